@@ -1,0 +1,50 @@
+"""hertzchain: differentiable simulation of 1-D granular chains of beads in Hertzian contact.
+
+Importing the package enables float64 in JAX (`jax_enable_x64`): the physics needs it
+(energy is conserved to 1e-6 and gradients match finite differences to 1e-5 only in
+double precision). Everything is SI inside; public arguments carry their unit in their name.
+
+Reference: S. Job, F. Melo, A. Sokolow, S. Sen, "How Hertzian solitary waves interact with
+boundaries in a 1-D granular medium", Phys. Rev. Lett. 94, 178002 (2005).
+"""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+from . import contact, materials  # noqa: E402
+from .chain import ChainModel, ChainSetup, build_model  # noqa: E402
+from .integrate import (  # noqa: E402
+    Recording,
+    YieldWarning,
+    batch_setup,
+    simulate,
+    simulate_batch,
+    solve,
+)
+from .materials import MATERIALS, Material, material  # noqa: E402
+from .timegrid import TimeGrid, choose_time_grid, shortest_contact_time_s  # noqa: E402
+from .traces import Traces  # noqa: E402
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ChainModel",
+    "ChainSetup",
+    "MATERIALS",
+    "Material",
+    "Recording",
+    "TimeGrid",
+    "Traces",
+    "YieldWarning",
+    "batch_setup",
+    "build_model",
+    "choose_time_grid",
+    "contact",
+    "material",
+    "materials",
+    "shortest_contact_time_s",
+    "simulate",
+    "simulate_batch",
+    "solve",
+]

@@ -1,0 +1,384 @@
+"""Description of a chain experiment (`ChainSetup`) and the mechanical model derived from it.
+
+Numbering (used everywhere in the package, in files and on the command line):
+beads are numbered 1..N from the striker end; contact K is between bead K and bead K+1;
+contact 0 is the striker on bead 1; the wall is after bead N. An embedded sensor in bead K
+splits that bead into a back half (mass $(1-\\beta)m$, facing the striker, touched by
+contact K-1) and a front half (mass $\\beta m$, touched by contact K), joined by a linear
+spring of stiffness $k_s$ chosen so that $\\omega_0^2 = k_s(1/m_+ + 1/m_-)$ (Eq. 4 of
+Job et al.).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import contact
+from .materials import BEAD_STEEL
+
+ENDS = ("wall", "free")
+
+
+def _is_concrete(x) -> bool:
+    return not isinstance(x, jax.core.Tracer)
+
+
+def _as_float(value, name: str):
+    try:
+        return jnp.asarray(value, dtype=jnp.float64)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name} must be a number (SI units), got {value!r}.") from error
+
+
+def _check(name: str, value, ok, requirement: str) -> None:
+    """Raise a ValueError naming `name` if a concrete `value` fails `ok(value)`."""
+    if not _is_concrete(value):
+        return
+    array = np.asarray(value, dtype=float)
+    if np.any(np.isnan(array)):
+        raise ValueError(f"{name} contains NaN; give {requirement}.")
+    if not np.all(ok(array)):
+        raise ValueError(f"{name} must be {requirement}, got {array.tolist()}.")
+
+
+class ChainSetup(eqx.Module):
+    """A 1-D chain experiment: beads, striker, wall or free end, dissipation, sensors.
+
+    Every dimensional field is SI and named with its unit. Array fields are float64 JAX
+    arrays, so a setup can be differentiated, `vmap`ped over, or changed with
+    `equinox.tree_at`. Defaults are the paper's chain (Job, Melo, Sokolow, Sen, PRL 94,
+    178002, 2005): 21 steel beads of radius 13 mm, density 7780 kg/m^3, Y = 203 GPa,
+    nu = 0.3, a wall of the same steel, and a striker identical to the beads (the paper
+    does not give its striker; give `striker_mass_kg` or `striker_radius_m` for yours).
+
+    **Arguments:**
+
+    - `n_beads`: number of beads N (the striker is extra).
+    - `bead_radius_m`, `bead_density_kg_m3`, `bead_youngs_pa`, `bead_poisson`: scalars or
+      arrays of length N (heterogeneous chains).
+    - `bead_mass_kg`: alternative to the density (scalar or length N); the density is then
+      derived from it and the radius.
+    - `bead_yield_stress_pa`: the beads' yield stress for the yield-force check (paper: 2 GPa).
+    - `striker_radius_m` / `striker_mass_kg`: size of the striker (one of them; default: bead 1's
+      radius). `striker_density_kg_m3`, `striker_youngs_pa`, `striker_poisson`: its material
+      (default: bead 1's).
+    - `striker_velocity_m_s`: impact velocity, m/s, > 0.
+    - `end`: `"wall"` (flat elastic wall) or `"free"`.
+    - `wall_youngs_pa`, `wall_poisson`: the wall's material (default: bead N's);
+      `wall_youngs_pa=inf` is a rigid wall.
+    - `eta_s`: viscoelastic time $\\eta$ of $F_v = \\eta\\kappa\\,\\partial_t\\delta^{3/2}$, s
+      (at every contact, striker and wall included).
+    - `mu`: friction coefficient of the beads (and striker) on the track, force $\\mu m g$.
+    - `mu_star`: thwarted-rotation friction, $\\kappa^* = (1+\\mu^*)\\kappa$ at every contact.
+    - `precompression_n`: static force pressing the chain against the wall (or squeezing a
+      free chain from both ends), N.
+    - `gravity_m_s2`: gravity for the track friction.
+    - `sensor_beads`: beads (1..N) with an embedded force sensor; `sensor_beta` the mass
+      fraction $\\beta = m_+/(m_+ + m_-)$ of the front half; `sensor_f0_hz` the resonance
+      $f_0 = \\omega_0/2\\pi$ (paper: 0.11 and 85 kHz).
+    """
+
+    bead_radius_m: jax.Array
+    bead_density_kg_m3: jax.Array
+    bead_youngs_pa: jax.Array
+    bead_poisson: jax.Array
+    bead_yield_stress_pa: jax.Array
+    striker_radius_m: jax.Array
+    striker_density_kg_m3: jax.Array
+    striker_youngs_pa: jax.Array
+    striker_poisson: jax.Array
+    striker_velocity_m_s: jax.Array
+    wall_youngs_pa: jax.Array
+    wall_poisson: jax.Array
+    eta_s: jax.Array
+    mu: jax.Array
+    mu_star: jax.Array
+    precompression_n: jax.Array
+    gravity_m_s2: jax.Array
+    sensor_beta: jax.Array
+    sensor_f0_hz: jax.Array
+    end: str = eqx.field(static=True)
+    sensor_beads: tuple[int, ...] = eqx.field(static=True)
+
+    def __init__(
+        self,
+        n_beads: int = 21,
+        *,
+        bead_radius_m=0.013,
+        bead_density_kg_m3=BEAD_STEEL.density_kg_m3,
+        bead_youngs_pa=BEAD_STEEL.youngs_pa,
+        bead_poisson=BEAD_STEEL.poisson,
+        bead_mass_kg=None,
+        bead_yield_stress_pa=BEAD_STEEL.yield_stress_pa,
+        striker_radius_m=None,
+        striker_mass_kg=None,
+        striker_density_kg_m3=None,
+        striker_youngs_pa=None,
+        striker_poisson=None,
+        striker_velocity_m_s=0.3,
+        end: str = "wall",
+        wall_youngs_pa=None,
+        wall_poisson=None,
+        eta_s=0.0,
+        mu=0.0,
+        mu_star=0.0,
+        precompression_n=0.0,
+        gravity_m_s2=9.81,
+        sensor_beads=(),
+        sensor_beta=0.11,
+        sensor_f0_hz=85e3,
+    ):
+        if isinstance(n_beads, bool) or not isinstance(n_beads, (int, np.integer)) or n_beads < 1:
+            raise ValueError(f"n_beads must be a positive integer, got {n_beads!r}.")
+        if end not in ENDS:
+            raise ValueError(f"end must be one of {ENDS}, got {end!r}.")
+
+        def per_bead(value, name):
+            array = _as_float(value, name)
+            if array.ndim == 0:
+                return jnp.full((n_beads,), array)
+            if array.shape != (n_beads,):
+                raise ValueError(
+                    f"{name} must be a scalar or have one value per bead ({n_beads}), "
+                    f"got shape {array.shape}."
+                )
+            return array
+
+        radius = per_bead(bead_radius_m, "bead_radius_m")
+        _check("bead_radius_m", radius, lambda r: np.isfinite(r) & (r > 0), "positive and finite (m)")
+        if bead_mass_kg is not None:
+            mass = per_bead(bead_mass_kg, "bead_mass_kg")
+            _check("bead_mass_kg", mass, lambda m: np.isfinite(m) & (m > 0), "positive (kg)")
+            density = mass / (4.0 / 3.0 * jnp.pi * radius**3)
+        else:
+            density = per_bead(bead_density_kg_m3, "bead_density_kg_m3")
+        self.bead_radius_m = radius
+        self.bead_density_kg_m3 = density
+        self.bead_youngs_pa = per_bead(bead_youngs_pa, "bead_youngs_pa")
+        self.bead_poisson = per_bead(bead_poisson, "bead_poisson")
+        self.bead_yield_stress_pa = _as_float(
+            math.inf if bead_yield_stress_pa is None else bead_yield_stress_pa,
+            "bead_yield_stress_pa",
+        )
+
+        self.striker_density_kg_m3 = _as_float(
+            density[0] if striker_density_kg_m3 is None else striker_density_kg_m3,
+            "striker_density_kg_m3",
+        )
+        if striker_mass_kg is not None and striker_radius_m is not None:
+            raise ValueError("Give striker_mass_kg or striker_radius_m, not both.")
+        if striker_mass_kg is not None:
+            striker_mass = _as_float(striker_mass_kg, "striker_mass_kg")
+            _check("striker_mass_kg", striker_mass, lambda m: m > 0, "positive (kg)")
+            striker_radius_m = (3.0 * striker_mass / (4.0 * jnp.pi * self.striker_density_kg_m3)) ** (
+                1.0 / 3.0
+            )
+        self.striker_radius_m = _as_float(
+            radius[0] if striker_radius_m is None else striker_radius_m, "striker_radius_m"
+        )
+        self.striker_youngs_pa = _as_float(
+            self.bead_youngs_pa[0] if striker_youngs_pa is None else striker_youngs_pa,
+            "striker_youngs_pa",
+        )
+        self.striker_poisson = _as_float(
+            self.bead_poisson[0] if striker_poisson is None else striker_poisson, "striker_poisson"
+        )
+        self.striker_velocity_m_s = _as_float(striker_velocity_m_s, "striker_velocity_m_s")
+        self.end = end
+        self.wall_youngs_pa = _as_float(
+            self.bead_youngs_pa[-1] if wall_youngs_pa is None else wall_youngs_pa, "wall_youngs_pa"
+        )
+        self.wall_poisson = _as_float(
+            self.bead_poisson[-1] if wall_poisson is None else wall_poisson, "wall_poisson"
+        )
+        self.eta_s = _as_float(eta_s, "eta_s")
+        self.mu = _as_float(mu, "mu")
+        self.mu_star = _as_float(mu_star, "mu_star")
+        self.precompression_n = _as_float(precompression_n, "precompression_n")
+        self.gravity_m_s2 = _as_float(gravity_m_s2, "gravity_m_s2")
+        self.sensor_beads = tuple(sorted(int(k) for k in sensor_beads))
+        self.sensor_beta = _as_float(sensor_beta, "sensor_beta")
+        self.sensor_f0_hz = _as_float(sensor_f0_hz, "sensor_f0_hz")
+
+    def __check_init__(self):
+        positive_finite = lambda x: np.isfinite(x) & (x > 0)  # noqa: E731
+        poisson_range = lambda x: (x > -1.0) & (x < 0.5)  # noqa: E731
+        _check("bead_density_kg_m3", self.bead_density_kg_m3, positive_finite, "positive (kg/m^3)")
+        _check("bead_youngs_pa", self.bead_youngs_pa, positive_finite, "positive and finite (Pa)")
+        _check("bead_poisson", self.bead_poisson, poisson_range, "in (-1, 0.5)")
+        _check("bead_yield_stress_pa", self.bead_yield_stress_pa, lambda x: x > 0, "positive (Pa)")
+        _check("striker_radius_m", self.striker_radius_m, positive_finite, "positive and finite (m)")
+        _check("striker_density_kg_m3", self.striker_density_kg_m3, positive_finite, "positive")
+        _check("striker_youngs_pa", self.striker_youngs_pa, positive_finite, "positive (Pa)")
+        _check("striker_poisson", self.striker_poisson, poisson_range, "in (-1, 0.5)")
+        _check(
+            "striker_velocity_m_s",
+            self.striker_velocity_m_s,
+            positive_finite,
+            "positive and finite (m/s; the striker moves towards bead 1)",
+        )
+        _check("wall_youngs_pa", self.wall_youngs_pa, lambda x: x > 0, "positive (Pa; inf = rigid)")
+        _check("wall_poisson", self.wall_poisson, poisson_range, "in (-1, 0.5)")
+        _check("eta_s", self.eta_s, lambda x: np.isfinite(x) & (x >= 0), "non-negative (s)")
+        _check("mu", self.mu, lambda x: np.isfinite(x) & (x >= 0), "non-negative")
+        _check("mu_star", self.mu_star, lambda x: np.isfinite(x) & (x > -1), "greater than -1")
+        _check(
+            "precompression_n", self.precompression_n, lambda x: np.isfinite(x) & (x >= 0), ">= 0 (N)"
+        )
+        _check("gravity_m_s2", self.gravity_m_s2, lambda x: np.isfinite(x) & (x >= 0), ">= 0 (m/s^2)")
+        for bead in self.sensor_beads:
+            if not 1 <= bead <= self.n_beads:
+                raise ValueError(
+                    f"sensor_beads: bead {bead} is not in the chain (beads are numbered 1..{self.n_beads})."
+                )
+        if len(set(self.sensor_beads)) != len(self.sensor_beads):
+            raise ValueError(f"sensor_beads lists a bead twice: {self.sensor_beads}.")
+        if self.sensor_beads:
+            _check("sensor_beta", self.sensor_beta, lambda x: (x > 0) & (x < 1), "in (0, 1)")
+            _check("sensor_f0_hz", self.sensor_f0_hz, positive_finite, "positive (Hz)")
+
+    @property
+    def n_beads(self) -> int:
+        return self.bead_radius_m.shape[-1]
+
+    @property
+    def bead_mass_kg(self) -> jax.Array:
+        return 4.0 / 3.0 * jnp.pi * self.bead_density_kg_m3 * self.bead_radius_m**3
+
+    @property
+    def striker_mass_kg(self) -> jax.Array:
+        return 4.0 / 3.0 * jnp.pi * self.striker_density_kg_m3 * self.striker_radius_m**3
+
+    def contact_kappa(self) -> jax.Array:
+        """Hertz stiffness of contacts 0..N-1 (striker-bead 1, then bead-bead), N/m^{3/2}.
+
+        Includes the thwarted-rotation factor $(1+\\mu^*)$.
+        """
+        radius = jnp.concatenate([self.striker_radius_m[None], self.bead_radius_m])
+        youngs = jnp.concatenate([self.striker_youngs_pa[None], self.bead_youngs_pa])
+        poisson = jnp.concatenate([self.striker_poisson[None], self.bead_poisson])
+        bare = contact.kappa_sphere_sphere(
+            radius[:-1], youngs[:-1], poisson[:-1], radius[1:], youngs[1:], poisson[1:]
+        )
+        return (1.0 + self.mu_star) * bare
+
+    def wall_kappa(self) -> jax.Array:
+        """Hertz stiffness of bead N on the flat wall, N/m^{3/2} (with $(1+\\mu^*)$)."""
+        bare = contact.kappa_sphere_flat(
+            self.bead_radius_m[-1],
+            self.bead_youngs_pa[-1],
+            self.bead_poisson[-1],
+            self.wall_youngs_pa,
+            self.wall_poisson,
+        )
+        return (1.0 + self.mu_star) * bare
+
+    def contact_yield_force_n(self) -> jax.Array:
+        """Yield force of contacts 0..N-1 and of the wall contact (last entry), N."""
+        radius = jnp.concatenate([self.striker_radius_m[None], self.bead_radius_m])
+        theta = contact.theta(
+            jnp.concatenate([self.striker_youngs_pa[None], self.bead_youngs_pa]),
+            jnp.concatenate([self.striker_poisson[None], self.bead_poisson]),
+        )
+        beads = contact.yield_force(
+            self.bead_yield_stress_pa, radius[:-1], theta[:-1], radius[1:], theta[1:]
+        )
+        wall = contact.yield_force(
+            self.bead_yield_stress_pa,
+            self.bead_radius_m[-1],
+            theta[-1],
+            theta_b=contact.theta(self.wall_youngs_pa, self.wall_poisson),
+        )
+        return jnp.concatenate([beads, wall[None]])
+
+    def sensor_spring_n_m(self) -> jax.Array:
+        """Stiffness $k_s$ of an embedded sensor in bead 1's size, from $\\beta$ and $f_0$, per
+        sensor bead, N/m."""
+        beads = jnp.asarray(self.sensor_beads, dtype=int) - 1
+        mass = self.bead_mass_kg[beads]
+        omega0 = 2.0 * jnp.pi * self.sensor_f0_hz
+        return omega0**2 * self.sensor_beta * (1.0 - self.sensor_beta) * mass
+
+
+class ChainModel(NamedTuple):
+    """The mechanical model of a setup: bodies on a line, joined by contacts.
+
+    Bodies are the striker, then the beads, with each sensor bead split in two halves.
+    Internal contact c joins body c and body c+1. All arrays are float64.
+    """
+
+    mass_kg: jax.Array  # (n_bodies,)
+    kappa: jax.Array  # (n_contacts,) Hertz stiffness, 0 for sensor springs
+    spring_n_m: jax.Array  # (n_contacts,) linear stiffness, 0 for Hertz contacts
+    is_spring: jax.Array  # (n_contacts,) bool
+    overlap0_m: jax.Array  # (n_contacts,) static overlap from precompression
+    wall_kappa: jax.Array  # scalar (0 for a free end)
+    wall_overlap0_m: jax.Array  # scalar
+    eta_s: jax.Array
+    friction_decel_m_s2: jax.Array  # mu * g
+    first_bead_force_n: jax.Array  # external force on bead 1, towards the wall
+    last_body_force_n: jax.Array  # external force on the last body (free end only)
+    striker_velocity_m_s: jax.Array
+
+
+def internal_contact_index(setup: ChainSetup, contact_number: int) -> int:
+    """Index in the model's contact array of the paper-numbered contact K (0..N-1)."""
+    return contact_number + sum(1 for bead in setup.sensor_beads if bead <= contact_number)
+
+
+def internal_sensor_index(setup: ChainSetup, bead: int) -> int:
+    """Index in the model's contact array of the spring of the sensor in `bead`."""
+    return internal_contact_index(setup, bead - 1) + 1
+
+
+def build_model(setup: ChainSetup) -> ChainModel:
+    """Derive masses, stiffnesses and the static state of a setup (pure, differentiable)."""
+    bead_mass = setup.bead_mass_kg
+    kappa = setup.contact_kappa()
+    springs_k = setup.sensor_spring_n_m()
+    beta = setup.sensor_beta
+    sensor_rank = {bead: i for i, bead in enumerate(setup.sensor_beads)}
+    zero = jnp.zeros(())
+    masses = [setup.striker_mass_kg]
+    # (Hertz stiffness, spring stiffness, is a sensor spring) per internal contact
+    links = [(kappa[0], zero, False)]
+    for bead in range(1, setup.n_beads + 1):
+        m = bead_mass[bead - 1]
+        if bead in sensor_rank:
+            masses += [(1.0 - beta) * m, beta * m]
+            links.append((zero, springs_k[sensor_rank[bead]], True))
+        else:
+            masses.append(m)
+        if bead < setup.n_beads:
+            links.append((kappa[bead], zero, False))
+    kappa_all = jnp.stack([link[0] for link in links])
+    spring_all = jnp.stack([link[1] for link in links])
+    is_spring = jnp.asarray([link[2] for link in links])
+    preload = setup.precompression_n
+    safe_kappa = jnp.where(is_spring, 1.0, kappa_all)
+    hertz_overlap = contact.overlap_at_force(preload, safe_kappa)
+    spring_overlap = preload / jnp.where(is_spring, spring_all, 1.0)
+    overlap0 = jnp.where(is_spring, spring_overlap, hertz_overlap).at[0].set(0.0)
+    has_wall = setup.end == "wall"
+    wall_kappa = setup.wall_kappa() if has_wall else jnp.zeros(())
+    wall_overlap0 = contact.overlap_at_force(preload, setup.wall_kappa()) if has_wall else jnp.zeros(())
+    return ChainModel(
+        mass_kg=jnp.stack(masses),
+        kappa=kappa_all,
+        spring_n_m=spring_all,
+        is_spring=is_spring,
+        overlap0_m=overlap0,
+        wall_kappa=wall_kappa,
+        wall_overlap0_m=wall_overlap0,
+        eta_s=setup.eta_s,
+        friction_decel_m_s2=setup.mu * setup.gravity_m_s2,
+        first_bead_force_n=preload,
+        last_body_force_n=jnp.zeros(()) if has_wall else -preload,
+        striker_velocity_m_s=setup.striker_velocity_m_s,
+    )

@@ -1,0 +1,52 @@
+"""The `hertzchain` command line: one subcommand per module.
+
+Each subcommand module defines `add_arguments(parser)` and `run(args) -> int`. The
+commands of the `fitting` package (fit, diagnose, design) are listed here too: the command
+line is the one place where the two packages meet; `hertzchain` itself never imports
+`fitting`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+COMMANDS = {
+    "simulate": ("hertzchain.cli.simulate", "simulate a chain (default: the paper's) and plot it"),
+    "analyze": ("hertzchain.cli.analyze", "fit every pulse of trace files (cos^6, speed, restitution)"),
+    "synth": ("hertzchain.cli.synth", "write synthetic experiment trace files from any setup"),
+    "fit": ("fitting.cli.fit", "fit eta, mu, C (and more) to trace files"),
+    "diagnose": ("fitting.cli.diagnose", "find and name the effect a model is missing"),
+    "reproduce": ("hertzchain.cli.reproduce", "regenerate the paper's figures and numbers"),
+    "sweep": ("hertzchain.cli.sweep", "sweep a grid of setups, streamed to disk, resumable"),
+    "sensitivity": ("hertzchain.cli.sensitivity", "exact sensitivities of observables to parameters"),
+    "design": ("fitting.cli.design", "predicted uncertainties and optimal experiment plans"),
+}
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = argparse.ArgumentParser(
+        prog="hertzchain",
+        description="Differentiable simulation and fitting of 1-D Hertzian bead chains "
+        "(Job, Melo, Sokolow, Sen, PRL 94, 178002, 2005).",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    chosen = argv[0] if argv and argv[0] in COMMANDS else None
+    module = None
+    for name, (module_name, help_text) in COMMANDS.items():
+        sub = commands.add_parser(name, help=help_text, description=help_text)
+        if name == chosen:  # import only the command that runs: start-up stays fast
+            module = importlib.import_module(module_name)
+            module.add_arguments(sub)
+    args = parser.parse_args(argv)
+    try:
+        return int(module.run(args) or 0)
+    except (ValueError, FileNotFoundError) as error:
+        print(f"hertzchain {args.command}: error: {error}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

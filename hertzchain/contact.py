@@ -1,0 +1,117 @@
+"""The Hertz contact law and the contact constants of the paper.
+
+Job et al. write the Hertz force between two elastic bodies as
+$F = \\kappa\\,\\delta^{3/2}$ (compression only), with
+$\\kappa^{-1} = (\\theta + \\theta')\\,(R^{-1} + R'^{-1})^{1/2}$ and
+$\\theta = 3(1-\\nu^2)/(4Y)$. A flat wall is the limit $R' \\to \\infty$; a rigid
+one has $\\theta' = 0$. Every function here is written in `jax.numpy`, accepts
+arrays and is differentiable in every argument.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+
+# Dimensionless constant of the Hertz binary-collision time
+# t_c = HERTZ_COLLISION_CONSTANT * (m_eff / kappa)^(2/5) * v^(-1/5), from integrating
+# m_eff d2(delta)/dt2 = -kappa delta^(3/2): t_c = 2 (delta_max / v) * (2/5) B(2/5, 1/2)
+# with delta_max = (5 m_eff v^2 / (4 kappa))^(2/5). Numerically 3.2180.
+HERTZ_COLLISION_CONSTANT = (
+    2.0 * 0.4 * math.gamma(0.4) * math.gamma(0.5) / math.gamma(0.9) * 1.25**0.4
+)
+
+
+def theta(youngs_pa, poisson):
+    """Elastic constant $\\theta = 3(1-\\nu^2)/(4Y)$, 1/Pa. A rigid body ($Y = \\infty$) gives 0."""
+    return 3.0 * (1.0 - poisson**2) / (4.0 * youngs_pa)
+
+
+def kappa_sphere_sphere(radius_a_m, youngs_a_pa, poisson_a, radius_b_m, youngs_b_pa, poisson_b):
+    """Hertz stiffness $\\kappa$ of two spheres, N/m^{3/2} (the paper's formula)."""
+    theta_sum = theta(youngs_a_pa, poisson_a) + theta(youngs_b_pa, poisson_b)
+    return 1.0 / (theta_sum * jnp.sqrt(1.0 / radius_a_m + 1.0 / radius_b_m))
+
+
+def kappa_sphere_flat(radius_m, youngs_pa, poisson, wall_youngs_pa, wall_poisson):
+    """Hertz stiffness of a sphere on a flat wall, N/m^{3/2}; `wall_youngs_pa = inf` is rigid."""
+    theta_sum = theta(youngs_pa, poisson) + theta(wall_youngs_pa, wall_poisson)
+    return 1.0 / (theta_sum * jnp.sqrt(1.0 / radius_m))
+
+
+def _positive_part_and_root(overlap_m):
+    """$(\\delta_+, \\sqrt{\\delta_+})$ with gradients that stay finite at $\\delta = 0$.
+
+    The "double where": the square root only ever sees positive numbers, so neither the
+    value nor the derivative of $\\sqrt{\\delta}$ is evaluated at 0.
+    """
+    in_contact = overlap_m > 0.0
+    safe = jnp.where(in_contact, overlap_m, 1.0)
+    root = jnp.where(in_contact, jnp.sqrt(safe), 0.0)
+    return jnp.where(in_contact, overlap_m, 0.0), root
+
+
+def hertz_force(overlap_m, kappa_n_m1p5):
+    """Elastic Hertz force $\\kappa\\,\\delta_+^{3/2}$, N (zero when the bodies are apart)."""
+    positive, root = _positive_part_and_root(overlap_m)
+    return kappa_n_m1p5 * positive * root
+
+
+def hertz_potential(overlap_m, kappa_n_m1p5):
+    """Hertz potential $U_H = (2/5)\\,\\kappa\\,\\delta_+^{5/2}$, J."""
+    positive, root = _positive_part_and_root(overlap_m)
+    return 0.4 * kappa_n_m1p5 * positive * positive * root
+
+
+def contact_force(overlap_m, overlap_rate_m_s, kappa_n_m1p5, eta_s):
+    """Total (elastic, total) normal force of a viscoelastic Hertz contact, N.
+
+    The viscous part is the paper's $F_v = \\eta\\kappa\\,\\partial_t(\\delta^{3/2})
+    = \\tfrac32\\eta\\kappa\\,\\delta^{1/2}\\dot\\delta$ (Kuwabara-Kono). It vanishes with
+    $\\delta^{1/2}$ at contact onset and separation, so the force is continuous there.
+    The sum is clipped at zero: beads without adhesion cannot pull on each other, so during
+    fast unloading they separate instead (LAMMPS's `limit_damping`). Returns both the
+    elastic part $\\kappa\\delta_+^{3/2}$ and the clipped total.
+    """
+    positive, root = _positive_part_and_root(overlap_m)
+    elastic = kappa_n_m1p5 * positive * root
+    viscous = 1.5 * eta_s * kappa_n_m1p5 * root * overlap_rate_m_s
+    total = jnp.where(overlap_m > 0.0, jnp.maximum(elastic + viscous, 0.0), 0.0)
+    return elastic, total
+
+
+def overlap_at_force(force_n, kappa_n_m1p5):
+    """Overlap $\\delta = (F/\\kappa)^{2/3}$ at which a Hertz contact carries `force_n`, m."""
+    return (force_n / kappa_n_m1p5) ** (2.0 / 3.0)
+
+
+def yield_force(yield_stress_pa, radius_a_m, theta_a, radius_b_m=jnp.inf, theta_b=0.0):
+    """Force at which the mean contact pressure reaches the yield stress, N.
+
+    The paper's estimate: the contact is a disk of area $A = \\pi a^2$ with
+    $a^3 = F R^* (\\theta+\\theta')$ (Hertz; $R^* = RR'/(R+R')$), which for identical beads is
+    the paper's $A = \\pi(\\theta R F)^{2/3}$. Setting $F/A = \\sigma_Y$ gives
+    $F_Y = (\\pi\\sigma_Y)^3 (R^*(\\theta+\\theta'))^2$ (paper: $\\approx 470$ N for its beads).
+    Defaults describe a rigid flat for the second body.
+    """
+    reduced_radius = 1.0 / (1.0 / radius_a_m + 1.0 / radius_b_m)
+    return (jnp.pi * yield_stress_pa) ** 3 * (reduced_radius * (theta_a + theta_b)) ** 2
+
+
+def collision_time(reduced_mass_kg, kappa_n_m1p5, impact_velocity_m_s):
+    """Duration of a Hertz binary collision at relative speed `impact_velocity_m_s`, s."""
+    return (
+        HERTZ_COLLISION_CONSTANT
+        * (reduced_mass_kg / kappa_n_m1p5) ** 0.4
+        * impact_velocity_m_s ** (-0.2)
+    )
+
+
+def velocity_for_peak_force(reduced_mass_kg, kappa_n_m1p5, peak_force_n):
+    """Relative impact speed of a binary Hertz collision whose peak force is `peak_force_n`, m/s.
+
+    From energy conservation $\\tfrac12 m^* v^2 = \\tfrac25\\kappa\\delta_m^{5/2}$.
+    """
+    overlap = overlap_at_force(peak_force_n, kappa_n_m1p5)
+    return jnp.sqrt(0.8 * kappa_n_m1p5 * overlap**2.5 / reduced_mass_kg)

@@ -1,0 +1,108 @@
+"""Elastic materials of beads and walls, with their sources.
+
+All values are SI: Young's modulus in Pa, density in kg/m^3, yield stress in Pa.
+The catalogue holds the paper's bead steel and the wall samples of its Fig. 3
+(plexiglass, Mg, Cu, Si, Fe, W and the 5 GPa sample), plus a few common bead
+materials for other setups.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+
+@dataclasses.dataclass(frozen=True)
+class Material:
+    """An isotropic linear-elastic material.
+
+    **Arguments:**
+
+    - `name`: short name used in tables and files.
+    - `youngs_pa`: Young's modulus $Y$, Pa.
+    - `poisson`: Poisson ratio $\\nu$, in (-1, 0.5).
+    - `density_kg_m3`: density, kg/m^3 (None for a wall-only sample whose
+      density does not enter the dynamics).
+    - `yield_stress_pa`: compressive yield stress $\\sigma_Y$, Pa (None if unknown).
+    - `source`: where the numbers come from.
+    """
+
+    name: str
+    youngs_pa: float
+    poisson: float
+    density_kg_m3: float | None = None
+    yield_stress_pa: float | None = None
+    source: str = ""
+
+    def __post_init__(self):
+        if not (math.isfinite(self.youngs_pa) or self.youngs_pa == math.inf) or self.youngs_pa <= 0:
+            raise ValueError(f"Material {self.name!r}: youngs_pa must be > 0 Pa, got {self.youngs_pa}.")
+        if not -1.0 < self.poisson < 0.5:
+            raise ValueError(f"Material {self.name!r}: poisson must lie in (-1, 0.5), got {self.poisson}.")
+        if self.density_kg_m3 is not None and not self.density_kg_m3 > 0:
+            raise ValueError(
+                f"Material {self.name!r}: density_kg_m3 must be > 0, got {self.density_kg_m3}."
+            )
+
+    @property
+    def theta_per_pa(self) -> float:
+        """Elastic constant $\\theta = 3(1-\\nu^2)/(4Y)$ of the paper, 1/Pa."""
+        return 3.0 * (1.0 - self.poisson**2) / (4.0 * self.youngs_pa)
+
+
+_HANDBOOK = "room-temperature handbook value (CRC Handbook of Chemistry and Physics)"
+
+BEAD_STEEL = Material(
+    "bead_steel",
+    youngs_pa=203e9,
+    poisson=0.3,
+    density_kg_m3=7780.0,
+    yield_stress_pa=2e9,
+    source="Job et al., PRL 94, 178002 (2005): AISI 52100 (JIS SUJ2) beads, "
+    "Y = 203 +/- 4 GPa, nu = 0.3 assumed, rho = 7780 kg/m^3, sigma_Y = 2 GPa",
+)
+
+PLEXIGLASS = Material(
+    "plexiglass", 3.0e9, 0.35, 1190.0, source="PMMA, " + _HANDBOOK + "; range 2.4-3.3 GPa"
+)
+MAGNESIUM = Material("Mg", 45e9, 0.29, 1738.0, source=_HANDBOOK)
+COPPER = Material("Cu", 130e9, 0.34, 8960.0, source=_HANDBOOK)
+SILICON = Material(
+    "Si", 160e9, 0.22, 2329.0, source="polycrystalline average; single crystal 130-188 GPa by orientation"
+)
+IRON = Material("Fe", 211e9, 0.29, 7874.0, source=_HANDBOOK)
+TUNGSTEN = Material("W", 411e9, 0.28, 19250.0, source=_HANDBOOK)
+SOFT_5GPA = Material(
+    "soft_5GPa", 5e9, 0.3, None, source="the 5 GPa sample of the paper's Fig. 3b/c; nu = 0.3 assumed"
+)
+PTFE = Material("PTFE", 1.46e9, 0.46, 2200.0, source="Daraio et al., PRE 72, 016603 (2005)")
+BRASS = Material("brass", 110e9, 0.34, 8500.0, source=_HANDBOOK)
+GLASS = Material("glass", 63e9, 0.22, 2500.0, source="soda-lime glass, " + _HANDBOOK)
+
+MATERIALS: dict[str, Material] = {
+    m.name: m
+    for m in (
+        BEAD_STEEL,
+        PLEXIGLASS,
+        MAGNESIUM,
+        COPPER,
+        SILICON,
+        IRON,
+        TUNGSTEN,
+        SOFT_5GPA,
+        PTFE,
+        BRASS,
+        GLASS,
+    )
+}
+
+# The wall samples of the paper's Fig. 3a, in the paper's order and spelling.
+PAPER_WALL_MATERIALS: tuple[str, ...] = ("plexiglass", "Mg", "Cu", "Si", "Fe", "W")
+
+
+def material(name: str) -> Material:
+    """Look a material up by name (case-insensitive); raises with the valid names."""
+    for key, value in MATERIALS.items():
+        if key.lower() == name.lower():
+            return value
+    raise ValueError(f"Unknown material {name!r}; known materials: {', '.join(MATERIALS)}.")

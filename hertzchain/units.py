@@ -1,0 +1,51 @@
+"""Unit conversion at the edges (command line, files): everything inside is SI.
+
+`parse_quantity("13mm", "m")` -> 0.013. A bare number is taken as SI. Accepted suffixes
+are SI prefixes on the expected unit (`13mm`, `5GPa`, `2us`, `85kHz`, `0.3m/s`), plus
+`um`/`µm`/`us`/`µs` for micro.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+_PREFIXES = {
+    "": 1.0, "p": 1e-12, "n": 1e-9, "u": 1e-6, "µ": 1e-6, "m": 1e-3, "c": 1e-2,
+    "k": 1e3, "M": 1e6, "G": 1e9, "T": 1e12,
+}
+_NUMBER = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|[-+]?inf)\s*(.*?)\s*$")
+
+
+def parse_quantity(text: str | float, unit: str, *, name: str = "value") -> float:
+    """Parse `text` as a quantity in `unit` and return it in SI.
+
+    **Raises:** `ValueError` naming `name` when the text is not a number, or carries a
+    unit other than `unit` with an SI prefix.
+    """
+    if isinstance(text, (int, float)):
+        return float(text)
+    match = _NUMBER.match(str(text))
+    if not match:
+        raise ValueError(f"{name}: cannot read {text!r} as a number in {unit}.")
+    number, suffix = float(match.group(1)), match.group(2)
+    if not suffix or suffix == unit:
+        return number
+    if unit and suffix.endswith(unit):
+        prefix = suffix[: -len(unit)]
+        if prefix in _PREFIXES:
+            return number * _PREFIXES[prefix]
+    raise ValueError(
+        f"{name}: unit {suffix!r} in {text!r} is not a prefixed {unit!r} "
+        f"(e.g. 13mm, 5GPa, 2us); give the value in {unit or 'SI units'}."
+    )
+
+
+def format_si(value: float, unit: str) -> str:
+    """A short human string for an SI value, e.g. 2e-06, 's' -> '2 us'."""
+    if value == 0 or not math.isfinite(value):
+        return f"{value:g} {unit}"
+    for prefix, factor in (("G", 1e9), ("M", 1e6), ("k", 1e3), ("", 1.0), ("m", 1e-3), ("u", 1e-6), ("n", 1e-9)):
+        if abs(value) >= factor:
+            return f"{value / factor:.4g} {prefix}{unit}"
+    return f"{value:g} {unit}"

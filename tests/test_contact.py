@@ -1,0 +1,58 @@
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import hertzchain as hc
+from hertzchain import contact
+from hertzchain.materials import BEAD_STEEL
+
+
+def test_kappa_of_paper_beads_is_12_N_per_um_1p5():
+    kappa = contact.kappa_sphere_sphere(0.013, 203e9, 0.3, 0.013, 203e9, 0.3)
+    assert float(kappa) * 1e-9 == pytest.approx(12.0, rel=5e-3)
+    assert float(kappa) * 1e-9 == pytest.approx(11.9900, abs=1e-3)
+
+
+def test_wall_kappa_steel_and_rigid_relative_to_bead_bead():
+    bead = contact.kappa_sphere_sphere(0.013, 203e9, 0.3, 0.013, 203e9, 0.3)
+    steel = contact.kappa_sphere_flat(0.013, 203e9, 0.3, 203e9, 0.3)
+    rigid = contact.kappa_sphere_flat(0.013, 203e9, 0.3, jnp.inf, 0.3)
+    assert float(steel / bead) == pytest.approx(np.sqrt(2), rel=1e-12)
+    assert float(rigid / bead) == pytest.approx(2 * np.sqrt(2), rel=1e-12)
+
+
+def test_yield_force_and_overlap_from_sigma_y_match_paper():
+    theta = BEAD_STEEL.theta_per_pa
+    force = float(contact.yield_force(2e9, 0.013, theta, 0.013, theta))
+    kappa = contact.kappa_sphere_sphere(0.013, 203e9, 0.3, 0.013, 203e9, 0.3)
+    overlap = float(contact.overlap_at_force(force, kappa))
+    assert force == pytest.approx(470.0, rel=0.02)  # paper: "roughly 470 N"
+    assert overlap * 1e6 == pytest.approx(11.0, rel=0.07)  # paper: "about 11 um"
+    # The paper's own closed form for identical beads, A = pi (theta R F)^(2/3).
+    assert force == pytest.approx((np.pi * 2e9) ** 3 * (theta * 0.013) ** 2, rel=1e-12)
+
+
+def test_hertz_gradients_are_finite_and_zero_at_contact_onset():
+    for fn in (
+        lambda d: contact.hertz_force(d, 1.2e10),
+        lambda d: contact.hertz_potential(d, 1.2e10),
+        lambda d: contact.contact_force(d, 0.1, 1.2e10, 2e-6)[1],
+    ):
+        for point in (0.0, -1e-9):
+            g = jax.grad(fn)(jnp.asarray(point))
+            assert np.isfinite(float(g)) and float(g) == 0.0
+    # and the viscous term's derivative with respect to the rate at onset
+    g = jax.grad(lambda r: contact.contact_force(0.0, r, 1.2e10, 2e-6)[1])(jnp.asarray(0.3))
+    assert float(g) == 0.0
+
+
+def test_binary_collision_time_matches_simulated_two_body_collision():
+    # striker on a single free bead: contact 0 lasts one Hertz collision time
+    setup = hc.ChainSetup(1, end="free", striker_velocity_m_s=0.2)
+    run = hc.simulate(setup, t_end_s=150e-6, sample_interval_s=0.05e-6, contacts=(0,))
+    force = np.asarray(run.forces_n["contact_0"])
+    duration = np.sum(force > 0) * 0.05e-6
+    mass = float(setup.bead_mass_kg[0])
+    expected = float(contact.collision_time(mass / 2, setup.contact_kappa()[0], 0.2))
+    assert duration == pytest.approx(expected, abs=0.1e-6)
