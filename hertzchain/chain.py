@@ -64,7 +64,12 @@ class ChainSetup(eqx.Module):
       arrays of length N (heterogeneous chains).
     - `bead_mass_kg`: alternative to the density (scalar or length N); the density is then
       derived from it and the radius.
-    - `bead_yield_stress_pa`: the beads' yield stress for the yield-force check (paper: 2 GPa).
+    - `bead_yield_stress_pa`: the beads' yield stress (paper: 2 GPa). It sets each contact's
+      yield force (the paper's mean-pressure estimate, `contact_yield_force_n`), used for the
+      yield check and, with `plasticity=True`, by the elastic-plastic contact law.
+    - `plasticity`: contacts above their yield force deform plastically (Thornton 1997, see
+      `contact.thornton_contact`) instead of staying Hertzian; default False (the paper's
+      beads stay elastic).
     - `striker_radius_m` / `striker_mass_kg`: size of the striker (one of them; default: bead 1's
       radius). `striker_density_kg_m3`, `striker_youngs_pa`, `striker_poisson`: its material
       (default: bead 1's).
@@ -105,6 +110,7 @@ class ChainSetup(eqx.Module):
     sensor_f0_hz: jax.Array
     end: str = eqx.field(static=True)
     sensor_beads: tuple[int, ...] = eqx.field(static=True)
+    plasticity: bool = eqx.field(static=True)
 
     def __init__(
         self,
@@ -133,6 +139,7 @@ class ChainSetup(eqx.Module):
         sensor_beads=(),
         sensor_beta=0.11,
         sensor_f0_hz=85e3,
+        plasticity: bool = False,
     ):
         if isinstance(n_beads, bool) or not isinstance(n_beads, (int, np.integer)) or n_beads < 1:
             raise ValueError(f"n_beads must be a positive integer, got {n_beads!r}.")
@@ -205,6 +212,7 @@ class ChainSetup(eqx.Module):
         self.sensor_beads = tuple(sorted(int(k) for k in sensor_beads))
         self.sensor_beta = _as_float(sensor_beta, "sensor_beta")
         self.sensor_f0_hz = _as_float(sensor_f0_hz, "sensor_f0_hz")
+        self.plasticity = bool(plasticity)
 
     def __check_init__(self):
         positive_finite = lambda x: np.isfinite(x) & (x > 0)  # noqa: E731
@@ -320,6 +328,9 @@ class ChainModel(NamedTuple):
     overlap0_m: jax.Array  # (n_contacts,) static overlap from precompression
     wall_kappa: jax.Array  # scalar (0 for a free end)
     wall_overlap0_m: jax.Array  # scalar
+    yield_force_n: jax.Array  # (n_contacts,) used when plastic
+    wall_yield_force_n: jax.Array  # scalar
+    plastic: bool  # Thornton elastic-plastic contacts instead of Hertz
     eta_s: jax.Array
     friction_decel_m_s2: jax.Array  # mu * g
     first_bead_force_n: jax.Array  # external force on bead 1, towards the wall
@@ -337,26 +348,36 @@ def internal_sensor_index(setup: ChainSetup, bead: int) -> int:
     return internal_contact_index(setup, bead - 1) + 1
 
 
+def _bead_links(setup: ChainSetup):
+    """(bead, kind) of the internal contacts after the striker's, in order: a sensor bead
+    contributes its spring, every bead but the last its contact with the next bead."""
+    for bead in range(1, setup.n_beads + 1):
+        if bead in setup.sensor_beads:
+            yield bead, "spring"
+        if bead < setup.n_beads:
+            yield bead, "hertz"
+
+
 def build_model(setup: ChainSetup) -> ChainModel:
     """Derive masses, stiffnesses and the static state of a setup (pure, differentiable)."""
     bead_mass = setup.bead_mass_kg
     kappa = setup.contact_kappa()
+    yield_force = setup.contact_yield_force_n()
     springs_k = setup.sensor_spring_n_m()
     beta = setup.sensor_beta
     sensor_rank = {bead: i for i, bead in enumerate(setup.sensor_beads)}
-    zero = jnp.zeros(())
+    zero, never = jnp.zeros(()), jnp.asarray(jnp.inf)
     masses = [setup.striker_mass_kg]
-    # (Hertz stiffness, spring stiffness, is a sensor spring) per internal contact
-    links = [(kappa[0], zero, False)]
     for bead in range(1, setup.n_beads + 1):
         m = bead_mass[bead - 1]
-        if bead in sensor_rank:
-            masses += [(1.0 - beta) * m, beta * m]
-            links.append((zero, springs_k[sensor_rank[bead]], True))
+        masses += [(1.0 - beta) * m, beta * m] if bead in sensor_rank else [m]
+    # (Hertz stiffness, spring stiffness, is a sensor spring, yield force) per internal contact
+    links = [(kappa[0], zero, False, yield_force[0])]
+    for bead, kind in _bead_links(setup):
+        if kind == "spring":
+            links.append((zero, springs_k[sensor_rank[bead]], True, never))
         else:
-            masses.append(m)
-        if bead < setup.n_beads:
-            links.append((kappa[bead], zero, False))
+            links.append((kappa[bead], zero, False, yield_force[bead]))
     kappa_all = jnp.stack([link[0] for link in links])
     spring_all = jnp.stack([link[1] for link in links])
     is_spring = jnp.asarray([link[2] for link in links])
@@ -376,6 +397,9 @@ def build_model(setup: ChainSetup) -> ChainModel:
         overlap0_m=overlap0,
         wall_kappa=wall_kappa,
         wall_overlap0_m=wall_overlap0,
+        yield_force_n=jnp.stack([link[3] for link in links]),
+        wall_yield_force_n=yield_force[-1],
+        plastic=setup.plasticity,
         eta_s=setup.eta_s,
         friction_decel_m_s2=setup.mu * setup.gravity_m_s2,
         first_bead_force_n=preload,

@@ -64,7 +64,7 @@ def hertz_potential(overlap_m, kappa_n_m1p5):
     return 0.4 * kappa_n_m1p5 * positive * positive * root
 
 
-def contact_force(overlap_m, overlap_rate_m_s, kappa_n_m1p5, eta_s):
+def contact_force(overlap_m, overlap_rate_m_s, kappa_n_m1p5, eta_s, elastic_n=None):
     """Total (elastic, total) normal force of a viscoelastic Hertz contact, N.
 
     The viscous part is the paper's $F_v = \\eta\\kappa\\,\\partial_t(\\delta^{3/2})
@@ -72,13 +72,54 @@ def contact_force(overlap_m, overlap_rate_m_s, kappa_n_m1p5, eta_s):
     $\\delta^{1/2}$ at contact onset and separation, so the force is continuous there.
     The sum is clipped at zero: beads without adhesion cannot pull on each other, so during
     fast unloading they separate instead (LAMMPS's `limit_damping`). Returns both the
-    elastic part $\\kappa\\delta_+^{3/2}$ and the clipped total.
+    elastic part $\\kappa\\delta_+^{3/2}$ (or `elastic_n` when given, e.g. an elastic-plastic
+    force) and the clipped total.
     """
     positive, root = _positive_part_and_root(overlap_m)
-    elastic = kappa_n_m1p5 * positive * root
+    elastic = kappa_n_m1p5 * positive * root if elastic_n is None else elastic_n
     viscous = 1.5 * eta_s * kappa_n_m1p5 * root * overlap_rate_m_s
     total = jnp.where(overlap_m > 0.0, jnp.maximum(elastic + viscous, 0.0), 0.0)
     return elastic, total
+
+
+def thornton_contact(overlap_m, max_overlap_m, kappa_n_m1p5, yield_force_n):
+    """Elastic-plastic normal contact of Thornton (J. Appl. Mech. 64, 383, 1997).
+
+    Hertz $\kappa\delta^{3/2}$ up to the yield overlap $\delta_y = (F_Y/\kappa)^{2/3}$;
+    beyond it, loading along the straight line with the Hertz tangent stiffness at yield,
+    $F = F_Y + \tfrac32 (F_Y/\delta_y)(\delta - \delta_y)$; unloading (and reloading
+    below the largest overlap $\delta_m$ reached so far) along a Hertz curve of enlarged
+    radius $R_p$ about a residual overlap $\delta_p$:
+    $F = \kappa_p(\delta - \delta_p)_+^{3/2}$, with
+    $R_p/R^* = ((2F_m + F_Y)/3)^{3/2} / (F_m F_Y^{1/2})$ (Thornton's $R_p$ written with the
+    limiting pressure eliminated through $F_Y$), $\kappa_p = \kappa\sqrt{R_p/R^*}$ and
+    $\delta_p$ such that the curve passes through $(\delta_m, F_m)$.
+
+    **Arguments:** current overlap and largest overlap so far (m; `max_overlap_m >=
+    overlap_m`), Hertz stiffness (N/m^{3/2}), yield force (N, finite).
+
+    **Returns:** (force N, elastic energy stored J, energy dissipated plastically so far J).
+    The dissipated energy depends only on $\delta_m$: the work of the loading path up to
+    $\delta_m$ minus the energy the unloading curve gives back.
+    """
+    yield_overlap = overlap_at_force(yield_force_n, kappa_n_m1p5)
+    yield_stiffness = 1.5 * yield_force_n / yield_overlap
+    excess = jnp.maximum(max_overlap_m - yield_overlap, 0.0)
+    max_force = yield_force_n + yield_stiffness * excess
+    radius_ratio = ((2.0 * max_force + yield_force_n) / 3.0) ** 1.5 / (max_force * jnp.sqrt(yield_force_n))
+    plastic_kappa = kappa_n_m1p5 * jnp.sqrt(radius_ratio)
+    elastic_span = overlap_at_force(max_force, plastic_kappa)
+    residual_overlap = max_overlap_m - elastic_span
+    yielded = max_overlap_m > yield_overlap
+    plastic_force = hertz_force(overlap_m - residual_overlap, plastic_kappa)
+    plastic_energy = hertz_potential(overlap_m - residual_overlap, plastic_kappa)
+    loading_work = (
+        0.4 * yield_force_n * yield_overlap + yield_force_n * excess + 0.5 * yield_stiffness * excess**2
+    )
+    dissipated = loading_work - 0.4 * max_force * elastic_span
+    force = jnp.where(yielded, plastic_force, hertz_force(overlap_m, kappa_n_m1p5))
+    energy = jnp.where(yielded, plastic_energy, hertz_potential(overlap_m, kappa_n_m1p5))
+    return force, energy, jnp.where(yielded, dissipated, 0.0)
 
 
 def overlap_at_force(force_n, kappa_n_m1p5):

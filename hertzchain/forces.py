@@ -32,16 +32,61 @@ def _net_force(contact_n, wall_n):
     return pushed_forward - pushed_back
 
 
-def chain_forces(model: ChainModel, displacement_m, velocity_m_s) -> ChainForces:
-    """All forces of the chain, N. Displacements are measured from the initial positions."""
-    overlap = displacement_m[:-1] - displacement_m[1:] + model.overlap0_m
+def overlaps(model: ChainModel, displacement_m):
+    """Overlaps of the internal contacts and of the wall contact, m: ((n_contacts,), scalar)."""
+    return (
+        displacement_m[:-1] - displacement_m[1:] + model.overlap0_m,
+        displacement_m[-1] + model.wall_overlap0_m,
+    )
+
+
+def initial_max_overlap(model: ChainModel):
+    """Largest overlaps before the impact (the preload's), contacts then wall, m."""
+    contacts, wall = overlaps(model, jnp.zeros_like(model.mass_kg))
+    return jnp.concatenate([contacts, wall[None]])
+
+
+def _elastic_parts(model: ChainModel, displacement_m, max_overlap_m):
+    """Elastic (rate-independent) force, stored energy and plastic dissipation of every
+    contact and of the wall (last), for Hertz or, if the model is plastic, Thornton contacts."""
+    contacts, wall = overlaps(model, displacement_m)
+    overlap = jnp.concatenate([contacts, wall[None]])
+    kappa = jnp.concatenate([model.kappa, model.wall_kappa[None]])
+    if not model.plastic:
+        zero = jnp.zeros_like(overlap)
+        return overlap, contact.hertz_force(overlap, kappa), contact.hertz_potential(overlap, kappa), zero
+    yield_force = jnp.concatenate([model.yield_force_n, model.wall_yield_force_n[None]])
+    plastic = jnp.isfinite(yield_force)
+    safe_yield = jnp.where(plastic, yield_force, 1.0)
+    force, energy, dissipated = contact.thornton_contact(overlap, max_overlap_m, kappa, safe_yield)
+    hertz = contact.hertz_force(overlap, kappa), contact.hertz_potential(overlap, kappa)
+    return (
+        overlap,
+        jnp.where(plastic, force, hertz[0]),
+        jnp.where(plastic, energy, hertz[1]),
+        jnp.where(plastic, dissipated, 0.0),
+    )
+
+
+def chain_forces(model: ChainModel, displacement_m, velocity_m_s, max_overlap_m=None) -> ChainForces:
+    """All forces of the chain, N. Displacements are measured from the initial positions.
+
+    `max_overlap_m` (contacts then wall, m) is the largest overlap reached so far, needed
+    only by plastic contacts; it must already include the current overlaps.
+    """
+    if max_overlap_m is None:
+        max_overlap_m = initial_max_overlap(model)
+    overlap_all, elastic_all, _, _ = _elastic_parts(model, displacement_m, max_overlap_m)
+    overlap, wall_overlap = overlap_all[:-1], overlap_all[-1]
     rate = velocity_m_s[:-1] - velocity_m_s[1:]
-    hertz_elastic, hertz_total = contact.contact_force(overlap, rate, model.kappa, model.eta_s)
+    hertz_elastic, hertz_total = contact.contact_force(
+        overlap, rate, model.kappa, model.eta_s, elastic_all[:-1]
+    )
     spring = model.spring_n_m * overlap
     contact_total = jnp.where(model.is_spring, spring, hertz_total)
     contact_elastic = jnp.where(model.is_spring, spring, hertz_elastic)
     wall_elastic, wall_total = contact.contact_force(
-        displacement_m[-1] + model.wall_overlap0_m, velocity_m_s[-1], model.wall_kappa, model.eta_s
+        wall_overlap, velocity_m_s[-1], model.wall_kappa, model.eta_s, elastic_all[-1]
     )
     external = jnp.zeros_like(displacement_m)
     external = external.at[1].add(model.first_bead_force_n).at[-1].add(model.last_body_force_n)
@@ -50,13 +95,20 @@ def chain_forces(model: ChainModel, displacement_m, velocity_m_s) -> ChainForces
     return ChainForces(contact_total, contact_elastic, wall_total, wall_elastic, body, viscous)
 
 
-def contact_potentials(model: ChainModel, displacement_m):
+def contact_potentials(model: ChainModel, displacement_m, max_overlap_m=None):
     """Elastic energy of each contact and of the wall contact, J: ((n_contacts,), scalar)."""
-    overlap = displacement_m[:-1] - displacement_m[1:] + model.overlap0_m
-    hertz = contact.hertz_potential(overlap, model.kappa)
-    spring = 0.5 * model.spring_n_m * overlap**2
-    wall = contact.hertz_potential(displacement_m[-1] + model.wall_overlap0_m, model.wall_kappa)
-    return jnp.where(model.is_spring, spring, hertz), wall
+    if max_overlap_m is None:
+        max_overlap_m = initial_max_overlap(model)
+    overlap, _, energy, _ = _elastic_parts(model, displacement_m, max_overlap_m)
+    spring = 0.5 * model.spring_n_m * overlap[:-1] ** 2
+    return jnp.where(model.is_spring, spring, energy[:-1]), energy[-1]
+
+
+def plastic_dissipation(model: ChainModel, displacement_m, max_overlap_m):
+    """Energy dissipated by plastic deformation so far, summed over contacts, J."""
+    if not model.plastic:
+        return jnp.zeros(())
+    return jnp.sum(_elastic_parts(model, displacement_m, max_overlap_m)[3])
 
 
 def preload_potential(model: ChainModel, displacement_m):

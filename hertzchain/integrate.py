@@ -44,7 +44,10 @@ from .forces import (
     chain_forces,
     contact_potentials,
     external_force_n,
+    initial_max_overlap,
     initial_velocity,
+    overlaps,
+    plastic_dissipation,
     preload_potential,
 )
 from .progress import Progress
@@ -78,13 +81,15 @@ class ChainState(NamedTuple):
     wall_impulse_n_s: jax.Array
     friction_impulse_n_s: jax.Array
     max_force_n: jax.Array  # (n_contacts + 1,) internal contacts then the wall
+    max_overlap_m: jax.Array  # (n_contacts + 1,) largest overlap so far (plastic contacts)
 
 
 def initial_state(model: ChainModel) -> ChainState:
     """State at the impact: striker moving, chain at rest (and preloaded if asked)."""
     displacement = jnp.zeros_like(model.mass_kg)
     velocity = initial_velocity(model)
-    forces = chain_forces(model, displacement, velocity)
+    max_overlap = initial_max_overlap(model)
+    forces = chain_forces(model, displacement, velocity, max_overlap)
     zero = jnp.zeros(())
     return ChainState(
         displacement_m=displacement,
@@ -97,6 +102,7 @@ def initial_state(model: ChainModel) -> ChainState:
         wall_impulse_n_s=zero,
         friction_impulse_n_s=zero,
         max_force_n=jnp.concatenate([forces.contact_total_n, forces.wall_total_n[None]]),
+        max_overlap_m=max_overlap,
     )
 
 
@@ -118,7 +124,11 @@ def verlet_step(model: ChainModel, dt_s: float, state: ChainState) -> ChainState
     viscous_work = jnp.sum(m * state.viscous_accel_m_s2 * h * 0.5 * (v0 + v_half))
     v_half, friction_1, impulse_1 = _friction_kick(model, v_half, h)
     displacement = state.displacement_m + dt_s * v_half
-    forces = chain_forces(model, displacement, v_half + h * state.accel_m_s2)
+    contact_overlap, wall_overlap = overlaps(model, displacement)
+    max_overlap = jnp.maximum(
+        state.max_overlap_m, jnp.concatenate([contact_overlap, wall_overlap[None]])
+    )
+    forces = chain_forces(model, displacement, v_half + h * state.accel_m_s2, max_overlap)
     accel = forces.body_force_n / m
     viscous_accel = forces.body_viscous_force_n / m
     v_end = v_half + h * accel
@@ -136,21 +146,24 @@ def verlet_step(model: ChainModel, dt_s: float, state: ChainState) -> ChainState
         wall_impulse_n_s=state.wall_impulse_n_s + h * (state.wall_force_n + forces.wall_total_n),
         friction_impulse_n_s=state.friction_impulse_n_s + impulse_1 + impulse_2,
         max_force_n=jnp.maximum(state.max_force_n, all_forces),
+        max_overlap_m=max_overlap,
     )
 
 
 _LEDGER = ("dissipated_viscous_j", "dissipated_friction_j", "wall_impulse_n_s", "friction_impulse_n_s")
 
 
-def _sample(model, u, v, ledger, setup_layout, recording):
+def _sample(model, u, v, ledger, setup_layout, recording, max_overlap=None):
     """Observables of one recorded sample (a dict of arrays).
 
     `u`, `v`: displacements and velocities of all bodies; `ledger`: an object with the
-    running `_LEDGER` quantities.
+    running `_LEDGER` quantities; `max_overlap`: largest overlaps so far (plastic contacts).
     """
     contact_index, sensor_index, user_contacts = setup_layout
-    forces = chain_forces(model, u, v)
-    contact_energy, wall_energy = contact_potentials(model, u)
+    if max_overlap is None:
+        max_overlap = initial_max_overlap(model)
+    forces = chain_forces(model, u, v, max_overlap)
+    contact_energy, wall_energy = contact_potentials(model, u, max_overlap)
     record = {
         "contacts": forces.contact_total_n[np.asarray(contact_index, dtype=int)],
         "sensors": forces.contact_total_n[np.asarray(sensor_index, dtype=int)],
@@ -160,6 +173,7 @@ def _sample(model, u, v, ledger, setup_layout, recording):
         "wall_elastic_j": wall_energy,
         "preload_potential_j": preload_potential(model, u),
         "momentum_kg_m_s": jnp.sum(model.mass_kg * v),
+        "dissipated_plastic_j": plastic_dissipation(model, u, max_overlap),
     }
     record.update({name: getattr(ledger, name) for name in _LEDGER})
     if recording.record_all:
@@ -204,7 +218,8 @@ def integrate(
             unroll=unroll,
         )[0]
         return state, _sample(
-            model, state.displacement_m, state.velocity_m_s, state, layout, recording
+            model, state.displacement_m, state.velocity_m_s, state, layout, recording,
+            state.max_overlap_m,
         )
 
     block = _block_size(grid.n_samples)
@@ -258,6 +273,7 @@ def _assemble(setup, model, grid, recording, records) -> Traces:
         + records["preload_potential_j"]
         + records["dissipated_viscous_j"]
         + records["dissipated_friction_j"]
+        + records["dissipated_plastic_j"]
     )
     yield_force = setup.contact_yield_force_n()
     user_contacts = _layout(setup, recording)[2]
@@ -272,6 +288,7 @@ def _assemble(setup, model, grid, recording, records) -> Traces:
         preload_potential_j=records["preload_potential_j"],
         dissipated_viscous_j=records["dissipated_viscous_j"],
         dissipated_friction_j=records["dissipated_friction_j"],
+        dissipated_plastic_j=records["dissipated_plastic_j"],
         energy_error_j=energy0 - ledger,
         momentum_kg_m_s=records["momentum_kg_m_s"],
         wall_impulse_n_s=records["wall_impulse_n_s"],
@@ -334,9 +351,14 @@ def _solve_with_progress(setup, grid, recording, unroll) -> Traces:
     return _assemble(setup, model, grid, recording, records)
 
 
-def check_yield(traces: Traces, on_yield: str = "warn") -> None:
-    """Warn (or raise) if any contact force exceeded its yield force during the run."""
-    if on_yield == "ignore":
+def check_yield(traces: Traces, on_yield: str = "warn", *, plastic: bool = False) -> None:
+    """Warn (or raise) if any contact force exceeded its yield force during the run.
+
+    Nothing to report when the contacts are modelled as plastic (`plastic=True`).
+    """
+    if on_yield not in ("warn", "raise", "ignore"):
+        raise ValueError(f"on_yield must be 'warn', 'raise' or 'ignore', got {on_yield!r}.")
+    if on_yield == "ignore" or plastic:
         return
     ratio = np.asarray(traces.max_force_n) / np.asarray(traces.yield_force_n)
     if np.all(ratio <= 1.0):
@@ -349,7 +371,8 @@ def check_yield(traces: Traces, on_yield: str = "warn") -> None:
         f"The force at {name} reached {np.asarray(traces.max_force_n)[worst]:.4g} N, above its "
         f"yield force {np.asarray(traces.yield_force_n)[worst]:.4g} N (mean contact pressure "
         "above bead_yield_stress_pa): the contact would deform plastically, which this elastic "
-        "model does not describe. Lower striker_velocity_m_s, or set on_yield='ignore'."
+        "model does not describe. Lower striker_velocity_m_s, model it with plasticity=True, "
+        "or set on_yield='ignore'."
     )
     if on_yield == "raise":
         raise ValueError(message)
@@ -397,7 +420,7 @@ def simulate(
         traces = _solve_with_progress(setup, grid, recording, unroll)
     else:
         traces = _solve_jit(setup, grid, recording, unroll=unroll)
-    check_yield(traces, on_yield)
+    check_yield(traces, on_yield, plastic=setup.plasticity)
     return traces
 
 
@@ -444,7 +467,7 @@ def simulate_batch(setup: ChainSetup, *, t_end_s: float = 2.5e-3, sample_interva
         steps_per_contact=steps_per_contact,
     )
     traces = _solve_batch_jit(batched, grid, recording, unroll)
-    check_yield(traces, on_yield)
+    check_yield(traces, on_yield, plastic=setup.plasticity)
     return jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), traces)
 
 

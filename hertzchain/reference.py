@@ -78,6 +78,11 @@ def simulate_reference(
     dimensionless by the striker's speed, its kinetic energy and momentum and its first
     collision's overlap), and `friction_smoothing_m_s` (see module docstring).
     """
+    if setup.plasticity:
+        raise ValueError(
+            "The reference solver integrates an ODE and cannot follow the history of plastic "
+            "contacts; use hertzchain.simulate for plasticity=True."
+        )
     recording = Recording(tuple(int(k) for k in contacts), bool(record_all))
     _layout(setup, recording)
     n_samples = round(t_end_s / sample_interval_s)

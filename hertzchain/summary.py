@@ -19,7 +19,12 @@ def _plain(value):
 
 def setup_dict(setup: ChainSetup) -> dict:
     """All fields of a setup as JSON-ready values (SI units, named as the fields)."""
-    values = {"n_beads": setup.n_beads, "end": setup.end, "sensor_beads": list(setup.sensor_beads)}
+    values = {
+        "n_beads": setup.n_beads,
+        "end": setup.end,
+        "sensor_beads": list(setup.sensor_beads),
+        "plasticity": setup.plasticity,
+    }
     for name in ChainSetup.__dataclass_fields__:
         if name not in values:
             values[name] = _plain(getattr(setup, name))
@@ -71,6 +76,7 @@ def run_summary(setup: ChainSetup, traces: Traces, options: dict) -> dict:
             "final_potential_j": float(traces.potential_j[-1]),
             "dissipated_viscous_j": float(traces.dissipated_viscous_j[-1]),
             "dissipated_friction_j": float(traces.dissipated_friction_j[-1]),
+            "dissipated_plastic_j": float(traces.dissipated_plastic_j[-1]),
             "max_relative_error": float(np.max(np.abs(np.asarray(traces.energy_error_j))) / energy0),
         },
         "momentum_balance": {

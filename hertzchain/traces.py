@@ -22,8 +22,8 @@ class Traces(eqx.Module):
       `sensor_K` (compression of the sensor spring in bead K, in N).
     - `channel_names`: the channels in file order.
     - `kinetic_j`, `elastic_j` (all contacts and the wall), `wall_elastic_j`,
-      `preload_potential_j`, `dissipated_viscous_j`, `dissipated_friction_j`: the energy
-      ledger. `energy_error_j` is the initial energy minus the sum of all of them: the
+      `preload_potential_j`, `dissipated_viscous_j`, `dissipated_friction_j`,
+      `dissipated_plastic_j`: the energy ledger. `energy_error_j` is the initial energy minus the sum of all of them: the
       integrator's own error (zero for an exact solution).
     - `momentum_kg_m_s`: total momentum of all bodies. `wall_impulse_n_s`,
       `friction_impulse_n_s`, `preload_impulse_n_s`: impulse given to the chain's momentum
@@ -47,6 +47,7 @@ class Traces(eqx.Module):
     preload_potential_j: jax.Array
     dissipated_viscous_j: jax.Array
     dissipated_friction_j: jax.Array
+    dissipated_plastic_j: jax.Array
     energy_error_j: jax.Array
     momentum_kg_m_s: jax.Array
     wall_impulse_n_s: jax.Array
@@ -83,7 +84,7 @@ class Traces(eqx.Module):
     @property
     def dissipated_j(self) -> jax.Array:
         """Energy dissipated by all mechanisms since the impact, J."""
-        return self.dissipated_viscous_j + self.dissipated_friction_j
+        return self.dissipated_viscous_j + self.dissipated_friction_j + self.dissipated_plastic_j
 
     @property
     def momentum_balance_error_kg_m_s(self) -> jax.Array:
@@ -108,6 +109,7 @@ class Traces(eqx.Module):
             "preload_potential_j",
             "dissipated_viscous_j",
             "dissipated_friction_j",
+            "dissipated_plastic_j",
             "energy_error_j",
             "momentum_kg_m_s",
             "wall_impulse_n_s",
