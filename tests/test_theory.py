@@ -1,0 +1,146 @@
+"""Closed-form solitary-wave theory against the paper and independent reference numbers."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import hertzchain
+from hertzchain import contact, theory
+from hertzchain.materials import material
+
+R = 0.013
+RHO = 7780.0
+Y = 203e9
+NU = 0.3
+MASS = 4.0 / 3.0 * math.pi * RHO * R**3
+
+
+def _kappa():
+    return contact.kappa_sphere_sphere(R, Y, NU, R, Y, NU)
+
+
+def test_velocity_constants_of_the_paper():
+    c_t = theory.long_wave_velocity_constant(R, RHO, Y, NU)
+    assert float(c_t) == pytest.approx(198.919, abs=0.01)  # paper: 198.9
+    unit = theory.lattice_speed_unit(R, MASS, _kappa())
+    assert float(unit) == pytest.approx(222.398, abs=0.002)
+    # Eq. (3) in lattice units is exactly (2/sqrt 5) 2R kappa^(1/3) m^(-1/2).
+    assert float(c_t) == pytest.approx(2 / math.sqrt(5) * float(unit), rel=1e-12)
+    c_n = theory.discrete_velocity_constant(R, MASS, _kappa())
+    assert float(c_n) == pytest.approx(201.385, abs=0.03)
+    assert float(c_n / c_t) == pytest.approx(1.01240, abs=3e-4)
+
+
+def test_setup_constants_match_the_functions(paper_setup):
+    numbers = theory.setup_constants(paper_setup)
+    assert float(numbers["kappa_n_m1p5"]) * 1e-9 == pytest.approx(11.990, abs=0.001)
+    assert float(numbers["wave_amplitude_n"]) == pytest.approx(333.34, abs=0.05)
+    # 2 tau = 2R sqrt(10)/v at 333.3 N with C_n: 155.0 us (reference: 155.05 us with v = 530.27).
+    assert float(numbers["speed_m_s"]) == pytest.approx(530.3, abs=0.3)
+    assert float(numbers["duration_s"]) * 1e6 == pytest.approx(155.05, abs=0.1)
+    assert float(numbers["wall_force_ratio"]) == pytest.approx(2 ** 0.8, rel=1e-12)  # steel wall
+
+
+def test_speed_amplitude_and_duration_relations():
+    c = 201.37
+    force = jnp.array([5.0, 50.0, 500.0])
+    speed = theory.solitary_speed_m_s(force, c)
+    np.testing.assert_allclose(theory.solitary_peak_force_n(speed, c), force, rtol=1e-13)
+    # 2 tau * v is the constant 2 R sqrt(10).
+    np.testing.assert_allclose(theory.solitary_duration_s(R, speed) * speed, 2 * R * math.sqrt(10), rtol=1e-14)
+    # d v / d F = v / (6 F).
+    grad = jax.grad(lambda f: theory.solitary_speed_m_s(f, c))(50.0)
+    assert float(grad) == pytest.approx(float(speed[1]) / 300.0, rel=1e-12)
+
+
+def test_impact_velocity_amplitude_relation():
+    kappa = _kappa()
+    # Asymptotic A = F_m / V0^(6/5) = 1413.66 N (m/s)^(-6/5) for the paper's beads.
+    assert float(theory.wave_amplitude_n(1.0, kappa, MASS)) == pytest.approx(1413.66, abs=0.05)
+    velocities = jnp.array([0.009, 0.3, 0.42])
+    forces = theory.wave_amplitude_n(velocities, kappa, MASS)
+    np.testing.assert_allclose(theory.impact_velocity_m_s(forces, kappa, MASS), velocities, rtol=1e-13)
+
+
+def test_cos6_profile_is_one_hump():
+    t = jnp.linspace(-3.0, 3.0, 601)
+    f = theory.solitary_profile_n(t, 10.0, 0.0, 1.0)
+    assert float(f[300]) == 10.0
+    assert np.all(np.asarray(f)[np.abs(np.asarray(t)) > math.pi / 2] == 0.0)
+    assert float(jnp.sum(f) * 0.01) == pytest.approx(10.0 * math.pi * 5 / 16, rel=1e-6)  # int cos^6
+    half = theory.solitary_fwhm_s(1.0) / 2
+    assert float(theory.solitary_profile_n(half, 1.0, 0.0, 1.0)) == pytest.approx(0.5, rel=1e-12)
+    assert float(theory.solitary_fwhm_s(1.0)) / 2 == pytest.approx(0.4705, abs=1e-4)
+
+
+@pytest.mark.parametrize(
+    "name, paper_form, kappa_form",
+    [("plexiglass", 0.4232, 0.4293), ("soft_5GPa", 0.5171, 0.5171), ("Mg", 1.1608, 1.1583),
+     ("Cu", 1.5770, 1.5880), ("Si", 1.6555, 1.6388), ("Fe", 1.7545, 1.7523),
+     ("W", 1.9566, 1.9533)],
+)
+def test_wall_force_ratio_estimates(name, paper_form, kappa_form):
+    wall = material(name)
+    assert float(theory.wall_force_ratio_paper(Y, wall.youngs_pa)) == pytest.approx(paper_form, abs=5e-4)
+    kappa_w = contact.kappa_sphere_flat(R, Y, NU, wall.youngs_pa, wall.poisson)
+    assert float(theory.wall_force_ratio(kappa_w, _kappa())) == pytest.approx(kappa_form, abs=5e-4)
+
+
+def test_wall_force_ratio_rigid_and_equal_poisson_forms_agree():
+    rigid = contact.kappa_sphere_flat(R, Y, NU, jnp.inf, NU)
+    assert float(theory.wall_force_ratio(rigid, _kappa())) == pytest.approx(2**1.2, rel=1e-12)
+    assert float(theory.wall_force_ratio_paper(Y, jnp.inf)) == pytest.approx(2**1.2, rel=1e-12)
+    wall_y = jnp.array([3e9, 45e9, 411e9])
+    kappa_w = contact.kappa_sphere_flat(R, Y, NU, wall_y, NU)
+    np.testing.assert_allclose(
+        theory.wall_force_ratio(kappa_w, _kappa()), theory.wall_force_ratio_paper(Y, wall_y), rtol=1e-12
+    )
+
+
+def test_paper_dissipation_conversions():
+    # The paper's own numbers: C_s = 0.17 gives mu = 0.19; C_v = 0.019 gives 1.55 us (with C = 201.5).
+    assert float(theory.mu_from_c_s(0.17, MASS)) == pytest.approx(0.1936, abs=2e-4)
+    assert float(theory.eta_from_c_v(0.019, 201.5, R)) * 1e6 == pytest.approx(1.551, abs=2e-3)
+    assert float(theory.c_v_from_eta(2e-6, 201.5, R)) == pytest.approx(0.0245, abs=2e-4)
+    assert float(theory.c_s_from_mu(0.19, MASS)) == pytest.approx(0.1668, abs=3e-4)
+    assert float(theory.restitution_law(100.0, 0.01, 0.1)) == pytest.approx(1 - 0.01 * 100 ** (1 / 6) - 1e-3)
+
+
+def _strain_profile(x, psi_m):
+    return psi_m * jnp.cos(x / (R * math.sqrt(10))) ** 4
+
+
+def test_cos4_strain_solves_the_travelling_wave_equation():
+    """psi = (5/4)^2 (v/c)^4 cos^4 solves v^2 psi = c^2 [psi^(3/2) + (2/5) R^2 psi^(1/4) (psi^(5/4))'']."""
+    c, v = 1.0, 0.2
+    psi_m = (5 / 4) ** 2 * (v / c) ** 4
+    d2 = jax.grad(jax.grad(lambda x: _strain_profile(x, psi_m) ** 1.25))
+    x = jnp.linspace(-0.6, 0.6, 13) * math.pi / 2 * R * math.sqrt(10)
+    psi = _strain_profile(x, psi_m)
+    rhs = c**2 * (psi**1.5 + 0.4 * R**2 * psi**0.25 * jax.vmap(d2)(x))
+    np.testing.assert_allclose(v**2 * psi, rhs, rtol=1e-10, atol=1e-22)
+
+
+def test_continuum_kinetic_fraction_is_five_ninths():
+    """Integrate the continuum energies of the cos^4 wave: K/(K+U) = 5/9; Hertz-only: 10/19."""
+    c, v = 1.0, 0.3
+    psi_m = (5 / 4) ** 2 * (v / c) ** 4
+    half = math.pi / 2 * R * math.sqrt(10)
+    x = jnp.linspace(-half, half, 20001)
+    psi = _strain_profile(x, psi_m)
+    slope = jax.vmap(jax.grad(lambda y: _strain_profile(y, psi_m) ** 1.25))(x)
+    kinetic = jnp.trapezoid(v**2 * psi**2 / (2 * c**2), x)
+    hertz = jnp.trapezoid(0.4 * psi**2.5, x)
+    dispersive = jnp.trapezoid(-4 / 25 * R**2 * slope**2, x)
+    assert float(kinetic / (kinetic + hertz + dispersive)) == pytest.approx(theory.KINETIC_FRACTION, rel=1e-7)
+    assert float(kinetic / (kinetic + hertz)) == pytest.approx(theory.HERTZ_ONLY_KINETIC_FRACTION, rel=1e-7)
+
+
+def test_theory_accepts_traced_setups(paper_setup):
+    grad = jax.grad(lambda y: theory.setup_constants(
+        hertzchain.ChainSetup(bead_youngs_pa=y))["long_wave_velocity_constant"])(Y)
+    # C_t is proportional to theta^(-1/3), i.e. to Y^(1/3).
+    assert float(grad) == pytest.approx(198.919 / (3 * Y), rel=1e-4)
