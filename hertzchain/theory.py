@@ -122,7 +122,7 @@ def solitary_profile_n(time_s, peak_force_n, center_s, tau_s):
 def solitary_fwhm_s(tau_s):
     """Full width at half maximum of the cos^6 pulse, $2\\,\\mathrm{acos}(2^{-1/6})\\,\\tau$, s.
 
-    Relative to the duration $2\\tau$: 0.4705 (the discrete pulse gives 0.4465 relative to
+    Relative to the duration $2\\tau$: 0.4715 (the discrete pulse gives 0.4465 relative to
     $2R\\sqrt{10}/v$).
     """
     return 2.0 * COS6_HALF_WIDTH * tau_s
