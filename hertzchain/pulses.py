@@ -1,0 +1,617 @@
+"""Pulse analysis of force traces: peaks, cos^6 fits, speeds, the velocity law, restitution.
+
+The functions that measure one pulse (`refine_peak`, `fit_cos6`, `first_peak`,
+`incident_wave`) are written in `jax.numpy`: they take arrays, work under `jit` and `vmap`
+(batch of traces along leading axes) and are differentiable in the force values. The
+functions that find and label several pulses in one trace (`find_pulses`, `momentum_check`)
+work on concrete NumPy arrays (they decide how many pulses there are).
+
+Definitions (they move the numbers by more than the paper's error bars, so they are fixed
+here and stated in each docstring; see also `hertzchain.theory`):
+
+- peak force and time: 3-point parabola through the largest sample and its neighbours;
+- speed: least-squares slope of contact position $2R\\,K$ against peak time;
+- amplitude for the velocity law: the mean parabolic peak force over the contacts used;
+- duration $2\\tau$: the cos^6 fit to the samples of the main lobe at or above
+  `threshold` (default 5 %) of the peak.
+
+With these, the paper's chain gives $C$ = 201.37 over contacts 8-15 (the paper: 201.5 +- 0.1,
+whose definition it does not state) and $2\\tau/(2R\\sqrt{10}/v)$ = 0.962.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import theory
+
+# ----------------------------------------------------------------------------------------
+# One peak
+
+
+def refine_peak(time_s, force_n, index=None):
+    """Peak time and force from a parabola through the largest sample and its neighbours.
+
+    **Arguments:**
+
+    - `time_s`: (n,) evenly spaced sample times, s (shared by a batch of traces).
+    - `force_n`: (..., n) force samples, N.
+    - `index`: the sample to refine around (default: the largest sample; it is kept one
+      sample away from either end).
+
+    **Returns:** `(peak_time_s, peak_force_n)`, each of shape (...). Differentiable in the
+    force values (the index choice is piecewise constant).
+    """
+    time_s = jnp.asarray(time_s)
+    force_n = jnp.asarray(force_n)
+    n = force_n.shape[-1]
+    if n < 3:
+        raise ValueError(f"refine_peak needs at least 3 samples, got {n}.")
+    if index is None:
+        index = jnp.argmax(force_n, axis=-1)
+    index = jnp.clip(jnp.asarray(index), 1, n - 2)
+    take = lambda offset: jnp.take_along_axis(force_n, (index + offset)[..., None], axis=-1)[..., 0]  # noqa: E731
+    left, middle, right = take(-1), take(0), take(1)
+    curvature = left - 2.0 * middle + right
+    safe = jnp.where(curvature < 0.0, curvature, -1.0)
+    offset = jnp.where(curvature < 0.0, 0.5 * (left - right) / safe, 0.0)
+    offset = jnp.clip(offset, -1.0, 1.0)
+    step = time_s[1] - time_s[0]
+    peak_time = time_s[index] + offset * step
+    peak_force = middle - 0.25 * (left - right) * offset
+    return peak_time, peak_force
+
+
+def first_peak(time_s, force_n, *, rise_fraction=0.3):
+    """The first pulse's peak: the first rise above `rise_fraction` of the trace maximum,
+    then the next local maximum, refined by `refine_peak`.
+
+    **Arguments:** `time_s` (n,), s; `force_n` (..., n), N; `rise_fraction` of the maximum.
+
+    **Returns:** `(peak_time_s, peak_force_n)` of shape (...).
+    """
+    force_n = jnp.asarray(force_n)
+    n = force_n.shape[-1]
+    top = jnp.max(force_n, axis=-1, keepdims=True)
+    start = jnp.argmax(force_n >= rise_fraction * top, axis=-1)
+    samples = jnp.arange(n - 1)
+    falling = (force_n[..., :-1] >= force_n[..., 1:]) & (samples >= start[..., None])
+    index = jnp.where(jnp.any(falling, axis=-1), jnp.argmax(falling, axis=-1), n - 1)
+    return refine_peak(time_s, force_n, index)
+
+
+def _first_peak_index(force_n, rise_fraction):
+    force = np.asarray(force_n)
+    top = np.max(force, axis=-1, keepdims=True)
+    start = np.argmax(force >= rise_fraction * top, axis=-1)
+    samples = np.arange(force.shape[-1] - 1)
+    falling = (force[..., :-1] >= force[..., 1:]) & (samples >= start[..., None])
+    return np.where(np.any(falling, axis=-1), np.argmax(falling, axis=-1), force.shape[-1] - 1)
+
+
+# ----------------------------------------------------------------------------------------
+# cos^6 fit
+
+
+class Cos6Fit(eqx.Module):
+    """Least-squares fit of $F(t) = F_m\\cos^6((t - t_0)/\\tau)$ to one pulse.
+
+    **Fields** (arrays with the batch shape of the input): `peak_force_n` ($F_m$, N),
+    `center_s` ($t_0$, s), `tau_s` ($\\tau$, s; the duration is $2\\tau$), their standard
+    errors `peak_force_stderr_n`, `center_stderr_s`, `tau_stderr_s` (from the Jacobian at
+    the optimum and the residual variance, or the given noise level), `residual_rms_n`
+    (N), `n_points` (samples fitted) and `converged` (bool).
+    """
+
+    peak_force_n: jax.Array
+    center_s: jax.Array
+    tau_s: jax.Array
+    peak_force_stderr_n: jax.Array
+    center_stderr_s: jax.Array
+    tau_stderr_s: jax.Array
+    residual_rms_n: jax.Array
+    n_points: jax.Array
+    converged: jax.Array
+
+    @property
+    def duration_s(self) -> jax.Array:
+        """The pulse duration $2\\tau$, s."""
+        return 2.0 * self.tau_s
+
+    @property
+    def duration_stderr_s(self) -> jax.Array:
+        return 2.0 * self.tau_stderr_s
+
+    def profile_n(self, time_s) -> jax.Array:
+        """The fitted pulse at `time_s`, N."""
+        return theory.solitary_profile_n(time_s, self.peak_force_n, self.center_s, self.tau_s)
+
+
+def _lobe_mask(time_s, force_n, threshold, window_s):
+    """Samples of the main lobe: contiguous around the largest sample in the window, all at or
+    above `threshold` times that sample."""
+    n = force_n.shape[-1]
+    inside = (time_s >= window_s[0]) & (time_s <= window_s[1])
+    peak_index = jnp.argmax(jnp.where(inside, force_n, -jnp.inf))
+    level = threshold * force_n[peak_index]
+    low = (force_n < level) | ~inside
+    samples = jnp.arange(n)
+    first = jnp.max(jnp.where(low & (samples < peak_index), samples, -1)) + 1
+    last = jnp.min(jnp.where(low & (samples > peak_index), samples, n)) - 1
+    return (samples >= first) & (samples <= last), peak_index
+
+
+def _fit_one(time_s, force_n, threshold, window_s, noise_std_n, n_iterations):
+    mask, peak_index = _lobe_mask(time_s, force_n, threshold, window_s)
+    t_guess, f_guess = refine_peak(time_s, force_n, peak_index)
+    f_guess = jnp.where(f_guess > 0.0, f_guess, jnp.max(jnp.abs(force_n)) + 1e-300)
+    step = time_s[1] - time_s[0]
+    above_half = jnp.sum(mask & (force_n >= 0.5 * f_guess))
+    tau_guess = jnp.maximum(above_half, 2) * step / (2.0 * theory.COS6_HALF_WIDTH)
+    weight = mask.astype(force_n.dtype)
+    x = (time_s - t_guess) / tau_guess
+    y = force_n / f_guess
+
+    def residuals(p):
+        a, c, s = p
+        return weight * (y - theory.solitary_profile_n(x, a, c, s))
+
+    jacobian = jax.jacfwd(residuals)
+
+    def cost(p):
+        return jnp.sum(residuals(p) ** 2)
+
+    def lm_step(_, carry):
+        p, lam = carry
+        r = residuals(p)
+        j = jacobian(p)
+        jtj = j.T @ j
+        g = j.T @ r
+        damped = jtj + lam * jnp.diag(jnp.diag(jtj) + 1e-12)
+        delta = -jnp.linalg.solve(damped, g)
+        trial = p + delta
+        trial = trial.at[2].set(jnp.maximum(trial[2], 1e-3))
+        better = cost(trial) < cost(p)
+        return jnp.where(better, trial, p), jnp.where(better, lam * 0.3, lam * 10.0)
+
+    p0 = jnp.array([1.0, 0.0, 1.0], dtype=force_n.dtype)
+    p, _ = jax.lax.fori_loop(0, n_iterations, lm_step, (p0, jnp.asarray(1e-3, force_n.dtype)))
+    r = residuals(p)
+    j = jacobian(p)
+    n_points = jnp.sum(weight)
+    dof = jnp.maximum(n_points - 3.0, 1.0)
+    variance = jnp.where(
+        jnp.isnan(noise_std_n), jnp.sum(r**2) / dof, (noise_std_n / f_guess) ** 2
+    )
+    covariance = variance * jnp.linalg.inv(j.T @ j)
+    se = jnp.sqrt(jnp.abs(jnp.diag(covariance)))
+    last_step = jnp.linalg.solve(j.T @ j + 1e-12 * jnp.eye(3), -j.T @ r)
+    converged = (n_points >= 4) & jnp.all(jnp.abs(last_step) <= 1e-6 + 1e-3 * se)
+    return Cos6Fit(
+        peak_force_n=p[0] * f_guess,
+        center_s=t_guess + p[1] * tau_guess,
+        tau_s=p[2] * tau_guess,
+        peak_force_stderr_n=se[0] * f_guess,
+        center_stderr_s=se[1] * tau_guess,
+        tau_stderr_s=se[2] * tau_guess,
+        residual_rms_n=jnp.sqrt(jnp.sum(r**2) / jnp.maximum(n_points, 1.0)) * f_guess,
+        n_points=n_points.astype(int),
+        converged=converged,
+    )
+
+
+@eqx.filter_jit
+def _fit_batch(time_s, force_n, threshold, window_s, noise_std_n, n_iterations):
+    fit = lambda f, noise: _fit_one(time_s, f, threshold, window_s, noise, n_iterations)  # noqa: E731
+    for _ in range(force_n.ndim - 1):
+        fit = jax.vmap(fit)
+    return fit(force_n, noise_std_n)
+
+
+def fit_cos6(time_s, force_n, *, threshold=0.05, window_s=None, noise_std_n=None, n_iterations=40):
+    """Fit $F_m\\cos^6((t - t_0)/\\tau)$ (Eq. 3 of Job et al.) to the main pulse of a trace.
+
+    The fitted samples are the main lobe: the largest sample inside `window_s` and the
+    contiguous samples around it that stay at or above `threshold` times it (the paper's
+    Fig. 2 uses the whole pulse; 0.05 leaves out the discrete pulse's long tails, which a
+    cos^6 of compact support cannot follow). Start: the parabolic peak and the half-width
+    of the samples above half maximum; then a damped Gauss-Newton (Levenberg-Marquardt)
+    iteration in scaled variables, with $\\tau$ kept positive.
+
+    **Arguments:**
+
+    - `time_s`: (n,) evenly spaced times, s.
+    - `force_n`: (..., n) forces, N; leading axes are a batch (fitted with `vmap`).
+    - `threshold`: lobe level as a fraction of the peak, in [0, 1).
+    - `window_s`: `(start, stop)` times limiting the search, s (default: the whole trace);
+      use it to pick the incident, reflected or a secondary pulse.
+    - `noise_std_n`: known noise standard deviation, N (scalar or batch-shaped) for the
+      standard errors; default: the residual variance (sum of squares / (n - 3)).
+    - `n_iterations`: fixed number of iterations (so that the fit can be vmapped).
+
+    **Returns:** `Cos6Fit`. Standard errors are the usual linearised ones,
+    $\\sqrt{\\mathrm{diag}(s^2(J^TJ)^{-1})}$; they describe noise, not the model error of
+    fitting a cos^6 to a discrete pulse (the maximum residual of that is 1.2 % of $F_m$).
+    """
+    if not 0.0 <= threshold < 1.0:
+        raise ValueError(f"threshold must be a fraction of the peak in [0, 1), got {threshold!r}.")
+    time_s = jnp.asarray(time_s, dtype=jnp.float64)
+    force_n = jnp.asarray(force_n, dtype=jnp.float64)
+    if time_s.ndim != 1 or force_n.shape[-1] != time_s.shape[0]:
+        raise ValueError(
+            f"fit_cos6: time_s must be (n,) and force_n (..., n); got {time_s.shape} and {force_n.shape}."
+        )
+    if time_s.shape[0] < 5:
+        raise ValueError(f"fit_cos6 needs at least 5 samples, got {time_s.shape[0]}.")
+    window = (-jnp.inf, jnp.inf) if window_s is None else tuple(float(w) for w in window_s)
+    noise = jnp.broadcast_to(
+        jnp.asarray(jnp.nan if noise_std_n is None else noise_std_n, dtype=jnp.float64),
+        force_n.shape[:-1],
+    )
+    return _fit_batch(time_s, force_n, float(threshold), jnp.asarray(window), noise, int(n_iterations))
+
+
+# ----------------------------------------------------------------------------------------
+# Speed and the velocity law
+
+
+class SpeedFit(NamedTuple):
+    """Speed from arrival times: `speed_m_s`, `speed_stderr_m_s` (NaN when not estimable),
+    `intercept_s` (the time at position 0, s), `n_points`."""
+
+    speed_m_s: float
+    speed_stderr_m_s: float
+    intercept_s: float
+    n_points: int
+
+
+def wave_speed(positions_m, arrival_times_s, *, time_stderr_s=None) -> SpeedFit:
+    """Speed as the least-squares slope of position against arrival time.
+
+    Two points give the time-of-flight speed $\\Delta x/\\Delta t$. The standard error comes
+    from `time_stderr_s` (each arrival time's uncertainty, s) when given, otherwise from the
+    residuals (three points or more).
+
+    **Arguments:** `positions_m` (n,), m (e.g. $2R\\,K$ for contact K); `arrival_times_s`
+    (n,), s (e.g. parabolic peak times or cos^6 centres).
+    """
+    x = np.asarray(positions_m, dtype=float)
+    t = np.asarray(arrival_times_s, dtype=float)
+    if x.shape != t.shape or x.ndim != 1 or len(x) < 2:
+        raise ValueError("wave_speed needs two or more (position, arrival time) pairs of equal length.")
+    if np.ptp(t) <= 0:
+        raise ValueError("wave_speed: all arrival times are equal; the speed is undefined.")
+    tc = t - t.mean()
+    slope = float(np.sum(tc * (x - x.mean())) / np.sum(tc**2))
+    intercept_x = x.mean() - slope * t.mean()
+    if time_stderr_s is not None:
+        # Errors in the times only: the inverse slope 1/v of t(x) has variance s_t^2/Sxx.
+        xc = x - x.mean()
+        stderr = slope**2 * float(time_stderr_s) / math.sqrt(float(np.sum(xc**2)))
+    elif len(x) > 2:
+        residual = x - (intercept_x + slope * t)
+        stderr = math.sqrt(float(np.sum(residual**2)) / (len(x) - 2) / float(np.sum(tc**2)))
+    else:
+        stderr = math.nan
+    return SpeedFit(slope, stderr, float(-intercept_x / slope), len(x))
+
+
+class IncidentWave(NamedTuple):
+    """The incident solitary wave measured at several contacts (definition of
+    `incident_wave`): `speed_m_s`, `speed_stderr_m_s`, `peak_force_n` (mean of the
+    contacts' peaks), `peak_times_s` and `peak_forces_n` per contact."""
+
+    speed_m_s: float
+    speed_stderr_m_s: float
+    peak_force_n: float
+    peak_times_s: np.ndarray
+    peak_forces_n: np.ndarray
+
+
+def incident_wave(time_s, forces_n, contacts, bead_radius_m, *, rise_fraction=0.3) -> IncidentWave:
+    """Speed and amplitude of the first pulse passing a set of contacts.
+
+    Definition (row 2a of the project's reference numbers): at each contact K the first pulse
+    (`first_peak`) gives a parabolic peak time and force; the speed is the least-squares
+    slope of $2R\\,K$ against the peak times and the amplitude is the mean peak force. On
+    the paper's chain (identical striker, contacts 8-15) this gives $v/F_m^{1/6}$ = 201.37.
+
+    **Arguments:** `time_s` (n,); `forces_n` (n_contacts, n) or a dict name -> (n,) in the
+    order of `contacts`; `contacts` the contact numbers K; `bead_radius_m`, m.
+    """
+    if isinstance(forces_n, dict):
+        forces_n = np.stack([np.asarray(f) for f in forces_n.values()])
+    forces = jnp.asarray(forces_n, dtype=jnp.float64)
+    if forces.shape[0] != len(contacts):
+        raise ValueError(f"incident_wave: {forces.shape[0]} traces for {len(contacts)} contacts.")
+    index = _first_peak_index(forces, rise_fraction)
+    late = [k for k, i in zip(contacts, index) if i >= forces.shape[-1] - 2]
+    if late:
+        raise ValueError(
+            f"incident_wave: the first pulse at contacts {late} peaks at the end of the trace; "
+            "record longer (t_end_s)."
+        )
+    times, peaks = first_peak(jnp.asarray(time_s), forces, rise_fraction=rise_fraction)
+    times, peaks = np.asarray(times), np.asarray(peaks)
+    positions = 2.0 * float(bead_radius_m) * np.asarray(contacts, dtype=float)
+    speed = wave_speed(positions, times)
+    return IncidentWave(speed.speed_m_s, speed.speed_stderr_m_s, float(np.mean(peaks)), times, peaks)
+
+
+class VelocityLawFit(NamedTuple):
+    """Fit of $v = C F_m^{1/6}$: `velocity_constant` ($C$, m s^-1 N^-1/6) and its
+    `velocity_constant_stderr`; the free power law $v = A F_m^{p}$ with `exponent` and
+    `exponent_stderr` (1/6 expected); `relative_rms` of $v/(CF_m^{1/6}) - 1$; `n_points`."""
+
+    velocity_constant: float
+    velocity_constant_stderr: float
+    exponent: float
+    exponent_stderr: float
+    relative_rms: float
+    n_points: int
+
+
+def fit_velocity_law(peak_force_n, speed_m_s, *, speed_stderr_m_s=None) -> VelocityLawFit:
+    """Least-squares fit of the velocity law $v = C F_m^{1/6}$ over a set of pulses.
+
+    $C = \\sum w v x / \\sum w x^2$ with $x = F_m^{1/6}$ and weights $w = 1/\\sigma_v^2$ (1 when
+    no `speed_stderr_m_s`). Its standard error is $(\\sum w x^2)^{-1/2}$ scaled by the
+    residual standard deviation (weighted, n - 1 degrees of freedom); with a single pulse
+    it is the propagated speed error (NaN without one). The free exponent comes from a
+    straight-line fit of $\\ln v$ against $\\ln F_m$ (NaN for fewer than 3 pulses).
+
+    What $F_m$ and $v$ mean is the caller's definition; with `incident_wave` over contacts
+    8-15 of the paper's chain the result is $C$ = 201.37 (the paper: 201.5 +- 0.1).
+    """
+    force = np.asarray(peak_force_n, dtype=float).ravel()
+    speed = np.asarray(speed_m_s, dtype=float).ravel()
+    if force.shape != speed.shape or len(force) == 0:
+        raise ValueError("fit_velocity_law needs equal numbers of peak forces and speeds.")
+    if np.any(force <= 0):
+        raise ValueError("fit_velocity_law: peak forces must be positive (N).")
+    sigma = np.ones_like(speed) if speed_stderr_m_s is None else np.broadcast_to(
+        np.asarray(speed_stderr_m_s, dtype=float), speed.shape
+    )
+    w = 1.0 / sigma**2
+    x = force ** (1.0 / 6.0)
+    sxx = float(np.sum(w * x**2))
+    c = float(np.sum(w * speed * x) / sxx)
+    residual = speed - c * x
+    n = len(force)
+    if n > 1:
+        scale = float(np.sum(w * residual**2)) / (n - 1)
+        if speed_stderr_m_s is not None:
+            scale = max(scale, 1.0)
+        stderr = math.sqrt(scale / sxx)
+    else:
+        stderr = math.sqrt(1.0 / sxx) if speed_stderr_m_s is not None else math.nan
+    exponent, exponent_se = math.nan, math.nan
+    if n > 2 and np.ptp(np.log(force)) > 0:
+        design = np.column_stack([np.ones(n), np.log(force)])
+        coef, *_ = np.linalg.lstsq(design, np.log(speed), rcond=None)
+        res = np.log(speed) - design @ coef
+        cov = float(np.sum(res**2)) / (n - 2) * np.linalg.inv(design.T @ design)
+        exponent, exponent_se = float(coef[1]), math.sqrt(float(cov[1, 1]))
+    relative_rms = float(np.sqrt(np.mean((speed / (c * x) - 1.0) ** 2)))
+    return VelocityLawFit(c, stderr, exponent, exponent_se, relative_rms, n)
+
+
+# ----------------------------------------------------------------------------------------
+# Restitution
+
+
+def restitution_coefficients(peak_forces_n, reference_peak_forces_n=None):
+    """The paper's restitution $\\epsilon_k = (U_{k+1}/U_k)^{1/2} = (F_{k+1}/F_k)^{5/6}$.
+
+    **Arguments:** `peak_forces_n` (..., n) peak forces of one pulse at consecutive contacts,
+    N; `reference_peak_forces_n`: the same from a dissipationless run of the same chain
+    (optional): each $\\epsilon_k$ is then divided by its dissipationless value, which removes
+    the decay of a wave still forming near the striker (it alone gives $\\epsilon$ = 0.9976
+    at contact 5 of the paper's chain).
+
+    **Returns:** (..., n - 1) $\\epsilon_k$; plot them against `peak_forces_n[..., :-1]`.
+    """
+    forces = jnp.asarray(peak_forces_n)
+    eps = (forces[..., 1:] / forces[..., :-1]) ** (5.0 / 6.0)
+    if reference_peak_forces_n is not None:
+        eps = eps / restitution_coefficients(reference_peak_forces_n)
+    return eps
+
+
+class RestitutionFit(NamedTuple):
+    """Fit of $1 - \\epsilon = C_v F^{1/6} + C_s/F$: `c_v` (N^-1/6), `c_s` (N), standard
+    errors `c_v_stderr`, `c_s_stderr` (NaN for a term left out), `residual_rms`,
+    `n_points`; and the paper's conversions `eta_paper_s` = $2\\sqrt{10}RC_v/(5C)$ and
+    `mu_paper` = $4C_s/(5mg)$ (NaN unless the constants were given). The conversions do
+    not hold for this model (simulated $\\eta$ = 2 us gives a $C_v$ 3.0 times smaller than
+    they predict, $\\mu$ = 0.19 a $C_s$ 0.69 times): fit $\\eta$, $\\mu$ with the simulator."""
+
+    c_v: float
+    c_s: float
+    c_v_stderr: float
+    c_s_stderr: float
+    residual_rms: float
+    n_points: int
+    eta_paper_s: float
+    mu_paper: float
+
+
+def fit_restitution_law(
+    force_n,
+    restitution,
+    *,
+    viscous=True,
+    friction=True,
+    velocity_constant=None,
+    bead_radius_m=None,
+    bead_mass_kg=None,
+    gravity_m_s2=9.81,
+) -> RestitutionFit:
+    """Linear least-squares fit of the paper's law $\\epsilon \\approx 1 - C_v F^{1/6} - C_s/F$.
+
+    **Arguments:** `force_n` (n,) the force at which each $\\epsilon$ was measured, N (the
+    incoming pulse's peak); `restitution` (n,) the $\\epsilon$ values; `viscous`, `friction`
+    choose the terms; `velocity_constant` (m s^-1 N^-1/6), `bead_radius_m`, `bead_mass_kg`,
+    `gravity_m_s2` enable the paper's conversions to $\\eta$ and $\\mu$ (see
+    `RestitutionFit` for why they are only indicative).
+    """
+    force = np.asarray(force_n, dtype=float).ravel()
+    loss = 1.0 - np.asarray(restitution, dtype=float).ravel()
+    if force.shape != loss.shape:
+        raise ValueError("fit_restitution_law: force_n and restitution must have the same length.")
+    if not (viscous or friction):
+        raise ValueError("fit_restitution_law: keep at least one of viscous, friction.")
+    if np.any(force <= 0):
+        raise ValueError("fit_restitution_law: forces must be positive (N).")
+    columns = ([force ** (1.0 / 6.0)] if viscous else []) + ([1.0 / force] if friction else [])
+    design = np.column_stack(columns)
+    n, k = design.shape
+    if n < k:
+        raise ValueError(f"fit_restitution_law: {n} points cannot fix {k} constants.")
+    coef, *_ = np.linalg.lstsq(design, loss, rcond=None)
+    residual = loss - design @ coef
+    if n > k:
+        cov = float(np.sum(residual**2)) / (n - k) * np.linalg.inv(design.T @ design)
+        se = np.sqrt(np.diag(cov))
+    else:
+        se = np.full(k, math.nan)
+    values = dict(c_v=0.0, c_s=0.0, c_v_stderr=math.nan, c_s_stderr=math.nan)
+    names = (["c_v"] if viscous else []) + (["c_s"] if friction else [])
+    for i, name in enumerate(names):
+        values[name] = float(coef[i])
+        values[name + "_stderr"] = float(se[i])
+    eta = math.nan
+    if velocity_constant is not None and bead_radius_m is not None:
+        eta = float(theory.eta_from_c_v(values["c_v"], velocity_constant, bead_radius_m))
+    mu = math.nan
+    if bead_mass_kg is not None:
+        mu = float(theory.mu_from_c_s(values["c_s"], bead_mass_kg, gravity_m_s2))
+    return RestitutionFit(
+        values["c_v"], values["c_s"], values["c_v_stderr"], values["c_s_stderr"],
+        float(np.sqrt(np.mean(residual**2))), n, eta, mu,
+    )
+
+
+def collision_restitution(time_s, force_n, *, reduced_mass_kg, impact_velocity_m_s):
+    """Restitution of one binary collision from its contact-force trace (the DEM definition).
+
+    The impulse of the collision is $J = \\int F\\,dt = m^*(1+\\epsilon)v_{in}$, so
+    $\\epsilon = J/(m^* v_{in}) - 1$ equals the ratio of separation to approach speed.
+    `reduced_mass_kg` is $m_1m_2/(m_1+m_2)$ ($m$ for a bead on a wall); the trace must
+    cover the whole contact (trapezoid rule; the force is taken as 0 before the first
+    sample, i.e. at the impact).
+    """
+    time = jnp.asarray(time_s)
+    force = jnp.asarray(force_n)
+    impulse = jnp.trapezoid(force, time, axis=-1) + 0.5 * force[..., 0] * time[0]
+    return impulse / (reduced_mass_kg * impact_velocity_m_s) - 1.0
+
+
+# ----------------------------------------------------------------------------------------
+# Several pulses in one trace
+
+
+class Pulse(NamedTuple):
+    """One pulse of a trace: `label` (see `find_pulses`), sample range `start`..`stop`
+    (inclusive; the boundaries with neighbouring pulses are the minima between them),
+    `peak_index`, parabolic `peak_time_s` and `peak_force_n`, and `window_s` (the time span
+    to pass to `fit_cos6`)."""
+
+    label: str
+    start: int
+    stop: int
+    peak_index: int
+    peak_time_s: float
+    peak_force_n: float
+    window_s: tuple[float, float]
+
+
+def estimate_noise_std_n(force_n) -> float:
+    """Noise standard deviation of a trace from its second differences, N.
+
+    White noise of variance $\\sigma^2$ gives second differences of variance $6\\sigma^2$;
+    the median absolute deviation makes the estimate robust to the samples where a finely
+    sampled smooth pulse curves (they must be a minority of the trace).
+    """
+    diff = np.diff(np.asarray(force_n, dtype=float), n=2)
+    mad = np.median(np.abs(diff - np.median(diff)))
+    return float(1.4826 * mad / math.sqrt(6.0))
+
+
+def find_pulses(time_s, force_n, *, channel="contact", min_fraction=0.05, noise_std_n=None):
+    """Find the pulses of one trace and label them in time order.
+
+    A pulse is a local maximum whose height and prominence exceed the larger of
+    `min_fraction` times the trace maximum and 5 times the noise (`noise_std_n`, estimated
+    from the trace when not given). Labels: for a `"wall"` channel `wall`, then
+    `wall_secondary_1`, ...; for a contact or sensor channel `incident`, `reflected`, then
+    `secondary_1`, ... (after a wall the first pulse is the incident wave, the second the
+    reflected primary and the rest secondary waves or tails).
+
+    **Returns:** a list of `Pulse`.
+    """
+    from scipy.signal import find_peaks
+
+    time = np.asarray(time_s, dtype=float)
+    force = np.asarray(force_n, dtype=float)
+    noise = estimate_noise_std_n(force) if noise_std_n is None else float(noise_std_n)
+    level = max(min_fraction * float(np.max(force)), 5.0 * noise)
+    if not np.max(force) > level:
+        return []
+    width = max(1, int(round(3.0 * noise / max(level, 1e-300))))
+    peaks, _ = find_peaks(force, height=level, prominence=level, distance=width)
+    if len(peaks) == 0:
+        return []
+    bounds = [int(np.argmax(force[: peaks[0]] >= level)) if peaks[0] > 0 else 0]
+    for a, b in zip(peaks[:-1], peaks[1:]):
+        bounds.append(int(a + np.argmin(force[a : b + 1])))
+    after = force[peaks[-1] :] < level
+    bounds.append(int(peaks[-1] + np.argmax(after)) if np.any(after) else len(force) - 1)
+    names = ("wall",) if channel == "wall" else ("incident", "reflected")
+    prefix = "wall_secondary" if channel == "wall" else "secondary"
+    pulses = []
+    for i, peak in enumerate(peaks):
+        label = names[i] if i < len(names) else f"{prefix}_{i - len(names) + 1}"
+        start, stop = bounds[i], bounds[i + 1]
+        t, f = refine_peak(time, force, int(peak))
+        pulses.append(
+            Pulse(label, start, stop, int(peak), float(t), float(f), (float(time[start]), float(time[stop])))
+        )
+    return pulses
+
+
+class MomentumCheck(NamedTuple):
+    """Areas under force pulses, N s: `wall_impulse_n_s`, `incident_impulse_n_s`,
+    `reflected_impulse_n_s` (everything after the incident pulse) and
+    `ratio` = wall / (incident + reflected) (the paper: "equal"; 1.015-1.02 for stiff walls,
+    the last beads leave the wall with momentum that never passes the contact)."""
+
+    wall_impulse_n_s: float
+    incident_impulse_n_s: float
+    reflected_impulse_n_s: float
+    ratio: float
+
+
+def momentum_check(time_s, wall_force_n, contact_force_n, *, noise_std_n=None) -> MomentumCheck:
+    """The paper's momentum check: area under the wall pulse against the areas of the
+    incident and reflected pulses at a contact.
+
+    The incident area runs from the start of the trace to the minimum after the first
+    pulse of the contact (`find_pulses`); the reflected area is the rest of the trace.
+    """
+    time = np.asarray(time_s, dtype=float)
+    contact_force = np.asarray(contact_force_n, dtype=float)
+    pulses = find_pulses(time, contact_force, noise_std_n=noise_std_n)
+    if not pulses:
+        raise ValueError("momentum_check: no pulse found in the contact trace.")
+    split = pulses[0].stop
+    incident = float(np.trapezoid(contact_force[: split + 1], time[: split + 1]))
+    reflected = float(np.trapezoid(contact_force[split:], time[split:]))
+    wall = float(np.trapezoid(np.asarray(wall_force_n, dtype=float), time))
+    return MomentumCheck(wall, incident, reflected, wall / (incident + reflected))
