@@ -123,8 +123,13 @@ def thornton_contact(overlap_m, max_overlap_m, kappa_n_m1p5, yield_force_n):
 
 
 def overlap_at_force(force_n, kappa_n_m1p5):
-    """Overlap $\\delta = (F/\\kappa)^{2/3}$ at which a Hertz contact carries `force_n`, m."""
-    return (force_n / kappa_n_m1p5) ** (2.0 / 3.0)
+    """Overlap $\\delta = (F/\\kappa)^{2/3}$ at which a Hertz contact carries `force_n`, m.
+
+    Zero force gives zero overlap with finite (zero) derivatives (the double `where`).
+    """
+    loaded = force_n > 0.0
+    ratio = jnp.where(loaded, force_n / kappa_n_m1p5, 1.0)
+    return jnp.where(loaded, ratio ** (2.0 / 3.0), 0.0)
 
 
 def yield_force(yield_stress_pa, radius_a_m, theta_a, radius_b_m=jnp.inf, theta_b=0.0):

@@ -13,6 +13,8 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from . import contact
@@ -49,39 +51,39 @@ class TimeGrid(NamedTuple):
         return self.steps_per_sample * self.n_samples
 
 
+def _contact_times(setup: ChainSetup):
+    """Contact-time estimates of one (unbatched) setup, s, as a 1-D array (jnp)."""
+    bead_mass = setup.bead_mass_kg
+    kappa = setup.contact_kappa()
+    reduced_striker = setup.striker_mass_kg * bead_mass[0] / (setup.striker_mass_kg + bead_mass[0])
+    velocity = setup.striker_velocity_m_s
+    overlap = (1.25 * reduced_striker * velocity**2 / kappa[0]) ** 0.4
+    peak = _FORCE_MARGIN * kappa[0] * overlap**1.5 + setup.precompression_n
+    times = [contact.collision_time(reduced_striker, kappa[0], velocity)]
+    loaded = [(0.5 * jnp.min(bead_mass), jnp.max(kappa))]
+    if setup.end == "wall":
+        loaded.append((bead_mass[-1], setup.wall_kappa()))
+    for mass, stiffness in loaded:
+        speed = contact.velocity_for_peak_force(mass, stiffness, peak)
+        times.append(contact.collision_time(mass, stiffness, speed))
+    if setup.sensor_beads:
+        times.append(0.5 / setup.sensor_f0_hz)
+    return jnp.stack(times)
+
+
 def shortest_contact_time_s(setup: ChainSetup) -> float:
     """Shortest contact time the run can produce, s (concrete setups, batched ones too).
 
     Taken over the striker's collision with bead 1 at the impact velocity, bead-bead and
     bead-wall contacts loaded to 2.5 times that collision's peak force plus the preload,
-    and half the period of any embedded sensor.
+    and half the period of any embedded sensor. A batched setup (leading axes on every
+    field) gives the minimum over the batch.
     """
-    p = {
-        name: np.asarray(getattr(setup, name), dtype=float)
-        for name in (
-            "striker_density_kg_m3", "striker_radius_m", "bead_density_kg_m3", "bead_radius_m",
-            "striker_velocity_m_s", "precompression_n", "sensor_f0_hz",
-        )
-    }
-    striker_mass = 4.0 / 3.0 * math.pi * p["striker_density_kg_m3"] * p["striker_radius_m"] ** 3
-    bead_mass = 4.0 / 3.0 * math.pi * p["bead_density_kg_m3"] * p["bead_radius_m"] ** 3
-    kappa = np.asarray(setup.contact_kappa())
-    reduced_striker = striker_mass * bead_mass[..., 0] / (striker_mass + bead_mass[..., 0])
-    velocity = p["striker_velocity_m_s"]
-    first_kappa = kappa[..., 0]
-    overlap = (1.25 * reduced_striker * velocity**2 / first_kappa) ** 0.4
-    peak = _FORCE_MARGIN * first_kappa * overlap**1.5 + p["precompression_n"]
-    times = [np.asarray(contact.collision_time(reduced_striker, first_kappa, velocity))]
-    lightest = np.min(bead_mass, axis=-1)
-    stiffest = np.max(kappa[..., 1:], axis=-1) if kappa.shape[-1] > 1 else first_kappa
-    for mass, stiffness in ((0.5 * lightest, stiffest),) + (
-        ((bead_mass[..., -1], np.asarray(setup.wall_kappa())),) if setup.end == "wall" else ()
-    ):
-        speed = np.asarray(contact.velocity_for_peak_force(mass, stiffness, peak))
-        times.append(np.asarray(contact.collision_time(mass, stiffness, speed)))
-    if setup.sensor_beads:
-        times.append(0.5 / p["sensor_f0_hz"])
-    return float(min(np.min(t) for t in times))
+    batch_ndim = jnp.ndim(setup.striker_velocity_m_s)
+    times = _contact_times
+    for _ in range(batch_ndim):
+        times = jax.vmap(times)
+    return float(np.min(np.asarray(times(setup))))
 
 
 def _check_resolution(dt_s: float, t_contact_s: float) -> None:
