@@ -306,8 +306,11 @@ class ChainSetup(eqx.Module):
         return jnp.concatenate([beads, wall[None]])
 
     def sensor_spring_n_m(self) -> jax.Array:
-        """Stiffness $k_s$ of an embedded sensor in bead 1's size, from $\\beta$ and $f_0$, per
-        sensor bead, N/m."""
+        """Spring stiffness $k_s$ of each embedded sensor, N/m (in `sensor_beads` order).
+
+        From $\\omega_0^2 = k_s(1/m_+ + 1/m_-)$ with $m_+ = \\beta m$, $m_- = (1-\\beta) m$:
+        $k_s = \\omega_0^2\\,\\beta(1-\\beta)\\,m$.
+        """
         beads = jnp.asarray(self.sensor_beads, dtype=int) - 1
         mass = self.bead_mass_kg[beads]
         omega0 = 2.0 * jnp.pi * self.sensor_f0_hz
