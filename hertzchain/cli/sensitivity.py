@@ -1,0 +1,176 @@
+"""`hertzchain sensitivity`: exact derivatives and elasticities of observables to parameters,
+at one setup, over a swept grid of setups, or averaged over a parameter box (global)."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+
+from .. import sensitivity as S
+from ..atomic import save_figure, write_json, write_text
+from ..tracefile import setup_header
+from ..units import parse_quantity
+from .setup_options import add_run_arguments, add_setup_arguments, setup_from_args
+
+
+def _names(text: str) -> tuple[str, ...]:
+    return tuple(part.strip() for part in text.split(",") if part.strip())
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_setup_arguments(parser)
+    add_run_arguments(parser)
+    group = parser.add_argument_group("sensitivity")
+    group.add_argument(
+        "--params", type=_names, required=True,
+        help="parameters, comma-separated: " + ", ".join(S.PARAMETERS),
+    )
+    group.add_argument(
+        "--observables", type=_names, required=True,
+        help="observables, comma-separated: " + "; ".join(S.OBSERVABLE_FORMS),
+    )
+    group.add_argument("--mode", choices=("auto", "forward", "reverse"), default="auto",
+                       help="AD mode [auto: reverse when fewer observable values than parameters]")
+    group.add_argument("--steps-per-contact", type=int, default=200,
+                       help="Verlet steps per shortest contact time [200]")
+    group.add_argument("--out", default="out/sensitivity", help="output folder [out/sensitivity]")
+    sweep = parser.add_argument_group("sweep (outer product of the given values)")
+    sweep.add_argument("--sweep-velocities", help="impact velocities (m/s), e.g. 0.05,0.1,0.3,1")
+    sweep.add_argument("--sweep-wall-youngs", help="wall moduli (Pa), e.g. 3e9,45e9,203e9")
+    sweep.add_argument("--sweep", action="append", default=[], metavar="PARAM=V1,V2,...",
+                       help="sweep any scalar parameter (SI values); repeatable")
+    sweep.add_argument("--chunk-size", type=int, default=64, help="setups per vmapped call [64]")
+    glob = parser.add_argument_group("global (derivative-based measures over a box)")
+    glob.add_argument("--box", action="append", default=[], metavar="PARAM=LOW:HIGH",
+                      help="range of a parameter (SI); repeatable; turns on the global study")
+    glob.add_argument("--global-samples", type=int, default=64, help="Latin-hypercube points [64]")
+    glob.add_argument("--seed", type=int, default=0, help="sampling seed [0]")
+
+
+def _values(text: str, unit: str, option: str) -> list[float]:
+    return [parse_quantity(part, unit, name=option) for part in text.split(",") if part.strip()]
+
+
+def _sweep_axes(args) -> dict[str, list[float]]:
+    axes = {}
+    if args.sweep_velocities:
+        axes["striker_velocity"] = _values(args.sweep_velocities, "m/s", "--sweep-velocities")
+    if args.sweep_wall_youngs:
+        axes["wall_youngs"] = _values(args.sweep_wall_youngs, "Pa", "--sweep-wall-youngs")
+    for item in args.sweep:
+        name, _, values = item.partition("=")
+        if not values:
+            raise ValueError(f"--sweep {item!r}: expected PARAM=V1,V2,... (SI values).")
+        if name.strip() in axes:
+            raise ValueError(f"--sweep: {name.strip()} is swept twice.")
+        axes[name.strip()] = [float(v) for v in values.split(",") if v.strip()]
+    return axes
+
+
+def _box(args) -> dict[str, tuple[float, float]]:
+    box = {}
+    for item in args.box:
+        name, _, bounds = item.partition("=")
+        low, _, high = bounds.partition(":")
+        try:
+            box[name.strip()] = (float(low), float(high))
+        except ValueError as error:
+            raise ValueError(f"--box {item!r}: expected PARAM=LOW:HIGH in SI units.") from error
+    return box
+
+
+def _csv(rows: list[dict]) -> str:
+    if not rows:
+        return ""
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return buffer.getvalue()
+
+
+def _trace_csv(result: S.SensitivityResult) -> str:
+    columns = {"time_s": result.time_s}
+    for o in result.trace_observables:
+        columns[o] = result.values[o]
+        for p in result.params:
+            d = np.asarray(result.derivative[o][p])
+            if d.ndim == 1:
+                columns[f"d({o})/d({p})"] = d
+            else:
+                for i in range(d.shape[1]):
+                    columns[f"d({o})/d({p}[{i + 1}])"] = d[:, i]
+    buffer = io.StringIO()
+    buffer.write(",".join(columns) + "\n")
+    np.savetxt(buffer, np.column_stack(list(columns.values())), delimiter=",", fmt="%.10g")
+    return buffer.getvalue()
+
+
+def _run_options(args) -> dict:
+    return {
+        "t_end_s": parse_quantity(args.t_end, "s", name="--t-end"),
+        "sample_interval_s": parse_quantity(args.sample_interval, "s", name="--sample-interval"),
+        "dt_s": None if args.dt is None else parse_quantity(args.dt, "s", name="--dt"),
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    setup = setup_from_args(args)
+    options = _run_options(args)
+    out = Path(args.out)
+    axes, box = _sweep_axes(args), _box(args)
+    if axes and box:
+        raise ValueError("give either sweep options or --box (a global study), not both.")
+    header = {"setup": setup_header(setup)}
+    if box:
+        print(f"global sensitivity over {', '.join(box)} ({args.global_samples} samples) ...", flush=True)
+        result = S.global_sensitivity(
+            setup, args.observables, box, params=args.params, n_samples=args.global_samples,
+            seed=args.seed, chunk_size=args.chunk_size, **options,
+        )
+        write_json(out / "sensitivity.json", {**header, "global": result.to_json(),
+                                              **result.samples.to_json()})
+        write_text(out / "sensitivity.csv", _csv(result.samples.rows()))
+        save_figure(S.plot_global_ranking(result), out / "global_ranking.png", dpi=120)
+        for o, order in result.ranking.items():
+            ranked = ", ".join(f"{p} {result.mean_squared_elasticity[o][p]:.3g}" for p in order)
+            print(f"  {o}: {ranked}")
+        print(f"wrote {out / 'sensitivity.json'}, {out / 'sensitivity.csv'}, {out / 'global_ranking.png'}")
+        return 0
+    if axes:
+        print(f"sensitivity sweep over {' x '.join(f'{k} ({len(v)})' for k, v in axes.items())} ...",
+              flush=True)
+        result = S.sensitivity_sweep(
+            setup, args.params, args.observables, axes, mode=args.mode,
+            steps_per_contact=args.steps_per_contact, chunk_size=args.chunk_size, **options,
+        )
+        for message in result.messages.values():
+            print(f"  note: {message}")
+        figure_name = "sweep.png"
+        save_figure(S.plot_sweep(result), out / figure_name, dpi=110)
+    else:
+        result = S.sensitivity(setup, args.params, args.observables, mode=args.mode,
+                               steps_per_contact=args.steps_per_contact, **options)
+        figure_name = "elasticities.png"
+        save_figure(S.plot_elasticities(result), out / figure_name, dpi=120)
+        if result.trace_observables:
+            write_text(out / "trace_sensitivity.csv", _trace_csv(result))
+            save_figure(S.plot_trace_sensitivities(result), out / "trace_sensitivity.png", dpi=110)
+        for o in result.observables:
+            if o in result.trace_observables:
+                continue
+            parts = ", ".join(
+                f"{p} {float(np.ravel(result.elasticity[o][p])[0]):+.4g}"
+                + (" (per bead: see CSV)" if np.size(result.elasticity[o][p]) > 1 else "")
+                for p in result.params
+            )
+            print(f"  {o} = {float(result.values[o]):.6g} {result.units[o]}; elasticities: {parts}")
+    write_json(out / "sensitivity.json", {**header, **result.to_json()})
+    write_text(out / "sensitivity.csv", _csv(result.rows()))
+    print(f"wrote {out / 'sensitivity.json'}, {out / 'sensitivity.csv'}, {out / figure_name}"
+          f" ({result.mode} mode)")
+    return 0
