@@ -13,6 +13,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 from . import contact, materials  # noqa: E402
+from . import acquisition, pulses, sensor, theory  # noqa: E402
 from .chain import ChainModel, ChainSetup, build_model  # noqa: E402
 from .integrate import (  # noqa: E402
     Recording,
@@ -37,14 +38,18 @@ __all__ = [
     "TimeGrid",
     "Traces",
     "YieldWarning",
+    "acquisition",
     "batch_setup",
     "build_model",
     "choose_time_grid",
     "contact",
     "material",
     "materials",
+    "pulses",
+    "sensor",
     "shortest_contact_time_s",
     "simulate",
     "simulate_batch",
     "solve",
+    "theory",
 ]
