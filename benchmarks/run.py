@@ -1,0 +1,501 @@
+"""Benchmarks: hertzchain against NumPy and Numba velocity-Verlet solvers, in one run.
+
+    python benchmarks/run.py [--quick] [--gpu-sweep] --out DIR
+
+Every measurement runs in its own process (so peak memory and compile time are its own;
+the hertzchain batch runs with the CPU's cores as host devices,
+`--xla_force_host_platform_device_count`). Writes `DIR/bench.json`, `DIR/bench.csv` (one row
+per implementation and size), `DIR/throughput.png` (bead-steps/s against batch size) and
+`DIR/table.md` (the table for `benchmarks/README.md`).
+
+The case: the paper's chain (steel beads R = 13 mm, kappa = 1.2e10 N/m^1.5), N beads plus a
+striker of the same steel, a Hertz wall; batches sweep the impact velocity over
+0.1..1 m/s and the wall modulus over 3..400 GPa (log-spaced); dissipationless; dt = 1 us;
+three forces recorded every step (contacts N//2 - 1, N//2 and the wall). Throughput is
+bead-steps per second: N * B * steps / median wall time after compilation.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(ROOT))
+
+SIZES_N = (21, 200, 2000)
+SIZES_B = (1, 64, 1024)
+QUICK_N = (21, 200)
+QUICK_B = (1, 64, 1024)
+STANDARD = (21, 1024)
+DT_S = 1e-6
+STANDARD_STEPS = 2500
+# Bead-steps per timed run of the larger cases (fewer steps there, same physics per step).
+WORK_PER_RUN = 2e8
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/statm") as handle:
+        return int(handle.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def _peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def steps_for(n_beads: int, batch: int) -> int:
+    """Steps timed for a size: the full 2.5 ms run unless that would take too long."""
+    steps = WORK_PER_RUN / (n_beads * batch)
+    return int(min(STANDARD_STEPS, max(100, 100 * round(steps / 100))))
+
+
+def _case(n_beads: int, batch: int, steps: int, eta_s: float = 0.0):
+    """The batched hertzchain setup, its grid and the arrays the baselines need."""
+    import numpy as np
+
+    import hertzchain as hc
+
+    if batch == 1:
+        values = {"striker_velocity_m_s": [0.3], "wall_youngs_pa": [203e9]}
+    else:
+        side = int(round(math.sqrt(batch)))
+        values = {
+            "striker_velocity_m_s": np.geomspace(0.1, 1.0, side),
+            "wall_youngs_pa": np.geomspace(3e9, 400e9, batch // side),
+        }
+    setup, _ = hc.batch_setup(hc.ChainSetup(n_beads, eta_s=eta_s), **values)
+    grid = hc.choose_time_grid(setup, t_end_s=steps * DT_S, sample_interval_s=DT_S, dt_s=DT_S)
+    model = hc.build_model(hc.ChainSetup(n_beads))
+    arrays = {
+        "mass_kg": np.asarray(model.mass_kg),
+        "kappa": np.asarray(model.kappa),
+        "wall_kappa": np.asarray(jax_vmap_wall_kappa(setup)),
+        "v0": np.asarray(setup.striker_velocity_m_s),
+    }
+    rows = (n_beads // 2 - 1, n_beads // 2)
+    return setup, grid, arrays, rows
+
+
+def jax_vmap_wall_kappa(setup):
+    import jax
+
+    return jax.vmap(lambda s: s.wall_kappa())(setup)
+
+
+def _time(fn, repeats: int):
+    """(first call s, median s, min s, max s) of `fn()` (which blocks until done)."""
+    start = time.perf_counter()
+    result = fn()
+    first = time.perf_counter() - start
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    times.sort()
+    return first, times[len(times) // 2], times[0], times[-1], result
+
+
+# ------------------------------------------------------------------------------------------
+# Workers (each runs in its own process)
+
+
+def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: int) -> dict:
+    import numpy as np
+
+    base_rss = _rss_mb()
+    setup, grid, arrays, rows = _case(n_beads, batch, steps)
+    args = (arrays["mass_kg"], arrays["kappa"], arrays["wall_kappa"], arrays["v0"], DT_S, steps, rows)
+    repeats = 5
+    if impl == "hertzchain":
+        import jax
+
+        from hertzchain.batched import solve_batched
+        from hertzchain.integrate import Recording
+
+        recording = Recording(tuple(rows))
+        use = jax.devices()[:devices] if batch >= 2 * devices else None
+
+        def fn():
+            out = solve_batched(setup, grid, recording, devices=use)
+            return jax.block_until_ready(out.forces_n)
+
+        first, median, low, high, result = _time(fn, repeats)
+        forces = np.stack([np.asarray(result[k]) for k in result], axis=1)  # (B, 3, n)
+        forces = np.transpose(forces, (2, 1, 0))  # (n, 3, B)
+    elif impl == "hertzchain-solve":
+        # The general solver on one chain (full energy ledger every sample), as `simulate` runs it.
+        import jax
+
+        from hertzchain.integrate import Recording, _solve_jit
+
+        single = jax.tree_util.tree_map(lambda leaf: leaf[0], setup)
+        recording = Recording(tuple(rows))
+
+        def fn():
+            return jax.block_until_ready(_solve_jit(single, grid, recording).forces_n)
+
+        first, median, low, high, result = _time(fn, repeats)
+        forces = np.stack([np.asarray(result[f"contact_{r}"]) for r in rows] + [np.asarray(result["wall"])], 1)
+        forces = forces[:, :, None]
+    else:
+        import baselines
+
+        if impl.startswith("numba") and not baselines.HAVE_NUMBA:
+            return {"available": False, "reason": "numba is not installed"}
+        single = batch == 1
+        fn_base = {
+            ("numpy", True): baselines.numpy_single,
+            ("numpy", False): baselines.numpy_batch,
+            ("numba", True): baselines.numba_single,
+            ("numba", False): baselines.numba_batch,
+        }[(impl, single)]
+        if single:
+            args = (args[0], args[1], float(args[2][0]), float(args[3][0])) + args[4:]
+        if impl == "numpy":
+            repeats = 3 if n_beads * batch * steps < 5e7 else 1
+
+        def fn():
+            return fn_base(*args)
+
+        first, median, low, high, result = _time(fn, repeats)
+        forces = result if not single else result[:, :, None]
+    bead_steps = n_beads * batch * steps
+    return {
+        "available": True,
+        "impl": impl,
+        "n_beads": n_beads,
+        "batch": batch,
+        "steps": steps,
+        "devices": devices if impl == "hertzchain" else (os.cpu_count() if impl == "numba" and batch > 1 else 1),
+        "first_call_s": first,
+        "run_s": median,
+        "run_min_s": low,
+        "run_max_s": high,
+        "compile_s": max(first - median, 0.0),
+        "bead_steps_per_s": bead_steps / median,
+        "peak_rss_mb": _peak_rss_mb() - base_rss,
+        "checksum_wall_max_n": float(np.max(forces[:, 2, :])),
+        "wall_peak_n": np.max(forces[:, 2, :], axis=0)[:8].tolist(),
+    }
+
+
+def worker_gradient() -> dict:
+    """Reverse-mode gradient of a trace loss with respect to eta against the forward run."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    import equinox as eqx
+    import hertzchain as hc
+    import hertzchain.integrate as integrate
+    from hertzchain.integrate import Recording, solve
+
+    eta_true, eta = 2e-6, 1.5e-6
+    recording = Recording(())
+
+    def traces(eta_s, t_end_s):
+        setup = hc.ChainSetup(21, eta_s=eta_s)
+        grid = hc.choose_time_grid(setup, t_end_s=t_end_s, sample_interval_s=DT_S, dt_s=DT_S)
+        return setup, grid
+
+    results = {}
+    for label, checkpointed in (("checkpointed", True), ("plain", False)):
+        original = integrate.jax.checkpoint
+        if not checkpointed:
+            integrate.jax.checkpoint = lambda fn, **_: fn
+        try:
+            for t_end in (2.5e-3, 10e-3):
+                _, grid = traces(eta, t_end)
+                target = solve(hc.ChainSetup(21, eta_s=eta_true), grid, recording).forces_n["wall"]
+
+                def loss(eta_s):
+                    setup = hc.ChainSetup(21, eta_s=eta_s)
+                    wall = solve(setup, grid, recording).forces_n["wall"]
+                    return jnp.sum((wall - target) ** 2)
+
+                forward = jax.jit(loss)
+                grad = jax.jit(jax.grad(loss))
+                x = jnp.asarray(eta)
+                f_first, f_med, *_ = _time(lambda: jax.block_until_ready(forward(x)), 7)
+                g_first, g_med, *_rest = _time(lambda: jax.block_until_ready(grad(x)), 7)
+                g_value = float(grad(x))
+                temp_f = forward.lower(x).compile().memory_analysis().temp_size_in_bytes
+                temp_g = grad.lower(x).compile().memory_analysis().temp_size_in_bytes
+                step = 1e-3 * eta
+                fd = float((forward(x + step) - forward(x - step)) / (2 * step))
+                results[f"{label}_{t_end * 1e3:g}ms"] = {
+                    "steps": grid.n_steps,
+                    "forward_s": f_med,
+                    "grad_s": g_med,
+                    "grad_over_forward": g_med / f_med,
+                    "grad_compile_s": max(g_first - g_med, 0.0),
+                    "forward_temp_mb": temp_f / 2**20,
+                    "grad_temp_mb": temp_g / 2**20,
+                    "grad": g_value,
+                    "finite_difference": fd,
+                    "relative_difference_to_fd": abs(g_value - fd) / abs(fd),
+                }
+        finally:
+            integrate.jax.checkpoint = original
+    return results
+
+
+def worker_machine() -> dict:
+    """The machine's rate: f64 FMA throughput (dgemm) and sqrt throughput on all cores."""
+    import numpy as np
+
+    info = {"cpu": platform.processor() or "", "cores": os.cpu_count()}
+    try:
+        lscpu = subprocess.run(["lscpu"], capture_output=True, text=True, check=False).stdout
+        for line in lscpu.splitlines():
+            if line.startswith("Model name:"):
+                info["cpu"] = line.split(":", 1)[1].strip()
+            if line.startswith("Flags:"):
+                flags = line.split()
+                info["vector"] = (
+                    "AVX-512" if "avx512f" in flags else "AVX2+FMA" if "avx2" in flags else "SSE"
+                )
+    except OSError:
+        pass
+    n = 2000
+    a = np.random.default_rng(0).standard_normal((n, n))
+    a @ a
+    start = time.perf_counter()
+    for _ in range(3):
+        a @ a
+    info["dgemm_gflop_s"] = 3 * 2 * n**3 / (time.perf_counter() - start) / 1e9
+    try:
+        import numba
+
+        @numba.njit(parallel=True, fastmath=True)
+        def hertz_core(d, k, repeats):
+            total = 0.0
+            for r in numba.prange(repeats):
+                acc = 0.0
+                for i in range(d.shape[0]):
+                    p = max(d[i] + r * 1e-9, 0.0)
+                    acc += k * p * np.sqrt(p)
+                total += acc
+            return total
+
+        d = np.random.default_rng(1).random(2048)
+        hertz_core(d, 1.0, 4)
+        repeats = 20000
+        start = time.perf_counter()
+        hertz_core(d, 1.0, repeats)
+        info["hertz_core_per_s"] = d.size * repeats / (time.perf_counter() - start)
+    except ImportError:
+        info["hertz_core_per_s"] = None
+    # A bead-step is ~10 flops + 1 sqrt; the Hertz core (max, sqrt, 2 mul, add) is about half
+    # of its instructions, so the compute limit is about half the core's rate.
+    limits = [info["dgemm_gflop_s"] * 1e9 / 10.0]
+    if info.get("hertz_core_per_s"):
+        limits.append(info["hertz_core_per_s"] / 2.0)
+    info["limit_bead_steps_per_s"] = min(limits)
+    return info
+
+
+def worker_fit(out_dir: str) -> dict:
+    """One fit of eta, mu, C on 10 traces and one diagnosis, through `benchmarks/fit_bench.py`."""
+    script = HERE / "fit_bench.py"
+    if not script.exists():
+        return {"available": False, "reason": "benchmarks/fit_bench.py not available"}
+    target = Path(out_dir) / "fit_bench"
+    start = time.perf_counter()
+    proc = subprocess.run(
+        [sys.executable, str(script), "--out", str(target)], capture_output=True, text=True, check=False
+    )
+    elapsed = time.perf_counter() - start
+    result = {"available": proc.returncode == 0, "wall_s": elapsed, "returncode": proc.returncode}
+    for candidate in sorted(target.glob("*.json")) if target.exists() else []:
+        try:
+            result[candidate.stem] = json.loads(candidate.read_text())
+        except (OSError, ValueError):
+            pass
+    if proc.returncode != 0:
+        result["reason"] = (proc.stderr or proc.stdout)[-2000:]
+    return result
+
+
+WORKERS = {"throughput": worker_throughput, "gradient": worker_gradient, "machine": worker_machine}
+
+
+def _spawn(kind: str, host_devices: int = 1, **kwargs) -> dict:
+    env = dict(os.environ)
+    env["XLA_FLAGS"] = (
+        env.get("XLA_FLAGS", "") + f" --xla_force_host_platform_device_count={host_devices}"
+    ).strip()
+    env.setdefault("JAX_PLATFORMS", "cpu")
+    payload = json.dumps({"kind": kind, "kwargs": kwargs})
+    proc = subprocess.run(
+        [sys.executable, str(Path(__file__).resolve()), "--worker", payload],
+        capture_output=True, text=True, env=env, check=False,
+    )
+    if proc.returncode != 0:
+        return {"available": False, "reason": (proc.stderr or proc.stdout)[-1500:]}
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+# ------------------------------------------------------------------------------------------
+# Report
+
+
+def _load() -> str:
+    try:
+        return " ".join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:
+        return "unknown"
+
+
+def _table(rows, machine) -> str:
+    impls = ("hertzchain", "hertzchain-1dev", "numba", "numpy")
+    sizes = sorted({(r["n_beads"], r["batch"]) for r in rows if r.get("available")})
+    header = "| implementation | " + " | ".join(f"N={n} B={b}" for n, b in sizes) + " |"
+    lines = [header, "|" + "---|" * (len(sizes) + 1)]
+    for impl in impls:
+        cells = []
+        for n, b in sizes:
+            match = [r for r in rows if r.get("label") == impl and (r["n_beads"], r["batch"]) == (n, b)]
+            cells.append(f"{match[0]['bead_steps_per_s']:.2g}" if match else "")
+        if any(cells):
+            lines.append(f"| {impl} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _plot(rows, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hertzchain.atomic import save_figure
+
+    fig, axes = plt.subplots(1, len({r["n_beads"] for r in rows}), figsize=(12, 4), squeeze=False)
+    for ax, n in zip(axes[0], sorted({r["n_beads"] for r in rows})):
+        for label, marker in (("hertzchain", "o"), ("hertzchain-1dev", "s"), ("numba", "^"), ("numpy", "v")):
+            pts = sorted((r["batch"], r["bead_steps_per_s"]) for r in rows if r["label"] == label and r["n_beads"] == n)
+            if pts:
+                ax.plot(*zip(*pts), marker=marker, label=label)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("batch size B (chains)")
+        ax.set_ylabel("throughput (bead-steps/s)")
+        ax.set_title(f"N = {n} beads, f64, dt = 1 us")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+    fig.tight_layout()
+    save_figure(fig, path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="a subset of sizes (N = 21, 200)")
+    parser.add_argument("--out", help="output folder")
+    parser.add_argument("--gpu-sweep", action="store_true", help="also run benchmarks/gpu_sweep.py")
+    parser.add_argument("--skip-fit", action="store_true", help="do not run the fit benchmark")
+    parser.add_argument("--worker", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.worker:
+        job = json.loads(args.worker)
+        print(json.dumps(WORKERS[job["kind"]](**job["kwargs"])))
+        return 0
+    if not args.out:
+        parser.error("--out DIR is required")
+    from hertzchain.atomic import write_json, write_text
+    from hertzchain.progress import Progress
+
+    out = Path(args.out)
+    cores = os.cpu_count() or 1
+    load_before = _load()
+    sizes = [(n, b) for n in (QUICK_N if args.quick else SIZES_N) for b in (QUICK_B if args.quick else SIZES_B)]
+    jobs = []
+    for n, b in sizes:
+        steps = STANDARD_STEPS if (n, b) == STANDARD else steps_for(n, b)
+        for impl in ("hertzchain", "numba", "numpy"):
+            jobs.append(dict(impl=impl, n_beads=n, batch=b, steps=steps, devices=cores if impl == "hertzchain" else 1))
+        if b > 1:
+            jobs.append(dict(impl="hertzchain", n_beads=n, batch=b, steps=steps, devices=1))
+    jobs.append(dict(impl="hertzchain-solve", n_beads=21, batch=1, steps=STANDARD_STEPS, devices=1))
+    progress = Progress(len(jobs) + 2, "benchmarks")
+    machine = _spawn("machine")
+    progress.advance()
+    rows = []
+    for job in jobs:
+        result = _spawn("throughput", host_devices=job["devices"], **job)
+        if result.get("available"):
+            label = job["impl"]
+            if job["impl"] == "hertzchain" and job["devices"] == 1 and job["batch"] > 1:
+                label = "hertzchain-1dev"
+            result["label"] = label
+            rows.append(result)
+        else:
+            print(f"{job}: {result.get('reason')}", file=sys.stderr)
+        progress.advance()
+    gradient = _spawn("gradient")
+    progress.advance()
+    fit = {"available": False, "reason": "skipped (--skip-fit)"} if args.skip_fit else worker_fit(str(out))
+
+    def pick(label, n, b):
+        match = [r for r in rows if r["label"] == label and (r["n_beads"], r["batch"]) == (n, b)]
+        return match[0] if match else None
+
+    standard = {label: pick(label, *STANDARD) for label in ("hertzchain", "hertzchain-1dev", "numba", "numpy")}
+    bead_steps = {k: v["bead_steps_per_s"] for k, v in standard.items() if v and k != "hertzchain-1dev"}
+    single = pick("hertzchain", 21, 1)
+    solve_single = pick("hertzchain-solve", 21, 1)
+    limit = machine.get("limit_bead_steps_per_s")
+    grad = gradient.get("checkpointed_2.5ms", {}) if isinstance(gradient, dict) else {}
+    summary = {
+        "machine": {**machine, "load_average_before": load_before, "load_average_after": _load()},
+        "standard_case": "N=21, B=1024, dissipationless, dt=1us, 2500 steps, v0 0.1-1 m/s, "
+        "Y_wall 3-400 GPa, 3 forces recorded every step",
+        "bead_steps_per_s": bead_steps,
+        "hertzchain_over_numba": (bead_steps["hertzchain"] / bead_steps["numba"])
+        if {"hertzchain", "numba"} <= bead_steps.keys() else None,
+        "hertzchain_one_device_bead_steps_per_s": standard["hertzchain-1dev"]["bead_steps_per_s"]
+        if standard["hertzchain-1dev"] else None,
+        "fraction_of_machine_limit": {k: v / limit for k, v in bead_steps.items()} if limit else None,
+        "paper_run_ms": {
+            "solve_batched_B1": single["run_s"] * 1e3 if single else None,
+            "solve": solve_single["run_s"] * 1e3 if solve_single else None,
+            "numba": pick("numba", 21, 1)["run_s"] * 1e3 if pick("numba", 21, 1) else None,
+        },
+        "compile_s": {
+            "solve_batched_standard": standard["hertzchain"]["compile_s"] if standard["hertzchain"] else None,
+            "solve_batched_B1": single["compile_s"] if single else None,
+            "solve": solve_single["compile_s"] if solve_single else None,
+        },
+        "grad_over_forward": grad.get("grad_over_forward"),
+        "gradient": gradient,
+        "fit": fit,
+        "runs": rows,
+    }
+    write_json(out / "bench.json", summary)
+    columns = ("label", "n_beads", "batch", "steps", "devices", "bead_steps_per_s", "run_s",
+               "run_min_s", "run_max_s", "compile_s", "peak_rss_mb", "checksum_wall_max_n")
+    write_text(out / "bench.csv", "\n".join(
+        [",".join(columns)] + [",".join(str(r.get(c, "")) for c in columns) for r in rows]
+    ) + "\n")
+    write_text(out / "table.md", _table(rows, machine) + "\n")
+    _plot(rows, out / "throughput.png")
+    if args.gpu_sweep:
+        subprocess.run([sys.executable, str(HERE / "gpu_sweep.py"), "--out", str(out / "gpu_sweep.json")], check=False)
+    print(json.dumps({k: summary[k] for k in ("bead_steps_per_s", "hertzchain_over_numba",
+                                              "paper_run_ms", "compile_s", "grad_over_forward")}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,78 @@
+"""`hertzchain sweep`: a grid of setups, streamed to disk in chunks, resumable, on all devices.
+
+Example::
+
+    hertzchain sweep --grid striker_velocity_m_s=0.1:1:10:log \\
+        --grid wall_youngs_pa=3e9,45e9,203e9 --grid eta_s=0,2e-6 --out out/sweep
+
+Run the same command again after an interruption: finished chunks are kept.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..sweep import SweepSpec, parse_grid, run_sweep
+from ..units import parse_quantity
+from .setup_options import add_run_arguments, add_setup_arguments, setup_from_args
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_setup_arguments(parser)
+    add_run_arguments(parser)
+    parser.add_argument(
+        "--grid",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUES",
+        help="a swept ChainSetup field and its values (SI): a comma list, start:stop:count or "
+        "start:stop:count:log; repeat for an outer product",
+    )
+    parser.add_argument("--out", default="out/sweep", help="output folder [out/sweep]")
+    parser.add_argument("--chunk-size", type=int, help="runs per chunk [sized to ~256 MB of samples]")
+    parser.add_argument("--max-chunks", type=int, help="compute at most this many chunks now, resume later")
+    parser.add_argument(
+        "--distributed",
+        action="store_true",
+        help="one of several processes/hosts: call jax.distributed.initialize() (cluster from the "
+        "environment) and share the chunks; process 0 writes the table",
+    )
+    parser.add_argument("--no-plots", action="store_true", help="do not draw the summary plots")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.distributed:
+        import jax
+
+        jax.distributed.initialize()
+    if not args.grid:
+        raise ValueError("give at least one --grid FIELD=VALUES, e.g. --grid striker_velocity_m_s=0.1:1:10:log")
+    setup = setup_from_args(args)
+    grid = dict(parse_grid(text) for text in args.grid)
+    spec = SweepSpec(
+        setup=setup,
+        grid=grid,
+        t_end_s=parse_quantity(args.t_end, "s", name="--t-end"),
+        sample_interval_s=parse_quantity(args.sample_interval, "s", name="--sample-interval"),
+        dt_s=None if args.dt is None else parse_quantity(args.dt, "s", name="--dt"),
+        contacts=tuple(args.contacts or ()),
+    )
+    print(f"sweep of {spec.n_runs} runs over {', '.join(grid)} into {args.out}", flush=True)
+    result = run_sweep(
+        spec,
+        Path(args.out),
+        chunk_size=args.chunk_size,
+        max_chunks=args.max_chunks,
+        distributed=args.distributed,
+        plots=not args.no_plots,
+    )
+    if not result.complete:
+        print(
+            f"{result.chunks_done}/{result.n_chunks} chunks done; run the same command again to resume.",
+            flush=True,
+        )
+        return 0
+    print(f"wrote {result.folder / 'sweep.csv'} and {result.folder / 'sweep.parquet'} "
+          f"({len(result.table['run'])} runs, {result.computed} chunks computed now)")
+    return 0

@@ -1,0 +1,114 @@
+"""Sweeps: grid parsing, resume after interruption, sharding, physics of the table."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import hertzchain as hc
+from hertzchain.cli import main as cli_main
+from hertzchain.sweep import SweepSpec, parse_grid, read_sweep, run_sweep
+
+N = 10
+
+
+def _spec(**grid):
+    grid = grid or {"striker_velocity_m_s": np.asarray([0.3, 0.6, 1.2]), "wall_youngs_pa": np.asarray([3e9, 4e11])}
+    return SweepSpec(hc.ChainSetup(N), grid, t_end_s=0.8e-3, sample_interval_s=2e-6, contacts=(2, 6))
+
+
+def test_parse_grid():
+    name, values = parse_grid("striker_velocity_m_s=0.1:1:3:log")
+    assert name == "striker_velocity_m_s"
+    np.testing.assert_allclose(values, [0.1, 10**-0.5, 1.0])
+    np.testing.assert_allclose(parse_grid("eta_s=0:2e-6:3")[1], [0.0, 1e-6, 2e-6])
+    np.testing.assert_array_equal(parse_grid("wall_youngs_pa=3e9,45e9")[1], [3e9, 45e9])
+    for bad in ("eta_s", "eta_s=", "eta_s=a,b", "eta_s=0:1", "v=0:1:3:cubic", "eta_s=0:1:3:log"):
+        with pytest.raises(ValueError, match="grid"):
+            parse_grid(bad)
+    with pytest.raises(ValueError, match="bead_radius_m"):
+        run_sweep(_spec(bead_radius_m=np.asarray([0.01])), "unused", progress=False)
+
+
+def test_interrupted_sweep_resumes_to_the_same_table(tmp_path):
+    spec = _spec()
+    whole = run_sweep(spec, tmp_path / "whole", chunk_size=2, progress=False)
+    assert whole.complete and whole.n_chunks == 3 and whole.computed == 3
+    first = run_sweep(spec, tmp_path / "resumed", chunk_size=2, max_chunks=1, progress=False)
+    assert not first.complete and first.chunks_done == 1
+    assert not (tmp_path / "resumed" / "sweep.csv").exists()
+    # A chunk half-written by a killed process leaves only a temporary file: ignored.
+    (tmp_path / "resumed" / "chunks" / ".chunk_00001.parquet.123.tmp").write_bytes(b"partial")
+    second = run_sweep(spec, tmp_path / "resumed", chunk_size=2, progress=False)
+    assert second.complete and second.computed == 2
+    for name in ("sweep.csv",):
+        assert (tmp_path / "whole" / name).read_bytes() == (tmp_path / "resumed" / name).read_bytes()
+    a, b = read_sweep(tmp_path / "whole"), read_sweep(tmp_path / "resumed")
+    assert list(a) == list(b)
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key])
+    # Running again computes nothing; a different sweep in the same folder is refused.
+    assert run_sweep(spec, tmp_path / "whole", chunk_size=2, progress=False).computed == 0
+    with pytest.raises(ValueError, match="different sweep"):
+        run_sweep(spec._replace(t_end_s=1e-3), tmp_path / "whole", chunk_size=2, progress=False)
+
+
+def test_table_physics(tmp_path):
+    table = run_sweep(_spec(), tmp_path, chunk_size=6, progress=False).table
+    assert len(table["run"]) == 6
+    np.testing.assert_array_equal(table["run"], np.arange(6))
+    np.testing.assert_array_equal(table["striker_velocity_m_s"], [0.3, 0.3, 0.6, 0.6, 1.2, 1.2])
+    # Dissipationless: the books balance to the integrator's error.
+    assert np.all(np.abs(table["energy_error_rel"]) < 1e-4)
+    assert np.all(table["dissipated_fraction"] == 0.0)
+    # A stiffer wall pushes back harder (Job et al. Fig. 3a: ratio grows with wall modulus).
+    soft, stiff = table["force_ratio"][0::2], table["force_ratio"][1::2]
+    assert np.all(stiff > soft) and np.all(stiff > 1.5) and np.all(soft < 1.2)
+    # Solitary-wave speed grows as F^(1/6) (Nesterenko): compare 0.3 and 1.2 m/s impacts.
+    ratio = table["speed_m_s"][4] / table["speed_m_s"][0]
+    expected = (table["incident_peak_n"][4] / table["incident_peak_n"][0]) ** (1 / 6)
+    assert abs(ratio / expected - 1) < 0.02
+    # The pulse is about five bead diameters long at these speeds (2 tau ~ 2R sqrt(10) / v).
+    width = table["duration_contact_6_s"] * table["speed_m_s"] / (2 * 0.013)
+    assert np.all((width > 2.5) & (width < 3.5))
+    for plot in ("force_ratio.png", "speed_vs_amplitude.png"):
+        assert (tmp_path / plot).stat().st_size > 1000
+
+
+_SHARDED = r"""
+import sys, jax, numpy as np, hertzchain as hc
+from hertzchain.sweep import SweepSpec, run_sweep
+spec = SweepSpec(hc.ChainSetup(10, eta_s=1e-6), {"striker_velocity_m_s": np.asarray([0.3, 0.6, 1.2]),
+                 "wall_youngs_pa": np.asarray([3e9, 4e11])}, t_end_s=0.8e-3, sample_interval_s=2e-6,
+                 contacts=(2, 6))
+run_sweep(spec, sys.argv[1] + "/four", chunk_size=4, progress=False, plots=False)
+run_sweep(spec, sys.argv[1] + "/one", chunk_size=4, devices=jax.devices()[:1], progress=False, plots=False)
+print(len(jax.devices()))
+"""
+
+
+def test_sharded_sweep_matches_unsharded(tmp_path):
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
+    proc = subprocess.run(
+        [sys.executable, "-c", _SHARDED, str(tmp_path)], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip().splitlines()[-1] == "4"
+    assert (tmp_path / "four" / "sweep.csv").read_bytes() == (tmp_path / "one" / "sweep.csv").read_bytes()
+    manifest = json.loads((tmp_path / "four" / "manifest.json").read_text())
+    assert manifest["n_runs"] == 6 and manifest["n_chunks"] == 2
+
+
+def test_cli_resume(tmp_path, capsys):
+    args = ["sweep", "--n-beads", "10", "--t-end", "0.8ms", "--sample-interval", "2us", "--contacts", "2,6",
+            "--grid", "striker_velocity_m_s=0.3,1.2", "--grid", "eta_s=0,2e-6", "--chunk-size", "2",
+            "--out", str(tmp_path), "--no-plots"]
+    assert cli_main(args + ["--max-chunks", "1"]) == 0
+    assert "1/2 chunks done" in capsys.readouterr().out
+    assert cli_main(args) == 0
+    table = read_sweep(tmp_path)
+    np.testing.assert_array_equal(table["eta_s"], [0.0, 2e-6, 0.0, 2e-6])
+    assert np.all(table["dissipated_fraction"][1::2] > 0.1) and np.all(table["dissipated_fraction"][0::2] == 0)
