@@ -549,7 +549,8 @@ def find_pulses(time_s, force_n, *, channel="contact", min_fraction=0.05, noise_
 
     A pulse is a local maximum whose height and prominence exceed the larger of
     `min_fraction` times the trace maximum and 5 times the noise (`noise_std_n`, estimated
-    from the trace when not given). Labels: for a `"wall"` channel `wall`, then
+    from the trace when not given), and which is separated from its neighbours by a dip of
+    at least that level (maxima made by noise on top of one pulse are merged). Labels: for a `"wall"` channel `wall`, then
     `wall_secondary_1`, ...; for a contact or sensor channel `incident`, `reflected`, then
     `secondary_1`, ... (after a wall the first pulse is the incident wave, the second the
     reflected primary and the rest secondary waves or tails).
@@ -568,6 +569,7 @@ def find_pulses(time_s, force_n, *, channel="contact", min_fraction=0.05, noise_
     peaks, _ = find_peaks(force, height=level, prominence=level, distance=width)
     if len(peaks) == 0:
         return []
+    peaks = _merge_shallow(force, list(peaks), level)
     bounds = [int(np.argmax(force[: peaks[0]] >= level)) if peaks[0] > 0 else 0]
     for a, b in zip(peaks[:-1], peaks[1:]):
         bounds.append(int(a + np.argmin(force[a : b + 1])))
@@ -584,6 +586,22 @@ def find_pulses(time_s, force_n, *, channel="contact", min_fraction=0.05, noise_
             Pulse(label, start, stop, int(peak), float(t), float(f), (float(time[start]), float(time[stop])))
         )
     return pulses
+
+
+def _merge_shallow(force, peaks, level):
+    """Merge neighbouring maxima not separated by a dip of at least `level` below the lower
+    of the two (noise on top of one pulse), keeping the higher one."""
+    merged = True
+    while merged and len(peaks) > 1:
+        merged = False
+        for i in range(len(peaks) - 1):
+            a, b = peaks[i], peaks[i + 1]
+            dip = float(np.min(force[a : b + 1]))
+            if min(force[a], force[b]) - dip < level:
+                peaks.pop(i + 1 if force[a] >= force[b] else i)
+                merged = True
+                break
+    return np.asarray(peaks, dtype=int)
 
 
 class MomentumCheck(NamedTuple):

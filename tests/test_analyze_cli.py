@@ -1,0 +1,76 @@
+"""`hertzchain synth` -> trace files -> `read_trace` and `hertzchain analyze` end to end."""
+
+import json
+
+import numpy as np
+import pytest
+
+from hertzchain.cli import main
+from hertzchain.tracefile import read_trace
+
+
+@pytest.fixture(scope="module")
+def synth_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("synth")
+    code = main([
+        "synth", "--velocities", "0.15,0.3", "--contacts", "8,12", "--t-end", "2.4ms",
+        "--sample-interval", "1us", "--noise-std", "0.37", "--seed", "4", "--out", str(out),
+    ])
+    assert code == 0
+    return out
+
+
+def test_synth_files_round_trip(synth_dir):
+    listing = json.loads((synth_dir / "synth.json").read_text())
+    assert [entry["file"] for entry in listing["files"]] == ["synth_v0.15.csv", "synth_v0.3.csv"]
+    for entry, velocity in zip(listing["files"], (0.15, 0.3)):
+        trace = read_trace(synth_dir / entry["file"])
+        assert trace.striker_velocity_m_s == velocity
+        assert trace.noise_std_n == pytest.approx(0.37)
+        assert trace.contacts == (8, 12) and "wall" in trace.channels
+        assert trace.header["x_true_eta_s"] == "0.0"
+        assert trace.header["x_acq_seed"] == str(entry["seed"])
+        assert len(trace.time_s) == 2400 and trace.sample_interval_s == pytest.approx(1e-6)
+        # Before the wave arrives the record is the noise alone.
+        quiet = trace.channels["contact_12"][trace.time_s < 0.25e-3]
+        assert np.std(quiet) == pytest.approx(0.37, rel=0.15)
+        setup = trace.setup()
+        assert float(setup.striker_velocity_m_s) == velocity and setup.n_beads == 21
+        assert (synth_dir / entry["file"].replace(".csv", ".png")).exists()
+
+
+def test_analyze_recovers_the_velocity_law(synth_dir, tmp_path):
+    files = sorted(str(p) for p in synth_dir.glob("*.csv"))
+    assert main(["analyze", *files, "--out", str(tmp_path)]) == 0
+    result = json.loads((tmp_path / "analysis.json").read_text())
+    for summary in result["files"]:
+        assert summary["incident_contacts"] == [8, 12]
+        # Steel wall: F_wall/F_inc = 1.943 (noise-free reference), Eq. 5 says 1.741.
+        assert summary["wall_force_ratio"] == pytest.approx(1.943, abs=0.02)
+        assert summary["theory"]["wall_force_ratio_eq5"] == pytest.approx(1.741, abs=1e-3)
+        check = summary["momentum_check"]["contact_12"]["ratio"]
+        assert 1.0 < check < 1.05
+    law = result["velocity_law"]
+    assert law["velocity_constant"] == pytest.approx(201.37, rel=2e-3)
+    labels = {(row["file"], row["channel"], row["label"]) for row in result["pulses"]}
+    assert ("synth_v0.3.csv", "contact_8", "incident") in labels
+    assert ("synth_v0.3.csv", "contact_8", "reflected") in labels
+    assert ("synth_v0.3.csv", "wall", "wall") in labels
+    rows = [r for r in result["pulses"] if r["label"] == "incident"]
+    assert all(r["converged"] for r in rows)
+    # 2 tau / (2R sqrt(10)/v) of the discrete pulse is 0.962 (fit threshold 0.05).
+    for r in rows:
+        speed = [s for s in result["files"] if s["file"] == r["file"]][0]["speed_m_s"]
+        assert r["duration_s"] * speed / (2 * 0.013 * np.sqrt(10)) == pytest.approx(0.962, abs=0.01)
+    csv_lines = (tmp_path / "pulses.csv").read_text().splitlines()
+    assert csv_lines[0].startswith("file,channel,label,peak_time_s")
+    assert len(csv_lines) == len(result["pulses"]) + 1
+    for name in ("synth_v0.15_pulses.png", "synth_v0.3_pulses.png", "speed_duration.png", "restitution.png"):
+        assert (tmp_path / name).stat().st_size > 1000
+
+
+def test_analyze_reports_bad_files(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("# format = hertzchain-trace/1\ntime_s,wall\n0,1\n")
+    assert main(["analyze", str(bad), "--out", str(tmp_path / "o")]) == 2
+    assert "missing header key" in capsys.readouterr().err
