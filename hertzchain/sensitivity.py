@@ -462,18 +462,6 @@ def choose_mode(n_inputs: int, n_outputs: int) -> str:
     return "reverse" if n_outputs < n_inputs else "forward"
 
 
-# The static overlap (F0/kappa)^(2/3) has an infinite derivative at F0 = 0, which turns
-# every stiffness derivative into 0 * inf = NaN in the core's model building. A preload of
-# 1e-200 N keeps it finite and changes no computed value (overlaps of 1e-140 m).
-_TINY_PRELOAD_N = 1e-200
-
-
-def _regular_preload(setup: ChainSetup) -> ChainSetup:
-    return eqx.tree_at(
-        lambda s: s.precompression_n, setup, setup.precompression_n + _TINY_PRELOAD_N
-    )
-
-
 def observable_function(
     setup: ChainSetup, params: Sequence[str], observables: Sequence[Observable], grid: TimeGrid
 ):
@@ -485,7 +473,7 @@ def observable_function(
 
     def fn(values, base=setup):
         changed = with_parameters(base, values)
-        traces = solve(_regular_preload(changed), grid, recording)
+        traces = solve(changed, grid, recording)
         return evaluate_observables(changed, traces, observables, grid.sample_interval_s)
 
     return fn
@@ -505,6 +493,14 @@ def _jacobian_fn(fn, mode: str):
         return out, valid, jac
 
     return run
+
+
+@eqx.filter_jit
+def jacobian_at(values, setup, params, observables, grid, mode):
+    """(observables, valid, jacobian) at parameter `values` (jitted; compiled once per
+    structure of setup, parameter names, observables, grid and mode)."""
+    fn = observable_function(setup, params, observables, grid)
+    return _jacobian_fn(fn, mode)(values, setup)
 
 
 # ------------------------------------------------------------------------------ results
@@ -690,9 +686,7 @@ def sensitivity(
     values0 = parameter_values(setup, params)
     n_out = sum(grid.n_samples if o.is_trace else 1 for o in parsed)
     mode = _resolve_mode(mode, _size(values0), n_out)
-    fn = observable_function(setup, params, parsed, grid)
-    run = eqx.filter_jit(_jacobian_fn(fn, mode))
-    out, valid, jac = run(values0, setup)
+    out, valid, jac = jacobian_at(values0, setup, params, parsed, grid, mode)
     for obs in parsed:
         if not bool(valid[obs.name]):
             raise ValueError(_invalid_reason(obs, grid.t_end_s))
