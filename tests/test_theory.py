@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import hertzchain
-from hertzchain import contact, theory
+from hertzchain import contact, pulses, theory
 from hertzchain.materials import material
 
 R = 0.013
@@ -144,3 +144,43 @@ def test_theory_accepts_traced_setups(paper_setup):
         hertzchain.ChainSetup(bead_youngs_pa=y))["long_wave_velocity_constant"])(Y)
     # C_t is proportional to theta^(-1/3), i.e. to Y^(1/3).
     assert float(grad) == pytest.approx(198.919 / (3 * Y), rel=1e-4)
+
+
+@pytest.fixture(scope="module")
+def free_wave():
+    """The paper's chain at 0.3 m/s, every contact, position and velocity recorded."""
+    return hertzchain.simulate(hertzchain.ChainSetup(), t_end_s=0.85e-3, sample_interval_s=1e-6,
+                               record_all=True)
+
+
+def test_kinetic_share_of_the_travelling_wave(free_wave, paper_setup):
+    """Time-averaged K/(K+U) around the wave is 5/9 (paper: about 56 %), oscillating by about
+    +-1 point as the peak hops from contact to contact."""
+    time = np.asarray(free_wave.time_s)
+    forces = np.asarray(free_wave.contact_forces_n)
+    energy = np.asarray(free_wave.contact_elastic_j)
+    velocity = np.asarray(free_wave.velocities_m_s)
+    mass = np.concatenate([[float(paper_setup.striker_mass_kg)], np.asarray(paper_setup.bead_mass_kg)])
+    shares = []
+    for i in np.nonzero((time > 0.35e-3) & (time < 0.7e-3))[0]:
+        k = int(np.argmax(forces[i]))
+        contacts = slice(k - 5, k + 6)  # contacts k-5 .. k+5
+        bodies = slice(k - 4, k + 6)  # the beads between them
+        kinetic = 0.5 * np.sum(mass[bodies] * velocity[i, bodies] ** 2)
+        shares.append(kinetic / (kinetic + np.sum(energy[i, contacts])))
+    shares = np.asarray(shares)
+    assert np.mean(shares) == pytest.approx(theory.KINETIC_FRACTION, abs=0.003)
+    assert np.mean(shares) == pytest.approx(0.56, abs=0.02)
+    assert 0.535 < shares.min() < 0.55 and 0.56 < shares.max() < 0.575
+
+
+def test_impact_amplitude_factor_by_simulation(free_wave, paper_setup):
+    """F_m at contacts 8-15 of the 21-bead chain is 0.03 % above the asymptotic a = 0.63955."""
+    contacts = tuple(range(8, 16))
+    forces = np.asarray(free_wave.contact_forces_n)[:, list(contacts)].T
+    wave = pulses.incident_wave(free_wave.time_s, forces, contacts, R)
+    kappa = float(paper_setup.contact_kappa()[1])
+    a = wave.peak_force_n / (kappa**0.4 * MASS**0.6 * 0.3**1.2)
+    assert a == pytest.approx(theory.IMPACT_AMPLITUDE_FACTOR * 1.0003, rel=3e-4)
+    assert wave.peak_force_n == pytest.approx(
+        float(theory.wave_amplitude_n(0.3, kappa, MASS)), rel=1e-3)
