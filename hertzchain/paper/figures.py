@@ -68,7 +68,7 @@ def figure1(fig1: Fig1, sensor: SensorRun, deconvolved_n: np.ndarray | None = No
         f"(c) energies, eta = 2 us; travelling wave: kinetic share {fig1.kinetic_fraction:.4f} "
         f"(paper: about 0.56)", fontsize=10,
     )
-    c.legend(fontsize=7.5, loc="center left", ncol=2)
+    c.legend(fontsize=7.5, loc="upper left", bbox_to_anchor=(0.05, 0.96), ncol=2)
     figure.suptitle("Fig. 1: 21 steel beads, striker 0.3 m/s, steel wall", fontsize=11)
     figure.tight_layout()
     return figure
