@@ -764,6 +764,21 @@ def _grid_for_batch(setup, points: dict[str, jax.Array], **run) -> TimeGrid:
     return choose_time_grid(batched, **run)
 
 
+@eqx.filter_jit
+def _jacobian_batch(batch, setup, params, observables, grid, mode):
+    """`jacobian_at` vmapped over setups that differ in the parameters of `batch` (name ->
+    (n,) values); also returns the parameter values of every setup."""
+    fn = observable_function(setup, params, observables, grid)
+    jac_fn = _jacobian_fn(fn, mode)
+
+    def one(point):
+        base = with_parameters(setup, point)
+        values = parameter_values(base, params)
+        return jac_fn(values, base) + (values,)
+
+    return jax.vmap(one)(batch)
+
+
 def _chunked(run, points: dict[str, jax.Array], chunk_size: int, label: str, progress: bool):
     """Apply a vmapped `run` to the points in equal chunks (padded), with progress."""
     size = int(next(iter(points.values())).shape[0])
@@ -816,17 +831,7 @@ def sensitivity_sweep(
                            dt_s=dt_s, steps_per_contact=steps_per_contact)
     n_in = _size(parameter_values(setup, params))
     mode = _resolve_mode(mode, n_in, len(parsed))
-    fn = observable_function(setup, params, parsed, grid)
-    jac_fn = _jacobian_fn(fn, mode)
-
-    @eqx.filter_jit
-    def run(batch):
-        def one(point):
-            base = with_parameters(setup, point)
-            return jac_fn(parameter_values(base, params), base) + (parameter_values(base, params),)
-
-        return jax.vmap(one)(batch)
-
+    run = lambda batch: _jacobian_batch(batch, setup, params, parsed, grid, mode)  # noqa: E731
     out, valid, jac, pvals = _chunked(run, points, chunk_size, "sensitivity sweep (setups)", progress)
     shape = tuple(len(v) for v in axes.values())
     reshape = lambda x: np.asarray(x).reshape(shape + np.asarray(x).shape[1:])  # noqa: E731
@@ -927,17 +932,7 @@ def global_sensitivity(
     grid = _grid_for_batch(setup, batch, t_end_s=t_end_s, sample_interval_s=sample_interval_s,
                            dt_s=dt_s)
     mode = _resolve_mode("auto", _size(parameter_values(setup, params)), len(parsed))
-    fn = observable_function(setup, params, parsed, grid)
-    jac_fn = _jacobian_fn(fn, mode)
-
-    @eqx.filter_jit
-    def run(chunk):
-        def one(point):
-            base = with_parameters(setup, point)
-            return jac_fn(parameter_values(base, params), base) + (parameter_values(base, params),)
-
-        return jax.vmap(one)(chunk)
-
+    run = lambda chunk: _jacobian_batch(chunk, setup, params, parsed, grid, mode)  # noqa: E731
     out, valid, jac, pvals = _chunked(run, batch, chunk_size, "global sensitivity (samples)", progress)
     axes = {"sample": np.arange(n_samples, dtype=float)}
     messages = {}

@@ -160,6 +160,7 @@ def test_scaling_symmetry_gives_exact_elasticities():
         assert e[o]["mu_star"] == pytest.approx(ek * stiffness, abs=1e-4), o
 
 
+@pytest.mark.slow
 def test_sweep_matches_single_points_and_eq5_trend():
     setup = hc.ChainSetup(8)
     sweep = {"striker_velocity": [0.1, 0.4], "wall_youngs": [5e9, 2.03e11]}
