@@ -53,6 +53,11 @@ def refine_peak(time_s, force_n, index=None):
     n = force_n.shape[-1]
     if n < 3:
         raise ValueError(f"refine_peak needs at least 3 samples, got {n}.")
+    if time_s.ndim != 1 or time_s.shape[0] != n:
+        raise ValueError(
+            f"refine_peak: time_s must be one (n,) axis shared by the traces; got {time_s.shape} "
+            f"for forces {force_n.shape} (for a batched run pass time_s[0])."
+        )
     if index is None:
         index = jnp.argmax(force_n, axis=-1)
     index = jnp.clip(jnp.asarray(index), 1, n - 2)
@@ -147,6 +152,14 @@ def _lobe_mask(time_s, force_n, threshold, window_s):
     return (samples >= first) & (samples <= last), peak_index
 
 
+def _inverse3(m):
+    """Inverse of a 3x3 matrix by its adjugate (compiles much faster than a LAPACK call)."""
+    cof = jnp.stack([
+        jnp.cross(m[1], m[2]), jnp.cross(m[2], m[0]), jnp.cross(m[0], m[1]),
+    ])
+    return cof.T / jnp.dot(m[0], cof[0])
+
+
 def _fit_one(time_s, force_n, threshold, window_s, noise_std_n, n_iterations):
     mask, peak_index = _lobe_mask(time_s, force_n, threshold, window_s)
     t_guess, f_guess = refine_peak(time_s, force_n, peak_index)
@@ -158,11 +171,22 @@ def _fit_one(time_s, force_n, threshold, window_s, noise_std_n, n_iterations):
     x = (time_s - t_guess) / tau_guess
     y = force_n / f_guess
 
-    def residuals(p):
+    def model_and_jacobian(p):
         a, c, s = p
-        return weight * (y - theory.solitary_profile_n(x, a, c, s))
+        z = (x - c) / s
+        inside = jnp.abs(z) < 0.5 * jnp.pi
+        zc = jnp.clip(z, -0.5 * jnp.pi, 0.5 * jnp.pi)
+        cos5 = jnp.where(inside, jnp.cos(zc) ** 5, 0.0)
+        shape = cos5 * jnp.cos(zc)
+        slope = 6.0 * a * cos5 * jnp.sin(zc) / s  # d model / d c
+        jac = jnp.stack([shape, slope, slope * z], axis=-1)
+        return a * shape, jac
 
-    jacobian = jax.jacfwd(residuals)
+    def residuals(p):
+        return weight * (y - model_and_jacobian(p)[0])
+
+    def jacobian(p):
+        return -weight[:, None] * model_and_jacobian(p)[1]
 
     def cost(p):
         return jnp.sum(residuals(p) ** 2)
@@ -174,7 +198,7 @@ def _fit_one(time_s, force_n, threshold, window_s, noise_std_n, n_iterations):
         jtj = j.T @ j
         g = j.T @ r
         damped = jtj + lam * jnp.diag(jnp.diag(jtj) + 1e-12)
-        delta = -jnp.linalg.solve(damped, g)
+        delta = -_inverse3(damped) @ g
         trial = p + delta
         trial = trial.at[2].set(jnp.maximum(trial[2], 1e-3))
         better = cost(trial) < cost(p)
@@ -189,9 +213,9 @@ def _fit_one(time_s, force_n, threshold, window_s, noise_std_n, n_iterations):
     variance = jnp.where(
         jnp.isnan(noise_std_n), jnp.sum(r**2) / dof, (noise_std_n / f_guess) ** 2
     )
-    covariance = variance * jnp.linalg.inv(j.T @ j)
+    covariance = variance * _inverse3(j.T @ j)
     se = jnp.sqrt(jnp.abs(jnp.diag(covariance)))
-    last_step = jnp.linalg.solve(j.T @ j + 1e-12 * jnp.eye(3), -j.T @ r)
+    last_step = -_inverse3(j.T @ j + 1e-12 * jnp.eye(3)) @ (j.T @ r)
     converged = (n_points >= 4) & jnp.all(jnp.abs(last_step) <= 1e-6 + 1e-3 * se)
     return Cos6Fit(
         peak_force_n=p[0] * f_guess,
