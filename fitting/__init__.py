@@ -1,0 +1,55 @@
+"""fitting: least-squares fits of hertzchain models to force traces, with uncertainties.
+
+The public API:
+
+- `fit(experiments, params=("eta", "mu", "C"), ...) -> FitResult`: Levenberg-Marquardt
+  (optimistix) on whitened residuals, multistart, standard errors, correlations,
+  identifiability warnings and profile likelihoods.
+- `load_experiments(paths)`, `make_experiment(trace)`, `Experiment`: the data model.
+- `make_problem(experiments, params)` -> `Problem`, and `residuals_and_jacobian(problem, x)`:
+  the whitened residual vector and its Jacobian at given physical values.
+- `REGISTRY`, `ParameterSpec`, `register_parameter`, `ForwardModel`: the parameter
+  registry and the hook for model switches.
+- `fit_datasets(problem, datasets)`: one compiled fit over many data sets (noise seeds).
+- `fitting.report.write_report(result, out_dir)`: fit.json, CSV and PNG files.
+"""
+
+import hertzchain  # noqa: F401  (enables float64)
+
+from .data import Experiment, FitInputError, estimate_noise_std, load_experiments, make_experiment
+from .fit import (
+    FitError,
+    FitResult,
+    FitWarning,
+    fit,
+    fit_datasets,
+    initial_values,
+    make_problem,
+    profile_likelihood,
+)
+from .model import ForwardModel, Problem, residuals_and_jacobian
+from .parameters import REGISTRY, ParameterInstance, ParameterSpec, get_spec, register_parameter
+
+__all__ = [
+    "REGISTRY",
+    "Experiment",
+    "FitError",
+    "FitInputError",
+    "FitResult",
+    "FitWarning",
+    "ForwardModel",
+    "ParameterInstance",
+    "ParameterSpec",
+    "Problem",
+    "estimate_noise_std",
+    "fit",
+    "fit_datasets",
+    "get_spec",
+    "initial_values",
+    "load_experiments",
+    "make_experiment",
+    "make_problem",
+    "profile_likelihood",
+    "register_parameter",
+    "residuals_and_jacobian",
+]

@@ -1,0 +1,92 @@
+"""`hertzchain fit FILE... --params eta,mu,C`: fit parameters to trace files.
+
+The chain of each file is described by its header (see `hertzchain.tracefile`); the
+command fits the chosen parameters and writes `fit.json`, CSV tables and PNG plots
+(`fitting.report`) into `--out`. Exit status: 0 converged, 3 not converged (the report
+is still written, marked `"converged": false`), 2 bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from hertzchain.units import parse_quantity
+
+from ..data import load_experiments
+from ..fit import fit
+from ..model import STEPS_PER_CONTACT, ForwardModel
+from ..parameters import REGISTRY, get_spec, parse_parameter_list
+from ..report import summary_text, write_report
+
+
+def _assignments(text: str | None, option: str) -> dict:
+    """Parse 'eta=2us,mu=0.19' into {name: SI value} (units by the parameter's unit)."""
+    values = {}
+    if not text:
+        return values
+    for part in text.split(","):
+        if not part.strip():
+            continue
+        if "=" not in part:
+            raise ValueError(f"{option}: expected name=value pairs, got {part!r}.")
+        name, value = (s.strip() for s in part.split("=", 1))
+        base = name.split("[", 1)[0]
+        spec = get_spec(base)
+        unit = spec.unit if spec.unit in ("s", "Pa", "N", "m/s") else ""
+        values[name] = parse_quantity(value, unit, name=f"{option} {name}")
+    return values
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("files", nargs="+", metavar="FILE", help="trace files (hertzchain-trace/1 CSV)")
+    parser.add_argument(
+        "--params", default="eta,mu,C",
+        help="comma-separated parameters to fit [eta,mu,C]; valid: " + ", ".join(REGISTRY),
+    )
+    parser.add_argument("--out", default="out/fit", help="output folder [out/fit]")
+    parser.add_argument("--multistart", type=int, default=1, help="starts run as one batch [1]")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the spread starts [0]")
+    parser.add_argument("--profile", default="", help="parameters to profile, e.g. eta,mu")
+    parser.add_argument("--start", help="start values, e.g. eta=2us,mu=0.1 [from the data]")
+    parser.add_argument("--fixed", help="hold global parameters at values, e.g. mu=0.19,wall_youngs=5GPa")
+    parser.add_argument("--channels", help="channels to fit, e.g. contact_6,wall [all]")
+    parser.add_argument("--noise-std", help="noise sigma of every channel (N) [header, else estimated]")
+    parser.add_argument(
+        "--covariance", choices=("auto", "noise", "residual"), default="auto",
+        help="standard errors from the stated noise or scaled by chi^2/dof [auto]",
+    )
+    parser.add_argument("--max-steps", type=int, default=100, help="optimiser iterations per start [100]")
+    parser.add_argument(
+        "--steps-per-contact", type=int, default=STEPS_PER_CONTACT,
+        help=f"Verlet steps per shortest contact time [{STEPS_PER_CONTACT}]",
+    )
+    parser.add_argument("--no-plots", action="store_true", help="write JSON and CSV only")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def run(args: argparse.Namespace) -> int:
+    params = parse_parameter_list(args.params)
+    missing = [f for f in args.files if not Path(f).is_file()]
+    if missing:
+        raise FileNotFoundError(f"no such trace file: {', '.join(missing)}")
+    channels = tuple(c.strip() for c in args.channels.split(",") if c.strip()) if args.channels else None
+    noise = parse_quantity(args.noise_std, "N", name="--noise-std") if args.noise_std else None
+    experiments = load_experiments(args.files, channels=channels, noise_std_n=noise)
+    profile = tuple(p.strip() for p in args.profile.split(",") if p.strip())
+    print(f"fitting {', '.join(params)} to {len(experiments)} file(s) ...", flush=True)
+    result = fit(
+        experiments, params, start=_assignments(args.start, "--start"),
+        fixed=_assignments(args.fixed, "--fixed"), multistart=args.multistart, seed=args.seed,
+        max_steps=args.max_steps, covariance=args.covariance, profile=profile,
+        forward=ForwardModel(steps_per_contact=args.steps_per_contact),
+        progress=not args.quiet, throw=False,
+    )
+    written = write_report(result, args.out, plots=not args.no_plots)
+    print(summary_text(result))
+    print(f"wrote {len(written)} files to {args.out} (fit.json, params.csv, plots)")
+    if not result.converged:
+        print(f"hertzchain fit: error: {result.message}", file=sys.stderr)
+        return 3
+    return 0

@@ -1,0 +1,183 @@
+"""The data model of a fit: experiments (trace files) and the checks they must pass.
+
+An `Experiment` is one trace file (`hertzchain.tracefile.TraceFile`) plus the choice of
+channels to fit and the noise level of each channel. The noise standard deviation whitens
+the residuals. It comes from the file's `noise_std_n` header when there is one; otherwise
+it is estimated from the channel itself with a robust high-pass estimate: the median
+absolute second difference, $\\sigma \\approx 1.4826\\,\\mathrm{MAD}(\\Delta^2 y)/\\sqrt{6}$
+(white noise of variance $\\sigma^2$ gives second differences of variance $6\\sigma^2$; a
+pulse sampled finely enough adds almost nothing to them).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+
+from hertzchain.tracefile import TraceFile, read_trace
+
+from .parameters import bare_speed_constant
+
+# The fit needs at least this many samples across the half-maximum width of the pulse.
+MIN_SAMPLES_PER_PULSE = 6
+MIN_SAMPLES = 20
+# Fraction of the half-maximum width of a discrete solitary wave in lattice units 2R sqrt(10)/v
+# (physics-reference.md, row 2h).
+_FWHM_FACTOR = 0.4465
+# A channel must show a pulse above this many noise standard deviations.
+MIN_PEAK_SNR = 5.0
+
+
+class FitInputError(ValueError):
+    """Data that cannot be fitted; the message names the file, the channel and the fix."""
+
+
+def estimate_noise_std(values) -> float:
+    """Robust estimate of white-noise standard deviation from second differences, same units."""
+    second = np.diff(np.asarray(values, dtype=float), n=2)
+    if second.size == 0:
+        return 0.0
+    mad = np.median(np.abs(second - np.median(second)))
+    return float(1.4826 * mad / math.sqrt(6.0))
+
+
+@dataclasses.dataclass(frozen=True)
+class Experiment:
+    """One trace file prepared for fitting.
+
+    **Fields:**
+
+    - `trace`: the `TraceFile`.
+    - `label`: short name used in reports (the file name without suffix by default).
+    - `channels`: names of the channels fitted (default: all of the file's channels).
+    - `noise_std_n`: channel -> noise standard deviation, N.
+    - `noise_source`: `"header"` (the file's `noise_std_n`) or `"estimated"`.
+    """
+
+    trace: TraceFile
+    label: str
+    channels: tuple[str, ...]
+    noise_std_n: dict
+    noise_source: str
+
+    @property
+    def time_s(self) -> np.ndarray:
+        return np.asarray(self.trace.time_s, dtype=float)
+
+    def data(self, channel: str) -> np.ndarray:
+        return np.asarray(self.trace.channels[channel], dtype=float)
+
+    @property
+    def n_residuals(self) -> int:
+        return len(self.channels) * len(self.time_s)
+
+
+def make_experiment(trace: TraceFile, *, label: str | None = None, channels=None,
+                    noise_std_n: float | None = None, striker_velocity_m_s: float | None = None
+                    ) -> Experiment:
+    """Check a trace for fitting and wrap it as an `Experiment`.
+
+    **Arguments:**
+
+    - `trace`: a `TraceFile` (e.g. from `hertzchain.tracefile.read_trace`).
+    - `label`: name in reports (default: the file stem, or `trace<k>`).
+    - `channels`: channels to fit (default all).
+    - `noise_std_n`: noise standard deviation, N (default: the header's, else estimated).
+    - `striker_velocity_m_s`: used only for the sampling check when the header has none.
+
+    **Raises:** `FitInputError` for NaN samples, unknown channels, records that are too
+    short or show no pulse above the noise, and sampling too coarse for the pulse.
+    """
+    where = trace.path or label or "<trace>"
+    if label is None:
+        label = Path(trace.path).stem if trace.path else "trace"
+    time = np.asarray(trace.time_s, dtype=float)
+    if time.size < MIN_SAMPLES:
+        raise FitInputError(
+            f"{where}: only {time.size} samples; a fit needs at least {MIN_SAMPLES} covering the pulse."
+        )
+    if channels is None:
+        channels = trace.channel_names
+    channels = tuple(channels)
+    for name in channels:
+        if name not in trace.channels:
+            raise FitInputError(
+                f"{where}: no channel {name!r}; the file has {', '.join(trace.channel_names)}."
+            )
+        values = np.asarray(trace.channels[name], dtype=float)
+        if not np.all(np.isfinite(values)):
+            bad = int(np.argmin(np.isfinite(values)))
+            raise FitInputError(
+                f"{where}: channel {name} has NaN or inf at sample {bad + 1} (t = {time[bad]:.6g} s); "
+                "remove or interpolate the bad samples first."
+            )
+    if noise_std_n is None and trace.noise_std_n is not None:
+        noise = {name: float(trace.noise_std_n) for name in channels}
+        source = "header"
+    elif noise_std_n is not None:
+        noise = {name: float(noise_std_n) for name in channels}
+        source = "header"
+    else:
+        noise = {name: estimate_noise_std(trace.channels[name]) for name in channels}
+        source = "estimated"
+    for name in channels:
+        values = np.asarray(trace.channels[name], dtype=float)
+        peak = float(np.max(values))
+        floor = max(noise[name], 1e-12 * max(abs(peak), 1.0))
+        if noise[name] <= 0:
+            noise[name] = floor
+        if peak < MIN_PEAK_SNR * noise[name]:
+            raise FitInputError(
+                f"{where}: channel {name} shows no pulse above {MIN_PEAK_SNR:g} x its noise "
+                f"({noise[name]:.3g} N) in {time[0]:.6g}..{time[-1]:.6g} s: the record is too "
+                "short for the pulse to reach it, or the channel is dead."
+            )
+    _check_sampling(trace, channels, where, striker_velocity_m_s)
+    return Experiment(trace=trace, label=label, channels=channels, noise_std_n=noise, noise_source=source)
+
+
+def _check_sampling(trace: TraceFile, channels, where: str, striker_velocity_m_s) -> None:
+    """Refuse a sampling interval too coarse for the narrowest pulse of the record."""
+    header = trace.header
+    velocity = trace.striker_velocity_m_s or striker_velocity_m_s
+    try:
+        setup = trace.setup(**({} if trace.striker_velocity_m_s else {"striker_velocity_m_s": velocity or 1.0}))
+    except ValueError as error:
+        raise FitInputError(f"{where}: {error}") from error
+    speed_constant = float(bare_speed_constant(setup))
+    peak = max(float(np.max(trace.channels[name])) for name in channels)
+    # the incident pulse's amplitude sets its speed; the wall force is up to ~2.3x larger
+    incident = peak / (2.3 if channels == ("wall",) else 1.0)
+    speed = speed_constant * max(incident, 1e-6) ** (1.0 / 6.0)
+    fwhm = _FWHM_FACTOR * 2.0 * float(header["bead_radius_m"]) * math.sqrt(10.0) / speed
+    interval = trace.sample_interval_s
+    if interval * MIN_SAMPLES_PER_PULSE > fwhm:
+        raise FitInputError(
+            f"{where}: sampled too coarsely for the pulse: interval {interval * 1e6:.3g} us, but a "
+            f"pulse of {peak:.3g} N lasts only about {fwhm * 1e6:.3g} us (half-maximum width); "
+            f"the fit needs an interval <= {fwhm / MIN_SAMPLES_PER_PULSE * 1e6:.3g} us."
+        )
+
+
+def load_experiments(sources, *, channels=None, noise_std_n=None) -> list[Experiment]:
+    """Read trace files (paths) or take `TraceFile`s and check them for fitting.
+
+    Labels are the file stems, made unique with a suffix when two files share a stem.
+    """
+    experiments, used = [], set()
+    for k, source in enumerate(sources):
+        trace = source if isinstance(source, TraceFile) else read_trace(source)
+        label = Path(trace.path).stem if trace.path else f"trace{k}"
+        base, n = label, 2
+        while label in used:
+            label, n = f"{base}_{n}", n + 1
+        used.add(label)
+        experiments.append(
+            make_experiment(trace, label=label, channels=channels, noise_std_n=noise_std_n)
+        )
+    if not experiments:
+        raise FitInputError("No trace files to fit.")
+    return experiments

@@ -1,0 +1,698 @@
+"""Least-squares fits of chain parameters to trace files with optimistix.
+
+`fit(experiments, params=("eta", "mu", "C"))` minimises the sum of squared whitened
+residuals (`fitting.model`) with Levenberg-Marquardt (`optimistix.LevenbergMarquardt`,
+Jacobian by forward-mode differentiation of the solver), in the bounded transformed
+coordinates of `fitting.parameters`. Several starts run as one `vmap`ped batch; the best
+is kept and disagreement between starts is reported. Standard errors, correlations and
+identifiability warnings come from `fitting.uncertainty`; profile likelihoods on request.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+import time
+import warnings
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from hertzchain.tracefile import TraceFile
+
+from . import start as start_values
+from .data import Experiment, FitInputError, load_experiments
+from .model import ForwardModel, Problem
+from .parameters import (
+    CONTINUUM_SPEED_FACTOR,
+    DISCRETE_SPEED_FACTOR,
+    ParameterInstance,
+    bare_speed_constant,
+    from_unbounded,
+    get_spec,
+    parse_parameter_list,
+    to_unbounded,
+    transform_arrays,
+)
+from .uncertainty import (
+    Covariance,
+    covariance_from_jacobian,
+    identifiability_warnings,
+    profile_interval,
+)
+
+
+class FitError(RuntimeError):
+    """The fit did not converge; the message says how far it got and what to try."""
+
+
+class FitWarning(UserWarning):
+    """Something about a fit the user should know (identifiability, multistart disagreement)."""
+
+
+# --- building a problem ------------------------------------------------------------------------
+def _as_experiments(experiments) -> list[Experiment]:
+    if isinstance(experiments, (Experiment, TraceFile, str)):
+        experiments = [experiments]
+    experiments = list(experiments)
+    if experiments and all(isinstance(e, Experiment) for e in experiments):
+        return experiments
+    if any(isinstance(e, Experiment) for e in experiments):
+        raise ValueError("Give either Experiments or trace files/paths, not a mixture.")
+    return load_experiments(experiments)
+
+
+def make_problem(experiments, params=("eta", "mu", "C"), *, fixed=None,
+                 forward: ForwardModel | None = None) -> Problem:
+    """Build the least-squares `Problem` for `params` on `experiments`.
+
+    **Arguments:**
+
+    - `experiments`: `Experiment`s (see `fitting.data`), `TraceFile`s or paths.
+    - `params`: names from the registry (`fitting.parameters.REGISTRY`); experiment-scoped
+      ones get one value per file, `gain` one per channel.
+    - `fixed`: name -> value (SI) of global setup parameters held fixed at a value other than
+      the header's (e.g. `{"mu": 0.19}`).
+    - `forward`: a `ForwardModel` (custom solver / model switches, time-step choice).
+    """
+    experiments = _as_experiments(experiments)
+    names = parse_parameter_list(params)
+    forward = forward or ForwardModel()
+    fixed = dict(fixed or {})
+    base = []
+    for experiment in experiments:
+        trace = experiment.trace
+        overrides = {}
+        if trace.striker_velocity_m_s is None:
+            if "striker_velocity" not in names:
+                raise FitInputError(
+                    f"{experiment.label}: the file has no striker_velocity_m_s; add it to the header "
+                    "or fit it (params ... ,striker_velocity)."
+                )
+            overrides["striker_velocity_m_s"] = start_values.estimate_striker_velocity(trace)
+        setup = trace.setup(**overrides)
+        for name, value in fixed.items():
+            spec = get_spec(name)
+            if spec.kind != "setup" or spec.scope != "global":
+                raise ValueError(f"fixed: {name} is not a global setup parameter.")
+            if name in names:
+                raise ValueError(f"{name} is both fitted and fixed; choose one.")
+            setup = spec.apply(setup, float(value))
+        base.append(setup)
+    if "C" in names:
+        bare = [float(bare_speed_constant(s)) for s in base]
+        if max(bare) - min(bare) > 1e-9 * max(bare):
+            raise ValueError(
+                "C is shared by all files but their beads differ (bare C from "
+                f"{min(bare):.6g} to {max(bare):.6g}); fit mu_star instead, or one bead kind at a time."
+            )
+    instances = []
+    for name in names:
+        spec = get_spec(name)
+        if spec.scope == "global":
+            instances.append(ParameterInstance(spec, label=name))
+        elif spec.scope == "experiment":
+            for e, experiment in enumerate(experiments):
+                instances.append(ParameterInstance(spec, e, label=f"{name}[{experiment.label}]"))
+        else:
+            for e, experiment in enumerate(experiments):
+                for channel in experiment.channels:
+                    instances.append(
+                        ParameterInstance(spec, e, channel, label=f"{name}[{experiment.label}:{channel}]")
+                    )
+    return Problem(experiments, instances, base, forward)
+
+
+def initial_values(problem: Problem, start=None) -> np.ndarray:
+    """Start values (SI) of the problem's parameters.
+
+    From `start` (a dict keyed by parameter name, which sets every instance of it, or by
+    instance label) where given; else eta, mu, C from the data (`fitting.start`); else the
+    header's value (`spec.read`) or the spec's default.
+    """
+    start = dict(start or {})
+    for key in start:
+        if key not in problem.labels and key not in {inst.name for inst in problem.instances}:
+            raise ValueError(
+                f"start: {key!r} is not a fitted parameter; fitted: {', '.join(problem.labels)}."
+            )
+    estimates = start_values.data_estimates(
+        [e.trace for e in problem.experiments], problem.base_setups
+    )
+    values = []
+    for inst in problem.instances:
+        setup = problem.base_setups[inst.experiment if inst.experiment is not None else 0]
+        if inst.label in start:
+            value = start[inst.label]
+        elif inst.name in start:
+            value = start[inst.name]
+        elif inst.name in ("eta", "mu", "C"):
+            value = estimates[inst.name]
+        elif inst.spec.read is not None:
+            value = inst.spec.read(setup)
+        else:
+            value = inst.spec.default
+        values.append(float(value))
+    return np.asarray(values)
+
+
+# --- the optimisation ---------------------------------------------------------------------------
+class _IterationReport:
+    """Host-side progress of the optimiser: one line per iteration (at most every 0.5 s)."""
+
+    def __init__(self, label: str, stream=None, min_interval_s: float = 0.5):
+        self.label = label
+        self.stream = sys.stderr if stream is None else stream
+        self.min_interval_s = min_interval_s
+        self.start = time.perf_counter()
+        self.last = -math.inf
+        self.best = math.inf
+        self.step = 0
+
+    def __call__(self, step, loss):
+        step = int(np.max(step))
+        if step > self.step:  # a new iteration: forget the last one's losses
+            self.best = math.inf
+        self.step = max(self.step, step)
+        if step > 0:
+            self.best = min(self.best, float(np.min(loss)))
+        now = time.perf_counter()
+        if now - self.last < self.min_interval_s:
+            return
+        self.last = now
+        if not math.isfinite(self.best):
+            return
+        self.stream.write(
+            f"{self.label}: iteration {self.step}, best chi^2 = {2 * self.best:.6g}, "
+            f"{now - self.start:.1f} s\n"
+        )
+        self.stream.flush()
+
+
+def _make_verbose(report):
+    if report is None:
+        return False
+
+    def verbose(**values):
+        jax.debug.callback(report, values["num_steps"][1], values["loss_last_accepted_step"][1])
+
+    return verbose
+
+
+def _make_solver(tolerance: float, n_residuals: int, report=None):
+    """Levenberg-Marquardt that stops when a step moves the whitened residuals little.
+
+    With `rtol = 0`, `atol = tolerance/sqrt(n)` and the RMS norm, optimistix's Cauchy
+    criterion reads: the last accepted step changed the residual vector by less than
+    `tolerance` in 2-norm (so chi^2 by about 2 tolerance |r|/sqrt(n)) and the transformed
+    coordinates by less than tolerance/sqrt(n) RMS.
+    """
+    atol = tolerance / math.sqrt(max(n_residuals, 1))
+    return optx.LevenbergMarquardt(rtol=0.0, atol=atol, norm=optx.rms_norm, verbose=_make_verbose(report))
+
+
+def _run_least_squares(problem: Problem, constants, templates, masks, starts, *, max_steps: int,
+                       solver, tolerance: float, data=None, batched_data: bool = False):
+    """Batch of LM solves over the rows of `starts` (B, p) in transformed coordinates.
+
+    Coordinates where `masks` (B, p) is False are held at `templates` (their Jacobian
+    columns are zero, so the damped steps leave them alone): this fixes a parameter for a
+    profile without recompiling. Returns (z (B, p), success (B,), steps (B,), chi2 (B,),
+    index of the kept start, its residuals (n,) and Jacobian (n, p) with respect to the
+    physical values). `data`: measured samples in `Problem.data_vector` layout, one set for
+    all rows or (with `batched_data`) one per row.
+    """
+    data = jnp.asarray(problem.data_vector() if data is None else data)
+    return _solve_batch(problem, constants, solver, max_steps, float(tolerance), bool(batched_data),
+                        jnp.asarray(templates), jnp.asarray(masks, dtype=bool),
+                        jnp.asarray(starts), data)
+
+
+@eqx.filter_jit
+def _solve_batch(problem, constants, solver, max_steps, tolerance, batched_data, templates, masks,
+                 starts, data):
+    def residual_fn(z, args):
+        template, mask, y = args
+        return problem.residuals(from_unbounded(constants, jnp.where(mask, z, template)), y)
+
+    def one(template, mask, z0, y):
+        solution = optx.least_squares(
+            residual_fn, solver, jnp.where(mask, z0, template), args=(template, mask, y),
+            max_steps=max_steps, throw=False, options={"jac": "fwd"},
+        )
+        z = jnp.where(mask, solution.value, template)
+        r = residual_fn(z, (template, mask, y))
+        # Gauss-Newton's predicted remaining decrease of chi^2 at the end point
+        jac = jax.jacfwd(residual_fn)(z, (template, mask, y))
+        step = jnp.linalg.lstsq(jac, r)[0]
+        decrement = jnp.sum((jac @ step) ** 2)
+        ok = jnp.all(jnp.isfinite(r)) & (decrement < tolerance)
+        return z, ok, solution.stats["num_steps"], jnp.sum(r**2)
+
+    z, ok, steps, chi2 = jax.vmap(one, in_axes=(0, 0, 0, 0 if batched_data else None))(
+        templates, masks, starts, data
+    )
+    if batched_data:  # one Jacobian per data set
+        x = jax.vmap(lambda zz: from_unbounded(constants, zz))(z)
+        jacobian = jax.vmap(jax.jacfwd(problem.residuals))(x, data)
+        return z, ok, steps, chi2, None, None, jacobian
+    # the kept start: the best converged one (the best finite one if none converged)
+    finite = jnp.where(jnp.isfinite(chi2), chi2, jnp.inf)
+    best = jnp.argmin(jnp.where(jnp.any(ok), jnp.where(ok, finite, jnp.inf), finite))
+    x_best = from_unbounded(constants, z[best])
+    residuals = problem.residuals(x_best, data)
+    jacobian = jax.jacfwd(problem.residuals)(x_best, data)
+    return z, ok, steps, chi2, best, residuals, jacobian
+
+
+def _multistart_points(problem: Problem, z0: np.ndarray, k: int, seed: int) -> np.ndarray:
+    """`k` starting points: the data-derived start, then spread ones.
+
+    Global parameters spread by up to a factor 3 (log parameters) or 3 scale units;
+    per-file velocities by 20 %, offsets by 3 us, gains by 10 %.
+    """
+    rng = np.random.default_rng(seed)
+    points = [z0]
+    for _ in range(k - 1):
+        z = z0.copy()
+        for i, inst in enumerate(problem.instances):
+            if inst.spec.scope == "global":
+                width = math.log(3.0) if inst.spec.space == "log" else 3.0
+            elif inst.name == "striker_velocity":
+                width = 0.2
+            elif inst.name == "time_offset":
+                width = 3e-6 / inst.spec.scale
+            else:
+                width = 0.1
+            z[i] = z0[i] + rng.uniform(-width, width)
+        points.append(z)
+    return np.asarray(points)
+
+
+# --- results ---------------------------------------------------------------------------------------
+@dataclasses.dataclass
+class FitResult:
+    """What a fit found.
+
+    **Fields:**
+
+    - `labels`: names of the fitted numbers (`eta`, `striker_velocity[run1]`, ...).
+    - `values`, `stderr`: label -> value / standard error in SI units (stderr inf when the
+      data cannot determine it).
+    - `units`: label -> SI unit.
+    - `correlation`: (p, p) correlation matrix in `labels` order; `covariance` likewise.
+    - `covariance_scale`: "noise" (sigma known) or "residual" (scaled by chi^2/dof).
+    - `chi2`, `dof`, `reduced_chi2`: of the whitened residuals.
+    - `residual_rms`: file label -> channel -> RMS residual in N; `residual_rms_whitened`
+      likewise in units of the channel's sigma.
+    - `speed_constant`: C of the fitted chain (discrete solitary waves, with standard
+      error), Eq. 3's continuum value C_t (1+mu*)^(1/3), and mu*.
+    - `converged`, `message`, `n_steps`: optimiser status of the kept start.
+    - `starts`: one dict per start (start and final values, chi^2, converged, steps).
+    - `warnings`: identifiability, bounds, multistart disagreement, resolution.
+    - `profiles`: label -> profile likelihood (when asked for).
+    - `problem`, `x`: the problem and the fitted vector (for predictions and plots).
+    """
+
+    labels: tuple
+    values: dict
+    stderr: dict
+    units: dict
+    correlation: np.ndarray
+    covariance: np.ndarray
+    covariance_scale: str
+    chi2: float
+    dof: int
+    reduced_chi2: float
+    residual_rms: dict
+    residual_rms_whitened: dict
+    speed_constant: dict
+    converged: bool
+    message: str
+    n_steps: int
+    starts: list
+    warnings: list
+    identifiability: dict
+    profiles: dict
+    problem: Problem
+    x: np.ndarray
+    elapsed_s: float
+
+    def predictions(self) -> list[dict]:
+        """Fitted model of every channel on the data's time axis, per file."""
+        return self.problem.predictions(self.x)
+
+    def to_json(self) -> dict:
+        """A JSON-ready dict (SI units; non-finite numbers as null)."""
+        def num(v):
+            if v is None:
+                return None
+            v = float(v)
+            return v if math.isfinite(v) else None
+
+        params = {
+            label: {"value": num(self.values[label]), "stderr": num(self.stderr[label]),
+                    "unit": self.units[label]}
+            for label in self.labels
+        }
+        for key in ("C",):
+            if key not in params:
+                params[key] = {"value": num(self.speed_constant["C"]),
+                               "stderr": num(self.speed_constant["C_stderr"]),
+                               "unit": "m/s N^-1/6", "fitted": False}
+        return {
+            "params": params,
+            "correlation": {
+                "names": list(self.labels),
+                "matrix": [[num(c) for c in row] for row in np.asarray(self.correlation)],
+            },
+            "covariance_scale": self.covariance_scale,
+            "chi2": num(self.chi2),
+            "dof": int(self.dof),
+            "reduced_chi2": num(self.reduced_chi2),
+            "residual_rms_n": {k: {c: num(v) for c, v in d.items()} for k, d in self.residual_rms.items()},
+            "residual_rms_whitened": {
+                k: {c: num(v) for c, v in d.items()} for k, d in self.residual_rms_whitened.items()
+            },
+            "speed_constant": {k: num(v) for k, v in self.speed_constant.items()},
+            "converged": bool(self.converged),
+            "message": self.message,
+            "n_steps": int(self.n_steps),
+            "starts": [
+                {
+                    "start": {k: num(v) for k, v in s["start"].items()},
+                    "final": {k: num(v) for k, v in s["final"].items()},
+                    "chi2": num(s["chi2"]),
+                    "converged": bool(s["converged"]),
+                    "steps": int(s["steps"]),
+                    "agrees_with_best": bool(s["agrees_with_best"]),
+                }
+                for s in self.starts
+            ],
+            "warnings": list(self.warnings),
+            "identifiability": {
+                "singular_values": [num(v) for v in self.identifiability["singular_values"]],
+                "condition_number": num(self.identifiability["condition_number"]),
+            },
+            "profiles": {
+                label: {
+                    "values": [num(v) for v in p["values"]],
+                    "delta_chi2": [num(v) for v in p["delta_chi2"]],
+                    "interval_68": [num(v) for v in p["interval_68"]],
+                    "interval_95": [num(v) for v in p["interval_95"]],
+                }
+                for label, p in self.profiles.items()
+            },
+            "noise_std_n": {
+                e.label: {"source": e.noise_source, **{c: num(s) for c, s in e.noise_std_n.items()}}
+                for e in self.problem.experiments
+            },
+            "files": [e.trace.path or e.label for e in self.problem.experiments],
+            "elapsed_s": num(self.elapsed_s),
+        }
+
+
+def _speed_constant(problem: Problem, x, cov: Covariance) -> dict:
+    setup = problem.setup_at(x, 0)
+    mu_star = float(setup.mu_star)
+    bare = float(bare_speed_constant(setup))
+    c = bare * (1 + mu_star) ** (1 / 3)
+    error = math.nan
+    labels = list(problem.labels)
+    if "C" in labels:
+        error = float(cov.stderr[labels.index("C")])
+    elif "mu_star" in labels:
+        error = float(cov.stderr[labels.index("mu_star")]) * c / (3 * (1 + mu_star))
+    ratio = CONTINUUM_SPEED_FACTOR / DISCRETE_SPEED_FACTOR
+    return {
+        "C": c,
+        "C_stderr": error,
+        "C_continuum": c * ratio,
+        "C_continuum_stderr": error * ratio,
+        "mu_star": mu_star,
+        "C_bare": bare,
+    }
+
+
+def _residual_rms(problem: Problem, residuals) -> tuple[dict, dict]:
+    rms, whitened = {}, {}
+    for experiment, slices in zip(problem.experiments, problem.residual_slices()):
+        rms[experiment.label], whitened[experiment.label] = {}, {}
+        for channel, part in slices.items():
+            w = float(np.sqrt(np.mean(residuals[part] ** 2)))
+            whitened[experiment.label][channel] = w
+            rms[experiment.label][channel] = w * experiment.noise_std_n[channel]
+    return rms, whitened
+
+
+def _covariance_scale(problem: Problem, scale: str) -> str:
+    if scale == "auto":
+        return "noise" if all(e.noise_source == "header" for e in problem.experiments) else "residual"
+    if scale not in ("noise", "residual"):
+        raise ValueError(f"covariance must be 'auto', 'noise' or 'residual', got {scale!r}.")
+    return scale
+
+
+def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multistart: int = 1,
+        seed: int = 0, max_steps: int = 100, tolerance: float = 0.1,
+        covariance: str = "auto", profile=(), profile_points: int = 13,
+        forward: ForwardModel | None = None, progress: bool = True, throw: bool = True) -> FitResult:
+    """Fit chain parameters to trace files by Levenberg-Marquardt.
+
+    **Arguments:**
+
+    - `experiments`: trace file paths, `TraceFile`s or `Experiment`s (`fitting.data`).
+    - `params`: parameter names (see `fitting.parameters.REGISTRY`): e.g. `("eta", "mu", "C")`,
+      plus nuisances `striker_velocity`, `time_offset` (per file), `gain` (per channel).
+    - `start`: name or label -> start value (SI); default: estimated from the data.
+    - `fixed`: name -> value (SI) of global setup parameters held fixed.
+    - `multistart`: number of starts run as one batch (the first is the data-derived one).
+    - `seed`: random seed of the spread starts.
+    - `max_steps`: optimiser iterations per start.
+    - `tolerance`: a start has converged when Gauss-Newton predicts less than `tolerance`
+      further decrease of chi^2 from where it stopped (0.1: a third of a standard error
+      at most); the optimiser stops when a step moves the whitened residuals by less than
+      `tolerance` (2-norm).
+    - `covariance`: "auto", "noise" or "residual" (see `fitting.uncertainty`).
+    - `profile`: labels to compute profile-likelihood intervals for.
+    - `forward`: a `ForwardModel` (custom simulator, model switches, time step).
+    - `progress`: report iterations on stderr.
+    - `throw`: raise `FitError` when no start converged (else return with `converged=False`).
+
+    **Returns:** `FitResult`.
+    """
+    began = time.perf_counter()
+    if multistart < 1:
+        raise ValueError(f"multistart must be >= 1, got {multistart}.")
+    problem = make_problem(experiments, params, fixed=fixed, forward=forward)
+    scale = _covariance_scale(problem, covariance)
+    for label in profile:
+        if label not in problem.labels:
+            raise ValueError(f"profile: {label!r} is not fitted; fitted: {', '.join(problem.labels)}.")
+    x0 = initial_values(problem, start)
+    constants = tuple(jnp.asarray(a) for a in transform_arrays(problem.instances))
+    z0 = to_unbounded(problem.instances, x0)
+    points = _multistart_points(problem, z0, multistart, seed)
+    p = len(problem.instances)
+    report = _IterationReport("fit") if progress else None
+    solver = _make_solver(tolerance, problem.n_residuals, report)
+
+    for attempt in range(2):
+        z, ok, steps, chi2, best, residuals, jacobian = (np.asarray(a) for a in _run_least_squares(
+            problem, constants, points, np.ones(points.shape, bool), points,
+            max_steps=max_steps, solver=solver, tolerance=tolerance,
+        ))
+        best = int(best)
+        x = np.asarray(from_unbounded(constants, jnp.asarray(z[best])))
+        coarse = problem.check_resolution(x)
+        if not coarse or attempt == 1:
+            break
+        # the fitted setups need a finer time step than the one chosen at the start
+        problem = problem.with_setups([problem.setup_at(x, e) for e in range(len(problem.experiments))])
+        points = np.vstack([z[best][None], points[1:]])
+
+    converged = bool(ok[best])
+    chi2_best = float(residuals @ residuals)
+    dof = problem.n_residuals - p
+    cov = covariance_from_jacobian(jacobian, problem.labels, chi2=chi2_best, dof=dof, scale=scale)
+    messages = identifiability_warnings(problem.instances, x, cov, problem.experiments)
+    if coarse:
+        messages.append(
+            f"the fitted setups of {', '.join(coarse)} are resolved by fewer than half the asked "
+            "steps per contact; results may carry time-step bias."
+        )
+    if scale == "noise" and dof > 0 and chi2_best / dof > 1.5:
+        messages.append(
+            f"reduced chi^2 = {chi2_best / dof:.3g} with the stated noise: the model does not explain "
+            "the data to noise level; standard errors from the stated noise are too small "
+            "(use covariance='residual', or look for a missing effect)."
+        )
+
+    starts = []
+    x_all = np.asarray(jax.vmap(lambda zz: from_unbounded(constants, zz))(jnp.asarray(z)))
+    x_start = np.asarray(jax.vmap(lambda zz: from_unbounded(constants, zz))(jnp.asarray(points)))
+    tolerance_chi2 = max(1.0, cov.variance_factor)
+    for k in range(len(points)):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            distance = np.abs(x_all[k] - x) / cov.stderr
+        distance = np.where(np.isfinite(distance), distance, 0.0)
+        agrees = bool(ok[k]) and chi2[k] - chi2[best] <= tolerance_chi2 and float(np.max(distance, initial=0)) < 2
+        starts.append({
+            "start": dict(zip(problem.labels, x_start[k])),
+            "final": dict(zip(problem.labels, x_all[k])),
+            "chi2": float(chi2[k]), "converged": bool(ok[k]), "steps": int(steps[k]),
+            "agrees_with_best": agrees, "max_distance_sigma": float(np.max(distance, initial=0)),
+        })
+    others = [k for k in range(len(points)) if k != best and ok[k] and not starts[k]["agrees_with_best"]]
+    if others:
+        worst = max(others, key=lambda k: chi2[k])
+        messages.append(
+            f"{len(others)} of {len(points)} starts converged to other local minima (worst: chi^2 "
+            f"{chi2[worst]:.6g} against the best {chi2[best]:.6g}, parameters up to "
+            f"{starts[worst]['max_distance_sigma']:.3g} sigma away): the misfit has several minima "
+            "(e.g. a pulse matched one period off); the best is kept."
+        )
+    failed = int(np.sum(~ok))
+    if failed and converged:
+        messages.append(f"{failed} of {len(points)} starts did not converge (ignored).")
+
+    message = "converged" if converged else (
+        f"no start reached an optimum within {max_steps} steps (best chi^2 = {chi2[best]:.6g} "
+        f"after {int(steps[best])} steps, and Gauss-Newton still predicts a decrease of more than "
+        f"{tolerance:g}); raise max_steps, give better start values, or fit fewer parameters."
+    )
+    rms, whitened = _residual_rms(problem, residuals)
+    profiles = {}
+    for label in profile:
+        profiles[label] = profile_likelihood(
+            problem, x, label, cov, points=profile_points, max_steps=max_steps,
+            chi2_min=chi2_best, batch=len(points), solver=solver, tolerance=tolerance,
+        )
+    result = FitResult(
+        labels=problem.labels,
+        values=dict(zip(problem.labels, map(float, x))),
+        stderr=dict(zip(problem.labels, map(float, cov.stderr))),
+        units={inst.label: inst.spec.unit for inst in problem.instances},
+        correlation=cov.correlation,
+        covariance=cov.covariance,
+        covariance_scale=scale,
+        chi2=chi2_best,
+        dof=dof,
+        reduced_chi2=chi2_best / dof if dof > 0 else math.nan,
+        residual_rms=rms,
+        residual_rms_whitened=whitened,
+        speed_constant=_speed_constant(problem, x, cov),
+        converged=converged,
+        message=message,
+        n_steps=int(steps[best]),
+        starts=starts,
+        warnings=messages,
+        identifiability={
+            "singular_values": cov.singular_values,
+            "condition_number": float(cov.singular_values[0] / cov.singular_values[-1])
+            if cov.singular_values.size and cov.singular_values[-1] > 0 else math.inf,
+            "weak_directions": cov.weak_directions,
+        },
+        profiles=profiles,
+        problem=problem,
+        x=x,
+        elapsed_s=time.perf_counter() - began,
+    )
+    for text in messages:
+        warnings.warn(text, FitWarning, stacklevel=2)
+    if not converged and throw:
+        raise FitError(message)
+    return result
+
+
+def profile_likelihood(problem: Problem, x, label: str, cov: Covariance, *, points: int = 13,
+                       span_sigma: float = 4.0, max_steps: int = 100, tolerance: float = 0.1,
+                       chi2_min: float | None = None, batch: int | None = None,
+                       solver=None) -> dict:
+    """Profile of chi^2 over one parameter, all others re-fitted at each value (one batch).
+
+    The grid spans +-`span_sigma` standard errors (in the parameter's transformed
+    coordinate; +-50 % when the standard error is not finite). Intervals are where
+    $\\Delta\\chi^2/s^2$ crosses 1 (68 %) and 3.84 (95 %), $s^2$ the covariance's
+    variance factor. The re-fits run `batch` at a time (default: all at once), with
+    `solver` (default: the fit's Levenberg-Marquardt for `tolerance`).
+    """
+    labels = list(problem.labels)
+    i = labels.index(label)
+    inst = problem.instances[i]
+    constants = tuple(jnp.asarray(a) for a in transform_arrays(problem.instances))
+    z_hat = to_unbounded(problem.instances, x)
+    error = float(cov.stderr[i])
+    value = float(x[i])
+    if inst.spec.space == "log":
+        width = error / value if np.isfinite(error) and error > 0 else math.log(1.5)
+        grid = value * np.exp(np.linspace(-span_sigma, span_sigma, points) * width
+                              * (1 if np.isfinite(error) and error > 0 else 1 / span_sigma))
+    else:
+        width = error if np.isfinite(error) and error > 0 else 0.5 * inst.spec.scale * span_sigma
+        grid = value + np.linspace(-span_sigma, span_sigma, points) * width
+    grid = np.clip(grid, inst.spec.lower * (1 + 1e-9), inst.spec.upper * (1 - 1e-9))
+    templates = np.repeat(z_hat[None], points, axis=0)
+    for k, g in enumerate(grid):
+        x_k = x.copy()
+        x_k[i] = g
+        templates[k] = to_unbounded(problem.instances, x_k)
+    masks = np.ones(templates.shape, bool)
+    masks[:, i] = False
+    # run in batches of the fit's own batch size, so the compiled solver is reused
+    batch = max(1, int(batch or points))
+    chi2, ok = np.empty(points), np.empty(points, bool)
+    for first in range(0, points, batch):
+        rows = np.arange(first, first + batch) % points
+        _, ok_k, _, chi2_k, _, _, _ = (np.asarray(a) for a in _run_least_squares(
+            problem, constants, templates[rows], masks[rows], templates[rows], max_steps=max_steps,
+            solver=solver or _make_solver(tolerance, problem.n_residuals), tolerance=tolerance,
+        ))
+        count = min(batch, points - first)
+        chi2[first:first + count], ok[first:first + count] = chi2_k[:count], ok_k[:count]
+    chi2_min = float(np.min(chi2)) if chi2_min is None else min(chi2_min, float(np.min(chi2)))
+    delta = chi2 - chi2_min
+    return {
+        "values": grid,
+        "delta_chi2": delta,
+        "converged": ok,
+        "interval_68": profile_interval(grid, delta, cov.variance_factor, 1.0),
+        "interval_95": profile_interval(grid, delta, cov.variance_factor, 3.84),
+    }
+
+
+def fit_datasets(problem: Problem, datasets, *, start=None, max_steps: int = 100,
+                 tolerance: float = 0.1, covariance: str = "noise") -> dict:
+    """Fit the same problem to many data sets in one vmapped, once-compiled batch.
+
+    For coverage studies (many noise seeds of one synthetic experiment) and for
+    bootstrap-like checks. `datasets` is (B, n) in `Problem.data_vector` layout. Every
+    data set starts from the same values (`start` dict, else `initial_values(problem)`).
+
+    **Returns:** dict with `values` (B, p), `stderr` (B, p), `chi2` (B,), `converged` (B,)
+    and `labels`.
+    """
+    datasets = np.asarray(datasets, dtype=float)
+    if datasets.ndim != 2 or datasets.shape[1] != problem.n_residuals:
+        raise ValueError(
+            f"datasets must have shape (B, {problem.n_residuals}), got {datasets.shape}."
+        )
+    x0 = initial_values(problem, start)
+    constants = tuple(jnp.asarray(a) for a in transform_arrays(problem.instances))
+    z0 = np.repeat(to_unbounded(problem.instances, x0)[None], len(datasets), axis=0)
+    z, ok, _, chi2, _, _, jacobians = (np.asarray(a) for a in _run_least_squares(
+        problem, constants, z0, np.ones(z0.shape, bool), z0, max_steps=max_steps,
+        solver=_make_solver(tolerance, problem.n_residuals), tolerance=tolerance, data=datasets,
+        batched_data=True,
+    ))
+    values = np.asarray(jax.vmap(lambda zz: from_unbounded(constants, zz))(jnp.asarray(z)))
+    dof = problem.n_residuals - len(problem.instances)
+    stderr = np.stack([
+        covariance_from_jacobian(j, problem.labels, chi2=float(c), dof=dof, scale=covariance).stderr
+        for j, c in zip(jacobians, chi2)
+    ])
+    return {"labels": problem.labels, "values": values, "stderr": stderr, "chi2": chi2, "converged": ok}

@@ -1,0 +1,383 @@
+"""The forward model of a fit: parameter values -> predicted channels -> whitened residuals.
+
+For each experiment the chain is simulated with `hertzchain.solve` (velocity Verlet) on a
+fixed time grid at least as fine as the data, then every channel is evaluated at the data's
+times shifted by the trigger offset, $t - t_{off}$, with a differentiable cubic
+(Catmull-Rom) interpolation, multiplied by the channel's gain, and compared with the data:
+$r = (g\\,F(t - t_{off}) - y)/\\sigma$. Before the impact the model holds its value at
+$t = 0$ (the static preload).
+
+Experiments with the same chain structure (number of beads, end, sensor beads) are
+simulated together in one `vmap`ped call on a common grid.
+
+Jacobian. The residual's derivative is assembled by a custom JVP: the simulator is
+differentiated in forward mode only with respect to the parameters that reach it (the
+global physical parameters plus the experiment's own striker velocity, say), once per
+experiment, and the cheap post-processing (interpolation, offsets, gains) is
+differentiated directly. A fit with per-file and per-channel nuisances therefore costs a
+few forward passes per iteration instead of one per free number.
+
+Time step: by default `STEPS_PER_CONTACT = 400` steps per shortest contact time, twice
+the simulator's default, because with the small standard errors of full-trace fits the
+velocity-Verlet bias at coarser steps is several standard errors of C and eta
+(discrepancy.md section 5.3).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from hertzchain.chain import ChainSetup
+from hertzchain.integrate import Recording, solve
+from hertzchain.timegrid import TimeGrid, choose_time_grid, shortest_contact_time_s
+
+from .data import Experiment
+from .parameters import ParameterInstance
+
+STEPS_PER_CONTACT = 400
+# Finest needed simulation sampling, as a fraction of the narrowest pulse's half-maximum width.
+_SAMPLES_PER_FWHM = 40
+_FWHM_FACTOR = 0.4465
+# Margin on the striker velocity when the fixed time grid is chosen (the fit may raise it).
+_VELOCITY_MARGIN = 1.5
+
+
+def _default_simulate(setup: ChainSetup, grid: TimeGrid, recording: Recording, extras: dict):
+    del extras
+    return solve(setup, grid, recording)
+
+
+@dataclasses.dataclass(frozen=True)
+class ForwardModel:
+    """How predictions are made; replace `simulate` to add model switches.
+
+    **Fields:**
+
+    - `simulate`: `(setup, grid, recording, extras) -> hertzchain.Traces`, pure and
+      forward-mode differentiable. `extras` maps the names of fitted parameters of kind
+      `"extra"` to their values (traced scalars), so an effect the core solver lacks
+      (plasticity, bead dispersion, ...) can be registered as a parameter and read here.
+      Default: `hertzchain.solve`, ignoring `extras`.
+    - `steps_per_contact`: Verlet steps per shortest contact time (default 400).
+    - `extras_defaults`: values of `extras` entries that are not fitted.
+    """
+
+    simulate: Callable = _default_simulate
+    steps_per_contact: int = STEPS_PER_CONTACT
+    extras_defaults: dict = dataclasses.field(default_factory=dict)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Group:
+    experiments: tuple[int, ...]  # indices into Problem.experiments
+    setups: ChainSetup  # stacked base setups (leading axis = experiments of the group)
+    grid: TimeGrid
+    recording: Recording
+    channels: tuple[str, ...]  # simulated channel names, in output order
+    global_index: tuple[int, ...]  # indices into x of global parameters reaching the simulator
+    local_index: np.ndarray  # (n_experiments_in_group, n_local) indices into x
+
+
+def interpolate(values, position):
+    """Catmull-Rom cubic interpolation of `values` (n,) at fractional indices `position`.
+
+    Positions outside [0, n-1] take the end values. Differentiable in both arguments
+    (C^1 in `position`); the error for a smooth signal is O(h^3) in the sample spacing.
+    """
+    n = values.shape[0]
+    q = jnp.clip(position, 0.0, n - 1.0)
+    i = jnp.clip(jnp.floor(q).astype(jnp.int32), 0, n - 2)
+    f = q - i
+    p0 = values[jnp.clip(i - 1, 0, n - 1)]
+    p1 = values[i]
+    p2 = values[i + 1]
+    p3 = values[jnp.clip(i + 2, 0, n - 1)]
+    return p1 + 0.5 * f * (
+        (p2 - p0) + f * ((2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) + f * (3.0 * (p1 - p2) + p3 - p0))
+    )
+
+
+def _stack(setups):
+    return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *setups)
+
+
+class Problem:
+    """A least-squares problem: experiments, free parameters and the forward model.
+
+    Build it with `make_problem`. The parameter vector `x` holds the physical values
+    (SI) of `instances` in order.
+
+    **Methods:** `residuals(x)` (whitened residual vector, jax), `predictions(x)` (per
+    experiment, channel -> model on the data's time axis, numpy), `jacobian(x)`.
+    """
+
+    def __init__(self, experiments, instances, base_setups, forward: ForwardModel):
+        self.experiments: list[Experiment] = list(experiments)
+        self.instances: tuple[ParameterInstance, ...] = tuple(instances)
+        self.base_setups: list[ChainSetup] = list(base_setups)
+        self.forward = forward
+        self.labels = tuple(inst.label for inst in self.instances)
+        self._index_nuisances()
+        self.groups = self._make_groups(self.base_setups)
+
+    # --- layout -------------------------------------------------------------------------------
+    def _index_nuisances(self):
+        self.offset_index: list[int | None] = [None] * len(self.experiments)
+        self.gain_index: list[dict] = [{} for _ in self.experiments]
+        self.global_sim: list[int] = []
+        self.local_sim: list[list[int]] = [[] for _ in self.experiments]
+        for i, inst in enumerate(self.instances):
+            kind, scope = inst.spec.kind, inst.spec.scope
+            if kind == "time_offset":
+                self.offset_index[inst.experiment] = i
+            elif kind == "gain":
+                self.gain_index[inst.experiment][inst.channel] = i
+            elif scope == "global":
+                self.global_sim.append(i)
+            elif scope == "experiment":
+                self.local_sim[inst.experiment].append(i)
+            else:
+                raise ValueError(f"{inst.label}: channel-scoped parameters must be gains.")
+
+    def _sim_interval(self, experiment: Experiment, setup: ChainSetup) -> float:
+        interval = float(experiment.trace.sample_interval_s)
+        peak = max(float(np.max(experiment.data(c))) for c in experiment.channels)
+        kappa = float(setup.contact_kappa()[min(1, setup.n_beads - 1)])
+        mass = float(setup.bead_mass_kg[0])
+        radius = float(setup.bead_radius_m[0])
+        speed = 0.905516 * 2 * radius * kappa ** (1 / 3) / math.sqrt(mass) * max(peak, 1e-6) ** (1 / 6)
+        fwhm = _FWHM_FACTOR * 2 * radius * math.sqrt(10.0) / speed
+        return interval / max(1, math.ceil(interval / (fwhm / _SAMPLES_PER_FWHM)))
+
+    def _make_groups(self, setups) -> list[_Group]:
+        keys: dict = {}
+        for e, setup in enumerate(setups):
+            key = (setup.n_beads, setup.end, setup.sensor_beads)
+            keys.setdefault(key, []).append(e)
+        groups = []
+        offset_margin = max(
+            [abs(self.instances[i].spec.lower) for i in self.offset_index if i is not None]
+            + [abs(self.instances[i].spec.upper) for i in self.offset_index if i is not None]
+            + [0.0]
+        )
+        for members in keys.values():
+            contacts = sorted({k for e in members for k in self.experiments[e].trace.contacts})
+            recording = Recording(contacts=tuple(contacts))
+            channels = (
+                tuple(f"contact_{k}" for k in contacts)
+                + tuple(f"sensor_{b}" for b in setups[members[0]].sensor_beads)
+                + ("wall",)
+            )
+            interval = min(self._sim_interval(self.experiments[e], setups[e]) for e in members)
+            t_end = max(float(self.experiments[e].time_s[-1]) for e in members)
+            t_end = t_end + offset_margin + 4 * interval
+            t_end = interval * math.ceil(t_end / interval)
+            margin = [
+                eqx.tree_at(
+                    lambda s: s.striker_velocity_m_s, setups[e],
+                    setups[e].striker_velocity_m_s * _VELOCITY_MARGIN,
+                )
+                for e in members
+            ]
+            grid = choose_time_grid(
+                _stack(margin), t_end_s=t_end, sample_interval_s=interval,
+                steps_per_contact=self.forward.steps_per_contact,
+            )
+            n_local = len(self.local_sim[members[0]])
+            local = np.array([self.local_sim[e] for e in members], dtype=int).reshape(len(members), n_local)
+            groups.append(
+                _Group(
+                    experiments=tuple(members),
+                    setups=_stack([setups[e] for e in members]),
+                    grid=grid,
+                    recording=recording,
+                    channels=channels,
+                    global_index=tuple(self.global_sim),
+                    local_index=local,
+                )
+            )
+        return groups
+
+    def with_setups(self, setups) -> Problem:
+        """The same problem with new base setups (new time grids chosen for them)."""
+        return Problem(self.experiments, self.instances, setups, self.forward)
+
+    # --- the model ------------------------------------------------------------------------------
+    def setup_at(self, x, experiment: int) -> ChainSetup:
+        """The `ChainSetup` of one experiment at parameter values `x` (extras not included)."""
+        setup = self.base_setups[experiment]
+        for i in self.global_sim + self.local_sim[experiment]:
+            spec = self.instances[i].spec
+            if spec.kind == "setup":
+                setup = spec.apply(setup, jnp.asarray(x)[i])
+        return setup
+
+    def _group_simulator(self, group: _Group):
+        global_specs = [self.instances[i].spec for i in group.global_index]
+        local_specs = (
+            [self.instances[i].spec for i in group.local_index[0]] if group.local_index.size else []
+        )
+        n_global = len(global_specs)
+        forward = self.forward
+
+        def one(setup, theta_global, theta_local):
+            extras = dict(forward.extras_defaults)
+            for spec, value in list(zip(global_specs, theta_global)) + list(zip(local_specs, theta_local)):
+                if spec.kind == "setup":
+                    setup = spec.apply(setup, value)
+                else:
+                    extras[spec.name] = value
+            traces = forward.simulate(setup, group.grid, group.recording, extras)
+            start = jnp.broadcast_to(setup.precompression_n, (len(group.channels), 1))
+            series = jnp.stack([traces.forces_n[name] for name in group.channels])
+            return jnp.concatenate([start, series], axis=1)  # (n_channels, n_samples + 1)
+
+        def batch(theta_global, theta_local):
+            return jax.vmap(one, in_axes=(0, None, 0))(group.setups, theta_global, theta_local)
+
+        @jax.custom_jvp
+        def simulate(theta_global, theta_local):
+            return batch(theta_global, theta_local)
+
+        @simulate.defjvp
+        def simulate_jvp(primals, tangents):
+            theta_global, theta_local = primals
+            d_global, d_local = tangents
+            if n_global + theta_local.shape[1] == 0:
+                out = batch(theta_global, theta_local)
+                return out, jnp.zeros_like(out)
+
+            def jac_one(setup, local):
+                def f(p):
+                    out = one(setup, p[:n_global], p[n_global:])
+                    return out, out
+
+                p = jnp.concatenate([theta_global, local])
+                return jax.jacfwd(f, has_aux=True)(p)
+
+            jac, out = jax.vmap(jac_one)(group.setups, theta_local)
+            direction = jnp.concatenate(
+                [jnp.broadcast_to(d_global, (theta_local.shape[0], n_global)), d_local], axis=1
+            )
+            return out, jnp.einsum("ecsp,ep->ecs", jac, direction)
+
+        return simulate
+
+    def simulated(self, x):
+        """Simulated channels per group: list of (n_experiments, n_channels, n_samples + 1)."""
+        x = jnp.asarray(x)
+        outputs = []
+        for group in self.groups:
+            theta_global = x[np.asarray(group.global_index, dtype=int)]
+            theta_local = x[group.local_index] if group.local_index.size else jnp.zeros(
+                (len(group.experiments), 0)
+            )
+            outputs.append(self._group_simulator(group)(theta_global, theta_local))
+        return outputs
+
+    def _predict(self, x, outputs):
+        x = jnp.asarray(x)
+        predictions = [None] * len(self.experiments)
+        for group, output in zip(self.groups, outputs):
+            interval = group.grid.sample_interval_s
+            for row, e in enumerate(group.experiments):
+                experiment = self.experiments[e]
+                offset = 0.0 if self.offset_index[e] is None else x[self.offset_index[e]]
+                position = (jnp.asarray(experiment.time_s) - offset) / interval
+                channels = {}
+                for name in experiment.channels:
+                    series = output[row, group.channels.index(name)]
+                    value = interpolate(series, position)
+                    if name in self.gain_index[e]:
+                        value = value * x[self.gain_index[e][name]]
+                    channels[name] = value
+                predictions[e] = channels
+        return predictions
+
+    def data_vector(self) -> np.ndarray:
+        """The measured samples of every fitted channel, concatenated like the residuals, N."""
+        return np.concatenate([e.data(c) for e in self.experiments for c in e.channels])
+
+    def sigma_vector(self) -> np.ndarray:
+        """The noise sigma of every residual, N."""
+        return np.concatenate(
+            [np.full(len(e.time_s), e.noise_std_n[c]) for e in self.experiments for c in e.channels]
+        )
+
+    def model_vector(self, x):
+        """The model of every fitted channel on the data's times, concatenated, N (jax)."""
+        predictions = self._predict(x, self.simulated(x))
+        return jnp.concatenate(
+            [p[c] for e, p in zip(self.experiments, predictions) for c in e.channels]
+        )
+
+    def residuals(self, x, data=None):
+        """Whitened residuals $(g F(t - t_{off}) - y)/\\sigma$ of every channel, concatenated.
+
+        `data`: measured samples in `data_vector` layout (default: the experiments' own);
+        passing it as an argument lets one compiled fit run over many data sets (noise seeds).
+        """
+        data = jnp.asarray(self.data_vector() if data is None else data)
+        return (self.model_vector(x) - data) / jnp.asarray(self.sigma_vector())
+
+    def predictions(self, x) -> list[dict]:
+        """Model of every fitted channel on the data's time axis (numpy), per experiment."""
+        predictions = self._predict(x, self.simulated(x))
+        return [{k: np.asarray(v) for k, v in p.items()} for p in predictions]
+
+    def residual_slices(self) -> list[dict]:
+        """Per experiment, channel -> slice of the residual vector."""
+        slices, start = [], 0
+        for experiment in self.experiments:
+            entry = {}
+            for name in experiment.channels:
+                n = len(experiment.time_s)
+                entry[name] = slice(start, start + n)
+                start += n
+            slices.append(entry)
+        return slices
+
+    @property
+    def n_residuals(self) -> int:
+        return sum(e.n_residuals for e in self.experiments)
+
+    def check_resolution(self, x) -> list[str]:
+        """Experiments whose fitted setup is resolved by fewer than half the asked steps."""
+        coarse = []
+        for group in self.groups:
+            for e in group.experiments:
+                setup = self.setup_at(np.asarray(x), e)
+                steps = shortest_contact_time_s(setup) / group.grid.dt_s
+                if steps < 0.5 * self.forward.steps_per_contact:
+                    coarse.append(self.experiments[e].label)
+        return coarse
+
+
+def residuals_and_jacobian(problem: Problem, x):
+    """Whitened residual vector r (n,) and its Jacobian dr/dx (n, p) at physical values x.
+
+    The Jacobian is with respect to the physical (SI) values of `problem.instances`;
+    residuals are divided by each channel's noise sigma, so $J^T J$ is the Fisher
+    information for the stated noise.
+    """
+    x = jnp.asarray(x, dtype=jnp.float64)
+    r = _residuals_jit(problem, x)
+    jac = _jacobian_jit(problem, x)
+    return np.asarray(r), np.asarray(jac)
+
+
+@eqx.filter_jit
+def _residuals_jit(problem, x):
+    return problem.residuals(x)
+
+
+@eqx.filter_jit
+def _jacobian_jit(problem, x):
+    return jax.jacfwd(problem.residuals)(x)

@@ -1,0 +1,303 @@
+"""The registry of fittable parameters: names, units, scopes, transforms, bounds, and how
+each one acts on a `ChainSetup` or on the measurement (a nuisance).
+
+Every parameter is optimised in a transformed coordinate $z$: first the physical value
+$x$ is mapped to $s = \\log x$ (`space="log"`, where positivity is physical) or
+$s = x/\\mathrm{scale}$ (`space="linear"`), then the bounds $[s_{lo}, s_{hi}]$ are
+enforced by $s = c + h\\tanh((z - c)/h)$ with $c$, $h$ the centre and half-width of the
+bounds. Near the centre $z \\approx s$, so optimisation steps are in log units or in units of
+`scale`; $z$ is unbounded, so the optimiser never leaves the physical range.
+
+Scopes:
+
+- `"global"`: one value shared by every experiment (eta, mu, C, ...).
+- `"experiment"`: one value per trace file (striker velocity, trigger time offset).
+- `"channel"`: one value per recorded channel of each file (sensor gain).
+
+Kinds (what a value acts on):
+
+- `"setup"`: a field of the `ChainSetup` (through `ParameterSpec.apply`).
+- `"time_offset"`: the model is compared with the data at $t - t_{off}$, i.e. the data's
+  clock reads $t_{off}$ at the impact.
+- `"gain"`: the data channel is modelled as gain x the simulated force.
+- `"extra"`: a value handed to a custom forward model in its `extras` dict (model
+  switches for effects the core solver does not have; see `fitting.model.ForwardModel`).
+
+Add parameters with `register_parameter`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Callable
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from hertzchain import contact
+from hertzchain.chain import ChainSetup
+
+SCOPES = ("global", "experiment", "channel")
+SPACES = ("log", "linear")
+KINDS = ("setup", "time_offset", "gain", "extra")
+
+# Speed constant of the discrete chain's solitary wave in lattice units:
+# v = DISCRETE_SPEED_FACTOR * 2R kappa^(1/3) m^(-1/2) F_m^(1/6) (physics-reference.md, row 2b).
+DISCRETE_SPEED_FACTOR = 0.905516
+# Nesterenko's long-wave (continuum) value of the same factor, 2/sqrt(5) (Eq. 3 of the paper).
+CONTINUUM_SPEED_FACTOR = 2.0 / math.sqrt(5.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class ParameterSpec:
+    """One fittable parameter.
+
+    **Fields:**
+
+    - `name`: the name used on the command line and in reports.
+    - `unit`: SI unit of the value (`""` if dimensionless).
+    - `scope`: `"global"`, `"experiment"` or `"channel"`.
+    - `space`: `"log"` (positive values, optimised in log) or `"linear"`.
+    - `lower`, `upper`: bounds of the physical value (SI).
+    - `scale`: for `"linear"` parameters, the size of one optimisation unit (SI).
+    - `kind`: `"setup"`, `"time_offset"`, `"gain"` or `"extra"`.
+    - `apply`: `(setup, value) -> setup` for `kind="setup"` (pure, differentiable).
+    - `read`: `(setup) -> value`: the value a setup already has (default start), or None.
+    - `default`: start value when `read` is None (nuisances: offset 0, gain 1).
+    - `description`: one line for help texts.
+    """
+
+    name: str
+    unit: str
+    scope: str
+    space: str
+    lower: float
+    upper: float
+    kind: str = "setup"
+    scale: float = 1.0
+    apply: Callable | None = None
+    read: Callable | None = None
+    default: float = float("nan")
+    description: str = ""
+
+    def __post_init__(self):
+        if self.scope not in SCOPES:
+            raise ValueError(f"ParameterSpec {self.name}: scope must be one of {SCOPES}.")
+        if self.space not in SPACES:
+            raise ValueError(f"ParameterSpec {self.name}: space must be one of {SPACES}.")
+        if self.kind not in KINDS:
+            raise ValueError(f"ParameterSpec {self.name}: kind must be one of {KINDS}.")
+        if not self.lower < self.upper:
+            raise ValueError(f"ParameterSpec {self.name}: lower must be below upper.")
+        if self.space == "log" and not self.lower > 0:
+            raise ValueError(f"ParameterSpec {self.name}: a log parameter needs lower > 0.")
+        if self.kind == "setup" and self.apply is None:
+            raise ValueError(f"ParameterSpec {self.name}: a setup parameter needs `apply`.")
+
+    # --- the transform, elementwise, usable on numpy or jax arrays -------------------------
+    def _s_bounds(self) -> tuple[float, float]:
+        if self.space == "log":
+            return math.log(self.lower), math.log(self.upper)
+        return self.lower / self.scale, self.upper / self.scale
+
+    def transform_constants(self) -> tuple[float, float, float]:
+        """(is_log, centre c, half-width h) of the bounded transform."""
+        lo, hi = self._s_bounds()
+        return float(self.space == "log"), 0.5 * (lo + hi), 0.5 * (hi - lo)
+
+    def in_bounds(self, value: float) -> bool:
+        return self.lower < value < self.upper
+
+
+def _apply_field(field: str):
+    def apply(setup: ChainSetup, value):
+        return eqx.tree_at(lambda s: getattr(s, field), setup, jnp.asarray(value, dtype=jnp.float64))
+
+    return apply
+
+
+def _read_field(field: str):
+    return lambda setup: float(np.asarray(getattr(setup, field)))
+
+
+def bare_speed_constant(setup: ChainSetup) -> float:
+    """Discrete-chain speed constant without thwarted rotation (mu* = 0), SI.
+
+    $C_0 = 0.905516\\,2R\\,\\kappa^{1/3} m^{-1/2}$ for bead 1 on a bead identical to it
+    (201.385 for the paper's beads), in the units of $v = C F_m^{1/6}$ (v in m/s, F_m in N).
+    """
+    radius = setup.bead_radius_m[0]
+    kappa = contact.kappa_sphere_sphere(
+        radius, setup.bead_youngs_pa[0], setup.bead_poisson[0],
+        radius, setup.bead_youngs_pa[0], setup.bead_poisson[0],
+    )
+    return DISCRETE_SPEED_FACTOR * 2.0 * radius * kappa ** (1.0 / 3.0) / jnp.sqrt(setup.bead_mass_kg[0])
+
+
+def _apply_speed_constant(setup: ChainSetup, value):
+    """Set the stiffness scale so that the chain's discrete speed constant is `value`."""
+    one_plus = (value / bare_speed_constant(setup)) ** 3
+    return eqx.tree_at(lambda s: s.mu_star, setup, one_plus - 1.0)
+
+
+def _read_speed_constant(setup: ChainSetup) -> float:
+    return float(bare_speed_constant(setup) * (1.0 + setup.mu_star) ** (1.0 / 3.0))
+
+
+def _read_wall_youngs(setup: ChainSetup) -> float:
+    value = float(np.asarray(setup.wall_youngs_pa))
+    return min(value, 1e12)  # a rigid wall starts as a very stiff one
+
+
+def _read_precompression(setup: ChainSetup) -> float:
+    return max(float(np.asarray(setup.precompression_n)), 1e-2)
+
+
+REGISTRY: dict[str, ParameterSpec] = {}
+
+
+def register_parameter(spec: ParameterSpec, *, replace: bool = False) -> ParameterSpec:
+    """Add a parameter to the registry (e.g. the strength of a new model effect)."""
+    if spec.name in REGISTRY and not replace:
+        raise ValueError(f"A parameter named {spec.name!r} is already registered.")
+    REGISTRY[spec.name] = spec
+    return spec
+
+
+for _spec in (
+    ParameterSpec(
+        "eta", "s", "global", "log", 1e-10, 1e-3, apply=_apply_field("eta_s"),
+        read=_read_field("eta_s"),
+        description="viscoelastic time eta of F_v = eta kappa d(delta^3/2)/dt (s)",
+    ),
+    ParameterSpec(
+        "mu", "", "global", "log", 1e-5, 3.0, apply=_apply_field("mu"), read=_read_field("mu"),
+        description="friction coefficient of the beads on the track",
+    ),
+    ParameterSpec(
+        "C", "m/s N^-1/6", "global", "log", 20.0, 2000.0, apply=_apply_speed_constant,
+        read=_read_speed_constant,
+        description="speed constant of the chain's solitary waves, v = C F_m^(1/6), set "
+        "through the stiffness scale kappa* = (1+mu*) kappa (C proportional to (1+mu*)^(1/3))",
+    ),
+    ParameterSpec(
+        "mu_star", "", "global", "linear", -0.5, 1.0, scale=0.01, apply=_apply_field("mu_star"),
+        read=_read_field("mu_star"),
+        description="thwarted-rotation friction, kappa* = (1+mu*) kappa (same physics as C)",
+    ),
+    ParameterSpec(
+        "wall_youngs", "Pa", "global", "log", 1e6, 1e13, apply=_apply_field("wall_youngs_pa"),
+        read=_read_wall_youngs, description="Young's modulus of the wall (Pa)",
+    ),
+    ParameterSpec(
+        "wall_poisson", "", "global", "linear", -0.9, 0.499, scale=0.1,
+        apply=_apply_field("wall_poisson"), read=_read_field("wall_poisson"),
+        description="Poisson ratio of the wall",
+    ),
+    ParameterSpec(
+        "precompression", "N", "global", "log", 1e-5, 1e4, apply=_apply_field("precompression_n"),
+        read=_read_precompression, description="static preload pressing the chain (N)",
+    ),
+    ParameterSpec(
+        "striker_velocity", "m/s", "experiment", "log", 1e-4, 50.0,
+        apply=_apply_field("striker_velocity_m_s"), read=_read_field("striker_velocity_m_s"),
+        description="impact velocity of each file (m/s)",
+    ),
+    ParameterSpec(
+        "time_offset", "s", "experiment", "linear", -5e-5, 5e-5, kind="time_offset", scale=1e-6,
+        default=0.0,
+        description="trigger delay of each file: the data clock reads time_offset at the impact (s)",
+    ),
+    ParameterSpec(
+        "gain", "", "channel", "log", 0.05, 20.0, kind="gain", default=1.0,
+        description="calibration factor of each channel: data = gain x force",
+    ),
+):
+    register_parameter(_spec)
+
+# Parameters that describe the same physical quantity: only one of each group may be fitted.
+EXCLUSIVE = (("C", "mu_star"),)
+
+
+def get_spec(name: str) -> ParameterSpec:
+    """The registered parameter `name`; an unknown name raises a ValueError listing all."""
+    if name not in REGISTRY:
+        raise ValueError(
+            f"Unknown parameter {name!r}. Fittable parameters: {', '.join(REGISTRY)}."
+        )
+    return REGISTRY[name]
+
+
+def parse_parameter_list(text_or_names) -> tuple[str, ...]:
+    """Parse `"eta,mu,C"` (or a sequence of names) into checked, de-duplicated names."""
+    if isinstance(text_or_names, str):
+        names = [part.strip() for part in text_or_names.split(",") if part.strip()]
+    else:
+        names = [str(part).strip() for part in text_or_names]
+    if not names:
+        raise ValueError("No parameters to fit: give at least one, e.g. eta,mu,C.")
+    seen = []
+    for name in names:
+        get_spec(name)
+        if name not in seen:
+            seen.append(name)
+    for group in EXCLUSIVE:
+        chosen = [name for name in group if name in seen]
+        if len(chosen) > 1:
+            raise ValueError(
+                f"Parameters {' and '.join(chosen)} describe the same stiffness scale; fit only one."
+            )
+    return tuple(seen)
+
+
+@dataclasses.dataclass(frozen=True)
+class ParameterInstance:
+    """One free number of a fit: a spec bound to an experiment and/or channel.
+
+    `label` is how reports name it: `eta`, `striker_velocity[run1]`, `gain[run1:wall]`.
+    """
+
+    spec: ParameterSpec
+    experiment: int | None = None
+    channel: str | None = None
+    label: str = ""
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+
+def to_unbounded(instances, values) -> np.ndarray:
+    """Physical values -> optimiser coordinates z (numpy)."""
+    values = np.asarray(values, dtype=float)
+    z = np.empty_like(values)
+    for i, inst in enumerate(instances):
+        is_log, centre, half = inst.spec.transform_constants()
+        value = values[i]
+        if not inst.spec.in_bounds(value):
+            raise ValueError(
+                f"Start value of {inst.label} = {value:g} {inst.spec.unit} is outside its bounds "
+                f"({inst.spec.lower:g}, {inst.spec.upper:g}); give a start inside them."
+            )
+        s = math.log(value) if is_log else value / inst.spec.scale
+        ratio = np.clip((s - centre) / half, -1 + 1e-12, 1 - 1e-12)
+        z[i] = centre + half * np.arctanh(ratio)
+    return z
+
+
+def transform_arrays(instances) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(is_log, centre, half, scale) arrays for `from_unbounded`."""
+    constants = np.array([inst.spec.transform_constants() for inst in instances], dtype=float)
+    scale = np.array([inst.spec.scale for inst in instances], dtype=float)
+    if len(instances) == 0:
+        constants = np.zeros((0, 3))
+    return constants[:, 0].astype(bool), constants[:, 1], constants[:, 2], scale
+
+
+def from_unbounded(constants, z):
+    """Optimiser coordinates z -> physical values (jax, differentiable)."""
+    is_log, centre, half, scale = constants
+    s = centre + half * jnp.tanh((z - centre) / half)
+    return jnp.where(is_log, jnp.exp(s), s * scale)

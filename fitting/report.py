@@ -1,0 +1,203 @@
+"""Fit reports: JSON, CSV and PNG files of a `FitResult`.
+
+`write_report(result, out_dir)` writes (all atomically, through `hertzchain.atomic`):
+
+- `fit.json`: everything in `FitResult.to_json()` (SI units).
+- `params.csv`: label, value, standard error, relative error, unit.
+- `correlation.csv` and `correlation.png`: the correlation matrix.
+- `rms.csv`: residual RMS per file and channel (N and in units of the noise sigma).
+- `starts.csv`: every start of the multistart batch: chi^2, converged, steps, values.
+- `residuals_<file>.csv`: time, data, model and residual of every channel.
+- `overlay_<file>.png` (fitted model over the data) and `residuals_<file>.png`.
+- `profile_<parameter>.png` and `profile_<parameter>.csv` for each profile.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import re
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from hertzchain.atomic import save_figure, write_json, write_text  # noqa: E402
+
+
+def _safe(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_")
+
+
+def _csv(header, rows) -> str:
+    buffer = io.StringIO()
+    buffer.write(",".join(header) + "\n")
+    for row in rows:
+        buffer.write(",".join(_cell(v) for v in row) + "\n")
+    return buffer.getvalue()
+
+
+def _cell(value) -> str:
+    if isinstance(value, str):
+        return value if "," not in value else f'"{value}"'
+    if isinstance(value, (bool, np.bool_)):
+        return str(bool(value)).lower()
+    if value is None:
+        return ""
+    value = float(value)
+    return repr(value) if math.isfinite(value) else ("inf" if value > 0 else "nan" if math.isnan(value) else "-inf")
+
+
+def write_report(result, out_dir, *, plots: bool = True) -> list[Path]:
+    """Write the fit's JSON, CSV and PNG files into `out_dir`; returns the paths written."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+
+    def text(name, content):
+        write_text(out / name, content)
+        written.append(out / name)
+
+    write_json(out / "fit.json", result.to_json())
+    written.append(out / "fit.json")
+    text("params.csv", _csv(
+        ["parameter", "value", "stderr", "relative_stderr", "unit"],
+        [
+            [label, result.values[label], result.stderr[label],
+             result.stderr[label] / abs(result.values[label]) if result.values[label] else math.nan,
+             result.units[label]]
+            for label in result.labels
+        ] + [
+            ["C (speed constant)", result.speed_constant["C"], result.speed_constant["C_stderr"],
+             math.nan, "m/s N^-1/6"],
+            ["C_t (1+mu*)^(1/3) (continuum)", result.speed_constant["C_continuum"],
+             result.speed_constant["C_continuum_stderr"], math.nan, "m/s N^-1/6"],
+        ],
+    ))
+    text("correlation.csv", _csv(
+        ["parameter"] + list(result.labels),
+        [[label] + list(row) for label, row in zip(result.labels, np.asarray(result.correlation))],
+    ))
+    rows = []
+    for experiment in result.problem.experiments:
+        for channel in experiment.channels:
+            rows.append([
+                experiment.label, channel, result.residual_rms[experiment.label][channel],
+                result.residual_rms_whitened[experiment.label][channel],
+                experiment.noise_std_n[channel], experiment.noise_source,
+            ])
+    text("rms.csv", _csv(["file", "channel", "rms_n", "rms_over_sigma", "noise_std_n", "noise_source"], rows))
+    text("starts.csv", _csv(
+        ["start", "chi2", "converged", "steps", "agrees_with_best"]
+        + [f"start_{label}" for label in result.labels] + [f"final_{label}" for label in result.labels],
+        [
+            [k, s["chi2"], s["converged"], s["steps"], s["agrees_with_best"]]
+            + [s["start"][label] for label in result.labels]
+            + [s["final"][label] for label in result.labels]
+            for k, s in enumerate(result.starts)
+        ],
+    ))
+    predictions = result.predictions()
+    for experiment, predicted in zip(result.problem.experiments, predictions):
+        time = experiment.time_s
+        columns, header = [time], ["time_s"]
+        for channel in experiment.channels:
+            data = experiment.data(channel)
+            columns += [data, predicted[channel], data - predicted[channel]]
+            header += [f"data_{channel}", f"model_{channel}", f"residual_{channel}"]
+        buffer = io.StringIO()
+        buffer.write(",".join(header) + "\n")
+        np.savetxt(buffer, np.column_stack(columns), delimiter=",", fmt="%.9g")
+        text(f"residuals_{_safe(experiment.label)}.csv", buffer.getvalue())
+    for label, profile in result.profiles.items():
+        text(f"profile_{_safe(label)}.csv", _csv(
+            [f"{label}", "delta_chi2", "converged"],
+            zip(profile["values"], profile["delta_chi2"], profile["converged"]),
+        ))
+    if plots:
+        written += _plots(result, predictions, out)
+    return written
+
+
+def _plots(result, predictions, out: Path) -> list[Path]:
+    written = []
+    for experiment, predicted in zip(result.problem.experiments, predictions):
+        time_us = experiment.time_s * 1e6
+        n = len(experiment.channels)
+        for kind in ("overlay", "residuals"):
+            figure, axes = plt.subplots(n, 1, figsize=(8, 2.4 * n + 0.6), sharex=True, squeeze=False)
+            for ax, channel in zip(axes[:, 0], experiment.channels):
+                data = experiment.data(channel)
+                if kind == "overlay":
+                    ax.plot(time_us, data, ".", ms=1.5, color="0.5", label="measured")
+                    ax.plot(time_us, predicted[channel], "-", lw=1.0, color="C3", label="fitted model")
+                    ax.set_ylabel(f"{channel} (N)")
+                else:
+                    sigma = experiment.noise_std_n[channel]
+                    ax.plot(time_us, data - predicted[channel], "-", lw=0.6, color="C0")
+                    ax.axhspan(-2 * sigma, 2 * sigma, color="C2", alpha=0.15, label="+-2 sigma noise")
+                    rms = result.residual_rms[experiment.label][channel]
+                    ax.set_ylabel(f"{channel}\nresidual (N)")
+                    ax.set_title(f"RMS {rms:.3g} N ({rms / sigma:.2f} sigma)", fontsize=8, loc="right")
+                ax.legend(fontsize=7, loc="upper right")
+            axes[-1, 0].set_xlabel("time after impact (us)")
+            figure.suptitle(f"{experiment.label}: {'fit' if kind == 'overlay' else 'residuals'}")
+            figure.tight_layout()
+            path = out / f"{kind}_{_safe(experiment.label)}.png"
+            save_figure(figure, path, dpi=110)
+            plt.close(figure)
+            written.append(path)
+    p = len(result.labels)
+    figure, ax = plt.subplots(figsize=(1.2 + 0.5 * p, 1.0 + 0.5 * p))
+    image = ax.imshow(np.asarray(result.correlation, dtype=float), vmin=-1, vmax=1, cmap="RdBu_r")
+    ax.set_xticks(range(p), result.labels, rotation=90, fontsize=7)
+    ax.set_yticks(range(p), result.labels, fontsize=7)
+    figure.colorbar(image, ax=ax, label="correlation (1)")
+    ax.set_title("parameter correlation")
+    figure.tight_layout()
+    save_figure(figure, out / "correlation.png", dpi=110)
+    plt.close(figure)
+    written.append(out / "correlation.png")
+    for label, profile in result.profiles.items():
+        figure, ax = plt.subplots(figsize=(5, 3.5))
+        scale = result.problem.instances[result.labels.index(label)].spec.unit
+        y = np.asarray(profile["delta_chi2"]) / max(result_variance(result), 1e-300)
+        ax.plot(profile["values"], y, "o-")
+        for level, name in ((1.0, "68 %"), (3.84, "95 %")):
+            ax.axhline(level, ls="--", lw=0.8, color="0.4")
+            ax.text(profile["values"][0], level, name, fontsize=7, va="bottom")
+        ax.set_xlabel(f"{label} ({scale or '1'})")
+        ax.set_ylabel("delta chi^2 / s^2 (1)")
+        ax.set_title(f"profile likelihood of {label}")
+        figure.tight_layout()
+        path = out / f"profile_{_safe(label)}.png"
+        save_figure(figure, path, dpi=110)
+        plt.close(figure)
+        written.append(path)
+    return written
+
+
+def result_variance(result) -> float:
+    """The covariance's variance factor s^2 (1 for known noise, chi^2/dof otherwise)."""
+    return 1.0 if result.covariance_scale == "noise" else result.reduced_chi2
+
+
+def summary_text(result) -> str:
+    """A short plain-text table of the fitted values (for the terminal)."""
+    lines = [f"fit {'converged' if result.converged else 'did NOT converge'} in {result.n_steps} "
+             f"iterations; chi^2/dof = {result.reduced_chi2:.4g} (covariance: {result.covariance_scale})"]
+    for label in result.labels:
+        value, error = result.values[label], result.stderr[label]
+        unit = result.units[label]
+        lines.append(f"  {label:32s} = {value:.6g} +- {error:.3g} {unit}")
+    c = result.speed_constant
+    lines.append(
+        f"  C (discrete solitary wave)       = {c['C']:.6g} +- {c['C_stderr']:.3g} m/s N^-1/6; "
+        f"continuum C_t (1+mu*)^(1/3) = {c['C_continuum']:.6g}; mu* = {c['mu_star']:.4g}"
+    )
+    for text in result.warnings:
+        lines.append(f"  warning: {text}")
+    return "\n".join(lines)

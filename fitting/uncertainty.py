@@ -1,0 +1,170 @@
+"""Standard errors, correlations, identifiability and profile likelihoods of a fit.
+
+Covariance. With whitened residuals $r = (\\text{model} - y)/\\sigma$ and their Jacobian
+$J$ at the optimum (with respect to the physical parameter values), the Gauss-Newton
+covariance is $s^2 (J^T J)^{-1}$. Two choices of $s^2$:
+
+- `"noise"`: $s^2 = 1$, i.e. the noise sigma of each channel is taken as known. This is
+  right when the files state `noise_std_n` and the model is adequate; the reduced
+  $\\chi^2$ is then reported as a check (about 1 for an adequate model).
+- `"residual"`: $s^2 = \\chi^2/\\mathrm{dof}$, i.e. the noise level is re-estimated from
+  the fit's residuals (the usual least-squares choice when sigma is not known, and a
+  guard against underestimated noise or a model that misses something).
+
+`"auto"` (default) uses `"noise"` when every file states its noise in the header and
+`"residual"` otherwise.
+
+Identifiability. The columns of $J$ are normalised to unit length and decomposed by SVD;
+a singular value below `DEGENERATE_RATIO` times the largest marks a combination of
+parameters the data cannot constrain, and the parameters taking part in it are named.
+Pairs with |correlation| above `CORRELATION_LIMIT`, parameters with a relative standard
+error above `RELATIVE_ERROR_LIMIT`, and parameters at a bound are reported too. One
+degeneracy is known exactly (discrepancy.md section 5.4): a uniform stiffness scale (C or
+mu*) together with a free striker velocity and free gains of all of a file's channels,
+$F(t; \\lambda\\kappa, V_0) = \\lambda^{-2} F(t; \\kappa, \\lambda^2 V_0)$ for a
+dissipationless chain; it is named whenever the chosen parameters contain it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+DEGENERATE_RATIO = 1e-6
+CORRELATION_LIMIT = 0.99
+RELATIVE_ERROR_LIMIT = 0.5
+# Participation (component of a normalised singular vector) that names a parameter.
+_PARTICIPATION = 0.1
+
+
+@dataclasses.dataclass(frozen=True)
+class Covariance:
+    """Covariance of the physical parameters, with what it was computed from.
+
+    **Fields:** `covariance` (p, p) in SI units; `stderr` (p,); `correlation` (p, p);
+    `scale` ("noise" or "residual"); `variance_factor` $s^2$; `singular_values` of the
+    column-normalised Jacobian (descending); `weak_directions`: list of
+    (relative singular value, {label: component}) for the degenerate directions.
+    """
+
+    covariance: np.ndarray
+    stderr: np.ndarray
+    correlation: np.ndarray
+    scale: str
+    variance_factor: float
+    singular_values: np.ndarray
+    weak_directions: list
+
+
+def covariance_from_jacobian(jacobian, labels, *, chi2: float, dof: int, scale: str) -> Covariance:
+    """Gauss-Newton covariance from the whitened Jacobian (see the module docstring)."""
+    if scale not in ("noise", "residual"):
+        raise ValueError(f"covariance scale must be 'noise', 'residual' or 'auto', got {scale!r}.")
+    jac = np.asarray(jacobian, dtype=float)
+    p = jac.shape[1]
+    norms = np.linalg.norm(jac, axis=0)
+    safe = np.where(norms > 0, norms, 1.0)
+    _, singular, vt = np.linalg.svd(jac / safe, full_matrices=False)
+    top = singular[0] if singular.size and singular[0] > 0 else 1.0
+    relative = singular / top
+    good = relative > DEGENERATE_RATIO
+    inverse = np.where(good, 1.0 / np.where(good, singular, 1.0) ** 2, 0.0)
+    normalised_cov = (vt.T * inverse) @ vt
+    factor = 1.0 if scale == "noise" else (chi2 / dof if dof > 0 else math.nan)
+    cov = factor * normalised_cov / np.outer(safe, safe)
+    weak = []
+    for k in np.nonzero(~good)[0]:
+        components = {labels[j]: float(vt[k, j]) for j in range(p) if abs(vt[k, j]) > _PARTICIPATION}
+        weak.append((float(relative[k]), components))
+    stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
+    unconstrained = set()
+    for _, components in weak:
+        unconstrained.update(components)
+    for j, label in enumerate(labels):
+        if norms[j] == 0 or label in unconstrained:
+            stderr[j] = np.inf
+    with np.errstate(invalid="ignore", divide="ignore"):
+        correlation = cov / np.outer(stderr, stderr)
+    correlation = np.where(np.isfinite(correlation), correlation, np.nan)
+    np.fill_diagonal(correlation, 1.0)
+    return Covariance(cov, stderr, correlation, scale, float(factor), singular, weak)
+
+
+def identifiability_warnings(instances, values, cov: Covariance, experiments) -> list[str]:
+    """Human-readable warnings about parameters the data cannot determine."""
+    labels = [inst.label for inst in instances]
+    messages = []
+    # the exact symmetry of discrepancy.md 5.4
+    names = {inst.name for inst in instances}
+    if names & {"C", "mu_star"}:
+        scale_name = "C" if "C" in names else "mu_star"
+        for e, experiment in enumerate(experiments):
+            has_velocity = any(
+                inst.name == "striker_velocity" and inst.experiment == e for inst in instances
+            )
+            gains = {inst.channel for inst in instances if inst.name == "gain" and inst.experiment == e}
+            if has_velocity and set(experiment.channels) <= gains:
+                messages.append(
+                    f"{scale_name} is not identifiable with striker_velocity[{experiment.label}] and "
+                    f"the gains of all its channels free: a stiffness scale lambda maps exactly onto "
+                    "V0 -> lambda^2 V0 and forces -> lambda^-2 forces without dissipation "
+                    "(only dissipation breaks this, weakly). Fix the striker velocity or a gain."
+                )
+    for relative, components in cov.weak_directions:
+        parts = ", ".join(f"{c:+.2f} {name}" for name, c in sorted(components.items(), key=lambda kv: -abs(kv[1])))
+        messages.append(
+            f"not identifiable from these data: the combination [{parts}] (normalised units) has "
+            f"relative singular value {relative:.1e}; these parameters cannot be determined separately."
+        )
+    p = len(labels)
+    for i in range(p):
+        for j in range(i + 1, p):
+            c = cov.correlation[i, j]
+            if np.isfinite(c) and abs(c) > CORRELATION_LIMIT:
+                messages.append(
+                    f"{labels[i]} and {labels[j]} are strongly correlated (r = {c:+.4f}): the data "
+                    "constrain mainly a combination of them."
+                )
+    for j, inst in enumerate(instances):
+        value, error = float(values[j]), float(cov.stderr[j])
+        spec = inst.spec
+        if spec.space == "log" and np.isfinite(error) and value > 0 and error / value > RELATIVE_ERROR_LIMIT:
+            messages.append(
+                f"{inst.label} is practically not identifiable from these data (relative standard "
+                f"error {error / value:.0%})."
+            )
+        if spec.space == "log":
+            near = min(abs(math.log(value / spec.lower)), abs(math.log(spec.upper / value))) < 1e-2
+        else:
+            near = min(value - spec.lower, spec.upper - value) < 1e-2 * spec.scale
+        if near:
+            messages.append(
+                f"{inst.label} = {value:.6g} sits at its bound ({spec.lower:g}, {spec.upper:g}); "
+                "its standard error is not meaningful."
+            )
+    return messages
+
+
+def profile_interval(grid, delta_chi2, variance_factor: float, level: float) -> tuple[float | None, float | None]:
+    """Where the profile $\\Delta\\chi^2/s^2$ crosses `level` on each side of its minimum.
+
+    Linear interpolation between grid points; None on a side where it does not cross
+    inside the grid (the interval is open there).
+    """
+    grid = np.asarray(grid, dtype=float)
+    y = np.asarray(delta_chi2, dtype=float) / variance_factor
+    best = int(np.nanargmin(y))
+    lower = upper = None
+    for k in range(best, 0, -1):
+        if y[k - 1] >= level > y[k] or (y[k - 1] >= level and y[k] <= level):
+            t = (level - y[k]) / (y[k - 1] - y[k])
+            lower = float(grid[k] + t * (grid[k - 1] - grid[k]))
+            break
+    for k in range(best, len(y) - 1):
+        if y[k + 1] >= level and y[k] <= level:
+            t = (level - y[k]) / (y[k + 1] - y[k])
+            upper = float(grid[k] + t * (grid[k + 1] - grid[k]))
+            break
+    return lower, upper
