@@ -23,8 +23,8 @@ The file is written in newtons: the recorded volts divided by the sensitivity (a
 quantisation step is `2 * full_scale_v / 2**bits / sensitivity` newtons). Its header
 `noise_std_n` is the total noise of the worst channel, additive and quantisation
 ($\\Delta^2/12$, the uniform-error model, valid when the noise is at least half a
-step and dithers the converter) combined; each channel's own value and every acquisition setting are kept
-as `x_acq_*` keys.
+step and dithers the converter) combined; each channel's own value and every
+acquisition setting are kept as `x_acq_*` keys.
 """
 
 from __future__ import annotations
@@ -51,7 +51,9 @@ def paper_sensitivity_v_per_n(channel: str) -> float:
 def _per_channel(value, channel, name):
     if isinstance(value, dict):
         if channel not in value:
-            raise ValueError(f"{name} has no value for channel {channel!r} (given for {sorted(value)}).")
+            raise ValueError(
+                f"{name} has no value for channel {channel!r} (given for {sorted(value)})."
+            )
         return value[channel]
     return value
 
@@ -87,18 +89,28 @@ class Acquisition:
 
     def __post_init__(self):
         if not (math.isfinite(self.sample_interval_s) and self.sample_interval_s > 0):
-            raise ValueError(f"sample_interval_s must be a positive time (s), got {self.sample_interval_s!r}.")
+            raise ValueError(
+                f"sample_interval_s must be a positive time (s), got {self.sample_interval_s!r}."
+            )
         if self.record_length is not None and self.record_length < 3:
-            raise ValueError(f"record_length must be at least 3 samples, got {self.record_length!r}.")
+            raise ValueError(
+                f"record_length must be at least 3 samples, got {self.record_length!r}."
+            )
         if not math.isfinite(self.trigger_delay_s):
             raise ValueError("trigger_delay_s must be finite (s).")
         if not self.trigger_jitter_s >= 0:
             raise ValueError(f"trigger_jitter_s must be >= 0 (s), got {self.trigger_jitter_s!r}.")
         if self.bandwidth_hz is not None and not self.bandwidth_hz > 0:
-            raise ValueError(f"bandwidth_hz must be positive (Hz) or None, got {self.bandwidth_hz!r}.")
+            raise ValueError(
+                f"bandwidth_hz must be positive (Hz) or None, got {self.bandwidth_hz!r}."
+            )
         if self.bandwidth_filter not in FILTERS:
-            raise ValueError(f"bandwidth_filter must be one of {FILTERS}, got {self.bandwidth_filter!r}.")
-        noises = self.noise_std_n.values() if isinstance(self.noise_std_n, dict) else [self.noise_std_n]
+            raise ValueError(
+                f"bandwidth_filter must be one of {FILTERS}, got {self.bandwidth_filter!r}."
+            )
+        noises = (
+            self.noise_std_n.values() if isinstance(self.noise_std_n, dict) else [self.noise_std_n]
+        )
         if any(not (math.isfinite(n) and n >= 0) for n in noises):
             raise ValueError(f"noise_std_n must be >= 0 (N), got {self.noise_std_n!r}.")
         if self.bits is not None and not (isinstance(self.bits, int) and 2 <= self.bits <= 32):
@@ -106,11 +118,15 @@ class Acquisition:
 
     def sensitivity(self, channel: str) -> float:
         value = self.sensitivity_v_per_n
-        value = paper_sensitivity_v_per_n(channel) if value is None else _per_channel(
-            value, channel, "sensitivity_v_per_n"
+        value = (
+            paper_sensitivity_v_per_n(channel)
+            if value is None
+            else _per_channel(value, channel, "sensitivity_v_per_n")
         )
         if not value > 0:
-            raise ValueError(f"sensitivity_v_per_n of {channel} must be positive (V/N), got {value!r}.")
+            raise ValueError(
+                f"sensitivity_v_per_n of {channel} must be positive (V/N), got {value!r}."
+            )
         return float(value)
 
 
@@ -144,7 +160,9 @@ def _lowpass(time_s, signal, acquisition: Acquisition):
     if acquisition.bandwidth_filter == "first_order":
         decay = math.exp(-2.0 * math.pi * acquisition.bandwidth_hz * step)
         return sp.lfilter([1.0 - decay], [1.0, -decay], signal)
-    sos = sp.bessel(4, acquisition.bandwidth_hz, btype="low", norm="mag", fs=1.0 / step, output="sos")
+    sos = sp.bessel(
+        4, acquisition.bandwidth_hz, btype="low", norm="mag", fs=1.0 / step, output="sos"
+    )
     return sp.sosfilt(sos, signal)
 
 
@@ -176,15 +194,21 @@ def acquire(time_s, forces_n: dict, acquisition: Acquisition = Acquisition(), *,
     fine_step = float(time[1] - time[0])
     if acquisition.sample_interval_s < fine_step * (1 - 1e-9):
         raise ValueError(
-            f"sample_interval_s ({acquisition.sample_interval_s:g} s) is finer than the simulation's "
-            f"samples ({fine_step:g} s); simulate with a finer sample_interval_s."
+            f"sample_interval_s ({acquisition.sample_interval_s:g} s) is finer than the "
+            f"simulation's samples ({fine_step:g} s); simulate with a finer sample_interval_s."
         )
     rng = np.random.default_rng(seed)
-    offset = acquisition.trigger_delay_s + acquisition.trigger_jitter_s * float(rng.standard_normal())
+    offset = acquisition.trigger_delay_s + acquisition.trigger_jitter_s * float(
+        rng.standard_normal()
+    )
     if acquisition.record_length is None:
-        length = int(math.floor((time[-1] - max(offset, 0.0)) / acquisition.sample_interval_s + 1e-9))
+        length = int(
+            math.floor((time[-1] - max(offset, 0.0)) / acquisition.sample_interval_s + 1e-9)
+        )
         if length < 3:
-            raise ValueError("acquire: the simulation is too short for the trigger delay and sampling.")
+            raise ValueError(
+                "acquire: the simulation is too short for the trigger delay and sampling."
+            )
     else:
         length = int(acquisition.record_length)
     record_time = acquisition.sample_interval_s * np.arange(1, length + 1)
@@ -199,7 +223,9 @@ def acquire(time_s, forces_n: dict, acquisition: Acquisition = Acquisition(), *,
     for name, force in forces_n.items():
         force = np.asarray(force, dtype=float)
         if force.shape != time.shape:
-            raise ValueError(f"acquire: channel {name} has {force.size} samples for {time.size} times.")
+            raise ValueError(
+                f"acquire: channel {name} has {force.size} samples for {time.size} times."
+            )
         filtered = _lowpass(grid, np.concatenate([[0.0], force]), acquisition)
         sampled = np.interp(physical, grid, filtered, left=0.0)
         sensitivity = acquisition.sensitivity(name)
@@ -208,7 +234,9 @@ def acquire(time_s, forces_n: dict, acquisition: Acquisition = Acquisition(), *,
         scale = acquisition.full_scale_v
         scale = None if scale is None else _per_channel(scale, name, "full_scale_v")
         if scale is None:
-            scale = _auto_full_scale_v(float(np.max(np.abs(sampled))) * sensitivity + 3 * noise_n * sensitivity)
+            scale = _auto_full_scale_v(
+                float(np.max(np.abs(sampled))) * sensitivity + 3 * noise_n * sensitivity
+            )
         total = noise_n
         if acquisition.bits is not None:
             lsb = 2.0 * scale / 2**acquisition.bits
@@ -227,8 +255,15 @@ def acquire(time_s, forces_n: dict, acquisition: Acquisition = Acquisition(), *,
     return Record(record_time, channels, noise_total, full_scales, clipped, offset)
 
 
-def acquire_trace(setup, time_s, forces_n: dict, acquisition: Acquisition = Acquisition(), *,
-                  seed=0, truth: dict | None = None) -> TraceFile:
+def acquire_trace(
+    setup,
+    time_s,
+    forces_n: dict,
+    acquisition: Acquisition = Acquisition(),
+    *,
+    seed=0,
+    truth: dict | None = None,
+) -> TraceFile:
     """Record a simulation of `setup` and return it as a `TraceFile` (forces in N).
 
     The header describes `setup` (`setup_header`), carries `noise_std_n` (the worst
@@ -257,5 +292,7 @@ def acquire_trace(setup, time_s, forces_n: dict, acquisition: Acquisition = Acqu
         if value is not None:
             header[f"x_acq_{key}"] = repr(value) if isinstance(value, float) else str(value)
     for key, value in (truth or {}).items():
-        header[f"x_true_{key}"] = repr(float(value)) if isinstance(value, (float, int)) else str(value)
+        header[f"x_true_{key}"] = (
+            repr(float(value)) if isinstance(value, (float, int)) else str(value)
+        )
     return TraceFile(header=header, time_s=record.time_s, channels=record.channels)

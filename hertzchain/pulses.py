@@ -154,9 +154,13 @@ def _lobe_mask(time_s, force_n, threshold, window_s):
 
 def _inverse3(m):
     """Inverse of a 3x3 matrix by its adjugate (compiles much faster than a LAPACK call)."""
-    cof = jnp.stack([
-        jnp.cross(m[1], m[2]), jnp.cross(m[2], m[0]), jnp.cross(m[0], m[1]),
-    ])
+    cof = jnp.stack(
+        [
+            jnp.cross(m[1], m[2]),
+            jnp.cross(m[2], m[0]),
+            jnp.cross(m[0], m[1]),
+        ]
+    )
     return cof.T / jnp.dot(m[0], cof[0])
 
 
@@ -210,9 +214,7 @@ def _fit_one(time_s, force_n, threshold, window_s, noise_std_n, n_iterations):
     j = jacobian(p)
     n_points = jnp.sum(weight)
     dof = jnp.maximum(n_points - 3.0, 1.0)
-    variance = jnp.where(
-        jnp.isnan(noise_std_n), jnp.sum(r**2) / dof, (noise_std_n / f_guess) ** 2
-    )
+    variance = jnp.where(jnp.isnan(noise_std_n), jnp.sum(r**2) / dof, (noise_std_n / f_guess) ** 2)
     covariance = variance * _inverse3(j.T @ j)
     se = jnp.sqrt(jnp.abs(jnp.diag(covariance)))
     last_step = -_inverse3(j.T @ j + 1e-12 * jnp.eye(3)) @ (j.T @ r)
@@ -269,7 +271,8 @@ def fit_cos6(time_s, force_n, *, threshold=0.05, window_s=None, noise_std_n=None
     force_n = jnp.asarray(force_n, dtype=jnp.float64)
     if time_s.ndim != 1 or force_n.shape[-1] != time_s.shape[0]:
         raise ValueError(
-            f"fit_cos6: time_s must be (n,) and force_n (..., n); got {time_s.shape} and {force_n.shape}."
+            f"fit_cos6: time_s must be (n,) and force_n (..., n); got {time_s.shape} and "
+            f"{force_n.shape}."
         )
     if time_s.shape[0] < 5:
         raise ValueError(f"fit_cos6 needs at least 5 samples, got {time_s.shape[0]}.")
@@ -278,7 +281,9 @@ def fit_cos6(time_s, force_n, *, threshold=0.05, window_s=None, noise_std_n=None
         jnp.asarray(jnp.nan if noise_std_n is None else noise_std_n, dtype=jnp.float64),
         force_n.shape[:-1],
     )
-    return _fit_batch(time_s, force_n, float(threshold), jnp.asarray(window), noise, int(n_iterations))
+    return _fit_batch(
+        time_s, force_n, float(threshold), jnp.asarray(window), noise, int(n_iterations)
+    )
 
 
 # ----------------------------------------------------------------------------------------
@@ -308,7 +313,9 @@ def wave_speed(positions_m, arrival_times_s, *, time_stderr_s=None) -> SpeedFit:
     x = np.asarray(positions_m, dtype=float)
     t = np.asarray(arrival_times_s, dtype=float)
     if x.shape != t.shape or x.ndim != 1 or len(x) < 2:
-        raise ValueError("wave_speed needs two or more (position, arrival time) pairs of equal length.")
+        raise ValueError(
+            "wave_speed needs two or more (position, arrival time) pairs of equal length."
+        )
     if np.ptp(t) <= 0:
         raise ValueError("wave_speed: all arrival times are equal; the speed is undefined.")
     tc = t - t.mean()
@@ -365,7 +372,9 @@ def incident_wave(time_s, forces_n, contacts, bead_radius_m, *, rise_fraction=0.
     times, peaks = np.asarray(times), np.asarray(peaks)
     positions = 2.0 * float(bead_radius_m) * np.asarray(contacts, dtype=float)
     speed = wave_speed(positions, times)
-    return IncidentWave(speed.speed_m_s, speed.speed_stderr_m_s, float(np.mean(peaks)), times, peaks)
+    return IncidentWave(
+        speed.speed_m_s, speed.speed_stderr_m_s, float(np.mean(peaks)), times, peaks
+    )
 
 
 class VelocityLawFit(NamedTuple):
@@ -399,8 +408,10 @@ def fit_velocity_law(peak_force_n, speed_m_s, *, speed_stderr_m_s=None) -> Veloc
         raise ValueError("fit_velocity_law needs equal numbers of peak forces and speeds.")
     if np.any(force <= 0):
         raise ValueError("fit_velocity_law: peak forces must be positive (N).")
-    sigma = np.ones_like(speed) if speed_stderr_m_s is None else np.broadcast_to(
-        np.asarray(speed_stderr_m_s, dtype=float), speed.shape
+    sigma = (
+        np.ones_like(speed)
+        if speed_stderr_m_s is None
+        else np.broadcast_to(np.asarray(speed_stderr_m_s, dtype=float), speed.shape)
     )
     w = 1.0 / sigma**2
     x = force ** (1.0 / 6.0)
@@ -517,8 +528,14 @@ def fit_restitution_law(
     if bead_mass_kg is not None:
         mu = float(theory.mu_from_c_s(values["c_s"], bead_mass_kg, gravity_m_s2))
     return RestitutionFit(
-        values["c_v"], values["c_s"], values["c_v_stderr"], values["c_s_stderr"],
-        float(np.sqrt(np.mean(residual**2))), n, eta, mu,
+        values["c_v"],
+        values["c_s"],
+        values["c_v_stderr"],
+        values["c_s_stderr"],
+        float(np.sqrt(np.mean(residual**2))),
+        n,
+        eta,
+        mu,
     )
 
 
@@ -574,10 +591,10 @@ def find_pulses(time_s, force_n, *, channel="contact", min_fraction=0.05, noise_
     A pulse is a local maximum whose height and prominence exceed the larger of
     `min_fraction` times the trace maximum and 5 times the noise (`noise_std_n`, estimated
     from the trace when not given), and which is separated from its neighbours by a dip of
-    at least that level (maxima made by noise on top of one pulse are merged). Labels: for a `"wall"` channel `wall`, then
-    `wall_secondary_1`, ...; for a contact or sensor channel `incident`, `reflected`, then
-    `secondary_1`, ... (after a wall the first pulse is the incident wave, the second the
-    reflected primary and the rest secondary waves or tails).
+    at least that level (maxima made by noise on top of one pulse are merged). Labels: for a
+    `"wall"` channel `wall`, then `wall_secondary_1`, ...; for a contact or sensor channel
+    `incident`, `reflected`, then `secondary_1`, ... (after a wall the first pulse is the
+    incident wave, the second the reflected primary and the rest secondary waves or tails).
 
     **Returns:** a list of `Pulse`.
     """
@@ -607,7 +624,15 @@ def find_pulses(time_s, force_n, *, channel="contact", min_fraction=0.05, noise_
         start, stop = bounds[i], bounds[i + 1]
         t, f = refine_peak(time, force, int(peak))
         pulses.append(
-            Pulse(label, start, stop, int(peak), float(t), float(f), (float(time[start]), float(time[stop])))
+            Pulse(
+                label,
+                start,
+                stop,
+                int(peak),
+                float(t),
+                float(f),
+                (float(time[start]), float(time[stop])),
+            )
         )
     return pulses
 

@@ -130,10 +130,11 @@ def deconvolve_sensor(
     from `noise_std_n` or estimated from the signal), at most $2f_0$: a Wiener-type choice
     that keeps every frequency where the signal dominates (the cap stops the $f^2$ gain
     acting on round-off and on ringing at the record's ends, and Eq. 4, a single
-    resonance, says nothing reliable far above $f_0$). A solitary pulse of $2\\tau$ = 150 us has no power
-    worth keeping above a few tens of kHz, so the low-pass leaves the pulse itself intact
-    (peak error 3e-5 without noise). The signal is zero-padded `pad_factor` times so that the
-    circular shift by $t_0$ does not wrap around; it should return to zero at both ends.
+    resonance, says nothing reliable far above $f_0$). A solitary pulse of $2\\tau$ = 150 us
+    has no power worth keeping above a few tens of kHz, so the low-pass leaves the pulse
+    itself intact (peak error 1e-3 without noise, mostly from $t_0$). The signal is
+    zero-padded `pad_factor` times so that the circular shift by $t_0$ does not wrap around;
+    it should return to zero at both ends.
 
     **Arguments:**
 
@@ -155,7 +156,9 @@ def deconvolve_sensor(
     step = float(time[1] - time[0])
     if cutoff_hz is None:
         noise = estimate_noise_std_n(sensor_n) if noise_std_n is None else float(noise_std_n)
-        cutoff_hz = min(wiener_cutoff_hz(time, sensor_n, noise, pad_factor=pad_factor), 2.0 * float(f0_hz))
+        cutoff_hz = min(
+            wiener_cutoff_hz(time, sensor_n, noise, pad_factor=pad_factor), 2.0 * float(f0_hz)
+        )
     n_fft = pad_factor * n
     frequency = jnp.asarray(np.fft.rfftfreq(n_fft, step))
     spectrum = jnp.fft.rfft(jnp.asarray(sensor_n, dtype=jnp.float64), n=n_fft)

@@ -128,7 +128,9 @@ def solitary_fwhm_s(tau_s):
     return 2.0 * COS6_HALF_WIDTH * tau_s
 
 
-def wave_amplitude_n(striker_velocity_m_s, kappa_n_m1p5, bead_mass_kg, factor=IMPACT_AMPLITUDE_FACTOR):
+def wave_amplitude_n(
+    striker_velocity_m_s, kappa_n_m1p5, bead_mass_kg, factor=IMPACT_AMPLITUDE_FACTOR
+):
     """Peak force of the solitary wave launched by an identical striker, N.
 
     $F_m = a\\,\\kappa^{2/5}m^{3/5}V_0^{6/5}$ with $a$ = `factor` (0.63955, asymptotic; about
@@ -188,7 +190,10 @@ def eta_from_c_v(c_v, velocity_constant, bead_radius_m):
 
 
 def c_v_from_eta(eta_s, velocity_constant, bead_radius_m):
-    """Inverse of `eta_from_c_v`: the paper's $C_v = 5C\\eta/(2\\sqrt{10}R)$, N^-1/6 (same warning)."""
+    """Inverse of `eta_from_c_v`: the paper's $C_v = 5C\\eta/(2\\sqrt{10}R)$, N^-1/6.
+
+    Same warning as `eta_from_c_v`.
+    """
     return 5.0 * velocity_constant * eta_s / (2.0 * math.sqrt(10.0) * bead_radius_m)
 
 
@@ -235,5 +240,7 @@ def setup_constants(setup) -> dict:
         "speed_m_s": speed,
         "duration_s": solitary_duration_s(radius, speed),
         "wall_force_ratio": wall_force_ratio(wall_kappa, kappa),
-        "wall_force_ratio_paper": wall_force_ratio_paper(setup.bead_youngs_pa[-1], setup.wall_youngs_pa),
+        "wall_force_ratio_paper": wall_force_ratio_paper(
+            setup.bead_youngs_pa[-1], setup.wall_youngs_pa
+        ),
     }

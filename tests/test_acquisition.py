@@ -53,7 +53,9 @@ def test_quantisation_steps_and_noise_budget():
     lsb_n = 2 * 5.0 / 256 / acq.EMBEDDED_SENSITIVITY_V_PER_N  # 3.47 N per code
     codes = record.channels["contact_6"] / lsb_n
     np.testing.assert_allclose(codes, np.round(codes), atol=1e-9)
-    assert record.noise_std_n["contact_6"] == pytest.approx(math.sqrt(3.0**2 + lsb_n**2 / 12), rel=1e-12)
+    assert record.noise_std_n["contact_6"] == pytest.approx(
+        math.sqrt(3.0**2 + lsb_n**2 / 12), rel=1e-12
+    )
     residual = record.channels["contact_6"] - forces["contact_6"][9::10]
     assert np.std(residual) == pytest.approx(record.noise_std_n["contact_6"], rel=0.05)
     # A range too small clips, and says so.
@@ -71,17 +73,24 @@ def test_trigger_delay_and_jitter_shift_the_time_axis():
     assert early.channels["contact_6"][0] == 0.0  # before the impact
     jittered = acq.acquire(T, forces, acq.Acquisition(trigger_jitter_s=1e-6), seed=5)
     drawn = jittered.trigger_offset_s
-    assert drawn == pytest.approx(float(np.random.default_rng(5).standard_normal()) * 1e-6, rel=1e-12)
+    assert drawn == pytest.approx(
+        float(np.random.default_rng(5).standard_normal()) * 1e-6, rel=1e-12
+    )
     peak_time = float(pulses.refine_peak(jittered.time_s, jittered.channels["contact_6"])[0])
     assert peak_time == pytest.approx(0.8e-3 - drawn, abs=1e-8)
 
 
 def test_bandwidth_filters():
     step = np.where(T >= 0.5e-3, 100.0, 0.0)
-    rc = acq.acquire(T, {"wall": step},
-                     acq.Acquisition(sample_interval_s=FINE, bandwidth_hz=50e3, bandwidth_filter="first_order"))
+    rc = acq.acquire(
+        T,
+        {"wall": step},
+        acq.Acquisition(sample_interval_s=FINE, bandwidth_hz=50e3, bandwidth_filter="first_order"),
+    )
     t_after = rc.time_s - 0.5e-3
-    expected = np.where(t_after >= 0, 100.0 * (1 - np.exp(-2 * np.pi * 50e3 * (t_after + FINE))), 0.0)
+    expected = np.where(
+        t_after >= 0, 100.0 * (1 - np.exp(-2 * np.pi * 50e3 * (t_after + FINE))), 0.0
+    )
     np.testing.assert_allclose(rc.channels["wall"], expected, atol=1e-6)
     # The Bessel filter passes a slow pulse with gain 1 and delays it by its group delay.
     bessel = acq.acquire(T, {"wall": _pulse()}, acq.Acquisition(bandwidth_hz=100e3))
@@ -103,13 +112,19 @@ def test_bad_settings_are_refused():
 
 def test_trace_file_round_trip(tmp_path):
     setup = hertzchain.ChainSetup(eta_s=2e-6, sensor_beads=(6,))
-    forces = {"contact_11": _pulse(), "sensor_6": _pulse(center=0.5e-3), "wall": _pulse(600.0, 1e-3)}
-    trace = acq.acquire_trace(setup, T, forces, acq.Acquisition(noise_std_n=0.5, bits=12), seed=3,
-                              truth={"eta_s": 2e-6})
+    forces = {
+        "contact_11": _pulse(),
+        "sensor_6": _pulse(center=0.5e-3),
+        "wall": _pulse(600.0, 1e-3),
+    }
+    trace = acq.acquire_trace(
+        setup, T, forces, acq.Acquisition(noise_std_n=0.5, bits=12), seed=3, truth={"eta_s": 2e-6}
+    )
     write_trace(tmp_path / "x.csv", trace)
     back = read_trace(tmp_path / "x.csv")
-    assert back.noise_std_n == pytest.approx(max(float(v) for k, v in trace.header.items()
-                                                 if k.startswith("x_acq_noise_std_n_")))
+    assert back.noise_std_n == pytest.approx(
+        max(float(v) for k, v in trace.header.items() if k.startswith("x_acq_noise_std_n_"))
+    )
     assert back.header["x_true_eta_s"] == "2e-06"
     assert back.sensor_beads == (6,) and back.contacts == (11,)
     for name in forces:

@@ -12,10 +12,25 @@ from hertzchain.tracefile import read_trace
 @pytest.fixture(scope="module")
 def synth_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("synth")
-    code = main([
-        "synth", "--velocities", "0.15,0.3", "--contacts", "8,12", "--t-end", "2.4ms",
-        "--sample-interval", "1us", "--noise-std", "0.37", "--seed", "4", "--out", str(out),
-    ])
+    code = main(
+        [
+            "synth",
+            "--velocities",
+            "0.15,0.3",
+            "--contacts",
+            "8,12",
+            "--t-end",
+            "2.4ms",
+            "--sample-interval",
+            "1us",
+            "--noise-std",
+            "0.37",
+            "--seed",
+            "4",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
     return out
 
@@ -65,7 +80,12 @@ def test_analyze_recovers_the_velocity_law(synth_dir, tmp_path):
     csv_lines = (tmp_path / "pulses.csv").read_text().splitlines()
     assert csv_lines[0].startswith("file,channel,label,peak_time_s")
     assert len(csv_lines) == len(result["pulses"]) + 1
-    for name in ("synth_v0.15_pulses.png", "synth_v0.3_pulses.png", "speed_duration.png", "restitution.png"):
+    for name in (
+        "synth_v0.15_pulses.png",
+        "synth_v0.3_pulses.png",
+        "speed_duration.png",
+        "restitution.png",
+    ):
         assert (tmp_path / name).stat().st_size > 1000
 
 

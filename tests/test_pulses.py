@@ -114,7 +114,9 @@ def incident_runs():
         scale = (0.3 / v0) ** 0.2
         traces = hertzchain.simulate(
             hertzchain.ChainSetup(striker_velocity_m_s=v0),
-            t_end_s=0.9e-3 * scale, sample_interval_s=0.1e-6 * scale, contacts=CONTACTS,
+            t_end_s=0.9e-3 * scale,
+            sample_interval_s=0.1e-6 * scale,
+            contacts=CONTACTS,
             on_yield="ignore",
         )
         forces = np.stack([np.asarray(traces.forces_n[f"contact_{k}"]) for k in CONTACTS])
@@ -164,11 +166,15 @@ def test_restitution_coefficients_and_law():
     np.testing.assert_allclose(pulses.restitution_coefficients(force, force), 1.0, rtol=1e-14)
     f = np.geomspace(5, 400, 12)
     eps = theory.restitution_law(f, 0.008, 0.11)
-    fit = pulses.fit_restitution_law(f, eps, velocity_constant=201.4, bead_radius_m=R, bead_mass_kg=0.0716)
+    fit = pulses.fit_restitution_law(
+        f, eps, velocity_constant=201.4, bead_radius_m=R, bead_mass_kg=0.0716
+    )
     assert fit.c_v == pytest.approx(0.008, rel=1e-9)
     assert fit.c_s == pytest.approx(0.11, rel=1e-9)
     assert fit.eta_paper_s == pytest.approx(float(theory.eta_from_c_v(0.008, 201.4, R)), rel=1e-9)
-    viscous_only = pulses.fit_restitution_law(f, theory.restitution_law(f, 0.008, 0.0), friction=False)
+    viscous_only = pulses.fit_restitution_law(
+        f, theory.restitution_law(f, 0.008, 0.0), friction=False
+    )
     assert viscous_only.c_v == pytest.approx(0.008, rel=1e-9) and viscous_only.c_s == 0.0
 
 
@@ -186,18 +192,28 @@ def test_collision_restitution_matches_velocities(target):
         reduced = float(setup.striker_mass_kg) / 2
     else:
         setup = hertzchain.ChainSetup(
-            1, end="free", eta_s=eta, striker_velocity_m_s=v_in, bead_radius_m=1e3,
-            bead_mass_kg=1e9, striker_radius_m=R, striker_density_kg_m3=7780.0,
+            1,
+            end="free",
+            eta_s=eta,
+            striker_velocity_m_s=v_in,
+            bead_radius_m=1e3,
+            bead_mass_kg=1e9,
+            striker_radius_m=R,
+            striker_density_kg_m3=7780.0,
         )
         reduced = float(setup.striker_mass_kg)
-    traces = hertzchain.simulate(setup, t_end_s=250e-6, sample_interval_s=0.1e-6, contacts=(0,),
-                                 record_all=True)
+    traces = hertzchain.simulate(
+        setup, t_end_s=250e-6, sample_interval_s=0.1e-6, contacts=(0,), record_all=True
+    )
     v = np.asarray(traces.velocities_m_s)[-1]
     from_velocities = (v[1] - v[0]) / v_in
     force = np.asarray(traces.forces_n["contact_0"])
     assert force[-1] == 0.0  # the collision is over
-    from_force = float(pulses.collision_restitution(
-        traces.time_s, force, reduced_mass_kg=reduced, impact_velocity_m_s=v_in))
+    from_force = float(
+        pulses.collision_restitution(
+            traces.time_s, force, reduced_mass_kg=reduced, impact_velocity_m_s=v_in
+        )
+    )
     assert 0.5 < from_velocities < 0.99
     assert from_force == pytest.approx(from_velocities, abs=2e-5)
 
@@ -221,9 +237,12 @@ def test_find_pulses_labels_and_noise():
 def test_momentum_check_on_the_paper_chain():
     """Area under the wall pulse vs incident + reflected areas at contact 10: 'equal' to ~2 %
     (the last beads leave the wall with momentum that never crosses contact 10)."""
-    traces = hertzchain.simulate(hertzchain.ChainSetup(), t_end_s=4e-3, sample_interval_s=1e-6,
-                                 contacts=(10,))
-    check = pulses.momentum_check(traces.time_s, traces.forces_n["wall"], traces.forces_n["contact_10"])
+    traces = hertzchain.simulate(
+        hertzchain.ChainSetup(), t_end_s=4e-3, sample_interval_s=1e-6, contacts=(10,)
+    )
+    check = pulses.momentum_check(
+        traces.time_s, traces.forces_n["wall"], traces.forces_n["contact_10"]
+    )
     mv0 = 0.3 * 0.0715976
     assert check.incident_impulse_n_s / mv0 == pytest.approx(1.1354, abs=0.003)
     # The wall impulse is the chain's momentum change (books kept by the integrator).
@@ -243,8 +262,12 @@ def test_viscous_restitution_law_of_the_chain():
 
     def peaks(eta_s):
         traces = hertzchain.simulate_batch(
-            hertzchain.ChainSetup(eta_s=eta_s), t_end_s=2.0e-3, sample_interval_s=0.2e-6,
-            contacts=contacts, on_yield="ignore", striker_velocity_m_s=velocities,
+            hertzchain.ChainSetup(eta_s=eta_s),
+            t_end_s=2.0e-3,
+            sample_interval_s=0.2e-6,
+            contacts=contacts,
+            on_yield="ignore",
+            striker_velocity_m_s=velocities,
         )
         forces = np.stack([np.asarray(traces.forces_n[f"contact_{k}"]) for k in contacts], axis=-2)
         time = np.asarray(traces.time_s)[0]
@@ -253,8 +276,13 @@ def test_viscous_restitution_law_of_the_chain():
     damped, elastic = peaks(2e-6), peaks(0.0)
     assert damped[5][4] == pytest.approx(230.5, abs=0.3)  # contact 10 at 0.3 m/s
     eps = np.asarray(pulses.restitution_coefficients(damped, elastic))
-    fit = pulses.fit_restitution_law(damped[:, :-1].ravel(), eps.ravel(), friction=False,
-                                     velocity_constant=201.4, bead_radius_m=R)
+    fit = pulses.fit_restitution_law(
+        damped[:, :-1].ravel(),
+        eps.ravel(),
+        friction=False,
+        velocity_constant=201.4,
+        bead_radius_m=R,
+    )
     assert fit.c_v == pytest.approx(0.00816, abs=3e-4)
     assert float(theory.c_v_from_eta(2e-6, 201.4, R)) / fit.c_v == pytest.approx(3.0, abs=0.15)
     assert fit.eta_paper_s == pytest.approx(2e-6 / 3.0, rel=0.06)

@@ -40,7 +40,9 @@ def sensor_run():
     """The paper's chain at 0.3 m/s with a sensor in bead 10 (contacts 9 and 10 around it)."""
     traces = hertzchain.simulate(
         hertzchain.ChainSetup(sensor_beads=(10,), sensor_beta=BETA, sensor_f0_hz=F0),
-        t_end_s=0.9e-3, sample_interval_s=0.1e-6, contacts=(9, 10),
+        t_end_s=0.9e-3,
+        sample_interval_s=0.1e-6,
+        contacts=(9, 10),
     )
     return {name: np.asarray(traces.forces_n[name]) for name in traces.channel_names} | {
         "time_s": np.asarray(traces.time_s)
@@ -50,7 +52,11 @@ def sensor_run():
 def test_filter_reproduces_the_mechanical_sensor(sensor_run):
     """Eq. 4 applied to the simulated contact forces is the simulator's split-bead sensor."""
     t = sensor_run["time_s"]
-    front, back, measured = sensor_run["contact_10"], sensor_run["contact_9"], sensor_run["sensor_10"]
+    front, back, measured = (
+        sensor_run["contact_10"],
+        sensor_run["contact_9"],
+        sensor_run["sensor_10"],
+    )
     model = np.asarray(sensor.sensor_signal(t, front, back, beta=BETA, f0_hz=F0))
     assert np.max(np.abs(model - measured)) < 1e-5 * front.max()
     # Reference: peak F_s / peak F_+ = 0.9217 at 0.3 m/s; the correction is of order beta.
@@ -59,7 +65,9 @@ def test_filter_reproduces_the_mechanical_sensor(sensor_run):
 
 
 def _delay(run):
-    wave = pulses.incident_wave(run["time_s"], np.stack([run["contact_9"], run["contact_10"]]), (9, 10), 0.013)
+    wave = pulses.incident_wave(
+        run["time_s"], np.stack([run["contact_9"], run["contact_10"]]), (9, 10), 0.013
+    )
     return float(sensor.sensor_delay_s(0.013, wave.speed_m_s))
 
 
@@ -67,26 +75,44 @@ def test_deconvolution_without_noise(sensor_run):
     t, front = sensor_run["time_s"], sensor_run["contact_10"]
     delay = _delay(sensor_run)
     assert delay == pytest.approx(49.0e-6, rel=0.015)
-    recovered = np.asarray(sensor.deconvolve_sensor(
-        t, sensor_run["sensor_10"], beta=BETA, f0_hz=F0, delay_s=delay, noise_std_n=0.0))
+    recovered = np.asarray(
+        sensor.deconvolve_sensor(
+            t, sensor_run["sensor_10"], beta=BETA, f0_hz=F0, delay_s=delay, noise_std_n=0.0
+        )
+    )
     assert np.max(np.abs(recovered - front)) < 3e-3 * front.max()
     assert recovered.max() / front.max() == pytest.approx(1.0, abs=2e-3)
-    back = np.asarray(sensor.deconvolve_sensor(
-        t, sensor_run["sensor_10"], beta=BETA, f0_hz=F0, delay_s=delay, noise_std_n=0.0, which="back"))
+    back = np.asarray(
+        sensor.deconvolve_sensor(
+            t,
+            sensor_run["sensor_10"],
+            beta=BETA,
+            f0_hz=F0,
+            delay_s=delay,
+            noise_std_n=0.0,
+            which="back",
+        )
+    )
     assert np.max(np.abs(back - sensor_run["contact_9"])) < 1e-2 * front.max()
 
 
 def test_deconvolution_with_noise(sensor_run):
     """At 1 us sampling with 0.5 % noise the recovered peak is within 1 % of the contact force,
     while the raw sensor is 8 % low: the correction is of order beta and noise stays bounded."""
-    t, front, signal = sensor_run["time_s"][9::10], sensor_run["contact_10"][9::10], sensor_run["sensor_10"][9::10]
+    t, front, signal = (
+        sensor_run["time_s"][9::10],
+        sensor_run["contact_10"][9::10],
+        sensor_run["sensor_10"][9::10],
+    )
     delay = _delay(sensor_run)
     rng = np.random.default_rng(11)
     noise = 0.005 * front.max()
     errors = []
     for _ in range(5):
         noisy = signal + rng.normal(0.0, noise, signal.size)
-        recovered = np.asarray(sensor.deconvolve_sensor(t, noisy, beta=BETA, f0_hz=F0, delay_s=delay))
+        recovered = np.asarray(
+            sensor.deconvolve_sensor(t, noisy, beta=BETA, f0_hz=F0, delay_s=delay)
+        )
         peak = float(pulses.refine_peak(t, recovered)[1])
         errors.append(peak / front.max() - 1)
         # The noise is not amplified: the residual is below the input noise level.

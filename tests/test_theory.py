@@ -41,7 +41,7 @@ def test_setup_constants_match_the_functions(paper_setup):
     # 2 tau = 2R sqrt(10)/v at 333.3 N with C_n: 155.0 us (reference: 155.05 us with v = 530.27).
     assert float(numbers["speed_m_s"]) == pytest.approx(530.3, abs=0.3)
     assert float(numbers["duration_s"]) * 1e6 == pytest.approx(155.05, abs=0.1)
-    assert float(numbers["wall_force_ratio"]) == pytest.approx(2 ** 0.8, rel=1e-12)  # steel wall
+    assert float(numbers["wall_force_ratio"]) == pytest.approx(2**0.8, rel=1e-12)  # steel wall
 
 
 def test_speed_amplitude_and_duration_relations():
@@ -50,7 +50,9 @@ def test_speed_amplitude_and_duration_relations():
     speed = theory.solitary_speed_m_s(force, c)
     np.testing.assert_allclose(theory.solitary_peak_force_n(speed, c), force, rtol=1e-13)
     # 2 tau * v is the constant 2 R sqrt(10).
-    np.testing.assert_allclose(theory.solitary_duration_s(R, speed) * speed, 2 * R * math.sqrt(10), rtol=1e-14)
+    np.testing.assert_allclose(
+        theory.solitary_duration_s(R, speed) * speed, 2 * R * math.sqrt(10), rtol=1e-14
+    )
     # d v / d F = v / (6 F).
     grad = jax.grad(lambda f: theory.solitary_speed_m_s(f, c))(50.0)
     assert float(grad) == pytest.approx(float(speed[1]) / 300.0, rel=1e-12)
@@ -62,7 +64,9 @@ def test_impact_velocity_amplitude_relation():
     assert float(theory.wave_amplitude_n(1.0, kappa, MASS)) == pytest.approx(1413.66, abs=0.05)
     velocities = jnp.array([0.009, 0.3, 0.42])
     forces = theory.wave_amplitude_n(velocities, kappa, MASS)
-    np.testing.assert_allclose(theory.impact_velocity_m_s(forces, kappa, MASS), velocities, rtol=1e-13)
+    np.testing.assert_allclose(
+        theory.impact_velocity_m_s(forces, kappa, MASS), velocities, rtol=1e-13
+    )
 
 
 def test_cos6_profile_is_one_hump():
@@ -78,13 +82,21 @@ def test_cos6_profile_is_one_hump():
 
 @pytest.mark.parametrize(
     "name, paper_form, kappa_form",
-    [("plexiglass", 0.4232, 0.4293), ("soft_5GPa", 0.5171, 0.5171), ("Mg", 1.1608, 1.1583),
-     ("Cu", 1.5770, 1.5880), ("Si", 1.6555, 1.6388), ("Fe", 1.7545, 1.7523),
-     ("W", 1.9566, 1.9533)],
+    [
+        ("plexiglass", 0.4232, 0.4293),
+        ("soft_5GPa", 0.5171, 0.5171),
+        ("Mg", 1.1608, 1.1583),
+        ("Cu", 1.5770, 1.5880),
+        ("Si", 1.6555, 1.6388),
+        ("Fe", 1.7545, 1.7523),
+        ("W", 1.9566, 1.9533),
+    ],
 )
 def test_wall_force_ratio_estimates(name, paper_form, kappa_form):
     wall = material(name)
-    assert float(theory.wall_force_ratio_paper(Y, wall.youngs_pa)) == pytest.approx(paper_form, abs=5e-4)
+    assert float(theory.wall_force_ratio_paper(Y, wall.youngs_pa)) == pytest.approx(
+        paper_form, abs=5e-4
+    )
     kappa_w = contact.kappa_sphere_flat(R, Y, NU, wall.youngs_pa, wall.poisson)
     assert float(theory.wall_force_ratio(kappa_w, _kappa())) == pytest.approx(kappa_form, abs=5e-4)
 
@@ -96,17 +108,22 @@ def test_wall_force_ratio_rigid_and_equal_poisson_forms_agree():
     wall_y = jnp.array([3e9, 45e9, 411e9])
     kappa_w = contact.kappa_sphere_flat(R, Y, NU, wall_y, NU)
     np.testing.assert_allclose(
-        theory.wall_force_ratio(kappa_w, _kappa()), theory.wall_force_ratio_paper(Y, wall_y), rtol=1e-12
+        theory.wall_force_ratio(kappa_w, _kappa()),
+        theory.wall_force_ratio_paper(Y, wall_y),
+        rtol=1e-12,
     )
 
 
 def test_paper_dissipation_conversions():
-    # The paper's own numbers: C_s = 0.17 gives mu = 0.19; C_v = 0.019 gives 1.55 us (with C = 201.5).
+    # The paper's own numbers: C_s = 0.17 gives mu = 0.19; C_v = 0.019 gives 1.55 us
+    # (with C = 201.5).
     assert float(theory.mu_from_c_s(0.17, MASS)) == pytest.approx(0.1936, abs=2e-4)
     assert float(theory.eta_from_c_v(0.019, 201.5, R)) * 1e6 == pytest.approx(1.551, abs=2e-3)
     assert float(theory.c_v_from_eta(2e-6, 201.5, R)) == pytest.approx(0.0245, abs=2e-4)
     assert float(theory.c_s_from_mu(0.19, MASS)) == pytest.approx(0.1668, abs=3e-4)
-    assert float(theory.restitution_law(100.0, 0.01, 0.1)) == pytest.approx(1 - 0.01 * 100 ** (1 / 6) - 1e-3)
+    assert float(theory.restitution_law(100.0, 0.01, 0.1)) == pytest.approx(
+        1 - 0.01 * 100 ** (1 / 6) - 1e-3
+    )
 
 
 def _strain_profile(x, psi_m):
@@ -114,7 +131,8 @@ def _strain_profile(x, psi_m):
 
 
 def test_cos4_strain_solves_the_travelling_wave_equation():
-    """psi = (5/4)^2 (v/c)^4 cos^4 solves v^2 psi = c^2 [psi^(3/2) + (2/5) R^2 psi^(1/4) (psi^(5/4))'']."""
+    """psi = (5/4)^2 (v/c)^4 cos^4 solves
+    v^2 psi = c^2 [psi^(3/2) + (2/5) R^2 psi^(1/4) (psi^(5/4))'']."""
     c, v = 1.0, 0.2
     psi_m = (5 / 4) ** 2 * (v / c) ** 4
     d2 = jax.grad(jax.grad(lambda x: _strain_profile(x, psi_m) ** 1.25))
@@ -135,13 +153,20 @@ def test_continuum_kinetic_fraction_is_five_ninths():
     kinetic = jnp.trapezoid(v**2 * psi**2 / (2 * c**2), x)
     hertz = jnp.trapezoid(0.4 * psi**2.5, x)
     dispersive = jnp.trapezoid(-4 / 25 * R**2 * slope**2, x)
-    assert float(kinetic / (kinetic + hertz + dispersive)) == pytest.approx(theory.KINETIC_FRACTION, rel=1e-7)
-    assert float(kinetic / (kinetic + hertz)) == pytest.approx(theory.HERTZ_ONLY_KINETIC_FRACTION, rel=1e-7)
+    assert float(kinetic / (kinetic + hertz + dispersive)) == pytest.approx(
+        theory.KINETIC_FRACTION, rel=1e-7
+    )
+    assert float(kinetic / (kinetic + hertz)) == pytest.approx(
+        theory.HERTZ_ONLY_KINETIC_FRACTION, rel=1e-7
+    )
 
 
 def test_theory_accepts_traced_setups(paper_setup):
-    grad = jax.grad(lambda y: theory.setup_constants(
-        hertzchain.ChainSetup(bead_youngs_pa=y))["long_wave_velocity_constant"])(Y)
+    grad = jax.grad(
+        lambda y: theory.setup_constants(hertzchain.ChainSetup(bead_youngs_pa=y))[
+            "long_wave_velocity_constant"
+        ]
+    )(Y)
     # C_t is proportional to theta^(-1/3), i.e. to Y^(1/3).
     assert float(grad) == pytest.approx(198.919 / (3 * Y), rel=1e-4)
 
@@ -149,8 +174,9 @@ def test_theory_accepts_traced_setups(paper_setup):
 @pytest.fixture(scope="module")
 def free_wave():
     """The paper's chain at 0.3 m/s, every contact, position and velocity recorded."""
-    return hertzchain.simulate(hertzchain.ChainSetup(), t_end_s=0.85e-3, sample_interval_s=1e-6,
-                               record_all=True)
+    return hertzchain.simulate(
+        hertzchain.ChainSetup(), t_end_s=0.85e-3, sample_interval_s=1e-6, record_all=True
+    )
 
 
 def test_kinetic_share_of_the_travelling_wave(free_wave, paper_setup):
@@ -160,7 +186,9 @@ def test_kinetic_share_of_the_travelling_wave(free_wave, paper_setup):
     forces = np.asarray(free_wave.contact_forces_n)
     energy = np.asarray(free_wave.contact_elastic_j)
     velocity = np.asarray(free_wave.velocities_m_s)
-    mass = np.concatenate([[float(paper_setup.striker_mass_kg)], np.asarray(paper_setup.bead_mass_kg)])
+    mass = np.concatenate(
+        [[float(paper_setup.striker_mass_kg)], np.asarray(paper_setup.bead_mass_kg)]
+    )
     shares = []
     for i in np.nonzero((time > 0.35e-3) & (time < 0.7e-3))[0]:
         k = int(np.argmax(forces[i]))
@@ -183,4 +211,5 @@ def test_impact_amplitude_factor_by_simulation(free_wave, paper_setup):
     a = wave.peak_force_n / (kappa**0.4 * MASS**0.6 * 0.3**1.2)
     assert a == pytest.approx(theory.IMPACT_AMPLITUDE_FACTOR * 1.0003, rel=3e-4)
     assert wave.peak_force_n == pytest.approx(
-        float(theory.wave_amplitude_n(0.3, kappa, MASS)), rel=1e-3)
+        float(theory.wave_amplitude_n(0.3, kappa, MASS)), rel=1e-3
+    )

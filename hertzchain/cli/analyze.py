@@ -35,23 +35,36 @@ from ..atomic import save_figure, write_json, write_text  # noqa: E402
 from ..tracefile import read_trace  # noqa: E402
 
 COLUMNS = (
-    "file", "channel", "label", "peak_time_s", "peak_force_n", "fit_peak_force_n",
-    "fit_peak_force_stderr_n", "center_s", "center_stderr_s", "tau_s", "tau_stderr_s",
-    "duration_s", "residual_rms_n", "n_points", "converged",
+    "file",
+    "channel",
+    "label",
+    "peak_time_s",
+    "peak_force_n",
+    "fit_peak_force_n",
+    "fit_peak_force_stderr_n",
+    "center_s",
+    "center_stderr_s",
+    "tau_s",
+    "tau_stderr_s",
+    "duration_s",
+    "residual_rms_n",
+    "n_points",
+    "converged",
 )
 
 DEFINITIONS = {
     "peak": "3-point parabola through the largest sample of the pulse and its neighbours",
-    "fit": "F_m cos^6((t - t0)/tau) fitted to the pulse's main lobe at or above `threshold` of its peak; "
-    "standard errors from the Jacobian and the residual variance; duration = 2 tau",
-    "speed": "least-squares slope of contact position 2R K against the incident pulses' arrival times, "
-    "the cos^6 fit centres (deconvolved sensors count as their front contact K)",
-    "amplitude": "mean parabolic peak force (or cos^6 amplitude with --amplitude fit) of the incident "
-    "pulses used for the speed",
+    "fit": "F_m cos^6((t - t0)/tau) fitted to the pulse's main lobe at or above `threshold` "
+    "of its peak; standard errors from the Jacobian and the residual variance; duration = 2 tau",
+    "speed": "least-squares slope of contact position 2R K against the incident pulses' arrival "
+    "times, the cos^6 fit centres (deconvolved sensors count as their front contact K)",
+    "amplitude": "mean parabolic peak force (or cos^6 amplitude with --amplitude fit) of the "
+    "incident pulses used for the speed",
     "restitution": "eps = (F_K2/F_K1)^(5/(6 (K2 - K1))) between consecutive measured contacts, "
     "at force F_K1 (incident pulse amplitudes)",
-    "paper_conversions": "eta = 2 sqrt(10) R C_v/(5C) and mu = 4 C_s/(5 m g) are the paper's; they do "
-    "not hold for the viscoelastic/Coulomb model (C_v is 3.0x, C_s 0.69x what they predict): "
+    "paper_conversions": "eta = 2 sqrt(10) R C_v/(5C) and mu = 4 C_s/(5 m g) are the paper's; "
+    "they do not hold for the viscoelastic/Coulomb model (C_v is 3.0x, C_s 0.69x what they "
+    "predict): "
     "fit eta and mu with the simulator",
 }
 
@@ -59,13 +72,25 @@ DEFINITIONS = {
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("files", nargs="+", metavar="FILE", help="trace files (hertzchain-trace/1)")
     parser.add_argument("--out", default="out/analyze", help="output folder [out/analyze]")
-    parser.add_argument("--threshold", type=float, default=0.05,
-                        help="cos^6 fit uses the samples above this fraction of the peak [0.05]")
-    parser.add_argument("--amplitude", choices=("peak", "fit"), default="peak",
-                        help="amplitude of a pulse for the speed law: parabolic peak (C = 201.37 on the "
-                        "paper's clean chain) or cos^6 fit amplitude (0.77 %% lower, C = 201.6) [peak]")
-    parser.add_argument("--min-fraction", type=float, default=0.05,
-                        help="smallest pulse reported, as a fraction of the channel's maximum [0.05]")
+    parser.add_argument(
+        "--threshold",
+        type=float,
+        default=0.05,
+        help="cos^6 fit uses the samples above this fraction of the peak [0.05]",
+    )
+    parser.add_argument(
+        "--amplitude",
+        choices=("peak", "fit"),
+        default="peak",
+        help="amplitude of a pulse for the speed law: parabolic peak (C = 201.37 on the "
+        "paper's clean chain) or cos^6 fit amplitude (0.77 %% lower, C = 201.6) [peak]",
+    )
+    parser.add_argument(
+        "--min-fraction",
+        type=float,
+        default=0.05,
+        help="smallest pulse reported, as a fraction of the channel's maximum [0.05]",
+    )
 
 
 def _channel_noise(trace, name):
@@ -88,19 +113,30 @@ def _plain(value):
 
 def _fit_pulses(file_name, time, name, force, noise, kind, args):
     rows, fits = [], []
-    for pulse in pulses.find_pulses(time, force, channel=kind, min_fraction=args.min_fraction, noise_std_n=noise):
+    for pulse in pulses.find_pulses(
+        time, force, channel=kind, min_fraction=args.min_fraction, noise_std_n=noise
+    ):
         fit = pulses.fit_cos6(time, force, threshold=args.threshold, window_s=pulse.window_s)
         fits.append((pulse, fit))
-        rows.append({
-            "file": file_name, "channel": name, "label": pulse.label,
-            "peak_time_s": pulse.peak_time_s, "peak_force_n": pulse.peak_force_n,
-            "fit_peak_force_n": float(fit.peak_force_n),
-            "fit_peak_force_stderr_n": float(fit.peak_force_stderr_n),
-            "center_s": float(fit.center_s), "center_stderr_s": float(fit.center_stderr_s),
-            "tau_s": float(fit.tau_s), "tau_stderr_s": float(fit.tau_stderr_s),
-            "duration_s": float(fit.duration_s), "residual_rms_n": float(fit.residual_rms_n),
-            "n_points": int(fit.n_points), "converged": bool(fit.converged),
-        })
+        rows.append(
+            {
+                "file": file_name,
+                "channel": name,
+                "label": pulse.label,
+                "peak_time_s": pulse.peak_time_s,
+                "peak_force_n": pulse.peak_force_n,
+                "fit_peak_force_n": float(fit.peak_force_n),
+                "fit_peak_force_stderr_n": float(fit.peak_force_stderr_n),
+                "center_s": float(fit.center_s),
+                "center_stderr_s": float(fit.center_stderr_s),
+                "tau_s": float(fit.tau_s),
+                "tau_stderr_s": float(fit.tau_stderr_s),
+                "duration_s": float(fit.duration_s),
+                "residual_rms_n": float(fit.residual_rms_n),
+                "n_points": int(fit.n_points),
+                "converged": bool(fit.converged),
+            }
+        )
     return rows, fits
 
 
@@ -127,7 +163,9 @@ def analyze_trace(trace, args):
     for name, force in trace.channels.items():
         kind = "wall" if name == "wall" else "contact"
         force = np.asarray(force)
-        channel_rows, fits = _fit_pulses(name_of_file, time, name, force, _channel_noise(trace, name), kind, args)
+        channel_rows, fits = _fit_pulses(
+            name_of_file, time, name, force, _channel_noise(trace, name), kind, args
+        )
         rows += channel_rows
         plotted[name] = (force, fits)
         if name.startswith("contact_") and fits and fits[0][0].label == "incident":
@@ -141,17 +179,31 @@ def analyze_trace(trace, args):
             continue
         bead = int(name.split("_")[1])
         force = np.asarray(trace.channels[name])
-        first = pulses.find_pulses(time, force, min_fraction=args.min_fraction,
-                                   noise_std_n=_channel_noise(trace, name))
+        first = pulses.find_pulses(
+            time, force, min_fraction=args.min_fraction, noise_std_n=_channel_noise(trace, name)
+        )
         if not first:
             continue
         beta = float(trace.header["sensor_beta"])
-        v = speed.speed_m_s if speed else float(theory.solitary_speed_m_s(first[0].peak_force_n / (1 - beta), c_n))
-        recovered = np.asarray(sensor.deconvolve_sensor(
-            time, force, beta=beta, f0_hz=float(trace.header["sensor_f0_hz"]),
-            delay_s=float(sensor.sensor_delay_s(radius, v)), noise_std_n=_channel_noise(trace, name)))
+        v = (
+            speed.speed_m_s
+            if speed
+            else float(theory.solitary_speed_m_s(first[0].peak_force_n / (1 - beta), c_n))
+        )
+        recovered = np.asarray(
+            sensor.deconvolve_sensor(
+                time,
+                force,
+                beta=beta,
+                f0_hz=float(trace.header["sensor_f0_hz"]),
+                delay_s=float(sensor.sensor_delay_s(radius, v)),
+                noise_std_n=_channel_noise(trace, name),
+            )
+        )
         label = f"{name}_deconvolved"
-        channel_rows, fits = _fit_pulses(name_of_file, time, label, recovered, None, "contact", args)
+        channel_rows, fits = _fit_pulses(
+            name_of_file, time, label, recovered, None, "contact", args
+        )
         rows += channel_rows
         plotted[label] = (recovered, fits)
         if fits and fits[0][0].label == "incident" and bead not in incident:
@@ -173,13 +225,19 @@ def analyze_trace(trace, args):
     if speed is not None:
         amplitude = float(np.mean([incident[k][1] for k in incident]))
         summary.update(
-            speed_m_s=speed.speed_m_s, speed_stderr_m_s=speed.speed_stderr_m_s, amplitude_n=amplitude,
+            speed_m_s=speed.speed_m_s,
+            speed_stderr_m_s=speed.speed_stderr_m_s,
+            amplitude_n=amplitude,
             velocity_constant=speed.speed_m_s / amplitude ** (1 / 6),
         )
     ks = sorted(incident)
     summary["restitution"] = [
-        {"contact_from": a, "contact_to": b, "force_n": incident[a][1],
-         "restitution": (incident[b][1] / incident[a][1]) ** (5.0 / (6.0 * (b - a)))}
+        {
+            "contact_from": a,
+            "contact_to": b,
+            "force_n": incident[a][1],
+            "restitution": (incident[b][1] / incident[a][1]) ** (5.0 / (6.0 * (b - a))),
+        }
         for a, b in zip(ks[:-1], ks[1:])
     ]
     if "wall" in plotted and plotted["wall"][1] and incident:
@@ -189,8 +247,12 @@ def analyze_trace(trace, args):
         summary["momentum_check"] = {}
         for name in trace.channels:
             if name.startswith("contact_"):
-                check = pulses.momentum_check(time, trace.channels["wall"], trace.channels[name],
-                                              noise_std_n=_channel_noise(trace, name))
+                check = pulses.momentum_check(
+                    time,
+                    trace.channels["wall"],
+                    trace.channels[name],
+                    noise_std_n=_channel_noise(trace, name),
+                )
                 summary["momentum_check"][name] = check._asdict()
     return rows, summary, plotted
 
@@ -198,13 +260,18 @@ def analyze_trace(trace, args):
 def _plot_file(time, plotted, title, path):
     figure, axes = plt.subplots(figsize=(9, 4.5))
     for name, (force, fits) in plotted.items():
-        line, = axes.plot(time * 1e3, force, lw=0.8, alpha=0.7, label=name.replace("_", " "))
+        (line,) = axes.plot(time * 1e3, force, lw=0.8, alpha=0.7, label=name.replace("_", " "))
         for pulse, fit in fits:
             start, stop = pulse.window_s
             t = np.linspace(start, stop, 400)
             axes.plot(t * 1e3, np.asarray(fit.profile_n(t)), "--", color=line.get_color(), lw=1.2)
-            axes.annotate(pulse.label, (pulse.peak_time_s * 1e3, pulse.peak_force_n), fontsize=7,
-                          ha="center", va="bottom")
+            axes.annotate(
+                pulse.label,
+                (pulse.peak_time_s * 1e3, pulse.peak_force_n),
+                fontsize=7,
+                ha="center",
+                va="bottom",
+            )
     axes.set_xlabel("time (ms)")
     axes.set_ylabel("force (N)")
     axes.set_title(f"{title}: traces (solid) and cos^6 fits (dashed)")
@@ -221,22 +288,38 @@ def _plot_speed_duration(summaries, rows, radius_m, path):
     c_n = with_speed[0]["theory"]["discrete_velocity_constant"] if with_speed else None
     forces = np.array([s["amplitude_n"] for s in with_speed])
     if len(forces):
-        speed_axes.errorbar(forces, [s["speed_m_s"] for s in with_speed],
-                            yerr=[s["speed_stderr_m_s"] or 0 for s in with_speed], fmt="o", label="measured")
+        speed_axes.errorbar(
+            forces,
+            [s["speed_m_s"] for s in with_speed],
+            yerr=[s["speed_stderr_m_s"] or 0 for s in with_speed],
+            fmt="o",
+            label="measured",
+        )
         grid = np.geomspace(forces.min() * 0.7, forces.max() * 1.4, 100)
         speed_axes.plot(grid, c_t * grid ** (1 / 6), "k-", lw=1, label=f"Eq. 3, C_t = {c_t:.1f}")
-        speed_axes.plot(grid, c_n * grid ** (1 / 6), "k--", lw=1, label=f"discrete chain, C_n = {c_n:.1f}")
+        speed_axes.plot(
+            grid, c_n * grid ** (1 / 6), "k--", lw=1, label=f"discrete chain, C_n = {c_n:.1f}"
+        )
     speed_axes.set_xscale("log")
     speed_axes.set_xlabel("amplitude F_m (N)")
     speed_axes.set_ylabel("speed v (m/s)")
     speed_axes.legend(fontsize=8)
-    incident = [r for r in rows if r["label"] == "incident"
-                and (r["channel"].startswith("contact_") or r["channel"].endswith("_deconvolved"))]
+    incident = [
+        r
+        for r in rows
+        if r["label"] == "incident"
+        and (r["channel"].startswith("contact_") or r["channel"].endswith("_deconvolved"))
+    ]
     if incident:
         f = np.array([r["fit_peak_force_n"] for r in incident])
-        duration_axes.errorbar(f, [r["duration_s"] * 1e6 for r in incident],
-                               yerr=[r["tau_stderr_s"] * 2e6 for r in incident], fmt="o", ms=3,
-                               label="cos^6 fits")
+        duration_axes.errorbar(
+            f,
+            [r["duration_s"] * 1e6 for r in incident],
+            yerr=[r["tau_stderr_s"] * 2e6 for r in incident],
+            fmt="o",
+            ms=3,
+            label="cos^6 fits",
+        )
         grid = np.geomspace(f.min() * 0.7, f.max() * 1.4, 100)
         c_t = summaries[0]["theory"]["long_wave_velocity_constant"]
         c_n = summaries[0]["theory"]["discrete_velocity_constant"]
@@ -259,8 +342,13 @@ def _plot_restitution(points, law, path):
     axes.plot(force, [p["restitution"] for p in points], "o", label="measured")
     if law is not None:
         grid = np.geomspace(force.min() * 0.8, force.max() * 1.25, 100)
-        axes.plot(grid, np.asarray(theory.restitution_law(grid, law["c_v"], law["c_s"])), "k-", lw=1,
-                  label=f"1 - {law['c_v']:.3g} F^1/6 - {law['c_s']:.3g}/F")
+        axes.plot(
+            grid,
+            np.asarray(theory.restitution_law(grid, law["c_v"], law["c_s"])),
+            "k-",
+            lw=1,
+            label=f"1 - {law['c_v']:.3g} F^1/6 - {law['c_s']:.3g}/F",
+        )
     axes.set_xscale("log")
     axes.set_xlabel("force F (N)")
     axes.set_ylabel("restitution (F_K2/F_K1)^(5/6 per contact)")
@@ -282,27 +370,46 @@ def run(args: argparse.Namespace) -> int:
         radius = float(trace.header["bead_radius_m"])
         all_rows += rows
         summaries.append(summary)
-        _plot_file(np.asarray(trace.time_s), plotted, summary["file"], out / f"{Path(path).stem}_pulses.png")
-        print(f"{summary['file']}: {len(rows)} pulses"
-              + (f", v = {summary['speed_m_s']:.2f} m/s at F_m = {summary['amplitude_n']:.4g} N"
-                 if "speed_m_s" in summary else ""))
+        _plot_file(
+            np.asarray(trace.time_s),
+            plotted,
+            summary["file"],
+            out / f"{Path(path).stem}_pulses.png",
+        )
+        print(
+            f"{summary['file']}: {len(rows)} pulses"
+            + (
+                f", v = {summary['speed_m_s']:.2f} m/s at F_m = {summary['amplitude_n']:.4g} N"
+                if "speed_m_s" in summary
+                else ""
+            )
+        )
     result = {"definitions": DEFINITIONS, "files": summaries}
     with_speed = [s for s in summaries if "speed_m_s" in s]
     if with_speed:
-        law = pulses.fit_velocity_law([s["amplitude_n"] for s in with_speed], [s["speed_m_s"] for s in with_speed])
+        law = pulses.fit_velocity_law(
+            [s["amplitude_n"] for s in with_speed], [s["speed_m_s"] for s in with_speed]
+        )
         result["velocity_law"] = law._asdict()
-        print(f"velocity law: C = {law.velocity_constant:.2f} +- {law.velocity_constant_stderr:.2g} "
-              f"(m/s)/N^(1/6) from {law.n_points} file(s)")
+        print(
+            f"velocity law: C = {law.velocity_constant:.2f} +- {law.velocity_constant_stderr:.2g} "
+            f"(m/s)/N^(1/6) from {law.n_points} file(s)"
+        )
     points = [p for s in summaries for p in s["restitution"]]
     law_dict = None
     if len(points) >= 2:
         friction = len(points) >= 3
         setup = read_trace(args.files[0]).setup(striker_velocity_m_s=0.3)
         c = result.get("velocity_law", {}).get("velocity_constant") or float(
-            theory.setup_constants(setup)["discrete_velocity_constant"])
+            theory.setup_constants(setup)["discrete_velocity_constant"]
+        )
         law = pulses.fit_restitution_law(
-            [p["force_n"] for p in points], [p["restitution"] for p in points], friction=friction,
-            velocity_constant=c, bead_radius_m=radius, bead_mass_kg=float(setup.bead_mass_kg[0]),
+            [p["force_n"] for p in points],
+            [p["restitution"] for p in points],
+            friction=friction,
+            velocity_constant=c,
+            bead_radius_m=radius,
+            bead_mass_kg=float(setup.bead_mass_kg[0]),
         )
         law_dict = law._asdict()
         result["restitution_law"] = law_dict | {"note": DEFINITIONS["paper_conversions"]}

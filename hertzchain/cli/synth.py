@@ -30,12 +30,23 @@ from ..tracefile import validate_header, write_trace  # noqa: E402
 from ..units import parse_quantity  # noqa: E402
 from .setup_options import add_run_arguments, add_setup_arguments, run_options, setup_from_args  # noqa: E402
 
-TRUTH_FIELDS = ("striker_velocity_m_s", "eta_s", "mu", "mu_star", "wall_youngs_pa", "precompression_n")
+TRUTH_FIELDS = (
+    "striker_velocity_m_s",
+    "eta_s",
+    "mu",
+    "mu_star",
+    "wall_youngs_pa",
+    "precompression_n",
+)
 
 
 def _float_list(text: str) -> tuple[float, ...]:
     try:
-        values = tuple(parse_quantity(part, "m/s", name="--velocities") for part in text.split(",") if part.strip())
+        values = tuple(
+            parse_quantity(part, "m/s", name="--velocities")
+            for part in text.split(",")
+            if part.strip()
+        )
     except ValueError as error:
         raise argparse.ArgumentTypeError(str(error)) from error
     if not values:
@@ -46,20 +57,33 @@ def _float_list(text: str) -> tuple[float, ...]:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_setup_arguments(parser)
     add_run_arguments(parser)
-    parser.add_argument("--velocities", type=_float_list,
-                        help="impact velocities, m/s, one file each, e.g. 0.1,0.3,1 [--striker-velocity]")
+    parser.add_argument(
+        "--velocities",
+        type=_float_list,
+        help="impact velocities, m/s, one file each, e.g. 0.1,0.3,1 [--striker-velocity]",
+    )
     noise = parser.add_mutually_exclusive_group()
     noise.add_argument("--noise-std", help="additive noise, N, on every channel [0]")
-    noise.add_argument("--noise-fraction", type=float,
-                       help="additive noise as a fraction of each channel's peak force, e.g. 0.005")
-    parser.add_argument("--seed", type=int, default=0, help="seed of noise and jitter (file i uses seed+i) [0]")
-    parser.add_argument("--oversample", type=int, default=10,
-                        help="simulation samples per recorded sample [10]")
+    noise.add_argument(
+        "--noise-fraction",
+        type=float,
+        help="additive noise as a fraction of each channel's peak force, e.g. 0.005",
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="seed of noise and jitter (file i uses seed+i) [0]"
+    )
+    parser.add_argument(
+        "--oversample", type=int, default=10, help="simulation samples per recorded sample [10]"
+    )
     parser.add_argument("--bits", type=int, help="converter resolution, bits [none]")
     parser.add_argument("--bandwidth", help="low-pass cut-off (Hz; e.g. 100kHz) [none]")
     parser.add_argument("--bandwidth-filter", choices=("bessel", "first_order"), default="bessel")
-    parser.add_argument("--trigger-delay", default="0", help="trigger time after the impact (s) [0]")
-    parser.add_argument("--trigger-jitter", default="0", help="trigger jitter, standard deviation (s) [0]")
+    parser.add_argument(
+        "--trigger-delay", default="0", help="trigger time after the impact (s) [0]"
+    )
+    parser.add_argument(
+        "--trigger-jitter", default="0", help="trigger jitter, standard deviation (s) [0]"
+    )
     parser.add_argument("--out", default="out/synth", help="output folder [out/synth]")
 
 
@@ -70,7 +94,9 @@ def _plot(trace, path: Path) -> None:
     axes.set_xlabel("time since trigger (ms)")
     axes.set_ylabel("force (N)")
     velocity = trace.header.get("striker_velocity_m_s")
-    axes.set_title(f"synthetic record, impact {velocity:g} m/s, noise {trace.header['noise_std_n']:.3g} N")
+    axes.set_title(
+        f"synthetic record, impact {velocity:g} m/s, noise {trace.header['noise_std_n']:.3g} N"
+    )
     axes.legend(fontsize=9)
     figure.tight_layout()
     save_figure(figure, path, dpi=110)
@@ -86,7 +112,9 @@ def run(args: argparse.Namespace) -> int:
     interval = options["sample_interval_s"]
     delay = parse_quantity(args.trigger_delay, "s", name="--trigger-delay")
     jitter = parse_quantity(args.trigger_jitter, "s", name="--trigger-jitter")
-    bandwidth = None if args.bandwidth is None else parse_quantity(args.bandwidth, "Hz", name="--bandwidth")
+    bandwidth = (
+        None if args.bandwidth is None else parse_quantity(args.bandwidth, "Hz", name="--bandwidth")
+    )
     record_length = int(round(options["t_end_s"] / interval))
     # Simulate past the record's end by the trigger offset (jitter up to 6 sigma).
     t_sim = options["t_end_s"] + max(delay, 0.0) + 6.0 * jitter + interval
@@ -96,36 +124,55 @@ def run(args: argparse.Namespace) -> int:
     for index, velocity in enumerate(velocities):
         setup = eqx.tree_at(lambda s: s.striker_velocity_m_s, base, jnp.asarray(float(velocity)))
         traces = simulate(
-            setup, t_end_s=t_sim, sample_interval_s=interval / args.oversample, contacts=options["contacts"],
-            dt_s=options["dt_s"], progress=True,
+            setup,
+            t_end_s=t_sim,
+            sample_interval_s=interval / args.oversample,
+            contacts=options["contacts"],
+            dt_s=options["dt_s"],
+            progress=True,
         )
         forces = {name: np.asarray(traces.forces_n[name]) for name in traces.channel_names}
         if args.noise_fraction is not None:
-            noise = {name: args.noise_fraction * float(np.max(np.abs(f))) for name, f in forces.items()}
+            noise = {
+                name: args.noise_fraction * float(np.max(np.abs(f))) for name, f in forces.items()
+            }
         else:
-            noise = 0.0 if args.noise_std is None else parse_quantity(args.noise_std, "N", name="--noise-std")
+            noise = (
+                0.0
+                if args.noise_std is None
+                else parse_quantity(args.noise_std, "N", name="--noise-std")
+            )
         setting = Acquisition(
-            sample_interval_s=interval, record_length=record_length, trigger_delay_s=delay,
-            trigger_jitter_s=jitter, bandwidth_hz=bandwidth, bandwidth_filter=args.bandwidth_filter,
-            noise_std_n=noise, bits=args.bits,
+            sample_interval_s=interval,
+            record_length=record_length,
+            trigger_delay_s=delay,
+            trigger_jitter_s=jitter,
+            bandwidth_hz=bandwidth,
+            bandwidth_filter=args.bandwidth_filter,
+            noise_std_n=noise,
+            bits=args.bits,
         )
         truth = {name: float(getattr(setup, name)) for name in TRUTH_FIELDS}
         truth["sensor_beads"] = ",".join(str(b) for b in setup.sensor_beads) or "none"
         if args.noise_fraction is not None:
             truth["noise_fraction"] = args.noise_fraction
-        trace = acquire_trace(setup, traces.time_s, forces, setting, seed=args.seed + index, truth=truth)
+        trace = acquire_trace(
+            setup, traces.time_s, forces, setting, seed=args.seed + index, truth=truth
+        )
         validate_header(trace.header, "synth")
         path = out / f"synth_v{velocity:.4g}.csv"
         write_trace(path, trace)
         _plot(trace, path.with_suffix(".png"))
-        listing.append({
-            "file": path.name,
-            "striker_velocity_m_s": float(velocity),
-            "seed": args.seed + index,
-            "noise_std_n": trace.header["noise_std_n"],
-            "channels": list(trace.channels),
-            "truth": truth,
-        })
+        listing.append(
+            {
+                "file": path.name,
+                "striker_velocity_m_s": float(velocity),
+                "seed": args.seed + index,
+                "noise_std_n": trace.header["noise_std_n"],
+                "channels": list(trace.channels),
+                "truth": truth,
+            }
+        )
         progress.advance(1)
     write_json(out / "synth.json", {"files": listing})
     print(f"wrote {len(listing)} trace files, their plots and synth.json to {out}")
