@@ -286,3 +286,25 @@ def test_viscous_restitution_law_of_the_chain():
     assert fit.c_v == pytest.approx(0.00816, abs=3e-4)
     assert float(theory.c_v_from_eta(2e-6, 201.4, R)) / fit.c_v == pytest.approx(3.0, abs=0.15)
     assert fit.eta_paper_s == pytest.approx(2e-6 / 3.0, rel=0.06)
+
+
+def test_secondary_waves_from_a_soft_wall():
+    """5 GPa wall (Fig. 3b,c): at contact 10 the reflected primary is 0.949 and one secondary
+    solitary wave 0.226 of the incident amplitude (reference); the wall force peaks at 0.600."""
+    setup = hertzchain.ChainSetup(wall_youngs_pa=5e9, wall_poisson=0.3)
+    traces = hertzchain.simulate(setup, t_end_s=4e-3, sample_interval_s=1e-6, contacts=(10,))
+    found = pulses.find_pulses(
+        traces.time_s, traces.forces_n["contact_10"], noise_std_n=0.0, min_fraction=0.01
+    )
+    assert [p.label for p in found] == ["incident", "reflected", "secondary_1"]
+    incident = found[0].peak_force_n
+    assert incident == pytest.approx(333.4, abs=0.5)
+    assert found[1].peak_force_n / incident == pytest.approx(0.949, abs=0.005)
+    assert found[2].peak_force_n / incident == pytest.approx(0.226, abs=0.005)
+    wall = pulses.find_pulses(
+        traces.time_s, traces.forces_n["wall"], channel="wall", noise_std_n=0.0
+    )
+    assert wall[0].label == "wall"
+    assert wall[0].peak_force_n / incident == pytest.approx(0.600, abs=0.003)
+    fit = pulses.fit_cos6(traces.time_s, traces.forces_n["contact_10"], window_s=found[2].window_s)
+    assert float(fit.peak_force_n) == pytest.approx(found[2].peak_force_n, rel=0.02)
