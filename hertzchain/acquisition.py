@@ -296,3 +296,19 @@ def acquire_trace(
             repr(float(value)) if isinstance(value, (float, int)) else str(value)
         )
     return TraceFile(header=header, time_s=record.time_s, channels=record.channels)
+
+
+def record_simulation(
+    setup, traces, acquisition: Acquisition = Acquisition(), *, seed=0, truth: dict | None = None
+) -> TraceFile:
+    """`acquire_trace` of every channel of a `Traces` from `simulate(setup, ...)`.
+
+    Simulate with a `sample_interval_s` several times finer than the recording's (10 times
+    is plenty for a 1 us recording) and long enough to cover the record after the trigger.
+    """
+    if np.ndim(traces.time_s) != 1:
+        raise ValueError("record_simulation takes the traces of one run, not of a batch.")
+    forces = {name: np.asarray(traces.forces_n[name]) for name in traces.channel_names}
+    return acquire_trace(
+        setup, np.asarray(traces.time_s), forces, acquisition, seed=seed, truth=truth
+    )

@@ -22,7 +22,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..acquisition import Acquisition, acquire_trace  # noqa: E402
+from ..acquisition import Acquisition, record_simulation  # noqa: E402
 from ..atomic import save_figure, write_json  # noqa: E402
 from ..integrate import simulate  # noqa: E402
 from ..progress import Progress  # noqa: E402
@@ -156,9 +156,7 @@ def run(args: argparse.Namespace) -> int:
         truth["sensor_beads"] = ",".join(str(b) for b in setup.sensor_beads) or "none"
         if args.noise_fraction is not None:
             truth["noise_fraction"] = args.noise_fraction
-        trace = acquire_trace(
-            setup, traces.time_s, forces, setting, seed=args.seed + index, truth=truth
-        )
+        trace = record_simulation(setup, traces, setting, seed=args.seed + index, truth=truth)
         validate_header(trace.header, "synth")
         path = out / f"synth_v{velocity:.4g}.csv"
         write_trace(path, trace)
