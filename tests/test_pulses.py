@@ -308,3 +308,14 @@ def test_secondary_waves_from_a_soft_wall():
     assert wall[0].peak_force_n / incident == pytest.approx(0.600, abs=0.003)
     fit = pulses.fit_cos6(traces.time_s, traces.forces_n["contact_10"], window_s=found[2].window_s)
     assert float(fit.peak_force_n) == pytest.approx(found[2].peak_force_n, rel=0.02)
+
+
+def test_fit_cos6_is_differentiable_in_the_data():
+    """d tau / d data through the fixed-iteration fit equals central finite differences."""
+    t, f = _cos6_samples(100.0, 301.3e-6, 47e-6)
+    f = f + 0.5 * np.random.default_rng(0).normal(size=f.size)
+    grad = jax.grad(lambda y: pulses.fit_cos6(t, y).tau_s)(jnp.asarray(f))
+    direction = 1e-3 * np.random.default_rng(1).normal(size=f.size)
+    plus = float(pulses.fit_cos6(t, f + direction).tau_s)
+    minus = float(pulses.fit_cos6(t, f - direction).tau_s)
+    assert float(grad @ direction) == pytest.approx((plus - minus) / 2, rel=1e-4)
