@@ -606,8 +606,7 @@ def find_pulses(time_s, force_n, *, channel="contact", min_fraction=0.05, noise_
     level = max(min_fraction * float(np.max(force)), 5.0 * noise)
     if not np.max(force) > level:
         return []
-    width = max(1, int(round(3.0 * noise / max(level, 1e-300))))
-    peaks, _ = find_peaks(force, height=level, prominence=level, distance=width)
+    peaks, _ = find_peaks(force, height=level, prominence=level)
     if len(peaks) == 0:
         return []
     peaks = _merge_shallow(force, list(peaks), level)
