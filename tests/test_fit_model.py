@@ -1,0 +1,71 @@
+"""The forward model of fits: consistency with the simulator, interpolation, Jacobian."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import fitting
+from fitting.model import interpolate
+from fitting.parameters import bare_speed_constant
+from fitting.synthetic import paper_setups, synthetic_traces
+
+TRUTH = {"eta": 2e-6, "mu": 0.19, "mu_star": 0.02}
+
+
+@pytest.fixture(scope="module")
+def small_problem():
+    """One file (V0 = 0.2 m/s, contact 5 and the wall, 1.4 ms), trigger offset 2 us, gain 1.05."""
+    setups = paper_setups([0.2], eta_s=TRUTH["eta"], mu=TRUTH["mu"], mu_star=TRUTH["mu_star"])
+    files = synthetic_traces(setups, contacts=(5,), t_end_s=1.4e-3, noise_std_n=0.2,
+                             time_offset_s=2e-6, gains=[{"contact_5": 1.05}], seed=3)
+    params = ("eta", "mu", "C", "striker_velocity", "time_offset", "gain")
+    problem = fitting.make_problem(files, params)
+    c_true = float(bare_speed_constant(setups[0])) * (1 + TRUTH["mu_star"]) ** (1 / 3)
+    x_true = np.array([TRUTH["eta"], TRUTH["mu"], c_true, 0.2, 2e-6, 1.05, 1.0])
+    return problem, x_true
+
+
+def test_interpolation_is_third_order():
+    errors = []
+    for n in (50, 100, 200):
+        grid = np.linspace(0, 1, n + 1)
+        values = jnp.sin(3 * grid) ** 2
+        query = jnp.linspace(0.05, 0.95, 101)
+        approx = interpolate(values, query * n)
+        errors.append(float(jnp.max(jnp.abs(approx - jnp.sin(3 * query) ** 2))))
+    # halving the spacing divides the error by about 8
+    assert errors[0] / errors[1] > 6 and errors[1] / errors[2] > 6
+
+
+def test_residuals_at_the_truth_are_the_noise(small_problem):
+    problem, x_true = small_problem
+    assert problem.labels == (
+        "eta", "mu", "C", "striker_velocity[trace0]", "time_offset[trace0]",
+        "gain[trace0:contact_5]", "gain[trace0:wall]",
+    )
+    residuals = jax.jit(problem.residuals)
+    r = np.asarray(residuals(x_true))
+    # whitened residuals at the true parameters are unit white noise (2800 samples)
+    assert np.mean(r**2) == pytest.approx(1.0, abs=0.1)
+    # and the model is not trivially matching: 10 % off in eta is visible
+    x_off = x_true.copy()
+    x_off[0] *= 1.1
+    assert np.mean(np.asarray(residuals(x_off)) ** 2) > 1.5
+
+
+def test_jacobian_matches_finite_differences(small_problem):
+    problem, x_true = small_problem
+    _, jac = fitting.residuals_and_jacobian(problem, x_true)
+    assert jac.shape == (problem.n_residuals, len(x_true))
+    residuals = jax.jit(problem.residuals)
+    for j in range(len(x_true)):
+        h = 1e-5 * abs(x_true[j])
+        up, down = x_true.copy(), x_true.copy()
+        up[j] += h
+        down[j] -= h
+        fd = (np.asarray(residuals(up)) - np.asarray(residuals(down))) / (2 * h)
+        scale = np.linalg.norm(fd)
+        assert scale > 0
+        # (the Coulomb stick-slip switches make the residual only piecewise smooth)
+        assert np.linalg.norm(jac[:, j] - fd) / scale < 1e-3, problem.labels[j]
