@@ -164,6 +164,10 @@ def run(args: argparse.Namespace) -> int:
             baseline_units=baseline_units, baseline=plan if baseline_units is None else None,
         )
         recommended = optimization.recommended
+        given = sum(len(e.channels) for e in plan)
+        if args.optimize < given:
+            print(f"  note: the recommended plan has {args.optimize} recordings, the given plan "
+                  f"{given}; compare plans of the same size (--optimize {given}).")
         data["optimization"] = optimization.to_json()
         chosen = ", ".join(f"{c} at {v:g} m/s" for v, c in optimization.chosen)
         print(f"  recommended: {chosen}")
