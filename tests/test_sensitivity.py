@@ -253,3 +253,19 @@ def test_command_line_writes_json_csv_and_plots(tmp_path):
     assert (out / "trace_sensitivity.csv").exists()
     assert main(["sensitivity", "--n-beads", "6", "--params", "eta,foo", "--observables", "wall_peak",
                  "--out", str(out)]) == 2
+
+
+@pytest.mark.slow
+def test_plastic_contacts_and_preload_match_finite_differences():
+    """Thornton elastic-plastic contacts above the yield force, and a static preload."""
+    setup = hc.ChainSetup(6, plasticity=True, striker_velocity_m_s=1.2, eta_s=0.5e-6,
+                          precompression_n=2.0)
+    grid = hc.choose_time_grid(setup, t_end_s=0.4e-3, sample_interval_s=1e-6, steps_per_contact=60)
+    params = ("yield_force", "precompression", "eta")
+    observables = ("wall_peak", "contact_2_peak", "contact_4_arrival", "dissipated_plastic")
+    result = S.sensitivity(setup, params, observables, grid=grid)
+    assert float(result.values["dissipated_plastic"]) > 0
+    fd = _central_differences(setup, params, observables, grid, 1e-6)
+    _check_against_fd(result, fd)
+    # a higher yield force leaves more of the impact elastic: less plastic loss
+    assert result.derivative["dissipated_plastic"]["yield_force"] < 0
