@@ -306,29 +306,52 @@ def worker_machine() -> dict:
     return info
 
 
-def worker_fit(out_dir: str) -> dict:
-    """One fit of eta, mu, C on 10 traces and one diagnosis, through `benchmarks/fit_bench.py`."""
-    script = HERE / "fit_bench.py"
-    if not script.exists():
-        return {"available": False, "reason": "benchmarks/fit_bench.py not available"}
-    target = Path(out_dir) / "fit_bench"
-    start = time.perf_counter()
-    proc = subprocess.run(
-        [sys.executable, str(script), "--out", str(target)], capture_output=True, text=True, check=False
+def worker_fit(quick: bool) -> dict:
+    """One fit of eta, mu, C on 10 synthetic traces and one diagnosis, with what `fitting` provides."""
+    try:
+        import fitting
+        from fitting.synthetic import paper_setups, synthetic_traces
+    except ImportError as error:
+        return {"available": False, "reason": f"fitting not available: {error}"}
+    import numpy as np
+
+    truth = {"eta_s": 2e-6, "mu": 0.19}
+    velocities = np.linspace(0.15, 0.6, 10)
+    t_end = 1.5e-3 if quick else 2.5e-3
+    files = synthetic_traces(
+        paper_setups(velocities, **truth), contacts=(6, 11), t_end_s=t_end, sample_interval_s=2e-6,
+        noise_std_n=0.3, seed=1,
     )
-    elapsed = time.perf_counter() - start
-    result = {"available": proc.returncode == 0, "wall_s": elapsed, "returncode": proc.returncode}
-    for candidate in sorted(target.glob("*.json")) if target.exists() else []:
-        try:
-            result[candidate.stem] = json.loads(candidate.read_text())
-        except (OSError, ValueError):
-            pass
-    if proc.returncode != 0:
-        result["reason"] = (proc.stderr or proc.stdout)[-2000:]
+    result = {"available": True, "n_traces": len(files), "t_end_s": t_end, "truth": truth}
+    start = time.perf_counter()
+    fitted = fitting.fit(files, ("eta", "mu", "C"), progress=False, throw=False)
+    result["fit_s"] = time.perf_counter() - start
+    result["fit_values"] = {k: float(v) for k, v in dict(fitted.values).items()}
+    result["fit_stderr"] = {k: float(v) for k, v in dict(fitted.stderr).items()}
+    result["fit_converged"] = bool(fitted.converged)
+    result["fit_steps"] = int(fitted.n_steps)
+    try:
+        from fitting.diagnosis import diagnose
+    except ImportError as error:
+        result["diagnosis"] = {"available": False, "reason": str(error)}
+        return result
+    start = time.perf_counter()
+    diagnosis = diagnose(files[:3], progress=False)
+    result["diagnosis"] = {
+        "available": True,
+        "n_traces": 3,
+        "wall_s": time.perf_counter() - start,
+        "summary": str(getattr(diagnosis, "effects", diagnosis))[:500],
+    }
     return result
 
 
-WORKERS = {"throughput": worker_throughput, "gradient": worker_gradient, "machine": worker_machine}
+WORKERS = {
+    "throughput": worker_throughput,
+    "gradient": worker_gradient,
+    "machine": worker_machine,
+    "fit": worker_fit,
+}
 
 
 def _spawn(kind: str, host_devices: int = 1, **kwargs) -> dict:
@@ -428,7 +451,7 @@ def main(argv=None) -> int:
         if b > 1:
             jobs.append(dict(impl="hertzchain", n_beads=n, batch=b, steps=steps, devices=1))
     jobs.append(dict(impl="hertzchain-solve", n_beads=21, batch=1, steps=STANDARD_STEPS, devices=1))
-    progress = Progress(len(jobs) + 2, "benchmarks")
+    progress = Progress(len(jobs) + 3, "benchmarks")
     machine = _spawn("machine")
     progress.advance()
     rows = []
@@ -445,7 +468,8 @@ def main(argv=None) -> int:
         progress.advance()
     gradient = _spawn("gradient")
     progress.advance()
-    fit = {"available": False, "reason": "skipped (--skip-fit)"} if args.skip_fit else worker_fit(str(out))
+    fit = {"available": False, "reason": "skipped (--skip-fit)"} if args.skip_fit else _spawn("fit", quick=args.quick)
+    progress.advance()
 
     def pick(label, n, b):
         match = [r for r in rows if r["label"] == label and (r["n_beads"], r["batch"]) == (n, b)]

@@ -97,6 +97,11 @@ def stack_setups(setups) -> ChainSetup:
     return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *setups)
 
 
+def build_model_contacts(setup: ChainSetup) -> range:
+    """Indices of the model's internal contacts (Hertz contacts and sensor springs)."""
+    return range(setup.n_beads + len(setup.sensor_beads))
+
+
 def fast_path_reason(setup: ChainSetup) -> str | None:
     """None if `solve_batched` can use the fast path for `setup`, else why not."""
     if setup.plasticity:
@@ -232,7 +237,6 @@ def _kernel(p, *, flags: _Flags, grid: TimeGrid, rows: tuple[int, ...], block_st
     v = x.at[0].set(p["v0"])
     total, wall, body, viscous = _forces(p, flags, x, v)
     state = _State(x, v, body * p["inv_mass"], viscous, total, wall, jnp.zeros_like(x[0]))
-    row_index = np.asarray(rows, dtype=int)
     steps = grid.steps_per_sample
     unrolled = steps <= block_steps
 
@@ -249,7 +253,7 @@ def _kernel(p, *, flags: _Flags, grid: TimeGrid, rows: tuple[int, ...], block_st
         if flags.viscous:
             # Samples record the forces at the step's final velocity, as `solve` does.
             total, wall, _, _ = _forces(p, flags, state.x, state.v)
-        return state, jnp.concatenate([total[row_index], wall[None]])
+        return state, jnp.stack([total[r] for r in rows] + [wall])
 
     def iteration(count):
         def run(state, _):
@@ -270,7 +274,6 @@ def _kernel(p, *, flags: _Flags, grid: TimeGrid, rows: tuple[int, ...], block_st
     return records, state
 
 
-@eqx.filter_jit
 def _run(params, flags, grid, rows, block_steps, devices):
     """The kernel, sharded over `devices` along the batch (last) axis when there are several."""
 
@@ -297,14 +300,7 @@ def _run(params, flags, grid, rows, block_steps, devices):
     return jax.shard_map(local, mesh=mesh, in_specs=in_specs, out_specs=out_specs)(params)
 
 
-@eqx.filter_jit
-def _batched_params(setup):
-    return jax.vmap(_chain_params)(setup)
-
-
-def kernel_params(setup: ChainSetup, pad_to: int | None = None) -> dict:
-    """Kernel arrays of a batched setup in (…, B) layout, padded to `pad_to` chains by
-    repeating the last chain (sharding needs a batch divisible by the device count)."""
+def _params(setup: ChainSetup, pad_to: int | None):
     batch = batch_size(setup)
     if pad_to is not None and pad_to > batch:
         setup = jax.tree_util.tree_map(
@@ -313,8 +309,37 @@ def kernel_params(setup: ChainSetup, pad_to: int | None = None) -> dict:
             ),
             setup,
         )
-    params = _batched_params(setup)
+    params = jax.vmap(_chain_params)(setup)
     return jax.tree_util.tree_map(lambda leaf: jnp.moveaxis(leaf, 0, -1), params)
+
+
+def kernel_params(setup: ChainSetup, pad_to: int | None = None) -> dict:
+    """Kernel arrays of a batched setup in (…, B) layout, padded to `pad_to` chains by
+    repeating the last chain (sharding needs a batch divisible by the device count)."""
+    return _params_jit(setup, pad_to)
+
+
+_params_jit = eqx.filter_jit(_params)
+
+
+@eqx.filter_jit
+def _solve_fast(params, batch, flags, grid, rows, names, user, block_steps, devices):
+    """The kernel and the output layout in one compiled call. The parameters are computed
+    apart, on one device, so that sharded and unsharded runs see the very same numbers."""
+    records, maxima, summary = _run(params, flags, grid, rows, block_steps, devices)
+    records, maxima, summary = records[..., :batch], maxima[..., :batch], summary[..., :batch]
+    initial, kinetic, potential, dissipated = summary
+    return BatchedTraces(
+        time_s=grid.sample_interval_s * jnp.arange(1, grid.n_samples + 1, dtype=jnp.float64),
+        forces_n={name: records[:, i, :].T for i, name in enumerate(names)},
+        max_force_n=maxima[np.asarray(user)].T,
+        initial_energy_j=initial,
+        kinetic_j=kinetic,
+        potential_j=potential,
+        dissipated_j=dissipated,
+        energy_error_j=initial - kinetic - potential - dissipated,
+        channel_names=names,
+    )
 
 
 def solve_batched(
@@ -347,8 +372,8 @@ def solve_batched(
     batch = batch_size(setup)
     _layout(setup, recording)
     names = _channel_names(setup, recording)
-    time = grid.sample_interval_s * jnp.arange(1, grid.n_samples + 1, dtype=jnp.float64)
     if fast_path_reason(setup) is not None:
+        time = grid.sample_interval_s * jnp.arange(1, grid.n_samples + 1, dtype=jnp.float64)
         return _solve_general(setup, grid, recording, names, time)
     flags = _flags(setup)
     rows = tuple(internal_contact_index(setup, k) for k in recording.contacts) + tuple(
@@ -358,25 +383,10 @@ def solve_batched(
     padded = max(batch, pad_to or 0)
     if devices is not None:
         padded = len(devices) * math.ceil(padded / len(devices))
+    n_internal = len(build_model_contacts(setup))
+    user = tuple(internal_contact_index(setup, k) for k in range(setup.n_beads)) + (n_internal,)
     params = kernel_params(setup, pad_to=padded)
-    records, maxima, summary = _run(params, flags, grid, rows, int(block_steps), devices)
-    records, maxima, summary = records[..., :batch], maxima[..., :batch], summary[..., :batch]
-    forces = {name: records[:, i, :].T for i, name in enumerate(names)}
-    user = np.asarray(
-        [internal_contact_index(setup, k) for k in range(setup.n_beads)] + [maxima.shape[0] - 1]
-    )
-    initial, kinetic, potential, dissipated = summary
-    return BatchedTraces(
-        time_s=time,
-        forces_n=forces,
-        max_force_n=maxima[user].T,
-        initial_energy_j=initial,
-        kinetic_j=kinetic,
-        potential_j=potential,
-        dissipated_j=dissipated,
-        energy_error_j=initial - kinetic - potential - dissipated,
-        channel_names=names,
-    )
+    return _solve_fast(params, batch, flags, grid, rows, names, user, int(block_steps), devices)
 
 
 @eqx.filter_jit

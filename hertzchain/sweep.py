@@ -217,7 +217,9 @@ def summarize(setup: ChainSetup, contacts, out: BatchedTraces) -> dict[str, np.n
     maxima = np.asarray(out.max_force_n)
     peak_times = {}
     for name in out.channel_names:
-        trace = jnp.asarray(out.forces_n[name])
+        # Via the host: the analysis then runs on one device whatever the run's sharding,
+        # so sharded and unsharded sweeps give the same table to the last bit.
+        trace = jnp.asarray(np.asarray(out.forces_n[name]))
         if name == "wall":
             columns["peak_wall_n"] = maxima[:, -1]
         elif name.startswith("contact_"):
