@@ -6,6 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+# Imported before the tests change directory: the examples run from a temporary folder.
+import fitting  # noqa: F401
+import hertzchain  # noqa: F401
+
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 
@@ -45,3 +49,15 @@ def test_02_sweep_velocity_wall(small):
     assert np.all((gap < -0.05) & (gap > -0.16))
     rows = (small / "02_force_ratio.csv").read_text().splitlines()
     assert len(rows) == 1 + 6
+
+
+@pytest.mark.slow  # one fit through the simulator: about 40 s of CPU at the small size
+def test_03_fit_traces(small):
+    namespace = _run("03_fit_traces.py")
+    result = namespace["result"]
+    assert result.converged
+    assert result.reduced_chi2 == pytest.approx(1.0, abs=0.1)
+    for label, true in (("eta", 1.7e-6), ("mu", 0.12)):
+        assert abs(result.values[label] - true) < 4 * result.stderr[label]
+    assert result.values["C"] == pytest.approx(201.385, abs=0.1)
+    assert (small / "03_fit" / "fit.json").exists()
