@@ -54,7 +54,8 @@ print("trace files:", ", ".join(p.name for p in paths))
 # noise level are read from each file's header.
 
 # %%
-result = fitting.fit(paths, params=("eta", "mu", "C"), start={"eta": 1e-6, "mu": 0.05}, progress=False)
+result = fitting.fit(paths, params=("eta", "mu", "C"), start={"eta": 1e-6, "mu": 0.05},
+                     progress=False)
 truth = {"eta": TRUE_ETA_S, "mu": TRUE_MU}
 for label in result.labels:
     value, error = result.values[label], result.stderr[label]

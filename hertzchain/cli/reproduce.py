@@ -21,11 +21,13 @@ def run(args: argparse.Namespace) -> int:
     print(f"reproducing Job et al., PRL 94, 178002 (2005){' (quick)' if args.quick else ''} ...",
           flush=True)
     numbers = reproduce(out, quick=args.quick)
-    print(f"wrote fig1.png, fig2.png, fig3.png, their CSV data, numbers.json and numbers.md to {out}")
+    print(f"wrote fig1.png, fig2.png, fig3.png, their CSV data, numbers.json and numbers.md "
+          f"to {out}")
     width = max(len(row["quantity"]) for row in numbers["rows"])
     for row in numbers["rows"]:
         ours = "-" if row["ours"] is None else f"{row['ours']:.5g}"
         paper = "-" if row["paper"] is None else f"{row['paper']:.5g}"
-        relative = "" if row["relative_difference"] is None else f"{100 * row['relative_difference']:+.2f} %"
+        difference = row["relative_difference"]
+        relative = "" if difference is None else f"{100 * difference:+.2f} %"
         print(f"  {row['quantity']:<{width}}  {ours:>10}  paper {paper:>10}  {relative}")
     return 0

@@ -17,7 +17,12 @@ import jax.numpy as jnp
 
 from ..chain import ChainSetup
 from ..integrate import Recording, check_yield, solve
-from ..timegrid import DEFAULT_STEPS_PER_CONTACT, TimeGrid, choose_time_grid, shortest_contact_time_s
+from ..timegrid import (
+    DEFAULT_STEPS_PER_CONTACT,
+    TimeGrid,
+    choose_time_grid,
+    shortest_contact_time_s,
+)
 from ..traces import Traces
 
 

@@ -30,7 +30,9 @@ PAPER: dict[str, PaperValue] = {
     "bead_energy_over_wave": PaperValue(
         0.44, "U_chain is about 44 % ... roughly supported by the most compressed contact"
     ),
-    "yield_force_N": PaperValue(470.0, "the corresponding maximum compression force is roughly F_Y = 470 N"),
+    "yield_force_N": PaperValue(
+        470.0, "the corresponding maximum compression force is roughly F_Y = 470 N"
+    ),
     "yield_overlap_um": PaperValue(11.0, "which corresponds to an overlap delta_Y = 11 um"),
     "duration_over_theory": PaperValue(1.0, "the duration 2 tau = 2 R sqrt(10) / v (Eq. 3)"),
     "duration_broadening_eta2us": PaperValue(
@@ -38,7 +40,9 @@ PAPER: dict[str, PaperValue] = {
         "a noteworthy disagreement ... for the duration ... about 10 % lower than experimental "
         "values; eta_n = 2 us gives a good agreement",
     ),
-    "eta_numeric_s": PaperValue(2e-6, "for eta_n = 2 us and mu = 0, a good agreement can be obtained"),
+    "eta_numeric_s": PaperValue(
+        2e-6, "for eta_n = 2 us and mu = 0, a good agreement can be obtained"
+    ),
     "eta_experiment_s": PaperValue(1.8e-6, "Then, eta_e = 1.8 us and mu_e = 0.19"),
     "mu_experiment": PaperValue(0.19, "Then, eta_e = 1.8 us and mu_e = 0.19"),
     "C_v_experiment": PaperValue(1.9e-2, "we determine that C_v = 1.9e-2 and C_s = 1.7e-1"),

@@ -177,7 +177,10 @@ def run_sweep(plan: Plan) -> Sweep:
     named = wall_materials()
     walls = list(named.values()) + [(y, 0.3) for y in plan.wall_sweep_pa]
     combos += [(0.3, 0.0, 0.0, y, nu) for y, nu in walls]
-    fields = lambda s: (s.striker_velocity_m_s, s.eta_s, s.mu, s.wall_youngs_pa, s.wall_poisson)  # noqa: E731
+
+    def fields(s):
+        return s.striker_velocity_m_s, s.eta_s, s.mu, s.wall_youngs_pa, s.wall_poisson
+
     setups = [
         eqx.tree_at(fields, setup, tuple(jnp.asarray(x, dtype=float) for x in combo))
         for combo in combos
@@ -459,7 +462,8 @@ def measure_fig2(sweep: Sweep) -> Fig2:
     mass = float(setup.bead_mass_kg[0])
     velocities = np.asarray(plan.velocities_m_s, dtype=float)
     speed, amplitude = _incident(time, _stack_sweep(sweep, SPEED_CONTACTS), radius)
-    peak_time, peak = (_np(a) for a in _first_peaks(time, _stack_sweep(sweep, RESTITUTION_CONTACTS)))
+    peaks = _first_peaks(time, _stack_sweep(sweep, RESTITUTION_CONTACTS))
+    peak_time, peak = (_np(a) for a in peaks)
     at_duration = RESTITUTION_CONTACTS.index(DURATION_CONTACT)
     first_time, first_force = peak_time[..., at_duration], peak[..., at_duration]
     # Restitution at contacts 6-17, normalised by the dissipationless run.
@@ -587,7 +591,9 @@ class Fig3:
 def wall_materials() -> dict[str, tuple[float, float]]:
     """Wall name -> (Young's modulus Pa, Poisson ratio): the paper's samples, the 5 GPa
     sample, the beads' steel (the paper's bare sensor cap) and a rigid wall."""
-    walls = {name: (MATERIALS[name].youngs_pa, MATERIALS[name].poisson) for name in PAPER_WALL_MATERIALS}
+    walls = {
+        name: (MATERIALS[name].youngs_pa, MATERIALS[name].poisson) for name in PAPER_WALL_MATERIALS
+    }
     walls["soft_5GPa"] = (PAPER_SOFT_WALL_PA, MATERIALS["soft_5GPa"].poisson)
     walls["steel"] = (BEAD_STEEL.youngs_pa, BEAD_STEEL.poisson)
     walls["rigid"] = (math.inf, BEAD_STEEL.poisson)

@@ -30,7 +30,8 @@ def figure1(fig1: Fig1, sensor: SensorRun, deconvolved_n: np.ndarray | None = No
     a.plot(ms, sensor.front_n[1], "--", color="tab:blue", lw=1.2,
            label=f"true force at its front contact ({SENSOR_BEAD})")
     if deconvolved_n is not None:
-        a.plot(ms, deconvolved_n, ":", color="tab:red", lw=1.6, label="$F_s$ deconvolved (Eq. 4, FFT)")
+        a.plot(ms, deconvolved_n, ":", color="tab:red", lw=1.6,
+               label="$F_s$ deconvolved (Eq. 4, FFT)")
     a.set_ylabel("force (N)")
     a.set_title(
         f"(a) embedded sensor (beta = 0.11, f0 = 85 kHz): raw peak = "
@@ -85,7 +86,8 @@ def figure2(fig2: Fig2):
            label=f"fit to simulation: C_n = {fig2.c_numeric:.2f} (paper 201.5)")
     a.plot(force, PAPER["C_experiment"].value * force ** (1 / 6), ":", color="tab:gray",
            label="paper's experimental fit C_e = 203.6")
-    a.plot(fig2.amplitude_n[el], fig2.speed_m_s[el], "bo", ms=5, label="simulation, dissipationless")
+    a.plot(fig2.amplitude_n[el], fig2.speed_m_s[el], "bo", ms=5,
+           label="simulation, dissipationless")
     a.plot(fig2.amplitude_n[damped], fig2.speed_m_s[damped], "rs", ms=5, mfc="none",
            label="simulation, eta = 2 us")
     a.set_xscale("log")
@@ -141,7 +143,8 @@ def figure3(fig3: Fig3):
     a.plot(youngs / 1e9, theory.wall_force_ratio_paper(203e9, youngs), "k--", lw=1,
            label=r"Eq. 5: $2^{6/5}(1 + Y_b/Y_w)^{-2/5}$")
     if len(fig3.sweep_pa):
-        a.plot(fig3.sweep_pa / 1e9, fig3.sweep_ratio, "b-", lw=1.2, label="simulation (wall nu = 0.3)")
+        a.plot(fig3.sweep_pa / 1e9, fig3.sweep_ratio, "b-", lw=1.2,
+               label="simulation (wall nu = 0.3)")
     finite = [case for case in fig3.cases.values() if np.isfinite(case.youngs_pa)]
     a.plot([cs.youngs_pa / 1e9 for cs in finite], [cs.force_ratio for cs in finite], "bo", ms=6,
            label="simulation, wall samples")

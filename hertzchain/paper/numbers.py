@@ -81,7 +81,9 @@ def _paper(key):
     return PAPER[key].value
 
 
-def build_numbers(plan: Plan, fig1: Fig1, sensor: SensorRun, fig2: Fig2, fig3: Fig3, *, quick: bool) -> dict:
+def build_numbers(
+    plan: Plan, fig1: Fig1, sensor: SensorRun, fig2: Fig2, fig3: Fig3, *, quick: bool
+) -> dict:
     """All numbers of the reproduction: required keys, per-wall objects, rows and definitions."""
     setup = ChainSetup()
     kappa = float(setup.contact_kappa()[1])
@@ -94,11 +96,14 @@ def build_numbers(plan: Plan, fig1: Fig1, sensor: SensorRun, fig2: Fig2, fig3: F
     eq5_nu = {name: cases[name].ratio_eq5_nu for name in walls}
     momentum = {name: cases[name].momentum_ratio for name in walls}
     secondary = {
-        name: (cases[name].reflected[1] if len(cases[name].reflected) > 1 else 0.0) for name in walls
+        name: (cases[name].reflected[1] if len(cases[name].reflected) > 1 else 0.0)
+        for name in walls
     }
     soft, steel = cases["soft_5GPa"], cases["steel"]
     i_top = int(np.argmax(fig2.velocities_m_s))
-    paper_eta_us = 1e6 * float(theory.eta_from_c_v(PAPER_C_V, _paper("C_numeric"), float(setup.bead_radius_m[0])))
+    broadening = list(zip(fig2.broadening, fig2.duration_amplitude_n[:, 1, 0]))
+    radius = float(setup.bead_radius_m[0])
+    paper_eta_us = 1e6 * float(theory.eta_from_c_v(PAPER_C_V, _paper("C_numeric"), radius))
     f_top = float(fig2.duration_amplitude_n[i_top, 1, 0])
     rows = [
         _row("kappa_N_per_um15", "kappa, bead-bead Hertz stiffness", kappa * 1e-9,
@@ -118,11 +123,12 @@ def build_numbers(plan: Plan, fig1: Fig1, sensor: SensorRun, fig2: Fig2, fig3: F
              "paper: eta = 2 us matches the experiment's C_e = 203.6 +- 8.9", "m s^-1 N^-1/6"),
         _row("kinetic_fraction", "kinetic share K/(K+U) of the travelling wave",
              fig1.kinetic_fraction, _paper("kinetic_fraction"),
-             f"oscillates {fig1.kinetic_fraction_range[0]:.3f}-{fig1.kinetic_fraction_range[1]:.3f} "
-             "as the peak hops between contacts; exact value 5/9"),
+             "oscillates {:.3f}-{:.3f} as the peak hops between contacts; exact value 5/9".format(
+                 *fig1.kinetic_fraction_range)),
         _row("bead_energy_over_wave", "U_bead^max / wave energy", fig1.bead_energy_over_wave,
              _paper("bead_energy_over_wave"),
-             "Eq. 5 assumes U_chain ~ U_bead^max; the most compressed contact holds 38 %, not 44 %"),
+             "Eq. 5 assumes U_chain ~ U_bead^max; the most compressed contact holds 38 %, "
+             "not 44 %"),
         _row("yield_force_N", "yield force F_Y (mean contact pressure = 2 GPa)", yield_force,
              _paper("yield_force_N"), unit="N"),
         _row("yield_overlap_um", "yield overlap delta_Y", yield_overlap * 1e6,
@@ -134,7 +140,7 @@ def build_numbers(plan: Plan, fig1: Fig1, sensor: SensorRun, fig2: Fig2, fig3: F
              f"2 tau(eta = 2 us) / 2 tau(eta = 0) at the same force ({f_top:.0f} N)",
              float(fig2.broadening[i_top]), _paper("duration_broadening_eta2us"),
              "broadening grows with force: "
-             + ", ".join(f"{b:.3f} at {f:.0f} N" for b, f in zip(fig2.broadening, fig2.duration_amplitude_n[:, 1, 0]))),
+             + ", ".join(f"{b:.3f} at {f:.0f} N" for b, f in broadening)),
         _row("C_v_eta2us", "C_v fitted to the simulation with eta = 2 us",
              fig2.viscous_fit.c_v, fig2.c_v_paper_conversion,
              "paper value = its conversion C_v = 5 C eta / (2 sqrt(10) R) for eta = 2 us: the "
@@ -151,13 +157,16 @@ def build_numbers(plan: Plan, fig1: Fig1, sensor: SensorRun, fig2: Fig2, fig3: F
              fig2.mu_for_paper_c_s, _paper("mu_experiment"), "linear in mu from the mu = 0.19 fit"),
         _row("sensor_peak_ratio", "embedded sensor: raw peak / true peak", sensor.peak_ratio,
              _paper("sensor_peak_ratio"), "paper: a correction of order beta = 0.11"),
-        _row("sensor_deconvolution_error", "FFT deconvolution of the sensor: max error / peak, incident",
+        _row("sensor_deconvolution_error",
+             "FFT deconvolution of the sensor: max error / peak, incident",
              float(sensor.deconvolution_error[0]), None,
-             f"reflected pulse (delay reversed): {float(sensor.deconvolution_error_reflected[0]):.4f}; "
+             "reflected pulse (delay reversed): "
+             f"{float(sensor.deconvolution_error_reflected[0]):.4f}; "
              f"with eta = 2 us: {float(sensor.deconvolution_error[1]):.4f} / "
              f"{float(sensor.deconvolution_error_reflected[1]):.4f}; raw signal: "
              f"{1 - sensor.peak_ratio:.3f} low at the peak"),
-        _row("potential_share_at_wall", "largest potential energy / impact energy at the steel wall",
+        _row("potential_share_at_wall",
+             "largest potential energy / impact energy at the steel wall",
              steel.max_potential_share, _paper("potential_share_at_wall"),
              f"the wall contact alone holds {steel.max_wall_share:.3f} (rigid wall: "
              f"{cases['rigid'].max_wall_share:.3f})"),
@@ -166,7 +175,8 @@ def build_numbers(plan: Plan, fig1: Fig1, sensor: SensorRun, fig2: Fig2, fig3: F
              f"dissipationless: {float(fig1.wall_peak_time_s[0]) * 1e3:.3f} ms", "ms"),
         _row("ejection_ms", "ejection: K >= 99 % of K + U again after the wall, eta = 2 us",
              float(fig1.ejection_time_s[1]) * 1e3, _paper("ejection_ms"),
-             f"paper: 'after t = 2 ms'; dissipationless: {float(fig1.ejection_time_s[0]) * 1e3:.3f} ms",
+             "paper: 'after t = 2 ms'; dissipationless: "
+             f"{float(fig1.ejection_time_s[0]) * 1e3:.3f} ms",
              "ms"),
     ]
     for name in walls:
@@ -181,9 +191,11 @@ def build_numbers(plan: Plan, fig1: Fig1, sensor: SensorRun, fig2: Fig2, fig3: F
         ))
     for name in ("steel", "rigid", "soft_5GPa"):
         rows.append(_row(
-            f"momentum_ratio.{name}", f"momentum at the wall: wall area / (incident + reflected), {name}",
+            f"momentum_ratio.{name}",
+            f"momentum at the wall: wall area / (incident + reflected), {name}",
             momentum[name], _paper("momentum_ratio"),
-            "the last beads leave the wall with momentum that never passes back through the contact",
+            "the last beads leave the wall with momentum that never passes back through the "
+            "contact",
         ))
     rows.append(_row("secondary_wave.soft_5GPa", "secondary solitary wave / incident, 5 GPa wall",
                      secondary["soft_5GPa"], None,
@@ -207,11 +219,15 @@ def build_numbers(plan: Plan, fig1: Fig1, sensor: SensorRun, fig2: Fig2, fig3: F
         "yield_overlap_um": yield_overlap * 1e6,
         "duration_over_theory": fig2.duration_over_theory,
         "duration_broadening_eta2us": {
-            f"{f:.1f}N": float(b) for f, b in zip(fig2.duration_amplitude_n[:, 1, 0], fig2.broadening)
+            f"{f:.1f}N": float(b) for b, f in broadening
         },
         "restitution": {
-            "viscous_eta2us": {"C_v": fig2.viscous_fit.c_v, "C_v_stderr": fig2.viscous_fit.c_v_stderr},
-            "friction_mu019": {"C_s": fig2.friction_fit.c_s, "C_s_stderr": fig2.friction_fit.c_s_stderr},
+            "viscous_eta2us": {
+                "C_v": fig2.viscous_fit.c_v, "C_v_stderr": fig2.viscous_fit.c_v_stderr,
+            },
+            "friction_mu019": {
+                "C_s": fig2.friction_fit.c_s, "C_s_stderr": fig2.friction_fit.c_s_stderr,
+            },
             "both": {"C_v": fig2.joint_fit.c_v, "C_s": fig2.joint_fit.c_s},
             "paper_conversion_C_v_for_eta2us": fig2.c_v_paper_conversion,
             "paper_conversion_C_s_for_mu019": fig2.c_s_paper_conversion,
@@ -287,7 +303,8 @@ def numbers_markdown(numbers: dict) -> str:
     for row in numbers["rows"]:
         relative = row["relative_difference"]
         lines.append(
-            f"| {row['quantity']} | {row['unit']} | {_format(row['ours'])} | {_format(row['paper'])} | "
+            f"| {row['quantity']} | {row['unit']} | {_format(row['ours'])} | "
+            f"{_format(row['paper'])} | "
             f"{'–' if relative is None else f'{100 * relative:+.2f} %'} | {row['note']} |"
         )
     lines += ["", "## Definitions", ""]

@@ -124,7 +124,9 @@ def _fig3_files(out: Path, fig3) -> None:
     _save(figures.figure3(fig3), out / "fig3.png")
 
 
-def reproduce(out_dir, *, quick: bool = False, plan: Plan | None = None, progress: bool = True) -> dict:
+def reproduce(
+    out_dir, *, quick: bool = False, plan: Plan | None = None, progress: bool = True
+) -> dict:
     """Regenerate the paper's simulation results into `out_dir` and return the numbers.
 
     **Arguments:**
