@@ -9,11 +9,13 @@ grid, and central finite differences of the simulator on the same grid agree wit
 **Parameters** (`PARAMETERS`; SI units): `eta` (s), `mu`, `mu_star`, `striker_velocity`
 (m/s), `striker_mass` (kg, at fixed striker radius), `wall_youngs` (Pa), `wall_poisson`,
 `bead_radius` (m), `bead_density` (kg/m^3), `bead_youngs` (Pa), `bead_poisson`,
-`sensor_beta`, `sensor_f0` (Hz), `precompression` (N), and `bead_masses` (kg, one per bead:
-N parameters, at fixed radii). The bead parameters act on the beads, not on the striker;
-for a chain of unequal beads they scale every bead's value in proportion to bead 1's. The
-yield stress is not a parameter: the core model is elastic (a yield force is only
-checked), so no observable depends on it.
+`sensor_beta`, `sensor_f0` (Hz), `precompression` (N, at a positive preload: at zero the
+static overlap F^(2/3) makes the derivative singular), `yield_stress` (Pa) and
+`yield_force` (N, the bead-bead contacts' yield force; all contacts' yield forces scale
+together as the yield stress cubed) for elastic-plastic contacts (`plasticity=True`), and
+`bead_masses` (kg, one per bead: N parameters, at fixed radii). The bead parameters act on
+the beads, not on the striker; for a chain of unequal beads they scale every bead's value
+in proportion to bead 1's.
 
 **Observables** (`observable_names`), with `CH` one of `contact_K`, `wall`, `sensor_K`:
 
@@ -32,8 +34,8 @@ checked), so no observable depends on it.
 - `speed_K_L` (m/s): pulse speed from contact K to contact L (K < L): the distance between
   the contact points at rest over the difference of their arrival times.
 - `force_ratio_K`: wall peak over the incident peak at contact K (Eq. 5 of the paper).
-- `dissipated_viscous`, `dissipated_friction`, `dissipated_total` (J): energy dissipated
-  by each mechanism by the end of the record.
+- `dissipated_viscous`, `dissipated_friction`, `dissipated_plastic`, `dissipated_total`
+  (J): energy dissipated by each mechanism by the end of the record.
 - `trace_CH` (N, one value per sample): the whole force trace.
 
 Elasticities are $\\partial\\ln O/\\partial\\ln p = (p/O)\\,\\partial O/\\partial p$. For a
@@ -41,6 +43,13 @@ parameter whose value is 0 the elasticity is 0; for an observable whose value is
 undefined and reported as None (JSON null). For whole traces the "elasticity" is
 $p\\,\\partial F(t)/\\partial p$ divided by the trace's largest |F| (a pointwise ratio
 would divide by zero before the pulse arrives).
+
+Track friction is exact Coulomb stick-slip in the core (a clamped kick per step), so a
+quantity is piecewise smooth at the scale of one time step: wherever beads stick, slip,
+stop or touch again. Derivatives are exact on each piece; finite differences agree with
+them to about 1e-3 along the incident pulse (tests), less well for quantities that sum
+many late stick/slip events (the friction energy after the beads have stopped and
+re-collided).
 
 Forward or reverse mode is chosen from the Jacobian's shape: reverse (`jax.jacrev`) when
 there are fewer observable values than parameter values (e.g. per-bead masses), forward
