@@ -41,6 +41,8 @@ def test_writes_every_figure_its_data_and_the_tables(quick):
     table = (out / "numbers.md").read_text()
     for row in numbers["rows"]:
         assert row["quantity"] in table
+    shortcuts = table.split("## Where the paper's approximations fail")[1].split("## Definitions")[0]
+    assert "**Eq. 5**" in shortcuts and "**eta from C_v**" in shortcuts
     # fig2_speed_duration.csv: one row per (velocity, eta, mu) run.
     rows = (out / "fig2_speed_duration.csv").read_text().splitlines()
     assert len(rows) == 1 + 4 * len(experiments.QUICK_PLAN.velocities_m_s)
