@@ -85,22 +85,22 @@ def contact_force(overlap_m, overlap_rate_m_s, kappa_n_m1p5, eta_s, elastic_n=No
 def thornton_contact(overlap_m, max_overlap_m, kappa_n_m1p5, yield_force_n):
     """Elastic-plastic normal contact of Thornton (J. Appl. Mech. 64, 383, 1997).
 
-    Hertz $\kappa\delta^{3/2}$ up to the yield overlap $\delta_y = (F_Y/\kappa)^{2/3}$;
+    Hertz $\\kappa\\delta^{3/2}$ up to the yield overlap $\\delta_y = (F_Y/\\kappa)^{2/3}$;
     beyond it, loading along the straight line with the Hertz tangent stiffness at yield,
-    $F = F_Y + \tfrac32 (F_Y/\delta_y)(\delta - \delta_y)$; unloading (and reloading
-    below the largest overlap $\delta_m$ reached so far) along a Hertz curve of enlarged
-    radius $R_p$ about a residual overlap $\delta_p$:
-    $F = \kappa_p(\delta - \delta_p)_+^{3/2}$, with
+    $F = F_Y + \\tfrac32 (F_Y/\\delta_y)(\\delta - \\delta_y)$; unloading (and reloading
+    below the largest overlap $\\delta_m$ reached so far) along a Hertz curve of enlarged
+    radius $R_p$ about a residual overlap $\\delta_p$:
+    $F = \\kappa_p(\\delta - \\delta_p)_+^{3/2}$, with
     $R_p/R^* = ((2F_m + F_Y)/3)^{3/2} / (F_m F_Y^{1/2})$ (Thornton's $R_p$ written with the
-    limiting pressure eliminated through $F_Y$), $\kappa_p = \kappa\sqrt{R_p/R^*}$ and
-    $\delta_p$ such that the curve passes through $(\delta_m, F_m)$.
+    limiting pressure eliminated through $F_Y$), $\\kappa_p = \\kappa\\sqrt{R_p/R^*}$ and
+    $\\delta_p$ such that the curve passes through $(\\delta_m, F_m)$.
 
     **Arguments:** current overlap and largest overlap so far (m; `max_overlap_m >=
     overlap_m`), Hertz stiffness (N/m^{3/2}), yield force (N, finite).
 
     **Returns:** (force N, elastic energy stored J, energy dissipated plastically so far J).
-    The dissipated energy depends only on $\delta_m$: the work of the loading path up to
-    $\delta_m$ minus the energy the unloading curve gives back.
+    The dissipated energy depends only on $\\delta_m$: the work of the loading path up to
+    $\\delta_m$ minus the energy the unloading curve gives back.
     """
     yield_overlap = overlap_at_force(yield_force_n, kappa_n_m1p5)
     yield_stiffness = 1.5 * yield_force_n / yield_overlap
