@@ -297,11 +297,11 @@ def worker_machine() -> dict:
         info["hertz_core_per_s"] = d.size * repeats / (time.perf_counter() - start)
     except ImportError:
         info["hertz_core_per_s"] = None
-    # A bead-step is ~10 flops + 1 sqrt; the Hertz core (max, sqrt, 2 mul, add) is about half
-    # of its instructions, so the compute limit is about half the core's rate.
+    # A bead-step is ~10 flops + 1 sqrt: bounded by the FMA rate / 10 and by the rate of the
+    # Hertz core (max, sqrt, 2 mul, add: one per bead-step, the sqrt being the slow part).
     limits = [info["dgemm_gflop_s"] * 1e9 / 10.0]
     if info.get("hertz_core_per_s"):
-        limits.append(info["hertz_core_per_s"] / 2.0)
+        limits.append(info["hertz_core_per_s"])
     info["limit_bead_steps_per_s"] = min(limits)
     return info
 
