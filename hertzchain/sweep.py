@@ -407,7 +407,9 @@ def plot_sweep(table: dict[str, np.ndarray], folder) -> None:
         fig, ax = plt.subplots(figsize=(6, 4))
         others = [k for k in table if k not in ("run", x_name) and k in _input_names(table)]
         keys = [tuple(table[k][i] for k in others) for i in range(len(table["run"]))]
-        for key in sorted(set(keys))[:12]:
+        shown = sorted(set(keys))[:20]
+        ax.set_prop_cycle(color=plt.cm.tab20(np.linspace(0.0, 1.0, 20))[: max(len(shown), 1)])
+        for key in shown:
             mask = np.asarray([kk == key for kk in keys])
             order = np.argsort(table[x_name][mask])
             label = ", ".join(f"{k}={v:.3g}" for k, v in zip(others, key)) or None
