@@ -53,3 +53,9 @@ __all__ = [
     "register_parameter",
     "residuals_and_jacobian",
 ]
+
+# Diagnosis of missing effects (fitting.diagnosis, fitting.effects).
+from .diagnosis import Diagnosis, DiagnosisError, diagnose  # noqa: E402
+from .effects import EFFECT_NAMES  # noqa: E402
+
+__all__ += ["Diagnosis", "DiagnosisError", "EFFECT_NAMES", "diagnose"]

@@ -1,0 +1,123 @@
+"""Confusion table of the diagnosis: which effect was hidden vs which effects were named.
+
+For every candidate effect (and for "none" and a few pairs), synthetic trace files are made
+with that effect hidden (`fitting.hidden.hidden_effect_traces`, nominal strengths, noise
+and nuisances drawn per seed), the diagnosis runs from the base model, and the named
+effects are tallied. Writes `confusion.csv`, `confusion.json` and `confusion.md` (with the
+run time of every diagnosis) into `--out`.
+
+    python benchmarks/confusion.py --quick            # 8-bead chain, one seed per row
+    python benchmarks/confusion.py --seeds 3 --pairs  # the paper's 21-bead chain, pairs too
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import hertzchain  # noqa: E402,F401
+from fitting.diagnosis import diagnose  # noqa: E402
+from fitting.effects import EFFECT_NAMES  # noqa: E402
+from fitting.hidden import hidden_effect_traces  # noqa: E402
+from hertzchain.atomic import write_json, write_text  # noqa: E402
+
+PAIRS = (("viscous_damping", "wall_compliance"), ("track_friction", "sensor_dynamics"),
+         ("viscous_damping", "track_friction"))
+
+
+def run_case(hidden, seed, *, n_beads, noise_fraction, contacts, velocities):
+    files = hidden_effect_traces(hidden, n_beads=n_beads, contacts=contacts, velocities_m_s=velocities,
+                                 noise_fraction=noise_fraction, seed=seed)
+    began = time.perf_counter()
+    result = diagnose(files, progress=False)
+    return {
+        "hidden": list(hidden),
+        "seed": seed,
+        "named": list(result.missing_effects),
+        "correct": sorted(result.missing_effects) == sorted(hidden),
+        "alarm": result.misspecification,
+        "gap_base": result.base_fit["gap"],
+        "gap_final": result.final["gap"],
+        "not_separable": result.not_separable,
+        "runtime_s": time.perf_counter() - began,
+    }
+
+
+def table(rows, columns) -> str:
+    """Markdown confusion table: rows = hidden, columns = named (counts)."""
+    hidden_keys = []
+    for row in rows:
+        key = "+".join(row["hidden"]) or "none"
+        if key not in hidden_keys:
+            hidden_keys.append(key)
+    lines = ["| hidden \\ named | " + " | ".join(columns) + " | correct | mean runtime (s) |",
+             "|---|" + "---|" * (len(columns) + 2)]
+    for key in hidden_keys:
+        group = [r for r in rows if ("+".join(r["hidden"]) or "none") == key]
+        counts = []
+        for column in columns:
+            if column == "none":
+                counts.append(sum(1 for r in group if not r["named"]))
+            else:
+                counts.append(sum(1 for r in group if column in r["named"]))
+        correct = sum(r["correct"] for r in group)
+        runtime = sum(r["runtime_s"] for r in group) / len(group)
+        lines.append(f"| {key} | " + " | ".join(str(c) for c in counts) + f" | {correct}/{len(group)} | {runtime:.0f} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="8-bead chain, one seed, no pairs")
+    parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument("--pairs", action="store_true", help="also hide the two-effect pairs")
+    parser.add_argument("--n-beads", type=int, default=None)
+    parser.add_argument("--noise", type=float, default=0.005, help="noise sigma / largest signal")
+    parser.add_argument("--effects", default="", help="comma-separated subset of rows (default all)")
+    parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
+    args = parser.parse_args(argv)
+    n_beads = args.n_beads or (8 if args.quick else 21)
+    contacts = (n_beads // 3, 2 * n_beads // 3)
+    velocities = (0.02, 0.05, 0.12, 0.3, 0.6)
+    cases = [()] + [(name,) for name in EFFECT_NAMES]
+    if args.pairs and not args.quick:
+        cases += list(PAIRS)
+    if args.effects:
+        wanted = [e.strip() for e in args.effects.split(",") if e.strip()]
+        cases = [c for c in cases if ("+".join(c) or "none") in wanted]
+    rows = []
+    began = time.perf_counter()
+    total = len(cases) * args.seeds
+    for case in cases:
+        for seed in range(args.seeds):
+            row = run_case(case, 100 + seed, n_beads=n_beads, noise_fraction=args.noise, contacts=contacts,
+                           velocities=velocities)
+            rows.append(row)
+            print(f"[{len(rows)}/{total}] hidden {'+'.join(case) or 'none'} seed {seed}: named "
+                  f"{', '.join(row['named']) or 'none'} ({row['runtime_s']:.0f} s)", flush=True)
+    elapsed = time.perf_counter() - began
+    columns = ["none"] + list(EFFECT_NAMES)
+    out = Path(args.out)
+    stem = "confusion_quick" if args.quick else "confusion"
+    settings = {"n_beads": n_beads, "contacts": contacts, "velocities_m_s": velocities, "noise_fraction": args.noise,
+                "seeds": args.seeds, "quick": args.quick}
+    write_json(out / f"{stem}.json", {"settings": settings, "rows": rows, "runtime_s": elapsed})
+    csv = ["hidden,seed,named,correct,alarm,gap_base,gap_final,runtime_s"]
+    for r in rows:
+        csv.append(f"{'+'.join(r['hidden']) or 'none'},{r['seed']},{'+'.join(r['named']) or 'none'},"
+                   f"{r['correct']},{r['alarm']},{r['gap_base']:.6g},{r['gap_final']:.6g},{r['runtime_s']:.1f}")
+    write_text(out / f"{stem}.csv", "\n".join(csv) + "\n")
+    md = (f"# Diagnosis confusion table\n\n{json.dumps(settings)}\n\n" + table(rows, columns)
+          + f"\nTotal run time {elapsed:.0f} s ({len(rows)} diagnoses).\n")
+    write_text(out / f"{stem}.md", md)
+    print(md)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,59 @@
+"""`hertzchain diagnose FILE... [--model base] [--out DIR]`: find, name and add the effects a
+chain model is missing (see `fitting.diagnosis`).
+
+Writes `DIR/diagnosis.json` (`missing_effects` in the order found, `steps` with
+`gap_before`/`gap_after`), `diagnosis.md`, `gaps.csv`, `gap.png` and overlay PNGs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from fitting.effects import EFFECT_NAMES
+
+
+def _names(text: str) -> list[str]:
+    return [part.strip() for part in text.split(",") if part.strip()]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("files", nargs="+", metavar="FILE", help="trace files (hertzchain-trace/1)")
+    parser.add_argument("--model", default="base",
+                        help="starting model: 'base' (header's chain, no dissipation, ideal force sensors) "
+                        f"or 'base+EFFECT+...'; effects: {', '.join(EFFECT_NAMES)}")
+    parser.add_argument("--out", default="diagnosis", metavar="DIR", help="output folder (default: diagnosis)")
+    parser.add_argument("--free", default="", help="further parameters fitted throughout, e.g. C or eta,mu")
+    parser.add_argument("--nuisances", default="striker_velocity,time_offset",
+                        help="per-file/per-channel nuisances (default striker_velocity,time_offset; add gain "
+                        "for uncalibrated channels)")
+    parser.add_argument("--candidates", default="", help="effects to consider (default: all)")
+    parser.add_argument("--channels", default="", help="channels to use (default: all of each file)")
+    parser.add_argument("--max-effects", type=int, default=3, help="most effects to add (default 3)")
+    parser.add_argument("--min-share", type=float, default=0.2,
+                        help="share of the remaining excess misfit a named effect must remove (default 0.2)")
+    parser.add_argument("--steps-per-contact", type=int, default=200,
+                        help="Verlet steps per shortest contact time of the model (default 200)")
+    parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+def run(args) -> int:
+    from fitting.data import load_experiments
+    from fitting.diagnosis import diagnose
+    from fitting.diagnosis_report import write_diagnosis_report
+
+    if args.max_effects < 0:
+        raise ValueError("--max-effects must be >= 0.")
+    if not 0 <= args.min_share < 1:
+        raise ValueError("--min-share must be in [0, 1).")
+    experiments = load_experiments(args.files, channels=_names(args.channels) or None)
+    diagnosis = diagnose(
+        experiments, model=args.model, free=_names(args.free), nuisances=_names(args.nuisances),
+        candidates=_names(args.candidates) or None, max_effects=args.max_effects,
+        min_share=args.min_share, steps_per_contact=args.steps_per_contact, progress=not args.quiet,
+    )
+    paths = write_diagnosis_report(diagnosis, args.out)
+    print(f"missing effects: {', '.join(diagnosis.missing_effects) or 'none'}")
+    print(diagnosis.conclusion)
+    print(f"report: {paths['markdown']} (JSON {paths['json']})", file=sys.stderr if args.quiet else sys.stdout)
+    return 0

@@ -1,0 +1,755 @@
+"""Find where a chain model and measured traces disagree, name the missing effect, add it,
+and repeat until nothing significant is left.
+
+`diagnose(experiments)` runs this workflow (discrepancy.md section 2, simplified where
+noted):
+
+1. **Base fit.** The stated model (default: the header's dissipationless Hertz chain with
+   ideal force sensors) is fitted with its nuisances free: per file the striker velocity
+   and the trigger offset (optionally a gain per channel), plus any physical parameter the
+   user frees. A disagreement is then not just a badly chosen nuisance.
+2. **Locate** (`fitting.locate`): the whitened residual by channel x time window, by file
+   (amplitude) and by frequency band.
+3. **Screen and refit.** Every candidate of the library (`fitting.effects`) is ranked by
+   its score (the $\\chi^2$ a Gauss-Newton step on its strength alone would remove, from
+   the Jacobian at the current fit, projected off the free parameters) and then refitted
+   with its strength(s) free. Candidates whose sensitivity lies in the span of the free
+   parameters are reported as not separable (a uniform stiffness scale with both striker
+   velocity and gain free, discrepancy.md section 5.4).
+4. **Decide.** A candidate with k strengths is named only if all hold:
+   (a) its $\\Delta\\chi^2$ beats the BIC penalty $k\\ln n$;
+   (b) it removes at least `min_share` of the excess misfit $\\chi^2 - \\mathrm{dof}$ that
+   remains (practical significance, discrepancy.md section 5.6);
+   (c) it improves held-out traces: two-fold cross-validation over files (folds alternate
+   in amplitude), the global parameters fitted on one fold, the other fold's nuisances
+   refitted with them held; the summed held-out $\\chi^2$ must drop by more than k.
+   Among the candidates that pass, the one with the largest held-out gain is named.
+   Nothing is named when the excess is already within the noise band
+   $3\\sqrt{2\\,\\mathrm{dof}}$ or when no candidate passes.
+5. **Iterate**: the named effect joins the model and the search repeats (`max_effects`).
+   A **backward check** then refits without each named effect and drops any that no longer
+   passes (a) and (b). A **misspecification alarm** is raised when the final excess is
+   still above the noise band: the residual that remains is reported (where and how
+   large) without a name.
+
+All fits share one compiled forward model and Jacobian (every candidate strength is a
+parameter of it, held at 0 when off), and a small Levenberg-Marquardt in NumPy frees or
+holds columns and rows, so the whole diagnosis compiles the simulator once.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+import time
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from hertzchain.progress import Progress
+
+from . import effects as fx
+from .data import Experiment
+from .fit import _as_experiments, initial_values, make_problem
+from .locate import describe, locate
+from .model import Problem, residuals_and_jacobian
+from .parameters import ParameterInstance, get_spec, parse_parameter_list
+
+NUISANCES = ("striker_velocity", "time_offset")
+MIN_SHARE = 0.2
+# Number of noise standard deviations of the chi^2 excess regarded as "at the noise level".
+NOISE_BAND_SIGMA = 3.0
+
+
+class DiagnosisError(ValueError):
+    """Bad input to a diagnosis; the message names the fix."""
+
+
+# --- the evaluator and the optimiser ----------------------------------------------------------
+class _Evaluator:
+    """Whitened residuals (alone, cheap) and with the Jacobian (one forward-mode pass per
+    simulator parameter) of one problem, with small caches, counters and timers."""
+
+    def __init__(self, problem: Problem):
+        self.problem = problem
+        self.calls = 0
+        self.residual_calls = 0
+        self.seconds = 0.0
+        self._cache: dict = {}
+        self._residual_cache: dict = {}
+
+    def __call__(self, x):
+        key = np.asarray(x, dtype=float).tobytes()
+        if key not in self._cache:
+            began = time.perf_counter()
+            self.calls += 1
+            r, jac = residuals_and_jacobian(self.problem, np.asarray(x, dtype=float))
+            if len(self._cache) > 6:
+                self._cache.pop(next(iter(self._cache)))
+            self._cache[key] = (r, jac)
+            self.seconds += time.perf_counter() - began
+        return self._cache[key]
+
+    def residuals(self, x):
+        key = np.asarray(x, dtype=float).tobytes()
+        if key in self._cache:
+            return self._cache[key][0]
+        if key not in self._residual_cache:
+            began = time.perf_counter()
+            self.residual_calls += 1
+            r = np.asarray(_residuals(self.problem, jnp.asarray(np.asarray(x, dtype=float))))
+            if len(self._residual_cache) > 32:
+                self._residual_cache.pop(next(iter(self._residual_cache)))
+            self._residual_cache[key] = r
+            self.seconds += time.perf_counter() - began
+        return self._residual_cache[key]
+
+
+@eqx.filter_jit
+def _residuals(problem, x):
+    return problem.residuals(x)
+
+
+def _levenberg_marquardt(evaluate, x0, active, rows, lower, upper, *, max_steps: int = 40,
+                         rtol: float = 1e-6, atol: float = 0.05):
+    """Minimise the squared residuals `rows` over the columns `active` (bounded by clipping).
+
+    Trial steps use residuals only; the Jacobian is evaluated at accepted points. Stops when
+    an accepted step lowers chi^2 by less than `rtol` chi^2 + `atol`. Returns (x, chi2 on
+    `rows`, steps taken).
+    """
+    x = np.array(x0, dtype=float)
+    active = np.asarray(active, dtype=int)
+    if active.size == 0:
+        r = evaluate.residuals(x)
+        return x, float(r[rows] @ r[rows]), 0
+    r, jac = evaluate(x)
+    chi2 = float(r[rows] @ r[rows])
+    damping = 1e-3
+    steps = 0
+    for steps in range(1, max_steps + 1):
+        ja = jac[np.ix_(rows, active)]
+        gradient = ja.T @ r[rows]
+        normal = ja.T @ ja
+        diag = np.diag(normal).copy()
+        diag[~(diag > 0)] = 1.0
+        accepted = False
+        for _ in range(8):
+            try:
+                step = -np.linalg.solve(normal + damping * np.diag(diag), gradient)
+            except np.linalg.LinAlgError:
+                damping *= 10
+                continue
+            trial = x.copy()
+            trial[active] = np.clip(x[active] + step, lower[active], upper[active])
+            r_new = evaluate.residuals(trial)
+            chi2_new = float(r_new[rows] @ r_new[rows])
+            if math.isfinite(chi2_new) and chi2_new < chi2:
+                accepted = True
+                decrease = chi2 - chi2_new
+                x, chi2 = trial, chi2_new
+                damping = max(damping / 5, 1e-9)
+                break
+            damping *= 10
+        if not accepted or decrease <= rtol * chi2 + atol:
+            break
+        r, jac = evaluate(x)
+    return x, chi2, steps
+
+
+# --- results ------------------------------------------------------------------------------------
+@dataclasses.dataclass
+class CandidateResult:
+    """One candidate effect refitted at one step of the search."""
+
+    effect: str
+    n_parameters: int
+    score_chi2: float
+    separable: bool
+    chi2: float
+    delta_chi2: float
+    bic_gain: float
+    share_of_excess: float
+    heldout_gain: float | None
+    values: dict
+    stderr: dict
+    passed: bool
+    reason: str
+
+    def to_json(self) -> dict:
+        return _clean(dataclasses.asdict(self))
+
+
+@dataclasses.dataclass
+class Step:
+    """One named effect: the gap before and after adding it."""
+
+    effect: str
+    gap_before: float
+    gap_after: float
+    chi2_before: float
+    chi2_after: float
+    dof_before: int
+    dof_after: int
+    values: dict
+    stderr: dict
+    candidates: list
+    location_before: dict
+    location_after: dict
+    x_before: np.ndarray
+    x_after: np.ndarray
+
+    def to_json(self) -> dict:
+        return _clean({
+            "effect": self.effect,
+            "gap_before": self.gap_before,
+            "gap_after": self.gap_after,
+            "chi2_before": self.chi2_before,
+            "chi2_after": self.chi2_after,
+            "dof_before": self.dof_before,
+            "dof_after": self.dof_after,
+            "fitted": {k: {"value": self.values[k], "stderr": self.stderr.get(k)} for k in self.values},
+            "candidates": [c.to_json() for c in self.candidates],
+            "location_before": self.location_before,
+            "location_after": self.location_after,
+        })
+
+
+@dataclasses.dataclass
+class Diagnosis:
+    """What `diagnose` found.
+
+    **Fields:**
+
+    - `missing_effects`: identifiers named, in the order found (empty: nothing missing).
+    - `steps`: one `Step` per named effect (gap before/after, fitted strengths, candidates).
+    - `base_fit`: chi2, dof, gap (reduced chi2) and values of the base fit.
+    - `final`: the same for the final model, with its `location` (residual breakdown).
+    - `last_candidates`: the candidates of the round that named nothing.
+    - `not_separable`: candidates whose sensitivity lies in the span of the free parameters.
+    - `indistinguishable`: candidate pairs with |cos| > 0.95 of their projected sensitivities.
+    - `misspecification`: True when the final excess misfit is above the noise band.
+    - `conclusion`: one paragraph in words.
+    - `problem`, `x_base`, `x_final`: the problem and parameter vectors (predictions, plots).
+    """
+
+    missing_effects: list
+    steps: list
+    base_fit: dict
+    final: dict
+    last_candidates: list
+    not_separable: list
+    indistinguishable: list
+    dropped_in_backward_check: list
+    misspecification: bool
+    conclusion: str
+    settings: dict
+    problem: Problem
+    x_base: np.ndarray
+    x_final: np.ndarray
+    elapsed_s: float
+    evaluations: int
+    evaluation_seconds: float = 0.0
+    residual_evaluations: int = 0
+
+    def to_json(self) -> dict:
+        return _clean({
+            "missing_effects": list(self.missing_effects),
+            "steps": [s.to_json() for s in self.steps],
+            "base_fit": self.base_fit,
+            "final": self.final,
+            "last_candidates": [c.to_json() for c in self.last_candidates],
+            "not_separable": self.not_separable,
+            "indistinguishable": self.indistinguishable,
+            "dropped_in_backward_check": self.dropped_in_backward_check,
+            "misspecification_alarm": self.misspecification,
+            "conclusion": self.conclusion,
+            "settings": self.settings,
+            "files": [e.trace.path or e.label for e in self.problem.experiments],
+            "elapsed_s": self.elapsed_s,
+            "model_evaluations": self.evaluations,
+            "residual_evaluations": self.residual_evaluations,
+            "model_seconds": self.evaluation_seconds,
+        })
+
+
+def _clean(value):
+    """JSON-ready copy: numpy to Python, non-finite numbers to None."""
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return [_clean(v) for v in value.tolist()]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    return value
+
+
+# --- the workflow ------------------------------------------------------------------------------
+def parse_model(model: str, n_beads: int) -> list[str]:
+    """`"base"` or `"base+viscous_damping+..."` -> the effects already in the model."""
+    parts = [p.strip() for p in str(model).split("+") if p.strip()]
+    if not parts or parts[0] != "base":
+        raise DiagnosisError(
+            f"model must be 'base' or 'base+EFFECT+...', got {model!r}; effects: {', '.join(fx.EFFECT_NAMES)}."
+        )
+    known = fx.library(n_beads)
+    for name in parts[1:]:
+        if name not in known:
+            raise DiagnosisError(f"model: unknown effect {name!r}; effects: {', '.join(fx.EFFECT_NAMES)}.")
+    return parts[1:]
+
+
+class _Search:
+    """State shared by the steps of one diagnosis."""
+
+    def __init__(self, experiments: list[Experiment], *, free, nuisances, steps_per_contact, candidates,
+                 min_share, report):
+        n_beads = {e.trace.n_beads for e in experiments}
+        if len(n_beads) != 1:
+            raise DiagnosisError(
+                f"all files must describe chains of the same length (got {sorted(n_beads)} beads); "
+                "diagnose one chain at a time."
+            )
+        self.n_beads = n_beads.pop()
+        self.library = fx.library(self.n_beads)
+        forward = fx.effects_forward_model(self.n_beads, steps_per_contact)
+        base_params = tuple(nuisances) + tuple(free)
+        seed = make_problem(experiments, base_params, forward=forward)
+        self.base_start = initial_values(seed)
+        covered = {fx.COVERED_BY[name] for name in free if name in fx.COVERED_BY}
+        has_contacts = any(k for e in experiments for k in (c.startswith("contact_") for c in e.channels))
+        names = [c for c in (candidates or fx.EFFECT_NAMES) if c not in covered]
+        if not has_contacts and "sensor_dynamics" in names:
+            names.remove("sensor_dynamics")
+        self.candidates = names
+        self.skipped = sorted(covered)
+        extra = []
+        for effect in self.library.values():
+            for name in effect.parameters:
+                extra.append(ParameterInstance(get_spec(name), label=name[len(fx.PREFIX):]))
+        self.problem = Problem(seed.experiments, tuple(seed.instances) + tuple(extra), seed.base_setups,
+                               forward)
+        self.evaluate = _Evaluator(self.problem)
+        self.labels = list(self.problem.labels)
+        p = len(self.labels)
+        self.lower = np.array([max(i.spec.lower, 0.0) if i.spec.lower < 0 and i.spec.lower > -1e-20
+                               else i.spec.lower for i in self.problem.instances])
+        self.upper = np.array([i.spec.upper for i in self.problem.instances])
+        n_base = len(seed.instances)
+        self.base_columns = list(range(n_base))
+        self.effect_columns = {
+            name: [self.labels.index(par[len(fx.PREFIX):]) for par in effect.parameters]
+            for name, effect in self.library.items()
+        }
+        x0 = np.zeros(p)
+        x0[:n_base] = self.base_start
+        for i, inst in enumerate(self.problem.instances[:n_base]):
+            x0[i] = float(np.clip(x0[i], inst.spec.lower * (1 + 1e-12) if inst.spec.lower > 0 else inst.spec.lower,
+                                  inst.spec.upper))
+        self.x0 = x0
+        self.n = self.problem.n_residuals
+        self.min_share = min_share
+        self.report = report
+        self.rows_all = np.arange(self.n)
+        slices = self.problem.residual_slices()
+        self.file_rows = [np.concatenate([np.arange(s.start, s.stop) for s in sl.values()]) for sl in slices]
+        self.file_columns = [
+            [i for i, inst in enumerate(self.problem.instances) if inst.experiment == e]
+            for e in range(len(self.problem.experiments))
+        ]
+        self.global_base_columns = [i for i in self.base_columns if self.problem.instances[i].experiment is None]
+        amplitude = [max(float(np.max(e.data(c))) for c in e.channels) for e in self.problem.experiments]
+        order = np.argsort(amplitude)
+        self.folds = [sorted(order[0::2].tolist()), sorted(order[1::2].tolist())] if len(order) >= 2 else []
+
+    def log(self, text: str):
+        if self.report:
+            sys.stderr.write(f"diagnose: {text}\n")
+            sys.stderr.flush()
+
+    def columns(self, effects) -> list[int]:
+        cols = list(self.base_columns)
+        for name in effects:
+            cols += self.effect_columns[name]
+        return cols
+
+    def fit(self, x_start, effects, *, rows=None, columns=None, max_steps=40):
+        cols = self.columns(effects) if columns is None else columns
+        rows = self.rows_all if rows is None else rows
+        return _levenberg_marquardt(self.evaluate, x_start, cols, rows, self.lower, self.upper,
+                                    max_steps=max_steps)
+
+    def stderr(self, x, columns, chi2) -> np.ndarray:
+        _, jac = self.evaluate(x)
+        ja = jac[:, columns]
+        try:
+            cov = np.linalg.pinv(ja.T @ ja)
+        except np.linalg.LinAlgError:
+            return np.full(len(columns), math.nan)
+        scale = max(1.0, chi2 / max(self.n - len(columns), 1))
+        return np.sqrt(np.clip(np.diag(cov), 0, None) * scale)
+
+    def start_for(self, effect: str, x) -> list[np.ndarray]:
+        """Start vectors for refitting `effect` from the current fit `x`."""
+        x = x.copy()
+        cols = self.effect_columns[effect]
+        starts = []
+        if effect == "viscous_damping":
+            for value in (0.3e-6, 2e-6):
+                s = x.copy(); s[cols[0]] = value; starts.append(s)
+        elif effect == "track_friction":
+            for value in (0.02, 0.2):
+                s = x.copy(); s[cols[0]] = value; starts.append(s)
+        elif effect == "sensor_dynamics":
+            s = x.copy(); s[cols[0]] = 0.05; s[cols[1]] = 0.5; starts.append(s)
+        elif effect == "precompression":
+            smallest = min(max(float(np.max(e.data(c))) for c in e.channels) for e in self.problem.experiments)
+            for fraction in (0.01, 0.1):
+                s = x.copy(); s[cols[0]] = fraction * smallest; starts.append(s)
+        elif effect == "plasticity":
+            largest = max(float(np.max(e.data(c))) for e in self.problem.experiments for c in e.channels)
+            nominal = self._nominal_yield_force()
+            for fraction in (0.9, 0.5):
+                s = x.copy(); s[cols[0]] = (nominal / (fraction * largest)) ** (1 / 3); starts.append(s)
+        elif effect == "wall_compliance":
+            for value in (0.0, 2.0):
+                s = x.copy(); s[cols[0]] = value; starts.append(s)
+        else:
+            starts.append(x)
+        return starts
+
+    def _nominal_yield_force(self) -> float:
+        setup = self.problem.base_setups[0]
+        stress = float(setup.bead_yield_stress_pa)
+        if not math.isfinite(stress):
+            setup = fx.rebuild_setup(setup, bead_yield_stress_pa=fx.DEFAULT_YIELD_STRESS_PA)
+        return float(np.min(np.asarray(setup.contact_yield_force_n())))
+
+    # --- screening --------------------------------------------------------------------------------
+    def screen(self, x, effects_in, names) -> tuple[dict, dict, dict, list]:
+        """Scores, best starts, separability and pairwise distinguishability at the fit `x`.
+
+        The score of a candidate is the chi^2 a Gauss-Newton step on its strengths (with
+        every free parameter re-adjusted, i.e. projected off their sensitivities) would
+        remove: from its Jacobian columns at `x` (exact derivatives at "off") and from the
+        secant to each start value (one residual evaluation each: this is what scores
+        effects with a threshold, such as plasticity, whose derivative at "off" is 0).
+        """
+        r, jac = self.evaluate(x)
+        active = self.columns(effects_in)
+        q, _ = np.linalg.qr(jac[:, active])
+
+        def project(block):
+            return block - q @ (q.T @ block)
+
+        def gain(block):
+            u, sv, _ = np.linalg.svd(project(block), full_matrices=False)
+            keep = sv > 1e-8 * (sv[0] if sv.size else 1.0)
+            return float(np.sum((u[:, keep].T @ r) ** 2)) if keep.any() else 0.0, (u[:, 0] if keep.any() else None)
+
+        scores, starts, separable, vectors = {}, {}, {}, {}
+        for name in names:
+            cols = self.effect_columns[name]
+            block = jac[:, cols]
+            raw = np.linalg.norm(block, axis=0)
+            kept = np.linalg.norm(project(block), axis=0)
+            if np.any(raw > 0):
+                separable[name] = bool(np.max(kept / np.where(raw > 0, raw, 1.0)) > 1e-4)
+            else:
+                separable[name] = True
+            best, vector = gain(block) if np.any(raw > 0) else (0.0, None)
+            best_start = x
+            for start in self.start_for(name, x):
+                delta = start[cols] - x[cols]
+                if not np.any(delta != 0):
+                    continue
+                secant = (self.evaluate.residuals(start) - r)[:, None]
+                g, v = gain(secant)
+                if g > best:
+                    best, best_start = g, start
+                    vector = v if vector is None else vector
+            scores[name], starts[name] = best, best_start
+            if vector is not None:
+                vectors[name] = vector
+        pairs = []
+        listed = list(vectors)
+        for i in range(len(listed)):
+            for j in range(i + 1, len(listed)):
+                c = abs(float(vectors[listed[i]] @ vectors[listed[j]]))
+                if c > 0.95:
+                    pairs.append({"effects": [listed[i], listed[j]], "abs_cos": c})
+        return scores, starts, separable, pairs
+
+    # --- held-out check ---------------------------------------------------------------------------
+    def heldout_chi2(self, x_full, effects) -> float | None:
+        """Summed held-out chi^2 of a model over the two folds (see module docstring)."""
+        if len(self.folds) < 2:
+            return None
+        total = 0.0
+        cols_all = self.columns(effects)
+        global_cols = [c for c in cols_all if self.problem.instances[c].experiment is None]
+        for held in self.folds:
+            train = [e for e in range(len(self.file_rows)) if e not in held]
+            train_rows = np.concatenate([self.file_rows[e] for e in train])
+            train_cols = global_cols + [c for e in train for c in self.file_columns[e]]
+            x_train = x_full
+            if global_cols:
+                x_train, _, _ = self.fit(x_full, effects, rows=train_rows, columns=train_cols, max_steps=10)
+            held_rows = np.concatenate([self.file_rows[e] for e in held])
+            held_cols = [c for e in held for c in self.file_columns[e]]
+            _, chi2, _ = self.fit(x_train, effects, rows=held_rows, columns=held_cols, max_steps=10)
+            total += chi2
+        return total
+
+
+def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, candidates=None,
+             max_effects: int = 3, min_share: float = MIN_SHARE, steps_per_contact: int = 200,
+             max_refits: int = 3, progress: bool = True) -> Diagnosis:
+    """Find, name and add the effects a chain model is missing (see the module docstring).
+
+    **Arguments:**
+
+    - `experiments`: trace file paths, `TraceFile`s or `Experiment`s (one chain length).
+    - `model`: `"base"` (header's chain, no dissipation, ideal force sensors) or
+      `"base+EFFECT+..."` to start with effects already in the model.
+    - `free`: further parameters of the registry fitted throughout (e.g. `("C",)`); the
+      candidate they stand for is then left out.
+    - `nuisances`: per-file / per-channel nuisances always fitted (default striker velocity
+      and trigger offset; add `"gain"` for uncalibrated channels).
+    - `candidates`: identifiers to consider (default: all of `fitting.effects`).
+    - `max_effects`: most effects to add.
+    - `min_share`: share of the remaining excess misfit a named effect must remove.
+    - `steps_per_contact`: Verlet steps per shortest contact time of the model.
+    - `max_refits`: candidates refitted per round (the best-scoring ones worth a refit).
+    - `progress`: report on stderr.
+
+    **Returns:** `Diagnosis`.
+    """
+    began = time.perf_counter()
+    experiments = _as_experiments(experiments)
+    nuisances = tuple(nuisances)
+    free = tuple(parse_parameter_list(free)) if free else ()
+    for name in nuisances:
+        if get_spec(name).scope == "global":
+            raise DiagnosisError(f"nuisances: {name} is a global parameter; give it in `free`.")
+    if candidates is not None:
+        for name in candidates:
+            if name not in fx.EFFECT_NAMES:
+                raise DiagnosisError(f"candidates: unknown effect {name!r}; effects: {', '.join(fx.EFFECT_NAMES)}.")
+    search = _Search(experiments, free=free, nuisances=nuisances, steps_per_contact=steps_per_contact,
+                     candidates=candidates, min_share=min_share, report=progress)
+    accepted = parse_model(model, search.n_beads)
+    search.log(f"{len(experiments)} files, {search.n} residuals; compiling the model ...")
+    n = search.n
+    penalty = math.log(n)
+
+    x = search.x0.copy()
+    starts = [x]
+    for name in accepted:
+        starts = [s2 for s in starts for s2 in search.start_for(name, s)][:1]
+    x, chi2, _ = search.fit(starts[0], accepted, max_steps=60)
+    search.log(f"base fit: chi^2/dof = {chi2 / (n - len(search.columns(accepted))):.4g}")
+    x_base, chi2_base = x.copy(), chi2
+
+    def dof_of(effects):
+        return n - len(search.columns(effects))
+
+    def band(dof):
+        return NOISE_BAND_SIGMA * math.sqrt(2 * dof)
+
+    steps: list[Step] = []
+    last_candidates: list[CandidateResult] = []
+    not_separable: set = set()
+    pairs_seen: list = []
+    heldout_cache: dict = {}
+
+    def heldout(x_fit, effects):
+        key = tuple(effects)
+        if key not in heldout_cache:
+            heldout_cache[key] = search.heldout_chi2(x_fit, effects)
+        return heldout_cache[key]
+
+    while len(steps) < max_effects:
+        dof = dof_of(accepted)
+        excess = chi2 - dof
+        location = locate(search.problem, x, search.evaluate(x)[0])
+        todo = [c for c in search.candidates if c not in accepted]
+        scores, best_starts, separable, pairs = search.screen(x, accepted, todo)
+        for pair in pairs:
+            if pair not in pairs_seen:
+                pairs_seen.append(pair)
+        worth = [c for c in todo if separable[c] and scores[c] > 0.5 * len(search.effect_columns[c]) * penalty
+                 and scores[c] > 0.5 * min_share * max(excess, 0.0)]
+        worth = sorted(worth, key=lambda c: -scores[c])[:max_refits] if excess > band(dof) else []
+        results = []
+        bar = Progress(len(worth), "diagnose: refitting candidates") if progress and worth else None
+        for name in todo:
+            cols = search.effect_columns[name]
+            k = len(cols)
+            if not separable[name]:
+                not_separable.add(name)
+                results.append(CandidateResult(name, k, scores[name], False, chi2, 0.0, -k * penalty,
+                                               0.0, None, {}, {}, False,
+                                               "not separable from the free parameters"))
+                continue
+            if name not in worth:
+                results.append(CandidateResult(
+                    name, k, scores[name], True, math.nan, math.nan, math.nan, math.nan, None, {}, {}, False,
+                    "the misfit is already at the noise level" if excess <= band(dof) else
+                    (f"score {scores[name]:.4g} not among the {max_refits} best worth a refit"
+                     if scores[name] > 0.5 * k * penalty and scores[name] > 0.5 * min_share * excess
+                     else f"score {scores[name]:.4g} too low to be worth a refit")))
+                continue
+            x_c, chi2_c, _ = search.fit(best_starts[name], accepted + [name], max_steps=20)
+            delta = chi2 - chi2_c
+            share = delta / excess if excess > 0 else 0.0
+            bic_gain = delta - k * penalty
+            values = {search.labels[c]: float(x_c[c]) for c in cols}
+            all_cols = search.columns(accepted + [name])
+            err = search.stderr(x_c, all_cols, chi2_c)
+            errors = {search.labels[c]: float(err[all_cols.index(c)]) for c in cols}
+            results.append(CandidateResult(name, k, scores[name], True, chi2_c, delta, bic_gain, share,
+                                           None, values, errors, False, ""))
+            results[-1]._x = x_c  # type: ignore[attr-defined]
+            if bar:
+                bar.advance()
+        # decide
+        at_noise = excess <= band(dof)
+        base_heldout = None
+        for c in sorted(results, key=lambda c: -(c.delta_chi2 if math.isfinite(c.delta_chi2) else -1)):
+            if not c.separable or not math.isfinite(c.delta_chi2):
+                continue
+            if at_noise:
+                c.reason = "the misfit is already at the noise level"
+                continue
+            if c.bic_gain <= 0:
+                c.reason = f"delta chi^2 {c.delta_chi2:.4g} below the BIC penalty {c.n_parameters * penalty:.4g}"
+                continue
+            if c.share_of_excess < min_share:
+                c.reason = (f"removes only {100 * c.share_of_excess:.3g} % of the excess misfit "
+                            f"(needs {100 * min_share:.3g} %)")
+                continue
+            if search.folds:
+                if base_heldout is None:
+                    base_heldout = heldout(x, accepted)
+                cand = heldout(c._x, accepted + [c.effect])  # type: ignore[attr-defined]
+                c.heldout_gain = base_heldout - cand
+                if c.heldout_gain <= c.n_parameters:
+                    c.reason = f"held-out chi^2 improves by only {c.heldout_gain:.4g}"
+                    continue
+            c.passed = True
+            c.reason = "passes BIC, practical-significance and held-out checks"
+            if sum(1 for r in results if r.passed) >= 3:
+                break
+        passed = [c for c in results if c.passed]
+        if not passed:
+            last_candidates = results
+            break
+        winner = max(passed, key=lambda c: (c.heldout_gain if c.heldout_gain is not None else c.delta_chi2))
+        x_new = winner._x  # type: ignore[attr-defined]
+        x_new, chi2_new, _ = search.fit(x_new, accepted + [winner.effect], max_steps=20)
+        location_after = locate(search.problem, x_new, search.evaluate(x_new)[0])
+        steps.append(Step(
+            effect=winner.effect,
+            gap_before=chi2 / dof, gap_after=chi2_new / dof_of(accepted + [winner.effect]),
+            chi2_before=chi2, chi2_after=chi2_new, dof_before=dof, dof_after=dof_of(accepted + [winner.effect]),
+            values=winner.values, stderr=winner.stderr, candidates=results,
+            location_before=location, location_after=location_after, x_before=x, x_after=x_new,
+        ))
+        search.log(f"named {winner.effect}: chi^2/dof {chi2 / dof:.4g} -> {chi2_new / dof_of(accepted + [winner.effect]):.4g}")
+        accepted = accepted + [winner.effect]
+        x, chi2 = x_new, chi2_new
+    named = [s.effect for s in steps]
+
+    # backward check: each named effect must still be needed with the others present
+    dropped = []
+    if len(named) >= 2:
+        for name in list(named):
+            others = [e for e in accepted if e != name]
+            x_wo = x.copy()
+            for c in search.effect_columns[name]:
+                x_wo[c] = 0.0
+            x_wo, chi2_wo, _ = search.fit(x_wo, others)
+            delta = chi2_wo - chi2
+            k = len(search.effect_columns[name])
+            excess_wo = chi2_wo - dof_of(others)
+            if delta - k * penalty <= 0 or (excess_wo > 0 and delta / excess_wo < min_share):
+                dropped.append(name)
+                accepted = others
+                x, chi2 = x_wo, chi2_wo
+        named = [e for e in named if e not in dropped]
+
+    dof = dof_of(accepted)
+    excess = chi2 - dof
+    alarm = excess > band(dof)
+    final_location = locate(search.problem, x, search.evaluate(x)[0])
+    where = describe(final_location)
+    if named:
+        text = f"Named missing effect(s), in order: {', '.join(named)}."
+    else:
+        text = "No missing effect detected: no candidate passes the tests."
+    if "rotational_friction" in named:
+        text += (" rotational_friction is a uniform scale of the contact stiffness, kappa* = (1+mu*) kappa: "
+                 "in this form it cannot be told apart from an error in the beads' Young's modulus.")
+    if alarm:
+        text += (f" MISSPECIFICATION ALARM: the final misfit is still {excess / math.sqrt(2 * dof):.1f} noise "
+                 f"units above the noise level (chi^2/dof = {chi2 / dof:.4g}); the library does not explain "
+                 f"it. Largest gaps: {'; '.join(where)}.")
+    else:
+        text += f" The final misfit is at the noise level (chi^2/dof = {chi2 / dof:.4g})."
+    if not_separable:
+        text += (f" Not separable from the free parameters: {', '.join(sorted(not_separable))}"
+                 " (e.g. a uniform stiffness scale while both striker velocity and gain are free).")
+
+    def summary(xv, chi, effects):
+        d = dof_of(effects)
+        cols = search.columns(effects)
+        err = search.stderr(xv, cols, chi)
+        return {
+            "effects": list(effects), "chi2": chi, "dof": d, "gap": chi / d,
+            "excess_sigma": (chi - d) / math.sqrt(2 * d),
+            "values": {search.labels[c]: float(xv[c]) for c in cols},
+            "stderr": {search.labels[c]: float(err[i]) for i, c in enumerate(cols)},
+        }
+
+    base_summary = summary(x_base, chi2_base, parse_model(model, search.n_beads))
+    base_summary["location"] = steps[0].location_before if steps else locate(
+        search.problem, x_base, search.evaluate(x_base)[0])
+    final_summary = summary(x, chi2, accepted)
+    final_summary["location"] = final_location
+    final_summary["where"] = where
+    return Diagnosis(
+        missing_effects=named,
+        steps=steps,
+        base_fit=base_summary,
+        final=final_summary,
+        last_candidates=last_candidates,
+        not_separable=sorted(not_separable),
+        indistinguishable=pairs_seen,
+        dropped_in_backward_check=dropped,
+        misspecification=bool(alarm),
+        conclusion=text,
+        settings={
+            "model": model, "free": list(free), "nuisances": list(nuisances),
+            "candidates": search.candidates, "left_out": search.skipped, "max_effects": max_effects,
+            "min_share": min_share, "noise_band_sigma": NOISE_BAND_SIGMA, "bic_penalty_per_parameter": penalty,
+            "steps_per_contact": steps_per_contact, "folds": [[search.problem.experiments[e].label for e in f]
+                                                              for f in search.folds],
+        },
+        problem=search.problem,
+        x_base=x_base,
+        x_final=x,
+        elapsed_s=time.perf_counter() - began,
+        evaluations=search.evaluate.calls,
+        evaluation_seconds=search.evaluate.seconds,
+        residual_evaluations=search.evaluate.residual_calls,
+    )

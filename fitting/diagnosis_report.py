@@ -1,0 +1,210 @@
+"""A diagnosis written out: `diagnosis.json`, `diagnosis.md`, per-step overlays and gap plots.
+
+- `diagnosis.json`: `Diagnosis.to_json()` (`missing_effects`, `steps` with `gap_before` /
+  `gap_after` and the residual breakdown before and after, the candidates' scores and
+  refits, the final misfit and the misspecification alarm).
+- `diagnosis.md`: the same in words and tables.
+- `gap.png`: $\\chi^2/n$ per channel and time window, before and after each step.
+- `overlay_step<k>_<effect>.png`: data, old model and new model of every file and channel
+  (`overlay_base.png` when nothing was named).
+- `gaps.csv`: channel, window, stage, n, chi2_per_sample, excess_sigma.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from hertzchain.atomic import save_figure, write_json, write_text  # noqa: E402
+
+from .diagnosis import Diagnosis  # noqa: E402
+from .locate import WINDOWS  # noqa: E402
+
+
+def _fmt(value, digits=4) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            return "-"
+        return f"{value:.{digits}g}"
+    return str(value)
+
+
+def _stages(diagnosis: Diagnosis):
+    stages = [("base", diagnosis.base_fit["location"])]
+    for step in diagnosis.steps:
+        stages.append((f"+{step.effect}", step.location_after))
+    return stages
+
+
+def _gap_table(diagnosis: Diagnosis) -> list[str]:
+    stages = _stages(diagnosis)
+    header = "| channel | window | " + " | ".join(name for name, _ in stages) + " |"
+    lines = [header, "|" + "---|" * (len(stages) + 2)]
+    first = stages[0][1]["by_channel_window"]
+    for channel, windows in first.items():
+        for window in WINDOWS:
+            if not windows.get(window, {}).get("n"):
+                continue
+            cells = [_fmt(loc["by_channel_window"][channel][window]["chi2_per_sample"], 3) for _, loc in stages]
+            lines.append(f"| {channel} | {window} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def markdown(diagnosis: Diagnosis) -> str:
+    """The report in Markdown."""
+    d = diagnosis
+    out = io.StringIO()
+    w = out.write
+    w("# Diagnosis\n\n")
+    w(f"Files: {', '.join(e.label for e in d.problem.experiments)}; model `{d.settings['model']}`; "
+      f"nuisances {', '.join(d.settings['nuisances'])}"
+      + (f"; free {', '.join(d.settings['free'])}" if d.settings["free"] else "") + ".\n\n")
+    w(f"**Missing effects (in the order found):** {', '.join(d.missing_effects) or 'none'}\n\n")
+    w(d.conclusion + "\n\n")
+    w("## Gap before and after each step\n\n")
+    w("Gap = reduced chi^2 of the whitened residuals (1 = noise level).\n\n")
+    w("| step | effect | gap before | gap after | excess before (sigma) | excess after (sigma) |\n")
+    w("|---|---|---|---|---|---|\n")
+    w(f"| 0 | base fit | - | {_fmt(d.base_fit['gap'])} | - | {_fmt(d.base_fit['excess_sigma'], 3)} |\n")
+    for k, s in enumerate(d.steps, 1):
+        eb = (s.chi2_before - s.dof_before) / math.sqrt(2 * s.dof_before)
+        ea = (s.chi2_after - s.dof_after) / math.sqrt(2 * s.dof_after)
+        w(f"| {k} | {s.effect} | {_fmt(s.gap_before)} | {_fmt(s.gap_after)} | {_fmt(eb, 3)} | {_fmt(ea, 3)} |\n")
+    w("\nchi^2 per sample by channel and time window:\n\n")
+    w("\n".join(_gap_table(d)) + "\n\n")
+    for k, s in enumerate(d.steps, 1):
+        w(f"## Step {k}: {s.effect}\n\n")
+        w("Fitted strengths (SI, 0 = effect off):\n\n| parameter | value | standard error |\n|---|---|---|\n")
+        for name, value in s.values.items():
+            w(f"| {name} | {_fmt(value)} | {_fmt(s.stderr.get(name))} |\n")
+        w("\nCandidates at this step:\n\n")
+        w(_candidate_table(s.candidates))
+        w(f"\n![overlay](overlay_step{k}_{s.effect}.png)\n\n")
+    if d.last_candidates:
+        w("## Last round (nothing named)\n\n")
+        w(_candidate_table(d.last_candidates) + "\n")
+    w("## Final residual\n\n")
+    for line in d.final["where"]:
+        w(f"- {line}\n")
+    if d.indistinguishable:
+        w("\nCandidate pairs these data cannot tell apart (|cos| of projected sensitivities > 0.95): "
+          + "; ".join(f"{p['effects'][0]} / {p['effects'][1]} ({p['abs_cos']:.3f})" for p in d.indistinguishable)
+          + "\n")
+    if d.dropped_in_backward_check:
+        w(f"\nDropped by the backward check (redundant once the others were in): "
+          f"{', '.join(d.dropped_in_backward_check)}\n")
+    w("\n![gap](gap.png)\n")
+    w(f"\nRun time {d.elapsed_s:.1f} s, {d.evaluations} model evaluations.\n")
+    return out.getvalue()
+
+
+def _candidate_table(candidates) -> str:
+    lines = ["| candidate | k | score | delta chi^2 | BIC gain | share of excess | held-out gain | passed | why |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for c in sorted(candidates, key=lambda c: -c.delta_chi2):
+        lines.append(
+            f"| {c.effect} | {c.n_parameters} | {_fmt(c.score_chi2, 3)} | {_fmt(c.delta_chi2, 4)} | "
+            f"{_fmt(c.bic_gain, 4)} | {_fmt(c.share_of_excess, 3)} | {_fmt(c.heldout_gain, 4)} | "
+            f"{'yes' if c.passed else 'no'} | {c.reason} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def _overlay(diagnosis: Diagnosis, x_old, x_new, title: str):
+    problem = diagnosis.problem
+    old = problem.predictions(x_old)
+    new = problem.predictions(x_new) if x_new is not None else None
+    experiments = problem.experiments
+    n_channels = max(len(e.channels) for e in experiments)
+    fig, axes = plt.subplots(len(experiments), n_channels, figsize=(4 * n_channels, 2.4 * len(experiments)),
+                             squeeze=False)
+    for row, experiment in enumerate(experiments):
+        for col, name in enumerate(experiment.channels):
+            ax = axes[row, col]
+            t = experiment.time_s * 1e3
+            ax.plot(t, experiment.data(name), color="0.6", lw=0.8, label="data")
+            ax.plot(t, old[row][name], color="tab:blue", lw=0.9, ls="--", label="old model")
+            if new is not None:
+                ax.plot(t, new[row][name], color="tab:red", lw=0.9, label="new model")
+            ax.set_title(f"{experiment.label}: {name}", fontsize=8)
+            ax.set_xlabel("time (ms)")
+            ax.set_ylabel("force (N)")
+            ax.tick_params(labelsize=7)
+        for col in range(len(experiment.channels), n_channels):
+            axes[row, col].axis("off")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def _gap_figure(diagnosis: Diagnosis):
+    stages = _stages(diagnosis)
+    first = stages[0][1]["by_channel_window"]
+    labels, values = [], []
+    for channel, windows in first.items():
+        for window in WINDOWS:
+            if windows.get(window, {}).get("n"):
+                labels.append(f"{channel}\n{window}")
+                values.append([loc["by_channel_window"][channel][window]["chi2_per_sample"] for _, loc in stages])
+    values = np.asarray(values, dtype=float)
+    fig, ax = plt.subplots(figsize=(max(6, 0.5 * len(labels) + 2), 4))
+    width = 0.8 / max(len(stages), 1)
+    positions = np.arange(len(labels))
+    for k, (name, _) in enumerate(stages):
+        ax.bar(positions + k * width, values[:, k], width, label=name)
+    ax.axhline(1.0, color="k", lw=0.8, ls=":")
+    ax.set_yscale("log")
+    ax.set_xticks(positions + width * (len(stages) - 1) / 2)
+    ax.set_xticklabels(labels, fontsize=6, rotation=90)
+    ax.set_ylabel("chi^2 per sample (1 = noise)")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def _gap_rows(diagnosis: Diagnosis) -> str:
+    lines = ["stage,channel,window,n,chi2_per_sample,excess_sigma"]
+    for stage, location in _stages(diagnosis):
+        for channel, windows in location["by_channel_window"].items():
+            for window, c in windows.items():
+                lines.append(f"{stage},{channel},{window},{c['n']},{c['chi2_per_sample']!r},{c['excess_sigma']!r}")
+    return "\n".join(lines) + "\n"
+
+
+def write_diagnosis_report(diagnosis: Diagnosis, out_dir) -> dict:
+    """Write the report files into `out_dir`; returns name -> path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"json": out / "diagnosis.json", "markdown": out / "diagnosis.md", "gap_png": out / "gap.png",
+             "gaps_csv": out / "gaps.csv"}
+    write_json(paths["json"], diagnosis.to_json())
+    write_text(paths["markdown"], markdown(diagnosis))
+    write_text(paths["gaps_csv"], _gap_rows(diagnosis))
+    fig = _gap_figure(diagnosis)
+    save_figure(fig, paths["gap_png"], dpi=110)
+    plt.close(fig)
+    if diagnosis.steps:
+        for k, step in enumerate(diagnosis.steps, 1):
+            fig = _overlay(diagnosis, step.x_before, step.x_after,
+                           f"step {k}: +{step.effect} (gap {step.gap_before:.4g} -> {step.gap_after:.4g})")
+            path = out / f"overlay_step{k}_{step.effect}.png"
+            save_figure(fig, path, dpi=90)
+            plt.close(fig)
+            paths[f"overlay_{k}"] = path
+    else:
+        fig = _overlay(diagnosis, diagnosis.x_base, None, f"base fit (gap {diagnosis.base_fit['gap']:.4g})")
+        path = out / "overlay_base.png"
+        save_figure(fig, path, dpi=90)
+        plt.close(fig)
+        paths["overlay_base"] = path
+    return paths

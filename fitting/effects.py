@@ -1,0 +1,236 @@
+"""The library of candidate missing effects, and the forward model that can switch each on.
+
+Every effect is an optional term of the chain model with one or more strength parameters
+whose value 0 is the base model (the effect switched off). All of them act through one
+forward model (`effects_forward_model`), so a diagnosis compiles the simulator once and
+frees or holds strengths as it goes.
+
+| identifier | parameter(s) (0 = off) | what it changes |
+|---|---|---|
+| `viscous_damping` | `eta_s` (s) | Kuwabara-Kono $F_v = \\eta\\kappa\\,\\partial_t\\delta^{3/2}$ added to $\\eta$ of the header |
+| `track_friction` | `mu` | Coulomb friction $\\mu m g$ of the beads on the track |
+| `rotational_friction` | `mu_star` | uniform stiffness scale $\\kappa^* = (1+\\mu^*)\\kappa$ of every contact; the paper's thwarted rotation, but equally an error in the beads' modulus: in this form the two cannot be told apart |
+| `sensor_dynamics` | `sensor_beta`, `sensor_rate` | a `contact_K` channel is the signal of a sensor embedded in bead K (Eq. 4 of the paper): $\\ddot F_s + \\omega_0^2F_s = \\omega_0^2[(1-\\beta)F_K + \\beta F_{K-1}]$, with `sensor_rate` $= (f_{ref}/f_0)^2$, $f_{ref}$ = 100 kHz |
+| `wall_compliance` | `wall_softening` | wall modulus $Y_w = Y_{w,0}e^{-w}$ (w > 0: softer than the header's) |
+| `bead_dispersion` | `bead_radius_dev_1..N` | relative radius deviation of each bead at fixed density (mass $\\propto R^3$, stiffness follows) |
+| `precompression` | `preload_n` (N) | static preload added to the header's |
+| `plasticity` | `yield_softening` | Thornton (1997) elastic-plastic contacts (`hertzchain.contact.thornton_contact`) with yield stress $\\sigma_{Y,0}/y$, i.e. yield forces $F_{Y,0}/y^3$ ($\\sigma_{Y,0}$: the header's, else 2 GPa); y = 0 never yields, y = 1 is the paper's 470 N |
+
+The sensor filter of `sensor_dynamics` is the exact discretisation of Eq. 4
+(`hertzchain.sensor.sensor_signal`) for $f_0$ below 2 MHz; above it (sensor_rate < 0.0025)
+its first-order expansion $F_s = u - \\ddot u/\\omega_0^2$, which is regular at $f_0 = \\infty$
+(the base model), so derivatives exist at "off".
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax.numpy as jnp
+
+from hertzchain.chain import ChainSetup
+from hertzchain.integrate import Recording, solve
+from hertzchain.sensor import sensor_signal
+
+from .model import ForwardModel
+from .parameters import REGISTRY, ParameterSpec, register_parameter
+
+SENSOR_REFERENCE_HZ = 100e3
+# Above this f0 the sensor filter uses its first-order expansion (sensor_rate below the switch).
+_SENSOR_EXACT_BELOW_HZ = 2e6
+_SENSOR_SWITCH_RATE = (SENSOR_REFERENCE_HZ / _SENSOR_EXACT_BELOW_HZ) ** 2
+# Yield stress used by `plasticity` when the header's beads never yield (the paper's 2 GPa).
+DEFAULT_YIELD_STRESS_PA = 2e9
+# A rigid nominal wall is represented as this many times stiffer than the beads.
+_RIGID_WALL_FACTOR = 1e3
+PREFIX = "dx_"
+
+
+@dataclasses.dataclass(frozen=True)
+class Effect:
+    """A candidate missing effect.
+
+    **Fields:** `name` (identifier), `parameters` (registry names of its strengths, in the
+    forward model's `extras`), `summary` (the model term), `signature` (what it leaves in
+    the data), `one_sided` (strengths that are physically >= 0, so a fit at the bound means
+    "absent").
+    """
+
+    name: str
+    parameters: tuple[str, ...]
+    summary: str
+    signature: str
+    one_sided: bool = True
+
+
+def _spec(name, unit, lower, upper, description):
+    return ParameterSpec(PREFIX + name, unit, "global", "linear", lower, upper, kind="extra",
+                         scale=1.0, default=0.0, description=description)
+
+
+_SPECS = (
+    _spec("eta_s", "s", 0.0 - 1e-30, 1e-3, "viscous_damping: added viscoelastic time eta (s)"),
+    _spec("mu", "", 0.0 - 1e-30, 3.0, "track_friction: friction coefficient on the track"),
+    _spec("mu_star", "", -0.5, 1.0, "rotational_friction: uniform stiffness scale kappa* = (1+mu*) kappa"),
+    _spec("sensor_beta", "", 0.0 - 1e-30, 0.5, "sensor_dynamics: mass fraction beta of the front half"),
+    _spec("sensor_rate", "", 0.0 - 1e-30, 1e4, "sensor_dynamics: (100 kHz / f0)^2"),
+    _spec("wall_softening", "", -5.0, 12.0, "wall_compliance: log(Y_w,header / Y_w)"),
+    _spec("preload_n", "N", 0.0 - 1e-30, 1e4, "precompression: static preload (N)"),
+    _spec("yield_softening", "", 0.0 - 1e-30, 20.0, "plasticity: sigma_Y,0 / sigma_Y"),
+)
+for _s in _SPECS:
+    if _s.name not in REGISTRY:
+        register_parameter(_s)
+
+
+def dispersion_parameter(bead: int) -> str:
+    """Registry name of the radius deviation of bead `bead` (1..N), registered on demand."""
+    name = f"{PREFIX}bead_radius_dev_{bead}"
+    if name not in REGISTRY:
+        register_parameter(_spec(f"bead_radius_dev_{bead}", "", -0.2, 0.2,
+                                 f"bead_dispersion: relative radius deviation of bead {bead}"))
+    return name
+
+
+def library(n_beads: int) -> dict[str, Effect]:
+    """The candidate effects for a chain of `n_beads`, by identifier, in a fixed order."""
+    p = PREFIX
+    effects = (
+        Effect("viscous_damping", (p + "eta_s",), "F_v = eta kappa d(delta^3/2)/dt (Kuwabara-Kono)",
+               "peaks lower and pulses broader, increasingly along the chain, most at high amplitude; "
+               "a slow trailing tail"),
+        Effect("track_friction", (p + "mu",), "Coulomb friction mu m g of every bead on the track",
+               "amplitude loss mostly at low amplitude (relative loss ~ 1/F_m); beads behind the pulse stop"),
+        Effect("rotational_friction", (p + "mu_star",),
+               "uniform contact-stiffness scale kappa* = (1+mu*) kappa (thwarted rotation, or equally an "
+               "error in the beads' Young's modulus: not separable in this form)",
+               "phase misfit only: pulses earlier (mu* > 0) by ~mu*/3 of the travel time, at all amplitudes",
+               one_sided=False),
+        Effect("sensor_dynamics", (p + "sensor_beta", p + "sensor_rate"),
+               "contact channels are embedded-sensor signals (Eq. 4, unknown beta and f0)",
+               "odd (derivative-shaped) residual in contact channels only, high-frequency ringing; "
+               "the wall channel is untouched"),
+        Effect("wall_compliance", (p + "wall_softening",), "wall Young's modulus differs from the header's",
+               "wall peak lower and longer (softer wall), later reflected pulse; nothing before the wall",
+               one_sided=False),
+        Effect("bead_dispersion", tuple(dispersion_parameter(b) for b in range(1, n_beads + 1)),
+               "bead radii (and masses, at fixed density) vary along the chain",
+               "position-specific pattern of amplitude and arrival residuals, same at every amplitude",
+               one_sided=False),
+        Effect("precompression", (p + "preload_n",), "static preload F0 on the chain",
+               "faster, wider pulses at low amplitude; baseline offset before the impact"),
+        Effect("plasticity", (p + "yield_softening",), "Thornton (1997) elastic-plastic contacts",
+               "flattened peaks and extra loss only above the yield force (a threshold in amplitude)"),
+    )
+    return {effect.name: effect for effect in effects}
+
+
+EFFECT_NAMES = tuple(library(1))
+
+# Fitted setup parameters (fitting.parameters) that already stand for an effect: freeing one
+# of them makes that effect's candidate redundant.
+COVERED_BY = {
+    "eta": "viscous_damping", "mu": "track_friction", "C": "rotational_friction",
+    "mu_star": "rotational_friction", "wall_youngs": "wall_compliance",
+    "precompression": "precompression",
+}
+
+
+def rebuild_setup(setup: ChainSetup, **changes) -> ChainSetup:
+    """A copy of `setup` with fields replaced, static ones (`plasticity`, `sensor_beads`) included.
+
+    Works on traced setups (inside `jit`/`vmap`/`jacfwd`): the constructor's concrete checks
+    skip traced values.
+    """
+    values = {f.name: getattr(setup, f.name) for f in dataclasses.fields(setup)}
+    values.update(changes)
+    return ChainSetup(setup.n_beads, **values)
+
+
+def _second_difference(series, step_s):
+    inner = (series[2:] - 2.0 * series[1:-1] + series[:-2]) / step_s**2
+    return jnp.concatenate([inner[:1], inner, inner[-1:]])
+
+
+def sensor_output(front_n, back_n, beta, rate, step_s):
+    """Embedded-sensor signal of Eq. 4 from the forces on its front and back halves, N.
+
+    `front_n`, `back_n`: (n,) forces at contact K and K-1 on an even grid of `step_s`;
+    `rate` $= (f_{ref}/f_0)^2$. Differentiable in `beta` and `rate`, also at `rate = 0`.
+    """
+    drive = (1.0 - beta) * front_n + beta * back_n
+    omega_ref = 2.0 * math.pi * SENSOR_REFERENCE_HZ
+    series_first = drive - rate / omega_ref**2 * _second_difference(drive, step_s)
+    exact = rate > _SENSOR_SWITCH_RATE
+    safe_rate = jnp.where(exact, rate, 1.0)
+    f0 = SENSOR_REFERENCE_HZ / jnp.sqrt(safe_rate)
+    time = step_s * jnp.arange(front_n.shape[0], dtype=jnp.float64)
+    filtered = sensor_signal(time, front_n, back_n, beta=beta, f0_hz=f0)
+    return jnp.where(exact, filtered, series_first)
+
+
+def apply_effects(setup: ChainSetup, extras: dict) -> ChainSetup:
+    """The setup with every effect strength of `extras` applied (plastic contacts always on)."""
+    p = PREFIX
+    n = setup.n_beads
+    deviations = jnp.stack([jnp.asarray(extras.get(f"{p}bead_radius_dev_{b}", 0.0), dtype=jnp.float64)
+                            for b in range(1, n + 1)])
+    radius = setup.bead_radius_m * (1.0 + deviations)
+    wall_nominal = setup.wall_youngs_pa
+    wall_nominal = jnp.where(jnp.isfinite(wall_nominal), wall_nominal,
+                             _RIGID_WALL_FACTOR * setup.bead_youngs_pa[-1])
+    wall = wall_nominal * jnp.exp(-extras[p + "wall_softening"])
+    sigma0 = jnp.where(jnp.isfinite(setup.bead_yield_stress_pa), setup.bead_yield_stress_pa,
+                       DEFAULT_YIELD_STRESS_PA)
+    softening = extras[p + "yield_softening"]
+    yields = softening > 0
+    sigma = jnp.where(yields, sigma0 / jnp.where(yields, softening, 1.0), jnp.inf)
+    return rebuild_setup(
+        setup,
+        bead_radius_m=radius,
+        eta_s=setup.eta_s + extras[p + "eta_s"],
+        mu=setup.mu + extras[p + "mu"],
+        mu_star=(1.0 + setup.mu_star) * (1.0 + extras[p + "mu_star"]) - 1.0,
+        wall_youngs_pa=wall,
+        precompression_n=setup.precompression_n + extras[p + "preload_n"],
+        bead_yield_stress_pa=sigma,
+        plasticity=True,
+    )
+
+
+class _Forces:
+    """The part of `hertzchain.Traces` a fit reads: `forces_n`."""
+
+    def __init__(self, forces_n):
+        self.forces_n = forces_n
+
+
+def _simulate_with_effects(setup, grid, recording, extras):
+    p = PREFIX
+    changed = apply_effects(setup, extras)
+    extra_contacts = {k - 1 for k in recording.contacts if k >= 1}
+    contacts = tuple(sorted(set(recording.contacts) | extra_contacts))
+    traces = solve(changed, grid, Recording(contacts=contacts))
+    forces = dict(traces.forces_n)
+    start = changed.precompression_n
+    step = grid.sample_interval_s
+    for k in recording.contacts:
+        front = jnp.concatenate([start[None], forces[f"contact_{k}"]])
+        back = front if k == 0 else jnp.concatenate([start[None], forces[f"contact_{k - 1}"]])
+        signal = sensor_output(front, back, extras[p + "sensor_beta"], extras[p + "sensor_rate"], step)
+        forces[f"contact_{k}"] = signal[1:]
+    return _Forces(forces)
+
+
+def effects_forward_model(n_beads: int, steps_per_contact: int = 200) -> ForwardModel:
+    """A `ForwardModel` with every effect of `library(n_beads)` available, all off by default.
+
+    Effect strengths are fitted parameters of kind "extra" (registry names starting with
+    `dx_`); the ones not fitted take their default 0 (off).
+    """
+    defaults = {spec.name: 0.0 for spec in _SPECS}
+    for b in range(1, n_beads + 1):
+        defaults[dispersion_parameter(b)] = 0.0
+    return ForwardModel(simulate=_simulate_with_effects, steps_per_contact=steps_per_contact,
+                        extras_defaults=defaults)

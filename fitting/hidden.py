@@ -1,0 +1,157 @@
+"""Synthetic trace files with a known missing effect hidden in them (tests, benchmarks).
+
+The data are simulated with the effect switched on (the "truth"), on a time step four
+times finer than a diagnosis uses, and written with the header of the *nominal* chain (the
+base model's view: no dissipation, ideal force sensors, the header's wall and beads). Each
+file gets its own striker-velocity error in the header, a trigger offset, and white
+Gaussian noise of a given fraction of its largest signal.
+
+How each effect is hidden (`NOMINAL` holds the default strengths):
+
+- `viscous_damping`: `eta_s`; `track_friction`: `mu`; `rotational_friction`: `mu_star`;
+- `sensor_dynamics`: every `contact_K` channel is the signal of a sensor embedded in bead K
+  (the core's split-bead model with `sensor_beta`, `sensor_f0_hz`), a different code path
+  from the diagnosis's filter;
+- `wall_compliance`: the wall's Young's modulus (Pa) differs from the header's;
+- `bead_dispersion`: bead radii scattered by this relative standard deviation (fixed per
+  data set, density fixed, so masses scatter three times as much);
+- `precompression`: a static preload (N);
+- `plasticity`: Thornton elastic-plastic contacts with this yield stress (Pa).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from hertzchain.chain import ChainSetup
+from hertzchain.tracefile import TraceFile, setup_header
+
+from .effects import EFFECT_NAMES
+from .model import interpolate
+from .parameters import bare_speed_constant
+from .synthetic import simulate_clean
+
+NOMINAL = {
+    "viscous_damping": 1e-6,
+    "track_friction": 0.19,
+    "rotational_friction": 0.03,
+    "sensor_dynamics": (0.11, 85e3),
+    "wall_compliance": 20e9,
+    "bead_dispersion": 0.005,
+    "precompression": 2.0,
+    "plasticity": 2e9,
+}
+DEFAULT_VELOCITIES_M_S = (0.02, 0.05, 0.12, 0.3, 0.6)
+
+
+def _truth(nominal: ChainSetup, hidden: dict, rng) -> dict:
+    """Keyword changes of the true setup for the `hidden` effects."""
+    changes: dict = {}
+    for name, value in hidden.items():
+        if name == "viscous_damping":
+            changes["eta_s"] = value
+        elif name == "track_friction":
+            changes["mu"] = value
+        elif name == "rotational_friction":
+            changes["mu_star"] = value
+        elif name == "wall_compliance":
+            changes["wall_youngs_pa"] = value
+        elif name == "bead_dispersion":
+            scatter = np.clip(rng.standard_normal(nominal.n_beads), -2.5, 2.5)
+            changes["bead_radius_m"] = np.asarray(nominal.bead_radius_m) * (1.0 + value * scatter)
+            changes["bead_density_kg_m3"] = np.asarray(nominal.bead_density_kg_m3)
+            changes["striker_radius_m"] = float(nominal.striker_radius_m)
+        elif name == "precompression":
+            changes["precompression_n"] = value
+        elif name == "plasticity":
+            changes["plasticity"] = True
+            changes["bead_yield_stress_pa"] = value
+        elif name == "sensor_dynamics":
+            beta, f0 = value
+            changes["sensor_beta"] = beta
+            changes["sensor_f0_hz"] = f0
+        else:
+            raise ValueError(f"hidden: unknown effect {name!r}; effects: {', '.join(EFFECT_NAMES)}.")
+    return changes
+
+
+def default_record_s(setup: ChainSetup, velocity_m_s: float, factor: float = 1.35) -> float:
+    """Record length: `factor` x the time the pulse of the slowest shot takes to reach the wall, s."""
+    kappa = float(setup.contact_kappa()[min(1, setup.n_beads - 1)])
+    mass = float(setup.bead_mass_kg[0])
+    amplitude = 0.63955 * kappa ** 0.4 * mass ** 0.6 * velocity_m_s ** 1.2
+    speed = float(bare_speed_constant(setup)) * amplitude ** (1 / 6)
+    return factor * setup.n_beads * 2 * float(setup.bead_radius_m[0]) / speed
+
+
+def hidden_effect_traces(hidden=(), *, n_beads: int = 21, velocities_m_s=DEFAULT_VELOCITIES_M_S,
+                         contacts=(7, 14), t_end_s: float | None = None, sample_interval_s: float = 1e-6,
+                         noise_fraction: float = 0.005, velocity_error: float = 0.02,
+                         trigger_jitter_s: float = 1e-6, seed: int = 0, **setup_fields) -> list[TraceFile]:
+    """Trace files of a chain with the `hidden` effects, headers of the nominal chain.
+
+    **Arguments:**
+
+    - `hidden`: effect identifiers (nominal strengths, `NOMINAL`) or a dict identifier ->
+      strength (see the module docstring for units).
+    - `n_beads`, `setup_fields`: the nominal chain (`ChainSetup` keywords, e.g.
+      `bead_radius_m`); `velocities_m_s`: one file per impact velocity.
+    - `contacts`: recorded contacts (the wall is always recorded).
+    - `t_end_s`: record length (default: `default_record_s` of the slowest shot).
+    - `sample_interval_s`; `noise_fraction`: noise sigma / the file's largest signal.
+    - `velocity_error`: relative standard deviation of the header's striker velocity.
+    - `trigger_jitter_s`: standard deviation of the trigger offset.
+    - `seed`: seeds noise, offsets, velocity errors and bead scatter.
+    """
+    if not isinstance(hidden, dict):
+        hidden = {name: NOMINAL[name] if name in NOMINAL else None for name in hidden}
+    for name in hidden:
+        if name not in EFFECT_NAMES:
+            raise ValueError(f"hidden: unknown effect {name!r}; effects: {', '.join(EFFECT_NAMES)}.")
+    rng = np.random.default_rng(seed)
+    contacts = tuple(contacts)
+    nominal = [ChainSetup(n_beads, striker_velocity_m_s=v, **setup_fields) for v in velocities_m_s]
+    changes = _truth(nominal[0], hidden, rng)
+    sensor = "sensor_dynamics" in hidden
+    if sensor:
+        changes["sensor_beads"] = tuple(k for k in contacts if k >= 1)
+    truth = []
+    for setup in nominal:
+        fields = dict(setup_fields)
+        fields.update(changes)
+        truth.append(ChainSetup(n_beads, striker_velocity_m_s=float(setup.striker_velocity_m_s), **fields))
+    if t_end_s is None:
+        t_end_s = default_record_s(nominal[0], float(min(velocities_m_s)))
+    offsets = trigger_jitter_s * rng.standard_normal(len(truth))
+    fine = sample_interval_s / 4
+    margin = float(np.max(np.abs(offsets))) + 4 * sample_interval_s
+    clean = simulate_clean(truth, contacts=contacts, t_end_s=t_end_s + margin, sample_interval_s=fine)
+    time = sample_interval_s * np.arange(1, round(t_end_s / sample_interval_s) + 1)
+    files = []
+    for b, (setup, true_setup) in enumerate(zip(nominal, truth)):
+        channels = {}
+        for name, series in clean[b].items():
+            if sensor and name.startswith("contact_") and int(name.split("_")[1]) in changes["sensor_beads"]:
+                continue
+            full = np.concatenate([[float(true_setup.precompression_n)], series])
+            value = np.asarray(interpolate(jnp.asarray(full), jnp.asarray((time - offsets[b]) / fine)))
+            out = name.replace("sensor_", "contact_") if sensor else name
+            channels[out] = value
+        ordered = {f"contact_{k}": channels[f"contact_{k}"] for k in contacts}
+        ordered["wall"] = channels["wall"]
+        sigma = noise_fraction * max(float(np.max(v)) for v in ordered.values())
+        for name in ordered:
+            ordered[name] = ordered[name] + sigma * rng.standard_normal(time.size)
+        header = setup_header(setup)
+        true_velocity = float(setup.striker_velocity_m_s)
+        header["striker_velocity_m_s"] = true_velocity * (1.0 + velocity_error * rng.standard_normal())
+        header["noise_std_n"] = sigma
+        header["x_hidden_effects"] = "+".join(hidden) if hidden else "none"
+        header["x_true_striker_velocity_m_s"] = repr(true_velocity)
+        header["x_true_time_offset_s"] = repr(float(offsets[b]))
+        for name, value in hidden.items():
+            header[f"x_true_{name}"] = repr(value)
+        files.append(TraceFile(header=header, time_s=time, channels=ordered, path=None))
+    return files
+

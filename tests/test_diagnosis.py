@@ -1,0 +1,258 @@
+"""Diagnosis: the candidate library's forward model, residual localisation, and the
+workflow naming hidden effects (fast cases here; the per-candidate sweep is marked slow)."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import hertzchain  # noqa: F401
+from fitting import effects as fx
+from fitting.diagnosis import DiagnosisError, diagnose, parse_model
+from fitting.hidden import NOMINAL, hidden_effect_traces
+from fitting.locate import cell, locate, window_masks
+from hertzchain.chain import ChainSetup
+from hertzchain.integrate import Recording, solve
+from hertzchain.sensor import sensor_signal
+from hertzchain.timegrid import choose_time_grid
+
+
+# --- the library's forward model ------------------------------------------------------------------
+def _extras(n_beads, **values):
+    extras = dict(fx.effects_forward_model(n_beads).extras_defaults)
+    for name, value in values.items():
+        extras[fx.PREFIX + name] = jnp.asarray(value, dtype=jnp.float64)
+    return extras
+
+
+def _run(setup, extras, contacts=(2, 4)):
+    grid = choose_time_grid(setup, t_end_s=4e-4, sample_interval_s=1e-6)
+    model = fx.effects_forward_model(setup.n_beads)
+    return model.simulate(setup, grid, Recording(contacts=contacts), extras).forces_n, grid
+
+
+def test_all_effects_off_is_the_base_model():
+    setup = ChainSetup(6, striker_velocity_m_s=0.2)
+    forces, grid = _run(setup, _extras(6))
+    plain = solve(setup, grid, Recording(contacts=(2, 4)))
+    for name in ("contact_2", "contact_4", "wall"):
+        np.testing.assert_allclose(forces[name], plain.forces_n[name], rtol=0, atol=1e-9 * float(jnp.max(plain.forces_n[name])))
+
+
+def test_effect_strengths_reach_the_setup():
+    setup = ChainSetup(6, striker_velocity_m_s=0.2, wall_youngs_pa=100e9)
+    extras = _extras(6, eta_s=1e-6, mu=0.1, mu_star=0.02, wall_softening=math.log(2.0), preload_n=3.0,
+                     yield_softening=1.0, bead_radius_dev_3=0.01)
+    changed = fx.apply_effects(setup, extras)
+    assert float(changed.eta_s) == pytest.approx(1e-6)
+    assert float(changed.mu) == pytest.approx(0.1)
+    assert float(changed.mu_star) == pytest.approx(0.02)
+    assert float(changed.wall_youngs_pa) == pytest.approx(50e9)
+    assert float(changed.precompression_n) == pytest.approx(3.0)
+    assert changed.plasticity
+    assert float(changed.bead_yield_stress_pa) == pytest.approx(float(setup.bead_yield_stress_pa))
+    ratio = np.asarray(changed.bead_mass_kg / setup.bead_mass_kg)
+    np.testing.assert_allclose(ratio, [1, 1, 1.01**3, 1, 1, 1], rtol=1e-12)
+    # yield_softening 0 never yields: identical to the elastic chain
+    assert not np.isfinite(float(fx.apply_effects(setup, _extras(6)).bead_yield_stress_pa))
+
+
+def test_sensor_filter_matches_eq4_and_is_regular_at_infinite_f0():
+    step = 1e-6
+    t = step * np.arange(400)
+    front = 50 * np.cos(np.clip((t - 2e-4) / 4e-5, -np.pi / 2, np.pi / 2)) ** 6
+    back = 50 * np.cos(np.clip((t - 1.3e-4) / 4e-5, -np.pi / 2, np.pi / 2)) ** 6
+    beta, f0 = 0.11, 85e3
+    rate = (fx.SENSOR_REFERENCE_HZ / f0) ** 2
+    ours = fx.sensor_output(jnp.asarray(front), jnp.asarray(back), beta, rate, step)
+    reference = sensor_signal(t, front, back, beta=beta, f0_hz=f0)
+    np.testing.assert_allclose(ours, reference, atol=1e-12)
+    # off: the contact force itself, and a finite derivative equal to -u''/omega_ref^2
+    off = fx.sensor_output(jnp.asarray(front), jnp.asarray(back), 0.0, 0.0, step)
+    np.testing.assert_allclose(off, front, atol=1e-12)
+    d_rate = jax.jacfwd(lambda r: fx.sensor_output(jnp.asarray(front), jnp.asarray(back), 0.0, r, step))(0.0)
+    assert np.all(np.isfinite(d_rate))
+    # first-order expansion agrees with the exact filter for a large f0 (3 MHz)
+    rate_small = (fx.SENSOR_REFERENCE_HZ / 3e6) ** 2
+    linear = front + rate_small * np.asarray(d_rate)
+    exact = sensor_signal(t, front, front, beta=0.0, f0_hz=3e6)
+    assert float(np.max(np.abs(linear - exact))) < 1e-3 * 50
+
+
+def test_jacobian_at_off_is_finite_for_every_strength():
+    setup = ChainSetup(5, striker_velocity_m_s=0.2)
+    grid = choose_time_grid(setup, t_end_s=3e-4, sample_interval_s=1e-6)
+    model = fx.effects_forward_model(5)
+    names = [n for n in model.extras_defaults]
+
+    def out(values):
+        extras = dict(zip(names, values))
+        forces = model.simulate(setup, grid, Recording(contacts=(2,)), extras).forces_n
+        return jnp.concatenate([forces["contact_2"], forces["wall"]])
+
+    jac = jax.jacfwd(out)(jnp.zeros(len(names)))
+    assert np.all(np.isfinite(np.asarray(jac)))
+    by_name = dict(zip(names, np.abs(np.asarray(jac)).max(axis=0)))
+    for name in ("dx_eta_s", "dx_mu", "dx_mu_star", "dx_sensor_beta", "dx_sensor_rate", "dx_wall_softening",
+                 "dx_bead_radius_dev_2"):
+        assert by_name[name] > 0, name
+
+
+# --- localisation -------------------------------------------------------------------------------------
+def test_window_masks_partition_the_record():
+    t = np.arange(1000)
+    model = 10 * np.cos(np.clip((t - 300) / 40, -np.pi / 2, np.pi / 2)) ** 6
+    masks = window_masks(model)
+    total = sum(m.astype(int) for m in masks.values())
+    assert np.all(total <= 1)
+    assert masks["peak"][300] and masks["before"][0] and masks["after"][999]
+    assert not masks["peak"][200]
+    c = cell(np.full(200, 2.0))
+    assert c["chi2_per_sample"] == pytest.approx(4.0)
+    assert c["excess_sigma"] == pytest.approx((800 - 200) / math.sqrt(400))
+
+
+def test_bad_model_and_candidates_are_refused():
+    with pytest.raises(DiagnosisError, match="model must be"):
+        parse_model("hertz", 5)
+    with pytest.raises(DiagnosisError, match="unknown effect"):
+        parse_model("base+air_drag", 5)
+    assert parse_model("base+viscous_damping", 5) == ["viscous_damping"]
+
+
+def test_hidden_traces_carry_the_nominal_header():
+    files = hidden_effect_traces({"wall_compliance": 20e9, "precompression": 2.0}, n_beads=5,
+                                 velocities_m_s=(0.1,), contacts=(2,), t_end_s=3e-4, seed=1)
+    header = files[0].header
+    assert header["wall_youngs_pa"] == pytest.approx(203e9)
+    assert "precompression_n" not in header
+    assert files[0].channels["contact_2"][0] == pytest.approx(2.0, abs=6 * header["noise_std_n"])
+    with pytest.raises(ValueError, match="unknown effect"):
+        hidden_effect_traces(["air_drag"], n_beads=5)
+
+
+# --- the workflow -------------------------------------------------------------------------------------
+SHORT = dict(n_beads=6, contacts=(2, 4), velocities_m_s=(0.03, 0.1, 0.3, 0.6), sample_interval_s=1e-6)
+
+
+def _gap_at_noise(diagnosis):
+    final = diagnosis.final
+    return final["chi2"] - final["dof"] <= 3.0 * math.sqrt(2 * final["dof"])
+
+
+def test_names_hidden_viscous_damping_on_a_short_chain():
+    files = hidden_effect_traces({"viscous_damping": 2e-6}, seed=5, noise_fraction=0.004, **SHORT)
+    result = diagnose(files, progress=False, max_effects=2)
+    assert result.missing_effects == ["viscous_damping"]
+    step = result.steps[0]
+    assert step.gap_before > 2.0
+    assert step.gap_after < 1.1
+    assert _gap_at_noise(result) and not result.misspecification
+    eta = step.values["eta_s"]
+    assert abs(eta - 2e-6) < max(4 * step.stderr["eta_s"], 0.1 * 2e-6)
+    payload = result.to_json()
+    assert payload["missing_effects"] == ["viscous_damping"]
+    assert payload["steps"][0]["gap_after"] < payload["steps"][0]["gap_before"]
+
+
+@pytest.mark.slow
+def test_nothing_hidden_names_nothing():
+    files = hidden_effect_traces((), seed=11, noise_fraction=0.006, **SHORT)
+    result = diagnose(files, progress=False)
+    assert result.missing_effects == []
+    assert not result.misspecification
+
+
+EFFECT_CASES = {
+    "viscous_damping": 1e-6,
+    "track_friction": 0.19,
+    "rotational_friction": 0.03,
+    "sensor_dynamics": NOMINAL["sensor_dynamics"],
+    "wall_compliance": 20e9,
+    "bead_dispersion": 0.01,
+    "precompression": 2.0,
+    "plasticity": 2e9,
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("effect", list(EFFECT_CASES))
+def test_each_hidden_effect_is_named(effect):
+    files = hidden_effect_traces({effect: EFFECT_CASES[effect]}, n_beads=10, contacts=(3, 6),
+                                 noise_fraction=0.005, seed=21)
+    result = diagnose(files, progress=False, max_effects=2)
+    assert result.missing_effects[:1] == [effect]
+    assert result.steps[0].gap_after < result.steps[0].gap_before
+    assert _gap_at_noise(result)
+
+
+@pytest.mark.slow
+def test_two_hidden_effects_are_both_named():
+    files = hidden_effect_traces({"viscous_damping": 1e-6, "wall_compliance": 20e9}, n_beads=10,
+                                 contacts=(3, 6), noise_fraction=0.005, seed=31)
+    result = diagnose(files, progress=False)
+    assert sorted(result.missing_effects) == ["viscous_damping", "wall_compliance"]
+    assert _gap_at_noise(result)
+
+
+def _exponent_traces(exponent, *, n_beads=6, velocities=(0.05, 0.15, 0.4), noise_fraction=0.004, seed=0):
+    """Traces of a chain whose contacts follow F = kappa_eff delta^exponent (outside the
+    library), from a small velocity-Verlet integrator of its own; kappa_eff matches the Hertz
+    force at a 10 um overlap so the pulses have the usual size."""
+    from hertzchain.tracefile import TraceFile, setup_header
+
+    rng = np.random.default_rng(seed)
+    setup = ChainSetup(n_beads)
+    kappa = float(setup.contact_kappa()[1])
+    kappa_wall = float(setup.wall_kappa())
+    scale = 1e-5 ** (1.5 - exponent)
+    mass = np.concatenate([[float(setup.striker_mass_kg)], np.asarray(setup.bead_mass_kg)])
+    k = np.full(n_beads, kappa * scale)
+    dt, every, n_samples = 2e-8, 50, 700
+
+    def forces(u):
+        overlap = np.maximum(u[:-1] - u[1:], 0.0)
+        contact = k * overlap**exponent
+        wall = kappa_wall * scale * max(u[-1], 0.0) ** exponent
+        net = np.concatenate([[0.0], contact]) - np.concatenate([contact, [wall]])
+        return net, contact, wall
+
+    files = []
+    for v0 in velocities:
+        u = np.zeros(n_beads + 1)
+        v = np.zeros(n_beads + 1)
+        v[0] = v0
+        a = forces(u)[0] / mass
+        rec = {f"contact_{c}": [] for c in (2, 4)} | {"wall": []}
+        for _ in range(n_samples):
+            for _ in range(every):
+                v += 0.5 * dt * a
+                u += dt * v
+                a = forces(u)[0] / mass
+                v += 0.5 * dt * a
+            _, contact, wall = forces(u)
+            rec["contact_2"].append(contact[2])
+            rec["contact_4"].append(contact[4])
+            rec["wall"].append(wall)
+        channels = {name: np.asarray(values) for name, values in rec.items()}
+        sigma = noise_fraction * max(float(np.max(c)) for c in channels.values())
+        for name in channels:
+            channels[name] = channels[name] + sigma * rng.standard_normal(n_samples)
+        header = setup_header(ChainSetup(n_beads, striker_velocity_m_s=v0))
+        header["noise_std_n"] = sigma
+        files.append(TraceFile(header=header, time_s=dt * every * np.arange(1, n_samples + 1), channels=channels,
+                               path=None))
+    return files
+
+
+@pytest.mark.slow
+def test_out_of_library_exponent_raises_the_alarm():
+    files = _exponent_traces(1.6)
+    result = diagnose(files, progress=False)
+    assert result.misspecification or result.final["gap"] > 1.05 or result.missing_effects
+    # never a silent "all explained" with nothing named
+    assert result.misspecification or result.missing_effects
