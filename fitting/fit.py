@@ -281,7 +281,7 @@ def _multistart_points(problem: Problem, z0: np.ndarray, k: int, seed: int) -> n
         z = z0.copy()
         for i, inst in enumerate(problem.instances):
             if inst.spec.scope == "global":
-                width = math.log(3.0) if inst.spec.space == "log" else 3.0
+                width = 3.0 if inst.spec.space == "linear" else math.log(3.0)
             elif inst.name == "striker_velocity":
                 width = 0.2
             elif inst.name == "time_offset":
@@ -615,8 +615,8 @@ def profile_likelihood(problem: Problem, x, label: str, cov: Covariance, *, poin
                        solver=None) -> dict:
     """Profile of chi^2 over one parameter, all others re-fitted at each value (one batch).
 
-    The grid spans +-`span_sigma` standard errors (in the parameter's transformed
-    coordinate; +-50 % when the standard error is not finite). Intervals are where
+    The grid spans +-`span_sigma` standard errors (+-50 % when the standard error is not
+    finite), clipped to the parameter's bounds. Intervals are where
     $\\Delta\\chi^2/s^2$ crosses 1 (68 %) and 3.84 (95 %), $s^2$ the covariance's
     variance factor. The re-fits run `batch` at a time (default: all at once), with
     `solver` (default: the fit's Levenberg-Marquardt for `tolerance`).
@@ -628,14 +628,10 @@ def profile_likelihood(problem: Problem, x, label: str, cov: Covariance, *, poin
     z_hat = to_unbounded(problem.instances, x)
     error = float(cov.stderr[i])
     value = float(x[i])
-    if inst.spec.space == "log":
-        width = error / value if np.isfinite(error) and error > 0 else math.log(1.5)
-        grid = value * np.exp(np.linspace(-span_sigma, span_sigma, points) * width
-                              * (1 if np.isfinite(error) and error > 0 else 1 / span_sigma))
-    else:
-        width = error if np.isfinite(error) and error > 0 else 0.5 * inst.spec.scale * span_sigma
-        grid = value + np.linspace(-span_sigma, span_sigma, points) * width
-    grid = np.clip(grid, inst.spec.lower * (1 + 1e-9), inst.spec.upper * (1 - 1e-9))
+    width = error if np.isfinite(error) and error > 0 else 0.5 * max(abs(value), inst.spec.scale) / span_sigma
+    grid = value + np.linspace(-span_sigma, span_sigma, points) * width
+    low = inst.spec.lower + 1e-9 * (abs(inst.spec.lower) + inst.spec.scale * (inst.spec.space == "linear"))
+    grid = np.clip(grid, low, inst.spec.upper * (1 - 1e-9))
     templates = np.repeat(z_hat[None], points, axis=0)
     for k, g in enumerate(grid):
         x_k = x.copy()

@@ -2,11 +2,21 @@
 each one acts on a `ChainSetup` or on the measurement (a nuisance).
 
 Every parameter is optimised in a transformed coordinate $z$: first the physical value
-$x$ is mapped to $s = \\log x$ (`space="log"`, where positivity is physical) or
-$s = x/\\mathrm{scale}$ (`space="linear"`), then the bounds $[s_{lo}, s_{hi}]$ are
-enforced by $s = c + h\\tanh((z - c)/h)$ with $c$, $h$ the centre and half-width of the
-bounds. Near the centre $z \\approx s$, so optimisation steps are in log units or in units of
-`scale`; $z$ is unbounded, so the optimiser never leaves the physical range.
+$x$ is mapped to
+
+- $s = \\log x$ (`space="log"`, where positivity is physical and zero is not: moduli,
+  velocities, C, gains),
+- $s = \\operatorname{asinh}(x/\\mathrm{scale})$ with $x = \\mathrm{scale}\\,|\\sinh s|$
+  (`space="asinh"`, for non-negative quantities whose zero is physical: eta, mu,
+  precompression): logarithmic above `scale`, linear through zero, so a fit can reach and
+  leave zero (a log coordinate would send a vanishing parameter infinitely far away, where
+  its gradient vanishes and the optimiser stalls),
+- $s = x/\\mathrm{scale}$ (`space="linear"`),
+
+then the bounds $[s_{lo}, s_{hi}]$ are enforced by $s = c + h\\tanh((z - c)/h)$ with $c$,
+$h$ the centre and half-width of the bounds. Near the centre $z \\approx s$, so optimisation
+steps are in log units or in units of `scale`; $z$ is unbounded, so the optimiser never
+leaves the physical range.
 
 Scopes:
 
@@ -40,7 +50,7 @@ from hertzchain import contact
 from hertzchain.chain import ChainSetup
 
 SCOPES = ("global", "experiment", "channel")
-SPACES = ("log", "linear")
+SPACES = ("log", "asinh", "linear")
 KINDS = ("setup", "time_offset", "gain", "extra")
 
 # Speed constant of the discrete chain's solitary wave in lattice units:
@@ -59,9 +69,11 @@ class ParameterSpec:
     - `name`: the name used on the command line and in reports.
     - `unit`: SI unit of the value (`""` if dimensionless).
     - `scope`: `"global"`, `"experiment"` or `"channel"`.
-    - `space`: `"log"` (positive values, optimised in log) or `"linear"`.
-    - `lower`, `upper`: bounds of the physical value (SI).
-    - `scale`: for `"linear"` parameters, the size of one optimisation unit (SI).
+    - `space`: `"log"` (positive values, optimised in log), `"asinh"` (non-negative values
+      whose zero is physical) or `"linear"`.
+    - `lower`, `upper`: bounds of the physical value (SI); `"asinh"` needs lower = 0.
+    - `scale`: for `"linear"` parameters the size of one optimisation unit, for `"asinh"`
+      the value where the coordinate turns from linear to logarithmic (SI).
     - `kind`: `"setup"`, `"time_offset"`, `"gain"` or `"extra"`.
     - `apply`: `(setup, value) -> setup` for `kind="setup"` (pure, differentiable).
     - `read`: `(setup) -> value`: the value a setup already has (default start), or None.
@@ -93,6 +105,8 @@ class ParameterSpec:
             raise ValueError(f"ParameterSpec {self.name}: lower must be below upper.")
         if self.space == "log" and not self.lower > 0:
             raise ValueError(f"ParameterSpec {self.name}: a log parameter needs lower > 0.")
+        if self.space == "asinh" and self.lower != 0:
+            raise ValueError(f"ParameterSpec {self.name}: an asinh parameter needs lower = 0.")
         if self.kind == "setup" and self.apply is None:
             raise ValueError(f"ParameterSpec {self.name}: a setup parameter needs `apply`.")
 
@@ -100,14 +114,26 @@ class ParameterSpec:
     def _s_bounds(self) -> tuple[float, float]:
         if self.space == "log":
             return math.log(self.lower), math.log(self.upper)
+        if self.space == "asinh":  # symmetric, so that zero sits at the centre
+            top = math.asinh(self.upper / self.scale)
+            return -top, top
         return self.lower / self.scale, self.upper / self.scale
 
-    def transform_constants(self) -> tuple[float, float, float]:
-        """(is_log, centre c, half-width h) of the bounded transform."""
+    def transform_constants(self) -> tuple[float, float, float, float]:
+        """(space code 0 log / 1 asinh / 2 linear, centre c, half-width h, scale)."""
         lo, hi = self._s_bounds()
-        return float(self.space == "log"), 0.5 * (lo + hi), 0.5 * (hi - lo)
+        return float(SPACES.index(self.space)), 0.5 * (lo + hi), 0.5 * (hi - lo), self.scale
+
+    def to_s(self, value: float) -> float:
+        if self.space == "log":
+            return math.log(value)
+        if self.space == "asinh":
+            return math.asinh(value / self.scale)
+        return value / self.scale
 
     def in_bounds(self, value: float) -> bool:
+        if self.space == "asinh":
+            return self.lower <= value < self.upper
         return self.lower < value < self.upper
 
 
@@ -152,7 +178,7 @@ def _read_wall_youngs(setup: ChainSetup) -> float:
 
 
 def _read_precompression(setup: ChainSetup) -> float:
-    return max(float(np.asarray(setup.precompression_n)), 1e-2)
+    return float(np.asarray(setup.precompression_n))
 
 
 REGISTRY: dict[str, ParameterSpec] = {}
@@ -168,12 +194,13 @@ def register_parameter(spec: ParameterSpec, *, replace: bool = False) -> Paramet
 
 for _spec in (
     ParameterSpec(
-        "eta", "s", "global", "log", 1e-10, 1e-3, apply=_apply_field("eta_s"),
+        "eta", "s", "global", "asinh", 0.0, 1e-3, scale=1e-8, apply=_apply_field("eta_s"),
         read=_read_field("eta_s"),
         description="viscoelastic time eta of F_v = eta kappa d(delta^3/2)/dt (s)",
     ),
     ParameterSpec(
-        "mu", "", "global", "log", 1e-5, 3.0, apply=_apply_field("mu"), read=_read_field("mu"),
+        "mu", "", "global", "asinh", 0.0, 3.0, scale=1e-4, apply=_apply_field("mu"),
+        read=_read_field("mu"),
         description="friction coefficient of the beads on the track",
     ),
     ParameterSpec(
@@ -197,7 +224,8 @@ for _spec in (
         description="Poisson ratio of the wall",
     ),
     ParameterSpec(
-        "precompression", "N", "global", "log", 1e-5, 1e4, apply=_apply_field("precompression_n"),
+        "precompression", "N", "global", "asinh", 0.0, 1e4, scale=1e-3,
+        apply=_apply_field("precompression_n"),
         read=_read_precompression, description="static preload pressing the chain (N)",
     ),
     ParameterSpec(
@@ -274,30 +302,31 @@ def to_unbounded(instances, values) -> np.ndarray:
     values = np.asarray(values, dtype=float)
     z = np.empty_like(values)
     for i, inst in enumerate(instances):
-        is_log, centre, half = inst.spec.transform_constants()
+        _, centre, half, _ = inst.spec.transform_constants()
         value = values[i]
         if not inst.spec.in_bounds(value):
             raise ValueError(
                 f"Start value of {inst.label} = {value:g} {inst.spec.unit} is outside its bounds "
                 f"({inst.spec.lower:g}, {inst.spec.upper:g}); give a start inside them."
             )
-        s = math.log(value) if is_log else value / inst.spec.scale
+        s = inst.spec.to_s(value)
         ratio = np.clip((s - centre) / half, -1 + 1e-12, 1 - 1e-12)
         z[i] = centre + half * np.arctanh(ratio)
     return z
 
 
 def transform_arrays(instances) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(is_log, centre, half, scale) arrays for `from_unbounded`."""
+    """(space code, centre, half, scale) arrays for `from_unbounded`."""
     constants = np.array([inst.spec.transform_constants() for inst in instances], dtype=float)
-    scale = np.array([inst.spec.scale for inst in instances], dtype=float)
     if len(instances) == 0:
-        constants = np.zeros((0, 3))
-    return constants[:, 0].astype(bool), constants[:, 1], constants[:, 2], scale
+        constants = np.zeros((0, 4))
+    return constants[:, 0], constants[:, 1], constants[:, 2], constants[:, 3]
 
 
 def from_unbounded(constants, z):
     """Optimiser coordinates z -> physical values (jax, differentiable)."""
-    is_log, centre, half, scale = constants
+    space, centre, half, scale = constants
     s = centre + half * jnp.tanh((z - centre) / half)
-    return jnp.where(is_log, jnp.exp(s), s * scale)
+    log_value = jnp.exp(jnp.where(space == 0, s, 0.0))
+    asinh_value = scale * jnp.abs(jnp.sinh(jnp.where(space == 1, s, 0.0)))
+    return jnp.where(space == 0, log_value, jnp.where(space == 1, asinh_value, s * scale))

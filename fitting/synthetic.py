@@ -1,7 +1,7 @@
 """Synthetic trace files with known truth, for tests, benchmarks and coverage studies.
 
 The traces are simulated with a finer time step than fits use (`steps_per_contact=800`
-against 400) so that a fit does not share the data's discretisation, then shifted by a
+against 400, 80 steps per half period of an embedded sensor against 40) so that a fit does not share the data's discretisation, then shifted by a
 trigger offset, scaled by channel gains, and given white Gaussian noise.
 """
 
@@ -16,7 +16,7 @@ from hertzchain.integrate import Recording, solve
 from hertzchain.timegrid import choose_time_grid
 from hertzchain.tracefile import TraceFile, setup_header
 
-from .model import interpolate
+from .model import SENSOR_STEPS_PER_HALF_PERIOD, interpolate, time_step_s
 
 DATA_STEPS_PER_CONTACT = 800
 
@@ -25,8 +25,9 @@ def simulate_clean(setups, *, contacts=(), t_end_s: float, sample_interval_s: fl
                    steps_per_contact: int = DATA_STEPS_PER_CONTACT) -> list[dict]:
     """Noise-free channels of several setups of one structure (one vmapped run), per setup."""
     stacked = jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *setups)
-    grid = choose_time_grid(stacked, t_end_s=t_end_s, sample_interval_s=sample_interval_s,
-                            steps_per_contact=steps_per_contact)
+    dt = time_step_s(stacked, sample_interval_s, steps_per_contact=steps_per_contact,
+                     sensor_steps=2 * SENSOR_STEPS_PER_HALF_PERIOD)
+    grid = choose_time_grid(stacked, t_end_s=t_end_s, sample_interval_s=sample_interval_s, dt_s=dt)
     recording = Recording(contacts=tuple(contacts))
     traces = jax.jit(jax.vmap(lambda s: solve(s, grid, recording)))(stacked)
     out = []

@@ -130,16 +130,15 @@ def identifiability_warnings(instances, values, cov: Covariance, experiments) ->
     for j, inst in enumerate(instances):
         value, error = float(values[j]), float(cov.stderr[j])
         spec = inst.spec
-        if spec.space == "log" and np.isfinite(error) and value > 0 and error / value > RELATIVE_ERROR_LIMIT:
+        if spec.space != "linear" and np.isfinite(error) and value > 0 and error / value > RELATIVE_ERROR_LIMIT:
             messages.append(
                 f"{inst.label} is practically not identifiable from these data (relative standard "
                 f"error {error / value:.0%})."
             )
-        if spec.space == "log":
-            near = min(abs(math.log(value / spec.lower)), abs(math.log(spec.upper / value))) < 1e-2
-        else:
-            near = min(value - spec.lower, spec.upper - value) < 1e-2 * spec.scale
-        if near:
+        _, centre, half, _ = spec.transform_constants()
+        position = (spec.to_s(value) - centre) / half  # -1 and +1 are the bounds
+        near_lower = position < -0.999 and spec.space != "asinh"  # asinh: zero is a physical value
+        if near_lower or position > 0.999:
             messages.append(
                 f"{inst.label} = {value:.6g} sits at its bound ({spec.lower:g}, {spec.upper:g}); "
                 "its standard error is not meaningful."
