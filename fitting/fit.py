@@ -602,10 +602,10 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
         x=x,
         elapsed_s=time.perf_counter() - began,
     )
-    for text in messages:
-        warnings.warn(text, FitWarning, stacklevel=2)
     if not converged and throw:
         raise FitError(message)
+    for text in messages:
+        warnings.warn(text, FitWarning, stacklevel=2)
     return result
 
 
