@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from pathlib import Path
 
 from hertzchain.units import parse_quantity
 
 from ..data import load_experiments
-from ..fit import fit
+from ..fit import FitWarning, fit
 from ..model import STEPS_PER_CONTACT, ForwardModel
 from ..parameters import REGISTRY, get_spec, parse_parameter_list
 from ..report import summary_text, write_report
@@ -76,13 +77,15 @@ def run(args: argparse.Namespace) -> int:
     experiments = load_experiments(args.files, channels=channels, noise_std_n=noise)
     profile = tuple(p.strip() for p in args.profile.split(",") if p.strip())
     print(f"fitting {', '.join(params)} to {len(experiments)} file(s) ...", flush=True)
-    result = fit(
-        experiments, params, start=_assignments(args.start, "--start"),
-        fixed=_assignments(args.fixed, "--fixed"), multistart=args.multistart, seed=args.seed,
-        max_steps=args.max_steps, covariance=args.covariance, profile=profile,
-        forward=ForwardModel(steps_per_contact=args.steps_per_contact),
-        progress=not args.quiet, throw=False,
-    )
+    with warnings.catch_warnings():  # the summary below and fit.json carry every warning
+        warnings.simplefilter("ignore", FitWarning)
+        result = fit(
+            experiments, params, start=_assignments(args.start, "--start"),
+            fixed=_assignments(args.fixed, "--fixed"), multistart=args.multistart, seed=args.seed,
+            max_steps=args.max_steps, covariance=args.covariance, profile=profile,
+            forward=ForwardModel(steps_per_contact=args.steps_per_contact),
+            progress=not args.quiet, throw=False,
+        )
     written = write_report(result, args.out, plots=not args.no_plots)
     print(summary_text(result))
     print(f"wrote {len(written)} files to {args.out} (fit.json, params.csv, plots)")

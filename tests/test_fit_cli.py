@@ -1,0 +1,65 @@
+"""`hertzchain fit`: the command line end to end (files in, fit.json/CSV/PNG out)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from fitting.parameters import bare_speed_constant
+from fitting.synthetic import paper_setups, synthetic_traces
+from hertzchain.cli import main
+from hertzchain.tracefile import write_trace
+
+TRUTH = {"eta": 2e-6, "mu": 0.19, "mu_star": 0.01}
+
+
+@pytest.fixture(scope="module")
+def trace_files(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("traces")
+    setups = paper_setups([0.15, 0.3], **{"eta_s": TRUTH["eta"], "mu": TRUTH["mu"], "mu_star": TRUTH["mu_star"]})
+    clean = synthetic_traces(setups, contacts=(5,), t_end_s=1.3e-3)
+    sigma = [0.005 * max(np.max(v) for v in f.channels.values()) for f in clean]
+    files = synthetic_traces(setups, contacts=(5,), t_end_s=1.3e-3, noise_std_n=sigma, seed=11)
+    paths = []
+    for k, trace in enumerate(files):
+        path = folder / f"shot{k}.csv"
+        write_trace(path, trace)
+        paths.append(str(path))
+    c_true = float(bare_speed_constant(setups[0])) * (1 + TRUTH["mu_star"]) ** (1 / 3)
+    return paths, c_true
+
+
+def test_fit_command_writes_the_report(trace_files, tmp_path, capsys):
+    paths, c_true = trace_files
+    out = tmp_path / "fit"
+    code = main(["fit", *paths, "--params", "eta,mu,C", "--out", str(out), "--multistart", "2",
+                 "--profile", "eta", "--quiet"])
+    assert code == 0
+    report = json.loads((out / "fit.json").read_text())
+    params = report["params"]
+    truth = {"eta": TRUTH["eta"], "mu": TRUTH["mu"], "C": c_true}
+    for name, value in truth.items():
+        assert abs(params[name]["value"] - value) < 3 * params[name]["stderr"], name
+    assert report["correlation"]["names"] == ["eta", "mu", "C"]
+    assert len(report["correlation"]["matrix"]) == 3
+    assert set(report["residual_rms_n"]) == {"shot0", "shot1"}
+    assert report["converged"] is True
+    assert len(report["starts"]) == 2
+    # the speed constant: discrete value and the continuum one, C_t (1+mu*)^(1/3)
+    speed = report["speed_constant"]
+    assert speed["C_continuum"] == pytest.approx(speed["C"] * 0.894427191 / 0.905516, rel=1e-9)
+    assert speed["C_continuum"] == pytest.approx(198.92 * 1.01 ** (1 / 3), rel=2e-3)
+    low, high = report["profiles"]["eta"]["interval_95"]
+    assert low < TRUTH["eta"] < high
+    for name in ("params.csv", "correlation.csv", "rms.csv", "starts.csv", "residuals_shot0.csv",
+                 "overlay_shot0.png", "residuals_shot1.png", "correlation.png", "profile_eta.png"):
+        assert (out / name).is_file(), name
+    printed = capsys.readouterr().out
+    assert "eta" in printed and "converged" in printed
+
+
+def test_fit_command_rejects_unknown_parameters(trace_files, capsys):
+    paths, _ = trace_files
+    assert main(["fit", paths[0], "--params", "eta,viscosity"]) == 2
+    error = capsys.readouterr().err
+    assert "Unknown parameter 'viscosity'" in error and "wall_youngs" in error
