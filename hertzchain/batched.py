@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
+from . import contact
 from .chain import ChainSetup, build_model, internal_contact_index, internal_sensor_index
 from .integrate import Recording, _channel_names, _layout, solve
 from .timegrid import TimeGrid
@@ -121,9 +122,48 @@ def _flags(setup: ChainSetup) -> _Flags:
     )
 
 
+class _Model(NamedTuple):
+    mass_kg: jax.Array
+    kappa: jax.Array
+    spring_n_m: jax.Array
+    overlap0_m: jax.Array
+    wall_kappa: jax.Array
+    wall_overlap0_m: jax.Array
+    eta_s: jax.Array
+    first_bead_force_n: jax.Array
+    last_body_force_n: jax.Array
+    striker_velocity_m_s: jax.Array
+
+
+def _vector_model(setup: ChainSetup) -> _Model:
+    """`build_model`'s quantities for a chain without sensors, in whole-array operations.
+
+    `build_model` assembles the bodies bead by bead (it has to, for sensor beads), which
+    makes a graph of O(N) operations: slow to compile for N in the thousands. Without
+    sensors the same numbers come from a few array operations.
+    """
+    kappa = setup.contact_kappa()
+    preload = setup.precompression_n
+    overlap0 = contact.overlap_at_force(preload, kappa).at[0].set(0.0)
+    has_wall = setup.end == "wall"
+    wall_kappa = setup.wall_kappa() if has_wall else jnp.zeros(())
+    return _Model(
+        mass_kg=jnp.concatenate([setup.striker_mass_kg[None], setup.bead_mass_kg]),
+        kappa=kappa,
+        spring_n_m=jnp.zeros_like(kappa),
+        overlap0_m=overlap0,
+        wall_kappa=wall_kappa,
+        wall_overlap0_m=contact.overlap_at_force(preload, setup.wall_kappa()) if has_wall else jnp.zeros(()),
+        eta_s=setup.eta_s,
+        first_bead_force_n=preload,
+        last_body_force_n=jnp.zeros(()) if has_wall else -preload,
+        striker_velocity_m_s=setup.striker_velocity_m_s,
+    )
+
+
 def _chain_params(setup: ChainSetup) -> dict:
     """Arrays the kernel needs for one chain (vmapped over the batch)."""
-    model = build_model(setup)
+    model = build_model(setup) if setup.sensor_beads else _vector_model(setup)
     return {
         "mass": model.mass_kg,
         "inv_mass": 1.0 / model.mass_kg,
