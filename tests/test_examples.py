@@ -61,3 +61,12 @@ def test_03_fit_traces(small):
         assert abs(result.values[label] - true) < 4 * result.stderr[label]
     assert result.values["C"] == pytest.approx(201.385, abs=0.1)
     assert (small / "03_fit" / "fit.json").exists()
+
+
+@pytest.mark.slow  # a diagnosis through the simulator: about 2 min of CPU at the small size
+def test_04_diagnose(small):
+    namespace = _run("04_diagnose.py")
+    diagnosis = namespace["diagnosis"]
+    assert diagnosis.missing_effects == ["wall_compliance"]
+    assert not diagnosis.misspecification
+    assert (small / "04_diagnosis").is_dir() and any((small / "04_diagnosis").iterdir())
