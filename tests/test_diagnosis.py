@@ -3,6 +3,7 @@ workflow naming hidden effects (fast cases here; the per-candidate sweep is mark
 
 from __future__ import annotations
 
+import json
 import math
 
 import jax
@@ -13,8 +14,9 @@ import pytest
 import hertzchain  # noqa: F401
 from fitting import effects as fx
 from fitting.diagnosis import DiagnosisError, diagnose, parse_model
+from fitting.diagnosis_report import write_diagnosis_report
 from fitting.hidden import NOMINAL, hidden_effect_traces
-from fitting.locate import cell, locate, window_masks
+from fitting.locate import cell, window_masks
 from hertzchain.chain import ChainSetup
 from hertzchain.integrate import Recording, solve
 from hertzchain.sensor import sensor_signal
@@ -144,9 +146,14 @@ def _gap_at_noise(diagnosis):
     return final["chi2"] - final["dof"] <= 3.0 * math.sqrt(2 * final["dof"])
 
 
-def test_names_hidden_viscous_damping_on_a_short_chain():
+@pytest.fixture(scope="module")
+def viscous_short():
     files = hidden_effect_traces({"viscous_damping": 2e-6}, seed=5, noise_fraction=0.004, **SHORT)
-    result = diagnose(files, progress=False, max_effects=2)
+    return diagnose(files, progress=False, max_effects=2)
+
+
+def test_names_hidden_viscous_damping_on_a_short_chain(viscous_short):
+    result = viscous_short
     assert result.missing_effects == ["viscous_damping"]
     step = result.steps[0]
     assert step.gap_before > 2.0
@@ -154,9 +161,25 @@ def test_names_hidden_viscous_damping_on_a_short_chain():
     assert _gap_at_noise(result) and not result.misspecification
     eta = step.values["eta_s"]
     assert abs(eta - 2e-6) < max(4 * step.stderr["eta_s"], 0.1 * 2e-6)
-    payload = result.to_json()
+    # the gap shrinks in the cells where viscous damping acts (peaks and tails)
+    before = step.location_before["by_channel_window"]["contact_4"]
+    after = step.location_after["by_channel_window"]["contact_4"]
+    assert after["peak"]["chi2_per_sample"] < 0.5 * before["peak"]["chi2_per_sample"]
+
+
+def test_report_files(viscous_short, tmp_path):
+    paths = write_diagnosis_report(viscous_short, tmp_path)
+    payload = json.loads(paths["json"].read_text())
     assert payload["missing_effects"] == ["viscous_damping"]
-    assert payload["steps"][0]["gap_after"] < payload["steps"][0]["gap_before"]
+    step = payload["steps"][0]
+    assert step["effect"] == "viscous_damping" and step["gap_after"] < step["gap_before"]
+    assert step["fitted"]["eta_s"]["value"] > 0
+    assert "viscous_damping" in paths["markdown"].read_text()
+    for key in ("gap_png", "overlay_1"):
+        assert paths[key].stat().st_size > 1000
+    rows = paths["gaps_csv"].read_text().splitlines()
+    assert rows[0].startswith("stage,channel,window")
+    assert any(r.startswith("+viscous_damping,contact_2,peak") for r in rows)
 
 
 @pytest.mark.slow
@@ -256,3 +279,22 @@ def test_out_of_library_exponent_raises_the_alarm():
     assert result.misspecification or result.final["gap"] > 1.05 or result.missing_effects
     # never a silent "all explained" with nothing named
     assert result.misspecification or result.missing_effects
+
+
+@pytest.mark.slow
+def test_command_line_writes_the_report(tmp_path):
+    from hertzchain.cli import main
+    from hertzchain.tracefile import write_trace
+
+    files = hidden_effect_traces({"track_friction": 0.3}, seed=8, noise_fraction=0.004, **SHORT)
+    paths = []
+    for k, trace in enumerate(files):
+        path = tmp_path / f"shot{k}.csv"
+        write_trace(path, trace)
+        paths.append(str(path))
+    out = tmp_path / "out"
+    assert main(["diagnose", *paths, "--model", "base", "--out", str(out), "--quiet"]) == 0
+    payload = json.loads((out / "diagnosis.json").read_text())
+    assert payload["missing_effects"] == ["track_friction"]
+    assert payload["steps"][0]["gap_after"] < payload["steps"][0]["gap_before"]
+    assert main(["diagnose", *paths, "--model", "base+nonsense", "--out", str(out)]) == 2
