@@ -85,6 +85,7 @@ def test_sensor_filter_matches_eq4_and_is_regular_at_infinite_f0():
     assert float(np.max(np.abs(linear - exact))) < 1e-3 * 50
 
 
+@pytest.mark.slow
 def test_jacobian_at_off_is_finite_for_every_strength():
     setup = ChainSetup(5, striker_velocity_m_s=0.2)
     grid = choose_time_grid(setup, t_end_s=3e-4, sample_interval_s=1e-6)
