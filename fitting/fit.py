@@ -224,7 +224,8 @@ def _run_least_squares(problem: Problem, constants, templates, masks, starts, *,
     profile without recompiling. Returns (z (B, p), success (B,), steps (B,), chi2 (B,),
     index of the kept start, its residuals (n,) and Jacobian (n, p) with respect to the
     physical values). `data`: measured samples in `Problem.data_vector` layout, one set for
-    all rows or (with `batched_data`) one per row.
+    all rows or (with `batched_data`) one per row; then the Jacobians of all rows (B, n, p)
+    are returned.
     """
     data = jnp.asarray(problem.data_vector() if data is None else data)
     return _solve_batch(problem, constants, solver, max_steps, float(tolerance), bool(batched_data),
@@ -245,42 +246,45 @@ def _solve_batch(problem, constants, solver, max_steps, tolerance, batched_data,
             max_steps=max_steps, throw=False, options={"jac": "fwd"},
         )
         z = jnp.where(mask, solution.value, template)
-        r = residual_fn(z, (template, mask, y))
-        # Gauss-Newton's predicted remaining decrease of chi^2 at the end point
-        jac = jax.jacfwd(residual_fn)(z, (template, mask, y))
-        step = jnp.linalg.lstsq(jac, r)[0]
-        decrement = jnp.sum((jac @ step) ** 2)
+        x = from_unbounded(constants, z)
+        r = problem.residuals(x, y)
+        jac = jax.jacfwd(problem.residuals)(x, y)  # with respect to the physical values
+        # Gauss-Newton's predicted remaining decrease of chi^2 at the end point (free columns)
+        free_jac = jnp.where(mask[None, :], jac, 0.0)
+        step = jnp.linalg.lstsq(free_jac, r)[0]
+        decrement = jnp.sum((free_jac @ step) ** 2)
         ok = jnp.all(jnp.isfinite(r)) & (decrement < tolerance)
-        return z, ok, solution.stats["num_steps"], jnp.sum(r**2)
+        return z, ok, solution.stats["num_steps"], jnp.sum(r**2), r, jac
 
-    z, ok, steps, chi2 = jax.vmap(one, in_axes=(0, 0, 0, 0 if batched_data else None))(
+    z, ok, steps, chi2, r, jac = jax.vmap(one, in_axes=(0, 0, 0, 0 if batched_data else None))(
         templates, masks, starts, data
     )
-    if batched_data:  # one Jacobian per data set
-        x = jax.vmap(lambda zz: from_unbounded(constants, zz))(z)
-        jacobian = jax.vmap(jax.jacfwd(problem.residuals))(x, data)
-        return z, ok, steps, chi2, None, None, jacobian
-    # the kept start: the best converged one (the best finite one if none converged)
+    # the kept row: the best converged one (the best finite one if none converged)
     finite = jnp.where(jnp.isfinite(chi2), chi2, jnp.inf)
     best = jnp.argmin(jnp.where(jnp.any(ok), jnp.where(ok, finite, jnp.inf), finite))
-    x_best = from_unbounded(constants, z[best])
-    residuals = problem.residuals(x_best, data)
-    jacobian = jax.jacfwd(problem.residuals)(x_best, data)
-    return z, ok, steps, chi2, best, residuals, jacobian
+    if batched_data:  # one Jacobian per data set
+        return z, ok, steps, chi2, best, r[best], jac
+    return z, ok, steps, chi2, best, r[best], jac[best]
 
 
 def _multistart_points(problem: Problem, z0: np.ndarray, k: int, seed: int) -> np.ndarray:
     """`k` starting points: the data-derived start, then spread ones.
 
-    Global parameters spread by up to a factor 3 (log parameters) or 3 scale units;
-    per-file velocities by 20 %, offsets by 3 us, gains by 10 %.
+    Global parameters spread by up to a factor 3 (log and asinh parameters) or 3 scale units,
+    except the speed constant C (and mu*), which the materials fix to a few %: +-5 %
+    (a pulse arriving one width early or late at the far end of the chain); per-file
+    velocities by 20 %, offsets by 3 us, gains by 10 %.
     """
     rng = np.random.default_rng(seed)
     points = [z0]
     for _ in range(k - 1):
         z = z0.copy()
         for i, inst in enumerate(problem.instances):
-            if inst.spec.scope == "global":
+            if inst.name == "C":
+                width = 0.05
+            elif inst.name == "mu_star":
+                width = 0.15 / inst.spec.scale
+            elif inst.spec.scope == "global":
                 width = 3.0 if inst.spec.space == "linear" else math.log(3.0)
             elif inst.name == "striker_velocity":
                 width = 0.2
