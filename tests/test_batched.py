@@ -37,7 +37,8 @@ CASES = {
 
 
 @pytest.mark.parametrize(
-    "case", [pytest.param(c, marks=pytest.mark.slow) if c == "viscous" else c for c in CASES]
+    "case",
+    [c if c == "sensors_preload_viscous" else pytest.param(c, marks=pytest.mark.slow) for c in CASES],
 )
 def test_matches_solve_to_round_off(case):
     setup, grid = _batch(**CASES[case])

@@ -58,6 +58,7 @@ def test_singular_plan_names_the_parameters(small_setup):
     assert 0 < fixed.relative_stderr["C"] < 1e-3
 
 
+@pytest.mark.slow
 def test_optimizer_finds_the_best_plan_and_beats_the_baseline(small_setup):
     baseline = [(0.3, "contact_2"), (0.3, "wall")]
     opt = fd.optimize_plan(
@@ -98,6 +99,7 @@ def test_bad_design_input(small_plan):
                             sample_interval_s=2e-6, t_end_s=0.1e-3)
 
 
+@pytest.mark.slow
 def test_command_line(tmp_path):
     from hertzchain.cli import main
 
@@ -140,6 +142,7 @@ def test_predicted_stderr_within_20_percent_and_recommended_plan_shrinks_scatter
     assert after.empirical_std["mu"] < before.empirical_std["mu"]
 
 
+@pytest.mark.slow
 def test_worked_example_runs_at_small_size(tmp_path, monkeypatch):
     monkeypatch.setenv("HERTZCHAIN_EXAMPLE_SMALL", "1")
     monkeypatch.setenv("HERTZCHAIN_EXAMPLE_OUT", str(tmp_path))

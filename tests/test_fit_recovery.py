@@ -42,6 +42,7 @@ def recovery():
     return result, truth
 
 
+@pytest.mark.slow
 def test_fits_converge_from_a_far_start(recovery):
     result, _ = recovery
     assert result["labels"] == ("eta", "mu", "C")
@@ -51,6 +52,7 @@ def test_fits_converge_from_a_far_start(recovery):
     np.testing.assert_allclose(result["chi2"] / dof, 1.0, atol=0.06)
 
 
+@pytest.mark.slow
 def test_estimates_are_within_their_reported_errors(recovery):
     result, truth = recovery
     z = (result["values"] - truth) / result["stderr"]

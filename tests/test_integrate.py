@@ -181,6 +181,7 @@ def test_gradients_match_central_differences_through_contact_opening():
     np.testing.assert_allclose(forward, reverse, rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_gradient_finite_at_zero_dissipation_and_contact_onset():
     setup = hc.ChainSetup(5, striker_velocity_m_s=0.2)
     grid = hc.choose_time_grid(setup, t_end_s=0.3e-3, sample_interval_s=2e-6)

@@ -110,6 +110,7 @@ def test_every_parameter_matches_finite_differences(smooth_setup, smooth_grid):
     _check_against_fd(masses, fd)
 
 
+@pytest.mark.slow
 def test_reverse_mode_equals_forward_for_per_bead_masses():
     setup = hc.ChainSetup(6, eta_s=1e-6, wall_youngs_pa=45e9)
     observables = ("wall_peak", "contact_3_arrival", "dissipated_viscous")
