@@ -256,9 +256,14 @@ def _solve_batch(problem, constants, solver, max_steps, tolerance, batched_data,
         ok = jnp.all(jnp.isfinite(r)) & (decrement < tolerance)
         return z, ok, solution.stats["num_steps"], jnp.sum(r**2), r, jac
 
-    z, ok, steps, chi2, r, jac = jax.vmap(one, in_axes=(0, 0, 0, 0 if batched_data else None))(
-        templates, masks, starts, data
-    )
+    if starts.shape[0] == 1 and not batched_data:
+        # one start: no vmap, whose batching of the optimiser's while loop costs seconds of tracing
+        single = one(templates[0], masks[0], starts[0], data)
+        z, ok, steps, chi2, r, jac = (a[None] for a in single)
+    else:
+        z, ok, steps, chi2, r, jac = jax.vmap(one, in_axes=(0, 0, 0, 0 if batched_data else None))(
+            templates, masks, starts, data
+        )
     # the kept row: the best converged one (the best finite one if none converged)
     finite = jnp.where(jnp.isfinite(chi2), chi2, jnp.inf)
     best = jnp.argmin(jnp.where(jnp.any(ok), jnp.where(ok, finite, jnp.inf), finite))

@@ -111,14 +111,25 @@ def interpolate(values, position):
     Positions outside [0, n-1] take the end values. Differentiable in both arguments
     (C^1 in `position`); the error for a smooth signal is O(h^3) in the sample spacing.
     """
-    n = values.shape[0]
+    position = jnp.asarray(position)
+    return interpolate_rows(jnp.asarray(values)[None], jnp.zeros(position.shape, jnp.int32), position)
+
+
+def interpolate_rows(series, rows, position):
+    """Catmull-Rom interpolation of `series[rows[j]]` (2-D) at fractional indices `position[j]`.
+
+    The same rule as `interpolate`, for many series at once: one gather per neighbour.
+    """
+    n = series.shape[-1]
     q = jnp.clip(position, 0.0, n - 1.0)
     i = jnp.clip(jnp.floor(q).astype(jnp.int32), 0, n - 2)
     f = q - i
-    p0 = values[jnp.clip(i - 1, 0, n - 1)]
-    p1 = values[i]
-    p2 = values[i + 1]
-    p3 = values[jnp.clip(i + 2, 0, n - 1)]
+    flat = series.reshape(-1)
+    base = jnp.asarray(rows) * n
+    p0 = flat[base + jnp.clip(i - 1, 0, n - 1)]
+    p1 = flat[base + i]
+    p2 = flat[base + i + 1]
+    p3 = flat[base + jnp.clip(i + 2, 0, n - 1)]
     return p1 + 0.5 * f * (
         (p2 - p0) + f * ((2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) + f * (3.0 * (p1 - p2) + p3 - p0))
     )
@@ -146,6 +157,8 @@ class Problem:
         self.labels = tuple(inst.label for inst in self.instances)
         self._index_nuisances()
         self.groups = self._make_groups(self.base_setups)
+        self._simulators = [self._group_simulator(group) for group in self.groups]
+        self._layout, self._order = self._sample_layout()
 
     # --- layout -------------------------------------------------------------------------------
     def _index_nuisances(self):
@@ -257,8 +270,24 @@ class Problem:
             series = jnp.stack([traces.forces_n[name] for name in group.channels])
             return jnp.concatenate([start, series], axis=1)  # (n_channels, n_samples + 1)
 
+        # `jax.jit` on the heavy parts: an optimiser traces the residuals many times (init,
+        # step, linearisation, covariance); the jitted simulation is traced once per shape
+        # and lowered once, which cuts a fit's compile time severalfold.
+        @jax.jit
         def batch(theta_global, theta_local):
             return jax.vmap(one, in_axes=(0, None, 0))(group.setups, theta_global, theta_local)
+
+        @jax.jit
+        def jacobian(theta_global, theta_local):
+            def jac_one(setup, local):
+                def f(p):
+                    out = one(setup, p[:n_global], p[n_global:])
+                    return out, out
+
+                p = jnp.concatenate([theta_global, local])
+                return jax.jacfwd(f, has_aux=True)(p)
+
+            return jax.vmap(jac_one)(group.setups, theta_local)
 
         @jax.custom_jvp
         def simulate(theta_global, theta_local):
@@ -272,15 +301,7 @@ class Problem:
                 out = batch(theta_global, theta_local)
                 return out, jnp.zeros_like(out)
 
-            def jac_one(setup, local):
-                def f(p):
-                    out = one(setup, p[:n_global], p[n_global:])
-                    return out, out
-
-                p = jnp.concatenate([theta_global, local])
-                return jax.jacfwd(f, has_aux=True)(p)
-
-            jac, out = jax.vmap(jac_one)(group.setups, theta_local)
+            jac, out = jacobian(theta_global, theta_local)
             direction = jnp.concatenate(
                 [jnp.broadcast_to(d_global, (theta_local.shape[0], n_global)), d_local], axis=1
             )
@@ -292,32 +313,57 @@ class Problem:
         """Simulated channels per group: list of (n_experiments, n_channels, n_samples + 1)."""
         x = jnp.asarray(x)
         outputs = []
-        for group in self.groups:
+        for group, simulator in zip(self.groups, self._simulators):
             theta_global = x[np.asarray(group.global_index, dtype=int)]
             theta_local = x[group.local_index] if group.local_index.size else jnp.zeros(
                 (len(group.experiments), 0)
             )
-            outputs.append(self._group_simulator(group)(theta_global, theta_local))
+            outputs.append(simulator(theta_global, theta_local))
         return outputs
 
-    def _predict(self, x, outputs):
-        x = jnp.asarray(x)
-        predictions = [None] * len(self.experiments)
-        for group, output in zip(self.groups, outputs):
-            interval = group.grid.sample_interval_s
+    def _sample_layout(self):
+        """Per group, where each residual's sample comes from (numpy, built once).
+
+        For every sample of the group's experiments, in group order: the row of the
+        group's (experiments x channels) output it reads, its data time, and the indices
+        into x of its experiment's trigger offset and its channel's gain (-1: none).
+        `order` maps the concatenation of the groups' samples to the residual layout.
+        """
+        layouts, position = [], {}
+        start = 0
+        for e, experiment in enumerate(self.experiments):
+            for name in experiment.channels:
+                position[(e, name)] = start
+                start += len(experiment.time_s)
+        order = []
+        for group in self.groups:
+            rows, times, offsets, gains = [], [], [], []
             for row, e in enumerate(group.experiments):
                 experiment = self.experiments[e]
-                offset = 0.0 if self.offset_index[e] is None else x[self.offset_index[e]]
-                position = (jnp.asarray(experiment.time_s) - offset) / interval
-                channels = {}
+                n = len(experiment.time_s)
+                offset = self.offset_index[e]
                 for name in experiment.channels:
-                    series = output[row, group.channels.index(name)]
-                    value = interpolate(series, position)
-                    if name in self.gain_index[e]:
-                        value = value * x[self.gain_index[e][name]]
-                    channels[name] = value
-                predictions[e] = channels
-        return predictions
+                    rows.append(np.full(n, row * len(group.channels) + group.channels.index(name)))
+                    times.append(np.asarray(experiment.time_s, dtype=float))
+                    offsets.append(np.full(n, -1 if offset is None else offset))
+                    gains.append(np.full(n, self.gain_index[e].get(name, -1)))
+                    order.append(np.arange(position[(e, name)], position[(e, name)] + n))
+            layouts.append(tuple(np.concatenate(a) for a in (rows, times, offsets, gains)))
+        return layouts, np.argsort(np.concatenate(order))
+
+    def _model_samples(self, x, outputs):
+        """The model at every data sample, in residual layout (jax): one gather per group."""
+        x = jnp.asarray(x)
+        x_or_default = lambda index, default: jnp.where(  # noqa: E731
+            index >= 0, x[np.maximum(index, 0)], default
+        )
+        pieces = []
+        for group, output, (rows, times, offsets, gains) in zip(self.groups, outputs, self._layout):
+            series = output.reshape(-1, output.shape[-1])  # (experiments * channels, samples)
+            position = (times - x_or_default(offsets, 0.0)) / group.grid.sample_interval_s
+            value = interpolate_rows(series, rows, position)
+            pieces.append(value * x_or_default(gains, 1.0))
+        return jnp.concatenate(pieces)[self._order]
 
     def data_vector(self) -> np.ndarray:
         """The measured samples of every fitted channel, concatenated like the residuals, N."""
@@ -331,10 +377,7 @@ class Problem:
 
     def model_vector(self, x):
         """The model of every fitted channel on the data's times, concatenated, N (jax)."""
-        predictions = self._predict(x, self.simulated(x))
-        return jnp.concatenate(
-            [p[c] for e, p in zip(self.experiments, predictions) for c in e.channels]
-        )
+        return self._model_samples(x, self.simulated(x))
 
     def residuals(self, x, data=None):
         """Whitened residuals $(g F(t - t_{off}) - y)/\\sigma$ of every channel, concatenated.
@@ -347,8 +390,8 @@ class Problem:
 
     def predictions(self, x) -> list[dict]:
         """Model of every fitted channel on the data's time axis (numpy), per experiment."""
-        predictions = self._predict(x, self.simulated(x))
-        return [{k: np.asarray(v) for k, v in p.items()} for p in predictions]
+        model = np.asarray(self.model_vector(x))
+        return [{name: model[part] for name, part in parts.items()} for parts in self.residual_slices()]
 
     def residual_slices(self) -> list[dict]:
         """Per experiment, channel -> slice of the residual vector."""
