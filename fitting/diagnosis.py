@@ -80,22 +80,27 @@ class _Evaluator:
         self._cache: dict = {}
         self._residual_cache: dict = {}
 
-    def __call__(self, x):
+    def __call__(self, x, columns=None):
+        """(r, J) at x; with `columns`, only those columns of J are computed (others NaN)."""
         key = np.asarray(x, dtype=float).tobytes()
-        if key not in self._cache:
-            began = time.perf_counter()
-            self.calls += 1
-            r, jac = residuals_and_jacobian(self.problem, np.asarray(x, dtype=float))
-            if len(self._cache) > 6:
-                self._cache.pop(next(iter(self._cache)))
-            self._cache[key] = (r, jac)
-            self.seconds += time.perf_counter() - began
-        return self._cache[key]
+        wanted = None if columns is None else tuple(int(c) for c in columns)
+        for cached in ((key, None), (key, wanted)):
+            if cached in self._cache:
+                return self._cache[cached]
+        began = time.perf_counter()
+        self.calls += 1
+        r, jac = residuals_and_jacobian(self.problem, np.asarray(x, dtype=float), wanted)
+        if len(self._cache) > 6:
+            self._cache.pop(next(iter(self._cache)))
+        self._cache[(key, wanted)] = (r, jac)
+        self.seconds += time.perf_counter() - began
+        return r, jac
 
     def residuals(self, x):
         key = np.asarray(x, dtype=float).tobytes()
-        if key in self._cache:
-            return self._cache[key][0]
+        for (cached, _), (r, _) in self._cache.items():
+            if cached == key:
+                return r
         if key not in self._residual_cache:
             began = time.perf_counter()
             self.residual_calls += 1
@@ -125,7 +130,7 @@ def _levenberg_marquardt(evaluate, x0, active, rows, lower, upper, *, max_steps:
     if active.size == 0:
         r = evaluate.residuals(x)
         return x, float(r[rows] @ r[rows]), 0
-    r, jac = evaluate(x)
+    r, jac = evaluate(x, active)
     chi2 = float(r[rows] @ r[rows])
     damping = 1e-3
     steps = 0
@@ -155,7 +160,7 @@ def _levenberg_marquardt(evaluate, x0, active, rows, lower, upper, *, max_steps:
             damping *= 10
         if not accepted or decrease <= rtol * chi2 + atol:
             break
-        r, jac = evaluate(x)
+        r, jac = evaluate(x, active)
     return x, chi2, steps
 
 
@@ -389,7 +394,7 @@ class _Search:
                                     max_steps=max_steps)
 
     def stderr(self, x, columns, chi2) -> np.ndarray:
-        _, jac = self.evaluate(x)
+        _, jac = self.evaluate(x, columns)
         ja = jac[:, columns]
         try:
             cov = np.linalg.pinv(ja.T @ ja)
@@ -581,7 +586,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
     while len(steps) < max_effects:
         dof = dof_of(accepted)
         excess = chi2 - dof
-        location = locate(search.problem, x, search.evaluate(x)[0])
+        location = locate(search.problem, x, search.evaluate.residuals(x))
         todo = [c for c in search.candidates if c not in accepted]
         scores, best_starts, separable, pairs = search.screen(x, accepted, todo)
         for pair in pairs:
@@ -657,7 +662,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
         winner = max(passed, key=lambda c: (c.heldout_gain if c.heldout_gain is not None else c.delta_chi2))
         x_new = winner._x  # type: ignore[attr-defined]
         x_new, chi2_new, _ = search.fit(x_new, accepted + [winner.effect], max_steps=20)
-        location_after = locate(search.problem, x_new, search.evaluate(x_new)[0])
+        location_after = locate(search.problem, x_new, search.evaluate.residuals(x_new))
         steps.append(Step(
             effect=winner.effect,
             gap_before=chi2 / dof, gap_after=chi2_new / dof_of(accepted + [winner.effect]),
@@ -691,7 +696,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
     dof = dof_of(accepted)
     excess = chi2 - dof
     alarm = excess > band(dof)
-    final_location = locate(search.problem, x, search.evaluate(x)[0])
+    final_location = locate(search.problem, x, search.evaluate.residuals(x))
     where = describe(final_location)
     if named:
         text = f"Named missing effect(s), in order: {', '.join(named)}."
@@ -723,7 +728,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
 
     base_summary = summary(x_base, chi2_base, parse_model(model, search.n_beads))
     base_summary["location"] = steps[0].location_before if steps else locate(
-        search.problem, x_base, search.evaluate(x_base)[0])
+        search.problem, x_base, search.evaluate.residuals(x_base))
     final_summary = summary(x, chi2, accepted)
     final_summary["location"] = final_location
     final_summary["where"] = where

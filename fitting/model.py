@@ -307,13 +307,20 @@ class Problem:
             )
             return out, jnp.einsum("ecsp,ep->ecs", jac, direction)
 
-        return simulate
+        return simulate, batch
 
-    def simulated(self, x):
-        """Simulated channels per group: list of (n_experiments, n_channels, n_samples + 1)."""
+    def simulated(self, x, *, directional: bool = False):
+        """Simulated channels per group: list of (n_experiments, n_channels, n_samples + 1).
+
+        Forward-mode derivatives: by default every simulator parameter's sensitivity is
+        computed once per experiment whatever the tangent (the custom JVP above, best for a
+        full Jacobian); with `directional=True` JAX's own forward mode pushes just the
+        given tangents through the solver (best for a few columns).
+        """
         x = jnp.asarray(x)
         outputs = []
-        for group, simulator in zip(self.groups, self._simulators):
+        for group, (full, plain) in zip(self.groups, self._simulators):
+            simulator = plain if directional else full
             theta_global = x[np.asarray(group.global_index, dtype=int)]
             theta_local = x[group.local_index] if group.local_index.size else jnp.zeros(
                 (len(group.experiments), 0)
@@ -351,8 +358,9 @@ class Problem:
             layouts.append(tuple(np.concatenate(a) for a in (rows, times, offsets, gains)))
         return layouts, np.argsort(np.concatenate(order))
 
-    def _model_samples(self, x, outputs):
-        """The model at every data sample, in residual layout (jax): one gather per group."""
+    def model_from_outputs(self, x, outputs):
+        """The model at every data sample, in residual layout (jax), from the simulated
+        `outputs` of `simulated`: one gather per group."""
         x = jnp.asarray(x)
         x_or_default = lambda index, default: jnp.where(  # noqa: E731
             index >= 0, x[np.maximum(index, 0)], default
@@ -375,18 +383,23 @@ class Problem:
             [np.full(len(e.time_s), e.noise_std_n[c]) for e in self.experiments for c in e.channels]
         )
 
-    def model_vector(self, x):
+    def model_vector(self, x, *, directional: bool = False):
         """The model of every fitted channel on the data's times, concatenated, N (jax)."""
-        return self._model_samples(x, self.simulated(x))
+        return self.model_from_outputs(x, self.simulated(x, directional=directional))
 
-    def residuals(self, x, data=None):
+    def residuals(self, x, data=None, *, directional: bool = False):
         """Whitened residuals $(g F(t - t_{off}) - y)/\\sigma$ of every channel, concatenated.
 
         `data`: measured samples in `data_vector` layout (default: the experiments' own);
         passing it as an argument lets one compiled fit run over many data sets (noise seeds).
+        `directional`: see `simulated`.
         """
         data = jnp.asarray(self.data_vector() if data is None else data)
-        return (self.model_vector(x) - data) / jnp.asarray(self.sigma_vector())
+        return (self.model_vector(x, directional=directional) - data) / jnp.asarray(self.sigma_vector())
+
+    def reaches_simulator(self, column: int) -> bool:
+        """Whether parameter `column` changes the simulation (not only offsets and gains)."""
+        return column in self.global_sim or any(column in local for local in self.local_sim)
 
     def predictions(self, x) -> list[dict]:
         """Model of every fitted channel on the data's time axis (numpy), per experiment."""
@@ -422,17 +435,36 @@ class Problem:
         return coarse
 
 
-def residuals_and_jacobian(problem: Problem, x):
+def residuals_and_jacobian(problem: Problem, x, columns=None):
     """Whitened residual vector r (n,) and its Jacobian dr/dx (n, p) at physical values x.
 
     The Jacobian is with respect to the physical (SI) values of `problem.instances`;
     residuals are divided by each channel's noise sigma, so $J^T J$ is the Fisher
     information for the stated noise.
+
+    `columns`: compute only these columns of the Jacobian (the others are NaN). The
+    solver is then differentiated along just the requested directions that reach it
+    (`Problem.simulated(directional=True)`, in a block whose width is rounded up to a power
+    of two so that few sizes compile), and offsets and gains with the simulation held;
+    much cheaper than the full Jacobian when a few of many simulator parameters are free.
     """
     x = jnp.asarray(x, dtype=jnp.float64)
     r = _residuals_jit(problem, x)
-    jac = _jacobian_jit(problem, x)
-    return np.asarray(r), np.asarray(jac)
+    if columns is None:
+        return np.asarray(r), np.asarray(_jacobian_jit(problem, x))
+    columns = [int(c) for c in columns]
+    jac = np.full((problem.n_residuals, len(problem.instances)), np.nan)
+    through = [c for c in columns if problem.reaches_simulator(c)]
+    after = [c for c in columns if not problem.reaches_simulator(c)]
+    for chosen, directional in ((through, True), (after, False)):
+        if not chosen:
+            continue
+        width = 1 << (len(chosen) - 1).bit_length()
+        basis = np.zeros((len(problem.instances), width))
+        basis[chosen, np.arange(len(chosen))] = 1.0
+        block = np.asarray(_directional_jacobian_jit(problem, x, jnp.asarray(basis), directional))
+        jac[:, chosen] = block[:, : len(chosen)]
+    return np.asarray(r), jac
 
 
 @eqx.filter_jit
@@ -443,3 +475,19 @@ def _residuals_jit(problem, x):
 @eqx.filter_jit
 def _jacobian_jit(problem, x):
     return jax.jacfwd(problem.residuals)(x)
+
+
+@eqx.filter_jit
+def _directional_jacobian_jit(problem, x, basis, through_simulator):
+    """d r(x + basis z)/dz at z = 0: through the solver's forward mode, or (for offsets
+    and gains) with the simulation held fixed."""
+    if through_simulator:
+        return jax.jacfwd(lambda z: problem.residuals(x + basis @ z, directional=True))(
+            jnp.zeros(basis.shape[1])
+        )
+    outputs = problem.simulated(x)  # x does not depend on z: no tangent reaches the solver
+    data = jnp.asarray(problem.data_vector())
+    sigma = jnp.asarray(problem.sigma_vector())
+    return jax.jacfwd(lambda z: (problem.model_from_outputs(x + basis @ z, outputs) - data) / sigma)(
+        jnp.zeros(basis.shape[1])
+    )
