@@ -13,7 +13,12 @@ noted):
 3. **Screen and refit.** Every candidate of the library (`fitting.effects`) is ranked by
    its score (the $\\chi^2$ a Gauss-Newton step on its strength alone would remove, from
    the Jacobian at the current fit, projected off the free parameters) and then refitted
-   with its strength(s) free. Candidates whose sensitivity lies in the span of the free
+   with its strength(s) free, from the start values whose secant removes the most
+   $\\chi^2$ (a grid of resonance frequencies for `sensor_dynamics`, whose misfit is
+   multimodal in f0: the three best are refitted); per-bead radii (`bead_dispersion`) are
+   fitted by time-window continuation (records cut at 40, 55, 70, 85 % of their length,
+   then whole), since from zero a fit of all radii on whole records stops in a local
+   minimum. Candidates whose sensitivity lies in the span of the free
    parameters are reported as not separable (a uniform stiffness scale with both striker
    velocity and gain free, discrepancy.md section 5.4).
 4. **Decide.** A candidate with k strengths is named only if all hold:
@@ -59,6 +64,12 @@ from .parameters import ParameterInstance, get_spec, parse_parameter_list
 
 NUISANCES = ("striker_velocity", "time_offset")
 MIN_SHARE = 0.2
+# Record fractions of the time-window continuation of per-bead refits (`_Search.refit`).
+WINDOW_FRACTIONS = (0.4, 0.55, 0.7, 0.85)
+# Resonance frequencies of the starts of `sensor_dynamics` refits, Hz.
+SENSOR_START_F0_HZ = (30e3, 45e3, 65e3, 90e3, 130e3, 190e3)
+# Refits per candidate, from its best secant starts (default 1).
+REFIT_STARTS = {"sensor_dynamics": 3}
 # Number of noise standard deviations of the chi^2 excess regarded as "at the noise level".
 NOISE_BAND_SIGMA = 3.0
 
@@ -318,6 +329,7 @@ class _Search:
 
     def __init__(self, experiments: list[Experiment], *, free, nuisances, steps_per_contact, candidates,
                  min_share, report):
+        self.began = time.perf_counter()
         n_beads = {e.trace.n_beads for e in experiments}
         if len(n_beads) != 1:
             raise DiagnosisError(
@@ -365,6 +377,9 @@ class _Search:
         self.min_share = min_share
         self.report = report
         self.rows_all = np.arange(self.n)
+        self.row_time_fraction = np.concatenate([
+            np.asarray(e.time_s) / float(e.time_s[-1]) for e in self.problem.experiments for _ in e.channels
+        ])
         slices = self.problem.residual_slices()
         self.file_rows = [np.concatenate([np.arange(s.start, s.stop) for s in sl.values()]) for sl in slices]
         self.file_columns = [
@@ -378,7 +393,7 @@ class _Search:
 
     def log(self, text: str):
         if self.report:
-            sys.stderr.write(f"diagnose: {text}\n")
+            sys.stderr.write(f"diagnose [{time.perf_counter() - self.began:.0f} s]: {text}\n")
             sys.stderr.flush()
 
     def columns(self, effects) -> list[int]:
@@ -392,6 +407,23 @@ class _Search:
         rows = self.rows_all if rows is None else rows
         return _levenberg_marquardt(self.evaluate, x_start, cols, rows, self.lower, self.upper,
                                     max_steps=max_steps)
+
+    def refit(self, starts, effects, name: str, *, max_steps=20):
+        """Fit with candidate `name` added, from each of `starts`; the best fit is kept. Per-bead strengths (`bead_dispersion`) are fitted
+        by time-window continuation: on records cut at growing fractions of their length
+        first, so early pulses fix the first beads before later, multiply scattered waves
+        come in (from zero, a fit of all radii on whole records stops in a local minimum
+        shifted by a fraction of a pulse: the cycle skipping of wave inversion)."""
+        best = None
+        for x in starts:
+            if name == "bead_dispersion":
+                for fraction in WINDOW_FRACTIONS:
+                    rows = np.nonzero(self.row_time_fraction <= fraction)[0]
+                    x, _, _ = self.fit(x, effects, rows=rows, max_steps=15)
+            result = self.fit(x, effects, max_steps=max_steps)
+            if best is None or result[1] < best[1]:
+                best = result
+        return best
 
     def stderr(self, x, columns, chi2) -> np.ndarray:
         _, jac = self.evaluate(x, columns)
@@ -415,7 +447,12 @@ class _Search:
             for value in (0.02, 0.2):
                 s = x.copy(); s[cols[0]] = value; starts.append(s)
         elif effect == "sensor_dynamics":
-            s = x.copy(); s[cols[0]] = 0.05; s[cols[1]] = 0.5; starts.append(s)
+            # the misfit is multimodal in f0 (the ringing's phase): a grid of starts, of which
+            # the screening keeps the one whose secant removes the most chi^2
+            for beta in (0.05, 0.15):
+                for f0_hz in SENSOR_START_F0_HZ:
+                    s = x.copy(); s[cols[0]] = beta; s[cols[1]] = (fx.SENSOR_REFERENCE_HZ / f0_hz) ** 2
+                    starts.append(s)
         elif effect == "precompression":
             smallest = min(max(float(np.max(e.data(c))) for c in e.channels) for e in self.problem.experiments)
             for fraction in (0.01, 0.1):
@@ -472,17 +509,21 @@ class _Search:
             else:
                 separable[name] = True
             best, vector = gain(block) if np.any(raw > 0) else (0.0, None)
-            best_start = x
+            secants = []  # (gain, start): the refit starts from the best secants' end points
             for start in self.start_for(name, x):
                 delta = start[cols] - x[cols]
                 if not np.any(delta != 0):
                     continue
                 secant = (self.evaluate.residuals(start) - r)[:, None]
                 g, v = gain(secant)
+                secants.append((g, start))
                 if g > best:
-                    best, best_start = g, start
+                    best = g
                     vector = v if vector is None else vector
-            scores[name], starts[name] = best, best_start
+            secants.sort(key=lambda pair: -pair[0])
+            kept = REFIT_STARTS.get(name, 1)
+            scores[name] = best
+            starts[name] = [start for _, start in secants[:kept]] or [x]
             if vector is not None:
                 vectors[name] = vector
         pairs = []
@@ -589,6 +630,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
         location = locate(search.problem, x, search.evaluate.residuals(x))
         todo = [c for c in search.candidates if c not in accepted]
         scores, best_starts, separable, pairs = search.screen(x, accepted, todo)
+        search.log("screened " + ", ".join(f"{c} {scores[c]:.3g}" for c in todo))
         for pair in pairs:
             if pair not in pairs_seen:
                 pairs_seen.append(pair)
@@ -614,7 +656,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
                      if scores[name] > 0.5 * k * penalty and scores[name] > 0.5 * min_share * excess
                      else f"score {scores[name]:.4g} too low to be worth a refit")))
                 continue
-            x_c, chi2_c, _ = search.fit(best_starts[name], accepted + [name], max_steps=20)
+            x_c, chi2_c, _ = search.refit(best_starts[name], accepted + [name], name)
             delta = chi2 - chi2_c
             share = delta / excess if excess > 0 else 0.0
             bic_gain = delta - k * penalty
@@ -644,6 +686,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
                             f"(needs {100 * min_share:.3g} %)")
                 continue
             if search.folds:
+                search.log(f"held-out check of {c.effect}")
                 if base_heldout is None:
                     base_heldout = heldout(x, accepted)
                 cand = heldout(c._x, accepted + [c.effect])  # type: ignore[attr-defined]
@@ -678,6 +721,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
     # backward check: each named effect must still be needed with the others present
     dropped = []
     if len(named) >= 2:
+        search.log("backward check of " + ", ".join(named))
         for name in list(named):
             others = [e for e in accepted if e != name]
             x_wo = x.copy()

@@ -42,6 +42,9 @@ from .data import Experiment
 from .parameters import ParameterInstance
 
 STEPS_PER_CONTACT = 400
+# Narrowest block of Jacobian columns computed by directional forward mode (see
+# `residuals_and_jacobian`).
+_MIN_BLOCK = 8
 # Steps per half period of an embedded sensor's resonance (a linear spring: velocity Verlet's
 # frequency error is (omega dt)^2/24 = 6e-4 at 40 steps per half period).
 SENSOR_STEPS_PER_HALF_PERIOD = 40
@@ -444,8 +447,9 @@ def residuals_and_jacobian(problem: Problem, x, columns=None):
 
     `columns`: compute only these columns of the Jacobian (the others are NaN). The
     solver is then differentiated along just the requested directions that reach it
-    (`Problem.simulated(directional=True)`, in a block whose width is rounded up to a power
-    of two so that few sizes compile), and offsets and gains with the simulation held;
+    (`Problem.simulated(directional=True)`, in a block of at least 8 columns whose width is
+    rounded up to a power of two, so that few sizes compile: a compilation costs as much as
+    tens of evaluations), and offsets and gains with the simulation held;
     much cheaper than the full Jacobian when a few of many simulator parameters are free.
     """
     x = jnp.asarray(x, dtype=jnp.float64)
@@ -459,7 +463,7 @@ def residuals_and_jacobian(problem: Problem, x, columns=None):
     for chosen, directional in ((through, True), (after, False)):
         if not chosen:
             continue
-        width = 1 << (len(chosen) - 1).bit_length()
+        width = max(_MIN_BLOCK, 1 << (len(chosen) - 1).bit_length())
         basis = np.zeros((len(problem.instances), width))
         basis[chosen, np.arange(len(chosen))] = 1.0
         block = np.asarray(_directional_jacobian_jit(problem, x, jnp.asarray(basis), directional))
