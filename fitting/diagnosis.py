@@ -409,8 +409,9 @@ class _Search:
                                     max_steps=max_steps)
 
     def refit(self, starts, effects, name: str, *, max_steps=20):
-        """Fit with candidate `name` added, from each of `starts`; the best fit is kept. Per-bead strengths (`bead_dispersion`) are fitted
-        by time-window continuation: on records cut at growing fractions of their length
+        """Fit with candidate `name` added, from each of `starts`; the best fit is kept.
+
+        Per-bead strengths (`bead_dispersion`) are fitted by time-window continuation: on records cut at growing fractions of their length
         first, so early pulses fix the first beads before later, multiply scattered waves
         come in (from zero, a fit of all radii on whole records stops in a local minimum
         shifted by a fraction of a pulse: the cycle skipping of wave inversion)."""

@@ -386,9 +386,9 @@ class Problem:
             [np.full(len(e.time_s), e.noise_std_n[c]) for e in self.experiments for c in e.channels]
         )
 
-    def model_vector(self, x, *, directional: bool = False):
+    def model_vector(self, x):
         """The model of every fitted channel on the data's times, concatenated, N (jax)."""
-        return self.model_from_outputs(x, self.simulated(x, directional=directional))
+        return self.model_from_outputs(x, self.simulated(x))
 
     def residuals(self, x, data=None, *, directional: bool = False):
         """Whitened residuals $(g F(t - t_{off}) - y)/\\sigma$ of every channel, concatenated.
@@ -397,8 +397,12 @@ class Problem:
         passing it as an argument lets one compiled fit run over many data sets (noise seeds).
         `directional`: see `simulated`.
         """
+        return self.residuals_from_outputs(x, self.simulated(x, directional=directional), data)
+
+    def residuals_from_outputs(self, x, outputs, data=None):
+        """`residuals` from the simulated `outputs` of `simulated` (no simulation here)."""
         data = jnp.asarray(self.data_vector() if data is None else data)
-        return (self.model_vector(x, directional=directional) - data) / jnp.asarray(self.sigma_vector())
+        return (self.model_from_outputs(x, outputs) - data) / jnp.asarray(self.sigma_vector())
 
     def reaches_simulator(self, column: int) -> bool:
         """Whether parameter `column` changes the simulation (not only offsets and gains)."""
@@ -453,22 +457,22 @@ def residuals_and_jacobian(problem: Problem, x, columns=None):
     much cheaper than the full Jacobian when a few of many simulator parameters are free.
     """
     x = jnp.asarray(x, dtype=jnp.float64)
-    r = _residuals_jit(problem, x)
     if columns is None:
-        return np.asarray(r), np.asarray(_jacobian_jit(problem, x))
+        return np.asarray(_residuals_jit(problem, x)), np.asarray(_jacobian_jit(problem, x))
     columns = [int(c) for c in columns]
-    jac = np.full((problem.n_residuals, len(problem.instances)), np.nan)
     through = [c for c in columns if problem.reaches_simulator(c)]
     after = [c for c in columns if not problem.reaches_simulator(c)]
-    for chosen, directional in ((through, True), (after, False)):
-        if not chosen:
-            continue
-        width = max(_MIN_BLOCK, 1 << (len(chosen) - 1).bit_length())
+    bases = []
+    for chosen in (through, after):
+        width = max(_MIN_BLOCK, 1 << max(len(chosen) - 1, 0).bit_length())
         basis = np.zeros((len(problem.instances), width))
         basis[chosen, np.arange(len(chosen))] = 1.0
-        block = np.asarray(_directional_jacobian_jit(problem, x, jnp.asarray(basis), directional))
-        jac[:, chosen] = block[:, : len(chosen)]
-    return np.asarray(r), jac
+        bases.append(jnp.asarray(basis))
+    r, block_through, block_after = (np.asarray(a) for a in _columns_jit(problem, x, *bases))
+    jac = np.full((problem.n_residuals, len(problem.instances)), np.nan)
+    jac[:, through] = block_through[:, : len(through)]
+    jac[:, after] = block_after[:, : len(after)]
+    return r, jac
 
 
 @eqx.filter_jit
@@ -482,16 +486,19 @@ def _jacobian_jit(problem, x):
 
 
 @eqx.filter_jit
-def _directional_jacobian_jit(problem, x, basis, through_simulator):
-    """d r(x + basis z)/dz at z = 0: through the solver's forward mode, or (for offsets
-    and gains) with the simulation held fixed."""
-    if through_simulator:
-        return jax.jacfwd(lambda z: problem.residuals(x + basis @ z, directional=True))(
-            jnp.zeros(basis.shape[1])
-        )
-    outputs = problem.simulated(x)  # x does not depend on z: no tangent reaches the solver
-    data = jnp.asarray(problem.data_vector())
-    sigma = jnp.asarray(problem.sigma_vector())
-    return jax.jacfwd(lambda z: (problem.model_from_outputs(x + basis @ z, outputs) - data) / sigma)(
-        jnp.zeros(basis.shape[1])
+def _columns_jit(problem, x, through_basis, after_basis):
+    """r at x and d r(x + B z)/dz at z = 0 for two bases, from one simulation: through the
+    solver's forward mode for `through_basis`, with the simulation held for `after_basis`
+    (offsets and gains)."""
+
+    def through(z):
+        shifted = x + through_basis @ z
+        outputs = problem.simulated(shifted, directional=True)
+        r = problem.residuals_from_outputs(shifted, outputs)
+        return r, (r, outputs)
+
+    block_through, (r, outputs) = jax.jacfwd(through, has_aux=True)(jnp.zeros(through_basis.shape[1]))
+    block_after = jax.jacfwd(lambda z: problem.residuals_from_outputs(x + after_basis @ z, outputs))(
+        jnp.zeros(after_basis.shape[1])
     )
+    return r, block_through, block_after
