@@ -10,16 +10,20 @@ frees or holds strengths as it goes.
 | `viscous_damping` | `eta_s` (s) | Kuwabara-Kono $F_v = \\eta\\kappa\\,\\partial_t\\delta^{3/2}$ added to $\\eta$ of the header |
 | `track_friction` | `mu` | Coulomb friction $\\mu m g$ of the beads on the track |
 | `rotational_friction` | `mu_star` | uniform stiffness scale $\\kappa^* = (1+\\mu^*)\\kappa$ of every contact; the paper's thwarted rotation, but equally an error in the beads' modulus: in this form the two cannot be told apart |
-| `sensor_dynamics` | `sensor_beta`, `sensor_rate` | a `contact_K` channel is the signal of a sensor embedded in bead K (Eq. 4 of the paper): $\\ddot F_s + \\omega_0^2F_s = \\omega_0^2[(1-\\beta)F_K + \\beta F_{K-1}]$, with `sensor_rate` $= (f_{ref}/f_0)^2$, $f_{ref}$ = 100 kHz |
+| `sensor_dynamics` | `sensor_beta`, `sensor_rate` | a `contact_K` channel is the signal of a sensor embedded in bead K, whose compression also shortens the bead (Eq. 4 of the paper): $\\ddot F_s + \\omega_0^2F_s = \\omega_0^2[(1-\\beta)F_K + \\beta F_{K-1}]$, with `sensor_rate` $= (f_{ref}/f_0)^2$, $f_{ref}$ = 100 kHz |
 | `wall_compliance` | `wall_softening` | wall modulus $Y_w = Y_{w,0}e^{-w}$ (w > 0: softer than the header's) |
 | `bead_dispersion` | `bead_radius_dev_1..N` | relative radius deviation of each bead at fixed density (mass $\\propto R^3$, stiffness follows) |
 | `precompression` | `preload_n` (N) | static preload added to the header's |
 | `plasticity` | `yield_softening` | Thornton (1997) elastic-plastic contacts (`hertzchain.contact.thornton_contact`) with yield stress $\\sigma_{Y,0}/y$, i.e. yield forces $F_{Y,0}/y^3$ ($\\sigma_{Y,0}$: the header's, else 2 GPa); y = 0 never yields, y = 1 is the paper's 470 N |
 
-The sensor filter of `sensor_dynamics` is the exact discretisation of Eq. 4
-(`hertzchain.sensor.sensor_signal`) for $f_0$ below 2 MHz; above it (sensor_rate < 0.0025)
-its first-order expansion $F_s = u - \\ddot u/\\omega_0^2$, which is regular at $f_0 = \\infty$
-(the base model), so derivatives exist at "off".
+`sensor_dynamics` has two parts, both exact for a bead cut in two around a sensor (the
+core's split-bead model, `ChainSetup.sensor_beads`) and both regular at $f_0 = \\infty$ (the
+base model), so derivatives exist at "off": the chain is simulated with each recorded
+contact's bead (K >= 1) shortened by its sensor's compression
+(`hertzchain.compliant_sensor`: the soft sensor delays and scatters the wave), and the
+channel is the sensor force of Eq. 4 driven by that chain's contacts K-1 and K, from the
+exact discretisation of Eq. 4 (`hertzchain.sensor.sensor_signal`) for $f_0$ below 2 MHz and
+above it (sensor_rate < 0.0025) its first-order expansion $F_s = u - \\ddot u/\\omega_0^2$.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ import math
 import jax.numpy as jnp
 
 from hertzchain.chain import ChainSetup
+from hertzchain.compliant_sensor import CompliantSensors
 from hertzchain.integrate import Recording, solve
 from hertzchain.sensor import sensor_signal
 
@@ -211,7 +216,10 @@ def _simulate_with_effects(setup, grid, recording, extras):
     changed = apply_effects(setup, extras)
     extra_contacts = {k - 1 for k in recording.contacts if k >= 1}
     contacts = tuple(sorted(set(recording.contacts) | extra_contacts))
-    traces = solve(changed, grid, Recording(contacts=contacts))
+    omega_ref = 2.0 * math.pi * SENSOR_REFERENCE_HZ
+    sensors = CompliantSensors(tuple(k for k in recording.contacts if k >= 1), extras[p + "sensor_beta"],
+                               extras[p + "sensor_rate"] / omega_ref**2)
+    traces = solve(changed, grid, Recording(contacts=contacts), compliant_sensors=sensors if sensors.beads else None)
     forces = dict(traces.forces_n)
     start = changed.precompression_n
     step = grid.sample_interval_s

@@ -11,7 +11,7 @@ How each effect is hidden (`NOMINAL` holds the default strengths):
 - `viscous_damping`: `eta_s`; `track_friction`: `mu`; `rotational_friction`: `mu_star`;
 - `sensor_dynamics`: every `contact_K` channel is the signal of a sensor embedded in bead K
   (the core's split-bead model with `sensor_beta`, `sensor_f0_hz`), a different code path
-  from the diagnosis's filter;
+  from the diagnosis's compliance form of the same mechanics;
 - `wall_compliance`: the wall's Young's modulus (Pa) differs from the header's;
 - `bead_dispersion`: bead radii scattered by this relative standard deviation (fixed per
   data set, density fixed, so masses scatter three times as much);

@@ -317,6 +317,22 @@ class ChainSetup(eqx.Module):
         return omega0**2 * self.sensor_beta * (1.0 - self.sensor_beta) * mass
 
 
+class CompliantSensorModel(NamedTuple):
+    """Embedded sensors as compliances of unsplit beads (`hertzchain.compliant_sensor`).
+
+    Sensor j sits in bead `beads[j]`: its back contact is internal contact `beads[j] - 1`
+    and its front contact `beads[j]`; a sensor force $F_s$ shortens them by
+    `back_m_n * F_s` and `front_m_n * F_s`.
+    """
+
+    beads: tuple[int, ...]  # static
+    beta: jax.Array  # (n_sensors,) mass fraction of the front half
+    inv_omega0_sq_s2: jax.Array  # (n_sensors,) 1/omega0^2, s^2 (0: rigid sensor)
+    back_m_n: jax.Array  # (n_sensors,) m/N
+    front_m_n: jax.Array  # (n_sensors,) m/N
+    reduced_mass_kg: jax.Array  # (n_sensors,) beta (1 - beta) m
+
+
 class ChainModel(NamedTuple):
     """The mechanical model of a setup: bodies on a line, joined by contacts.
 
@@ -339,6 +355,8 @@ class ChainModel(NamedTuple):
     first_bead_force_n: jax.Array  # external force on bead 1, towards the wall
     last_body_force_n: jax.Array  # external force on the last body (free end only)
     striker_velocity_m_s: jax.Array
+    # Embedded sensors in compliance form (`hertzchain.compliant_sensor`): none by default.
+    compliant: "CompliantSensorModel | None" = None
 
 
 def internal_contact_index(setup: ChainSetup, contact_number: int) -> int:

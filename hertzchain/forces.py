@@ -14,6 +14,7 @@ import jax.numpy as jnp
 
 from . import contact
 from .chain import ChainModel
+from .compliant_sensor import overlap_offsets
 
 
 class ChainForces(NamedTuple):
@@ -32,12 +33,15 @@ def _net_force(contact_n, wall_n):
     return pushed_forward - pushed_back
 
 
-def overlaps(model: ChainModel, displacement_m):
-    """Overlaps of the internal contacts and of the wall contact, m: ((n_contacts,), scalar)."""
-    return (
-        displacement_m[:-1] - displacement_m[1:] + model.overlap0_m,
-        displacement_m[-1] + model.wall_overlap0_m,
-    )
+def overlaps(model: ChainModel, displacement_m, sensor_force_n=None):
+    """Overlaps of the internal contacts and of the wall contact, m: ((n_contacts,), scalar).
+
+    `sensor_force_n`: forces of the model's compliant sensors, which shorten their beads by
+    their compliance times the force beyond the preload's (None: at the preload's)."""
+    contacts = displacement_m[:-1] - displacement_m[1:] + model.overlap0_m
+    if model.compliant is not None and sensor_force_n is not None:
+        contacts = contacts - overlap_offsets(model, sensor_force_n - model.first_bead_force_n)
+    return contacts, displacement_m[-1] + model.wall_overlap0_m
 
 
 def initial_max_overlap(model: ChainModel):
@@ -46,10 +50,10 @@ def initial_max_overlap(model: ChainModel):
     return jnp.concatenate([contacts, wall[None]])
 
 
-def _elastic_parts(model: ChainModel, displacement_m, max_overlap_m):
+def _elastic_parts(model: ChainModel, displacement_m, max_overlap_m, sensor_force_n=None):
     """Elastic (rate-independent) force, stored energy and plastic dissipation of every
     contact and of the wall (last), for Hertz or, if the model is plastic, Thornton contacts."""
-    contacts, wall = overlaps(model, displacement_m)
+    contacts, wall = overlaps(model, displacement_m, sensor_force_n)
     overlap = jnp.concatenate([contacts, wall[None]])
     kappa = jnp.concatenate([model.kappa, model.wall_kappa[None]])
     if not model.plastic:
@@ -68,17 +72,22 @@ def _elastic_parts(model: ChainModel, displacement_m, max_overlap_m):
     )
 
 
-def chain_forces(model: ChainModel, displacement_m, velocity_m_s, max_overlap_m=None) -> ChainForces:
+def chain_forces(model: ChainModel, displacement_m, velocity_m_s, max_overlap_m=None, sensor_force_n=None,
+                 sensor_rate_n_s=None) -> ChainForces:
     """All forces of the chain, N. Displacements are measured from the initial positions.
 
     `max_overlap_m` (contacts then wall, m) is the largest overlap reached so far, needed
     only by plastic contacts; it must already include the current overlaps.
+    `sensor_force_n`, `sensor_rate_n_s`: force and its rate of the model's compliant sensors
+    (`hertzchain.compliant_sensor`), N and N/s.
     """
     if max_overlap_m is None:
         max_overlap_m = initial_max_overlap(model)
-    overlap_all, elastic_all, _, _ = _elastic_parts(model, displacement_m, max_overlap_m)
+    overlap_all, elastic_all, _, _ = _elastic_parts(model, displacement_m, max_overlap_m, sensor_force_n)
     overlap, wall_overlap = overlap_all[:-1], overlap_all[-1]
     rate = velocity_m_s[:-1] - velocity_m_s[1:]
+    if model.compliant is not None and sensor_rate_n_s is not None:
+        rate = rate - overlap_offsets(model, sensor_rate_n_s)
     hertz_elastic, hertz_total = contact.contact_force(
         overlap, rate, model.kappa, model.eta_s, elastic_all[:-1]
     )
@@ -95,20 +104,20 @@ def chain_forces(model: ChainModel, displacement_m, velocity_m_s, max_overlap_m=
     return ChainForces(contact_total, contact_elastic, wall_total, wall_elastic, body, viscous)
 
 
-def contact_potentials(model: ChainModel, displacement_m, max_overlap_m=None):
+def contact_potentials(model: ChainModel, displacement_m, max_overlap_m=None, sensor_force_n=None):
     """Elastic energy of each contact and of the wall contact, J: ((n_contacts,), scalar)."""
     if max_overlap_m is None:
         max_overlap_m = initial_max_overlap(model)
-    overlap, _, energy, _ = _elastic_parts(model, displacement_m, max_overlap_m)
+    overlap, _, energy, _ = _elastic_parts(model, displacement_m, max_overlap_m, sensor_force_n)
     spring = 0.5 * model.spring_n_m * overlap[:-1] ** 2
     return jnp.where(model.is_spring, spring, energy[:-1]), energy[-1]
 
 
-def plastic_dissipation(model: ChainModel, displacement_m, max_overlap_m):
+def plastic_dissipation(model: ChainModel, displacement_m, max_overlap_m, sensor_force_n=None):
     """Energy dissipated by plastic deformation so far, summed over contacts, J."""
     if not model.plastic:
         return jnp.zeros(())
-    return jnp.sum(_elastic_parts(model, displacement_m, max_overlap_m)[3])
+    return jnp.sum(_elastic_parts(model, displacement_m, max_overlap_m, sensor_force_n)[3])
 
 
 def preload_potential(model: ChainModel, displacement_m):

@@ -39,6 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import compliant_sensor as cs
 from .chain import ChainModel, ChainSetup, build_model, internal_contact_index, internal_sensor_index
 from .forces import (
     chain_forces,
@@ -82,6 +83,10 @@ class ChainState(NamedTuple):
     friction_impulse_n_s: jax.Array
     max_force_n: jax.Array  # (n_contacts + 1,) internal contacts then the wall
     max_overlap_m: jax.Array  # (n_contacts + 1,) largest overlap so far (plastic contacts)
+    # compliant sensors (`hertzchain.compliant_sensor`), (n_sensors,) each, empty without
+    sensor_force_n: jax.Array
+    sensor_rate_n_s: jax.Array
+    sensor_drive_n: jax.Array
 
 
 def initial_state(model: ChainModel) -> ChainState:
@@ -91,6 +96,8 @@ def initial_state(model: ChainModel) -> ChainState:
     max_overlap = initial_max_overlap(model)
     forces = chain_forces(model, displacement, velocity, max_overlap)
     zero = jnp.zeros(())
+    n_sensors = 0 if model.compliant is None else len(model.compliant.beads)
+    at_rest = jnp.broadcast_to(model.first_bead_force_n, (n_sensors,))
     return ChainState(
         displacement_m=displacement,
         velocity_m_s=velocity,
@@ -103,6 +110,9 @@ def initial_state(model: ChainModel) -> ChainState:
         friction_impulse_n_s=zero,
         max_force_n=jnp.concatenate([forces.contact_total_n, forces.wall_total_n[None]]),
         max_overlap_m=max_overlap,
+        sensor_force_n=at_rest,
+        sensor_rate_n_s=jnp.zeros((n_sensors,)),
+        sensor_drive_n=at_rest,
     )
 
 
@@ -124,11 +134,13 @@ def verlet_step(model: ChainModel, dt_s: float, state: ChainState) -> ChainState
     viscous_work = jnp.sum(m * state.viscous_accel_m_s2 * h * 0.5 * (v0 + v_half))
     v_half, friction_1, impulse_1 = _friction_kick(model, v_half, h)
     displacement = state.displacement_m + dt_s * v_half
-    contact_overlap, wall_overlap = overlaps(model, displacement)
+    sensor = _sensor_drift(model, dt_s, state)
+    contact_overlap, wall_overlap = overlaps(model, displacement, sensor.force_n)
     max_overlap = jnp.maximum(
         state.max_overlap_m, jnp.concatenate([contact_overlap, wall_overlap[None]])
     )
-    forces = chain_forces(model, displacement, v_half + h * state.accel_m_s2, max_overlap)
+    forces = chain_forces(model, displacement, v_half + h * state.accel_m_s2, max_overlap, sensor.force_n,
+                          sensor.predicted_rate_n_s)
     accel = forces.body_force_n / m
     viscous_accel = forces.body_viscous_force_n / m
     v_end = v_half + h * accel
@@ -147,33 +159,69 @@ def verlet_step(model: ChainModel, dt_s: float, state: ChainState) -> ChainState
         friction_impulse_n_s=state.friction_impulse_n_s + impulse_1 + impulse_2,
         max_force_n=jnp.maximum(state.max_force_n, all_forces),
         max_overlap_m=max_overlap,
+        **_sensor_kick(model, dt_s, sensor, forces.contact_total_n),
     )
+
+
+class _SensorDrift(NamedTuple):
+    force_n: jax.Array | None
+    half_rate_n_s: jax.Array | None
+    predicted_rate_n_s: jax.Array | None
+    quasi_static: jax.Array | None
+
+
+def _sensor_drift(model: ChainModel, dt_s: float, state: ChainState) -> _SensorDrift:
+    """First half kick and drift of the compliant sensors' forces (quasi-static ones take
+    the previous step's drive)."""
+    if model.compliant is None:
+        return _SensorDrift(None, None, None, None)
+    h = 0.5 * dt_s
+    quasi_static = cs.is_quasi_static(model, dt_s)
+    accel = cs.sensor_accel(model, state.sensor_drive_n, state.sensor_force_n, quasi_static)
+    half_rate = state.sensor_rate_n_s + h * accel
+    force = jnp.where(quasi_static, state.sensor_drive_n, state.sensor_force_n + dt_s * half_rate)
+    return _SensorDrift(force, half_rate, half_rate + h * accel, quasi_static)
+
+
+def _sensor_kick(model: ChainModel, dt_s: float, sensor: _SensorDrift, contact_force_n) -> dict:
+    """Second half kick of the compliant sensors: the state fields they update."""
+    if model.compliant is None:
+        empty = jnp.zeros((0,))
+        return {"sensor_force_n": empty, "sensor_rate_n_s": empty, "sensor_drive_n": empty}
+    drive = cs.sensor_drive(model, contact_force_n)
+    accel = cs.sensor_accel(model, drive, sensor.force_n, sensor.quasi_static)
+    rate = jnp.where(sensor.quasi_static, 0.0, sensor.half_rate_n_s + 0.5 * dt_s * accel)
+    return {"sensor_force_n": sensor.force_n, "sensor_rate_n_s": rate, "sensor_drive_n": drive}
 
 
 _LEDGER = ("dissipated_viscous_j", "dissipated_friction_j", "wall_impulse_n_s", "friction_impulse_n_s")
 
 
-def _sample(model, u, v, ledger, setup_layout, recording, max_overlap=None):
+def _sample(model, u, v, ledger, setup_layout, recording, max_overlap=None, sensor=(None, None)):
     """Observables of one recorded sample (a dict of arrays).
 
     `u`, `v`: displacements and velocities of all bodies; `ledger`: an object with the
-    running `_LEDGER` quantities; `max_overlap`: largest overlaps so far (plastic contacts).
+    running `_LEDGER` quantities; `max_overlap`: largest overlaps so far (plastic contacts);
+    `sensor`: force and rate of the compliant sensors, if any.
     """
     contact_index, sensor_index, user_contacts = setup_layout
     if max_overlap is None:
         max_overlap = initial_max_overlap(model)
-    forces = chain_forces(model, u, v, max_overlap)
-    contact_energy, wall_energy = contact_potentials(model, u, max_overlap)
+    force_s, rate_s = sensor
+    forces = chain_forces(model, u, v, max_overlap, force_s, rate_s)
+    contact_energy, wall_energy = contact_potentials(model, u, max_overlap, force_s)
+    sensor_spring, sensor_kinetic = (cs.sensor_energies(model, force_s, rate_s) if force_s is not None
+                                     else (0.0, 0.0))
     record = {
         "contacts": forces.contact_total_n[np.asarray(contact_index, dtype=int)],
         "sensors": forces.contact_total_n[np.asarray(sensor_index, dtype=int)],
         "wall": forces.wall_total_n,
-        "kinetic_j": 0.5 * jnp.sum(model.mass_kg * v**2),
-        "elastic_j": jnp.sum(contact_energy) + wall_energy,
+        "kinetic_j": 0.5 * jnp.sum(model.mass_kg * v**2) + sensor_kinetic,
+        "elastic_j": jnp.sum(contact_energy) + wall_energy + sensor_spring,
         "wall_elastic_j": wall_energy,
         "preload_potential_j": preload_potential(model, u),
         "momentum_kg_m_s": jnp.sum(model.mass_kg * v),
-        "dissipated_plastic_j": plastic_dissipation(model, u, max_overlap),
+        "dissipated_plastic_j": plastic_dissipation(model, u, max_overlap, force_s),
     }
     record.update({name: getattr(ledger, name) for name in _LEDGER})
     if recording.record_all:
@@ -217,9 +265,10 @@ def integrate(
             length=grid.steps_per_sample,
             unroll=unroll,
         )[0]
+        sensor = (state.sensor_force_n, state.sensor_rate_n_s) if model.compliant is not None else (None, None)
         return state, _sample(
             model, state.displacement_m, state.velocity_m_s, state, layout, recording,
-            state.max_overlap_m,
+            state.max_overlap_m, sensor,
         )
 
     block = _block_size(grid.n_samples)
@@ -267,6 +316,9 @@ def _assemble(setup, model, grid, recording, records) -> Traces:
     v0 = initial_velocity(model)
     contact_energy0, wall_energy0 = contact_potentials(model, jnp.zeros_like(v0))
     energy0 = 0.5 * jnp.sum(model.mass_kg * v0**2) + jnp.sum(contact_energy0) + wall_energy0
+    if model.compliant is not None:
+        at_rest = initial_state(model).sensor_force_n
+        energy0 = energy0 + cs.sensor_energies(model, at_rest, jnp.zeros_like(at_rest))[0]
     ledger = (
         records["kinetic_j"]
         + records["elastic_j"]
@@ -306,13 +358,23 @@ def _assemble(setup, model, grid, recording, records) -> Traces:
     )
 
 
-def solve(setup: ChainSetup, grid: TimeGrid, recording: Recording = Recording(), *, unroll: int = 1) -> Traces:
+def solve(setup: ChainSetup, grid: TimeGrid, recording: Recording = Recording(), *, unroll: int = 1,
+          compliant_sensors: cs.CompliantSensors | None = None) -> Traces:
     """Simulate `setup` on a fixed time grid: the pure, differentiable core of `simulate`.
 
     Use it inside `jax.grad`, `jax.jacfwd`, `jax.vmap` or `jax.jit` (with `grid` and
     `recording` static). It does no input checks on traced values; `simulate` does.
+    `compliant_sensors`: embedded sensors in compliance form (`hertzchain.compliant_sensor`),
+    for a setup without `sensor_beads`; their beads are shortened by the sensor force, which
+    is not itself recorded (record the bead's two contacts).
     """
     model = build_model(setup)
+    if compliant_sensors is not None:
+        if setup.sensor_beads:
+            raise ValueError("compliant_sensors: the setup already splits sensor beads "
+                             f"{setup.sensor_beads}; use one sensor model (sensor_beads=() here).")
+        model = cs.with_compliant_sensors(model, compliant_sensors.beads, beta=compliant_sensors.beta,
+                                          inv_omega0_sq_s2=compliant_sensors.inv_omega0_sq_s2)
     state0 = initial_state(model)
     final, records = integrate(model, state0, grid, _layout(setup, recording), recording, unroll=unroll)
     records["max_force_n"] = final.max_force_n

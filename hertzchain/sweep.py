@@ -24,11 +24,12 @@ pulse at the last recorded contact); `force_ratio` (wall peak / incident peak);
 `energy_error_rel`, `dissipated_fraction`, `final_energy_fraction` (the energy balance at
 the end, relative to the impact energy).
 
-Several hosts: start one process per host with `distributed=True` (it calls
-`jax.distributed.initialize()`, which reads the cluster from the environment, e.g. SLURM, or
-from `JAX_COORDINATOR_ADDRESS`, `JAX_NUM_PROCESSES`, `JAX_PROCESS_ID`); all write to the same
-folder (a shared file system), process k computing the chunks k, k + P, k + 2P, ... on its own
-devices; process 0 assembles the table after a barrier.
+Several hosts: start one process per host, call `jax.distributed.initialize(...)` in each
+(the CLI's `--distributed`, with `--coordinator`, `--num-processes`, `--process-id` where the
+cluster is not detected from SLURM, Open MPI or Kubernetes), then `run_sweep(...,
+distributed=True)`; all write to the same folder (a shared file system), process k computing
+the chunks k, k + P, k + 2P, ... on its own devices; process 0 assembles the table after a
+barrier.
 """
 
 from __future__ import annotations

@@ -2,6 +2,7 @@
 
 import json
 import os
+import socket
 import subprocess
 import sys
 
@@ -112,3 +113,41 @@ def test_cli_resume(tmp_path, capsys):
     table = read_sweep(tmp_path)
     np.testing.assert_array_equal(table["eta_s"], [0.0, 2e-6, 0.0, 2e-6])
     assert np.all(table["dissipated_fraction"][1::2] > 0.1) and np.all(table["dissipated_fraction"][0::2] == 0)
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def test_two_process_distributed_sweep_matches_one_process(tmp_path):
+    """`--distributed` over two processes (jax.distributed, CPU collectives) on one machine:
+    each computes every other chunk, process 0 writes the table, identical to one process."""
+    args = ["sweep", "--n-beads", "10", "--t-end", "0.8ms", "--sample-interval", "2us", "--contacts", "2,6",
+            "--grid", "striker_velocity_m_s=0.3,0.6,1.2", "--grid", "wall_youngs_pa=3e9,4e11",
+            "--chunk-size", "2", "--no-plots"]
+    assert cli_main(args + ["--out", str(tmp_path / "one")]) == 0
+    port = _free_port()
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-m", "hertzchain", *args, "--out", str(tmp_path / "two"), "--distributed",
+             "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2", "--process-id", str(k)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        )
+        for k in range(2)
+    ]
+    outputs = [proc.communicate(timeout=300) for proc in procs]
+    for proc, (out, err) in zip(procs, outputs):
+        assert proc.returncode == 0, err[-2000:]
+    assert "process 1: computed 1 chunks" in outputs[1][0]
+    assert "wrote" in outputs[0][0]
+    assert (tmp_path / "two" / "sweep.csv").read_bytes() == (tmp_path / "one" / "sweep.csv").read_bytes()
+
+
+def test_distributed_options_need_distributed(tmp_path, capsys):
+    args = ["sweep", "--grid", "striker_velocity_m_s=0.3", "--num-processes", "2", "--out", str(tmp_path)]
+    assert cli_main(args) == 2
+    assert "--num-processes: only for a --distributed sweep" in capsys.readouterr().err
+    assert not (tmp_path / "manifest.json").exists()

@@ -35,17 +35,47 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--distributed",
         action="store_true",
-        help="one of several processes/hosts: call jax.distributed.initialize() (cluster from the "
-        "environment) and share the chunks; process 0 writes the table",
+        help="one of several processes/hosts sharing the chunks (jax.distributed); process 0 writes "
+        "the table. On SLURM, Open MPI or Kubernetes the cluster is detected; elsewhere give the "
+        "three options below",
     )
+    parser.add_argument("--coordinator", metavar="HOST:PORT",
+                        help="with --distributed: address of process 0's coordinator service")
+    parser.add_argument("--num-processes", type=int, help="with --distributed: number of processes P")
+    parser.add_argument("--process-id", type=int, help="with --distributed: this process's index, 0..P-1")
     parser.add_argument("--no-plots", action="store_true", help="do not draw the summary plots")
 
 
-def run(args: argparse.Namespace) -> int:
-    if args.distributed:
-        import jax
+def start_distributed(args: argparse.Namespace) -> None:
+    """Join the cluster: `jax.distributed.initialize` with the options given (None = detect)."""
+    given = {"--coordinator": args.coordinator, "--num-processes": args.num_processes,
+             "--process-id": args.process_id}
+    if not args.distributed:
+        named = [flag for flag, value in given.items() if value is not None]
+        if named:
+            raise ValueError(f"{', '.join(named)}: only for a --distributed sweep; add --distributed or drop them.")
+        return
+    if args.num_processes is not None and args.num_processes < 1:
+        raise ValueError(f"--num-processes must be at least 1, got {args.num_processes}.")
+    if args.process_id is not None and args.num_processes is not None and not (
+        0 <= args.process_id < args.num_processes
+    ):
+        raise ValueError(f"--process-id must be in 0..{args.num_processes - 1}, got {args.process_id}.")
+    import jax
 
-        jax.distributed.initialize()
+    jax.distributed.initialize(
+        coordinator_address=args.coordinator, num_processes=args.num_processes, process_id=args.process_id
+    )
+
+
+def jax_process_index() -> int:
+    import jax
+
+    return jax.process_index()
+
+
+def run(args: argparse.Namespace) -> int:
+    start_distributed(args)
     if not args.grid:
         raise ValueError("give at least one --grid FIELD=VALUES, e.g. --grid striker_velocity_m_s=0.1:1:10:log")
     setup = setup_from_args(args)
@@ -67,6 +97,10 @@ def run(args: argparse.Namespace) -> int:
         distributed=args.distributed,
         plots=not args.no_plots,
     )
+    if args.distributed and jax_process_index() != 0:
+        print(f"process {jax_process_index()}: computed {result.computed} chunks; process 0 writes the table.",
+              flush=True)
+        return 0
     if not result.complete:
         print(
             f"{result.chunks_done}/{result.n_chunks} chunks done; run the same command again to resume.",
