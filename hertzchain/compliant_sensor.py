@@ -42,7 +42,7 @@ BETA_FLOOR = 0.02
 
 
 class CompliantSensors(NamedTuple):
-    """Embedded sensors to model in compliance form (`solve(..., compliant_sensors=...)`).
+    r"""Embedded sensors to model in compliance form (`solve(..., compliant_sensors=...)`).
 
     **Fields:** `beads` bead numbers K (1..N-1), each sensor's back contact is K-1 and its
     front contact K; `beta` mass fraction of the front half; `inv_omega0_sq_s2`
@@ -54,7 +54,7 @@ class CompliantSensors(NamedTuple):
     inv_omega0_sq_s2: float | jax.Array
 
     @classmethod
-    def from_f0(cls, beads, *, beta, f0_hz) -> "CompliantSensors":
+    def from_f0(cls, beads, *, beta, f0_hz) -> CompliantSensors:
         """Sensors of resonance `f0_hz` (Hz; inf for rigid)."""
         return cls(tuple(beads), beta, 1.0 / (2.0 * jnp.pi * jnp.asarray(f0_hz, dtype=jnp.float64)) ** 2)
 

@@ -40,7 +40,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import compliant_sensor as cs
-from .chain import ChainModel, ChainSetup, build_model, internal_contact_index, internal_sensor_index
+from .chain import (
+    ChainModel,
+    ChainSetup,
+    build_model,
+    internal_contact_index,
+    internal_sensor_index,
+)
 from .forces import (
     chain_forces,
     contact_potentials,
