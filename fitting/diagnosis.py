@@ -18,8 +18,8 @@ noted):
    multimodal in f0: the three best are refitted) and from fresh nuisances (a base fit
    pays for a missing effect with its nuisances, which can leave them in a basin the
    candidate's optimum is not reached from); per-bead radii (`bead_dispersion`) are
-   fitted by time-window continuation (records cut at 40, 55, 70, 85 % of their length,
-   then whole), since from zero a fit of all radii on whole records stops in a local
+   fitted by time-window continuation (records cut at 45 and 70 % of their length, a
+   few loose steps each, then whole), since from zero a fit of all radii on whole records stops in a local
    minimum. Candidates whose sensitivity lies in the span of the free
    parameters are reported as not separable (a uniform stiffness scale with both striker
    velocity and gain free, discrepancy.md section 5.4).
@@ -69,7 +69,10 @@ from .parameters import ParameterInstance, get_spec, parse_parameter_list
 NUISANCES = ("striker_velocity", "time_offset")
 MIN_SHARE = 0.2
 # Record fractions of the time-window continuation of per-bead refits (`_Search.refit`).
-WINDOW_FRACTIONS = (0.4, 0.55, 0.7, 0.85)
+WINDOW_FRACTIONS = (0.45, 0.7)
+# Each window's fit only has to bring the radii into the basin of the next: a few loose steps.
+WINDOW_MAX_STEPS = 8
+WINDOW_RTOL = 1e-3
 # Resonance frequencies of the starts of `sensor_dynamics` refits, Hz.
 SENSOR_START_F0_HZ = (30e3, 45e3, 65e3, 90e3, 130e3, 190e3)
 # Refits per candidate, from its best secant starts (default 1).
@@ -133,7 +136,7 @@ def _residuals(problem, x):
 
 
 def _levenberg_marquardt(evaluate, x0, active, rows, lower, upper, *, max_steps: int = 40,
-                         rtol: float = 1e-6, atol: float = 0.05):
+                         rtol: float = 1e-5, atol: float = 0.05):
     """Minimise the squared residuals `rows` over the columns `active` (bounded by clipping).
 
     Trial steps use residuals only; the Jacobian is evaluated at accepted points. Stops when
@@ -406,11 +409,11 @@ class _Search:
             cols += self.effect_columns[name]
         return cols
 
-    def fit(self, x_start, effects, *, rows=None, columns=None, max_steps=40):
+    def fit(self, x_start, effects, *, rows=None, columns=None, max_steps=40, rtol=1e-5):
         cols = self.columns(effects) if columns is None else columns
         rows = self.rows_all if rows is None else rows
         return _levenberg_marquardt(self.evaluate, x_start, cols, rows, self.lower, self.upper,
-                                    max_steps=max_steps)
+                                    max_steps=max_steps, rtol=rtol)
 
     def fresh(self, x) -> np.ndarray:
         """`x` with every per-file nuisance back at its start value (header velocity, zero
@@ -438,11 +441,12 @@ class _Search:
         starts = list(starts) + [self.fresh(starts[0])]
         if name == "bead_dispersion":
             rows = np.nonzero(self.row_time_fraction <= WINDOW_FRACTIONS[0])[0]
-            first = [self.fit(x, effects, rows=rows, max_steps=15) for x in starts]
+            window = dict(max_steps=WINDOW_MAX_STEPS, rtol=WINDOW_RTOL)
+            first = [self.fit(x, effects, rows=rows, **window) for x in starts]
             x = min(first, key=lambda result: result[1])[0]
             for fraction in WINDOW_FRACTIONS[1:]:
                 rows = np.nonzero(self.row_time_fraction <= fraction)[0]
-                x, _, _ = self.fit(x, effects, rows=rows, max_steps=15)
+                x, _, _ = self.fit(x, effects, rows=rows, **window)
             starts = [x]
         best = None
         for x in starts:
