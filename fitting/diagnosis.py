@@ -441,7 +441,7 @@ class _Search:
         starts = list(starts) + [self.fresh(starts[0])]
         if name == "bead_dispersion":
             rows = np.nonzero(self.row_time_fraction <= WINDOW_FRACTIONS[0])[0]
-            window = dict(max_steps=WINDOW_MAX_STEPS, rtol=WINDOW_RTOL)
+            window = {"max_steps": WINDOW_MAX_STEPS, "rtol": WINDOW_RTOL}
             first = [self.fit(x, effects, rows=rows, **window) for x in starts]
             x = min(first, key=lambda result: result[1])[0]
             for fraction in WINDOW_FRACTIONS[1:]:
