@@ -19,8 +19,8 @@ noted):
    pays for a missing effect with its nuisances, which can leave them in a basin the
    candidate's optimum is not reached from); per-bead radii (`bead_dispersion`) are
    fitted by time-window continuation (records cut at 45 and 70 % of their length, a
-   few loose steps each, then whole), since from zero a fit of all radii on whole records stops in a local
-   minimum. Candidates whose sensitivity lies in the span of the free
+   few loose steps each, then whole), since from zero a fit of all radii on whole records
+   stops in a local minimum. Candidates whose sensitivity lies in the span of the free
    parameters are reported as not separable (a uniform stiffness scale with both striker
    velocity and gain free, discrepancy.md section 5.4).
 4. **Decide.** A candidate with k strengths is named only if all hold:
@@ -440,13 +440,13 @@ class _Search:
         bead)."""
         starts = list(starts) + [self.fresh(starts[0])]
         if name == "bead_dispersion":
-            rows = np.nonzero(self.row_time_fraction <= WINDOW_FRACTIONS[0])[0]
-            window = {"max_steps": WINDOW_MAX_STEPS, "rtol": WINDOW_RTOL}
-            first = [self.fit(x, effects, rows=rows, **window) for x in starts]
-            x = min(first, key=lambda result: result[1])[0]
-            for fraction in WINDOW_FRACTIONS[1:]:
+            def window_fit(x, fraction):
                 rows = np.nonzero(self.row_time_fraction <= fraction)[0]
-                x, _, _ = self.fit(x, effects, rows=rows, **window)
+                return self.fit(x, effects, rows=rows, max_steps=WINDOW_MAX_STEPS, rtol=WINDOW_RTOL)
+
+            x = min((window_fit(x, WINDOW_FRACTIONS[0]) for x in starts), key=lambda result: result[1])[0]
+            for fraction in WINDOW_FRACTIONS[1:]:
+                x = window_fit(x, fraction)[0]
             starts = [x]
         best = None
         for x in starts:
@@ -582,13 +582,13 @@ class _Search:
         r, jac = self.evaluate(x_fit, cols)
         global_cols = [c for c in cols if self.problem.instances[c].experiment is None]
 
+        nuisance_bases = [np.linalg.qr(jac[np.ix_(rows, columns)])[0] if columns else None
+                          for rows, columns in zip(self.file_rows, self.file_columns)]
+
         def profiled(e, block):
             """`block` (rows of file e) with file e's nuisance directions projected out."""
-            own = jac[np.ix_(self.file_rows[e], self.file_columns[e])]
-            if own.size == 0:
-                return block
-            q, _ = np.linalg.qr(own)
-            return block - q @ (q.T @ block)
+            q = nuisance_bases[e]
+            return block if q is None else block - q @ (q.T @ block)
 
         total = 0.0
         for held in self.folds:
