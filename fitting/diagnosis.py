@@ -22,7 +22,10 @@ noted):
    few loose steps each, then whole), since from zero a fit of all radii on whole records
    stops in a local minimum. Candidates whose sensitivity lies in the span of the free
    parameters are reported as not separable (a uniform stiffness scale with both striker
-   velocity and gain free, discrepancy.md section 5.4).
+   velocity and gain free, discrepancy.md section 5.4). Candidates are refitted in order
+   of their number of strengths; once one explains the misfit to the noise level,
+   candidates with more strengths are not refitted (they could only fit the noise better:
+   parsimony, and the per-bead refit is the costliest step of a diagnosis).
 4. **Decide.** A candidate with k strengths is named only if all hold:
    (a) its $\\Delta\\chi^2$ beats the BIC penalty $k\\ln n$;
    (b) it removes at least `min_share` of the excess misfit $\\chi^2 - \\mathrm{dof}$ that
@@ -43,7 +46,9 @@ noted):
 
 All fits share one compiled forward model and Jacobian (every candidate strength is a
 parameter of it, held at 0 when off), and a small Levenberg-Marquardt in NumPy frees or
-holds columns and rows, so the whole diagnosis compiles the simulator once.
+holds columns and rows, so the whole diagnosis compiles the simulator once, twice when
+`plasticity` is tried: points where its strength is 0 run on Hertz contacts, the same
+model there at a quarter of the cost of the elastic-plastic contact law (`_Evaluator`).
 """
 
 from __future__ import annotations
@@ -88,10 +93,17 @@ class DiagnosisError(ValueError):
 # --- the evaluator and the optimiser ----------------------------------------------------------
 class _Evaluator:
     """Whitened residuals (alone, cheap) and with the Jacobian (one forward-mode pass per
-    simulator parameter) of one problem, with small caches, counters and timers."""
+    simulator parameter) of one problem, with small caches, counters and timers.
 
-    def __init__(self, problem: Problem):
+    With `elastic` (the same problem on Hertz contacts) and `plastic_columns`, points
+    where those strengths are all 0 are evaluated on `elastic`: the same numbers there
+    (an infinite yield force), at a quarter of the cost of the elastic-plastic contact law.
+    """
+
+    def __init__(self, problem: Problem, elastic: Problem | None = None, plastic_columns=()):
         self.problem = problem
+        self.elastic = elastic
+        self.plastic_columns = np.asarray(plastic_columns, dtype=int)
         self.calls = 0
         self.residual_calls = 0
         self.seconds = 0.0
@@ -107,12 +119,18 @@ class _Evaluator:
                 return self._cache[cached]
         began = time.perf_counter()
         self.calls += 1
-        r, jac = residuals_and_jacobian(self.problem, np.asarray(x, dtype=float), wanted)
+        r, jac = residuals_and_jacobian(self.problem_at(x), np.asarray(x, dtype=float), wanted)
         if len(self._cache) > 6:
             self._cache.pop(next(iter(self._cache)))
         self._cache[(key, wanted)] = (r, jac)
         self.seconds += time.perf_counter() - began
         return r, jac
+
+    def problem_at(self, x) -> Problem:
+        """The problem evaluated at `x`: `elastic` where no contact can yield."""
+        if self.elastic is None or np.any(np.asarray(x)[self.plastic_columns] > 0):
+            return self.problem
+        return self.elastic
 
     def residuals(self, x):
         key = np.asarray(x, dtype=float).tobytes()
@@ -122,7 +140,7 @@ class _Evaluator:
         if key not in self._residual_cache:
             began = time.perf_counter()
             self.residual_calls += 1
-            r = np.asarray(_residuals(self.problem, jnp.asarray(np.asarray(x, dtype=float))))
+            r = np.asarray(_residuals(self.problem_at(x), jnp.asarray(np.asarray(x, dtype=float))))
             if len(self._residual_cache) > 32:
                 self._residual_cache.pop(next(iter(self._residual_cache)))
             self._residual_cache[key] = r
@@ -360,10 +378,13 @@ class _Search:
         for effect in self.library.values():
             for name in effect.parameters:
                 extra.append(ParameterInstance(get_spec(name), label=name[len(fx.PREFIX):]))
-        self.problem = Problem(seed.experiments, tuple(seed.instances) + tuple(extra), seed.base_setups,
-                               forward)
-        self.evaluate = _Evaluator(self.problem)
+        instances = tuple(seed.instances) + tuple(extra)
+        self.problem = Problem(seed.experiments, instances, seed.base_setups, forward)
+        elastic = Problem(seed.experiments, instances, seed.base_setups,
+                          fx.effects_forward_model(self.n_beads, steps_per_contact, plastic=False))
         self.labels = list(self.problem.labels)
+        plastic_columns = [self.labels.index(par[len(fx.PREFIX):]) for par in self.library["plasticity"].parameters]
+        self.evaluate = _Evaluator(self.problem, elastic, plastic_columns)
         p = len(self.labels)
         self.lower = np.array([max(i.spec.lower, 0.0) if i.spec.lower < 0 and i.spec.lower > -1e-20
                                else i.spec.lower for i in self.problem.instances])
@@ -685,38 +706,48 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
         worth = [c for c in todo if separable[c] and scores[c] > 0.5 * len(search.effect_columns[c]) * penalty
                  and scores[c] > 0.5 * min_share * max(excess, 0.0)]
         worth = sorted(worth, key=lambda c: -scores[c])[:max_refits] if excess > band(dof) else []
-        results = []
+        refitted: dict = {}
         bar = Progress(len(worth), "diagnose: refitting candidates") if progress and worth else None
-        for name in todo:
+        for name in sorted(worth, key=lambda c: (len(search.effect_columns[c]), -scores[c])):
             cols = search.effect_columns[name]
             k = len(cols)
-            if not separable[name]:
+            simpler = [c for c in refitted.values() if c.n_parameters < k
+                       and c.chi2 - dof_of(accepted + [c.effect]) <= band(dof_of(accepted + [c.effect]))]
+            if simpler:
+                refitted[name] = CandidateResult(
+                    name, k, scores[name], True, math.nan, math.nan, math.nan, math.nan, None, {}, {}, False,
+                    f"not refitted: {simpler[0].effect} ({simpler[0].n_parameters} parameter(s)) already "
+                    "explains the misfit to the noise level")
+            else:
+                x_c, chi2_c, _ = search.refit(best_starts[name], accepted + [name], name)
+                delta = chi2 - chi2_c
+                all_cols = search.columns(accepted + [name])
+                err = search.stderr(x_c, all_cols, chi2_c)
+                refitted[name] = CandidateResult(
+                    name, k, scores[name], True, chi2_c, delta, delta - k * penalty,
+                    delta / excess if excess > 0 else 0.0, None,
+                    {search.labels[c]: float(x_c[c]) for c in cols},
+                    {search.labels[c]: float(err[all_cols.index(c)]) for c in cols}, False, "")
+                refitted[name]._x = x_c  # type: ignore[attr-defined]
+            if bar:
+                bar.advance()
+        results = []
+        for name in todo:
+            k = len(search.effect_columns[name])
+            if name in refitted:
+                results.append(refitted[name])
+            elif not separable[name]:
                 not_separable.add(name)
                 results.append(CandidateResult(name, k, scores[name], False, chi2, 0.0, -k * penalty,
                                                0.0, None, {}, {}, False,
                                                "not separable from the free parameters"))
-                continue
-            if name not in worth:
+            else:
                 results.append(CandidateResult(
                     name, k, scores[name], True, math.nan, math.nan, math.nan, math.nan, None, {}, {}, False,
                     "the misfit is already at the noise level" if excess <= band(dof) else
                     (f"score {scores[name]:.4g} not among the {max_refits} best worth a refit"
                      if scores[name] > 0.5 * k * penalty and scores[name] > 0.5 * min_share * excess
                      else f"score {scores[name]:.4g} too low to be worth a refit")))
-                continue
-            x_c, chi2_c, _ = search.refit(best_starts[name], accepted + [name], name)
-            delta = chi2 - chi2_c
-            share = delta / excess if excess > 0 else 0.0
-            bic_gain = delta - k * penalty
-            values = {search.labels[c]: float(x_c[c]) for c in cols}
-            all_cols = search.columns(accepted + [name])
-            err = search.stderr(x_c, all_cols, chi2_c)
-            errors = {search.labels[c]: float(err[all_cols.index(c)]) for c in cols}
-            results.append(CandidateResult(name, k, scores[name], True, chi2_c, delta, bic_gain, share,
-                                           None, values, errors, False, ""))
-            results[-1]._x = x_c  # type: ignore[attr-defined]
-            if bar:
-                bar.advance()
         # decide
         at_noise = excess <= band(dof)
         base_heldout = None

@@ -31,9 +31,9 @@ def _extras(n_beads, **values):
     return extras
 
 
-def _run(setup, extras, contacts=(2, 4)):
+def _run(setup, extras, contacts=(2, 4), *, plastic=True):
     grid = choose_time_grid(setup, t_end_s=4e-4, sample_interval_s=1e-6)
-    model = fx.effects_forward_model(setup.n_beads)
+    model = fx.effects_forward_model(setup.n_beads, plastic=plastic)
     return model.simulate(setup, grid, Recording(contacts=contacts), extras).forces_n, grid
 
 
@@ -61,6 +61,20 @@ def test_effect_strengths_reach_the_setup():
     np.testing.assert_allclose(ratio, [1, 1, 1.01**3, 1, 1, 1], rtol=1e-12)
     # yield_softening 0 never yields: identical to the elastic chain
     assert not np.isfinite(float(fx.apply_effects(setup, _extras(6)).bead_yield_stress_pa))
+
+
+def test_hertz_contact_model_equals_the_plastic_one_until_contacts_yield():
+    setup = ChainSetup(6, striker_velocity_m_s=0.5)
+    extras = _extras(6, eta_s=1e-6, wall_softening=0.5, bead_radius_dev_2=0.01)
+    elastic, _ = _run(setup, extras, plastic=False)
+    plastic, _ = _run(setup, extras)
+    for name in ("contact_2", "contact_4", "wall"):
+        np.testing.assert_allclose(elastic[name], plastic[name], rtol=0, atol=1e-12 * float(jnp.max(plastic[name])))
+    # yield forces 1/27 of the nominal: the plastic model flattens the peaks, the Hertz one cannot
+    yielding = dict(extras, **{fx.PREFIX + "yield_softening": jnp.asarray(3.0)})
+    elastic, _ = _run(setup, yielding, plastic=False)
+    plastic, _ = _run(setup, yielding)
+    assert float(jnp.max(plastic["contact_2"])) < 0.9 * float(jnp.max(elastic["contact_2"]))
 
 
 def test_sensor_filter_matches_eq4_and_is_regular_at_infinite_f0():
