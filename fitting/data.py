@@ -2,17 +2,24 @@
 
 An `Experiment` is one trace file (`hertzchain.tracefile.TraceFile`) plus the choice of
 channels to fit and the noise level of each channel. The noise standard deviation whitens
-the residuals. It comes from the file's `noise_std_n` header when there is one; otherwise
+the residuals. It comes from the file's `noise_std_n_<channel>` or `noise_std_n` header
+when there is one; otherwise
 it is estimated from the channel itself with a robust high-pass estimate: the median
 absolute second difference, $\\sigma \\approx 1.4826\\,\\mathrm{MAD}(\\Delta^2 y)/\\sqrt{6}$
 (white noise of variance $\\sigma^2$ gives second differences of variance $6\\sigma^2$; a
 pulse sampled finely enough adds almost nothing to them).
+
+Samples the file marks as clipped (`clipped_<channel>`: the digitiser was at its range
+limit) stay in the record but are left out of the fit, with a `DataWarning` naming the
+file, the channel and the count. Channels listed in `ac_channels` are compared with the
+model's change of force since before the impact (`fitting.model`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +42,10 @@ class FitInputError(ValueError):
     """Data that cannot be fitted; the message names the file, the channel and the fix."""
 
 
+class DataWarning(UserWarning):
+    """Data the fit uses only in part (clipped samples); the message says which and why."""
+
+
 def estimate_noise_std(values) -> float:
     """Robust estimate of white-noise standard deviation from second differences, same units."""
     second = np.diff(np.asarray(values, dtype=float), n=2)
@@ -54,7 +65,8 @@ class Experiment:
     - `label`: short name used in reports (the file name without suffix by default).
     - `channels`: names of the channels fitted (default: all of the file's channels).
     - `noise_std_n`: channel -> noise standard deviation, N.
-    - `noise_source`: `"header"` (the file's `noise_std_n`) or `"estimated"`.
+    - `noise_source`: `"header"` (the file's `noise_std_n` keys) or `"estimated"`.
+    - `excluded`: channel -> (n_samples,) bool, the samples left out of the fit (clipped).
     """
 
     trace: TraceFile
@@ -62,6 +74,7 @@ class Experiment:
     channels: tuple[str, ...]
     noise_std_n: dict
     noise_source: str
+    excluded: dict = dataclasses.field(default_factory=dict)
 
     @property
     def time_s(self) -> np.ndarray:
@@ -73,6 +86,20 @@ class Experiment:
     @property
     def n_residuals(self) -> int:
         return len(self.channels) * len(self.time_s)
+
+    @property
+    def n_fitted(self) -> int:
+        """Samples that enter the fit (every channel's, clipped samples left out)."""
+        return self.n_residuals - sum(int(np.sum(self.excluded.get(c, False))) for c in self.channels)
+
+    def used(self, channel: str) -> np.ndarray:
+        """(n_samples,) bool: the channel's samples that enter the fit."""
+        return ~np.asarray(self.excluded.get(channel, np.zeros(len(self.time_s), bool)))
+
+    @property
+    def ac_channels(self) -> tuple[str, ...]:
+        """Fitted channels that read changes of force only (see `TraceFile.ac_channels`)."""
+        return tuple(c for c in self.channels if c in self.trace.ac_channels)
 
 
 def make_experiment(trace: TraceFile, *, label: str | None = None, channels=None,
@@ -93,7 +120,7 @@ def make_experiment(trace: TraceFile, *, label: str | None = None, channels=None
     """
     where = trace.path or label or "<trace>"
     if label is None:
-        label = Path(trace.path).stem if trace.path else "trace"
+        label = trace.header.get("x_shot") or (Path(trace.path).stem if trace.path else "trace")
     time = np.asarray(trace.time_s, dtype=float)
     if time.size < MIN_SAMPLES:
         raise FitInputError(
@@ -114,17 +141,31 @@ def make_experiment(trace: TraceFile, *, label: str | None = None, channels=None
                 f"{where}: channel {name} has NaN or inf at sample {bad + 1} (t = {time[bad]:.6g} s); "
                 "remove or interpolate the bad samples first."
             )
-    if noise_std_n is None and trace.noise_std_n is not None:
-        noise = {name: float(trace.noise_std_n) for name in channels}
-        source = "header"
-    elif noise_std_n is not None:
+    excluded = {name: trace.clipped(name) for name in channels}
+    for name in channels:
+        count = int(np.sum(excluded[name]))
+        if count:
+            warnings.warn(
+                f"{where}: channel {name} has {count} samples at the digitiser's range limit "
+                "(clipped); they are left out of the fit. A larger vertical range avoids this.",
+                DataWarning, stacklevel=3,
+            )
+    if noise_std_n is not None:
         noise = {name: float(noise_std_n) for name in channels}
+        source = "header"
+    elif all(trace.channel_noise_std_n(name) is not None for name in channels):
+        noise = {name: float(trace.channel_noise_std_n(name)) for name in channels}
         source = "header"
     else:
         noise = {name: estimate_noise_std(trace.channels[name]) for name in channels}
         source = "estimated"
     for name in channels:
-        values = np.asarray(trace.channels[name], dtype=float)
+        values = np.asarray(trace.channels[name], dtype=float)[~excluded[name]]
+        if values.size < MIN_SAMPLES:
+            raise FitInputError(
+                f"{where}: channel {name} keeps only {values.size} samples that are not clipped; "
+                "record it again with a larger vertical range."
+            )
         peak = float(np.max(values))
         floor = max(noise[name], 1e-12 * max(abs(peak), 1.0))
         if noise[name] <= 0:
@@ -136,7 +177,8 @@ def make_experiment(trace: TraceFile, *, label: str | None = None, channels=None
                 "short for the pulse to reach it, or the channel is dead."
             )
     _check_sampling(trace, channels, where, striker_velocity_m_s)
-    return Experiment(trace=trace, label=label, channels=channels, noise_std_n=noise, noise_source=source)
+    return Experiment(trace=trace, label=label, channels=channels, noise_std_n=noise,
+                      noise_source=source, excluded=excluded)
 
 
 def _check_sampling(trace: TraceFile, channels, where: str, striker_velocity_m_s) -> None:
@@ -165,12 +207,19 @@ def _check_sampling(trace: TraceFile, channels, where: str, striker_velocity_m_s
 def load_experiments(sources, *, channels=None, noise_std_n=None) -> list[Experiment]:
     """Read trace files (paths) or take `TraceFile`s and check them for fitting.
 
-    Labels are the file stems, made unique with a suffix when two files share a stem.
+    An experiment file (`.toml`, see `hertzchain.importer`) stands for its shots, imported
+    in memory. Labels are the shot labels or file stems, made unique with a suffix when two
+    share one.
     """
+    sources = list(sources)
+    if any(isinstance(s, (str, Path)) and str(s).lower().endswith(".toml") for s in sources):
+        from hertzchain.importer import expand_sources  # scope-file readers load only for these
+
+        sources = expand_sources(sources)
     experiments, used = [], set()
     for k, source in enumerate(sources):
         trace = source if isinstance(source, TraceFile) else read_trace(source)
-        label = Path(trace.path).stem if trace.path else f"trace{k}"
+        label = trace.header.get("x_shot") or (Path(trace.path).stem if trace.path else f"trace{k}")
         base, n = label, 2
         while label in used:
             label, n = f"{base}_{n}", n + 1

@@ -380,11 +380,7 @@ class _Search:
                 extra.append(ParameterInstance(get_spec(name), label=name[len(fx.PREFIX):]))
         instances = tuple(seed.instances) + tuple(extra)
         self.problem = Problem(seed.experiments, instances, seed.base_setups, forward)
-        elastic = Problem(seed.experiments, instances, seed.base_setups,
-                          fx.effects_forward_model(self.n_beads, steps_per_contact, plastic=False))
         self.labels = list(self.problem.labels)
-        plastic_columns = [self.labels.index(par[len(fx.PREFIX):]) for par in self.library["plasticity"].parameters]
-        self.evaluate = _Evaluator(self.problem, elastic, plastic_columns)
         p = len(self.labels)
         self.lower = np.array([max(i.spec.lower, 0.0) if i.spec.lower < 0 and i.spec.lower > -1e-20
                                else i.spec.lower for i in self.problem.instances])
@@ -395,6 +391,9 @@ class _Search:
             name: [self.labels.index(par[len(fx.PREFIX):]) for par in effect.parameters]
             for name, effect in self.library.items()
         }
+        elastic = Problem(seed.experiments, instances, seed.base_setups,
+                          fx.effects_forward_model(self.n_beads, steps_per_contact, plastic=False))
+        self.evaluate = _Evaluator(self.problem, elastic, self.effect_columns["plasticity"])
         x0 = np.zeros(p)
         x0[:n_base] = self.base_start
         for i, inst in enumerate(self.problem.instances[:n_base]):
@@ -483,7 +482,7 @@ class _Search:
             cov = np.linalg.pinv(ja.T @ ja)
         except np.linalg.LinAlgError:
             return np.full(len(columns), math.nan)
-        scale = max(1.0, chi2 / max(self.n - len(columns), 1))
+        scale = max(1.0, chi2 / max(self.problem.n_fitted - len(columns), 1))
         return np.sqrt(np.clip(np.diag(cov), 0, None) * scale)
 
     def start_for(self, effect: str, x) -> list[np.ndarray]:
@@ -609,47 +608,38 @@ class _Search:
         nuisance_bases = [np.linalg.qr(jac[np.ix_(rows, columns)])[0] if columns else None
                           for rows, columns in zip(self.file_rows, self.file_columns)]
 
+        def profiled(e, block):
+            """`block` (rows of file e) with file e's nuisance directions projected out."""
+            q = nuisance_bases[e]
+            return block if q is None else block - q @ (q.T @ block)
+
         def profiled_chi2(residuals, files):
-            """chi^2 of `files` with each file's nuisance directions projected out."""
-            total = 0.0
-            for e in files:
-                rest, q = residuals[self.file_rows[e]], nuisance_bases[e]
-                if q is not None:
-                    rest = rest - q @ (q.T @ rest)
-                total += float(rest @ rest)
-            return total
+            return sum(float(np.sum(profiled(e, residuals[self.file_rows[e]]) ** 2)) for e in files)
 
         total = 0.0
         for held in self.folds:
             train = [e for e in range(len(self.file_rows)) if e not in held]
-            x_train = self._training_step(x_fit, r, jac, global_cols, train, nuisance_bases, profiled_chi2)
+            x_train = x_fit
+            if global_cols:
+                a = np.vstack([profiled(e, jac[np.ix_(self.file_rows[e], global_cols)]) for e in train])
+                b = np.concatenate([profiled(e, r[self.file_rows[e]]) for e in train])
+                x_train = self._damped_step(x_fit, global_cols, a, b, lambda x, files=train: profiled_chi2(x, files))
             moved = r if x_train is x_fit else self.evaluate.residuals(x_train)
             total += profiled_chi2(moved, held)
         return total
 
-    def _training_step(self, x_fit, r, jac, global_cols, train, nuisance_bases, profiled_chi2):
-        """`x_fit` with the global parameters moved by one damped Gauss-Newton step on the
-        files `train` (nuisances profiled out): the least damping whose step does not
-        raise their chi^2; `x_fit` itself when every step does."""
-        if not global_cols:
-            return x_fit
-        blocks, rests = [], []
-        for e in train:
-            rows, q = self.file_rows[e], nuisance_bases[e]
-            block, rest = jac[np.ix_(rows, global_cols)], r[rows]
-            if q is not None:
-                block, rest = block - q @ (q.T @ block), rest - q @ (q.T @ rest)
-            blocks.append(block)
-            rests.append(rest)
-        a, b = np.vstack(blocks), np.concatenate(rests)
-        at_rest = profiled_chi2(r, train)
+    def _damped_step(self, x_fit, columns, a, b, chi2_of):
+        """`x_fit` moved on `columns` by the least-damped Gauss-Newton step of the linear
+        model `a dx + b` (Marquardt scaling) whose actual chi^2, `chi2_of(residuals)`, is
+        not above the linear model's at rest, `b @ b`; `x_fit` itself when none is."""
+        at_rest = float(b @ b)
         scale = np.sqrt(np.maximum(np.sum(a * a, axis=0), np.finfo(float).tiny))
         for damping in (0.0, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0):
             lhs = np.vstack([a, np.diag(math.sqrt(damping) * scale)])
-            shift = -np.linalg.lstsq(lhs, np.concatenate([b, np.zeros(len(global_cols))]), rcond=None)[0]
+            shift = -np.linalg.lstsq(lhs, np.concatenate([b, np.zeros(len(columns))]), rcond=None)[0]
             trial = np.array(x_fit, dtype=float)
-            trial[global_cols] = np.clip(trial[global_cols] + shift, self.lower[global_cols], self.upper[global_cols])
-            chi2 = profiled_chi2(self.evaluate.residuals(trial), train)
+            trial[columns] = np.clip(trial[columns] + shift, self.lower[columns], self.upper[columns])
+            chi2 = chi2_of(self.evaluate.residuals(trial))
             if math.isfinite(chi2) and chi2 <= at_rest:
                 return trial
         return x_fit
@@ -693,7 +683,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
                      candidates=candidates, min_share=min_share, report=progress)
     accepted = parse_model(model, search.n_beads)
     search.log(f"{len(experiments)} files, {search.n} residuals; compiling the model ...")
-    n = search.n
+    n = search.problem.n_fitted
     penalty = math.log(n)
 
     x = search.x0.copy()
@@ -709,6 +699,10 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
 
     def band(dof):
         return NOISE_BAND_SIGMA * math.sqrt(2 * dof)
+
+    def explains_to_noise(candidate):
+        dof_c = dof_of(accepted + [candidate.effect])
+        return candidate.chi2 - dof_c <= band(dof_c)
 
     steps: list[Step] = []
     last_candidates: list[CandidateResult] = []
@@ -740,8 +734,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
         for name in sorted(worth, key=lambda c: (len(search.effect_columns[c]), -scores[c])):
             cols = search.effect_columns[name]
             k = len(cols)
-            simpler = [c for c in refitted.values() if c.n_parameters < k
-                       and c.chi2 - dof_of(accepted + [c.effect]) <= band(dof_of(accepted + [c.effect]))]
+            simpler = [c for c in refitted.values() if c.n_parameters < k and explains_to_noise(c)]
             if simpler:
                 refitted[name] = CandidateResult(
                     name, k, scores[name], True, math.nan, math.nan, math.nan, math.nan, None, {}, {}, False,

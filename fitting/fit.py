@@ -526,7 +526,7 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
 
     converged = bool(ok[best])
     chi2_best = float(residuals @ residuals)
-    dof = problem.n_residuals - p
+    dof = problem.n_fitted - p
     cov = covariance_from_jacobian(jacobian, problem.labels, chi2=chi2_best, dof=dof, scale=scale)
     messages = identifiability_warnings(problem.instances, x, cov, problem.experiments)
     if coarse:
@@ -695,7 +695,7 @@ def fit_datasets(problem: Problem, datasets, *, start=None, max_steps: int = 100
         batched_data=True,
     ))
     values = np.asarray(jax.vmap(lambda zz: from_unbounded(constants, zz))(jnp.asarray(z)))
-    dof = problem.n_residuals - len(problem.instances)
+    dof = problem.n_fitted - len(problem.instances)
     stderr = np.stack([
         covariance_from_jacobian(j, problem.labels, chi2=float(c), dof=dof, scale=covariance).stderr
         for j, c in zip(jacobians, chi2)

@@ -5,7 +5,12 @@ fixed time grid at least as fine as the data, then every channel is evaluated at
 times shifted by the trigger offset, $t - t_{off}$, with a differentiable cubic
 (Catmull-Rom) interpolation, multiplied by the channel's gain, and compared with the data:
 $r = (g\\,F(t - t_{off}) - y)/\\sigma$. Before the impact the model holds its value at
-$t = 0$ (the static preload).
+$t = 0$ (the static preload), so records with a pre-trigger segment (t < 0) are fitted
+whole. A channel the file lists in `ac_channels` (a piezo sensor behind an AC-coupled
+conditioner) is compared with the change of force since before the impact,
+$F(t - t_{off}) - F(0^-)$: a static preload is not in it. Samples a file marks as
+clipped are whitened with an infinite sigma, so they add nothing to chi^2 or its
+derivatives; `n_fitted` counts the samples that do.
 
 Experiments with the same chain structure (number of beads, end, sensor beads) are
 simulated together in one `vmap`ped call on a common grid.
@@ -335,8 +340,9 @@ class Problem:
         """Per group, where each residual's sample comes from (numpy, built once).
 
         For every sample of the group's experiments, in group order: the row of the
-        group's (experiments x channels) output it reads, its data time, and the indices
-        into x of its experiment's trigger offset and its channel's gain (-1: none).
+        group's (experiments x channels) output it reads, its data time, the indices
+        into x of its experiment's trigger offset and its channel's gain (-1: none), and
+        whether its channel is AC-coupled.
         `order` maps the concatenation of the groups' samples to the residual layout.
         """
         layouts, position = [], {}
@@ -347,7 +353,7 @@ class Problem:
                 start += len(experiment.time_s)
         order = []
         for group in self.groups:
-            rows, times, offsets, gains = [], [], [], []
+            rows, times, offsets, gains, ac = [], [], [], [], []
             for row, e in enumerate(group.experiments):
                 experiment = self.experiments[e]
                 n = len(experiment.time_s)
@@ -357,8 +363,9 @@ class Problem:
                     times.append(np.asarray(experiment.time_s, dtype=float))
                     offsets.append(np.full(n, -1 if offset is None else offset))
                     gains.append(np.full(n, self.gain_index[e].get(name, -1)))
+                    ac.append(np.full(n, name in experiment.ac_channels))
                     order.append(np.arange(position[(e, name)], position[(e, name)] + n))
-            layouts.append(tuple(np.concatenate(a) for a in (rows, times, offsets, gains)))
+            layouts.append(tuple(np.concatenate(a) for a in (rows, times, offsets, gains, ac)))
         return layouts, np.argsort(np.concatenate(order))
 
     def model_from_outputs(self, x, outputs):
@@ -369,10 +376,12 @@ class Problem:
             index >= 0, x[np.maximum(index, 0)], default
         )
         pieces = []
-        for group, output, (rows, times, offsets, gains) in zip(self.groups, outputs, self._layout):
+        for group, output, (rows, times, offsets, gains, ac) in zip(self.groups, outputs, self._layout):
             series = output.reshape(-1, output.shape[-1])  # (experiments * channels, samples)
             position = (times - x_or_default(offsets, 0.0)) / group.grid.sample_interval_s
             value = interpolate_rows(series, rows, position)
+            if ac.any():  # the change since before the impact (column 0: the state at rest)
+                value = value - jnp.where(ac, series[rows, 0], 0.0)
             pieces.append(value * x_or_default(gains, 1.0))
         return jnp.concatenate(pieces)[self._order]
 
@@ -381,10 +390,10 @@ class Problem:
         return np.concatenate([e.data(c) for e in self.experiments for c in e.channels])
 
     def sigma_vector(self) -> np.ndarray:
-        """The noise sigma of every residual, N."""
-        return np.concatenate(
-            [np.full(len(e.time_s), e.noise_std_n[c]) for e in self.experiments for c in e.channels]
-        )
+        """The noise sigma of every residual, N (inf for samples left out of the fit)."""
+        return np.concatenate([
+            np.where(e.used(c), e.noise_std_n[c], np.inf) for e in self.experiments for c in e.channels
+        ])
 
     def model_vector(self, x):
         """The model of every fitted channel on the data's times, concatenated, N (jax)."""
@@ -427,7 +436,13 @@ class Problem:
 
     @property
     def n_residuals(self) -> int:
+        """Length of the residual vector (every sample of every fitted channel)."""
         return sum(e.n_residuals for e in self.experiments)
+
+    @property
+    def n_fitted(self) -> int:
+        """Residuals that count (clipped samples left out): the chi^2's number of terms."""
+        return sum(e.n_fitted for e in self.experiments)
 
     def check_resolution(self, x) -> list[str]:
         """Experiments whose fitted setup is resolved by fewer than half the asked steps."""

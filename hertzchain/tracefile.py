@@ -22,11 +22,21 @@ It opens in any spreadsheet and with `pandas.read_csv(path, comment="#")`.
   and bead K+1 (`contact_0`: striker on bead 1), `wall` the force on the wall,
   `sensor_K` the signal (N) of a sensor embedded in bead K (then `sensor_beta` and
   `sensor_f0_hz` are required).
-- Time 0 is the impact (the trigger); samples are evenly spaced and increasing.
-- The striker is a sphere of the beads' material with mass `striker_mass_kg` (or radius
-  `striker_radius_m`), unless `striker_density_kg_m3`, `striker_youngs_pa`,
-  `striker_poisson` say otherwise. `striker_velocity_m_s` and `noise_std_n` may be absent
-  (they are then estimated by the tools that need them).
+- Time 0 is the impact (the trigger); samples are evenly spaced and increasing. Samples
+  before the impact (a scope's pre-trigger segment) have negative times; the chain is at
+  rest there (a static preload, if any, is the only force).
+- The beads' density may be given as `bead_density_kg_m3`, as `bead_mass_kg`, or both if
+  they agree (to `REDUNDANT_TOLERANCE`); likewise the striker's `striker_mass_kg` and
+  `striker_radius_m` (a sphere of the beads' material unless `striker_density_kg_m3`,
+  `striker_youngs_pa`, `striker_poisson` say otherwise). Values that disagree are an error
+  naming both and the value the others imply. `striker_velocity_m_s` and `noise_std_n` may
+  be absent (they are then estimated by the tools that need them).
+- Measurement keys: `noise_std_n` holds for every channel unless `noise_std_n_<channel>`
+  gives that channel's own; `ac_channels` lists (comma-separated) the channels that read
+  changes of force since before the impact, as piezo sensors behind AC-coupled
+  conditioners do: a static preload is not in them; `clipped_<channel>` lists the rows
+  (0-based data rows, ranges `a-b` inclusive, comma-separated) where the digitiser was at
+  its range limit: those samples are kept in the file and left out of fits.
 - Further keys: see `HEADER_KEYS`. Unknown keys are an error unless prefixed `x_`
   (free-form, kept as text, e.g. the true parameters of a synthetic file).
 """
@@ -45,6 +55,10 @@ from .atomic import write_text
 from .chain import ChainSetup
 
 FORMAT = "hertzchain-trace/1"
+# Redundant header values (a mass and the density and radius it follows from) must agree to
+# this relative difference: bead masses and diameters are quoted to about 0.1-0.5 % (the
+# paper's beads: diameter +-125 um of 26 mm, i.e. +-0.5 %), so a larger gap is a mistake.
+REDUNDANT_TOLERANCE = 5e-3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,7 +76,8 @@ HEADER_KEYS: dict[str, _Key] = {
     "format": _Key(str, True, meaning=f"must be {FORMAT}"),
     "n_beads": _Key(int, True, 1, 1e6, "number of beads"),
     "bead_radius_m": _Key(float, True, 1e-5, 1.0, "bead radius, m"),
-    "bead_density_kg_m3": _Key(float, True, 100.0, 3e4, "bead density, kg/m^3"),
+    "bead_density_kg_m3": _Key(float, False, 100.0, 3e4, "bead density, kg/m^3 (or bead_mass_kg)"),
+    "bead_mass_kg": _Key(float, False, 1e-9, 1e3, "mass of one bead, kg (or bead_density_kg_m3)"),
     "bead_youngs_pa": _Key(float, True, 1e6, 2e12, "bead Young's modulus, Pa"),
     "bead_poisson": _Key(float, True, -1.0, 0.5, "bead Poisson ratio"),
     "wall_youngs_pa": _Key(float, True, 1e6, math.inf, "wall Young's modulus, Pa (inf: rigid)"),
@@ -78,10 +93,56 @@ HEADER_KEYS: dict[str, _Key] = {
     "sensor_beta": _Key(float, False, 0.0, 1.0, "embedded sensor mass ratio beta"),
     "sensor_f0_hz": _Key(float, False, 1.0, 1e9, "embedded sensor resonance, Hz"),
     "end": _Key(str, False, meaning="'wall' (default) or 'free'"),
+    "ac_channels": _Key(str, False, meaning="channels that do not see a static force, comma-separated"),
+}
+# Per-channel keys: `<prefix><channel>`.
+CHANNEL_KEYS: dict[str, _Key] = {
+    "noise_std_n_": _Key(float, False, 0.0, 1e6, "noise standard deviation of the channel, N"),
+    "clipped_": _Key(str, False, meaning="rows at the digitiser's range limit, e.g. 120-131,140"),
 }
 
 _HEADER_LINE = re.compile(r"^#\s*([A-Za-z_][A-Za-z0-9_]*)\s*=\s*(.*?)\s*$")
 _CHANNEL = re.compile(r"^(contact|sensor)_(\d+)$")
+_CHANNEL_NAME = re.compile(r"^(?:(?:contact|sensor)_\d+|wall)$")
+
+
+def _spec(key: str) -> _Key | None:
+    """The specification of a header key (per-channel keys included), None if unknown."""
+    if key in HEADER_KEYS:
+        return HEADER_KEYS[key]
+    for prefix, spec in CHANNEL_KEYS.items():
+        if key.startswith(prefix) and _CHANNEL_NAME.match(key[len(prefix):]):
+            return spec
+    return None
+
+
+def parse_rows(text: str, where: str = "<header>") -> np.ndarray:
+    """Row indices (0-based, sorted) of a `clipped_<channel>` value such as `"3-5,9"`."""
+    rows = []
+    for part in str(text).split(","):
+        part = part.strip()
+        if not part:
+            continue
+        match = re.fullmatch(r"(\d+)(?:\s*-\s*(\d+))?", part)
+        if not match:
+            _fail(where, f"clipped rows must be numbers or ranges a-b, got {part!r}.")
+        first = int(match.group(1))
+        last = int(match.group(2)) if match.group(2) else first
+        if last < first:
+            _fail(where, f"clipped range {part!r} runs backwards.")
+        rows.extend(range(first, last + 1))
+    return np.unique(np.asarray(rows, dtype=int))
+
+
+def format_rows(mask) -> str:
+    """The `clipped_<channel>` text of a boolean row mask: runs as `a-b`, single rows as `a`."""
+    rows = np.flatnonzero(np.asarray(mask, dtype=bool))
+    if rows.size == 0:
+        return ""
+    breaks = np.flatnonzero(np.diff(rows) > 1)
+    starts = np.concatenate([[rows[0]], rows[breaks + 1]])
+    ends = np.concatenate([rows[breaks], [rows[-1]]])
+    return ",".join(str(a) if a == b else f"{a}-{b}" for a, b in zip(starts, ends))
 
 
 class TraceFileError(ValueError):
@@ -123,7 +184,23 @@ class TraceFile:
 
     @property
     def noise_std_n(self) -> float | None:
+        """The file-wide noise standard deviation, N (None if not stated)."""
         return self.header.get("noise_std_n")
+
+    def channel_noise_std_n(self, channel: str) -> float | None:
+        """Noise standard deviation of one channel, N: its own key, else the file's, else None."""
+        return self.header.get(f"noise_std_n_{channel}", self.header.get("noise_std_n"))
+
+    @property
+    def ac_channels(self) -> tuple[str, ...]:
+        """Channels that read changes of force only (a static preload is not in them)."""
+        return _ac_channel_names(self.header)
+
+    def clipped(self, channel: str) -> np.ndarray:
+        """Boolean mask (n_samples,) of the channel's samples at the digitiser's range limit."""
+        mask = np.zeros(len(self.time_s), dtype=bool)
+        mask[parse_rows(self.header.get(f"clipped_{channel}", ""))] = True
+        return mask
 
     @property
     def sensor_beads(self) -> tuple[int, ...]:
@@ -141,7 +218,7 @@ class TraceFile:
         h = self.header
         values = dict(
             bead_radius_m=h["bead_radius_m"],
-            bead_density_kg_m3=h["bead_density_kg_m3"],
+            bead_density_kg_m3=bead_density_kg_m3(h),
             bead_youngs_pa=h["bead_youngs_pa"],
             bead_poisson=h["bead_poisson"],
             wall_youngs_pa=h["wall_youngs_pa"],
@@ -163,11 +240,54 @@ class TraceFile:
             )
         if "striker_mass_kg" in overrides or "striker_radius_m" in overrides:
             values.pop("striker_radius_m" if "striker_mass_kg" in overrides else "striker_mass_kg", None)
+        elif "striker_mass_kg" in values and "striker_radius_m" in values:
+            values.pop("striker_mass_kg")  # checked to agree with the radius on reading
         return ChainSetup(int(h["n_beads"]), **values)
 
 
 def _fail(where: str, message: str):
     raise TraceFileError(f"{where}: {message}")
+
+
+def _ac_channel_names(header: dict) -> tuple[str, ...]:
+    return tuple(c.strip() for c in str(header.get("ac_channels", "")).split(",") if c.strip())
+
+
+def _sphere_mass_kg(radius_m: float, density_kg_m3: float) -> float:
+    return 4.0 / 3.0 * math.pi * density_kg_m3 * radius_m**3
+
+
+def bead_density_kg_m3(header: dict) -> float:
+    """The beads' density, kg/m^3: `bead_density_kg_m3`, else from `bead_mass_kg` and the radius."""
+    if "bead_density_kg_m3" in header:
+        return float(header["bead_density_kg_m3"])
+    return float(header["bead_mass_kg"]) / _sphere_mass_kg(float(header["bead_radius_m"]), 1.0)
+
+
+def _check_redundant(header: dict, where: str) -> None:
+    """Redundant keys must agree to REDUNDANT_TOLERANCE; the error names both and the implied value."""
+    def agree(given_key, given, implied, implied_from):
+        if abs(given - implied) > REDUNDANT_TOLERANCE * abs(implied):
+            _fail(
+                where,
+                f"{given_key} = {given:.6g} disagrees with {implied_from}, which imply {implied:.6g} "
+                f"({100 * (given / implied - 1):+.3g} %, more than {100 * REDUNDANT_TOLERANCE:g} %): "
+                f"correct one of them or give only one.",
+            )
+
+    radius = float(header["bead_radius_m"])
+    if "bead_density_kg_m3" not in header and "bead_mass_kg" not in header:
+        _fail(where, "missing header key '# bead_density_kg_m3 = ...' (or '# bead_mass_kg = ...').")
+    if "bead_density_kg_m3" in header and "bead_mass_kg" in header:
+        agree("bead_mass_kg", float(header["bead_mass_kg"]),
+              _sphere_mass_kg(radius, float(header["bead_density_kg_m3"])),
+              f"bead_radius_m = {radius:.6g} and bead_density_kg_m3 = {header['bead_density_kg_m3']:.6g}")
+    if "striker_mass_kg" in header and "striker_radius_m" in header:
+        density = float(header.get("striker_density_kg_m3", bead_density_kg_m3(header)))
+        source = ("striker_density_kg_m3" if "striker_density_kg_m3" in header else "the beads' density")
+        agree("striker_mass_kg", float(header["striker_mass_kg"]),
+              _sphere_mass_kg(float(header["striker_radius_m"]), density),
+              f"striker_radius_m = {header['striker_radius_m']:.6g} and {source} ({density:.6g} kg/m^3)")
 
 
 def validate_header(header: dict, where: str = "<header>") -> None:
@@ -180,13 +300,13 @@ def validate_header(header: dict, where: str = "<header>") -> None:
     for key, value in header.items():
         if key.startswith("x_"):
             continue
-        if key not in HEADER_KEYS:
+        spec = _spec(key)
+        if spec is None:
             _fail(
                 where,
-                f"unknown header key {key!r}; known keys: {', '.join(HEADER_KEYS)} "
-                "(prefix your own keys with 'x_').",
+                f"unknown header key {key!r}; known keys: {', '.join(HEADER_KEYS)}, and per channel "
+                f"{', '.join(p + '<channel>' for p in CHANNEL_KEYS)} (prefix your own keys with 'x_').",
             )
-        spec = HEADER_KEYS[key]
         if spec.kind in (int, float):
             if not isinstance(value, (int, float)) or math.isnan(value):
                 _fail(where, f"{key} must be a number, got {value!r}.")
@@ -198,8 +318,7 @@ def validate_header(header: dict, where: str = "<header>") -> None:
                 )
     if header.get("end", "wall") not in ("wall", "free"):
         _fail(where, f"end must be 'wall' or 'free', got {header['end']!r}.")
-    if "striker_mass_kg" in header and "striker_radius_m" in header:
-        _fail(where, "give striker_mass_kg or striker_radius_m, not both.")
+    _check_redundant(header, where)
 
 
 def _validate(header: dict, time_s: np.ndarray, channels: dict, where: str) -> None:
@@ -207,6 +326,14 @@ def _validate(header: dict, time_s: np.ndarray, channels: dict, where: str) -> N
     n_beads = int(header["n_beads"])
     if not channels:
         _fail(where, "no force channels after time_s.")
+    for key in header:
+        for prefix in CHANNEL_KEYS:
+            if key.startswith(prefix) and key[len(prefix):] not in channels:
+                _fail(where, f"header key {key} names a channel the table does not have "
+                             f"({', '.join(channels)}).")
+    for name in _ac_channel_names(header):
+        if name not in channels:
+            _fail(where, f"ac_channels names {name!r}, which the table does not have ({', '.join(channels)}).")
     time = np.asarray(time_s, dtype=float)
     if time.ndim != 1 or len(time) < 3:
         _fail(where, f"need at least 3 samples, got {len(time)}.")
@@ -238,19 +365,23 @@ def _validate(header: dict, time_s: np.ndarray, channels: dict, where: str) -> N
         array = np.asarray(values, dtype=float)
         if array.shape != time.shape:
             _fail(where, f"{name} has {array.size} values for {time.size} times.")
+        rows = parse_rows(header.get(f"clipped_{name}", ""), where)
+        if rows.size and rows[-1] >= time.size:
+            _fail(where, f"clipped_{name} names row {rows[-1]}, but the table has rows 0..{time.size - 1}.")
         if not np.all(np.isfinite(array)):
             row = int(np.argmin(np.isfinite(array))) + 1
             _fail(where, f"{name} has NaN or inf at sample {row} (t = {time[row - 1]:.6g} s).")
 
 
 def _parse_value(key: str, text: str, where: str):
-    if key.startswith("x_") or key not in HEADER_KEYS or HEADER_KEYS[key].kind is str:
+    spec = _spec(key)
+    if key.startswith("x_") or spec is None or spec.kind is str:
         return text
     try:
         number = float(text)
     except ValueError:
         _fail(where, f"header {key} = {text!r} is not a number.")
-    if HEADER_KEYS[key].kind is int:
+    if spec.kind is int:
         if number != int(number):
             _fail(where, f"header {key} must be an integer, got {text!r}.")
         return int(number)
@@ -302,9 +433,9 @@ def _format_value(value) -> str:
 
 def format_trace(trace: TraceFile) -> str:
     """The text of a trace file (header in a fixed key order, then the table)."""
-    keys = [k for k in HEADER_KEYS if k in trace.header] + sorted(
-        k for k in trace.header if k.startswith("x_")
-    )
+    keys = [k for k in HEADER_KEYS if k in trace.header]
+    keys += [k for k in trace.header if k not in HEADER_KEYS and not k.startswith("x_")]
+    keys += sorted(k for k in trace.header if k.startswith("x_"))
     lines = [f"# {key} = {_format_value(trace.header[key])}" for key in keys]
     names = list(trace.channels)
     lines.append(",".join(["time_s"] + names))

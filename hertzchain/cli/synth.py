@@ -2,8 +2,8 @@
 
 Each velocity is simulated on a grid `--oversample` times finer than the recording, then
 recorded as an oscilloscope would (`hertzchain.acquisition`: trigger, bandwidth, noise,
-quantisation, the paper's sensor sensitivities) and written as a `hertzchain-trace/1` file
-in newtons. The true parameters are stored in the header as `x_true_*` keys, the
+quantisation, the paper's sensor sensitivities, AC or DC coupling, a pre-trigger segment)
+and written as a `hertzchain-trace/1` file in newtons. The true parameters are stored in the header as `x_true_*` keys, the
 acquisition settings as `x_acq_*` keys. Also written: a PNG per file and `synth.json`
 listing the files and their truth.
 """
@@ -84,6 +84,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--trigger-jitter", default="0", help="trigger jitter, standard deviation (s) [0]"
     )
+    parser.add_argument(
+        "--coupling", choices=("dc", "ac"), default="dc",
+        help="dc: channels read the force; ac: piezo sensors reading its change since before the "
+        "impact, so a static preload (--precompression) is not in them [dc]",
+    )
+    parser.add_argument(
+        "--pre-trigger", type=int, default=0, help="samples recorded before the trigger [0]"
+    )
     parser.add_argument("--out", default="out/synth", help="output folder [out/synth]")
 
 
@@ -115,7 +123,9 @@ def run(args: argparse.Namespace) -> int:
     bandwidth = (
         None if args.bandwidth is None else parse_quantity(args.bandwidth, "Hz", name="--bandwidth")
     )
-    record_length = int(round(options["t_end_s"] / interval))
+    if args.pre_trigger < 0:
+        raise ValueError(f"--pre-trigger must be >= 0 samples, got {args.pre_trigger}.")
+    record_length = int(round(options["t_end_s"] / interval)) + args.pre_trigger
     # Simulate past the record's end by the trigger offset (jitter up to 6 sigma).
     t_sim = options["t_end_s"] + max(delay, 0.0) + 6.0 * jitter + interval
     out = Path(args.out)
@@ -151,6 +161,8 @@ def run(args: argparse.Namespace) -> int:
             bandwidth_filter=args.bandwidth_filter,
             noise_std_n=noise,
             bits=args.bits,
+            pre_trigger_samples=args.pre_trigger,
+            coupling=args.coupling,
         )
         truth = {name: float(getattr(setup, name)) for name in TRUTH_FIELDS}
         truth["sensor_beads"] = ",".join(str(b) for b in setup.sensor_beads) or "none"

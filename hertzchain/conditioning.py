@@ -1,0 +1,144 @@
+"""Conditioning of recorded channels: from a scope's volts to forces on the model's clock.
+
+Each step is a small pure function on numpy arrays, so that an importer (see
+`hertzchain.importer`) can apply them in order and record what each one did:
+
+1. `regular_time_grid`: times as written by a scope carry a few significant digits; a grid
+   that is uniform to within `TIME_ROUNDING` of a sample interval is replaced by the exact
+   uniform grid of the same first sample and interval (the trace format needs an even grid).
+2. `crossing_time_s`: the time a trigger channel first crosses a level (linear
+   interpolation between the two samples around it), to set time zero at an impact
+   recorded on a channel of its own.
+3. `clipped_mask`: samples at the digitiser's range limit (within half a quantisation step,
+   or one part in 10^9 of the range when the step is unknown).
+4. `quantisation_step`: the converter's step, estimated from the values themselves when the
+   file does not state it (8-bit data sit on a lattice of at most 256 levels).
+5. `baseline`: offset and noise from the pre-trigger segment: the mean (not the median:
+   quantised values dithered by noise average to the true level, their median sits on a
+   code), and the standard deviation about it, floored at the quantisation error of a
+   uniform converter, step/sqrt(12), which a record sitting on one code does not show.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+# A scope's time column is taken as uniform when every time lies within this fraction of a
+# sample interval of the uniform grid (Tektronix CSV prints about 4-6 significant digits).
+TIME_ROUNDING = 0.05
+# Fewest pre-trigger samples from which an offset and a noise level are estimated.
+MIN_BASELINE_SAMPLES = 20
+# Values on fewer distinct levels than this share of the samples are taken as quantised.
+_QUANTISED_SHARE = 0.25
+
+
+class ConditioningError(ValueError):
+    """A record that cannot be conditioned; the message says where and what to do."""
+
+
+def regular_time_grid(time_s, where: str) -> tuple[np.ndarray, float]:
+    """The uniform grid closest to `time_s` (s) and the largest deviation from it, in intervals.
+
+    **Raises:** `ConditioningError` when the times are not increasing or not uniform to
+    within `TIME_ROUNDING` of an interval (the message gives the row and the steps).
+    """
+    time = np.asarray(time_s, dtype=float)
+    if time.ndim != 1 or time.size < 3:
+        raise ConditioningError(f"{where}: need at least 3 samples, got {time.size}.")
+    step = np.diff(time)
+    if np.any(step <= 0):
+        row = int(np.argmax(step <= 0)) + 1
+        raise ConditioningError(
+            f"{where}: time does not increase at sample {row + 1} ({time[row - 1]:.9g} s then "
+            f"{time[row]:.9g} s); the record must be in time order."
+        )
+    index = np.arange(time.size, dtype=float)
+    slope, intercept = np.polyfit(index, time, 1)
+    grid = intercept + slope * index
+    deviation = float(np.max(np.abs(time - grid)) / slope)
+    if deviation > TIME_ROUNDING:
+        raise ConditioningError(
+            f"{where}: samples are not evenly spaced (steps from {step.min():.6g} to "
+            f"{step.max():.6g} s, up to {deviation:.3g} intervals off a uniform grid); "
+            "resample the record to a uniform grid first."
+        )
+    return grid, deviation
+
+
+def crossing_time_s(time_s, values, level: float, rising: bool, where: str) -> float:
+    """First time (s) at which `values` cross `level` upwards (`rising`) or downwards.
+
+    **Raises:** `ConditioningError` when they never do (the message gives their range).
+    """
+    time = np.asarray(time_s, dtype=float)
+    v = np.asarray(values, dtype=float) - level
+    beyond = v > 0 if rising else v < 0
+    if beyond[0]:
+        raise ConditioningError(
+            f"{where}: the trigger channel is already {'above' if rising else 'below'} {level:g} V "
+            "at the first sample; set the level between its resting and its triggered value."
+        )
+    if not beyond.any():
+        raise ConditioningError(
+            f"{where}: the trigger channel never goes {'above' if rising else 'below'} {level:g} V "
+            f"(its values run from {np.min(values):.4g} to {np.max(values):.4g} V)."
+        )
+    k = int(np.argmax(beyond))
+    fraction = v[k - 1] / (v[k - 1] - v[k])
+    return float(time[k - 1] + fraction * (time[k] - time[k - 1]))
+
+
+def quantisation_step(values, stated: float | None = None) -> float | None:
+    """The converter's step (same unit as `values`): `stated` if given, else the smallest
+    gap between the distinct values when they are few (quantised data), else None."""
+    if stated is not None:
+        return float(stated)
+    levels = np.unique(np.asarray(values, dtype=float))
+    if levels.size < 2 or levels.size > _QUANTISED_SHARE * np.size(values):
+        return None
+    gaps = np.diff(levels)
+    return float(np.min(gaps[gaps > 1e-12 * np.max(np.abs(levels))]))
+
+
+def clipped_mask(values, range_v: tuple[float, float] | None, step: float | None) -> np.ndarray:
+    """(n,) bool: samples at or beyond the range limits `range_v` (V), within half a step."""
+    values = np.asarray(values, dtype=float)
+    if range_v is None:
+        return np.zeros(values.shape, dtype=bool)
+    low, high = float(range_v[0]), float(range_v[1])
+    tolerance = 0.5 * step if step else 1e-9 * (high - low)
+    return (values >= high - tolerance) | (values <= low + tolerance)
+
+
+@dataclasses.dataclass(frozen=True)
+class Baseline:
+    """What the pre-trigger segment says of a channel: `offset` (its mean), `noise_std` (its
+    standard deviation about it, floored at the quantisation error), `n_samples` used, and
+    `quantisation_floor` (step/sqrt(12), 0 if unknown); same unit as the values."""
+
+    offset: float
+    noise_std: float
+    n_samples: int
+    quantisation_floor: float
+
+
+def baseline(values, before: np.ndarray, step: float | None, where: str) -> Baseline:
+    """Offset and noise of a channel from its samples where `before` is True.
+
+    **Raises:** `ConditioningError` when fewer than `MIN_BASELINE_SAMPLES` samples lie
+    there (the message names the channel and how to give the values instead).
+    """
+    segment = np.asarray(values, dtype=float)[np.asarray(before, dtype=bool)]
+    if segment.size < MIN_BASELINE_SAMPLES:
+        raise ConditioningError(
+            f"{where}: only {segment.size} samples before the impact, and the offset or the noise "
+            f"must come from them (at least {MIN_BASELINE_SAMPLES}); record a pre-trigger segment, "
+            "or give the channel's offset_v and noise_std_n in the experiment file."
+        )
+    floor = step / math.sqrt(12.0) if step else 0.0
+    offset = float(np.mean(segment))
+    spread = float(np.std(segment, ddof=1))
+    return Baseline(offset, max(spread, floor), int(segment.size), floor)
