@@ -204,6 +204,19 @@ def _check_sampling(trace: TraceFile, channels, where: str, striker_velocity_m_s
         )
 
 
+def as_experiments(sources) -> list[Experiment]:
+    """`Experiment`s as given, or loaded from trace files, experiment files (paths) or
+    `TraceFile`s (one or a sequence; see `load_experiments`)."""
+    if isinstance(sources, (Experiment, TraceFile, str, Path)):
+        sources = [sources]
+    sources = list(sources)
+    if sources and all(isinstance(e, Experiment) for e in sources):
+        return sources
+    if any(isinstance(e, Experiment) for e in sources):
+        raise ValueError("Give either Experiments or trace files/paths, not a mixture.")
+    return load_experiments(sources)
+
+
 def load_experiments(sources, *, channels=None, noise_std_n=None) -> list[Experiment]:
     """Read trace files (paths) or take `TraceFile`s and check them for fitting.
 

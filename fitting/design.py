@@ -52,7 +52,7 @@ from hertzchain.chain import ChainSetup
 from hertzchain.progress import Progress
 from hertzchain.tracefile import TraceFile, setup_header
 
-from .data import Experiment, load_experiments, make_experiment
+from .data import Experiment, as_experiments, make_experiment
 from .fit import make_problem
 from .model import ForwardModel, Problem, residuals_and_jacobian
 from .parameters import get_spec, parse_parameter_list
@@ -359,15 +359,6 @@ def _result_from_jacobian(plan: _Plan, jac, experiments) -> DesignResult:
                                plan.nuisances, units, _plan_summary(experiments))
 
 
-def _as_experiments(plan) -> list[Experiment]:
-    if isinstance(plan, (Experiment, TraceFile, str)):
-        plan = [plan]
-    plan = list(plan)
-    if plan and all(isinstance(e, Experiment) for e in plan):
-        return plan
-    return load_experiments(plan)
-
-
 def design(plan, params=("eta", "mu", "C"), *, values=None, nuisances=(),
            forward: ForwardModel | None = None) -> DesignResult:
     """Predicted standard errors and correlations of `params` for a plan (Cramér–Rao).
@@ -389,7 +380,7 @@ def design(plan, params=("eta", "mu", "C"), *, values=None, nuisances=(),
     singular (naming the parameters it cannot separate).
     """
     params, nuisances = _check_names(params, nuisances)
-    experiments = _as_experiments(plan)
+    experiments = as_experiments(plan)
     plan_ = _Plan(experiments, params, nuisances, values, forward)
     return _result_from_jacobian(plan_, plan_.jacobian(), experiments)
 
@@ -685,7 +676,7 @@ def fit_scatter(plan, params=("eta", "mu", "C"), *, values=None, nuisances=(), n
     seeds run as vmapped batches of `chunk_size`). Free nuisances are fitted too.
     """
     params, nuisances = _check_names(params, nuisances)
-    experiments = _as_experiments(plan)
+    experiments = as_experiments(plan)
     plan_ = _Plan(experiments, params, nuisances, values, forward)
     predicted = _result_from_jacobian(plan_, plan_.jacobian(), experiments)
     problem = plan_.problem

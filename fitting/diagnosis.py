@@ -65,8 +65,8 @@ import numpy as np
 from hertzchain.progress import Progress
 
 from . import effects as fx
-from .data import Experiment
-from .fit import _as_experiments, initial_values, make_problem
+from .data import Experiment, as_experiments
+from .fit import initial_values, make_problem
 from .locate import describe, locate
 from .model import Problem, residuals_and_jacobian
 from .parameters import ParameterInstance, get_spec, parse_parameter_list
@@ -669,7 +669,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
     **Returns:** `Diagnosis`.
     """
     began = time.perf_counter()
-    experiments = _as_experiments(experiments)
+    experiments = as_experiments(experiments)
     nuisances = tuple(nuisances)
     free = tuple(parse_parameter_list(free)) if free else ()
     for name in nuisances:

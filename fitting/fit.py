@@ -22,10 +22,9 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from hertzchain.tracefile import TraceFile
 
 from . import start as start_values
-from .data import Experiment, FitInputError, load_experiments
+from .data import FitInputError, as_experiments
 from .model import ForwardModel, Problem
 from .parameters import (
     CONTINUUM_SPEED_FACTOR,
@@ -55,17 +54,6 @@ class FitWarning(UserWarning):
 
 
 # --- building a problem ------------------------------------------------------------------------
-def _as_experiments(experiments) -> list[Experiment]:
-    if isinstance(experiments, (Experiment, TraceFile, str)):
-        experiments = [experiments]
-    experiments = list(experiments)
-    if experiments and all(isinstance(e, Experiment) for e in experiments):
-        return experiments
-    if any(isinstance(e, Experiment) for e in experiments):
-        raise ValueError("Give either Experiments or trace files/paths, not a mixture.")
-    return load_experiments(experiments)
-
-
 def make_problem(experiments, params=("eta", "mu", "C"), *, fixed=None,
                  forward: ForwardModel | None = None) -> Problem:
     """Build the least-squares `Problem` for `params` on `experiments`.
@@ -79,7 +67,7 @@ def make_problem(experiments, params=("eta", "mu", "C"), *, fixed=None,
       the header's (e.g. `{"mu": 0.19}`).
     - `forward`: a `ForwardModel` (custom solver / model switches, time-step choice).
     """
-    experiments = _as_experiments(experiments)
+    experiments = as_experiments(experiments)
     names = parse_parameter_list(params)
     forward = forward or ForwardModel()
     fixed = dict(fixed or {})
