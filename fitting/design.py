@@ -83,6 +83,7 @@ def plan_experiments(
     noise_std_n: float = 0.5,
     sample_interval_s: float = 1e-6,
     t_end_s: float = 2.5e-3,
+    coupling: str = "dc",
 ) -> list[Experiment]:
     """A plan from a few numbers: one shot per impact velocity, recording `channels`.
 
@@ -94,6 +95,8 @@ def plan_experiments(
       need `setup.sensor_beads`).
     - `noise_std_n`: white-noise standard deviation of every channel, N.
     - `sample_interval_s`, `t_end_s`: the recorded time axis.
+    - `coupling`: `"dc"`, or `"ac"` for piezo sensors that read changes of force only (a
+      static preload of `setup` is then not in the channels).
 
     The experiments carry noise-free simulated data (the design does not use data values;
     the data checks of `fitting.data` still apply: a channel the pulse does not reach within
@@ -106,6 +109,8 @@ def plan_experiments(
         raise ValueError(f"velocities must be positive (m/s), got {velocities}.")
     if not noise_std_n > 0:
         raise ValueError(f"noise_std_n must be positive (N), got {noise_std_n}.")
+    if coupling not in ("dc", "ac"):
+        raise ValueError(f"coupling must be 'dc' or 'ac', got {coupling!r}.")
     channels = tuple(channels)
     contacts = _contacts_of(setup, channels)
     setups = [
@@ -120,7 +125,10 @@ def plan_experiments(
     for k, (s, v) in enumerate(zip(setups, velocities)):
         header = setup_header(s)
         header["noise_std_n"] = float(noise_std_n)
-        data = {name: clean[k][name] for name in channels}
+        rest = float(s.precompression_n) if coupling == "ac" else 0.0
+        data = {name: clean[k][name] - rest for name in channels}
+        if coupling == "ac":
+            header["ac_channels"] = ",".join(channels)
         trace = TraceFile(header=header, time_s=time, channels=data, path=None)
         experiments.append(make_experiment(trace, label=f"v{k + 1}_{v:g}", channels=channels,
                                            noise_std_n=noise_std_n))

@@ -10,17 +10,18 @@ frees or holds strengths as it goes.
 | `viscous_damping` | `eta_s` (s) | Kuwabara-Kono $F_v = \\eta\\kappa\\,\\partial_t\\delta^{3/2}$ added to $\\eta$ of the header |
 | `track_friction` | `mu` | Coulomb friction $\\mu m g$ of the beads on the track |
 | `rotational_friction` | `mu_star` | uniform stiffness scale $\\kappa^* = (1+\\mu^*)\\kappa$ of every contact; the paper's thwarted rotation, but equally an error in the beads' modulus: in this form the two cannot be told apart |
-| `sensor_dynamics` | `sensor_beta`, `sensor_rate` | a `contact_K` channel is the signal of a sensor embedded in bead K, whose compression also shortens the bead (Eq. 4 of the paper): $\\ddot F_s + \\omega_0^2F_s = \\omega_0^2[(1-\\beta)F_K + \\beta F_{K-1}]$, with `sensor_rate` $= (f_{ref}/f_0)^2$, $f_{ref}$ = 100 kHz |
+| `sensor_dynamics` | `sensor_beta`, `sensor_rate`, `sensor_coupling` | a `contact_K` channel is the signal of a sensor embedded in bead K (Eq. 4 of the paper): $\\ddot F_s + \\omega_0^2F_s = \\omega_0^2[(1-\\beta)F_K + \\beta F_{K-1}]$, with `sensor_rate` $= (f_{ref}/f_0)^2$, $f_{ref}$ = 100 kHz; `sensor_coupling` c scales how much the sensor's compression also shortens the bead: c = 1 the split-bead mechanics, c = 0 the paper's filter form (the chain unaffected) |
 | `wall_compliance` | `wall_softening` | wall modulus $Y_w = Y_{w,0}e^{-w}$ (w > 0: softer than the header's) |
 | `bead_dispersion` | `bead_radius_dev_1..N` | relative radius deviation of each bead at fixed density (mass $\\propto R^3$, stiffness follows) |
-| `precompression` | `preload_n` (N) | static preload added to the header's |
+| `precompression` | `preload_n` (N), `preload_seen` | static preload added to the header's; `preload_seen` is the share of it the channels read (0: piezo sensors, which read changes of force only; 1: DC sensors); channels a file lists in `ac_channels` never read it |
 | `plasticity` | `yield_softening` | Thornton (1997) elastic-plastic contacts (`hertzchain.contact.thornton_contact`) with yield stress $\\sigma_{Y,0}/y$, i.e. yield forces $F_{Y,0}/y^3$ ($\\sigma_{Y,0}$: the header's, else 2 GPa); y = 0 never yields, y = 1 is the paper's 470 N |
 
 `sensor_dynamics` has two parts, both exact for a bead cut in two around a sensor (the
 core's split-bead model, `ChainSetup.sensor_beads`) and both regular at $f_0 = \\infty$ (the
 base model), so derivatives exist at "off": the chain is simulated with each recorded
-contact's bead (K >= 1) shortened by its sensor's compression
-(`hertzchain.compliant_sensor`: the soft sensor delays and scatters the wave), and the
+contact's bead (K >= 1) shortened by c times its sensor's compression
+(`hertzchain.compliant_sensor`: the soft sensor delays and scatters the wave; c = 0 is the
+paper's reading of Eq. 4 as a filter on a rigid bead's forces), and the
 channel is the sensor force of Eq. 4 driven by that chain's contacts K-1 and K, from the
 exact discretisation of Eq. 4 (`hertzchain.sensor.sensor_signal`) for $f_0$ below 2 MHz and
 above it (sensor_rate < 0.0025) its first-order expansion $F_s = u - \\ddot u/\\omega_0^2$.
@@ -80,8 +81,12 @@ _SPECS = (
     _spec("mu_star", "", -0.5, 1.0, "rotational_friction: uniform stiffness scale kappa* = (1+mu*) kappa"),
     _spec("sensor_beta", "", 0.0 - 1e-30, 0.5, "sensor_dynamics: mass fraction beta of the front half"),
     _spec("sensor_rate", "", 0.0 - 1e-30, 1e4, "sensor_dynamics: (100 kHz / f0)^2"),
+    _spec("sensor_coupling", "", 0.0 - 1e-30, 1.0,
+          "sensor_dynamics: share of the sensor's compression that shortens its bead (1: split bead, 0: filter)"),
     _spec("wall_softening", "", -5.0, 12.0, "wall_compliance: log(Y_w,header / Y_w)"),
     _spec("preload_n", "N", 0.0 - 1e-30, 1e4, "precompression: static preload (N)"),
+    _spec("preload_seen", "", 0.0 - 1e-30, 1.0,
+          "precompression: share of the static preload the channels read (0: AC/piezo, 1: DC)"),
     _spec("yield_softening", "", 0.0 - 1e-30, 20.0, "plasticity: sigma_Y,0 / sigma_Y"),
 )
 for _s in _SPECS:
@@ -112,8 +117,9 @@ def library(n_beads: int) -> dict[str, Effect]:
                "error in the beads' Young's modulus: not separable in this form)",
                "phase misfit only: pulses earlier (mu* > 0) by ~mu*/3 of the travel time, at all amplitudes",
                one_sided=False),
-        Effect("sensor_dynamics", (p + "sensor_beta", p + "sensor_rate"),
-               "contact channels are embedded-sensor signals (Eq. 4, unknown beta and f0)",
+        Effect("sensor_dynamics", (p + "sensor_beta", p + "sensor_rate", p + "sensor_coupling"),
+               "contact channels are embedded-sensor signals (Eq. 4, unknown beta and f0; split-bead "
+               "mechanics or the filter form, by the coupling c)",
                "odd (derivative-shaped) residual in contact channels only, high-frequency ringing; "
                "the wall channel is untouched"),
         Effect("wall_compliance", (p + "wall_softening",), "wall Young's modulus differs from the header's",
@@ -123,8 +129,9 @@ def library(n_beads: int) -> dict[str, Effect]:
                "bead radii (and masses, at fixed density) vary along the chain",
                "position-specific pattern of amplitude and arrival residuals, same at every amplitude",
                one_sided=False),
-        Effect("precompression", (p + "preload_n",), "static preload F0 on the chain",
-               "faster, wider pulses at low amplitude; baseline offset before the impact"),
+        Effect("precompression", (p + "preload_n", p + "preload_seen"),
+               "static preload F0 on the chain, read by DC sensors or not by AC (piezo) ones",
+               "faster, wider pulses at low amplitude; a baseline offset only on DC-coupled channels"),
         Effect("plasticity", (p + "yield_softening",), "Thornton (1997) elastic-plastic contacts",
                "flattened peaks and extra loss only above the yield force (a threshold in amplitude)"),
     )
@@ -210,10 +217,12 @@ def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True) -> C
 
 
 class _Forces:
-    """The part of `hertzchain.Traces` a fit reads: `forces_n`."""
+    """The part of `hertzchain.Traces` a fit reads: `forces_n`, and `rest_n`, what the
+    channels read with the chain at rest before the impact (N)."""
 
-    def __init__(self, forces_n):
+    def __init__(self, forces_n, rest_n):
         self.forces_n = forces_n
+        self.rest_n = rest_n
 
 
 def _simulate_with_effects(setup, grid, recording, extras, *, plastic: bool):
@@ -223,17 +232,18 @@ def _simulate_with_effects(setup, grid, recording, extras, *, plastic: bool):
     contacts = tuple(sorted(set(recording.contacts) | extra_contacts))
     omega_ref = 2.0 * math.pi * SENSOR_REFERENCE_HZ
     sensors = CompliantSensors(tuple(k for k in recording.contacts if k >= 1), extras[p + "sensor_beta"],
-                               extras[p + "sensor_rate"] / omega_ref**2)
+                               extras[p + "sensor_coupling"] * extras[p + "sensor_rate"] / omega_ref**2)
     traces = solve(changed, grid, Recording(contacts=contacts), compliant_sensors=sensors if sensors.beads else None)
-    forces = dict(traces.forces_n)
-    start = changed.precompression_n
+    unseen = (1.0 - extras[p + "preload_seen"]) * extras[p + "preload_n"]
+    forces = {name: value - unseen for name, value in traces.forces_n.items()}
+    start = changed.precompression_n - unseen
     step = grid.sample_interval_s
     for k in recording.contacts:
         front = jnp.concatenate([start[None], forces[f"contact_{k}"]])
         back = front if k == 0 else jnp.concatenate([start[None], forces[f"contact_{k - 1}"]])
         signal = sensor_output(front, back, extras[p + "sensor_beta"], extras[p + "sensor_rate"], step)
         forces[f"contact_{k}"] = signal[1:]
-    return _Forces(forces)
+    return _Forces(forces, start)
 
 
 def _simulate_plastic(setup, grid, recording, extras):

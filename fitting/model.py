@@ -89,7 +89,8 @@ class ForwardModel:
     **Fields:**
 
     - `simulate`: `(setup, grid, recording, extras) -> hertzchain.Traces`, pure and
-      forward-mode differentiable. `extras` maps the names of fitted parameters of kind
+      forward-mode differentiable; its result may carry `rest_n`, what the channels read
+      at rest before the impact (default: the setup's static preload). `extras` maps the names of fitted parameters of kind
       `"extra"` to their values (traced scalars), so an effect the core solver lacks
       (plasticity, bead dispersion, ...) can be registered as a parameter and read here.
       Default: `hertzchain.solve`, ignoring `extras`.
@@ -274,7 +275,9 @@ class Problem:
                 else:
                     extras[spec.name] = value
             traces = forward.simulate(setup, group.grid, group.recording, extras)
-            start = jnp.broadcast_to(setup.precompression_n, (len(group.channels), 1))
+            # what the channels read at rest: the static preload, unless the model says otherwise
+            rest = getattr(traces, "rest_n", setup.precompression_n)
+            start = jnp.broadcast_to(rest, (len(group.channels), 1))
             series = jnp.stack([traces.forces_n[name] for name in group.channels])
             return jnp.concatenate([start, series], axis=1)  # (n_channels, n_samples + 1)
 

@@ -161,3 +161,22 @@ def test_clipped_samples_are_left_out_of_the_fit_with_a_warning(preloaded):
     assert np.all(r[wall][clipped] == 0.0)
     # the rest is unit noise: the clipped samples, far off the model, are not in it
     assert float(np.sum(r**2) / problem.n_fitted) == pytest.approx(1.0, abs=0.15)
+
+
+def test_simulate_and_design_plans_read_a_preload_as_the_coupling_says(tmp_path):
+    from fitting.design import plan_experiments
+    from hertzchain.cli import main
+
+    for coupling, rest in (("dc", PRELOAD_N), ("ac", 0.0)):
+        out = tmp_path / coupling
+        assert main(["simulate", "--n-beads", "6", "--precompression", "2N", "--t-end", "0.2ms",
+                     "--coupling", coupling, "--out", str(out)]) == 0
+        trace = read_trace(out / "traces.csv")
+        assert trace.channels["wall"][0] == pytest.approx(rest, abs=1e-6)
+        assert trace.ac_channels == (() if coupling == "dc" else trace.channel_names)
+        setup = hc.ChainSetup(6, precompression_n=PRELOAD_N)
+        (plan,) = plan_experiments(setup, [0.2], channels=("wall",), t_end_s=0.3e-3, coupling=coupling)
+        assert plan.data("wall")[0] == pytest.approx(rest, abs=1e-6)
+        problem = fitting.make_problem([plan], ("eta",))
+        # the noise-free plan is the model itself, whichever the coupling
+        assert float(np.max(np.abs(np.asarray(problem.residuals(np.array([0.0])))))) < 1e-3

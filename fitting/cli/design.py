@@ -42,7 +42,8 @@ def _names(text: str | None) -> tuple[str, ...]:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("files", nargs="*", metavar="FILE",
-                        help="trace files defining the plan (else give --velocities ...)")
+                        help="trace files or experiment files (.toml) defining the plan "
+                        "(else give --velocities ...)")
     parser.add_argument("--params", default="eta,mu,C",
                         help="parameters to design for [eta,mu,C]; valid: "
                         + ", ".join(n for n in REGISTRY if n not in NUISANCES))
@@ -58,6 +59,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     plan.add_argument("--no-wall", action="store_true", help="do not record the wall force")
     plan.add_argument("--noise-std", default="0.5", help="noise sigma of every channel (N) [0.5]")
     plan.add_argument("--sample-interval", default="1e-6", help="sampling interval (s) [1us]")
+    plan.add_argument("--coupling", choices=("dc", "ac"), default="dc",
+                      help="ac: piezo sensors, which do not read a static preload [dc]")
     plan.add_argument("--t-end", default="2.5e-3", help="record length after the impact (s) [2.5ms]")
     opt = parser.add_argument_group("optimal plan")
     opt.add_argument("--optimize", type=int, metavar="N",
@@ -130,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"simulating the plan: {len(velocities)} shot(s), channels {', '.join(channels)} ...",
               flush=True)
         plan = plan_experiments(setup, velocities, channels=channels, noise_std_n=noise,
-                                sample_interval_s=interval, t_end_s=t_end)
+                                sample_interval_s=interval, t_end_s=t_end, coupling=args.coupling)
         baseline_units = [(v, c) for v in velocities for c in channels]
     else:
         raise ValueError("no plan: give trace files, or --velocities (and --contacts, --noise-std, "

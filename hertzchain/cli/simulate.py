@@ -18,6 +18,11 @@ from .setup_options import add_run_arguments, add_setup_arguments, run_options, 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_setup_arguments(parser)
     add_run_arguments(parser)
+    parser.add_argument(
+        "--coupling", choices=("dc", "ac"), default="dc",
+        help="channels of traces.csv: dc, the forces; ac, as piezo sensors read them, the change "
+        "since before the impact (a static --precompression is not in them) [dc]",
+    )
     parser.add_argument("--out", default="out/simulate", help="output folder [out/simulate]")
 
 
@@ -33,7 +38,10 @@ def run(args: argparse.Namespace) -> int:
     )
     traces = simulate(setup, record_all=True, progress=True, **options)
     out = Path(args.out)
-    forces = {name: np.asarray(traces.forces_n[name]) for name in traces.channel_names}
+    rest = float(setup.precompression_n) if args.coupling == "ac" else 0.0
+    forces = {name: np.asarray(traces.forces_n[name]) - rest for name in traces.channel_names}
+    if args.coupling == "ac":
+        header["ac_channels"] = ",".join(forces)
     write_trace(
         out / "traces.csv",
         TraceFile(header=header, time_s=np.asarray(traces.time_s), channels=forces),
