@@ -4,13 +4,18 @@
 every sample; that generality costs a loop iteration, a checkpoint and a dozen stores per
 step. Sweeps need much less: a few force channels, the largest force of every contact and
 the energy balance at the end. `solve_batched` integrates exactly the same equations with
-the same velocity-Verlet step as `integrate.verlet_step` (same order of operations, so the
-results agree to round-off), but
+the same velocity-Verlet step as `integrate.verlet_step` (same order of operations and the
+same contact laws from `contact`, so the results agree to round-off), but
 
-- the state is laid out as (n_bodies, B), the batch on the fast axis, so every operation of
-  a step is one vector instruction over chains;
+- the state is laid out as (rows, B), the batch on the fast axis, so every operation of
+  a step is one vector instruction over chains; the wall is one more body (at rest), so
+  that all contact forces, wall included, are one elementwise expression;
+- the state (displacements, half-step velocities, running maxima) is one packed array and
+  a step is two fused loops, the contact forces and then the update of the whole state,
+  kept apart by `optimization_barrier` (XLA otherwise makes one loop per state variable
+  plus one per shifted copy; see `benchmarks/README.md`);
 - a `lax.scan` iteration advances a block of about `block_steps` steps, fully unrolled,
-  and records the chosen forces of all its samples at once;
+  and writes the chosen forces of all its samples straight into (B, n_samples) outputs;
 - the batch can be split over several devices (`devices=`) with `jax.shard_map`, e.g. the
   two cores of a CPU run as two host devices
   (`XLA_FLAGS=--xla_force_host_platform_device_count=2`, set before JAX starts), or GPUs.
@@ -75,7 +80,6 @@ class _Flags(NamedTuple):
     viscous: bool
     springs: bool
     preload: bool
-    wall: bool
 
 
 def batch_size(setup: ChainSetup) -> int:
@@ -118,7 +122,6 @@ def _flags(setup: ChainSetup) -> _Flags:
         viscous=bool(np.any(np.asarray(setup.eta_s) != 0.0)),
         springs=bool(setup.sensor_beads),
         preload=bool(np.any(np.asarray(setup.precompression_n) != 0.0)),
-        wall=setup.end == "wall",
     )
 
 
@@ -162,105 +165,155 @@ def _vector_model(setup: ChainSetup) -> _Model:
 
 
 def _chain_params(setup: ChainSetup) -> dict:
-    """Arrays the kernel needs for one chain (vmapped over the batch)."""
+    """Arrays the kernel needs for one chain (vmapped over the batch), in the kernel's
+    layout: n_bodies + 1 rows for bodies (the last one is the wall, at rest, or nothing for
+    a free end) and n_bodies rows for contacts (the last one is the wall contact, of zero
+    stiffness for a free end)."""
     model = build_model(setup) if setup.sensor_beads else _vector_model(setup)
+    external = jnp.zeros_like(model.mass_kg).at[1].add(model.first_bead_force_n)
+    external = external.at[-1].add(model.last_body_force_n)
     return {
         "mass": model.mass_kg,
-        "inv_mass": 1.0 / model.mass_kg,
-        "kappa": model.kappa,
-        "damping": 1.5 * model.eta_s * model.kappa,
-        "spring": model.spring_n_m,
-        "overlap0": model.overlap0_m,
-        "wall_kappa": model.wall_kappa,
-        "wall_damping": 1.5 * model.eta_s * model.wall_kappa,
-        "wall_overlap0": model.wall_overlap0_m,
+        "inv_mass": jnp.concatenate([1.0 / model.mass_kg, jnp.zeros(1)]),
+        "kappa": jnp.concatenate([model.kappa, model.wall_kappa[None]]),
+        "spring": jnp.concatenate([model.spring_n_m, jnp.zeros(1)]),
+        "overlap0": jnp.concatenate([model.overlap0_m, model.wall_overlap0_m[None]]),
+        "eta": model.eta_s,
+        "external": jnp.concatenate([external, jnp.zeros(1)]),
         "first_force": model.first_bead_force_n,
         "last_force": model.last_body_force_n,
         "v0": model.striker_velocity_m_s,
     }
 
 
-def _forces(p, flags: _Flags, x, v):
-    """Contact forces (n_contacts, B), wall force (B,), body forces (n_bodies, B), and
-    their viscous parts, with the same formulas as `forces.chain_forces`."""
-    overlap = x[:-1] - x[1:] + p["overlap0"]
-    positive = jnp.maximum(overlap, 0.0)
-    root = jnp.sqrt(positive)
-    elastic = p["kappa"] * positive * root
+# The kernel works on (rows, B) arrays, the batch on the fast axis. Bodies have n_bodies + 1
+# rows: the last is the wall (displacement and velocity 0, inverse mass 0), so that the
+# overlap of contact k, wall contact included, is x[k] - x[k + 1] + overlap0[k] for every
+# k: one elementwise expression of row slices. Contact forces have n_bodies rows.
+
+
+def _contact_forces(p, flags: _Flags, x, v, contacts=None):
+    """Total and elastic force of every contact, wall last (n_bodies, B), or of the listed
+    `contacts` only, N, from displacements x (m) and velocities v (m/s) of the bodies and
+    the wall: the laws of `contact` (the ones `forces.chain_forces` uses), elementwise."""
+
+    def rows(a):
+        return a if contacts is None else jnp.stack([a[k] for k in contacts])
+
+    def pair(a):  # the bodies in front of and behind each contact
+        return rows(a[:-1]), rows(a[1:])
+
+    front, back = pair(x)
+    overlap = front - back + rows(p["overlap0"])
     if flags.viscous:
-        rate = v[:-1] - v[1:]
-        total = jnp.maximum(elastic + p["damping"] * root * rate, 0.0)
+        front_v, back_v = pair(v)
+        elastic, total = contact.contact_force(overlap, front_v - back_v, rows(p["kappa"]), p["eta"])
     else:
-        total = elastic
+        elastic = total = contact.hertz_force(overlap, rows(p["kappa"]))
     if flags.springs:
-        total = total + p["spring"] * overlap
-        elastic = elastic + p["spring"] * overlap
-    if flags.wall:
-        wall_overlap = x[-1] + p["wall_overlap0"]
-        wall_positive = jnp.maximum(wall_overlap, 0.0)
-        wall_root = jnp.sqrt(wall_positive)
-        wall_elastic = p["wall_kappa"] * wall_positive * wall_root
-        if flags.viscous:
-            wall = jnp.maximum(wall_elastic + p["wall_damping"] * wall_root * v[-1], 0.0)
-        else:
-            wall = wall_elastic
-    else:
-        wall = wall_elastic = jnp.zeros_like(x[-1])
-    zero = jnp.zeros_like(x[:1])
-    body = jnp.concatenate([zero, total]) - jnp.concatenate([total, wall[None]])
-    if flags.preload:
-        body = body.at[1].add(p["first_force"]).at[-1].add(p["last_force"])
-    if flags.viscous:
-        viscous_c, viscous_w = total - elastic, wall - wall_elastic
-        viscous = jnp.concatenate([zero, viscous_c]) - jnp.concatenate([viscous_c, viscous_w[None]])
-    else:
-        viscous = None
-    return total, wall, body, viscous
+        spring = contact.spring_force(overlap, rows(p["spring"]))
+        elastic, total = elastic + spring, total + spring
+    return total, elastic
+
+
+def _body_force(force, external=None):
+    """Force on every body and on the wall (n_bodies + 1, B), N, from the contact forces
+    (compression positive): contact k pushes body k + 1 forward and body k back."""
+    zero = jnp.zeros_like(force[:1])
+    body = jnp.concatenate([zero, force]) - jnp.concatenate([force, zero])
+    return body if external is None else body + external
 
 
 def _energy(p, flags: _Flags, x, v):
     """Kinetic and potential (elastic plus preload) energy, J, each (B,)."""
-    kinetic = 0.5 * jnp.sum(p["mass"] * v**2, axis=0)
+    n = p["mass"].shape[0]
+    kinetic = 0.5 * jnp.sum(p["mass"] * v[:n] ** 2, axis=0)
     overlap = x[:-1] - x[1:] + p["overlap0"]
-    positive = jnp.maximum(overlap, 0.0)
-    potential = jnp.sum(0.4 * p["kappa"] * positive**2 * jnp.sqrt(positive), axis=0)
+    potential = jnp.sum(contact.hertz_potential(overlap, p["kappa"]), axis=0)
     if flags.springs:
-        potential = potential + jnp.sum(0.5 * p["spring"] * overlap**2, axis=0)
-    if flags.wall:
-        wall_positive = jnp.maximum(x[-1] + p["wall_overlap0"], 0.0)
-        potential = potential + 0.4 * p["wall_kappa"] * wall_positive**2 * jnp.sqrt(wall_positive)
+        potential = potential + jnp.sum(contact.spring_potential(overlap, p["spring"]), axis=0)
     if flags.preload:
-        potential = potential - (p["first_force"] * x[1] + p["last_force"] * x[-1])
+        potential = potential - (p["first_force"] * x[1] + p["last_force"] * x[n - 1])
     return kinetic, potential
 
 
-class _State(NamedTuple):
-    x: jax.Array
-    v: jax.Array
-    a: jax.Array
-    viscous_force: jax.Array | None
-    max_contact: jax.Array
-    max_wall: jax.Array
-    dissipated: jax.Array
+class _Layout(NamedTuple):
+    """Row ranges of the packed state: one (rows, B) array, so that a step is two fused
+    loops (the forces, then everything else) instead of one per state variable."""
+
+    bodies: int
+
+    def fields(self, flags: _Flags) -> tuple[tuple[str, int], ...]:
+        b, c = self.bodies + 1, self.bodies
+        if flags.viscous:
+            # x, v, a at the step; running maxima; viscous body forces; dissipated energy
+            return (("x", b), ("v", b), ("a", b), ("max", c), ("viscous", b), ("dissipated", 1))
+        # x, u = v + (dt/2) a (the next half-kick's velocity), running maxima
+        return (("x", b), ("u", b), ("max", c))
+
+    def unpack(self, flags: _Flags, state) -> dict:
+        out, row = {}, 0
+        for name, rows in self.fields(flags):
+            out[name] = state[row : row + rows]
+            row += rows
+        return out
+
+    def pack(self, flags: _Flags, parts: dict):
+        return jnp.concatenate([parts[name] for name, _ in self.fields(flags)])
 
 
-def _step(p, flags: _Flags, dt: float, s: _State) -> tuple[_State, jax.Array, jax.Array]:
-    """One velocity-Verlet step (the order of `integrate.verlet_step`)."""
+def _step(p, flags: _Flags, layout: _Layout, dt: float, state):
+    """One velocity-Verlet step on the packed state (the order of `integrate.verlet_step`):
+    returns the new state and the total contact forces (n_bodies, B), N."""
     h = 0.5 * dt
-    v_half = s.v + h * s.a
-    x = s.x + dt * v_half
-    total, wall, body, viscous = _forces(p, flags, x, v_half + h * s.a)
-    a = body * p["inv_mass"]
+    s = layout.unpack(flags, state)
+    barrier = jax.lax.optimization_barrier
+    if not flags.viscous:
+        x = s["x"] + dt * s["u"]
+        force = barrier(_contact_forces(p, flags, x, None)[0])
+        a = _body_force(force, p["external"] if flags.preload else None) * p["inv_mass"]
+        v = s["u"] + h * a
+        new = {"x": x, "u": v + h * a, "max": jnp.maximum(s["max"], force)}
+        return barrier(layout.pack(flags, new)), force
+    v_half = s["v"] + h * s["a"]
+    x = s["x"] + dt * v_half
+    total, elastic = _contact_forces(p, flags, x, v_half + h * s["a"])
+    both = barrier(jnp.concatenate([total, elastic]))
+    total, elastic = both[: layout.bodies], both[layout.bodies :]
+    a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
     v = v_half + h * a
-    dissipated = s.dissipated
+    viscous = _body_force(total - elastic)
+    work = jnp.sum(s["viscous"] * h * 0.5 * (s["v"] + v_half), axis=0)
+    work = work + jnp.sum(viscous * h * 0.5 * (v_half + v), axis=0)
+    new = {
+        "x": x, "v": v, "a": a, "max": jnp.maximum(s["max"], total), "viscous": viscous,
+        "dissipated": s["dissipated"] - work[None],
+    }
+    return barrier(layout.pack(flags, new)), total
+
+
+def _initial(p, flags: _Flags, layout: _Layout, dt: float):
+    """Packed state at the impact and the bodies' (x, v) there."""
+    x = jnp.zeros_like(p["inv_mass"])
+    v = x.at[0].set(p["v0"])
+    total, elastic = _contact_forces(p, flags, x, v)
+    a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
     if flags.viscous:
-        work = jnp.sum(s.viscous_force * h * 0.5 * (s.v + v_half), axis=0)
-        work = work + jnp.sum(viscous * h * 0.5 * (v_half + v), axis=0)
-        dissipated = dissipated - work
-    state = _State(
-        x, v, a, viscous, jnp.maximum(s.max_contact, total), jnp.maximum(s.max_wall, wall), dissipated
-    )
-    return state, total, wall
+        parts = {"x": x, "v": v, "a": a, "max": total, "viscous": _body_force(total - elastic),
+                 "dissipated": jnp.zeros_like(x[:1])}
+    else:
+        parts = {"x": x, "u": v + 0.5 * dt * a, "max": total}
+    return layout.pack(flags, parts), x, v
+
+
+def _final(p, flags: _Flags, layout: _Layout, dt: float, state):
+    """Displacements, velocities and dissipated energy at the end of the run."""
+    s = layout.unpack(flags, state)
+    if flags.viscous:
+        return s["x"], s["v"], s["dissipated"][0]
+    total = _contact_forces(p, flags, s["x"], None)[0]
+    a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
+    return s["x"], s["u"] - 0.5 * dt * a, jnp.zeros_like(s["x"][0])
 
 
 def _block_plan(grid: TimeGrid, block_steps: int) -> tuple[int, int, int]:
@@ -271,61 +324,69 @@ def _block_plan(grid: TimeGrid, block_steps: int) -> tuple[int, int, int]:
 
 
 def _kernel(p, *, flags: _Flags, grid: TimeGrid, rows: tuple[int, ...], block_steps: int):
-    """Integrate chains laid out as (n_bodies, B): recorded rows (n_samples, n_rows + 1, B),
-    and the final state."""
-    x = jnp.zeros_like(p["mass"])
-    v = x.at[0].set(p["v0"])
-    total, wall, body, viscous = _forces(p, flags, x, v)
-    state = _State(x, v, body * p["inv_mass"], viscous, total, wall, jnp.zeros_like(x[0]))
+    """Integrate chains laid out as (rows, B): the recorded forces, one (B, n_samples)
+    array per channel (the chosen contacts, then the wall), N, and the final packed state."""
+    layout = _Layout(p["mass"].shape[0])
+    state, _, _ = _initial(p, flags, layout, grid.dt_s)
     steps = grid.steps_per_sample
-    unrolled = steps <= block_steps
+    channels = rows + (layout.bodies - 1,)
+    dt = grid.dt_s
 
     def sample(state):
-        if unrolled:
+        if steps <= block_steps:
             for _ in range(steps):
-                state, total, wall = _step(p, flags, grid.dt_s, state)
+                state, force = _step(p, flags, layout, dt, state)
         else:
             def body(carry, _):
-                return _step(p, flags, grid.dt_s, carry)[0], None
+                return _step(p, flags, layout, dt, carry)[0], None
 
             state = jax.lax.scan(body, state, None, length=steps - 1, unroll=block_steps)[0]
-            state, total, wall = _step(p, flags, grid.dt_s, state)
+            state, force = _step(p, flags, layout, dt, state)
         if flags.viscous:
             # Samples record the forces at the step's final velocity, as `solve` does.
-            total, wall, _, _ = _forces(p, flags, state.x, state.v)
-        return state, jnp.stack([total[r] for r in rows] + [wall])
+            s = layout.unpack(flags, state)
+            force = _contact_forces(p, flags, s["x"], s["v"], channels)[0]
+            return state, jax.lax.optimization_barrier(force)
+        return state, jax.lax.optimization_barrier(jnp.stack([force[c] for c in channels]))
 
     def iteration(count):
-        def run(state, _):
+        # `count` samples, written straight into the (B, n_samples) outputs at `first`.
+        def run(carry, first):
+            state, traces = carry
             records = []
             for _ in range(count):
                 state, record = sample(state)
                 records.append(record)
-            return state, jnp.stack(records)
+            traces = tuple(
+                jax.lax.dynamic_update_slice(trace, jnp.stack([r[i] for r in records], axis=1), (0, first))
+                for i, trace in enumerate(traces)
+            )
+            return (state, traces), None
 
         return run
 
     per_iteration, iterations, leftover = _block_plan(grid, block_steps)
-    state, records = jax.lax.scan(iteration(per_iteration), state, None, length=iterations)
-    records = records.reshape((-1,) + records.shape[2:])
+    # (zeros derived from a batch array, so that under shard_map they vary along the batch)
+    traces = tuple(jnp.zeros_like(p["v0"])[:, None] + jnp.zeros(grid.n_samples) for _ in channels)
+    starts = per_iteration * jnp.arange(iterations)
+    state, traces = jax.lax.scan(iteration(per_iteration), (state, traces), starts)[0]
     if leftover:
-        state, tail = jax.lax.scan(iteration(1), state, None, length=leftover)
-        records = jnp.concatenate([records, tail.reshape((-1,) + tail.shape[2:])])
-    return records, state
+        starts = per_iteration * iterations + jnp.arange(leftover)
+        state, traces = jax.lax.scan(iteration(1), (state, traces), starts)[0]
+    return traces, state, layout
 
 
 def _run(params, flags, grid, rows, block_steps, devices):
-    """The kernel, sharded over `devices` along the batch (last) axis when there are several."""
+    """The kernel, sharded over `devices` along the batch axis when there are several."""
 
     def local(p):
-        records, state = _kernel(p, flags=flags, grid=grid, rows=rows, block_steps=block_steps)
-        x0 = jnp.zeros_like(p["mass"])
-        v0 = x0.at[0].set(p["v0"])
+        traces, state, layout = _kernel(p, flags=flags, grid=grid, rows=rows, block_steps=block_steps)
+        _, x0, v0 = _initial(p, flags, layout, grid.dt_s)
         initial = sum(_energy(p, flags, x0, v0))
-        kinetic, potential = _energy(p, flags, state.x, state.v)
-        summary = jnp.stack([initial, kinetic, potential, state.dissipated])
-        maxima = jnp.concatenate([state.max_contact, state.max_wall[None]])
-        return records, maxima, summary
+        x, v, dissipated = _final(p, flags, layout, grid.dt_s, state)
+        kinetic, potential = _energy(p, flags, x, v)
+        summary = jnp.stack([initial, kinetic, potential, dissipated])
+        return traces, layout.unpack(flags, state)["max"], summary
 
     if devices is None or len(devices) == 1:
         return local(params)
@@ -333,7 +394,7 @@ def _run(params, flags, grid, rows, block_steps, devices):
     spec = lambda leaf: PartitionSpec(*([None] * (leaf.ndim - 1)), "batch")  # noqa: E731
     in_specs = (jax.tree_util.tree_map(spec, params),)
     out_specs = (
-        PartitionSpec(None, None, "batch"),
+        tuple(PartitionSpec("batch", None) for _ in range(len(rows) + 1)),
         PartitionSpec(None, "batch"),
         PartitionSpec(None, "batch"),
     )
@@ -366,12 +427,12 @@ _params_jit = eqx.filter_jit(_params)
 def _solve_fast(params, batch, flags, grid, rows, names, user, block_steps, devices):
     """The kernel and the output layout in one compiled call. The parameters are computed
     apart, on one device, so that sharded and unsharded runs see the very same numbers."""
-    records, maxima, summary = _run(params, flags, grid, rows, block_steps, devices)
-    records, maxima, summary = records[..., :batch], maxima[..., :batch], summary[..., :batch]
+    traces, maxima, summary = _run(params, flags, grid, rows, block_steps, devices)
+    maxima, summary = maxima[..., :batch], summary[..., :batch]
     initial, kinetic, potential, dissipated = summary
     return BatchedTraces(
         time_s=grid.sample_interval_s * jnp.arange(1, grid.n_samples + 1, dtype=jnp.float64),
-        forces_n={name: records[:, i, :].T for i, name in enumerate(names)},
+        forces_n={name: trace[:batch] for name, trace in zip(names, traces)},
         max_force_n=maxima[np.asarray(user)].T,
         initial_energy_j=initial,
         kinetic_j=kinetic,

@@ -64,6 +64,16 @@ def hertz_potential(overlap_m, kappa_n_m1p5):
     return 0.4 * kappa_n_m1p5 * positive * positive * root
 
 
+def spring_force(overlap_m, stiffness_n_m):
+    """Force of a linear spring (an embedded sensor's), $k\\delta$, N; it pulls when stretched."""
+    return stiffness_n_m * overlap_m
+
+
+def spring_potential(overlap_m, stiffness_n_m):
+    """Energy of a linear spring, $k\\delta^2/2$, J."""
+    return 0.5 * stiffness_n_m * overlap_m**2
+
+
 def contact_force(overlap_m, overlap_rate_m_s, kappa_n_m1p5, eta_s, elastic_n=None):
     """Total (elastic, total) normal force of a viscoelastic Hertz contact, N.
 

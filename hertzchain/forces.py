@@ -91,7 +91,7 @@ def chain_forces(model: ChainModel, displacement_m, velocity_m_s, max_overlap_m=
     hertz_elastic, hertz_total = contact.contact_force(
         overlap, rate, model.kappa, model.eta_s, elastic_all[:-1]
     )
-    spring = model.spring_n_m * overlap
+    spring = contact.spring_force(overlap, model.spring_n_m)
     contact_total = jnp.where(model.is_spring, spring, hertz_total)
     contact_elastic = jnp.where(model.is_spring, spring, hertz_elastic)
     wall_elastic, wall_total = contact.contact_force(
@@ -109,7 +109,7 @@ def contact_potentials(model: ChainModel, displacement_m, max_overlap_m=None, se
     if max_overlap_m is None:
         max_overlap_m = initial_max_overlap(model)
     overlap, _, energy, _ = _elastic_parts(model, displacement_m, max_overlap_m, sensor_force_n)
-    spring = 0.5 * model.spring_n_m * overlap[:-1] ** 2
+    spring = contact.spring_potential(overlap[:-1], model.spring_n_m)
     return jnp.where(model.is_spring, spring, energy[:-1]), energy[-1]
 
 

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -118,3 +119,35 @@ def test_sharded_over_host_devices_matches_one_device():
     assert result["devices"] == 4
     assert result["shape"] == [6, 400]
     assert result["diff"] == 0.0 and result["max_diff"] == 0.0
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_fast_path_uses_the_force_laws_of_solve(case):
+    """The fast path's contact forces, body forces and energies, evaluated on random
+    compressed and separated states, are those of `forces.chain_forces` (same contact-law
+    functions of `contact`, so the forces are bit-identical)."""
+    from hertzchain import batched, forces
+
+    setup, _ = _batch(**CASES[case])
+    flags = batched._flags(setup)
+    params = batched.kernel_params(setup)
+    models = [hc.build_model(jax.tree_util.tree_map(lambda leaf, i=i: leaf[i], setup)) for i in range(4)]
+    n_bodies = models[0].mass_kg.shape[0]
+    rng = np.random.default_rng(3)
+    x = rng.normal(scale=2e-6, size=(n_bodies, 4))  # about half the contacts compressed
+    v = rng.normal(scale=0.3, size=(n_bodies, 4))
+    wall = np.zeros((1, 4))
+    total, elastic = batched._contact_forces(params, flags, np.concatenate([x, wall]), np.concatenate([v, wall]))
+    body = batched._body_force(total, params["external"])[:n_bodies]
+    kinetic, potential = batched._energy(params, flags, np.concatenate([x, wall]), np.concatenate([v, wall]))
+    for i, model in enumerate(models):
+        ref = forces.chain_forces(model, jnp.asarray(x[:, i]), jnp.asarray(v[:, i]))
+        assert np.sum(np.asarray(ref.contact_total_n) > 0) >= 2  # some contacts are loaded
+        np.testing.assert_array_equal(total[:-1, i], ref.contact_total_n)
+        np.testing.assert_array_equal(total[-1, i], ref.wall_total_n)
+        np.testing.assert_array_equal(elastic[:-1, i], ref.contact_elastic_n)
+        np.testing.assert_allclose(body[:, i], ref.body_force_n, rtol=1e-14, atol=1e-12 * float(np.max(total)))
+        contacts_j, wall_j = forces.contact_potentials(model, jnp.asarray(x[:, i]))
+        elastic_j = float(jnp.sum(contacts_j) + wall_j + forces.preload_potential(model, jnp.asarray(x[:, i])))
+        np.testing.assert_allclose(potential[i], elastic_j, rtol=1e-13, atol=1e-15)
+        np.testing.assert_allclose(kinetic[i], 0.5 * float(jnp.sum(model.mass_kg * v[:, i] ** 2)), rtol=1e-14)

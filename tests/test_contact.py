@@ -56,3 +56,27 @@ def test_binary_collision_time_matches_simulated_two_body_collision():
     mass = float(setup.bead_mass_kg[0])
     expected = float(contact.collision_time(mass / 2, setup.contact_kappa()[0], 0.2))
     assert duration == pytest.approx(expected, abs=0.1e-6)
+
+
+def test_contact_laws_are_elementwise_in_any_layout():
+    """The laws that both solvers call give the same numbers on (contacts,) and on
+    (contacts, chains) arrays, and the viscous force is clipped at zero on fast unloading."""
+    rng = np.random.default_rng(0)
+    overlap = rng.normal(scale=2e-6, size=(7, 5))
+    rate = rng.normal(scale=0.5, size=(7, 5))
+    kappa = 1.2e10 * (1.0 + rng.random((7, 1)))
+    spring = 3e8 * np.ones((7, 1))
+    laws = (
+        lambda o, r, k: contact.hertz_force(o, k),
+        lambda o, r, k: contact.hertz_potential(o, k),
+        lambda o, r, k: contact.contact_force(o, r, k, 2e-6)[1],
+        lambda o, r, k: contact.spring_force(o, spring[: o.shape[0]]),
+        lambda o, r, k: contact.spring_potential(o, spring[: o.shape[0]]),
+    )
+    for law in laws:
+        whole = np.asarray(law(overlap, rate, kappa))
+        for j in range(5):
+            np.testing.assert_array_equal(whole[:, j : j + 1], law(overlap[:, j : j + 1], rate[:, j : j + 1], kappa))
+    total = np.asarray(contact.contact_force(overlap, rate, kappa, 2e-6)[1])
+    assert np.all(total >= 0.0) and np.any((overlap > 0) & (total == 0.0))  # clipped while in contact
+    np.testing.assert_allclose(contact.hertz_force(overlap, kappa), kappa * np.maximum(overlap, 0) ** 1.5, rtol=1e-15)
