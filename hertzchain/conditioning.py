@@ -15,8 +15,14 @@ Each step is a small pure function on numpy arrays, so that an importer (see
    file does not state it (8-bit data sit on a lattice of at most 256 levels).
 5. `baseline`: offset and noise from the pre-trigger segment: the mean (not the median:
    quantised values dithered by noise average to the true level, their median sits on a
-   code), and the standard deviation about it, floored at the quantisation error of a
-   uniform converter, step/sqrt(12), which a record sitting on one code does not show.
+   code), and the noise. Without a known step, the noise is the standard deviation about
+   the mean. With one, the analogue noise sigma_a is the maximum-likelihood width of a
+   normal distribution seen through the converter's bins (each sample a count in the bin
+   of its code: interval-censored data), which holds from sigma_a below a step, where the
+   spread of a resting record says little, to many steps (on two codes the width is not
+   identifiable and their spread, an upper estimate, is taken; on one, 0);
+   the channel's noise is then sigma^2 = sigma_a^2 + step^2/12, the error of a moving
+   signal through a uniform converter.
 """
 
 from __future__ import annotations
@@ -115,9 +121,10 @@ def clipped_mask(values, range_v: tuple[float, float] | None, step: float | None
 
 @dataclasses.dataclass(frozen=True)
 class Baseline:
-    """What the pre-trigger segment says of a channel: `offset` (its mean), `noise_std` (its
-    standard deviation about it, floored at the quantisation error), `n_samples` used, and
-    `quantisation_floor` (step/sqrt(12), 0 if unknown); same unit as the values."""
+    """What the pre-trigger segment says of a channel: `offset` (its mean), `noise_std` (the
+    noise of the channel, quantisation error included, see the module docstring),
+    `n_samples` used, and `quantisation_floor` (step/sqrt(12), 0 if unknown); same unit as
+    the values."""
 
     offset: float
     noise_std: float
@@ -138,7 +145,40 @@ def baseline(values, before: np.ndarray, step: float | None, where: str) -> Base
             f"must come from them (at least {MIN_BASELINE_SAMPLES}); record a pre-trigger segment, "
             "or give the channel's offset_v and noise_std_n in the experiment file."
         )
-    floor = step / math.sqrt(12.0) if step else 0.0
     offset = float(np.mean(segment))
-    spread = float(np.std(segment, ddof=1))
-    return Baseline(offset, max(spread, floor), int(segment.size), floor)
+    if not step:
+        return Baseline(offset, float(np.std(segment, ddof=1)), int(segment.size), 0.0)
+    floor = step / math.sqrt(12.0)
+    return Baseline(offset, math.hypot(binned_noise_std(segment, step), floor), int(segment.size), floor)
+
+
+def binned_noise_std(values, step: float) -> float:
+    """Maximum-likelihood standard deviation of normal noise about a constant level, from
+    samples quantised to multiples of `step` (same unit); 0 when they all share one code,
+    and the codes' spread (an upper estimate) when they fall on two.
+
+    Each sample counts in the bin [k - 1/2, k + 1/2) step of its code k; the level and the
+    width maximise sum_k n_k log(Phi(b_k) - Phi(a_k)) (scipy's Nelder-Mead on the level
+    and the log width)."""
+    from scipy import optimize, special
+
+    values = np.asarray(values, dtype=float)
+    codes = np.round((values - np.median(values)) / step)
+    levels, counts = np.unique(codes, return_counts=True)
+    if levels.size == 1:
+        return 0.0
+    if levels.size == 2:
+        # two bins fix only (boundary - level)/width: the width is not identifiable; the
+        # codes' spread bounds it from above (it is at most half a step)
+        return step * float(np.std(codes, ddof=1))
+
+    def negative_log_likelihood(theta):
+        level, width = theta[0], math.exp(theta[1])
+        upper = special.ndtr((levels + 0.5 - level) / width)
+        lower = special.ndtr((levels - 0.5 - level) / width)
+        return -float(np.sum(counts * np.log(np.maximum(upper - lower, 1e-300))))
+
+    spread = max(float(np.std(codes)), 0.1)
+    best = optimize.minimize(negative_log_likelihood, [float(np.mean(codes)), math.log(spread)],
+                             method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9})
+    return step * math.exp(float(best.x[1]))

@@ -94,3 +94,33 @@ def test_analyze_reports_bad_files(tmp_path, capsys):
     bad.write_text("# format = hertzchain-trace/1\ntime_s,wall\n0,1\n")
     assert main(["analyze", str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "missing header key" in capsys.readouterr().err
+
+
+def test_repeated_shots_report_their_scatter(tmp_path):
+    """Three shots at 0.3 m/s (and one at 0.15 m/s) differing only by their noise: grouped
+    as repeats, with the sample standard deviation of their per-shot amplitudes and speeds."""
+    import hertzchain as hc
+    from hertzchain.acquisition import Acquisition, record_simulation
+    from hertzchain.tracefile import write_trace
+
+    paths = []
+    for k, velocity in enumerate((0.3, 0.3, 0.15, 0.3)):
+        setup = hc.ChainSetup(striker_velocity_m_s=velocity)
+        run = hc.simulate(setup, t_end_s=1.2e-3, sample_interval_s=0.1e-6, contacts=(6, 11))
+        trace = record_simulation(setup, run, Acquisition(noise_std_n=2.0), seed=k)
+        paths.append(tmp_path / f"shot{k}.csv")
+        write_trace(paths[-1], trace)
+    out = tmp_path / "analysis"
+    assert main(["analyze", *map(str, paths), "--out", str(out)]) == 0
+    result = json.loads((out / "analysis.json").read_text())
+    (group,) = result["repeats"]
+    assert group["n_shots"] == 3 and group["velocity_m_s"] == pytest.approx(0.3)
+    assert group["shots"] == "shot0.csv shot1.csv shot3.csv"
+    per_shot = {s["file"]: s for s in result["files"]}
+    for name in ("amplitude_n", "speed_m_s"):
+        values = [per_shot[f][name] for f in ("shot0.csv", "shot1.csv", "shot3.csv")]
+        assert group[f"{name}_mean"] == pytest.approx(np.mean(values), rel=1e-12)
+        assert group[f"{name}_sd"] == pytest.approx(np.std(values, ddof=1), rel=1e-9)
+    # noise of 2 N on a 300 N pulse: the amplitudes scatter by a few tenths of a newton
+    assert 0.01 < group["amplitude_n_sd"] < 2.0
+    assert (out / "repeats.csv").read_text().startswith("velocity_m_s,n_shots,shots,amplitude_n_mean")

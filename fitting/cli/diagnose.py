@@ -18,7 +18,8 @@ def _names(text: str) -> list[str]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("files", nargs="+", metavar="FILE", help="trace files (hertzchain-trace/1)")
+    parser.add_argument("files", nargs="+", metavar="FILE",
+                        help="trace files (hertzchain-trace/1) or experiment files (.toml)")
     parser.add_argument("--model", default="base",
                         help="starting model: 'base' (header's chain, no dissipation, ideal force sensors) "
                         f"or 'base+EFFECT+...'; effects: {', '.join(EFFECT_NAMES)}")

@@ -41,7 +41,8 @@ def _assignments(text: str | None, option: str) -> dict:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("files", nargs="+", metavar="FILE", help="trace files (hertzchain-trace/1 CSV)")
+    parser.add_argument("files", nargs="+", metavar="FILE",
+                        help="trace files (hertzchain-trace/1) or experiment files (.toml)")
     parser.add_argument(
         "--params", default="eta,mu,C",
         help="comma-separated parameters to fit [eta,mu,C]; valid: " + ", ".join(REGISTRY),

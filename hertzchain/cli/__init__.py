@@ -16,6 +16,7 @@ COMMANDS = {
     "simulate": ("hertzchain.cli.simulate", "simulate a chain (default: the paper's) and plot it"),
     "analyze": ("hertzchain.cli.analyze", "fit every pulse of trace files (cos^6, speed, restitution)"),
     "synth": ("hertzchain.cli.synth", "write synthetic experiment trace files from any setup"),
+    "import": ("hertzchain.cli.import_experiment", "condition a lab's scope files (experiment.toml) into trace files"),
     "fit": ("fitting.cli.fit", "fit eta, mu, C (and more) to trace files"),
     "diagnose": ("fitting.cli.diagnose", "find and name the effect a model is missing"),
     "reproduce": ("hertzchain.cli.reproduce", "regenerate the paper's figures and numbers"),
@@ -43,7 +44,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(module.run(args) or 0)
-    except (ValueError, FileNotFoundError) as error:
+    except (ValueError, FileNotFoundError) as error:  # every input error of the library
         print(f"hertzchain {args.command}: error: {error}", file=sys.stderr)
         return 2
 

@@ -32,7 +32,13 @@ import numpy as np  # noqa: E402
 
 from .. import pulses, sensor, theory  # noqa: E402
 from ..atomic import save_figure, write_json, write_text  # noqa: E402
-from ..tracefile import read_trace  # noqa: E402
+from ..importer import expand_sources  # noqa: E402
+from ..tracefile import TraceFile, read_trace  # noqa: E402
+
+# Shots whose measured striker velocities differ by less than this fraction are repeats
+# of one setting when no nominal velocity is given (a drop height is set to about 1 %).
+REPEAT_TOLERANCE = 0.02
+_REPEAT_QUANTITIES = ("amplitude_n", "speed_m_s", "velocity_constant", "restitution", "wall_force_ratio")
 
 COLUMNS = (
     "file",
@@ -70,7 +76,8 @@ DEFINITIONS = {
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("files", nargs="+", metavar="FILE", help="trace files (hertzchain-trace/1)")
+    parser.add_argument("files", nargs="+", metavar="FILE",
+                        help="trace files (hertzchain-trace/1) or experiment files (.toml)")
     parser.add_argument("--out", default="out/analyze", help="output folder [out/analyze]")
     parser.add_argument(
         "--threshold",
@@ -94,12 +101,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _channel_noise(trace, name):
-    value = trace.header.get(f"x_acq_noise_std_n_{name}")
-    if value is not None:
-        return float(value)
-    if trace.noise_std_n is not None:
-        return float(trace.noise_std_n)
-    return None
+    value = trace.channel_noise_std_n(name)
+    return None if value is None else float(value)
 
 
 def _plain(value):
@@ -152,7 +155,7 @@ def _arrival(pulse_and_fit, args):
 def analyze_trace(trace, args):
     """Analyse one `TraceFile`: returns (pulse rows, per-file summary, channels to plot with
     their fits)."""
-    name_of_file = Path(trace.path).name if trace.path else "<trace>"
+    name_of_file = trace.header.get("x_shot") or (Path(trace.path).name if trace.path else "<trace>")
     time = np.asarray(trace.time_s)
     radius = float(trace.header["bead_radius_m"])
     setup = trace.setup(**({} if trace.striker_velocity_m_s else {"striker_velocity_m_s": 0.3}))
@@ -214,6 +217,7 @@ def analyze_trace(trace, args):
     summary = {
         "file": name_of_file,
         "striker_velocity_m_s": trace.striker_velocity_m_s,
+        "nominal_velocity_m_s": _nominal_velocity(trace),
         "noise_std_n": trace.noise_std_n,
         "incident_contacts": sorted(incident),
         "theory": {
@@ -364,8 +368,9 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     all_rows, summaries = [], []
     radius = None
-    for path in args.files:
-        trace = read_trace(path)
+    traces = [source if isinstance(source, TraceFile) else read_trace(source)
+              for source in expand_sources(args.files)]
+    for trace in traces:
         rows, summary, plotted = analyze_trace(trace, args)
         radius = float(trace.header["bead_radius_m"])
         all_rows += rows
@@ -374,7 +379,7 @@ def run(args: argparse.Namespace) -> int:
             np.asarray(trace.time_s),
             plotted,
             summary["file"],
-            out / f"{Path(path).stem}_pulses.png",
+            out / f"{Path(summary['file']).stem}_pulses.png",
         )
         print(
             f"{summary['file']}: {len(rows)} pulses"
@@ -399,7 +404,7 @@ def run(args: argparse.Namespace) -> int:
     law_dict = None
     if len(points) >= 2:
         friction = len(points) >= 3
-        setup = read_trace(args.files[0]).setup(striker_velocity_m_s=0.3)
+        setup = traces[0].setup(striker_velocity_m_s=0.3)
         c = result.get("velocity_law", {}).get("velocity_constant") or float(
             theory.setup_constants(setup)["discrete_velocity_constant"]
         )
@@ -416,6 +421,18 @@ def run(args: argparse.Namespace) -> int:
         _plot_restitution(points, law_dict, out / "restitution.png")
     if any(r["label"] == "incident" for r in all_rows):
         _plot_speed_duration(summaries, all_rows, radius, out / "speed_duration.png")
+    repeats = repeat_scatter(summaries)
+    if repeats:
+        result["repeats"] = repeats
+        buffer = io.StringIO()
+        writer = csv.DictWriter(buffer, fieldnames=list(repeats[0]))
+        writer.writeheader()
+        writer.writerows(repeats)
+        write_text(out / "repeats.csv", buffer.getvalue())
+        for row in repeats:
+            print(f"{row['n_shots']} shots at {row['velocity_m_s']:.4g} m/s: amplitude "
+                  f"{row['amplitude_n_mean']:.4g} +- {row['amplitude_n_sd']:.2g} N, speed "
+                  f"{row['speed_m_s_mean']:.4g} +- {row['speed_m_s_sd']:.2g} m/s (shot-to-shot sd)")
     result["pulses"] = all_rows
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=COLUMNS)
@@ -425,6 +442,41 @@ def run(args: argparse.Namespace) -> int:
     write_json(out / "analysis.json", _json_ready(result))
     print(f"wrote pulses.csv, analysis.json and plots to {out}")
     return 0
+
+
+def _nominal_velocity(trace):
+    value = trace.header.get("x_import_nominal_velocity_m_s")
+    return float(value) if value is not None else trace.striker_velocity_m_s
+
+
+def repeat_scatter(summaries) -> list[dict]:
+    """Shot-to-shot scatter of repeated shots: per group of two or more shots at the same
+    nominal velocity (or measured velocities within `REPEAT_TOLERANCE`), the mean and the
+    sample standard deviation of amplitude, speed, velocity constant, restitution (mean
+    over each shot's contact pairs) and wall force ratio."""
+    groups: list[list[dict]] = []
+    for summary in sorted((s for s in summaries if s["nominal_velocity_m_s"]),
+                          key=lambda s: s["nominal_velocity_m_s"]):
+        v = summary["nominal_velocity_m_s"]
+        if groups and abs(v / groups[-1][0]["nominal_velocity_m_s"] - 1) <= REPEAT_TOLERANCE:
+            groups[-1].append(summary)
+        else:
+            groups.append([summary])
+    rows = []
+    for group in groups:
+        if len(group) < 2:
+            continue
+        row = {"velocity_m_s": float(np.mean([s["nominal_velocity_m_s"] for s in group])),
+               "n_shots": len(group), "shots": " ".join(s["file"] for s in group)}
+        for name in _REPEAT_QUANTITIES:
+            values = [s.get(name) if name != "restitution" else
+                      (float(np.mean([p["restitution"] for p in s["restitution"]])) if s["restitution"] else None)
+                      for s in group]
+            values = [v for v in values if v is not None]
+            row[f"{name}_mean"] = float(np.mean(values)) if values else math.nan
+            row[f"{name}_sd"] = float(np.std(values, ddof=1)) if len(values) >= 2 else math.nan
+        rows.append(row)
+    return rows
 
 
 def _json_ready(value):

@@ -1,0 +1,464 @@
+"""Recorded shots described by an `experiment.toml`, turned into `hertzchain-trace/1` files.
+
+A lab keeps, for a series of shots, the chain it built, how the scope was set, what each
+scope channel measured and with which sensitivity, and which files belong to which shot.
+That is the experiment file::
+
+    [chain]                     # the trace header's keys (see hertzchain.tracefile)
+    n_beads = 21
+    bead_radius_m = 0.013
+    bead_density_kg_m3 = 7780
+    bead_youngs_pa = 203e9
+    bead_poisson = 0.3
+    wall_youngs_pa = 203e9
+    wall_poisson = 0.3
+    striker_mass_kg = 0.0716    # and/or striker_radius_m, if they agree
+
+    [scope]
+    format = "tek-csv"          # or "auto"; hertzchain.scopefiles.FORMATS lists them
+    time_zero = "trigger"       # or a delay in s ("12us"), or "channel:CH3>2.5V" / "channel:CH3<-1V"
+
+    [[channel]]
+    source = "CH1"              # the scope's name of the channel
+    measures = "wall"           # "wall" | "contact_K" | "sensor_K"
+    sensitivity_v_per_n = 0.1124
+    coupling = "ac"             # "ac" (piezo: reads changes of force) | "dc"
+
+    [[channel]]
+    source = "CH2"
+    measures = "sensor_11"
+    sensitivity_v_per_n = 0.01124
+    sensor_beta = 0.11
+    sensor_f0_hz = 85000
+
+    [[shot]]
+    files = ["shot1_CH1.csv", "shot1_CH2.csv"]
+    striker_velocity_m_s = 0.3  # optional: measured, else a fit's nuisance
+
+Keys (unknown keys are an error naming the valid ones; quantities may carry units as
+strings, e.g. `"11.24mV/N"` is not parsed but `"13mm"` is, for keys whose unit is a plain SI
+unit):
+
+- `[chain]`: `CHAIN_KEYS`.
+- `[scope]`: `SCOPE_KEYS`: `format`, `time_zero`, and `baseline_end_s`, the end of the
+  segment from which offsets and noise are taken (default 0: everything before the impact).
+- `[[channel]]`: `CHANNEL_KEYS`: also `noise_std_n` and `offset_v` from a notebook (else
+  estimated from the pre-trigger segment), `range_v = [low, high]` (the digitiser's
+  limits, when the file does not state them), `invert` (a sensor wired with the opposite
+  sign).
+- `[[shot]]`: `SHOT_KEYS`: also `label`, `nominal_velocity_m_s` (shots at the same nominal
+  velocity are repeats, see `hertzchain analyze`), and any `[chain]` key that differs for
+  this shot (another wall, say).
+
+Conditioning (`hertzchain.conditioning`), each step written in the header as `x_import_*`
+keys so a result can be traced back to the files: the time grid made exact; time zero set
+as `time_zero` says, pre-trigger samples kept with negative times; offset removed (the
+notebook's `offset_v`, else the pre-trigger mean); volts to newtons by the sensitivity;
+noise sigma per channel (the notebook's, else the pre-trigger standard deviation with the
+quantisation floor) written as `noise_std_n_<channel>`; samples at the range limit written
+as `clipped_<channel>` (left out of fits). An `"ac"` channel, and a `"dc"` channel whose
+zero comes from the pre-trigger segment, reads the change of force since before the
+impact: it is listed in `ac_channels`, and the model compares it with that change.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from . import conditioning
+from .scopefiles import FORMATS, ScopeFileError, merge_waveforms, read_waveforms
+from .tracefile import FORMAT, HEADER_KEYS, TraceFile, TraceFileError, format_rows, write_trace
+from .units import parse_quantity
+
+# Plausible sensitivities, V/N: from a 0.1 mV/N load cell to a 10 V/N amplified sensor.
+SENSITIVITY_RANGE_V_PER_N = (1e-4, 10.0)
+MEASURES = ("wall", "contact_K", "sensor_K")
+COUPLINGS = ("ac", "dc")
+
+_MEASUREMENT_KEYS = ("format", "striker_velocity_m_s", "noise_std_n", "ac_channels", "sensor_beta",
+                     "sensor_f0_hz")
+CHAIN_KEYS = tuple(k for k in HEADER_KEYS if k not in _MEASUREMENT_KEYS)
+SCOPE_KEYS = ("format", "time_zero", "baseline_end_s")
+CHANNEL_KEYS = ("source", "measures", "sensitivity_v_per_n", "coupling", "noise_std_n", "offset_v",
+                "range_v", "invert", "sensor_beta", "sensor_f0_hz")
+SHOT_KEYS = ("files", "label", "striker_velocity_m_s", "nominal_velocity_m_s", "time_zero") + CHAIN_KEYS
+_TOP_KEYS = ("chain", "scope", "channel", "shot")
+# Units of keys that may be written as strings with a unit ("13mm").
+_UNITS = {"_m": "m", "_pa": "Pa", "_kg": "kg", "_s": "s", "_hz": "Hz", "_n": "N", "_m_s": "m/s",
+          "_kg_m3": "", "_v": "V"}
+
+
+class ExperimentFileError(ValueError):
+    """An experiment file that cannot be imported; the message names the file, the key or
+    shot, and the fix."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Channel:
+    """One scope channel: `source` (scope name), `measures` (trace channel name),
+    `sensitivity_v_per_n`, `coupling`, and optional notebook values `noise_std_n` (N),
+    `offset_v` (V), `range_v` (V, V), `invert`, `sensor_beta`, `sensor_f0_hz`."""
+
+    source: str
+    measures: str
+    sensitivity_v_per_n: float
+    coupling: str = "ac"
+    noise_std_n: float | None = None
+    offset_v: float | None = None
+    range_v: tuple[float, float] | None = None
+    invert: bool = False
+    sensor_beta: float | None = None
+    sensor_f0_hz: float | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class Shot:
+    """One shot: `files` (paths), `label`, measured `striker_velocity_m_s` (or None),
+    `nominal_velocity_m_s` (or None), `time_zero` (its own, or None), `chain` (overrides)."""
+
+    files: tuple[Path, ...]
+    label: str
+    striker_velocity_m_s: float | None
+    nominal_velocity_m_s: float | None
+    time_zero: object
+    chain: dict
+
+
+@dataclasses.dataclass(frozen=True)
+class ExperimentDescription:
+    """A parsed and checked experiment file (see the module docstring)."""
+
+    path: Path
+    chain: dict
+    format: str
+    time_zero: object
+    baseline_end_s: float
+    channels: tuple[Channel, ...]
+    shots: tuple[Shot, ...]
+
+
+def _fail(where, message):
+    raise ExperimentFileError(f"{where}: {message}")
+
+
+def _check_keys(table: dict, valid, where: str) -> None:
+    for key in table:
+        if key not in valid and not key.startswith("x_"):
+            _fail(where, f"unknown key {key!r}; valid keys: {', '.join(valid)} (prefix your own with 'x_').")
+
+
+def _quantity(value, key: str, where: str) -> float:
+    """A number, or a string with a unit matching the key's suffix ("13mm" for *_m)."""
+    if isinstance(value, bool):
+        _fail(where, f"{key} must be a number, got {value!r}.")
+    if isinstance(value, (int, float)):
+        return float(value)
+    unit = next((u for suffix, u in sorted(_UNITS.items(), key=lambda s: -len(s[0])) if key.endswith(suffix)), "")
+    try:
+        return parse_quantity(str(value), unit, name=f"{where}: {key}")
+    except ValueError as error:
+        raise ExperimentFileError(str(error)) from error
+
+
+def _chain_values(table: dict, where: str) -> dict:
+    values = {}
+    for key, value in table.items():
+        if key.startswith("x_"):
+            values[key] = str(value)
+        elif HEADER_KEYS[key].kind is str:
+            values[key] = str(value)
+        elif HEADER_KEYS[key].kind is int:
+            if isinstance(value, bool) or not isinstance(value, int):
+                _fail(where, f"{key} must be an integer, got {value!r}.")
+            values[key] = value
+        else:
+            values[key] = _quantity(value, key, where)
+    return values
+
+
+def _time_zero(value, where: str):
+    """'trigger', a delay in s (the impact's time on the scope's clock), or
+    ('channel', source, level_v, rising)."""
+    if value == "trigger":
+        return value
+    if isinstance(value, str) and value.startswith("channel:"):
+        spec = value[len("channel:"):]
+        for sign, rising in ((">", True), ("<", False)):
+            if sign in spec:
+                source, level = spec.split(sign, 1)
+                try:
+                    return ("channel", source.strip(), parse_quantity(level.strip(), "V"), rising)
+                except ValueError:
+                    break
+        _fail(where, f"time_zero = {value!r}: write 'channel:NAME>LEVEL' or 'channel:NAME<LEVEL' "
+                     "with the level in volts, e.g. 'channel:CH3>2.5V'.")
+    try:
+        return _quantity(value, "time_zero_s", where)
+    except ExperimentFileError:
+        _fail(where, f"time_zero = {value!r}: use 'trigger', a delay such as '12us', or "
+                     "'channel:NAME>LEVEL'.")
+
+
+def _channel(table: dict, where: str) -> Channel:
+    _check_keys(table, CHANNEL_KEYS, where)
+    for key in ("source", "measures", "sensitivity_v_per_n"):
+        if key not in table:
+            _fail(where, f"missing key {key!r}.")
+    measures = str(table["measures"])
+    kind, _, index = measures.partition("_")
+    if not (measures == "wall" or (kind in ("contact", "sensor") and index.isdigit())):
+        _fail(where, f"measures = {measures!r}; use one of {', '.join(MEASURES)} (K a number).")
+    sensitivity = _quantity(table["sensitivity_v_per_n"], "sensitivity_v_per_n", where)
+    low, high = SENSITIVITY_RANGE_V_PER_N
+    if not sensitivity > 0:
+        _fail(where, f"sensitivity_v_per_n = {sensitivity!r} must be positive (V/N); a sensor "
+                     "wired with the opposite sign takes invert = true.")
+    if not low <= sensitivity <= high:
+        _fail(where, f"sensitivity_v_per_n = {sensitivity!r} V/N is outside the plausible range "
+                     f"{low:g}-{high:g} V/N (0.1 mV/N to 10 V/N); give it in V/N (11.24 mV/N is 0.01124).")
+    coupling = str(table.get("coupling", "ac"))
+    if coupling not in COUPLINGS:
+        _fail(where, f"coupling = {coupling!r}; use 'ac' (piezo sensors) or 'dc'.")
+    range_v = table.get("range_v")
+    if range_v is not None:
+        if not (isinstance(range_v, list) and len(range_v) == 2 and float(range_v[0]) < float(range_v[1])):
+            _fail(where, f"range_v = {range_v!r}; give [low, high] in volts with low < high.")
+        range_v = (float(range_v[0]), float(range_v[1]))
+    optional = {}
+    for key in ("noise_std_n", "offset_v", "sensor_beta", "sensor_f0_hz"):
+        if key in table:
+            optional[key] = _quantity(table[key], key, where)
+    if "noise_std_n" in optional and not optional["noise_std_n"] > 0:
+        _fail(where, f"noise_std_n = {optional['noise_std_n']!r} must be positive (N).")
+    if kind == "sensor":
+        for key in ("sensor_beta", "sensor_f0_hz"):
+            if key not in optional:
+                _fail(where, f"{measures} is an embedded sensor: give {key} "
+                             "(the paper's: sensor_beta = 0.11, sensor_f0_hz = 85000).")
+    return Channel(str(table["source"]), measures, sensitivity, coupling, range_v=range_v,
+                   invert=bool(table.get("invert", False)), **optional)
+
+
+def load_experiment(path) -> ExperimentDescription:
+    """Read and check an experiment file; raises `ExperimentFileError` naming what is wrong."""
+    path = Path(path)
+    where = str(path)
+    try:
+        document = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise
+    except tomllib.TOMLDecodeError as error:
+        _fail(where, f"not valid TOML ({error}).")
+    _check_keys(document, _TOP_KEYS, where)
+    for key in ("chain", "channel", "shot"):
+        if key not in document:
+            _fail(where, f"missing [{key}]" + (" table." if key == "chain" else f" entries ([[{key}]])."))
+    chain_table = document["chain"]
+    _check_keys(chain_table, CHAIN_KEYS, f"{where} [chain]")
+    chain = _chain_values(chain_table, f"{where} [chain]")
+    scope = document.get("scope", {})
+    _check_keys(scope, SCOPE_KEYS, f"{where} [scope]")
+    file_format = str(scope.get("format", "auto"))
+    if file_format != "auto" and file_format not in FORMATS:
+        _fail(f"{where} [scope]", f"format = {file_format!r} is not supported; formats: auto, "
+                                  + ", ".join(f"{k} ({v})" for k, v in FORMATS.items()) + ".")
+    time_zero = _time_zero(scope.get("time_zero", "trigger"), f"{where} [scope]")
+    baseline_end = _quantity(scope.get("baseline_end_s", 0.0), "baseline_end_s", f"{where} [scope]")
+
+    channels = tuple(_channel(t, f"{where} [[channel]] #{k + 1}") for k, t in enumerate(document["channel"]))
+    for attribute in ("source", "measures"):
+        seen = {}
+        for k, channel in enumerate(channels):
+            value = getattr(channel, attribute)
+            if value in seen:
+                _fail(where, f"[[channel]] #{seen[value] + 1} and #{k + 1} both have {attribute} = "
+                             f"{value!r}; each scope channel and each measured force appears once.")
+            seen[value] = k
+    sensors = [c for c in channels if c.measures.startswith("sensor_")]
+    for key in ("sensor_beta", "sensor_f0_hz"):
+        values = {getattr(c, key) for c in sensors}
+        if len(values) > 1:
+            _fail(where, f"the embedded sensors have different {key} ({sorted(values)}); the model "
+                         "takes one value for all of them.")
+    n_beads = chain.get("n_beads")
+    for channel in channels:
+        kind, _, index = channel.measures.partition("_")
+        if n_beads and index and not (0 <= int(index) < n_beads if kind == "contact" else 1 <= int(index) <= n_beads):
+            _fail(where, f"measures = {channel.measures!r} is outside a chain of {n_beads} beads.")
+
+    shots, labels = [], set()
+    for k, table in enumerate(document["shot"]):
+        at = f"{where} [[shot]] #{k + 1}"
+        _check_keys(table, SHOT_KEYS, at)
+        files = table.get("files")
+        if isinstance(files, str):
+            files = [files]
+        if not files or not all(isinstance(f, str) for f in files):
+            _fail(at, "files = [...] must list the shot's scope files.")
+        resolved = tuple((path.parent / f) for f in files)
+        missing = [str(f) for f in resolved if not f.is_file()]
+        if missing:
+            _fail(at, f"no such file: {', '.join(missing)} (paths are relative to the experiment file).")
+        label = str(table.get("label", Path(files[0]).stem))
+        if label in labels:
+            label = f"{label}_{k + 1}"
+        labels.add(label)
+        overrides = _chain_values({key: table[key] for key in table if key in CHAIN_KEYS}, at)
+        velocity = table.get("striker_velocity_m_s")
+        nominal = table.get("nominal_velocity_m_s")
+        shots.append(Shot(
+            files=resolved, label=label,
+            striker_velocity_m_s=None if velocity is None else _quantity(velocity, "striker_velocity_m_s", at),
+            nominal_velocity_m_s=None if nominal is None else _quantity(nominal, "nominal_velocity_m_s", at),
+            time_zero=None if "time_zero" not in table else _time_zero(table["time_zero"], at),
+            chain=overrides,
+        ))
+    return ExperimentDescription(path, chain, file_format, time_zero, baseline_end, channels, tuple(shots))
+
+
+def _read_shot(description: ExperimentDescription, shot: Shot, where: str):
+    parts = []
+    for file in shot.files:
+        try:
+            parts.append(read_waveforms(file, description.format))
+        except ScopeFileError as error:
+            raise ExperimentFileError(f"{where}: {error}") from error
+    try:
+        return merge_waveforms(parts, where)
+    except ScopeFileError as error:
+        raise ExperimentFileError(str(error)) from error
+
+
+def condition_shot(description: ExperimentDescription, shot: Shot) -> TraceFile:
+    """The trace file of one shot: its scope files read, merged and conditioned."""
+    where = f"{description.path} shot {shot.label!r}"
+    waves = _read_shot(description, shot, where)
+    missing = [c.source for c in description.channels if c.source not in waves.channels]
+    if missing:
+        _fail(where, f"no channel {', '.join(missing)} in {', '.join(str(f) for f in shot.files)} "
+                     f"(they hold {', '.join(waves.channels) or 'none'}); every shot needs every [[channel]].")
+    try:
+        time, deviation = conditioning.regular_time_grid(waves.time_s, where)
+        time_zero = description.time_zero if shot.time_zero is None else shot.time_zero
+        if time_zero == "trigger":
+            zero = 0.0
+        elif isinstance(time_zero, tuple):
+            _, source, level, rising = time_zero
+            if source not in waves.channels:
+                _fail(where, f"time_zero names channel {source!r}, which the files do not have "
+                             f"({', '.join(waves.channels)}).")
+            zero = conditioning.crossing_time_s(time, waves.channels[source], level, rising, f"{where} {source}")
+        else:
+            zero = float(time_zero)
+        time = time - zero
+        before = time < description.baseline_end_s
+        header = {"format": FORMAT, **description.chain, **shot.chain}
+        info = {"experiment": str(description.path), "files": ";".join(str(f) for f in shot.files),
+                "format": waves.format, "time_zero_s": repr(zero),
+                "time_grid_deviation_samples": f"{deviation:.3g}"}
+        if shot.striker_velocity_m_s is not None:
+            header["striker_velocity_m_s"] = shot.striker_velocity_m_s
+        if shot.nominal_velocity_m_s is not None:
+            info["nominal_velocity_m_s"] = repr(shot.nominal_velocity_m_s)
+        channels, ac, noise = {}, [], {}
+        for channel in description.channels:
+            name, at = channel.measures, f"{where} channel {channel.source} ({channel.measures})"
+            volts = np.asarray(waves.channels[channel.source], dtype=float)
+            step_v = conditioning.quantisation_step(volts, waves.lsb_v.get(channel.source))
+            range_v = channel.range_v or waves.range_v.get(channel.source)
+            clipped = conditioning.clipped_mask(volts, range_v, step_v)
+            needs_baseline = channel.offset_v is None or channel.noise_std_n is None
+            base = conditioning.baseline(volts, before & ~clipped, step_v, at) if needs_baseline else None
+            offset = channel.offset_v if channel.offset_v is not None else base.offset
+            sign = -1.0 if channel.invert else 1.0
+            force = sign * (volts - offset) / channel.sensitivity_v_per_n
+            if channel.noise_std_n is not None:
+                sigma, noise_source = channel.noise_std_n, "notebook"
+            else:
+                sigma, noise_source = base.noise_std / channel.sensitivity_v_per_n, "pre-trigger"
+            referenced_at_rest = channel.coupling == "ac" or channel.offset_v is None
+            if referenced_at_rest:
+                ac.append(name)
+            channels[name] = force
+            noise[name] = sigma
+            header[f"noise_std_n_{name}"] = sigma
+            if clipped.any():
+                header[f"clipped_{name}"] = format_rows(clipped)
+            if name.startswith("sensor_"):
+                header["sensor_beta"] = channel.sensor_beta
+                header["sensor_f0_hz"] = channel.sensor_f0_hz
+            prefix = f"{name}_"
+            info |= {
+                prefix + "source": channel.source,
+                prefix + "sensitivity_v_per_n": repr(channel.sensitivity_v_per_n),
+                prefix + "coupling": channel.coupling,
+                prefix + "invert": str(channel.invert),
+                prefix + "offset_v": repr(float(offset)),
+                prefix + "offset_source": "notebook" if channel.offset_v is not None else
+                f"pre-trigger mean of {base.n_samples} samples",
+                prefix + "noise_source": noise_source,
+                prefix + "quantisation_step_v": "unknown" if step_v is None else repr(step_v),
+                prefix + "range_v": "unknown" if range_v is None else f"{range_v[0]!r};{range_v[1]!r}",
+                prefix + "clipped_samples": str(int(clipped.sum())),
+                prefix + "reads": "change of force since before the impact" if referenced_at_rest
+                else "force (zero from the notebook's offset_v)",
+            }
+        header["noise_std_n"] = max(noise.values())
+        if ac:
+            header["ac_channels"] = ",".join(ac)
+        header |= {f"x_import_{k}": v for k, v in info.items()}
+        header["x_shot"] = shot.label
+        return TraceFile(header=header, time_s=time, channels=channels, path=where)
+    except (conditioning.ConditioningError, TraceFileError) as error:
+        raise ExperimentFileError(str(error)) from error
+
+
+def import_experiment(path) -> list[TraceFile]:
+    """Every shot of an experiment file as a `TraceFile` (in memory; forces in N)."""
+    description = load_experiment(path)
+    return [condition_shot(description, shot) for shot in description.shots]
+
+
+def write_imported(path, out_dir) -> list[Path]:
+    """`import_experiment` written as one trace file per shot, `out_dir/<label>.csv`.
+
+    Every shot is conditioned before anything is written, so a bad shot leaves no files;
+    each file is written atomically.
+    """
+    traces = import_experiment(path)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for trace in traces:
+        target = out / f"{trace.header['x_shot']}.csv"
+        write_trace(target, trace)
+        written.append(target)
+    return written
+
+
+def is_experiment_file(path) -> bool:
+    """Whether a path given where trace files are accepted is an experiment file (`.toml`)."""
+    return str(path).lower().endswith(".toml")
+
+
+def expand_sources(paths) -> list:
+    """Paths of trace files as given, with each experiment file replaced by its shots'
+    `TraceFile`s (imported in memory)."""
+    sources = []
+    for path in paths:
+        if is_experiment_file(path):
+            sources.extend(import_experiment(path))
+        else:
+            sources.append(path)
+    return sources
+
+
+__all__ = [
+    "COUPLINGS", "Channel", "ExperimentDescription", "ExperimentFileError", "MEASURES", "Shot",
+    "condition_shot", "expand_sources", "import_experiment", "is_experiment_file", "load_experiment",
+    "write_imported",
+]

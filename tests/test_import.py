@@ -1,0 +1,266 @@
+"""Recorded data as a lab has it: raw Tektronix CSV shots described by an experiment file,
+imported, fitted and checked against the truth and the Cramér-Rao bound.
+
+The shots are simulated by `hertzchain.simulate` (the default Verlet step, finer sampling
+than the fit's model), recorded by `hertzchain.acquisition` in volts (8 bits, DC offsets,
+a pre-trigger segment) and written by the standard `csv` module in the TDS1000/2000
+layout; only the reader, the importer and the fit are under test. The chain is not the
+paper's: 12 brass beads of 10 mm radius with an embedded sensor in bead 6 and a steel wall.
+"""
+
+import csv
+import math
+import textwrap
+import warnings
+
+import numpy as np
+import pytest
+
+import fitting
+import hertzchain as hc
+from fitting.design import design
+from hertzchain.acquisition import Acquisition, acquire
+from hertzchain.cli import main
+from hertzchain.importer import ExperimentFileError, import_experiment, load_experiment
+from hertzchain.materials import BRASS, BEAD_STEEL
+from hertzchain.tracefile import read_trace
+
+TRUTH = {"eta": 1.5e-6, "mu": 0.15}
+VELOCITIES = (0.05, 0.15, 0.4)
+OFFSETS_V = {"CH1": 0.021, "CH2": -0.013}
+SENSITIVITY = {"CH1": 0.1124, "CH2": 0.01124}
+CHANNELS = {"CH1": "wall", "CH2": "sensor_6"}
+PRE_TRIGGER = 200
+INTERVAL_S = 1e-6
+
+
+def brass_chain(velocity, **extra):
+    return hc.ChainSetup(12, bead_radius_m=0.01, bead_density_kg_m3=BRASS.density_kg_m3,
+                         bead_youngs_pa=BRASS.youngs_pa, bead_poisson=BRASS.poisson,
+                         wall_youngs_pa=BEAD_STEEL.youngs_pa, wall_poisson=BEAD_STEEL.poisson,
+                         sensor_beads=(6,), striker_velocity_m_s=velocity, **extra)
+
+
+def write_tek_csv(path, time_s, volts, source, scale_v):
+    """One channel in the TDS1000/2000 CSV layout, written with the csv module."""
+    settings = [
+        ("Record Length", f"{len(time_s):.6e}"), ("Sample Interval", f"{INTERVAL_S:.6e}"),
+        ("Trigger Point", f"{PRE_TRIGGER:.12e}"), ("", ""), ("", ""), ("", ""),
+        ("Source", source), ("Vertical Units", "V"), ("Vertical Scale", f"{scale_v:.6e}"),
+        ("Vertical Offset", "0.000000e+00"), ("Horizontal Units", "s"),
+        ("Horizontal Scale", f"{100 * INTERVAL_S:.6e}"), ("Pt Fmt", "Y"), ("Yzero", "0.000000e+00"),
+        ("Probe Atten", "1.000000e+00"), ("Model Number", "TDS2012B"), ("Serial Number", "C000001"),
+        ("Firmware Version", "FV:v22.11"),
+    ]
+    with open(path, "w", newline="") as handle:
+        writer = csv.writer(handle, lineterminator="\r\n")
+        for k, (t, v) in enumerate(zip(time_s, volts)):
+            key, value = settings[k] if k < len(settings) else ("", "")
+            writer.writerow([key, value, "", f"{t:.12f}", f"{v:.5f}", ""])
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory):
+    """Three two-channel shots as scope files, and their experiment file."""
+    folder = tmp_path_factory.mktemp("lab")
+    shots = []
+    for k, velocity in enumerate(VELOCITIES):
+        setup = brass_chain(velocity, eta_s=TRUTH["eta"], mu=TRUTH["mu"])
+        run = hc.simulate(setup, t_end_s=1.5e-3, sample_interval_s=0.1e-6, steps_per_contact=800)
+        forces = {source: np.asarray(run.forces_n[name]) for source, name in CHANNELS.items()}
+        peaks = {s: float(np.max(f)) for s, f in forces.items()}
+        # 8 bits over +-5.12 divisions (25 codes per division), the range set to hold the pulse
+        scales = {s: 1.2 * peaks[s] * SENSITIVITY[s] / 4.0 for s in forces}
+        setting = Acquisition(
+            sample_interval_s=INTERVAL_S, record_length=1300 + PRE_TRIGGER + 1, pre_trigger_samples=PRE_TRIGGER,
+            noise_std_n={s: 0.003 * peaks[s] for s in forces}, bits=8, coupling="ac",
+            full_scale_v={s: 5.12 * scales[s] for s in forces}, sensitivity_v_per_n=SENSITIVITY,
+            dc_offset_v=OFFSETS_V,
+        )
+        record = acquire(np.asarray(run.time_s), forces, setting, seed=10 + k)
+        files = []
+        for source in CHANNELS:
+            path = folder / f"shot{k + 1}_{source}.csv"
+            write_tek_csv(path, record.time_s, record.volts[source], source, scales[source])
+            files.append(path.name)
+        shots.append((files, velocity))
+    experiment = folder / "experiment.toml"
+    experiment.write_text(textwrap.dedent(f"""\
+        [chain]
+        n_beads = 12
+        bead_radius_m = "10mm"
+        bead_density_kg_m3 = {BRASS.density_kg_m3}
+        bead_youngs_pa = {BRASS.youngs_pa}
+        bead_poisson = {BRASS.poisson}
+        wall_youngs_pa = {BEAD_STEEL.youngs_pa}
+        wall_poisson = {BEAD_STEEL.poisson}
+
+        [scope]
+        format = "tek-csv"
+        time_zero = "trigger"
+
+        [[channel]]
+        source = "CH1"
+        measures = "wall"
+        sensitivity_v_per_n = 0.1124
+        coupling = "ac"
+
+        [[channel]]
+        source = "CH2"
+        measures = "sensor_6"
+        sensitivity_v_per_n = 0.01124
+        coupling = "ac"
+        sensor_beta = 0.11
+        sensor_f0_hz = 85000
+        """) + "".join(
+        f'\n[[shot]]\nfiles = ["{a}", "{b}"]\nstriker_velocity_m_s = {v}\n' for (a, b), v in shots))
+    return folder, experiment
+
+
+def test_import_conditions_every_shot(lab):
+    folder, experiment = lab
+    traces = import_experiment(experiment)
+    assert [t.header["x_shot"] for t in traces] == ["shot1_CH1", "shot2_CH1", "shot3_CH1"]
+    for trace, velocity in zip(traces, VELOCITIES):
+        assert trace.striker_velocity_m_s == velocity
+        assert trace.channel_names == ("wall", "sensor_6")
+        assert np.sum(trace.time_s < 0) == PRE_TRIGGER and trace.sample_interval_s == pytest.approx(INTERVAL_S)
+        for source, name in CHANNELS.items():
+            # the DC offset is found from the pre-trigger segment to a fraction of a code
+            offset = float(trace.header[f"x_import_{name}_offset_v"])
+            step = float(trace.header[f"x_import_{name}_quantisation_step_v"])
+            assert abs(offset - OFFSETS_V[source]) < 0.3 * step
+            # the noise estimate holds the analogue noise and the quantisation error of a moving
+            # signal; an analogue noise of a quarter step leaves the resting record on two
+            # codes, where the estimate is the codes' spread: on the high side, by up to 1.5x
+            peak = float(np.max(trace.channels[name]))
+            expected = math.sqrt((0.003 * peak) ** 2 + (step / SENSITIVITY[source]) ** 2 / 12)
+            assert 0.9 < float(trace.header[f"noise_std_n_{name}"]) / expected < 1.5
+        assert trace.ac_channels == ("wall", "sensor_6")
+
+
+def test_fit_from_scope_files_recovers_the_truth_at_the_information_limit(lab, tmp_path):
+    folder, experiment = lab
+    out = tmp_path / "fit"
+    assert main(["fit", str(experiment), "--params", "eta,mu,C", "--out", str(out), "--no-plots", "--quiet"]) == 0
+    import json
+
+    fit = json.loads((out / "fit.json").read_text())
+    values = {name: fit["params"][name]["value"] for name in ("eta", "mu", "C")}
+    stderr = {name: fit["params"][name]["stderr"] for name in ("eta", "mu", "C")}
+    c_true = float(fitting.parameters.bare_speed_constant(brass_chain(0.1)))
+    assert values["eta"] == pytest.approx(TRUTH["eta"], rel=0.05)
+    assert values["mu"] == pytest.approx(TRUTH["mu"], rel=0.10)
+    assert values["C"] == pytest.approx(c_true, rel=0.003)
+    # standard errors as the Cramer-Rao bound of the same plan predicts
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", fitting.FitWarning)
+        bound = design(fitting.load_experiments([experiment]), ("eta", "mu", "C"),
+                               values={"eta": TRUTH["eta"], "mu": TRUTH["mu"], "C": c_true})
+    for name in ("eta", "mu", "C"):
+        assert stderr[name] == pytest.approx(bound.stderr[name], rel=0.3), name
+
+    # the same data through `hertzchain import` and the trace files give the same numbers
+    imported = tmp_path / "imported"
+    assert main(["import", str(experiment), "--out", str(imported), "--no-plots"]) == 0
+    files = sorted(str(p) for p in imported.glob("*.csv"))
+    assert len(files) == 3 and read_trace(files[0]).header["x_shot"] == "shot1_CH1"
+    again = tmp_path / "again"
+    assert main(["fit", *files, "--params", "eta,mu,C", "--out", str(again), "--no-plots", "--quiet"]) == 0
+    refit = json.loads((again / "fit.json").read_text())
+    for name in ("eta", "mu", "C"):
+        assert refit["params"][name]["value"] == pytest.approx(values[name], rel=1e-6)
+        assert refit["params"][name]["stderr"] == pytest.approx(stderr[name], rel=1e-4)
+
+
+def _experiment(tmp_path, lab, chain_extra="", channel_extra="", shots=None, scope='format = "tek-csv"'):
+    folder, _ = lab
+    files = shots if shots is not None else f'[[shot]]\nfiles = ["{folder}/shot1_CH1.csv", "{folder}/shot1_CH2.csv"]\n'
+    text = textwrap.dedent(f"""\
+        [chain]
+        n_beads = 12
+        bead_radius_m = 0.01
+        bead_density_kg_m3 = 8500
+        bead_youngs_pa = 110e9
+        bead_poisson = 0.34
+        wall_youngs_pa = 203e9
+        wall_poisson = 0.3
+        {chain_extra}
+        [scope]
+        {scope}
+
+        [[channel]]
+        source = "CH1"
+        measures = "wall"
+        sensitivity_v_per_n = 0.1124
+        {channel_extra}
+        """) + files
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(chain_extra="bead_colour = 1"), r"\[chain\]: unknown key 'bead_colour'; valid keys: n_beads, bead_radius_m"),
+    (dict(scope='format = "lecroy"'), r"format = 'lecroy' is not supported; formats: auto, tek-csv"),
+    (dict(channel_extra="sensitivity_v_per_n = 1"), r"Cannot overwrite|duplicate|defined"),
+    (dict(channel_extra="coupling = \"rf\""), r"coupling = 'rf'; use 'ac' \(piezo sensors\) or 'dc'"),
+    (dict(channel_extra='[[channel]]\nsource = "CH1"\nmeasures = "sensor_3"\nsensitivity_v_per_n = 0.01\n'
+                       'sensor_beta = 0.1\nsensor_f0_hz = 8e4'),
+     r"\[\[channel\]\] #1 and #2 both have source = 'CH1'"),
+    (dict(channel_extra='[[channel]]\nsource = "CH2"\nmeasures = "wall"\nsensitivity_v_per_n = 0.01'),
+     r"\[\[channel\]\] #1 and #2 both have measures = 'wall'"),
+    (dict(channel_extra='[[channel]]\nsource = "CH3"\nmeasures = "contact_4"\nsensitivity_v_per_n = 0.01'),
+     r"no channel CH3 in .*shot1_CH1.csv.* \(they hold CH1, CH2\); every shot needs every \[\[channel\]\]"),
+    (dict(channel_extra='[[channel]]\nsource = "CH2"\nmeasures = "sensor_6"\nsensitivity_v_per_n = 0.01'),
+     r"sensor_6 is an embedded sensor: give sensor_beta"),
+    (dict(shots='[[shot]]\nfiles = ["nowhere.csv"]\n'), r"no such file: .*nowhere.csv"),
+    (dict(shots=""), r"missing \[shot\] entries"),
+    (dict(scope='time_zero = "channel:CH2"'), r"write 'channel:NAME>LEVEL'"),
+    (dict(scope='time_zero = "channel:CH2>50V"'), r"never goes above 50 V"),
+])
+def test_bad_experiment_files_say_what_is_wrong(tmp_path, lab, change, message):
+    path = _experiment(tmp_path, lab, **change)
+    with pytest.raises((ExperimentFileError, ValueError), match=message):
+        import_experiment(path)
+
+
+@pytest.mark.parametrize("sensitivity, message", [
+    ("0", r"sensitivity_v_per_n = 0.0 must be positive \(V/N\)"),
+    ("-0.1", r"must be positive \(V/N\); a sensor wired with the opposite sign takes invert = true"),
+    ("11.24", r"sensitivity_v_per_n = 11.24 V/N is outside the plausible range 0.0001-10 V/N"),
+    ("1e-5", r"outside the plausible range"),
+])
+def test_implausible_sensitivities_are_refused(tmp_path, lab, sensitivity, message):
+    path = _experiment(tmp_path, lab)
+    path.write_text(path.read_text().replace("sensitivity_v_per_n = 0.1124", f"sensitivity_v_per_n = {sensitivity}"))
+    with pytest.raises(ExperimentFileError, match=message):
+        load_experiment(path)
+
+
+def test_records_without_pre_trigger_need_the_notebook_values(tmp_path, lab):
+    folder, _ = lab
+    path = _experiment(tmp_path, lab)
+    # a delay of -1 ms puts time zero before the whole record: nothing is before the impact
+    path.write_text(path.read_text().replace('format = "tek-csv"', 'format = "tek-csv"\ntime_zero = "-1ms"'))
+    with pytest.raises(ExperimentFileError, match=r"only 0 samples before the impact.*give the channel's "
+                                                  r"offset_v and noise_std_n"):
+        import_experiment(path)
+    path.write_text(path.read_text().replace("sensitivity_v_per_n = 0.1124",
+                                             "sensitivity_v_per_n = 0.1124\noffset_v = 0.021\nnoise_std_n = 0.05\ncoupling = \"dc\""))
+    trace = import_experiment(path)[0]
+    assert trace.time_s[0] == pytest.approx(-PRE_TRIGGER * INTERVAL_S + 1e-3)
+    assert trace.channel_noise_std_n("wall") == 0.05 and trace.ac_channels == ()
+    assert trace.header["x_import_wall_offset_source"] == "notebook"
+
+
+def test_time_zero_from_a_trigger_channel_crossing(tmp_path, lab):
+    folder, _ = lab
+    path = _experiment(tmp_path, lab, scope='format = "tek-csv"\ntime_zero = "channel:CH1>0.5V"')
+    trace = import_experiment(path)[0]
+    # the wall channel crosses 0.5 V when its force passes (0.5 - offset)/sensitivity
+    force = trace.channels["wall"]
+    level_n = (0.5 - OFFSETS_V["CH1"]) / SENSITIVITY["CH1"]
+    k = int(np.argmax(force > level_n))
+    assert trace.time_s[k - 1] <= 1e-9 and trace.time_s[k] >= -1e-9
+    assert float(trace.header["x_import_time_zero_s"]) > 5e-4  # the wall is hit late
