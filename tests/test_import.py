@@ -264,3 +264,19 @@ def test_time_zero_from_a_trigger_channel_crossing(tmp_path, lab):
     k = int(np.argmax(force > level_n))
     assert trace.time_s[k - 1] <= 1e-9 and trace.time_s[k] >= -1e-9
     assert float(trace.header["x_import_time_zero_s"]) > 5e-4  # the wall is hit late
+
+
+def test_analyze_and_design_take_the_experiment_file(lab, tmp_path):
+    import json
+
+    folder, experiment = lab
+    assert main(["analyze", str(experiment), "--out", str(tmp_path / "analyze")]) == 0
+    analysis = json.loads((tmp_path / "analyze" / "analysis.json").read_text())
+    assert [f["file"] for f in analysis["files"]] == ["shot1_CH1", "shot2_CH1", "shot3_CH1"]
+    # the wall pulse arrives once, after the pre-trigger segment: the first pulse is the wall's
+    walls = [r for r in analysis["pulses"] if r["channel"] == "wall" and r["label"] == "wall"]
+    assert len(walls) == 3 and all(r["peak_time_s"] > 0 for r in walls)
+    assert main(["design", str(experiment), "--eta", "1.5us", "--mu", "0.15",
+                 "--out", str(tmp_path / "design")]) == 0
+    planned = json.loads((tmp_path / "design" / "design.json").read_text())
+    assert planned["params"]["eta"]["stderr"] > 0 and len(planned["plan"]) == 3

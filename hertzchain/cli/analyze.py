@@ -304,10 +304,13 @@ def _plot_speed_duration(summaries, rows, radius_m, path):
         speed_axes.plot(
             grid, c_n * grid ** (1 / 6), "k--", lw=1, label=f"discrete chain, C_n = {c_n:.1f}"
         )
-    speed_axes.set_xscale("log")
+        speed_axes.set_xscale("log")
+        speed_axes.legend(fontsize=8)
+    else:
+        speed_axes.text(0.5, 0.5, "no speed: it needs two measured contacts per file",
+                        ha="center", va="center", transform=speed_axes.transAxes)
     speed_axes.set_xlabel("amplitude F_m (N)")
     speed_axes.set_ylabel("speed v (m/s)")
-    speed_axes.legend(fontsize=8)
     incident = [
         r
         for r in rows
