@@ -10,10 +10,11 @@ same contact laws from `contact`, so the results agree to round-off), but
 - the state is laid out as (rows, B), the batch on the fast axis, so every operation of
   a step is one vector instruction over chains; the wall is one more body (at rest), so
   that all contact forces, wall included, are one elementwise expression;
-- the state (displacements, half-step velocities, running maxima) is one packed array and
-  a step is two fused loops, the contact forces and then the update of the whole state,
-  kept apart by `optimization_barrier` (XLA otherwise makes one loop per state variable
-  plus one per shifted copy; see `benchmarks/README.md`);
+- the state (displacements, half-step velocities, running maxima) is one packed array,
+  rebuilt by each step behind an `optimization_barrier`: XLA compiles the whole step into
+  one fused loop (it would otherwise make one loop per state variable and per shifted
+  copy, and fuse successive steps' concatenations into each other), plus a small one for
+  the recorded channels; see `benchmarks/README.md`;
 - a `lax.scan` iteration advances a block of about `block_steps` steps, fully unrolled,
   and writes the chosen forces of all its samples straight into (B, n_samples) outputs;
 - the batch can be split over several devices (`devices=`) with `jax.shard_map`, e.g. the
@@ -238,8 +239,8 @@ def _energy(p, flags: _Flags, x, v):
 
 
 class _Layout(NamedTuple):
-    """Row ranges of the packed state: one (rows, B) array, so that a step is two fused
-    loops (the forces, then everything else) instead of one per state variable."""
+    """Row ranges of the packed state: one (rows, B) array, so that a step is one fused
+    loop instead of one per state variable."""
 
     bodies: int
 
@@ -263,18 +264,17 @@ class _Layout(NamedTuple):
 
 
 def _step(p, flags: _Flags, layout: _Layout, dt: float, state):
-    """One velocity-Verlet step on the packed state (the order of `integrate.verlet_step`):
-    returns the new state and the total contact forces (n_bodies, B), N."""
+    """One velocity-Verlet step on the packed state (the order of `integrate.verlet_step`)."""
     h = 0.5 * dt
     s = layout.unpack(flags, state)
     barrier = jax.lax.optimization_barrier
     if not flags.viscous:
         x = s["x"] + dt * s["u"]
-        force = barrier(_contact_forces(p, flags, x, None)[0])
+        force = _contact_forces(p, flags, x, None)[0]
         a = _body_force(force, p["external"] if flags.preload else None) * p["inv_mass"]
         v = s["u"] + h * a
         new = {"x": x, "u": v + h * a, "max": jnp.maximum(s["max"], force)}
-        return barrier(layout.pack(flags, new)), force
+        return barrier(layout.pack(flags, new))
     v_half = s["v"] + h * s["a"]
     x = s["x"] + dt * v_half
     total, elastic = _contact_forces(p, flags, x, v_half + h * s["a"])
@@ -289,7 +289,7 @@ def _step(p, flags: _Flags, layout: _Layout, dt: float, state):
         "x": x, "v": v, "a": a, "max": jnp.maximum(s["max"], total), "viscous": viscous,
         "dissipated": s["dissipated"] - work[None],
     }
-    return barrier(layout.pack(flags, new)), total
+    return barrier(layout.pack(flags, new))
 
 
 def _initial(p, flags: _Flags, layout: _Layout, dt: float):
@@ -335,19 +335,17 @@ def _kernel(p, *, flags: _Flags, grid: TimeGrid, rows: tuple[int, ...], block_st
     def sample(state):
         if steps <= block_steps:
             for _ in range(steps):
-                state, force = _step(p, flags, layout, dt, state)
+                state = _step(p, flags, layout, dt, state)
         else:
             def body(carry, _):
-                return _step(p, flags, layout, dt, carry)[0], None
+                return _step(p, flags, layout, dt, carry), None
 
-            state = jax.lax.scan(body, state, None, length=steps - 1, unroll=block_steps)[0]
-            state, force = _step(p, flags, layout, dt, state)
-        if flags.viscous:
-            # Samples record the forces at the step's final velocity, as `solve` does.
-            s = layout.unpack(flags, state)
-            force = _contact_forces(p, flags, s["x"], s["v"], channels)[0]
-            return state, jax.lax.optimization_barrier(force)
-        return state, jax.lax.optimization_barrier(jnp.stack([force[c] for c in channels]))
+            state = jax.lax.scan(body, state, None, length=steps, unroll=block_steps)[0]
+        # The recorded channels alone, from the new state (with viscous damping, at the
+        # step's final velocity, as `solve` records them).
+        s = layout.unpack(flags, state)
+        force = _contact_forces(p, flags, s["x"], s.get("v"), channels)[0]
+        return state, jax.lax.optimization_barrier(force)
 
     def iteration(count):
         # `count` samples, written straight into the (B, n_samples) outputs at `first`.
@@ -357,9 +355,9 @@ def _kernel(p, *, flags: _Flags, grid: TimeGrid, rows: tuple[int, ...], block_st
             for _ in range(count):
                 state, record = sample(state)
                 records.append(record)
+            block = jax.lax.optimization_barrier(jnp.stack(records))  # (count, channels, B)
             traces = tuple(
-                jax.lax.dynamic_update_slice(trace, jnp.stack([r[i] for r in records], axis=1), (0, first))
-                for i, trace in enumerate(traces)
+                jax.lax.dynamic_update_slice(trace, block[:, i, :].T, (0, first)) for i, trace in enumerate(traces)
             )
             return (state, traces), None
 

@@ -80,3 +80,19 @@ def test_contact_laws_are_elementwise_in_any_layout():
     total = np.asarray(contact.contact_force(overlap, rate, kappa, 2e-6)[1])
     assert np.all(total >= 0.0) and np.any((overlap > 0) & (total == 0.0))  # clipped while in contact
     np.testing.assert_allclose(contact.hertz_force(overlap, kappa), kappa * np.maximum(overlap, 0) ** 1.5, rtol=1e-15)
+
+
+def test_forward_mode_derivatives_finite_at_contact_onset():
+    """Tangents (jax.jvp, what jacfwd pushes through the solvers) of every law are finite
+    at and just outside contact, and zero there."""
+    laws = (
+        lambda d, r: contact.hertz_force(d, 1.2e10),
+        lambda d, r: contact.hertz_potential(d, 1.2e10),
+        lambda d, r: contact.contact_force(d, r, 1.2e10, 2e-6)[1],
+    )
+    for law in laws:
+        for point in (0.0, -1e-9):
+            _, tangent = jax.jvp(law, (jnp.asarray(point), jnp.asarray(0.3)), (jnp.asarray(1.0), jnp.asarray(1.0)))
+            assert np.isfinite(float(tangent)) and float(tangent) == 0.0
+    _, tangent = jax.jvp(lambda d: contact.hertz_force(d, 1.2e10), (jnp.asarray(1e-6),), (jnp.asarray(1.0),))
+    assert float(tangent) == pytest.approx(1.5 * 1.2e10 * 1e-3, rel=1e-12)  # dF/dd = 3/2 kappa sqrt(d)
