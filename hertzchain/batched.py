@@ -205,16 +205,29 @@ def _contact_forces(p, flags: _Flags, x, v, contacts=None):
         return rows(a[:-1]), rows(a[1:])
 
     front, back = pair(x)
-    overlap = front - back + rows(p["overlap0"])
+    rate = None
     if flags.viscous:
         front_v, back_v = pair(v)
-        elastic, total = contact.contact_force(overlap, front_v - back_v, rows(p["kappa"]), p["eta"])
+        rate = front_v - back_v
+    return _forces_at(p, flags, front - back + rows(p["overlap0"]), rate, rows)
+
+
+def _forces_at(p, flags: _Flags, overlap, rate, rows=lambda a: a):
+    """Total and elastic contact forces, N, at the given overlaps (m) and overlap rates
+    (m/s; None without damping), of the contacts that `rows` picks from the parameters."""
+    if flags.viscous:
+        elastic, total = contact.contact_force(overlap, rate, rows(p["kappa"]), p["eta"])
     else:
         elastic = total = contact.hertz_force(overlap, rows(p["kappa"]))
     if flags.springs:
         spring = contact.spring_force(overlap, rows(p["spring"]))
         elastic, total = elastic + spring, total + spring
     return total, elastic
+
+
+def _overlaps(p, x):
+    """Overlap of every contact, wall last (n_bodies, B), m."""
+    return x[:-1] - x[1:] + p["overlap0"]
 
 
 def _body_force(force, external=None):
@@ -249,7 +262,8 @@ class _Layout(NamedTuple):
         if flags.viscous:
             # x, v, a at the step; running maxima; viscous body forces; dissipated energy
             return (("x", b), ("v", b), ("a", b), ("max", c), ("viscous", b), ("dissipated", 1))
-        # x, u = v + (dt/2) a (the next half-kick's velocity), running maxima
+        # x, u = v + (dt/2) a (the next half-kick's velocity), largest overlaps so far
+        # (the elastic forces grow with the overlap, so their maxima are the forces there)
         return (("x", b), ("u", b), ("max", c))
 
     def unpack(self, flags: _Flags, state) -> dict:
@@ -273,7 +287,7 @@ def _step(p, flags: _Flags, layout: _Layout, dt: float, state):
         force = _contact_forces(p, flags, x, None)[0]
         a = _body_force(force, p["external"] if flags.preload else None) * p["inv_mass"]
         v = s["u"] + h * a
-        new = {"x": x, "u": v + h * a, "max": jnp.maximum(s["max"], force)}
+        new = {"x": x, "u": v + h * a, "max": jnp.maximum(s["max"], _overlaps(p, x))}
         return barrier(layout.pack(flags, new))
     v_half = s["v"] + h * s["a"]
     x = s["x"] + dt * v_half
@@ -302,7 +316,7 @@ def _initial(p, flags: _Flags, layout: _Layout, dt: float):
         parts = {"x": x, "v": v, "a": a, "max": total, "viscous": _body_force(total - elastic),
                  "dissipated": jnp.zeros_like(x[:1])}
     else:
-        parts = {"x": x, "u": v + 0.5 * dt * a, "max": total}
+        parts = {"x": x, "u": v + 0.5 * dt * a, "max": _overlaps(p, x)}
     return layout.pack(flags, parts), x, v
 
 
@@ -384,7 +398,10 @@ def _run(params, flags, grid, rows, block_steps, devices):
         x, v, dissipated = _final(p, flags, layout, grid.dt_s, state)
         kinetic, potential = _energy(p, flags, x, v)
         summary = jnp.stack([initial, kinetic, potential, dissipated])
-        return traces, layout.unpack(flags, state)["max"], summary
+        maxima = layout.unpack(flags, state)["max"]
+        if not flags.viscous:
+            maxima = _forces_at(p, flags, maxima, None)[0]
+        return traces, maxima, summary
 
     if devices is None or len(devices) == 1:
         return local(params)
