@@ -191,6 +191,10 @@ def _make_verbose(report):
     return verbose
 
 
+# Fractions of the Gauss-Newton step tried at the end of a fit (see `_solve_batch`).
+_LINE_FRACTIONS = jnp.asarray([1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125])
+
+
 def _make_solver(tolerance: float, n_residuals: int, report=None):
     """Levenberg-Marquardt that stops when a step moves the whitened residuals little.
 
@@ -239,13 +243,16 @@ def _solve_batch(problem, constants, solver, max_steps, tolerance, batched_data,
         jac = jax.jacfwd(problem.residuals)(x, y)  # with respect to the physical values
         # Gauss-Newton's predicted remaining decrease of chi^2 at the end point (free columns);
         # where the loss is only piecewise smooth (stick-slip friction) the prediction can
-        # promise a decrease no step delivers: the end point is an optimum when the Gauss-
-        # Newton step itself does not lower chi^2 by `tolerance` either
+        # promise a decrease no step delivers: when the optimiser stopped by its own test, the
+        # end point is an optimum if no fraction of the Gauss-Newton step (1, 1/2, ... 1/32)
+        # lowers chi^2 by `tolerance` either
         free_jac = jnp.where(mask[None, :], jac, 0.0)
         step = jnp.linalg.lstsq(free_jac, r)[0]
         decrement = jnp.sum((free_jac @ step) ** 2)
-        realised = jnp.sum(r**2) - jnp.sum(problem.residuals(x - step, y) ** 2)
-        ok = jnp.all(jnp.isfinite(r)) & ((decrement < tolerance) | (jnp.isfinite(realised) & (realised < tolerance)))
+        chi2_at = jax.vmap(lambda t: jnp.sum(problem.residuals(x - t * step, y) ** 2))(_LINE_FRACTIONS)
+        realised = jnp.sum(r**2) - jnp.min(jnp.where(jnp.isfinite(chi2_at), chi2_at, jnp.inf))
+        at_kink = (solution.result == optx.RESULTS.successful) & (realised < tolerance)
+        ok = jnp.all(jnp.isfinite(r)) & ((decrement < tolerance) | at_kink)
         return z, ok, solution.stats["num_steps"], jnp.sum(r**2), r, jac
 
     if starts.shape[0] == 1 and not batched_data:
@@ -476,8 +483,9 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
     - `max_steps`: optimiser iterations per start.
     - `tolerance`: a start has converged when Gauss-Newton predicts less than `tolerance`
       further decrease of chi^2 from where it stopped (0.1: a third of a standard error
-      at most), or when its step does not deliver that decrease (a kink of the stick-slip
-      loss); the optimiser stops when a step moves the whitened residuals by less than
+      at most), or, once the optimiser has stopped by its own test, when no fraction of
+      that step delivers the decrease (a kink of the stick-slip loss); the optimiser stops
+      when a step moves the whitened residuals by less than
       `tolerance` (2-norm).
     - `covariance`: "auto", "noise" or "residual" (see `fitting.uncertainty`).
     - `profile`: labels to compute profile-likelihood intervals for.
