@@ -8,6 +8,8 @@ run time of every diagnosis) into `--out`.
 
     python benchmarks/confusion.py --quick            # 8-bead chain, one seed per row
     python benchmarks/confusion.py --seeds 3 --pairs  # the paper's 21-bead chain, pairs too
+    python benchmarks/confusion.py --independent      # data from elsewhere (independent_data.py):
+                                                      # paper and brass setups, diffrax, piezo, 11 bits
 """
 
 from __future__ import annotations
@@ -24,19 +26,28 @@ import hertzchain  # noqa: E402,F401
 from fitting.diagnosis import diagnose  # noqa: E402
 from fitting.effects import EFFECT_NAMES  # noqa: E402
 from fitting.hidden import hidden_effect_traces  # noqa: E402
+from independent_data import SETUPS, hidden_records  # noqa: E402
 from hertzchain.atomic import write_json, write_text  # noqa: E402
 
 PAIRS = (("viscous_damping", "wall_compliance"), ("track_friction", "sensor_dynamics"),
          ("viscous_damping", "track_friction"))
 
 
-def run_case(hidden, seed, *, n_beads, noise_fraction, contacts, velocities):
-    files = hidden_effect_traces(hidden, n_beads=n_beads, contacts=contacts, velocities_m_s=velocities,
-                                 noise_fraction=noise_fraction, seed=seed)
+def run_case(hidden, seed, *, n_beads=None, noise_fraction=None, contacts=None, velocities=None, setup=None,
+             code_path=None):
+    """One diagnosis of data with `hidden` effects: from `fitting.hidden` or, with `setup`,
+    from `independent_data.hidden_records(setup, hidden, code_path=...)`."""
+    if setup is None:
+        files = hidden_effect_traces(hidden, n_beads=n_beads, contacts=contacts, velocities_m_s=velocities,
+                                     noise_fraction=noise_fraction, seed=seed)
+    else:
+        files = hidden_records(setup, hidden, code_path=code_path, seed=seed)
     began = time.perf_counter()
     result = diagnose(files, progress=False)
     return {
         "hidden": list(hidden),
+        "setup": setup or f"{n_beads} beads (fitting.hidden)",
+        "code_path": code_path or "verlet",
         "seed": seed,
         "named": list(result.missing_effects),
         "correct": sorted(result.missing_effects) == sorted(hidden),
@@ -79,6 +90,10 @@ def main(argv=None) -> int:
     parser.add_argument("--n-beads", type=int, default=None)
     parser.add_argument("--noise", type=float, default=0.005, help="noise sigma / largest signal")
     parser.add_argument("--effects", default="", help="comma-separated subset of rows (default all)")
+    parser.add_argument("--independent", action="store_true",
+                        help="data from independent_data.py: --setups, --code-path, the pair viscous+wall")
+    parser.add_argument("--setups", default="paper,brass", help="with --independent [paper,brass]")
+    parser.add_argument("--code-path", default="diffrax", choices=("diffrax", "verlet"))
     parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     args = parser.parse_args(argv)
     n_beads = args.n_beads or (8 if args.quick else 21)
@@ -90,30 +105,43 @@ def main(argv=None) -> int:
     if args.effects:
         wanted = [e.strip() for e in args.effects.split(",") if e.strip()]
         cases = [c for c in cases if ("+".join(c) or "none") in wanted]
+    setups = [s.strip() for s in args.setups.split(",") if s.strip()] if args.independent else [None]
+    if args.independent:
+        cases = [c for c in cases if len(c) < 2] + [("viscous_damping", "wall_compliance")]
+        if args.effects:
+            cases = [c for c in cases if ("+".join(c) or "none") in wanted]
     rows = []
     began = time.perf_counter()
-    total = len(cases) * args.seeds
-    for case in cases:
-        for seed in range(args.seeds):
-            row = run_case(case, 100 + seed, n_beads=n_beads, noise_fraction=args.noise, contacts=contacts,
-                           velocities=velocities)
-            rows.append(row)
-            print(f"[{len(rows)}/{total}] hidden {'+'.join(case) or 'none'} seed {seed}: named "
-                  f"{', '.join(row['named']) or 'none'} ({row['runtime_s']:.0f} s)", flush=True)
+    total = len(cases) * args.seeds * len(setups)
+    for setup in setups:
+        for case in cases:
+            for seed in range(args.seeds):
+                row = run_case(case, 100 + seed, n_beads=n_beads, noise_fraction=args.noise, contacts=contacts,
+                               velocities=velocities, setup=setup, code_path=args.code_path if setup else None)
+                rows.append(row)
+                print(f"[{len(rows)}/{total}] {row['setup']}: hidden {'+'.join(case) or 'none'} seed {seed}: "
+                      f"named {', '.join(row['named']) or 'none'} ({row['runtime_s']:.0f} s)", flush=True)
     elapsed = time.perf_counter() - began
     columns = ["none"] + list(EFFECT_NAMES)
     out = Path(args.out)
-    stem = "confusion_quick" if args.quick else "confusion"
+    stem = "confusion_independent" if args.independent else ("confusion_quick" if args.quick else "confusion")
     settings = {"n_beads": n_beads, "contacts": contacts, "velocities_m_s": velocities, "noise_fraction": args.noise,
                 "seeds": args.seeds, "quick": args.quick}
+    if args.independent:
+        settings = {"setups": {name: {k: v for k, v in SETUPS[name].items() if k != "fields"} for name in setups},
+                    "code_path": args.code_path, "seeds": args.seeds,
+                    "data": "independent_data.py: 0.5 % noise, 11 bits, 2 us, piezo channels, true header velocity"}
     write_json(out / f"{stem}.json", {"settings": settings, "rows": rows, "runtime_s": elapsed})
-    csv = ["hidden,seed,named,correct,alarm,gap_base,gap_final,runtime_s"]
+    csv = ["setup,code_path,hidden,seed,named,correct,alarm,gap_base,gap_final,runtime_s"]
     for r in rows:
-        csv.append(f"{'+'.join(r['hidden']) or 'none'},{r['seed']},{'+'.join(r['named']) or 'none'},"
-                   f"{r['correct']},{r['alarm']},{r['gap_base']:.6g},{r['gap_final']:.6g},{r['runtime_s']:.1f}")
+        csv.append(f"{r['setup']},{r['code_path']},{'+'.join(r['hidden']) or 'none'},{r['seed']},"
+                   f"{'+'.join(r['named']) or 'none'},{r['correct']},{r['alarm']},{r['gap_base']:.6g},"
+                   f"{r['gap_final']:.6g},{r['runtime_s']:.1f}")
     write_text(out / f"{stem}.csv", "\n".join(csv) + "\n")
-    md = (f"# Diagnosis confusion table\n\n{json.dumps(settings)}\n\n" + table(rows, columns)
-          + f"\nTotal run time {elapsed:.0f} s ({len(rows)} diagnoses).\n")
+    md = f"# Diagnosis confusion table\n\n{json.dumps(settings)}\n\n"
+    for setup in dict.fromkeys(r["setup"] for r in rows):
+        md += f"## {setup}\n\n" + table([r for r in rows if r["setup"] == setup], columns) + "\n"
+    md += f"Total run time {elapsed:.0f} s ({len(rows)} diagnoses).\n"
     write_text(out / f"{stem}.md", md)
     print(md)
     return 0

@@ -1,0 +1,120 @@
+"""Records with a hidden effect made outside the diagnosis's own generator (`fitting.hidden`),
+for the confusion table of `benchmarks/confusion.py --independent`.
+
+Two setups: the paper's chain (21 steel beads of 13 mm, an identical striker) and a brass
+one (15 beads of 5 mm radius struck by a 3 mm brass ball). Two code paths: the diffrax
+reference solver (adaptive Dopri8, `hertzchain.reference`; Coulomb friction there is its
+tanh regularisation, plasticity is not available and falls back to the Verlet solver at
+four times the diagnosis's steps), or the Verlet solver at 800 steps per contact. Embedded
+sensors, when hidden, follow the paper's filter form of Eq. 4 applied after the
+simulation (`hertzchain.sensor.sensor_signal`), not the split-bead mechanics the
+diagnosis's compliance form is built on. Each record goes through `hertzchain.acquisition`:
+0.5 % noise per channel, an 11-bit converter, 2 us sampling, piezo (AC-coupled) channels,
+the header's striker velocity true and the trigger at the impact; the files do not state
+their coupling (an independent generator's files do not), and the header describes the
+nominal chain.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+import hertzchain as hc
+from hertzchain.acquisition import Acquisition, acquire
+from hertzchain.materials import BRASS
+from hertzchain.reference import simulate_reference
+from hertzchain.sensor import sensor_signal
+from hertzchain.tracefile import TraceFile, format_rows, setup_header
+
+SETUPS = {
+    "paper": dict(n_beads=21, fields={}, contacts=(6, 11), velocities_m_s=(0.05, 0.12, 0.3, 0.6, 1.0),
+                  record_s=1.7e-3),
+    "brass": dict(n_beads=15, contacts=(5, 10), velocities_m_s=(0.05, 0.15, 0.5, 1.0, 1.5), record_s=0.7e-3,
+                  fields=dict(bead_radius_m=5e-3, bead_density_kg_m3=BRASS.density_kg_m3,
+                              bead_youngs_pa=BRASS.youngs_pa, bead_poisson=BRASS.poisson,
+                              striker_radius_m=3e-3)),
+}
+# Hidden strengths (SI); plasticity's is the yield force as a share of the largest force any
+# bead-bead contact of the data set reaches elastically.
+STRENGTHS = {"viscous_damping": 1e-6, "track_friction": 0.19, "rotational_friction": 0.03,
+             "sensor_dynamics": (0.11, 85e3), "wall_compliance": 20e9, "bead_dispersion": 0.005,
+             "precompression": 2.0, "plasticity": 0.6}
+
+
+def _true_fields(setup_name: str, hidden, rng) -> dict:
+    spec = SETUPS[setup_name]
+    nominal = hc.ChainSetup(spec["n_beads"], **spec["fields"])
+    fields = dict(spec["fields"])
+    for name in hidden:
+        value = STRENGTHS[name]
+        if name == "viscous_damping":
+            fields["eta_s"] = value
+        elif name == "track_friction":
+            fields["mu"] = value
+        elif name == "rotational_friction":
+            fields["mu_star"] = value
+        elif name == "wall_compliance":
+            fields["wall_youngs_pa"] = value
+        elif name == "precompression":
+            fields["precompression_n"] = value
+        elif name == "bead_dispersion":
+            scatter = np.clip(rng.standard_normal(spec["n_beads"]), -2.5, 2.5)
+            fields["bead_radius_m"] = np.asarray(nominal.bead_radius_m) * (1.0 + value * scatter)
+            fields["bead_density_kg_m3"] = np.asarray(nominal.bead_density_kg_m3)
+            fields["striker_radius_m"] = float(nominal.striker_radius_m)
+        elif name == "plasticity":
+            fastest = hc.ChainSetup(spec["n_beads"], striker_velocity_m_s=max(spec["velocities_m_s"]),
+                                    **spec["fields"])
+            peak = float(np.max(np.asarray(hc.simulate(fastest, t_end_s=spec["record_s"], contacts=(2,),
+                                                       on_yield="ignore").forces_n["contact_2"])))
+            nominal_force = float(nominal.contact_yield_force_n()[1])
+            fields["plasticity"] = True
+            fields["bead_yield_stress_pa"] = float(nominal.bead_yield_stress_pa) * (value * peak / nominal_force) ** (1 / 3)
+    return fields
+
+
+def hidden_records(setup_name: str, hidden=(), *, code_path: str = "diffrax", seed: int = 0) -> list[TraceFile]:
+    """Records of `setup_name` ("paper" or "brass") with the `hidden` effects (identifiers of
+    `fitting.effects`, strengths `STRENGTHS`) from `code_path` ("diffrax" or "verlet")."""
+    if code_path not in ("diffrax", "verlet"):
+        raise ValueError(f"code_path must be 'diffrax' or 'verlet', got {code_path!r}.")
+    spec = SETUPS[setup_name]
+    rng = np.random.default_rng(seed)
+    fields = _true_fields(setup_name, hidden, rng)
+    sensor = "sensor_dynamics" in hidden
+    contacts = spec["contacts"]
+    simulated = tuple(sorted(set(contacts) | ({k - 1 for k in contacts} if sensor else set())))
+    files = []
+    for k, velocity in enumerate(spec["velocities_m_s"]):
+        truth = hc.ChainSetup(spec["n_beads"], striker_velocity_m_s=velocity, **fields)
+        nominal = hc.ChainSetup(spec["n_beads"], striker_velocity_m_s=velocity, **spec["fields"])
+        if code_path == "diffrax" and not truth.plasticity:
+            run = simulate_reference(truth, t_end_s=spec["record_s"], sample_interval_s=0.25e-6,
+                                     contacts=simulated, rtol=1e-9)
+        else:
+            run = hc.simulate(truth, t_end_s=spec["record_s"], sample_interval_s=0.25e-6, contacts=simulated,
+                              steps_per_contact=800, on_yield="ignore")
+        time = np.asarray(run.time_s)
+        forces = {f"contact_{c}": np.asarray(run.forces_n[f"contact_{c}"]) for c in contacts}
+        forces["wall"] = np.asarray(run.forces_n["wall"])
+        if sensor:
+            beta, f0_hz = STRENGTHS["sensor_dynamics"]
+            for c in contacts:
+                forces[f"contact_{c}"] = np.asarray(sensor_signal(
+                    jnp.asarray(time), jnp.asarray(run.forces_n[f"contact_{c}"]),
+                    jnp.asarray(run.forces_n[f"contact_{c - 1}"]), beta=beta, f0_hz=f0_hz))
+        rest = float(truth.precompression_n)
+        noise = {n: 0.005 * float(np.max(f) - rest) for n, f in forces.items()}
+        setting = Acquisition(sample_interval_s=2e-6, noise_std_n=noise, bits=11, coupling="ac")
+        record = acquire(time, forces, setting, seed=1000 * seed + k, static_n=rest)
+        header = setup_header(nominal)  # the nominal chain; the true impact velocity
+        header["noise_std_n"] = max(record.noise_std_n.values())
+        for name in record.channels:
+            header[f"noise_std_n_{name}"] = record.noise_std_n[name]
+            if record.clipped[name].any():
+                header[f"clipped_{name}"] = format_rows(record.clipped[name])
+        header["x_hidden_effects"] = "+".join(hidden) or "none"
+        header["x_code_path"] = code_path
+        files.append(TraceFile(header, record.time_s, record.channels, path=f"{setup_name}_{velocity:g}"))
+    return files
