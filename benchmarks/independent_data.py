@@ -37,7 +37,7 @@ SETUPS = {
 }
 # Hidden strengths (SI); plasticity's is the yield force as a share of the largest force any
 # bead-bead contact of the data set reaches elastically.
-STRENGTHS = {"viscous_damping": 1e-6, "track_friction": 0.19, "rotational_friction": 0.03,
+STRENGTHS = {"viscous_damping": 1e-6, "dashpot_damping": 20.0, "track_friction": 0.19, "rotational_friction": 0.03,
              "sensor_dynamics": (0.11, 85e3), "wall_compliance": 20e9, "bead_dispersion": 0.005,
              "precompression": 2.0, "plasticity": 0.6}
 
@@ -50,6 +50,8 @@ def _true_fields(setup_name: str, hidden, rng) -> dict:
         value = STRENGTHS[name]
         if name == "viscous_damping":
             fields["eta_s"] = value
+        elif name == "dashpot_damping":
+            fields["dashpot_n_s_m"] = value
         elif name == "track_friction":
             fields["mu"] = value
         elif name == "rotational_friction":

@@ -534,6 +534,8 @@ class _Search:
         - `track_friction`: beads stick below mu g; the effect on a pulse is a threshold in
           amplitude. Starts: mu = 0.01, 0.05, 0.2.
         - `viscous_damping`: smooth from 0; starts 0.3, 1 and 3 us cover its range.
+        - `dashpot_damping`: smooth from 0; starts at 0.3, 1 and 3 % of the critical
+          damping of a contact linearised at the largest observed force.
         - `sensor_dynamics`: multimodal in f0 (the ringing's phase): a grid of f0 and beta,
           each with the split-bead mechanics (coupling 1) and the paper's filter form (0).
         - `wall_compliance`: smooth; starts at the header's wall and a wall e^2 softer.
@@ -550,6 +552,14 @@ class _Search:
         smallest = min(max(float(np.max(e.data(c))) for c in e.channels) for e in self.problem.experiments)
         if effect == "viscous_damping":
             return [start(value) for value in (0.3e-6, 1e-6, 3e-6)]
+        if effect == "dashpot_damping":
+            # a few thousandths to a few hundredths of the critical damping of a contact
+            # linearised at the largest observed force
+            setup = self.problem.base_setups[0]
+            kappa, mass = float(setup.contact_kappa()[1]), float(setup.bead_mass_kg[0])
+            stiffness = 1.5 * kappa ** (2 / 3) * largest ** (1 / 3)
+            critical = 2.0 * math.sqrt(stiffness * mass)
+            return [start(share * critical) for share in (0.003, 0.01, 0.03)]
         if effect == "track_friction":
             return [start(value) for value in (0.01, 0.05, 0.2)]
         if effect == "sensor_dynamics":

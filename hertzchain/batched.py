@@ -115,6 +115,8 @@ def fast_path_reason(setup: ChainSetup) -> str | None:
     friction = np.asarray(setup.mu) * np.asarray(setup.gravity_m_s2)
     if np.any(friction != 0.0):
         return "track friction (mu > 0)"
+    if np.any(np.asarray(setup.dashpot_n_s_m) != 0.0):
+        return "a linear dashpot (dashpot_n_s_m > 0)"
     return None
 
 

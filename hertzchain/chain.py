@@ -79,6 +79,9 @@ class ChainSetup(eqx.Module):
       `wall_youngs_pa=inf` is a rigid wall.
     - `eta_s`: viscoelastic time $\\eta$ of $F_v = \\eta\\kappa\\,\\partial_t\\delta^{3/2}$, s
       (at every contact, striker and wall included).
+    - `dashpot_n_s_m`: a linear dashpot $\\gamma\\dot\\delta$ on the overlap rate while in contact,
+      N s/m (every contact; the total force is clipped at 0 as with `eta_s`): the damping of
+      much of the granular-crystal literature (Herbold & Nesterenko, PRE 75, 021304, 2007).
     - `mu`: friction coefficient of the beads (and striker) on the track, force $\\mu m g$.
     - `mu_star`: thwarted-rotation friction, $\\kappa^* = (1+\\mu^*)\\kappa$ at every contact.
     - `precompression_n`: static force pressing the chain against the wall (or squeezing a
@@ -102,6 +105,7 @@ class ChainSetup(eqx.Module):
     wall_youngs_pa: jax.Array
     wall_poisson: jax.Array
     eta_s: jax.Array
+    dashpot_n_s_m: jax.Array
     mu: jax.Array
     mu_star: jax.Array
     precompression_n: jax.Array
@@ -132,6 +136,7 @@ class ChainSetup(eqx.Module):
         wall_youngs_pa=None,
         wall_poisson=None,
         eta_s=0.0,
+        dashpot_n_s_m=0.0,
         mu=0.0,
         mu_star=0.0,
         precompression_n=0.0,
@@ -205,6 +210,7 @@ class ChainSetup(eqx.Module):
             self.bead_poisson[-1] if wall_poisson is None else wall_poisson, "wall_poisson"
         )
         self.eta_s = _as_float(eta_s, "eta_s")
+        self.dashpot_n_s_m = _as_float(dashpot_n_s_m, "dashpot_n_s_m")
         self.mu = _as_float(mu, "mu")
         self.mu_star = _as_float(mu_star, "mu_star")
         self.precompression_n = _as_float(precompression_n, "precompression_n")
@@ -234,6 +240,8 @@ class ChainSetup(eqx.Module):
         _check("wall_youngs_pa", self.wall_youngs_pa, lambda x: x > 0, "positive (Pa; inf = rigid)")
         _check("wall_poisson", self.wall_poisson, poisson_range, "in (-1, 0.5)")
         _check("eta_s", self.eta_s, lambda x: np.isfinite(x) & (x >= 0), "non-negative (s)")
+        _check("dashpot_n_s_m", self.dashpot_n_s_m, lambda x: np.isfinite(x) & (x >= 0),
+               "non-negative (N s/m)")
         _check("mu", self.mu, lambda x: np.isfinite(x) & (x >= 0), "non-negative")
         _check("mu_star", self.mu_star, lambda x: np.isfinite(x) & (x > -1), "greater than -1")
         _check(
@@ -351,6 +359,7 @@ class ChainModel(NamedTuple):
     wall_yield_force_n: jax.Array  # scalar
     plastic: bool  # Thornton elastic-plastic contacts instead of Hertz
     eta_s: jax.Array
+    dashpot_n_s_m: jax.Array  # linear dashpot of every contact in compression
     friction_decel_m_s2: jax.Array  # mu * g
     first_bead_force_n: jax.Array  # external force on bead 1, towards the wall
     last_body_force_n: jax.Array  # external force on the last body (free end only)
@@ -422,6 +431,7 @@ def build_model(setup: ChainSetup) -> ChainModel:
         wall_yield_force_n=yield_force[-1],
         plastic=setup.plasticity,
         eta_s=setup.eta_s,
+        dashpot_n_s_m=setup.dashpot_n_s_m,
         friction_decel_m_s2=setup.mu * setup.gravity_m_s2,
         first_bead_force_n=preload,
         last_body_force_n=jnp.zeros(()) if has_wall else -preload,

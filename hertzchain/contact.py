@@ -74,12 +74,14 @@ def spring_potential(overlap_m, stiffness_n_m):
     return 0.5 * stiffness_n_m * overlap_m**2
 
 
-def contact_force(overlap_m, overlap_rate_m_s, kappa_n_m1p5, eta_s, elastic_n=None):
+def contact_force(overlap_m, overlap_rate_m_s, kappa_n_m1p5, eta_s, elastic_n=None, dashpot_n_s_m=0.0):
     """Total (elastic, total) normal force of a viscoelastic Hertz contact, N.
 
     The viscous part is the paper's $F_v = \\eta\\kappa\\,\\partial_t(\\delta^{3/2})
     = \\tfrac32\\eta\\kappa\\,\\delta^{1/2}\\dot\\delta$ (Kuwabara-Kono). It vanishes with
     $\\delta^{1/2}$ at contact onset and separation, so the force is continuous there.
+    A linear dashpot $\\gamma\\dot\\delta$ (`dashpot_n_s_m`, N s/m) adds to it while in
+    contact; it does not vanish at onset (the force jumps by $\\gamma\\dot\\delta$ there).
     The sum is clipped at zero: beads without adhesion cannot pull on each other, so during
     fast unloading they separate instead (LAMMPS's `limit_damping`). Returns both the
     elastic part $\\kappa\\delta_+^{3/2}$ (or `elastic_n` when given, e.g. an elastic-plastic
@@ -87,7 +89,8 @@ def contact_force(overlap_m, overlap_rate_m_s, kappa_n_m1p5, eta_s, elastic_n=No
     """
     positive, root = _positive_part_and_root(overlap_m)
     elastic = kappa_n_m1p5 * positive * root if elastic_n is None else elastic_n
-    viscous = 1.5 * eta_s * kappa_n_m1p5 * root * overlap_rate_m_s
+    dashpot = jnp.where(kappa_n_m1p5 > 0.0, dashpot_n_s_m, 0.0)  # no contact law, no contact (a free end)
+    viscous = (1.5 * eta_s * kappa_n_m1p5 * root + dashpot) * overlap_rate_m_s
     total = jnp.where(overlap_m > 0.0, jnp.maximum(elastic + viscous, 0.0), 0.0)
     return elastic, total
 

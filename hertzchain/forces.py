@@ -89,13 +89,14 @@ def chain_forces(model: ChainModel, displacement_m, velocity_m_s, max_overlap_m=
     if model.compliant is not None and sensor_rate_n_s is not None:
         rate = rate - overlap_offsets(model, sensor_rate_n_s)
     hertz_elastic, hertz_total = contact.contact_force(
-        overlap, rate, model.kappa, model.eta_s, elastic_all[:-1]
+        overlap, rate, model.kappa, model.eta_s, elastic_all[:-1], model.dashpot_n_s_m
     )
     spring = contact.spring_force(overlap, model.spring_n_m)
     contact_total = jnp.where(model.is_spring, spring, hertz_total)
     contact_elastic = jnp.where(model.is_spring, spring, hertz_elastic)
     wall_elastic, wall_total = contact.contact_force(
-        wall_overlap, velocity_m_s[-1], model.wall_kappa, model.eta_s, elastic_all[-1]
+        wall_overlap, velocity_m_s[-1], model.wall_kappa, model.eta_s, elastic_all[-1],
+        model.dashpot_n_s_m,
     )
     external = jnp.zeros_like(displacement_m)
     external = external.at[1].add(model.first_bead_force_n).at[-1].add(model.last_body_force_n)
