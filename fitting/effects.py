@@ -15,6 +15,7 @@ frees or holds strengths as it goes.
 | `wall_compliance` | `wall_softening` | wall modulus $Y_w = Y_{w,0}e^{-w}$ (w > 0: softer than the header's) |
 | `bead_dispersion` | `bead_radius_dev_1..N` | relative radius deviation of each bead at fixed density (mass $\\propto R^3$, stiffness follows) |
 | `precompression` | `preload_n` (N), `preload_seen` | static preload added to the header's; `preload_seen` is the share of it the channels read (0: piezo sensors, which read changes of force only; 1: DC sensors); channels a file lists in `ac_channels` never read it |
+| `contact_exponent` | `exponent_shift`, `exponent_stiffness` | every contact follows $F = (1+s)\\kappa\\,\\delta_r^{3/2}(\\delta/\\delta_r)^n$ with $n = 3/2 + $ `exponent_shift` (non-ideal, rough or non-spherical contacts; `hertzchain.contact.power_law_force`): the stiffness at the overlap $\\delta_r$ of a reference force near the data's is fitted with it (`exponent_stiffness` s), so that n and the stiffness stay apart and a law normalised elsewhere is still matched |
 | `plasticity` | `yield_softening` | Thornton (1997) elastic-plastic contacts (`hertzchain.contact.thornton_contact`) with yield stress $\\sigma_{Y,0}/y$, i.e. yield forces $F_{Y,0}/y^3$ ($\\sigma_{Y,0}$: the header's, else 2 GPa); y = 0 never yields, y = 1 is the paper's 470 N |
 
 `sensor_dynamics` has two parts, both exact for a bead cut in two around a sensor (the
@@ -90,6 +91,8 @@ _SPECS = (
     _spec("preload_seen", "", 0.0 - 1e-30, 1.0,
           "precompression: share of the static preload the channels read (0: AC/piezo, 1: DC)"),
     _spec("yield_softening", "", 0.0 - 1e-30, 20.0, "plasticity: sigma_Y,0 / sigma_Y"),
+    _spec("exponent_shift", "", -0.5, 1.0, "contact_exponent: n - 3/2 of every contact's power law"),
+    _spec("exponent_stiffness", "", -0.5, 1.0, "contact_exponent: relative stiffness at the reference overlap"),
 )
 for _s in _SPECS:
     if _s.name not in REGISTRY:
@@ -137,6 +140,10 @@ def library(n_beads: int) -> dict[str, Effect]:
         Effect("precompression", (p + "preload_n", p + "preload_seen"),
                "static preload F0 on the chain, read by DC sensors or not by AC (piezo) ones",
                "faster, wider pulses at low amplitude; a baseline offset only on DC-coupled channels"),
+        Effect("contact_exponent", (p + "exponent_shift", p + "exponent_stiffness"),
+               "F = kappa_n delta^n at every contact, n and the stiffness at a reference overlap free",
+               "pulses narrower or wider than Hertz's and a speed that scales with amplitude other than "
+               "F^(1/6): (n - 1)/(2n) instead", one_sided=False),
         Effect("plasticity", (p + "yield_softening",), "Thornton (1997) elastic-plastic contacts",
                "flattened peaks and extra loss only above the yield force (a threshold in amplitude)"),
     )
@@ -187,12 +194,15 @@ def sensor_output(front_n, back_n, beta, rate, step_s):
     return jnp.where(exact, filtered, series_first)
 
 
-def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True) -> ChainSetup:
+def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True,
+                  power_law: bool = False) -> ChainSetup:
     """The setup with every effect strength of `extras` applied.
 
     `plastic`: Thornton elastic-plastic contacts (needed as soon as `yield_softening` > 0);
     `False` gives Hertz contacts, the same model where `yield_softening` is 0 (an infinite
-    yield force) at a fraction of the cost.
+    yield force) at a fraction of the cost. `power_law`: power-law contacts of exponent
+    3/2 + `exponent_shift`, equal to Hertz at the overlap of `extras["reference_force_n"]`
+    (needed as soon as `exponent_shift` is not 0; not with `plastic`).
     """
     p = PREFIX
     n = setup.n_beads
@@ -214,11 +224,16 @@ def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True) -> C
         eta_s=setup.eta_s + extras[p + "eta_s"],
         dashpot_n_s_m=setup.dashpot_n_s_m + extras[p + "dashpot_n_s_m"],
         mu=setup.mu + extras[p + "mu"],
-        mu_star=(1.0 + setup.mu_star) * (1.0 + extras[p + "mu_star"]) - 1.0,
+        mu_star=(1.0 + setup.mu_star) * (1.0 + extras[p + "mu_star"]) * (1.0 + extras[p + "exponent_stiffness"])
+        - 1.0,
         wall_youngs_pa=wall,
         precompression_n=setup.precompression_n + extras[p + "preload_n"],
         bead_yield_stress_pa=sigma,
         plasticity=plastic,
+        power_law=power_law,
+        contact_exponent=1.5 + extras[p + "exponent_shift"],
+        exponent_reference_overlap_m=(extras["reference_force_n"] / setup.contact_kappa()[min(1, n - 1)])
+        ** (2 / 3),
     )
 
 
@@ -231,9 +246,9 @@ class _Forces:
         self.rest_n = rest_n
 
 
-def _simulate_with_effects(setup, grid, recording, extras, *, plastic: bool):
+def _simulate_with_effects(setup, grid, recording, extras, *, plastic: bool, power_law: bool = False):
     p = PREFIX
-    changed = apply_effects(setup, extras, plastic=plastic)
+    changed = apply_effects(setup, extras, plastic=plastic, power_law=power_law)
     extra_contacts = {k - 1 for k in recording.contacts if k >= 1}
     contacts = tuple(sorted(set(recording.contacts) | extra_contacts))
     omega_ref = 2.0 * math.pi * SENSOR_REFERENCE_HZ
@@ -260,15 +275,25 @@ def _simulate_elastic(setup, grid, recording, extras):
     return _simulate_with_effects(setup, grid, recording, extras, plastic=False)
 
 
-def effects_forward_model(n_beads: int, steps_per_contact: int = 200, *, plastic: bool = True) -> ForwardModel:
+def _simulate_power_law(setup, grid, recording, extras):
+    return _simulate_with_effects(setup, grid, recording, extras, plastic=False, power_law=True)
+
+
+def effects_forward_model(n_beads: int, steps_per_contact: int = 200, *, plastic: bool = True,
+                          power_law: bool = False, reference_force_n: float = 100.0) -> ForwardModel:
     """A `ForwardModel` with every effect of `library(n_beads)` available, all off by default.
 
     Effect strengths are fitted parameters of kind "extra" (registry names starting with
     `dx_`); the ones not fitted take their default 0 (off). `plastic=False`: Hertz contacts
-    whatever `yield_softening` (exact where it is 0, several times faster).
+    whatever `yield_softening` (exact where it is 0, several times faster); `power_law`:
+    power-law contacts (for `exponent_shift` other than 0), equal to Hertz's at the overlap
+    of `reference_force_n` (N; choose it near the data's forces).
     """
+    if plastic and power_law:
+        raise ValueError("effects_forward_model: plastic and power_law contacts cannot be combined.")
     defaults = {spec.name: 0.0 for spec in _SPECS}
     for b in range(1, n_beads + 1):
         defaults[dispersion_parameter(b)] = 0.0
-    return ForwardModel(simulate=_simulate_plastic if plastic else _simulate_elastic,
-                        steps_per_contact=steps_per_contact, extras_defaults=defaults)
+    defaults["reference_force_n"] = float(reference_force_n)
+    simulate = _simulate_power_law if power_law else (_simulate_plastic if plastic else _simulate_elastic)
+    return ForwardModel(simulate=simulate, steps_per_contact=steps_per_contact, extras_defaults=defaults)

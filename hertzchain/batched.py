@@ -117,6 +117,8 @@ def fast_path_reason(setup: ChainSetup) -> str | None:
         return "track friction (mu > 0)"
     if np.any(np.asarray(setup.dashpot_n_s_m) != 0.0):
         return "a linear dashpot (dashpot_n_s_m > 0)"
+    if setup.power_law:
+        return "power-law contacts (contact_exponent)"
     return None
 
 

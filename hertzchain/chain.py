@@ -70,6 +70,11 @@ class ChainSetup(eqx.Module):
     - `plasticity`: contacts above their yield force deform plastically (Thornton 1997, see
       `contact.thornton_contact`) instead of staying Hertzian; default False (the paper's
       beads stay elastic).
+    - `contact_exponent`, `exponent_reference_overlap_m`: every contact (wall included)
+      follows $F = \\kappa\\,\\delta_r^{3/2}(\\delta/\\delta_r)^n$ (`contact.power_law_force`) with
+      n = `contact_exponent` instead of Hertz's 3/2; it equals the Hertz force at the
+      reference overlap $\\delta_r$ (m, default 10 um). `power_law` (static) switches that law
+      on; by default it is on when `contact_exponent` differs from 1.5. Not with `plasticity`.
     - `striker_radius_m` / `striker_mass_kg`: size of the striker (one of them; default: bead 1's
       radius). `striker_density_kg_m3`, `striker_youngs_pa`, `striker_poisson`: its material
       (default: bead 1's).
@@ -113,8 +118,11 @@ class ChainSetup(eqx.Module):
     sensor_beta: jax.Array
     sensor_f0_hz: jax.Array
     end: str = eqx.field(static=True)
+    contact_exponent: jax.Array
+    exponent_reference_overlap_m: jax.Array
     sensor_beads: tuple[int, ...] = eqx.field(static=True)
     plasticity: bool = eqx.field(static=True)
+    power_law: bool = eqx.field(static=True)
 
     def __init__(
         self,
@@ -145,6 +153,9 @@ class ChainSetup(eqx.Module):
         sensor_beta=0.11,
         sensor_f0_hz=85e3,
         plasticity: bool = False,
+        contact_exponent=1.5,
+        exponent_reference_overlap_m=1e-5,
+        power_law: bool | None = None,
     ):
         if isinstance(n_beads, bool) or not isinstance(n_beads, (int, np.integer)) or n_beads < 1:
             raise ValueError(f"n_beads must be a positive integer, got {n_beads!r}.")
@@ -219,6 +230,14 @@ class ChainSetup(eqx.Module):
         self.sensor_beta = _as_float(sensor_beta, "sensor_beta")
         self.sensor_f0_hz = _as_float(sensor_f0_hz, "sensor_f0_hz")
         self.plasticity = bool(plasticity)
+        self.contact_exponent = _as_float(contact_exponent, "contact_exponent")
+        self.exponent_reference_overlap_m = _as_float(exponent_reference_overlap_m, "exponent_reference_overlap_m")
+        if power_law is None:
+            power_law = _is_concrete(self.contact_exponent) and bool(np.any(np.asarray(self.contact_exponent) != 1.5))
+        self.power_law = bool(power_law)
+        if self.power_law and self.plasticity:
+            raise ValueError("contact_exponent != 1.5 (power_law) and plasticity=True cannot be combined: "
+                             "the elastic-plastic law is built on Hertz contacts.")
 
     def __check_init__(self):
         positive_finite = lambda x: np.isfinite(x) & (x > 0)  # noqa: E731
@@ -242,6 +261,10 @@ class ChainSetup(eqx.Module):
         _check("eta_s", self.eta_s, lambda x: np.isfinite(x) & (x >= 0), "non-negative (s)")
         _check("dashpot_n_s_m", self.dashpot_n_s_m, lambda x: np.isfinite(x) & (x >= 0),
                "non-negative (N s/m)")
+        _check("contact_exponent", self.contact_exponent, lambda x: np.isfinite(x) & (x >= 1.0) & (x <= 3.0),
+               "between 1 and 3 (Hertz: 1.5)")
+        _check("exponent_reference_overlap_m", self.exponent_reference_overlap_m, positive_finite,
+               "positive (m)")
         _check("mu", self.mu, lambda x: np.isfinite(x) & (x >= 0), "non-negative")
         _check("mu_star", self.mu_star, lambda x: np.isfinite(x) & (x > -1), "greater than -1")
         _check(
@@ -366,6 +389,9 @@ class ChainModel(NamedTuple):
     striker_velocity_m_s: jax.Array
     # Embedded sensors in compliance form (`hertzchain.compliant_sensor`): none by default.
     compliant: "CompliantSensorModel | None" = None
+    # Power-law contacts (`contact.power_law_force`): exponent and reference overlap, or None (Hertz).
+    contact_exponent: jax.Array | None = None
+    reference_overlap_m: jax.Array | None = None
 
 
 def internal_contact_index(setup: ChainSetup, contact_number: int) -> int:
@@ -413,12 +439,13 @@ def build_model(setup: ChainSetup) -> ChainModel:
     is_spring = jnp.asarray([link[2] for link in links])
     preload = setup.precompression_n
     safe_kappa = jnp.where(is_spring, 1.0, kappa_all)
-    hertz_overlap = contact.overlap_at_force(preload, safe_kappa)
+    law = (setup.contact_exponent, setup.exponent_reference_overlap_m) if setup.power_law else (None, None)
+    hertz_overlap = contact.overlap_at_force(preload, safe_kappa, *law)
     spring_overlap = preload / jnp.where(is_spring, spring_all, 1.0)
     overlap0 = jnp.where(is_spring, spring_overlap, hertz_overlap).at[0].set(0.0)
     has_wall = setup.end == "wall"
     wall_kappa = setup.wall_kappa() if has_wall else jnp.zeros(())
-    wall_overlap0 = contact.overlap_at_force(preload, setup.wall_kappa()) if has_wall else jnp.zeros(())
+    wall_overlap0 = contact.overlap_at_force(preload, setup.wall_kappa(), *law) if has_wall else jnp.zeros(())
     return ChainModel(
         mass_kg=jnp.stack(masses),
         kappa=kappa_all,
@@ -436,4 +463,6 @@ def build_model(setup: ChainSetup) -> ChainModel:
         first_bead_force_n=preload,
         last_body_force_n=jnp.zeros(()) if has_wall else -preload,
         striker_velocity_m_s=setup.striker_velocity_m_s,
+        contact_exponent=law[0],
+        reference_overlap_m=law[1],
     )

@@ -64,6 +64,23 @@ def hertz_potential(overlap_m, kappa_n_m1p5):
     return 0.4 * kappa_n_m1p5 * positive * positive * root
 
 
+def power_law_force(overlap_m, kappa_n_m1p5, exponent, reference_overlap_m):
+    """Contact force $\\kappa\\,\\delta_r^{3/2}(\\delta_+/\\delta_r)^n$, N: a contact law of exponent n
+    (non-ideal, rough or non-spherical contacts) that equals Hertz's at the reference overlap
+    $\\delta_r$ (m) whatever n, so that n and the stiffness stay apart; n = 3/2 is Hertz."""
+    in_contact = overlap_m > 0.0
+    ratio = jnp.where(in_contact, overlap_m / reference_overlap_m, 1.0)
+    return jnp.where(in_contact, kappa_n_m1p5 * reference_overlap_m**1.5 * ratio**exponent, 0.0)
+
+
+def power_law_potential(overlap_m, kappa_n_m1p5, exponent, reference_overlap_m):
+    """Energy of `power_law_force`, $\\kappa\\,\\delta_r^{5/2}(\\delta_+/\\delta_r)^{n+1}/(n+1)$, J."""
+    in_contact = overlap_m > 0.0
+    ratio = jnp.where(in_contact, overlap_m / reference_overlap_m, 1.0)
+    energy = kappa_n_m1p5 * reference_overlap_m**2.5 * ratio ** (exponent + 1.0) / (exponent + 1.0)
+    return jnp.where(in_contact, energy, 0.0)
+
+
 def spring_force(overlap_m, stiffness_n_m):
     """Force of a linear spring (an embedded sensor's), $k\\delta$, N; it pulls when stretched."""
     return stiffness_n_m * overlap_m
@@ -135,14 +152,18 @@ def thornton_contact(overlap_m, max_overlap_m, kappa_n_m1p5, yield_force_n):
     return force, energy, jnp.where(yielded, dissipated, 0.0)
 
 
-def overlap_at_force(force_n, kappa_n_m1p5):
-    """Overlap $\\delta = (F/\\kappa)^{2/3}$ at which a Hertz contact carries `force_n`, m.
+def overlap_at_force(force_n, kappa_n_m1p5, exponent=None, reference_overlap_m=None):
+    """Overlap $\\delta = (F/\\kappa)^{2/3}$ at which a Hertz contact carries `force_n`, m (with
+    `exponent` and `reference_overlap_m`: the overlap of `power_law_force`).
 
     Zero force gives zero overlap with finite (zero) derivatives (the double `where`).
     """
     loaded = force_n > 0.0
-    ratio = jnp.where(loaded, force_n / kappa_n_m1p5, 1.0)
-    return jnp.where(loaded, ratio ** (2.0 / 3.0), 0.0)
+    if exponent is None:
+        ratio = jnp.where(loaded, force_n / kappa_n_m1p5, 1.0)
+        return jnp.where(loaded, ratio ** (2.0 / 3.0), 0.0)
+    ratio = jnp.where(loaded, force_n / (kappa_n_m1p5 * reference_overlap_m**1.5), 1.0)
+    return jnp.where(loaded, reference_overlap_m * ratio ** (1.0 / exponent), 0.0)
 
 
 def yield_force(yield_stress_pa, radius_a_m, theta_a, radius_b_m=jnp.inf, theta_b=0.0):

@@ -52,10 +52,15 @@ def initial_max_overlap(model: ChainModel):
 
 def _elastic_parts(model: ChainModel, displacement_m, max_overlap_m, sensor_force_n=None):
     """Elastic (rate-independent) force, stored energy and plastic dissipation of every
-    contact and of the wall (last), for Hertz or, if the model is plastic, Thornton contacts."""
+    contact and of the wall (last), for Hertz, power-law or, if the model is plastic,
+    Thornton contacts."""
     contacts, wall = overlaps(model, displacement_m, sensor_force_n)
     overlap = jnp.concatenate([contacts, wall[None]])
     kappa = jnp.concatenate([model.kappa, model.wall_kappa[None]])
+    if model.contact_exponent is not None:
+        law = (kappa, model.contact_exponent, model.reference_overlap_m)
+        zero = jnp.zeros_like(overlap)
+        return overlap, contact.power_law_force(overlap, *law), contact.power_law_potential(overlap, *law), zero
     if not model.plastic:
         zero = jnp.zeros_like(overlap)
         return overlap, contact.hertz_force(overlap, kappa), contact.hertz_potential(overlap, kappa), zero
