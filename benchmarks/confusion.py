@@ -91,7 +91,7 @@ def main(argv=None) -> int:
     parser.add_argument("--noise", type=float, default=0.005, help="noise sigma / largest signal")
     parser.add_argument("--effects", default="", help="comma-separated subset of rows (default all)")
     parser.add_argument("--independent", action="store_true",
-                        help="data from independent_data.py: --setups, --code-path, the pair viscous+wall")
+                        help="data from independent_data.py: --setups, --code-path, two pairs")
     parser.add_argument("--setups", default="paper,brass", help="with --independent [paper,brass]")
     parser.add_argument("--code-path", default="diffrax", choices=("diffrax", "verlet"))
     parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
@@ -107,7 +107,8 @@ def main(argv=None) -> int:
         cases = [c for c in cases if ("+".join(c) or "none") in wanted]
     setups = [s.strip() for s in args.setups.split(",") if s.strip()] if args.independent else [None]
     if args.independent:
-        cases = [c for c in cases if len(c) < 2] + [("viscous_damping", "wall_compliance")]
+        cases = [c for c in cases if len(c) < 2] + [("viscous_damping", "wall_compliance"),
+                                                     ("dashpot_damping", "track_friction")]
         if args.effects:
             cases = [c for c in cases if ("+".join(c) or "none") in wanted]
     rows = []

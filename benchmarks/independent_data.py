@@ -29,17 +29,19 @@ from hertzchain.tracefile import TraceFile, format_rows, setup_header
 
 SETUPS = {
     "paper": dict(n_beads=21, fields={}, contacts=(6, 11), velocities_m_s=(0.05, 0.12, 0.3, 0.6, 1.0),
-                  record_s=1.7e-3),
+                  record_s=1.7e-3, reference_overlap_m=5e-6),
     "brass": dict(n_beads=15, contacts=(5, 10), velocities_m_s=(0.05, 0.15, 0.5, 1.0, 1.5), record_s=0.7e-3,
+                  reference_overlap_m=3e-6,
                   fields=dict(bead_radius_m=5e-3, bead_density_kg_m3=BRASS.density_kg_m3,
                               bead_youngs_pa=BRASS.youngs_pa, bead_poisson=BRASS.poisson,
                               striker_radius_m=3e-3)),
 }
 # Hidden strengths (SI); plasticity's is the yield force as a share of the largest force any
-# bead-bead contact of the data set reaches elastically.
+# bead-bead contact of the data set reaches elastically; contact_exponent's law equals
+# Hertz's at the setup's `reference_overlap_m`.
 STRENGTHS = {"viscous_damping": 1e-6, "dashpot_damping": 20.0, "track_friction": 0.19, "rotational_friction": 0.03,
              "sensor_dynamics": (0.11, 85e3), "wall_compliance": 20e9, "bead_dispersion": 0.005,
-             "precompression": 2.0, "plasticity": 0.6}
+             "precompression": 2.0, "plasticity": 0.6, "contact_exponent": 1.6}
 
 
 def _true_fields(setup_name: str, hidden, rng) -> dict:
@@ -60,6 +62,9 @@ def _true_fields(setup_name: str, hidden, rng) -> dict:
             fields["wall_youngs_pa"] = value
         elif name == "precompression":
             fields["precompression_n"] = value
+        elif name == "contact_exponent":  # the Hertz force at an overlap typical of the setup
+            fields["contact_exponent"] = value
+            fields["exponent_reference_overlap_m"] = spec["reference_overlap_m"]
         elif name == "bead_dispersion":
             scatter = np.clip(rng.standard_normal(spec["n_beads"]), -2.5, 2.5)
             fields["bead_radius_m"] = np.asarray(nominal.bead_radius_m) * (1.0 + value * scatter)
