@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hertzchain.theory import DISCRETE_FWHM_FACTOR
 from hertzchain.tracefile import TraceFile, read_trace
 
 from .parameters import bare_speed_constant
@@ -31,9 +32,8 @@ from .parameters import bare_speed_constant
 # The fit needs at least this many samples across the half-maximum width of the pulse.
 MIN_SAMPLES_PER_PULSE = 6
 MIN_SAMPLES = 20
-# Fraction of the half-maximum width of a discrete solitary wave in lattice units 2R sqrt(10)/v
-# (physics-reference.md, row 2h).
-_FWHM_FACTOR = 0.4465
+# Half-maximum width of a discrete solitary wave in lattice units 2R sqrt(10)/v.
+_FWHM_FACTOR = DISCRETE_FWHM_FACTOR
 # A channel must show a pulse above this many noise standard deviations.
 MIN_PEAK_SNR = 5.0
 

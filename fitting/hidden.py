@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from hertzchain.chain import ChainSetup
+from hertzchain.theory import wave_amplitude_n
 from hertzchain.tracefile import TraceFile, setup_header
 
 from .effects import EFFECT_NAMES
@@ -80,7 +81,7 @@ def default_record_s(setup: ChainSetup, velocity_m_s: float, factor: float = 1.3
     """Record length: `factor` x the time the pulse of the slowest shot takes to reach the wall, s."""
     kappa = float(setup.contact_kappa()[min(1, setup.n_beads - 1)])
     mass = float(setup.bead_mass_kg[0])
-    amplitude = 0.63955 * kappa ** 0.4 * mass ** 0.6 * velocity_m_s ** 1.2
+    amplitude = wave_amplitude_n(velocity_m_s, kappa, mass)
     speed = float(bare_speed_constant(setup)) * amplitude ** (1 / 6)
     return factor * setup.n_beads * 2 * float(setup.bead_radius_m[0]) / speed
 

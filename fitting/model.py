@@ -41,6 +41,7 @@ import numpy as np
 
 from hertzchain.chain import ChainSetup
 from hertzchain.integrate import Recording, solve
+from hertzchain.theory import DISCRETE_FWHM_FACTOR, DISCRETE_SPEED_FACTOR
 from hertzchain.timegrid import TimeGrid, choose_time_grid, shortest_contact_time_s
 
 from .data import Experiment
@@ -55,7 +56,7 @@ _MIN_BLOCK = 8
 SENSOR_STEPS_PER_HALF_PERIOD = 40
 # Finest needed simulation sampling, as a fraction of the narrowest pulse's half-maximum width.
 _SAMPLES_PER_FWHM = 40
-_FWHM_FACTOR = 0.4465
+_FWHM_FACTOR = DISCRETE_FWHM_FACTOR
 # Margin on the striker velocity when the fixed time grid is chosen (the fit may raise it).
 _VELOCITY_MARGIN = 1.5
 
@@ -194,7 +195,7 @@ class Problem:
         kappa = float(setup.contact_kappa()[min(1, setup.n_beads - 1)])
         mass = float(setup.bead_mass_kg[0])
         radius = float(setup.bead_radius_m[0])
-        speed = 0.905516 * 2 * radius * kappa ** (1 / 3) / math.sqrt(mass) * max(peak, 1e-6) ** (1 / 6)
+        speed = DISCRETE_SPEED_FACTOR * 2 * radius * kappa ** (1 / 3) / math.sqrt(mass) * max(peak, 1e-6) ** (1 / 6)
         fwhm = _FWHM_FACTOR * 2 * radius * math.sqrt(10.0) / speed
         return interval / max(1, math.ceil(interval / (fwhm / _SAMPLES_PER_FWHM)))
 

@@ -48,16 +48,16 @@ import numpy as np
 
 from hertzchain import contact
 from hertzchain.chain import ChainSetup
+from hertzchain.theory import DISCRETE_SPEED_FACTOR, LONG_WAVE_SPEED_FACTOR
 
 SCOPES = ("global", "experiment", "channel")
 SPACES = ("log", "asinh", "linear")
 KINDS = ("setup", "time_offset", "gain", "extra")
 
-# Speed constant of the discrete chain's solitary wave in lattice units:
-# v = DISCRETE_SPEED_FACTOR * 2R kappa^(1/3) m^(-1/2) F_m^(1/6) (physics-reference.md, row 2b).
-DISCRETE_SPEED_FACTOR = 0.905516
-# Nesterenko's long-wave (continuum) value of the same factor, 2/sqrt(5) (Eq. 3 of the paper).
-CONTINUUM_SPEED_FACTOR = 2.0 / math.sqrt(5.0)
+# Speed constant of the discrete chain's solitary wave in lattice units,
+# v = DISCRETE_SPEED_FACTOR * 2R kappa^(1/3) m^(-1/2) F_m^(1/6), and Nesterenko's long-wave
+# (continuum) value of the same factor, 2/sqrt(5) (Eq. 3 of the paper): see hertzchain.theory.
+CONTINUUM_SPEED_FACTOR = LONG_WAVE_SPEED_FACTOR
 
 
 @dataclasses.dataclass(frozen=True)

@@ -5,9 +5,9 @@
   largest sample, fitted by a least-squares parabola, so noise does not stop the search
   on the leading edge).
 - **C** from the velocity law $v = C F_m^{1/6}$ of the discrete chain with the header's
-  materials, $C = 0.905516\\,2R\\kappa^{1/3}m^{-1/2}$ (201.385 for the paper's beads; the
-  paper's measured 201.5 agrees to 0.1 %). It is checked against the speed measured from
-  arrival times, $v = 2R\\,\\Delta k/\\Delta t$ between the first and last recorded
+  materials, $C = 0.905516\\,2R\\kappa^{1/3}m^{-1/2}$ (`theory.DISCRETE_SPEED_FACTOR`; 201.385
+  for the paper's beads; the paper's measured 201.5 agrees to 0.1 %). It is checked against
+  the speed measured from arrival times, $v = 2R\\,\\Delta k/\\Delta t$ between the first and last recorded
   positions of a file (a sensor in bead K sits at position K - 1/2); the measured value
   replaces it only when they differ by more than 10 % (e.g. wrong materials in the header).
   The measured value is biased by dissipation (a few %), and a start a few % off in C puts
@@ -16,11 +16,14 @@
 - **Restitution** per contact from peak ratios along the chain,
   $\\epsilon = (F_b/F_a)^{(5/6)/(k_b-k_a)}$, fitted over files as
   $1 - \\epsilon = C_v F^{1/6} + C_s/F$ (non-negative least squares), then converted with
-  the paper's conversions corrected by the simulated ratios of physics-reference.md
-  section 6: $C_v = 0.333 \\cdot 5C\\eta/(2\\sqrt{10}R)$ and
+  the paper's conversions corrected by the ratios simulated on the paper's chain
+  (`theory.VISCOUS_CONVERSION_CORRECTION`, `theory.FRICTION_CONVERSION_CORRECTION`, re-measured
+  by tests/test_reproduce.py): $C_v = 0.333 \\cdot 5C\\eta/(2\\sqrt{10}R)$ and
   $C_s = 0.687 \\cdot 5\\mu m g/4$.
 - **Striker velocity** (when the header lacks it) from the amplitude law
-  $F_m = 0.63955\\,\\kappa^{2/5} m^{3/5} V_0^{6/5}$ (identical striker).
+  $F_m = 0.63955\\,\\kappa^{2/5} m^{3/5} V_0^{6/5}$ (identical striker,
+  `theory.impact_velocity_m_s`); from the wall channel alone, the wall force divided by
+  Eq. (5) times its simulated correction `theory.WALL_FORCE_CORRECTION` (1.116).
 - Time offsets start at 0, gains at 1, everything else at the header's value.
 """
 
@@ -31,13 +34,11 @@ import math
 import numpy as np
 from scipy.optimize import nnls
 
+from hertzchain import theory
 from hertzchain.tracefile import TraceFile
 
 from .parameters import bare_speed_constant
 
-_AMPLITUDE_FACTOR = 0.63955
-_VISCOUS_CORRECTION = 0.00816 / 0.0245
-_FRICTION_CORRECTION = 0.687
 DEFAULT_ETA_S = 1e-6
 DEFAULT_MU = 0.05
 
@@ -112,8 +113,9 @@ def estimate_striker_velocity(trace: TraceFile) -> float:
     else:
         wall = np.asarray(trace.channels["wall"], dtype=float)
         wall_kappa = float(setup.wall_kappa())
-        force = float(np.max(wall)) / (1.116 * 2 ** 0.6 * (wall_kappa / kappa) ** 0.4)
-    return float((force / (_AMPLITUDE_FACTOR * kappa**0.4 * mass**0.6)) ** (1 / 1.2))
+        ratio = theory.WALL_FORCE_CORRECTION * theory.wall_force_ratio(wall_kappa, kappa)
+        force = float(np.max(wall)) / ratio
+    return float(theory.impact_velocity_m_s(force, kappa, mass))
 
 
 def estimate_speed_constant(traces, setups) -> float | None:
@@ -158,8 +160,8 @@ def estimate_dissipation(traces, setups, speed_constant: float) -> tuple[float |
     radius = float(setup.bead_radius_m[0])
     mass = float(setup.bead_mass_kg[0])
     gravity = float(setup.gravity_m_s2)
-    eta = coefficients[0] * 2 * math.sqrt(10) * radius / (5 * speed_constant * _VISCOUS_CORRECTION)
-    mu = coefficients[1] / (_FRICTION_CORRECTION * 1.25 * mass * max(gravity, 1e-12))
+    eta = coefficients[0] * 2 * math.sqrt(10) * radius / (5 * speed_constant * theory.VISCOUS_CONVERSION_CORRECTION)
+    mu = coefficients[1] / (theory.FRICTION_CONVERSION_CORRECTION * 1.25 * mass * max(gravity, 1e-12))
     return (float(eta) if eta > 0 else None), (float(mu) if mu > 0 else None)
 
 

@@ -1,5 +1,5 @@
 """The reproduction of the paper (quick run): its numbers against the paper's own agreement
-and against the project's independent reference numbers (research notes, physics-reference).
+and against independent reference numbers (adaptive DOP853 solutions of the same chains).
 """
 
 import json
@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import hertzchain as hc
+from hertzchain import theory
 from hertzchain.cli import main
 from hertzchain.paper import batch, experiments
 from hertzchain.paper.reproduce import reproduce
@@ -54,7 +55,7 @@ def test_constants_within_the_papers_agreement(quick):
     assert n["kappa_N_per_um15"] == pytest.approx(11.9900, abs=1e-3)
     assert n["C_theory"] == pytest.approx(198.9, abs=0.05)
     # The paper: C_n = 201.5 +- 0.1; with the stated definition the discrete chain gives
-    # 201.3675 (independent adaptive solver, physics-reference row 2a).
+    # 201.3675 (independent adaptive DOP853 solver, contacts 8-15, `pulses.incident_wave`).
     assert n["C_numeric"] == pytest.approx(201.5, rel=0.005)
     assert n["C_numeric"] == pytest.approx(201.3675, abs=0.05)
     assert n["C_numeric_fit_amplitude"] == pytest.approx(201.62, abs=0.05)
@@ -90,6 +91,8 @@ def test_force_ratio_follows_eq5_trend_and_eq5_lies_below(quick):
     for wall, expected in (("plexiglass", 0.4979), ("soft_5GPa", 0.6001), ("Mg", 1.3560),
                            ("Cu", 1.8169), ("steel", 1.9433), ("W", 2.0844), ("rigid", 2.2377)):
         assert ratio[wall] == pytest.approx(expected, abs=0.003)
+    # theory.WALL_FORCE_CORRECTION (used by fitting.start) is the steel wall's ratio.
+    assert ratio["steel"] / eq5["steel"] == pytest.approx(theory.WALL_FORCE_CORRECTION, abs=0.002)
 
 
 def test_secondary_waves_for_the_soft_wall_only(quick):
@@ -120,6 +123,9 @@ def test_dissipation_and_the_papers_conversions(quick):
     c_s_ratio = r["paper_conversion_C_s_for_mu019"] / r["friction_mu019"]["C_s"]
     assert c_v_ratio == pytest.approx(3.0, abs=0.2)
     assert c_s_ratio == pytest.approx(1.46, abs=0.05)
+    # The corrections fitting.start applies to the paper's conversions.
+    assert 1.0 / c_v_ratio == pytest.approx(theory.VISCOUS_CONVERSION_CORRECTION, rel=0.05)
+    assert 1.0 / c_s_ratio == pytest.approx(theory.FRICTION_CONVERSION_CORRECTION, rel=0.02)
     broadening = n["duration_broadening_eta2us"]
     top = max(broadening, key=lambda key: float(key.rstrip("N")))
     assert broadening[top] == pytest.approx(1.097, abs=0.003)  # paper: about 10 %

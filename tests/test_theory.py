@@ -213,3 +213,40 @@ def test_impact_amplitude_factor_by_simulation(free_wave, paper_setup):
     assert wave.peak_force_n == pytest.approx(
         float(theory.wave_amplitude_n(0.3, kappa, MASS)), rel=1e-3
     )
+
+
+def test_discrete_speed_factor_by_simulation(free_wave, paper_setup):
+    """v / (2R kappa^(1/3) m^(-1/2) F_m^(1/6)) from the peak times and peaks at contacts 8-15
+    of the 21-bead chain is 0.9054, 1e-4 below the asymptotic DISCRETE_SPEED_FACTOR."""
+    contacts = tuple(range(8, 16))
+    forces = np.asarray(free_wave.contact_forces_n)[:, list(contacts)].T
+    wave = pulses.incident_wave(free_wave.time_s, forces, contacts, R)
+    unit = float(theory.lattice_speed_unit(R, MASS, float(paper_setup.contact_kappa()[1])))
+    factor = wave.speed_m_s / (unit * wave.peak_force_n ** (1 / 6))
+    assert factor == pytest.approx(theory.DISCRETE_SPEED_FACTOR, rel=1.5e-4)
+    assert factor < theory.DISCRETE_SPEED_FACTOR
+
+
+def _half_maximum_width(time, force):
+    """Width of the first pulse at half its sampled maximum, crossings linearly interpolated."""
+    i = int(np.argmax(force))
+    half = force[i] / 2
+    a = np.nonzero(force[:i] < half)[0][-1]
+    b = i + np.nonzero(force[i:] < half)[0][0]
+    left = time[a] + (half - force[a]) / (force[a + 1] - force[a]) * (time[a + 1] - time[a])
+    right = time[b - 1] + (half - force[b - 1]) / (force[b] - force[b - 1]) * (time[b] - time[b - 1])
+    return right - left
+
+
+def test_discrete_fwhm_factor_by_simulation(free_wave):
+    """The contact force's half-maximum width in units of 2R sqrt(10)/v grows to 0.4465
+    (DISCRETE_FWHM_FACTOR) along contacts 8-15, narrower than the cos^6 pulse's 0.4715."""
+    contacts = tuple(range(8, 16))
+    time = np.asarray(free_wave.time_s)
+    forces = np.asarray(free_wave.contact_forces_n)[:, list(contacts)].T
+    wave = pulses.incident_wave(time, forces, contacts, R)
+    lattice_time = float(theory.solitary_duration_s(R, wave.speed_m_s))
+    factors = np.array([_half_maximum_width(time, f) for f in forces]) / lattice_time
+    assert np.all(np.diff(factors) > 0)
+    assert factors[-1] == pytest.approx(theory.DISCRETE_FWHM_FACTOR, abs=1e-4)
+    assert factors[-1] < theory.COS6_HALF_WIDTH - 0.02

@@ -332,7 +332,8 @@ def _plot_speed_duration(summaries, rows, radius_m, path):
         c_n = summaries[0]["theory"]["discrete_velocity_constant"]
         eq3 = 2 * radius_m * math.sqrt(10) / (c_t * grid ** (1 / 6)) * 1e6
         duration_axes.plot(grid, eq3, "k-", lw=1, label="2R sqrt(10)/v, Eq. 3")
-        discrete = 0.9619 * 2 * radius_m * math.sqrt(10) / (c_n * grid ** (1 / 6)) * 1e6
+        discrete = (theory.DISCRETE_DURATION_FACTOR * 2 * radius_m * math.sqrt(10)
+                    / (c_n * grid ** (1 / 6)) * 1e6)
         duration_axes.plot(grid, discrete, "k--", lw=1, label="discrete chain, no dissipation")
     duration_axes.set_xscale("log")
     duration_axes.set_xlabel("amplitude F_m (N)")
