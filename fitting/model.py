@@ -24,8 +24,8 @@ few forward passes per iteration instead of one per free number.
 
 Time step: by default `STEPS_PER_CONTACT = 400` steps per shortest Hertz contact time, twice
 the simulator's default (embedded sensors: 40 steps per half period, see `time_step_s`), because with the small standard errors of full-trace fits the
-velocity-Verlet bias at coarser steps is several standard errors of C and eta
-(discrepancy.md section 5.3).
+velocity-Verlet bias at coarser steps is several standard errors of C and eta (the bias
+is second order in the step).
 """
 
 from __future__ import annotations

@@ -19,8 +19,8 @@ a singular value below `DEGENERATE_RATIO` times the largest marks a combination 
 parameters the data cannot constrain, and the parameters taking part in it are named.
 Pairs with |correlation| above `CORRELATION_LIMIT`, parameters with a relative standard
 error above `RELATIVE_ERROR_LIMIT`, and parameters at a bound are reported too. One
-degeneracy is known exactly (discrepancy.md section 5.4): a uniform stiffness scale (C or
-mu*) together with a free striker velocity and free gains of all of a file's channels,
+degeneracy is known exactly (a scaling symmetry of the Hertz law, checked by
+tests/test_fit_identifiability.py): a uniform stiffness scale (C or mu*) together with a free striker velocity and free gains of all of a file's channels,
 $F(t; \\lambda\\kappa, V_0) = \\lambda^{-2} F(t; \\kappa, \\lambda^2 V_0)$ for a
 dissipationless chain; it is named whenever the chosen parameters contain it.
 """
@@ -96,7 +96,7 @@ def identifiability_warnings(instances, values, cov: Covariance, experiments) ->
     """Human-readable warnings about parameters the data cannot determine."""
     labels = [inst.label for inst in instances]
     messages = []
-    # the exact symmetry of discrepancy.md 5.4
+    # the exact scaling symmetry of the module docstring
     names = {inst.name for inst in instances}
     if names & {"C", "mu_star"}:
         scale_name = "C" if "C" in names else "mu_star"

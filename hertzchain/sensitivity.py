@@ -72,6 +72,7 @@ import numpy as np
 from .chain import ChainSetup
 from .integrate import Recording, solve
 from .progress import Progress
+from .theory import COS6_HALF_WIDTH
 from .timegrid import DEFAULT_STEPS_PER_CONTACT, TimeGrid, choose_time_grid
 from .traces import Traces
 
@@ -249,8 +250,6 @@ OBSERVABLE_FORMS = (
 _UNITS = {"peak": "N", "peak_time": "s", "arrival": "s", "duration": "s"}
 # The incident pulse: first local maximum above this fraction of the trace's maximum.
 _DETECT_FRACTION = 0.3
-# Full width at half height of cos^6(x/tau) is 2 tau arccos(2^(-1/6)).
-_COS6_HALF_WIDTH = math.acos(2.0 ** (-1.0 / 6.0))
 
 
 class Observable(NamedTuple):
@@ -413,7 +412,7 @@ def evaluate_observables(
             values[obs.name], valid[obs.name] = p.arrival, p.found_arrival
         elif obs.kind == "duration":
             p = pulse(obs.channels[0])
-            values[obs.name] = (p.trailing - p.arrival) / _COS6_HALF_WIDTH
+            values[obs.name] = (p.trailing - p.arrival) / COS6_HALF_WIDTH
             valid[obs.name] = p.found_trailing
         elif obs.kind == "speed":
             a, b = pulse(obs.channels[0]), pulse(obs.channels[1])
