@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
+
+import numpy as np
 
 
 @contextlib.contextmanager
@@ -29,6 +32,34 @@ def write_text(path, text: str) -> None:
     """Write `text` to `path` atomically."""
     with atomic_path(path) as temporary:
         temporary.write_text(text)
+
+
+def json_ready(value):
+    """`value` as JSON can hold it: NaN and inf as None (JSON has neither).
+
+    Dicts (keys as strings), lists and tuples are converted item by item; booleans and
+    integers (Python or NumPy) stay booleans and integers; any other number or numeric array
+    (NumPy, JAX, 0-d or not) becomes a Python float or nested lists of them. None, strings
+    and other objects are returned unchanged.
+    """
+    if isinstance(value, dict):
+        return {str(k): json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_ready(v) for v in value]
+    if value is None or isinstance(value, str):
+        return value
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return value
+    if array.ndim:
+        return [json_ready(v) for v in array.tolist()]
+    number = float(array)
+    return number if math.isfinite(number) else None
 
 
 def write_json(path, data) -> None:

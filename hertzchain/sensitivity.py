@@ -59,7 +59,6 @@ there are fewer observable values than parameter values (e.g. per-bead masses), 
 from __future__ import annotations
 
 import dataclasses
-import math
 import re
 from collections.abc import Callable, Mapping, Sequence
 from typing import NamedTuple
@@ -71,6 +70,7 @@ import numpy as np
 
 from .chain import ChainSetup
 from .integrate import Recording, solve
+from .atomic import json_ready
 from .progress import Progress
 from .theory import COS6_HALF_WIDTH
 from .timegrid import DEFAULT_STEPS_PER_CONTACT, TimeGrid, choose_time_grid
@@ -573,8 +573,7 @@ class SensitivityResult:
         """A JSON-ready dict (NaN/undefined -> None)."""
 
         def clean(x):
-            a = np.asarray(x, dtype=float)
-            return _nan_to_none(a.tolist()) if a.ndim else (None if not np.isfinite(a) else float(a))
+            return json_ready(np.asarray(x, dtype=float))
 
         data = {
             "grid": {"axes": list(self.grid_axes), "values": {k: clean(v) for k, v in self.grid_axes.items()}},
@@ -631,12 +630,6 @@ class SensitivityResult:
                             "elasticity": float(e[idx]),
                         })
         return rows
-
-
-def _nan_to_none(x):
-    if isinstance(x, list):
-        return [_nan_to_none(v) for v in x]
-    return None if (isinstance(x, float) and not math.isfinite(x)) else x
 
 
 def _prepare(setup, params, observables, sweep=None):
@@ -960,8 +953,8 @@ def global_sensitivity(
         for p in params:
             e = samples.elasticity[obs][p][ok]
             e = e.reshape(e.shape[0], -1)
-            msq[obs][p] = _finite_or_none(np.mean(np.sum(e**2, axis=1)))
-            mabs[obs][p] = _finite_or_none(np.mean(np.sqrt(np.sum(e**2, axis=1))))
+            msq[obs][p] = json_ready(np.mean(np.sum(e**2, axis=1)))
+            mabs[obs][p] = json_ready(np.mean(np.sqrt(np.sum(e**2, axis=1))))
         ranking[obs] = sorted(params, key=lambda p: -(msq[obs][p] or 0.0))
     return GlobalSensitivity(
         box={k: (float(v[0]), float(v[1])) for k, v in box.items()},
@@ -972,11 +965,6 @@ def global_sensitivity(
         ranking=ranking,
         samples=samples,
     )
-
-
-def _finite_or_none(x):
-    x = float(x)
-    return x if math.isfinite(x) else None
 
 
 # ------------------------------------------------------------------------------ plots

@@ -31,7 +31,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .. import pulses, sensor, theory  # noqa: E402
-from ..atomic import save_figure, write_json, write_text  # noqa: E402
+from ..atomic import json_ready, save_figure, write_json, write_text  # noqa: E402
 from ..importer import expand_sources  # noqa: E402
 from ..tracefile import TraceFile, read_trace  # noqa: E402
 
@@ -103,15 +103,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _channel_noise(trace, name):
     value = trace.channel_noise_std_n(name)
     return None if value is None else float(value)
-
-
-def _plain(value):
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    number = float(value)
-    return number if math.isfinite(number) else None
 
 
 def _fit_pulses(file_name, time, name, force, noise, kind, args):
@@ -443,7 +434,7 @@ def run(args: argparse.Namespace) -> int:
     writer.writeheader()
     writer.writerows(all_rows)
     write_text(out / "pulses.csv", buffer.getvalue())
-    write_json(out / "analysis.json", _json_ready(result))
+    write_json(out / "analysis.json", json_ready(result))
     print(f"wrote pulses.csv, analysis.json and plots to {out}")
     return 0
 
@@ -482,12 +473,3 @@ def repeat_scatter(summaries) -> list[dict]:
         rows.append(row)
     return rows
 
-
-def _json_ready(value):
-    if isinstance(value, dict):
-        return {str(k): _json_ready(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_ready(v) for v in value]
-    if value is None or isinstance(value, str):
-        return value
-    return _plain(value)

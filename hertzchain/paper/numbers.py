@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from .. import theory
+from ..atomic import json_ready
 from ..chain import ChainSetup
 from .constants import PAPER, PAPER_C_S, PAPER_C_V
 from .experiments import (
@@ -205,7 +206,7 @@ def build_numbers(
                      secondary["steel"], None, "paper: absent for walls as stiff as the beads"))
 
     eq5_gap = {name: eq5[name] / force_ratio[name] - 1.0 for name in walls}
-    return jsonable({
+    return json_ready({
         "kappa_N_per_um15": kappa * 1e-9,
         "C_theory": fig2.c_theory,
         "C_numeric": fig2.c_numeric,
@@ -264,21 +265,6 @@ def build_numbers(
             "striker": "identical to a bead",
         },
     })
-
-
-def jsonable(value):
-    """`value` with NumPy numbers as Python numbers and NaN/inf as None (JSON has neither)."""
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [jsonable(v) for v in value]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    return value
 
 
 def _format(value) -> str:
