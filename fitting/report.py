@@ -14,7 +14,6 @@
 
 from __future__ import annotations
 
-import io
 import math
 import re
 from pathlib import Path
@@ -25,24 +24,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hertzchain.atomic import save_figure, write_json, write_text  # noqa: E402
+from hertzchain.atomic import save_figure, write_csv, write_json  # noqa: E402
 
 
 def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_")
 
 
-def _csv(header, rows) -> str:
-    buffer = io.StringIO()
-    buffer.write(",".join(header) + "\n")
-    for row in rows:
-        buffer.write(",".join(_cell(v) for v in row) + "\n")
-    return buffer.getvalue()
-
-
 def _cell(value) -> str:
     if isinstance(value, str):
-        return value if "," not in value else f'"{value}"'
+        return value
     if isinstance(value, (bool, np.bool_)):
         return str(bool(value)).lower()
     if value is None:
@@ -57,13 +48,14 @@ def write_report(result, out_dir, *, plots: bool = True) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     written = []
 
-    def text(name, content):
-        write_text(out / name, content)
+    def table(name, header, rows):
+        write_csv(out / name, header, ([_cell(v) for v in row] for row in rows))
         written.append(out / name)
 
     write_json(out / "fit.json", result.to_json())
     written.append(out / "fit.json")
-    text("params.csv", _csv(
+    table(
+        "params.csv",
         ["parameter", "value", "stderr", "relative_stderr", "unit"],
         [
             [label, result.values[label], result.stderr[label],
@@ -76,11 +68,12 @@ def write_report(result, out_dir, *, plots: bool = True) -> list[Path]:
             ["C_t (1+mu*)^(1/3) (continuum)", result.speed_constant["C_continuum"],
              result.speed_constant["C_continuum_stderr"], math.nan, "m/s N^-1/6"],
         ],
-    ))
-    text("correlation.csv", _csv(
+    )
+    table(
+        "correlation.csv",
         ["parameter"] + list(result.labels),
         [[label] + list(row) for label, row in zip(result.labels, np.asarray(result.correlation))],
-    ))
+    )
     rows = []
     for experiment in result.problem.experiments:
         for channel in experiment.channels:
@@ -89,8 +82,9 @@ def write_report(result, out_dir, *, plots: bool = True) -> list[Path]:
                 result.residual_rms_whitened[experiment.label][channel],
                 experiment.noise_std_n[channel], experiment.noise_source,
             ])
-    text("rms.csv", _csv(["file", "channel", "rms_n", "rms_over_sigma", "noise_std_n", "noise_source"], rows))
-    text("starts.csv", _csv(
+    table("rms.csv", ["file", "channel", "rms_n", "rms_over_sigma", "noise_std_n", "noise_source"], rows)
+    table(
+        "starts.csv",
         ["start", "chi2", "converged", "steps", "agrees_with_best"]
         + [f"start_{label}" for label in result.labels] + [f"final_{label}" for label in result.labels],
         [
@@ -99,7 +93,7 @@ def write_report(result, out_dir, *, plots: bool = True) -> list[Path]:
             + [s["final"][label] for label in result.labels]
             for k, s in enumerate(result.starts)
         ],
-    ))
+    )
     predictions = result.predictions()
     for experiment, predicted in zip(result.problem.experiments, predictions):
         time = experiment.time_s
@@ -108,15 +102,16 @@ def write_report(result, out_dir, *, plots: bool = True) -> list[Path]:
             data = experiment.data(channel)
             columns += [data, predicted[channel], data - predicted[channel]]
             header += [f"data_{channel}", f"model_{channel}", f"residual_{channel}"]
-        buffer = io.StringIO()
-        buffer.write(",".join(header) + "\n")
-        np.savetxt(buffer, np.column_stack(columns), delimiter=",", fmt="%.9g")
-        text(f"residuals_{_safe(experiment.label)}.csv", buffer.getvalue())
+        path = out / f"residuals_{_safe(experiment.label)}.csv"
+        rows = np.column_stack(columns).tolist()
+        write_csv(path, header, ([f"{x:.9g}" for x in row] for row in rows))
+        written.append(path)
     for label, profile in result.profiles.items():
-        text(f"profile_{_safe(label)}.csv", _csv(
+        table(
+            f"profile_{_safe(label)}.csv",
             [f"{label}", "delta_chi2", "converged"],
             zip(profile["values"], profile["delta_chi2"], profile["converged"]),
-        ))
+        )
     if plots:
         written += _plots(result, predictions, out)
     return written

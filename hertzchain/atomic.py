@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import csv
 import json
 import math
 import os
@@ -32,6 +33,19 @@ def write_text(path, text: str) -> None:
     """Write `text` to `path` atomically."""
     with atomic_path(path) as temporary:
         temporary.write_text(text)
+
+
+def write_csv(path, header, rows) -> None:
+    """Write a CSV file atomically: the `header` cells, then one line per row of `rows`.
+
+    Cells are written as given (format numbers before; None is an empty cell); the `csv`
+    module quotes a cell that holds a comma, a quote or a line break. Lines end in "\\n".
+    """
+    with atomic_path(path) as temporary:
+        with open(temporary, "w", newline="") as handle:
+            writer = csv.writer(handle, lineterminator="\n")
+            writer.writerow(header)
+            writer.writerows(rows)
 
 
 def json_ready(value):

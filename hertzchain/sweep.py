@@ -44,7 +44,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .atomic import atomic_path, save_figure, write_json, write_text
+from .atomic import atomic_path, save_figure, write_csv, write_json
 from .batched import BatchedTraces, solve_batched
 from .chain import ChainSetup
 from .integrate import Recording
@@ -272,16 +272,13 @@ def _read_parquet(path: Path) -> dict[str, np.ndarray]:
     return {name: table.column(name).to_numpy() for name in table.column_names}
 
 
-def _csv(columns: dict[str, np.ndarray]) -> str:
-    names = list(columns)
-    lines = [",".join(names)]
-    n = len(next(iter(columns.values())))
+def _write_table_csv(path, columns: dict[str, np.ndarray]) -> None:
+    """The table as CSV: integer columns as integers, the others as shortest round-trip floats."""
     formatted = [
-        [str(int(x)) for x in columns[k]] if columns[k].dtype.kind in "iu" else [repr(float(x)) for x in columns[k]]
-        for k in names
+        [str(int(x)) for x in column] if column.dtype.kind in "iu" else [repr(float(x)) for x in column]
+        for column in columns.values()
     ]
-    lines += [",".join(col[i] for col in formatted) for i in range(n)]
-    return "\n".join(lines) + "\n"
+    write_csv(path, list(columns), zip(*formatted, strict=True))
 
 
 class SweepResult(NamedTuple):
@@ -381,7 +378,7 @@ def run_sweep(
     parts = [_read_parquet(_chunk_path(folder, i)) for i in range(n_chunks)]
     table = {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
     _write_parquet(folder / "sweep.parquet", table)
-    write_text(folder / "sweep.csv", _csv(table))
+    _write_table_csv(folder / "sweep.csv", table)
     if plots:
         plot_sweep(table, folder)
     return SweepResult(True, done, n_chunks, len(todo), table, folder)

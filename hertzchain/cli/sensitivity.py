@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import sensitivity as S
-from ..atomic import save_figure, write_json, write_text
+from ..atomic import save_figure, write_csv, write_json, write_text
 from ..tracefile import setup_header
 from ..units import parse_quantity
 from .setup_options import add_run_arguments, add_setup_arguments, setup_from_args
@@ -93,7 +93,7 @@ def _csv(rows: list[dict]) -> str:
     return buffer.getvalue()
 
 
-def _trace_csv(result: S.SensitivityResult) -> str:
+def _write_trace_csv(path, result: S.SensitivityResult) -> None:
     columns = {"time_s": result.time_s}
     for o in result.trace_observables:
         columns[o] = result.values[o]
@@ -104,10 +104,8 @@ def _trace_csv(result: S.SensitivityResult) -> str:
             else:
                 for i in range(d.shape[1]):
                     columns[f"d({o})/d({p}[{i + 1}])"] = d[:, i]
-    buffer = io.StringIO()
-    buffer.write(",".join(columns) + "\n")
-    np.savetxt(buffer, np.column_stack(list(columns.values())), delimiter=",", fmt="%.10g")
-    return buffer.getvalue()
+    table = np.column_stack(list(columns.values()))
+    write_csv(path, list(columns), ([f"{x:.10g}" for x in row] for row in table.tolist()))
 
 
 def _run_options(args) -> dict:
@@ -158,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
         figure_name = "elasticities.png"
         save_figure(S.plot_elasticities(result), out / figure_name, dpi=120)
         if result.trace_observables:
-            write_text(out / "trace_sensitivity.csv", _trace_csv(result))
+            _write_trace_csv(out / "trace_sensitivity.csv", result)
             save_figure(S.plot_trace_sensitivities(result), out / "trace_sensitivity.png", dpi=110)
         for o in result.observables:
             if o in result.trace_observables:

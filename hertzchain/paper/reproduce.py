@@ -13,7 +13,6 @@ Writes (all atomically):
 
 from __future__ import annotations
 
-import io
 import math
 import time
 from pathlib import Path
@@ -21,7 +20,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..atomic import save_figure, write_json, write_text
+from ..atomic import save_figure, write_csv, write_json, write_text
 from ..progress import Progress
 from . import experiments, figures
 from .experiments import FAR_CONTACT, FULL_PLAN, QUICK_PLAN, SENSOR_BEAD, Plan
@@ -30,17 +29,11 @@ from .numbers import build_numbers, numbers_markdown
 
 def _write_csv(path: Path, columns: dict) -> None:
     """Columns of equal length (numbers or strings) as a CSV file with a header line."""
-    names = list(columns)
-    length = len(next(iter(columns.values())))
-    buffer = io.StringIO()
-    buffer.write(",".join(names) + "\n")
-    for i in range(length):
-        cells = []
-        for name in names:
-            value = columns[name][i]
-            cells.append(value if isinstance(value, str) else f"{float(value):.10g}")
-        buffer.write(",".join(cells) + "\n")
-    write_text(path, buffer.getvalue())
+    formatted = [
+        [value if isinstance(value, str) else f"{float(value):.10g}" for value in column]
+        for column in columns.values()
+    ]
+    write_csv(path, list(columns), zip(*formatted, strict=True))
 
 
 def _save(figure, path: Path) -> None:
