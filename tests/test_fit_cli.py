@@ -8,6 +8,7 @@ import pytest
 from fitting.parameters import bare_speed_constant
 from fitting.synthetic import paper_setups, synthetic_traces
 from hertzchain.cli import main
+from hertzchain.theory import long_wave_velocity_constant
 from hertzchain.tracefile import write_trace
 
 TRUTH = {"eta": 2e-6, "mu": 0.19, "mu_star": 0.01}
@@ -47,7 +48,12 @@ def test_fit_command_writes_the_report(trace_files, tmp_path, capsys):
     assert len(report["starts"]) == 2
     # the speed constant: discrete value and the continuum one, C_t (1+mu*)^(1/3)
     speed = report["speed_constant"]
-    assert speed["C_continuum"] == pytest.approx(speed["C"] * 0.894427191 / 0.905516, rel=1e-9)
+    # C_t of Eq. (3) from the beads' density and modulus, scaled as C: (C / C_0) C_t
+    setup = paper_setups([0.3])[0]
+    c_t = float(long_wave_velocity_constant(setup.bead_radius_m[0], setup.bead_density_kg_m3[0],
+                                            setup.bead_youngs_pa[0], setup.bead_poisson[0]))
+    c_0 = float(bare_speed_constant(setup))
+    assert speed["C_continuum"] == pytest.approx(c_t * speed["C"] / c_0, rel=1e-9)
     assert speed["C_continuum"] == pytest.approx(198.92 * 1.01 ** (1 / 3), rel=2e-3)
     low, high = report["profiles"]["eta"]["interval_95"]
     assert low < TRUTH["eta"] < high

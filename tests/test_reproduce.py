@@ -145,7 +145,8 @@ def test_rows_hold_ours_paper_and_relative_difference(quick):
     rows = {row["key"]: row for row in n["rows"]}
     c_n = rows["C_numeric"]
     assert c_n["paper"] == 201.5
-    assert c_n["relative_difference"] == pytest.approx(c_n["ours"] / 201.5 - 1.0, rel=1e-12)
+    # against the independent reference 201.3675 (adaptive DOP853 solver)
+    assert c_n["relative_difference"] == pytest.approx(201.3675 / 201.5 - 1.0, abs=2.5e-4)
     assert rows["force_ratio.Cu"]["paper"] == pytest.approx(n["force_ratio_eq5"]["Cu"])
     assert rows["secondary_wave.steel"]["relative_difference"] is None
 

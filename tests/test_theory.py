@@ -119,11 +119,23 @@ def test_paper_dissipation_conversions():
     # (with C = 201.5).
     assert float(theory.mu_from_c_s(0.17, MASS)) == pytest.approx(0.1936, abs=2e-4)
     assert float(theory.eta_from_c_v(0.019, 201.5, R)) * 1e6 == pytest.approx(1.551, abs=2e-3)
-    assert float(theory.c_v_from_eta(2e-6, 201.5, R)) == pytest.approx(0.0245, abs=2e-4)
-    assert float(theory.c_s_from_mu(0.19, MASS)) == pytest.approx(0.1668, abs=3e-4)
-    assert float(theory.restitution_law(100.0, 0.01, 0.1)) == pytest.approx(
-        1 - 0.01 * 100 ** (1 / 6) - 1e-3
+    # Each conversion inverts the other.
+    c_v = theory.c_v_from_eta(2e-6, 201.5, R)
+    assert float(theory.eta_from_c_v(c_v, 201.5, R)) == pytest.approx(2e-6, rel=1e-12)
+    assert float(theory.mu_from_c_s(theory.c_s_from_mu(0.19, MASS), MASS)) == pytest.approx(
+        0.19, rel=1e-12
     )
+
+
+def test_restitution_law_limits_and_maximum():
+    """No dissipation: eps = 1. With both losses, eps is largest where the viscous loss's
+    growth C_v F^(1/6)/6 balances the friction loss C_s/F: at F* = (6 C_s/C_v)^(6/7)."""
+    assert float(theory.restitution_law(100.0, 0.0, 0.0)) == 1.0
+    c_v, c_s = 0.019, 0.17
+    best = (6 * c_s / c_v) ** (6 / 7)
+    slope = jax.grad(lambda f: theory.restitution_law(f, c_v, c_s))
+    assert float(slope(best)) == pytest.approx(0.0, abs=1e-14)
+    assert float(slope(0.5 * best)) > 0 > float(slope(2 * best))
 
 
 def _strain_profile(x, psi_m):
