@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hertzchain.pulses import estimate_noise_std_n
 from hertzchain.theory import DISCRETE_FWHM_FACTOR
 from hertzchain.tracefile import TraceFile, read_trace
 
@@ -46,13 +47,8 @@ class DataWarning(UserWarning):
     """Data the fit uses only in part (clipped samples); the message says which and why."""
 
 
-def estimate_noise_std(values) -> float:
-    """Robust estimate of white-noise standard deviation from second differences, same units."""
-    second = np.diff(np.asarray(values, dtype=float), n=2)
-    if second.size == 0:
-        return 0.0
-    mad = np.median(np.abs(second - np.median(second)))
-    return float(1.4826 * mad / math.sqrt(6.0))
+# Robust estimate of white-noise standard deviation from second differences, same units.
+estimate_noise_std = estimate_noise_std_n
 
 
 @dataclasses.dataclass(frozen=True)

@@ -24,6 +24,8 @@ import math
 
 import numpy as np
 
+from hertzchain.pulses import first_run
+
 WINDOWS = ("before", "leading_edge", "peak", "trailing_edge", "after")
 FREQUENCY_BANDS_HZ = ((0.0, 5e3), (5e3, 20e3), (20e3, 60e3), (60e3, 200e3), (200e3, math.inf))
 
@@ -48,17 +50,12 @@ def window_masks(model_values) -> dict:
     masks = {name: np.zeros(n, bool) for name in WINDOWS}
     if n == 0:
         return masks
-    peak_index = int(np.argmax(m))
-    amplitude = m[peak_index]
-    if not amplitude > 0:
+    # the first pulse: its maximum before the model drops back to 10 % of the largest
+    run = first_run(m, 0.1)
+    if run is None:
         masks["after"][:] = True
         return masks
-    above = np.nonzero(m > 0.1 * amplitude)[0]
-    start = int(above[0])
-    # the first pulse: its maximum before the model drops back below 10 %
-    below_after = np.nonzero(m[start:] < 0.1 * amplitude)[0]
-    end = start + int(below_after[0]) if below_after.size else n
-    first_peak = start + int(np.argmax(m[start:end]))
+    start, end, first_peak = run
     half = m[first_peak] / 2
     left = first_peak
     while left > 0 and m[left] > half:

@@ -82,22 +82,39 @@ def first_peak(time_s, force_n, *, rise_fraction=0.3):
     **Returns:** `(peak_time_s, peak_force_n)` of shape (...).
     """
     force_n = jnp.asarray(force_n)
+    return refine_peak(time_s, force_n, _first_peak_index(force_n, rise_fraction))
+
+
+def _first_peak_index(force_n, rise_fraction):
+    """Sample index (...) of `first_peak`: the first sample not below its successor from the
+    first rise above `rise_fraction` of the maximum on (the last sample if none)."""
     n = force_n.shape[-1]
     top = jnp.max(force_n, axis=-1, keepdims=True)
     start = jnp.argmax(force_n >= rise_fraction * top, axis=-1)
     samples = jnp.arange(n - 1)
     falling = (force_n[..., :-1] >= force_n[..., 1:]) & (samples >= start[..., None])
-    index = jnp.where(jnp.any(falling, axis=-1), jnp.argmax(falling, axis=-1), n - 1)
-    return refine_peak(time_s, force_n, index)
+    return jnp.where(jnp.any(falling, axis=-1), jnp.argmax(falling, axis=-1), n - 1)
 
 
-def _first_peak_index(force_n, rise_fraction):
-    force = np.asarray(force_n)
-    top = np.max(force, axis=-1, keepdims=True)
-    start = np.argmax(force >= rise_fraction * top, axis=-1)
-    samples = np.arange(force.shape[-1] - 1)
-    falling = (force[..., :-1] >= force[..., 1:]) & (samples >= start[..., None])
-    return np.where(np.any(falling, axis=-1), np.argmax(falling, axis=-1), force.shape[-1] - 1)
+def first_run(values, fraction):
+    """Sample indices `(start, end, peak)` of the first run of samples above `fraction` of a
+    trace's maximum: its first sample, one past its last, and its largest; None when the
+    maximum is not positive or no sample exceeds the level (`fraction` >= 1).
+
+    NumPy, not differentiable: for choosing samples (a window, the samples a parabola is
+    fitted through), not for values that must carry a gradient.
+    """
+    values = np.asarray(values, dtype=float)
+    top = float(np.max(values)) if values.size else 0.0
+    if not top > 0:
+        return None
+    above = values > fraction * top
+    start = int(np.argmax(above))
+    if not above[start]:
+        return None
+    below_after = np.nonzero(~above[start:])[0]
+    end = start + int(below_after[0]) if below_after.size else len(values)
+    return start, end, start + int(np.argmax(values[start:end]))
 
 
 # ----------------------------------------------------------------------------------------
@@ -361,7 +378,7 @@ def incident_wave(time_s, forces_n, contacts, bead_radius_m, *, rise_fraction=0.
     forces = jnp.asarray(forces_n, dtype=jnp.float64)
     if forces.shape[0] != len(contacts):
         raise ValueError(f"incident_wave: {forces.shape[0]} traces for {len(contacts)} contacts.")
-    index = _first_peak_index(forces, rise_fraction)
+    index = np.asarray(_first_peak_index(forces, rise_fraction))
     late = [k for k, i in zip(contacts, index) if i >= forces.shape[-1] - 2]
     if late:
         raise ValueError(
@@ -578,9 +595,12 @@ def estimate_noise_std_n(force_n) -> float:
 
     White noise of variance $\\sigma^2$ gives second differences of variance $6\\sigma^2$;
     the median absolute deviation makes the estimate robust to the samples where a finely
-    sampled smooth pulse curves (they must be a minority of the trace).
+    sampled smooth pulse curves (they must be a minority of the trace). 0 for a trace of
+    fewer than 3 samples. Works in any unit (the result is in the trace's).
     """
     diff = np.diff(np.asarray(force_n, dtype=float), n=2)
+    if diff.size == 0:
+        return 0.0
     mad = np.median(np.abs(diff - np.median(diff)))
     return float(1.4826 * mad / math.sqrt(6.0))
 

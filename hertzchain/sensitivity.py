@@ -334,7 +334,15 @@ class _Pulse(NamedTuple):
 
 
 def _pulse(force_n, dt_s: float, baseline_n, scale_n, use_global_max: bool) -> _Pulse:
-    """Peak, peak time and half-height crossings of the incident pulse of one trace."""
+    """Peak, peak time and half-height crossings of the incident pulse of one trace.
+
+    Separate from `pulses.first_peak` on purpose: it runs inside the jitted and
+    differentiated observable function, so it never raises and flags what it cannot find
+    instead; it measures from the precompression baseline and takes the first strict local
+    maximum above 30 % of the pulse height. Its vertex is `pulses.refine_peak`'s three-point
+    parabola (unclipped: at a local maximum the offset is within half a sample), with a
+    safe denominator where the pulse is not found, so that flagged values stay finite.
+    """
     y = force_n
     ys = jax.lax.stop_gradient(y)
     n = y.shape[0]
