@@ -365,7 +365,8 @@ class IncidentWave(NamedTuple):
 def incident_wave(time_s, forces_n, contacts, bead_radius_m, *, rise_fraction=0.3) -> IncidentWave:
     """Speed and amplitude of the first pulse passing a set of contacts.
 
-    Definition (row 2a of the project's reference numbers): at each contact K the first pulse
+    Definition (the paper does not state its own; tests/test_pulses.py checks the result
+    against an adaptive DOP853 solution): at each contact K the first pulse
     (`first_peak`) gives a parabolic peak time and force; the speed is the least-squares
     slope of $2R\\,K$ against the peak times and the amplitude is the mean peak force. On
     the paper's chain (identical striker, contacts 8-15) this gives $v/F_m^{1/6}$ = 201.37.
