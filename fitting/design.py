@@ -48,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from hertzchain.atomic import json_ready
 from hertzchain.chain import ChainSetup
 from hertzchain.progress import Progress
 from hertzchain.tracefile import TraceFile, setup_header
@@ -55,16 +56,19 @@ from hertzchain.tracefile import TraceFile, setup_header
 from .data import Experiment, as_experiments, make_experiment
 from .fit import make_problem
 from .model import ForwardModel, Problem, residuals_and_jacobian
-from .parameters import get_spec, parse_parameter_list
-from .parameters import from_unbounded, to_unbounded, transform_arrays
+from .parameters import (
+    from_unbounded,
+    get_spec,
+    parse_parameter_list,
+    to_unbounded,
+    transform_arrays,
+)
 from .synthetic import simulate_clean
+from .uncertainty import DEGENERATE_RATIO
 
 # Verlet steps per contact time of the noise-free data of a planned experiment: the design
 # uses the data only for the fit's input checks and its choice of simulation sampling.
 _PLAN_STEPS = 100
-# A direction of the column-normalised Jacobian with a singular value below this fraction of
-# the largest is one the plan cannot see (as fitting.uncertainty.DEGENERATE_RATIO).
-DEGENERATE_RATIO = 1e-6
 
 NUISANCES = ("striker_velocity", "time_offset", "gain")
 CRITERIA = ("D", "A")
@@ -189,26 +193,22 @@ class DesignResult:
     plan: list
 
     def to_json(self) -> dict:
-        def num(v):
-            v = float(v)
-            return v if math.isfinite(v) else None
-
         return {
             "params": {
-                p: {"value": num(self.values[p]), "stderr": num(self.stderr[p]),
-                    "relative_stderr": num(self.relative_stderr[p]), "unit": self.units[p]}
+                p: {"value": json_ready(self.values[p]), "stderr": json_ready(self.stderr[p]),
+                    "relative_stderr": json_ready(self.relative_stderr[p]), "unit": self.units[p]}
                 for p in self.params
             },
             "correlation": {
                 "names": list(self.params),
-                "matrix": [[num(c) for c in row] for row in np.asarray(self.correlation)],
+                "matrix": [[json_ready(c) for c in row] for row in np.asarray(self.correlation)],
             },
             "nuisances": {
                 "free": list(self.nuisances),
                 "treatment": "free and marginalised" if self.nuisances
                 else "fixed (striker velocity, trigger offset and gains known)",
             },
-            "criterion": {k: num(v) for k, v in self.criterion.items()},
+            "criterion": {k: json_ready(v) for k, v in self.criterion.items()},
             "plan": self.plan,
         }
 

@@ -1,8 +1,7 @@
 """Find where a chain model and measured traces disagree, name the missing effect, add it,
 and repeat until nothing significant is left.
 
-`diagnose(experiments)` runs this workflow (discrepancy.md section 2, simplified where
-noted):
+`diagnose(experiments)` runs this workflow:
 
 1. **Base fit.** The stated model (default: the header's dissipationless Hertz chain with
    ideal force sensors) is fitted with its nuisances free: per file the striker velocity
@@ -22,7 +21,8 @@ noted):
    few loose steps each, then whole), since from zero a fit of all radii on whole records
    stops in a local minimum. Candidates whose sensitivity lies in the span of the free
    parameters are reported as not separable (a uniform stiffness scale with both striker
-   velocity and gain free, discrepancy.md section 5.4). Candidates are refitted in order
+   velocity and gain free: F(t; l kappa, V0) = l^-2 F(t; kappa, l^2 V0), tested in
+   `tests/test_fit_identifiability.py`). Candidates are refitted in order
    of their number of strengths; once one explains the misfit to the noise level,
    candidates with more strengths are not refitted (they could only fit the noise better:
    parsimony, and the per-bead refit is the costliest step of a diagnosis). The best
@@ -32,7 +32,8 @@ noted):
 4. **Decide.** A candidate with k strengths is named only if all hold:
    (a) its $\\Delta\\chi^2$ beats the BIC penalty $k\\ln n$;
    (b) it removes at least `min_share` of the excess misfit $\\chi^2 - \\mathrm{dof}$ that
-   remains (practical significance, discrepancy.md section 5.6);
+   remains (practical significance: with 10^4 samples every small convention difference is
+   statistically significant);
    (c) it improves held-out traces: two-fold cross-validation over files (folds alternate
    in amplitude), the global parameters fitted on one fold, the other fold's nuisances
    refitted with them held, both by one Levenberg-Marquardt step from the fit to all files
@@ -70,6 +71,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from hertzchain.atomic import json_ready
 from hertzchain.progress import Progress
 
 from . import effects as fx
@@ -253,7 +255,7 @@ class CandidateResult:
     reason: str
 
     def to_json(self) -> dict:
-        return _clean(dataclasses.asdict(self))
+        return json_ready(dataclasses.asdict(self))
 
 
 @dataclasses.dataclass
@@ -276,7 +278,7 @@ class Step:
     x_after: np.ndarray
 
     def to_json(self) -> dict:
-        return _clean({
+        return json_ready({
             "effect": self.effect,
             "gap_before": self.gap_before,
             "gap_after": self.gap_after,
@@ -329,7 +331,7 @@ class Diagnosis:
     residual_evaluations: int = 0
 
     def to_json(self) -> dict:
-        return _clean({
+        return json_ready({
             "missing_effects": list(self.missing_effects),
             "steps": [s.to_json() for s in self.steps],
             "base_fit": self.base_fit,
@@ -347,24 +349,6 @@ class Diagnosis:
             "residual_evaluations": self.residual_evaluations,
             "model_seconds": self.evaluation_seconds,
         })
-
-
-def _clean(value):
-    """JSON-ready copy: numpy to Python, non-finite numbers to None."""
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return [_clean(v) for v in value.tolist()]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        v = float(value)
-        return v if math.isfinite(v) else None
-    return value
 
 
 # --- the workflow ------------------------------------------------------------------------------

@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from hertzchain.atomic import json_ready
 
 from . import start as start_values
 from .data import FitInputError, as_experiments
@@ -356,45 +357,39 @@ class FitResult:
 
     def to_json(self) -> dict:
         """A JSON-ready dict (SI units; non-finite numbers as null)."""
-        def num(v):
-            if v is None:
-                return None
-            v = float(v)
-            return v if math.isfinite(v) else None
-
         params = {
-            label: {"value": num(self.values[label]), "stderr": num(self.stderr[label]),
+            label: {"value": json_ready(self.values[label]), "stderr": json_ready(self.stderr[label]),
                     "unit": self.units[label]}
             for label in self.labels
         }
         for key in ("C",):
             if key not in params:
-                params[key] = {"value": num(self.speed_constant["C"]),
-                               "stderr": num(self.speed_constant["C_stderr"]),
+                params[key] = {"value": json_ready(self.speed_constant["C"]),
+                               "stderr": json_ready(self.speed_constant["C_stderr"]),
                                "unit": "m/s N^-1/6", "fitted": False}
         return {
             "params": params,
             "correlation": {
                 "names": list(self.labels),
-                "matrix": [[num(c) for c in row] for row in np.asarray(self.correlation)],
+                "matrix": [[json_ready(c) for c in row] for row in np.asarray(self.correlation)],
             },
             "covariance_scale": self.covariance_scale,
-            "chi2": num(self.chi2),
+            "chi2": json_ready(self.chi2),
             "dof": int(self.dof),
-            "reduced_chi2": num(self.reduced_chi2),
-            "residual_rms_n": {k: {c: num(v) for c, v in d.items()} for k, d in self.residual_rms.items()},
+            "reduced_chi2": json_ready(self.reduced_chi2),
+            "residual_rms_n": {k: {c: json_ready(v) for c, v in d.items()} for k, d in self.residual_rms.items()},
             "residual_rms_whitened": {
-                k: {c: num(v) for c, v in d.items()} for k, d in self.residual_rms_whitened.items()
+                k: {c: json_ready(v) for c, v in d.items()} for k, d in self.residual_rms_whitened.items()
             },
-            "speed_constant": {k: num(v) for k, v in self.speed_constant.items()},
+            "speed_constant": {k: json_ready(v) for k, v in self.speed_constant.items()},
             "converged": bool(self.converged),
             "message": self.message,
             "n_steps": int(self.n_steps),
             "starts": [
                 {
-                    "start": {k: num(v) for k, v in s["start"].items()},
-                    "final": {k: num(v) for k, v in s["final"].items()},
-                    "chi2": num(s["chi2"]),
+                    "start": {k: json_ready(v) for k, v in s["start"].items()},
+                    "final": {k: json_ready(v) for k, v in s["final"].items()},
+                    "chi2": json_ready(s["chi2"]),
                     "converged": bool(s["converged"]),
                     "steps": int(s["steps"]),
                     "agrees_with_best": bool(s["agrees_with_best"]),
@@ -403,24 +398,24 @@ class FitResult:
             ],
             "warnings": list(self.warnings),
             "identifiability": {
-                "singular_values": [num(v) for v in self.identifiability["singular_values"]],
-                "condition_number": num(self.identifiability["condition_number"]),
+                "singular_values": [json_ready(v) for v in self.identifiability["singular_values"]],
+                "condition_number": json_ready(self.identifiability["condition_number"]),
             },
             "profiles": {
                 label: {
-                    "values": [num(v) for v in p["values"]],
-                    "delta_chi2": [num(v) for v in p["delta_chi2"]],
-                    "interval_68": [num(v) for v in p["interval_68"]],
-                    "interval_95": [num(v) for v in p["interval_95"]],
+                    "values": [json_ready(v) for v in p["values"]],
+                    "delta_chi2": [json_ready(v) for v in p["delta_chi2"]],
+                    "interval_68": [json_ready(v) for v in p["interval_68"]],
+                    "interval_95": [json_ready(v) for v in p["interval_95"]],
                 }
                 for label, p in self.profiles.items()
             },
             "noise_std_n": {
-                e.label: {"source": e.noise_source, **{c: num(s) for c, s in e.noise_std_n.items()}}
+                e.label: {"source": e.noise_source, **{c: json_ready(s) for c, s in e.noise_std_n.items()}}
                 for e in self.problem.experiments
             },
             "files": [e.trace.path or e.label for e in self.problem.experiments],
-            "elapsed_s": num(self.elapsed_s),
+            "elapsed_s": json_ready(self.elapsed_s),
         }
 
 
