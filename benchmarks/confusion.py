@@ -23,6 +23,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import hertzchain  # noqa: E402,F401
+import jax  # noqa: E402
 from fitting.diagnosis import diagnose  # noqa: E402
 from fitting.effects import EFFECT_NAMES  # noqa: E402
 from fitting.hidden import hidden_effect_traces  # noqa: E402
@@ -44,6 +45,7 @@ def run_case(hidden, seed, *, n_beads=None, noise_fraction=None, contacts=None, 
         files = hidden_records(setup, hidden, code_path=code_path, seed=seed)
     began = time.perf_counter()
     result = diagnose(files, progress=False)
+    jax.clear_caches()  # each diagnosis compiles its own models: free them before the next
     return {
         "hidden": list(hidden),
         "setup": setup or f"{n_beads} beads (fitting.hidden)",
