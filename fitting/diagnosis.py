@@ -238,24 +238,28 @@ def _levenberg_marquardt(evaluate, x0, active, rows, lower, upper, *, max_steps:
 # --- results ------------------------------------------------------------------------------------
 @dataclasses.dataclass
 class CandidateResult:
-    """One candidate effect refitted at one step of the search."""
+    """One candidate effect at one step of the search: refitted (`chi2`, `delta_chi2`,
+    `bic_gain`, `share_of_excess`, `values`, `stderr`, `x` its parameter vector) or not
+    (NaN, with the `reason`)."""
 
     effect: str
     n_parameters: int
     score_chi2: float
-    separable: bool
-    chi2: float
-    delta_chi2: float
-    bic_gain: float
-    share_of_excess: float
-    heldout_gain: float | None
-    values: dict
-    stderr: dict
-    passed: bool
-    reason: str
+    separable: bool = True
+    chi2: float = math.nan
+    delta_chi2: float = math.nan
+    bic_gain: float = math.nan
+    share_of_excess: float = math.nan
+    heldout_gain: float | None = None
+    values: dict = dataclasses.field(default_factory=dict)
+    stderr: dict = dataclasses.field(default_factory=dict)
+    passed: bool = False
+    reason: str = ""
+    x: np.ndarray | None = dataclasses.field(default=None, repr=False)
 
     def to_json(self) -> dict:
-        return json_ready(dataclasses.asdict(self))
+        fields = (f.name for f in dataclasses.fields(self) if f.name != "x")
+        return json_ready({name: getattr(self, name) for name in fields})
 
 
 @dataclasses.dataclass
@@ -839,20 +843,19 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
             simpler = [c for c in refitted.values() if c.n_parameters < k and explains_to_noise(c)]
             if simpler:
                 refitted[name] = CandidateResult(
-                    name, k, scores[name], True, math.nan, math.nan, math.nan, math.nan, None, {}, {}, False,
-                    f"not refitted: {simpler[0].effect} ({simpler[0].n_parameters} parameter(s)) already "
-                    "explains the misfit to the noise level")
+                    name, k, scores[name],
+                    reason=f"not refitted: {simpler[0].effect} ({simpler[0].n_parameters} parameter(s)) "
+                    "already explains the misfit to the noise level")
             else:
                 x_c, chi2_c, _ = search.refit(best_starts[name], accepted + [name], name)
                 delta = chi2 - chi2_c
                 all_cols = search.columns(accepted + [name])
                 err = search.stderr(x_c, all_cols, chi2_c)
                 refitted[name] = CandidateResult(
-                    name, k, scores[name], True, chi2_c, delta, delta - k * penalty,
-                    delta / excess if excess > 0 else 0.0, None,
-                    {search.labels[c]: float(x_c[c]) for c in cols},
-                    {search.labels[c]: float(err[all_cols.index(c)]) for c in cols}, False, "")
-                refitted[name]._x = x_c  # type: ignore[attr-defined]
+                    name, k, scores[name], chi2=chi2_c, delta_chi2=delta, bic_gain=delta - k * penalty,
+                    share_of_excess=delta / excess if excess > 0 else 0.0,
+                    values={search.labels[c]: float(x_c[c]) for c in cols},
+                    stderr={search.labels[c]: float(err[all_cols.index(c)]) for c in cols}, x=x_c)
             if bar:
                 bar.advance()
         results = []
@@ -862,13 +865,13 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
                 results.append(refitted[name])
             elif not separable[name]:
                 not_separable.add(name)
-                results.append(CandidateResult(name, k, scores[name], False, chi2, 0.0, -k * penalty,
-                                               0.0, None, {}, {}, False,
-                                               "not separable from the free parameters"))
+                results.append(CandidateResult(name, k, scores[name], separable=False, chi2=chi2, delta_chi2=0.0,
+                                               bic_gain=-k * penalty, share_of_excess=0.0,
+                                               reason="not separable from the free parameters"))
             else:
                 results.append(CandidateResult(
-                    name, k, scores[name], True, math.nan, math.nan, math.nan, math.nan, None, {}, {}, False,
-                    "the misfit is already at the noise level" if excess <= band(dof) else
+                    name, k, scores[name],
+                    reason="the misfit is already at the noise level" if excess <= band(dof) else
                     f"score {scores[name]:.4g} not among the {max_refits} best, which are refitted"))
         # decide
         at_noise = excess <= band(dof)
@@ -896,7 +899,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
                 search.log(f"held-out check of {c.effect}")
                 if base_heldout is None:
                     base_heldout = heldout(x, accepted)
-                cand = heldout(c._x, accepted + [c.effect])  # type: ignore[attr-defined]
+                cand = heldout(c.x, accepted + [c.effect])
                 c.heldout_gain = base_heldout - cand
                 margin = c.n_parameters * (penalty if many else 1.0)
                 if c.heldout_gain <= margin:
@@ -909,7 +912,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
             last_candidates = results
             break
         winner = max(passed, key=lambda c: (c.heldout_gain if c.heldout_gain is not None else c.delta_chi2))
-        x_new = winner._x  # type: ignore[attr-defined]
+        x_new = winner.x
         x_new, chi2_new, _ = search.fit(x_new, accepted + [winner.effect], max_steps=20)
         location_after = locate(search.problem, x_new, search.evaluate.residuals(x_new))
         steps.append(Step(
