@@ -1,5 +1,6 @@
-"""The linear dashpot gamma * d(delta)/dt at contacts: energy it takes in one collision
-against the first-order closed form, the energy ledger, and the diffrax reference."""
+"""Damping laws at contacts against closed forms: the energy one weak collision loses to the
+Kuwabara-Kono term and to a linear dashpot, to first order in the damping (integrals over
+the elastic Hertz collision); the energy ledger; the diffrax reference."""
 
 import math
 
@@ -8,6 +9,30 @@ import pytest
 
 import hertzchain as hc
 from hertzchain.reference import simulate_reference
+
+
+def _one_collision(velocity, **damping):
+    """(energy lost to damping, J; reduced mass, kg; kappa; elastic maximum overlap, m)."""
+    setup = hc.ChainSetup(1, end="free", striker_velocity_m_s=velocity, **damping)
+    run = hc.simulate(setup, t_end_s=0.2e-3, sample_interval_s=0.1e-6, record_all=True)
+    mass = float(setup.striker_mass_kg) * float(setup.bead_mass_kg[0]) / (
+        float(setup.striker_mass_kg) + float(setup.bead_mass_kg[0]))
+    kappa = float(setup.contact_kappa()[0])
+    overlap = (5 * mass * velocity**2 / (4 * kappa)) ** 0.4
+    return float(np.asarray(run.dissipated_viscous_j)[-1]), mass, kappa, overlap
+
+
+def test_energy_a_weak_kuwabara_kono_term_takes_in_one_collision_matches_the_closed_form():
+    """To first order in eta: 3 eta kappa v delta_m^(3/2) * 0.4 B(0.6, 1.5), i.e.
+    1 - e^2 proportional to v^(1/5) (Kuwabara & Kono 1987; Schwager & Poschel 1998)."""
+    eta = 2e-7
+    losses = []
+    for velocity in (0.05, 0.2):
+        lost, mass, kappa, overlap = _one_collision(velocity, eta_s=eta)
+        beta = math.gamma(0.6) * math.gamma(1.5) / math.gamma(2.1)
+        assert lost == pytest.approx(3 * eta * kappa * velocity * overlap**1.5 * 0.4 * beta, rel=0.02)
+        losses.append(lost / (0.5 * mass * velocity**2))
+    assert losses[1] / losses[0] == pytest.approx(4 ** 0.2, rel=0.02)  # 1 - e^2 ~ v^(1/5)
 
 
 def test_energy_taken_by_a_weak_dashpot_in_one_collision_matches_the_closed_form():
