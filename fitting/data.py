@@ -222,7 +222,9 @@ def load_experiments(sources, *, channels=None, noise_std_n=None) -> list[Experi
     """
     sources = list(sources)
     if any(isinstance(s, (str, Path)) and str(s).lower().endswith(".toml") for s in sources):
-        from hertzchain.importer import expand_sources  # scope-file readers load only for these
+        # experiment files (`hertzchain.importer.is_experiment_file`): the scope-file readers
+        # and their packages load only when one is given
+        from hertzchain.importer import expand_sources
 
         sources = expand_sources(sources)
     experiments, used = [], set()

@@ -249,8 +249,6 @@ def load_experiment(path) -> ExperimentDescription:
     where = str(path)
     try:
         document = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise
     except tomllib.TOMLDecodeError as error:
         _fail(where, f"not valid TOML ({error}).")
     _check_keys(document, _TOP_KEYS, where)
