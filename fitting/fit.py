@@ -30,8 +30,8 @@ from .model import ForwardModel, Problem
 from .parameters import (
     CONTINUUM_SPEED_FACTOR,
     DISCRETE_SPEED_FACTOR,
-    ParameterInstance,
     bare_speed_constant,
+    build_instances,
     from_unbounded,
     get_spec,
     parse_parameter_list,
@@ -99,20 +99,7 @@ def make_problem(experiments, params=("eta", "mu", "C"), *, fixed=None,
                 "C is shared by all files but their beads differ (bare C from "
                 f"{min(bare):.6g} to {max(bare):.6g}); fit mu_star instead, or one bead kind at a time."
             )
-    instances = []
-    for name in names:
-        spec = get_spec(name)
-        if spec.scope == "global":
-            instances.append(ParameterInstance(spec, label=name))
-        elif spec.scope == "experiment":
-            for e, experiment in enumerate(experiments):
-                instances.append(ParameterInstance(spec, e, label=f"{name}[{experiment.label}]"))
-        else:
-            for e, experiment in enumerate(experiments):
-                for channel in experiment.channels:
-                    instances.append(
-                        ParameterInstance(spec, e, channel, label=f"{name}[{experiment.label}:{channel}]")
-                    )
+    instances = build_instances(names, experiments)
     return Problem(experiments, instances, base, forward)
 
 

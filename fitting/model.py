@@ -180,6 +180,10 @@ class Problem:
             kind, scope = inst.spec.kind, inst.spec.scope
             if kind == "time_offset":
                 self.offset_index[inst.experiment] = i
+            elif kind == "gain" and scope == "sensor":
+                for e, experiment in enumerate(self.experiments):
+                    if inst.channel in experiment.channels:
+                        self.gain_index[e][inst.channel] = i
             elif kind == "gain":
                 self.gain_index[inst.experiment][inst.channel] = i
             elif scope == "global":
@@ -254,7 +258,8 @@ class Problem:
     def setup_at(self, x, experiment: int) -> ChainSetup:
         """The `ChainSetup` of one experiment at parameter values `x` (extras not included)."""
         setup = self.base_setups[experiment]
-        for i in self.global_sim + self.local_sim[experiment]:
+        indices = self.global_sim + self.local_sim[experiment]
+        for i in sorted(indices, key=lambda i: self.instances[i].spec.stage):
             spec = self.instances[i].spec
             if spec.kind == "setup":
                 setup = spec.apply(setup, jnp.asarray(x)[i])
@@ -270,7 +275,8 @@ class Problem:
 
         def one(setup, theta_global, theta_local):
             extras = dict(forward.extras_defaults)
-            for spec, value in list(zip(global_specs, theta_global)) + list(zip(local_specs, theta_local)):
+            pairs = list(zip(global_specs, theta_global)) + list(zip(local_specs, theta_local))
+            for spec, value in sorted(pairs, key=lambda pair: pair[0].stage):
                 if spec.kind == "setup":
                     setup = spec.apply(setup, value)
                 else:

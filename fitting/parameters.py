@@ -22,7 +22,9 @@ Scopes:
 
 - `"global"`: one value shared by every experiment (eta, mu, C, ...).
 - `"experiment"`: one value per trace file (striker velocity, trigger time offset).
-- `"channel"`: one value per recorded channel of each file (sensor gain).
+- `"channel"`: one value per recorded channel of each file (a gain per shot and channel).
+- `"sensor"`: one value per channel name, shared by every file that records it (the
+  calibration of one physical sensor used for all shots).
 
 Kinds (what a value acts on):
 
@@ -50,7 +52,7 @@ from hertzchain import contact
 from hertzchain.chain import ChainSetup
 from hertzchain.theory import DISCRETE_SPEED_FACTOR, LONG_WAVE_SPEED_FACTOR
 
-SCOPES = ("global", "experiment", "channel")
+SCOPES = ("global", "experiment", "channel", "sensor")
 SPACES = ("log", "asinh", "linear")
 KINDS = ("setup", "time_offset", "gain", "extra")
 
@@ -79,6 +81,10 @@ class ParameterSpec:
     - `read`: `(setup) -> value`: the value a setup already has (default start), or None.
     - `default`: start value when `read` is None (nuisances: offset 0, gain 1).
     - `description`: one line for help texts.
+    - `stage`: order in which setup parameters are applied: 0 for quantities of the
+      materials and the geometry, 1 for those defined relative to them (C sets the
+      stiffness scale so that the chain with its current beads has speed constant C, so a
+      free bead modulus or radius must be applied before it).
     """
 
     name: str
@@ -93,6 +99,7 @@ class ParameterSpec:
     read: Callable | None = None
     default: float = float("nan")
     description: str = ""
+    stage: int = 0
 
     def __post_init__(self):
         if self.scope not in SCOPES:
@@ -146,6 +153,20 @@ def _apply_field(field: str):
 
 def _read_field(field: str):
     return lambda setup: float(np.asarray(getattr(setup, field)))
+
+
+def _apply_bead_scale(field: str):
+    """Set every bead's `field` so that bead 1 has `value` (the others keep their ratio to it)."""
+
+    def apply(setup: ChainSetup, value):
+        current = getattr(setup, field)
+        return eqx.tree_at(lambda s: getattr(s, field), setup, current * (value / current[0]))
+
+    return apply
+
+
+def _read_first_bead(field: str):
+    return lambda setup: float(np.asarray(getattr(setup, field))[0])
 
 
 def bare_speed_constant(setup: ChainSetup) -> float:
@@ -205,13 +226,13 @@ for _spec in (
     ),
     ParameterSpec(
         "C", "m/s N^-1/6", "global", "log", 20.0, 2000.0, apply=_apply_speed_constant,
-        read=_read_speed_constant,
+        read=_read_speed_constant, stage=1,
         description="speed constant of the chain's solitary waves, v = C F_m^(1/6), set "
         "through the stiffness scale kappa* = (1+mu*) kappa (C proportional to (1+mu*)^(1/3))",
     ),
     ParameterSpec(
         "mu_star", "", "global", "linear", -0.5, 1.0, scale=0.01, apply=_apply_field("mu_star"),
-        read=_read_field("mu_star"),
+        read=_read_field("mu_star"), stage=1,
         description="thwarted-rotation friction, kappa* = (1+mu*) kappa (same physics as C)",
     ),
     ParameterSpec(
@@ -229,6 +250,18 @@ for _spec in (
         read=_read_precompression, description="static preload pressing the chain (N)",
     ),
     ParameterSpec(
+        "bead_youngs", "Pa", "global", "log", 1e6, 1e13, apply=_apply_bead_scale("bead_youngs_pa"),
+        read=_read_first_bead("bead_youngs_pa"),
+        description="Young's modulus of the chain's beads (Pa; all beads scaled together, the "
+        "striker keeps its own)",
+    ),
+    ParameterSpec(
+        "bead_radius", "m", "global", "log", 1e-5, 1.0, apply=_apply_bead_scale("bead_radius_m"),
+        read=_read_first_bead("bead_radius_m"),
+        description="radius of the chain's beads (m; all beads scaled together at their density, "
+        "so the mass follows R^3; the striker keeps its own)",
+    ),
+    ParameterSpec(
         "striker_velocity", "m/s", "experiment", "log", 1e-4, 50.0,
         apply=_apply_field("striker_velocity_m_s"), read=_read_field("striker_velocity_m_s"),
         description="impact velocity of each file (m/s)",
@@ -240,13 +273,18 @@ for _spec in (
     ),
     ParameterSpec(
         "gain", "", "channel", "log", 0.05, 20.0, kind="gain", default=1.0,
-        description="calibration factor of each channel: data = gain x force",
+        description="calibration factor of each channel of each file: data = gain x force",
+    ),
+    ParameterSpec(
+        "sensor_gain", "", "sensor", "log", 0.05, 20.0, kind="gain", default=1.0,
+        description="calibration factor of each sensor (channel name), shared by every file "
+        "that records it: data = gain x force",
     ),
 ):
     register_parameter(_spec)
 
 # Parameters that describe the same physical quantity: only one of each group may be fitted.
-EXCLUSIVE = (("C", "mu_star"),)
+EXCLUSIVE = ((("C", "mu_star"), "the same stiffness scale"), (("gain", "sensor_gain"), "the same calibration"))
 
 
 def get_spec(name: str) -> ParameterSpec:
@@ -271,11 +309,11 @@ def parse_parameter_list(text_or_names) -> tuple[str, ...]:
         get_spec(name)
         if name not in seen:
             seen.append(name)
-    for group in EXCLUSIVE:
+    for group, quantity in EXCLUSIVE:
         chosen = [name for name in group if name in seen]
         if len(chosen) > 1:
             raise ValueError(
-                f"Parameters {' and '.join(chosen)} describe the same stiffness scale; fit only one."
+                f"Parameters {' and '.join(chosen)} describe {quantity}; fit only one."
             )
     return tuple(seen)
 
@@ -295,6 +333,34 @@ class ParameterInstance:
     @property
     def name(self) -> str:
         return self.spec.name
+
+
+def build_instances(names, experiments) -> list[ParameterInstance]:
+    """The free numbers of a fit of `names` (checked registry names) on `experiments`.
+
+    A global parameter is one number; an experiment-scoped one, one per file
+    (`striker_velocity[run1]`); a channel-scoped one, one per channel of each file
+    (`gain[run1:wall]`); a sensor-scoped one, one per channel name, shared by the files
+    that record it (`sensor_gain[wall]`).
+    """
+    instances = []
+    for name in names:
+        spec = get_spec(name)
+        if spec.scope == "global":
+            instances.append(ParameterInstance(spec, label=name))
+        elif spec.scope == "experiment":
+            for e, experiment in enumerate(experiments):
+                instances.append(ParameterInstance(spec, e, label=f"{name}[{experiment.label}]"))
+        elif spec.scope == "channel":
+            for e, experiment in enumerate(experiments):
+                for channel in experiment.channels:
+                    instances.append(
+                        ParameterInstance(spec, e, channel, label=f"{name}[{experiment.label}:{channel}]")
+                    )
+        else:
+            sensors = dict.fromkeys(c for experiment in experiments for c in experiment.channels)
+            instances.extend(ParameterInstance(spec, None, c, label=f"{name}[{c}]") for c in sensors)
+    return instances
 
 
 def to_unbounded(instances, values) -> np.ndarray:

@@ -108,3 +108,61 @@ def test_register_a_new_parameter():
     finally:
         REGISTRY.pop("test_extra_strength", None)
     assert math.isfinite(spec.transform_constants()[1])
+
+
+def test_material_nuisances_are_applied_before_the_speed_constant():
+    """With C fitted, a stiffer bead material changes only the contacts C does not set.
+
+    C fixes the bead-bead stiffness scale (1 + mu*) kappa through Eq. 3's discrete
+    constant, so raising the beads' Young's modulus by 10 % at fixed C must leave the
+    bead-bead contacts' stiffness where it was (the scale 1 + mu* drops by 1/1.1), and
+    change the wall contact by the ratio of the Hertz kappa_w ~ sqrt(R) / (theta + theta_w)
+    times that scale.
+    """
+    from fitting.fit import make_problem
+    from fitting.synthetic import paper_setups, synthetic_traces
+
+    trace = synthetic_traces(paper_setups([0.3]), contacts=(6,), t_end_s=1.5e-3)[0]
+    problem = make_problem([trace], ("C", "bead_youngs"))
+    c = float(bare_speed_constant(problem.base_setups[0])) * 1.02
+    youngs = 203e9
+    before = problem.setup_at(np.array([c, youngs]), 0)
+    after = problem.setup_at(np.array([c, 1.1 * youngs]), 0)
+    # contact_kappa includes the stiffness scale (1 + mu*): contact 1 is bead 1 on bead 2
+    assert float(after.contact_kappa()[1]) == pytest.approx(float(before.contact_kappa()[1]), rel=1e-12)
+    theta = lambda y, nu: 3 * (1 - nu**2) / (4 * y)  # noqa: E731
+    wall = before.wall_youngs_pa
+    ratio = (theta(youngs, 0.3) + theta(wall, before.wall_poisson)) / (
+        theta(1.1 * youngs, 0.3) + theta(wall, before.wall_poisson))
+    scale = float((1 + after.mu_star) / (1 + before.mu_star))
+    assert scale == pytest.approx(1 / 1.1, rel=1e-12)
+    wall_ratio = float(after.wall_kappa() / before.wall_kappa())
+    assert wall_ratio == pytest.approx(float(ratio) * scale, rel=1e-12)
+    assert abs(wall_ratio - 1) > 0.02  # the wall contact does change: C cannot absorb it
+
+
+def test_bead_radius_scales_every_bead_and_its_mass():
+    from fitting.fit import make_problem
+    from fitting.synthetic import paper_setups, synthetic_traces
+
+    trace = synthetic_traces(paper_setups([0.3]), contacts=(6,), t_end_s=1.5e-3)[0]
+    problem = make_problem([trace], ("bead_radius",))
+    setup = problem.setup_at(np.array([0.013 * 1.01]), 0)
+    assert np.allclose(np.asarray(setup.bead_radius_m), 0.013 * 1.01, rtol=1e-12)
+    assert float(setup.bead_mass_kg[0]) == pytest.approx(
+        4 / 3 * math.pi * 7780 * (0.013 * 1.01) ** 3, rel=1e-12)
+    assert float(setup.striker_radius_m) == pytest.approx(float(problem.base_setups[0].striker_radius_m))
+
+
+def test_sensor_gain_is_one_number_per_channel_name_across_files():
+    from fitting.fit import make_problem
+    from fitting.synthetic import paper_setups, synthetic_traces
+
+    traces = synthetic_traces(paper_setups([0.2, 0.4]), contacts=(6,), t_end_s=1.5e-3)
+    problem = make_problem(traces, ("sensor_gain",))
+    assert problem.labels == ("sensor_gain[contact_6]", "sensor_gain[wall]")
+    base = np.asarray(problem.model_vector(np.array([1.0, 1.0])))
+    scaled = np.asarray(problem.model_vector(np.array([1.03, 1.0])))
+    for slices in problem.residual_slices():
+        np.testing.assert_allclose(scaled[slices["contact_6"]], 1.03 * base[slices["contact_6"]], rtol=1e-12)
+        np.testing.assert_allclose(scaled[slices["wall"]], base[slices["wall"]], rtol=1e-12)
