@@ -38,6 +38,7 @@ from .parameters import (
     to_unbounded,
     transform_arrays,
 )
+from .priors import apply_priors, parse_priors, prior_names
 from .uncertainty import (
     Covariance,
     covariance_from_jacobian,
@@ -56,7 +57,7 @@ class FitWarning(UserWarning):
 
 # --- building a problem ------------------------------------------------------------------------
 def make_problem(experiments, params=("eta", "mu", "C"), *, fixed=None,
-                 forward: ForwardModel | None = None) -> Problem:
+                 forward: ForwardModel | None = None, priors=()) -> Problem:
     """Build the least-squares `Problem` for `params` on `experiments`.
 
     **Arguments:**
@@ -67,9 +68,12 @@ def make_problem(experiments, params=("eta", "mu", "C"), *, fixed=None,
     - `fixed`: name -> value (SI) of global setup parameters held fixed at a value other than
       the header's (e.g. `{"mu": 0.19}`).
     - `forward`: a `ForwardModel` (custom solver / model switches, time-step choice).
+    - `priors`: `fitting.priors` texts or `Prior`s (`"bead_youngs=203GPa+-4GPa"`); a
+      parameter with a prior is fitted; a normal prior adds a residual row.
     """
     experiments = as_experiments(experiments)
-    names = parse_parameter_list(params)
+    priors = parse_priors(priors)
+    names = parse_parameter_list(tuple(parse_parameter_list(params)) + prior_names(priors))
     forward = forward or ForwardModel()
     fixed = dict(fixed or {})
     base = []
@@ -100,7 +104,12 @@ def make_problem(experiments, params=("eta", "mu", "C"), *, fixed=None,
                 f"{min(bare):.6g} to {max(bare):.6g}); fit mu_star instead, or one bead kind at a time."
             )
     instances = build_instances(names, experiments)
-    return Problem(experiments, instances, base, forward)
+    nominal = [
+        inst.spec.read(base[inst.experiment or 0]) if inst.spec.read is not None else inst.spec.default
+        for inst in instances
+    ]
+    instances, rows = apply_priors(priors, instances, nominal)
+    return Problem(experiments, instances, base, forward, rows)
 
 
 def initial_values(problem: Problem, start=None) -> np.ndarray:
@@ -116,9 +125,7 @@ def initial_values(problem: Problem, start=None) -> np.ndarray:
             raise ValueError(
                 f"start: {key!r} is not a fitted parameter; fitted: {', '.join(problem.labels)}."
             )
-    estimates = start_values.data_estimates(
-        [e.trace for e in problem.experiments], problem.base_setups
-    )
+    estimates = None  # from the data, only when a start value is needed from them
     values = []
     for inst in problem.instances:
         setup = problem.base_setups[inst.experiment if inst.experiment is not None else 0]
@@ -127,6 +134,10 @@ def initial_values(problem: Problem, start=None) -> np.ndarray:
         elif inst.name in start:
             value = start[inst.name]
         elif inst.name in ("eta", "mu", "C"):
+            if estimates is None:
+                estimates = start_values.data_estimates(
+                    [e.trace for e in problem.experiments], problem.base_setups
+                )
             value = estimates[inst.name]
         elif inst.spec.read is not None:
             value = inst.spec.read(setup)
@@ -450,7 +461,8 @@ def _covariance_scale(problem: Problem, scale: str) -> str:
 def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multistart: int = 1,
         seed: int = 0, max_steps: int = 100, tolerance: float = 0.1,
         covariance: str = "auto", profile=(), profile_points: int = 13,
-        forward: ForwardModel | None = None, progress: bool = True, throw: bool = True) -> FitResult:
+        forward: ForwardModel | None = None, progress: bool = True, throw: bool = True,
+        priors=()) -> FitResult:
     """Fit chain parameters to trace files by Levenberg-Marquardt.
 
     **Arguments:**
@@ -474,13 +486,16 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
     - `forward`: a `ForwardModel` (custom simulator, model switches, time step).
     - `progress`: report iterations on stderr.
     - `throw`: raise `FitError` when no start converged (else return with `converged=False`).
+    - `priors`: tolerances of parameters (`fitting.priors`, e.g. `"bead_youngs=203GPa+-4GPa"`);
+      each frees its parameter, and a normal one makes the optimum the maximum a posteriori
+      point and the covariance the Laplace approximation with the prior included.
 
     **Returns:** `FitResult`.
     """
     began = time.perf_counter()
     if multistart < 1:
         raise ValueError(f"multistart must be >= 1, got {multistart}.")
-    problem = make_problem(experiments, params, fixed=fixed, forward=forward)
+    problem = make_problem(experiments, params, fixed=fixed, forward=forward, priors=priors)
     scale = _covariance_scale(problem, covariance)
     for label in profile:
         if label not in problem.labels:

@@ -157,13 +157,17 @@ class Problem:
 
     **Methods:** `residuals(x)` (whitened residual vector, jax), `predictions(x)` (per
     experiment, channel -> model on the data's time axis, numpy), `jacobian(x)`.
+
+    `priors`: normal priors (`fitting.priors.NormalRow`), each appended to the residuals
+    as $(x_i - \mathrm{centre})/\mathrm{sd}$ after the data's samples.
     """
 
-    def __init__(self, experiments, instances, base_setups, forward: ForwardModel):
+    def __init__(self, experiments, instances, base_setups, forward: ForwardModel, priors=()):
         self.experiments: list[Experiment] = list(experiments)
         self.instances: tuple[ParameterInstance, ...] = tuple(instances)
         self.base_setups: list[ChainSetup] = list(base_setups)
         self.forward = forward
+        self.priors = tuple(priors)
         self.labels = tuple(inst.label for inst in self.instances)
         self._index_nuisances()
         self.groups = self._make_groups(self.base_setups)
@@ -252,7 +256,7 @@ class Problem:
 
     def with_setups(self, setups) -> Problem:
         """The same problem with new base setups (new time grids chosen for them)."""
-        return Problem(self.experiments, self.instances, setups, self.forward)
+        return Problem(self.experiments, self.instances, setups, self.forward, self.priors)
 
     # --- the model ------------------------------------------------------------------------------
     def setup_at(self, x, experiment: int) -> ChainSetup:
@@ -421,7 +425,13 @@ class Problem:
     def residuals_from_outputs(self, x, outputs, data=None):
         """`residuals` from the simulated `outputs` of `simulated` (no simulation here)."""
         data = jnp.asarray(self.data_vector() if data is None else data)
-        return (self.model_from_outputs(x, outputs) - data) / jnp.asarray(self.sigma_vector())
+        whitened = (self.model_from_outputs(x, outputs) - data) / jnp.asarray(self.sigma_vector())
+        if not self.priors:
+            return whitened
+        index = np.array([row.index for row in self.priors])
+        centre = np.array([row.centre for row in self.priors])
+        sd = np.array([row.sd for row in self.priors])
+        return jnp.concatenate([whitened, (jnp.asarray(x)[index] - centre) / sd])
 
     def reaches_simulator(self, column: int) -> bool:
         """Whether parameter `column` changes the simulation (not only offsets and gains)."""
@@ -446,13 +456,15 @@ class Problem:
 
     @property
     def n_residuals(self) -> int:
-        """Length of the residual vector (every sample of every fitted channel)."""
-        return sum(e.n_residuals for e in self.experiments)
+        """Length of the residual vector (every sample of every fitted channel, then one
+        row per normal prior)."""
+        return sum(e.n_residuals for e in self.experiments) + len(self.priors)
 
     @property
     def n_fitted(self) -> int:
-        """Residuals that count (clipped samples left out): the chi^2's number of terms."""
-        return sum(e.n_fitted for e in self.experiments)
+        """Residuals that count (clipped samples left out, prior rows in): the chi^2's
+        number of terms."""
+        return sum(e.n_fitted for e in self.experiments) + len(self.priors)
 
     def check_resolution(self, x) -> list[str]:
         """Experiments whose fitted setup is resolved by fewer than half the asked steps."""
