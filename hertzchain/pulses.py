@@ -82,12 +82,15 @@ def first_peak(time_s, force_n, *, rise_fraction=0.3):
     **Returns:** `(peak_time_s, peak_force_n)` of shape (...).
     """
     force_n = jnp.asarray(force_n)
-    return refine_peak(time_s, force_n, _first_peak_index(force_n, rise_fraction))
+    return refine_peak(time_s, force_n, first_peak_index(force_n, rise_fraction))
 
 
-def _first_peak_index(force_n, rise_fraction):
+def first_peak_index(force_n, rise_fraction=0.3):
     """Sample index (...) of `first_peak`: the first sample not below its successor from the
-    first rise above `rise_fraction` of the maximum on (the last sample if none)."""
+    first rise above `rise_fraction` of the trace maximum on (the last sample if none).
+
+    Works under `jit` and `vmap` and never raises: an index of 0 or n - 1 (a sample without
+    a neighbour on one side) says that no interior peak was found. `force_n` (..., n), N."""
     n = force_n.shape[-1]
     top = jnp.max(force_n, axis=-1, keepdims=True)
     start = jnp.argmax(force_n >= rise_fraction * top, axis=-1)
@@ -379,7 +382,7 @@ def incident_wave(time_s, forces_n, contacts, bead_radius_m, *, rise_fraction=0.
     forces = jnp.asarray(forces_n, dtype=jnp.float64)
     if forces.shape[0] != len(contacts):
         raise ValueError(f"incident_wave: {forces.shape[0]} traces for {len(contacts)} contacts.")
-    index = np.asarray(_first_peak_index(forces, rise_fraction))
+    index = np.asarray(first_peak_index(forces, rise_fraction))
     late = [k for k, i in zip(contacts, index) if i >= forces.shape[-1] - 2]
     if late:
         raise ValueError(

@@ -4,8 +4,6 @@ at one setup, over a swept grid of setups, or averaged over a parameter box (glo
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 from pathlib import Path
 
 import numpy as np
@@ -83,14 +81,13 @@ def _box(args) -> dict[str, tuple[float, float]]:
     return box
 
 
-def _csv(rows: list[dict]) -> str:
+def _write_rows(path, rows: list[dict]) -> None:
+    """`rows` (dicts with the same keys, in the same order) as a CSV table with a header of
+    their keys; an empty file when there are none."""
     if not rows:
-        return ""
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    return buffer.getvalue()
+        write_text(path, "")
+        return
+    write_csv(path, list(rows[0]), (row.values() for row in rows))
 
 
 def _write_trace_csv(path, result: S.SensitivityResult) -> None:
@@ -132,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
         )
         write_json(out / "sensitivity.json", {**header, "global": result.to_json(),
                                               **result.samples.to_json()})
-        write_text(out / "sensitivity.csv", _csv(result.samples.rows()))
+        _write_rows(out / "sensitivity.csv", result.samples.rows())
         save_figure(S.plot_global_ranking(result), out / "global_ranking.png", dpi=120)
         for o, order in result.ranking.items():
             ranked = ", ".join(f"{p} {result.mean_squared_elasticity[o][p]:.3g}" for p in order)
@@ -168,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
             )
             print(f"  {o} = {float(result.values[o]):.6g} {result.units[o]}; elasticities: {parts}")
     write_json(out / "sensitivity.json", {**header, **result.to_json()})
-    write_text(out / "sensitivity.csv", _csv(result.rows()))
+    _write_rows(out / "sensitivity.csv", result.rows())
     print(f"wrote {out / 'sensitivity.json'}, {out / 'sensitivity.csv'}, {out / figure_name}"
           f" ({result.mode} mode)")
     return 0

@@ -1,0 +1,145 @@
+"""Named physical parameters of a `ChainSetup`: what each name reads and sets.
+
+One registry, `PARAMETERS`, maps a short name (`eta`, `wall_youngs`, `bead_radius`, ...) to
+a `Parameter` that reads the value from a setup and writes a new value into it, in SI
+units. `get` and `set` are pure and differentiable, so a value can be traced through
+`jax.grad`, `jax.jacfwd` and `jax.vmap`. `hertzchain.sensitivity` takes derivatives
+against these names. What a name does to a setup is defined here and nowhere else: a
+registry that fits setup quantities (`fitting.parameters`, which adds bounds, coordinate
+transforms and scopes) uses these entries' `get` and `set` for the names it shares.
+
+**Parameters** (SI units): `eta` (s), `mu`, `mu_star`, `striker_velocity` (m/s),
+`striker_mass` (kg, at fixed striker radius), `wall_youngs` (Pa), `wall_poisson`,
+`bead_radius` (m), `bead_density` (kg/m^3), `bead_youngs` (Pa), `bead_poisson`,
+`sensor_beta`, `sensor_f0` (Hz), `precompression` (N), `yield_stress` (Pa) and
+`yield_force` (N, the bead-bead contacts' yield force; all contacts' yield forces scale
+together as the yield stress cubed), and `bead_masses` (kg, one per bead: N values, at
+fixed radii). The bead parameters act on the beads, not on the striker; for a chain of
+unequal beads they read bead 1's value and scale every bead's value in proportion to it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .chain import ChainSetup
+
+
+class Parameter(NamedTuple):
+    """A physical parameter of a `ChainSetup`.
+
+    **Fields:** `name` (command-line name), `unit` (SI unit, "" if dimensionless),
+    `meaning`, `get(setup) -> array` and `set(setup, value) -> setup` (pure, differentiable),
+    `per_bead` (one value per bead).
+    """
+
+    name: str
+    unit: str
+    meaning: str
+    get: Callable
+    set: Callable
+    per_bead: bool = False
+
+
+def _field(name: str) -> Callable:
+    return lambda setup: getattr(setup, name)
+
+
+def _setter(name: str):
+    return lambda setup, value: eqx.tree_at(
+        lambda s: getattr(s, name), setup, jnp.asarray(value, dtype=jnp.float64)
+    )
+
+
+def _bead_scalar_get(name: str):
+    return lambda setup: getattr(setup, name)[0]
+
+
+def _bead_scalar_set(name: str):
+    def set_value(setup, value):
+        old = getattr(setup, name)
+        return eqx.tree_at(lambda s: getattr(s, name), setup, old * (value / old[0]))
+
+    return set_value
+
+
+def _sphere_volume(radius_m):
+    return 4.0 / 3.0 * jnp.pi * radius_m**3
+
+
+def _set_bead_masses(setup, mass_kg):
+    return eqx.tree_at(
+        lambda s: s.bead_density_kg_m3, setup, mass_kg / _sphere_volume(setup.bead_radius_m)
+    )
+
+
+def _set_striker_mass(setup, mass_kg):
+    return eqx.tree_at(
+        lambda s: s.striker_density_kg_m3, setup, mass_kg / _sphere_volume(setup.striker_radius_m)
+    )
+
+
+def _set_yield_force(setup, force_n):
+    current = setup.contact_yield_force_n()[1 if setup.n_beads > 1 else 0]
+    stress = setup.bead_yield_stress_pa * (force_n / current) ** (1.0 / 3.0)
+    return eqx.tree_at(lambda s: s.bead_yield_stress_pa, setup, stress)
+
+
+def _scalar(name, field, unit, meaning) -> Parameter:
+    return Parameter(name, unit, meaning, _field(field), _setter(field))
+
+
+def _bead(name, field, unit, meaning) -> Parameter:
+    return Parameter(name, unit, meaning, _bead_scalar_get(field), _bead_scalar_set(field))
+
+
+PARAMETERS: dict[str, Parameter] = {
+    p.name: p
+    for p in (
+        _scalar("eta", "eta_s", "s", "viscoelastic time eta of F_v = eta kappa d(delta^3/2)/dt"),
+        _scalar("mu", "mu", "", "track friction coefficient (force mu m g)"),
+        _scalar("mu_star", "mu_star", "", "thwarted-rotation friction, kappa* = (1+mu*) kappa"),
+        _scalar("striker_velocity", "striker_velocity_m_s", "m/s", "impact velocity"),
+        Parameter(
+            "striker_mass", "kg", "striker mass at fixed striker radius",
+            lambda s: s.striker_mass_kg, _set_striker_mass,
+        ),
+        _scalar("wall_youngs", "wall_youngs_pa", "Pa", "Young's modulus of the wall"),
+        _scalar("wall_poisson", "wall_poisson", "", "Poisson ratio of the wall"),
+        _bead("bead_radius", "bead_radius_m", "m", "bead radius (every bead; striker unchanged)"),
+        _bead("bead_density", "bead_density_kg_m3", "kg/m^3", "bead density (every bead)"),
+        _bead("bead_youngs", "bead_youngs_pa", "Pa", "bead Young's modulus (every bead)"),
+        _bead("bead_poisson", "bead_poisson", "", "bead Poisson ratio (every bead)"),
+        _scalar("sensor_beta", "sensor_beta", "", "embedded sensor mass ratio beta"),
+        _scalar("sensor_f0", "sensor_f0_hz", "Hz", "embedded sensor resonance f0"),
+        _scalar("precompression", "precompression_n", "N", "static preload (> 0)"),
+        _scalar("yield_stress", "bead_yield_stress_pa", "Pa",
+                "bead yield stress of the elastic-plastic contacts (plasticity=True)"),
+        Parameter(
+            "yield_force", "N", "yield force of the bead-bead contacts (plasticity=True; "
+            "all contacts' yield forces scale together, F_Y ~ yield stress^3)",
+            lambda s: s.contact_yield_force_n()[1 if s.n_beads > 1 else 0], _set_yield_force,
+        ),
+        Parameter(
+            "bead_masses", "kg", "mass of each bead at fixed radius (N parameters)",
+            lambda s: s.bead_mass_kg, _set_bead_masses, per_bead=True,
+        ),
+    )
+}
+
+
+def parameter_values(setup: ChainSetup, params: Sequence[str]) -> dict[str, jax.Array]:
+    """The current values of `params` in `setup` (scalars, or (N,) for per-bead ones), SI."""
+    return {name: jnp.asarray(PARAMETERS[name].get(setup)) for name in params}
+
+
+def with_parameters(setup: ChainSetup, values: Mapping[str, jax.Array]) -> ChainSetup:
+    """`setup` with the named parameters set to `values` (pure and differentiable)."""
+    for name, value in values.items():
+        setup = PARAMETERS[name].set(setup, value)
+    return setup
