@@ -178,7 +178,8 @@ def wall_force_ratio_paper(bead_youngs_pa, wall_youngs_pa):
 
     The paper's rough energy argument ($U_{end}^{max} \\approx 2U_{bead}^{max}$) with equal
     Poisson ratios. 2.297 for a rigid wall, 1.741 for a wall of the beads' steel; the
-    simulated ratios are 2.238 and 1.943 (the estimate is 11-15 % low for walls of 3-211 GPa).
+    simulated ratios are 2.238 and 1.943 (the estimate is 10-15 % low for walls of 3-211 GPa;
+    `hertzchain reproduce` measures it, tests/test_reproduce.py checks it).
     `wall_youngs_pa = inf` is a rigid wall.
     """
     return 2.0**1.2 * (1.0 + bead_youngs_pa / wall_youngs_pa) ** (-0.4)

@@ -79,7 +79,7 @@ def test_force_ratio_follows_eq5_trend_and_eq5_lies_below(quick):
     simulated = [ratio[w] for w in finite]
     assert np.all(np.diff(simulated) > 0) and ratio["rigid"] > max(simulated)
     assert np.all(np.diff([eq5[w] for w in finite]) > 0)
-    # The estimate is 11-18 % below the simulation from 3 to 211 GPa, 6 % below for W,
+    # The estimate is 10-15 % below the simulation from 3 to 211 GPa, 6 % below for W,
     # and 2.7 % above for a rigid wall.
     for w in finite:
         gap = eq5[w] / ratio[w] - 1.0
