@@ -415,7 +415,15 @@ def _bead_links(setup: ChainSetup):
 
 
 def build_model(setup: ChainSetup) -> ChainModel:
-    """Derive masses, stiffnesses and the static state of a setup (pure, differentiable)."""
+    """Derive masses, stiffnesses and the static state of a setup (pure, differentiable).
+
+    A setup built from concrete numbers was checked when it was built; one whose values are
+    traced (changed inside `jit`, `vmap` or `grad`, e.g. by `eqx.tree_at`) is checked here
+    with `eqx.error_if`: a mass or a contact or sensor stiffness that is not positive and
+    finite, or a damping, friction, preload or impact-velocity value that is not finite,
+    raises at run time (under `vmap`, one bad element raises for the batch). The checks run
+    once per solve, outside the time loop.
+    """
     bead_mass = setup.bead_mass_kg
     kappa = setup.contact_kappa()
     yield_force = setup.contact_yield_force_n()
@@ -446,8 +454,26 @@ def build_model(setup: ChainSetup) -> ChainModel:
     has_wall = setup.end == "wall"
     wall_kappa = setup.wall_kappa() if has_wall else jnp.zeros(())
     wall_overlap0 = contact.overlap_at_force(preload, setup.wall_kappa(), *law) if has_wall else jnp.zeros(())
+    mass_kg = jnp.stack(masses)
+    mass_kg = eqx.error_if(
+        mass_kg, ~(jnp.isfinite(mass_kg) & (mass_kg > 0)),
+        "ChainSetup: a bead or striker mass is not positive and finite (check the radii and "
+        "densities of the traced setup).",
+    )
+    stiffness = jnp.where(is_spring, spring_all, kappa_all)
+    kappa_all = eqx.error_if(
+        kappa_all, ~(jnp.isfinite(stiffness) & (stiffness > 0)),
+        "ChainSetup: a contact or sensor stiffness is not positive and finite (check the radii, "
+        "Young's moduli, Poisson ratios, mu_star and sensor_f0_hz of the traced setup).",
+    )
+    scalars = (setup.eta_s, setup.dashpot_n_s_m, setup.mu, preload, setup.striker_velocity_m_s)
+    mass_kg = eqx.error_if(
+        mass_kg, ~jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in scalars])),
+        "ChainSetup: eta_s, dashpot_n_s_m, mu, precompression_n or striker_velocity_m_s is not "
+        "finite in the traced setup.",
+    )
     return ChainModel(
-        mass_kg=jnp.stack(masses),
+        mass_kg=mass_kg,
         kappa=kappa_all,
         spring_n_m=spring_all,
         is_spring=is_spring,

@@ -1,5 +1,6 @@
 """Bad input gets a clear error that names the field; the embedded sensor splits a bead."""
 
+import equinox as eqx
 import numpy as np
 import pytest
 
@@ -31,6 +32,31 @@ from hertzchain.chain import build_model
 def test_bad_setup_values_name_the_field(kwargs, match):
     with pytest.raises(ValueError, match=match):
         hc.ChainSetup(**kwargs)
+
+
+@pytest.mark.parametrize(
+    "field, factor, match",
+    [
+        ("bead_radius_m", -1.0, "a bead or striker mass is not positive and finite"),
+        ("bead_youngs_pa", 0.0, "a contact or sensor stiffness is not positive and finite"),
+        ("eta_s", np.nan, "eta_s, dashpot_n_s_m, mu, precompression_n or striker_velocity_m_s is not finite"),
+    ],
+)
+def test_bad_traced_values_raise_at_run_time(field, factor, match):
+    """Values changed inside a jitted function skip `ChainSetup`'s checks; the solver's
+    model checks them (eqx.error_if) instead of returning NaN forces."""
+    setup = hc.ChainSetup(4, eta_s=1e-6)
+    grid = hc.choose_time_grid(setup, t_end_s=0.2e-3, sample_interval_s=2e-6)
+
+    @eqx.filter_jit
+    def wall_force(value):
+        changed = eqx.tree_at(lambda s: getattr(s, field), setup, value)
+        return hc.solve(changed, grid).forces_n["wall"]
+
+    value = getattr(setup, field)
+    assert np.all(np.isfinite(np.asarray(wall_force(value))))
+    with pytest.raises(RuntimeError, match=match):
+        wall_force(value * factor).block_until_ready()
 
 
 @pytest.mark.parametrize("n_beads", [0, -3, 2.5])
