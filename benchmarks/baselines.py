@@ -13,11 +13,18 @@ striker's) and the wall.
 - `numba_batch`: the batch on the SIMD axis, (n_bodies, B) layout, blocks of 64 chains per
   thread (`prange`), each block run through all its steps while it sits in cache, the force
   sweep fused with both half kicks — the hand-tuned kernel the JAX path is measured against.
+- `plain_jax_batch`: the performance notes' plain-JAX recipe: (n_bodies, B) layout, a
+  `lax.scan` over blocks of `block` steps whose inner scan is fully unrolled and emits the
+  three forces of every step, the batch split over the host devices with `shard_map`. What
+  XLA reaches on this problem without hertzchain's generality (no maxima, no energies, no
+  sensors or damping): the reference the batched path is profiled against.
 
 Numba is optional (`pip install hertzchain[bench]`): `HAVE_NUMBA` says whether it is there.
 """
 
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 
@@ -30,6 +37,8 @@ except ImportError:  # pragma: no cover - depends on the environment
     HAVE_NUMBA = False
 
 BLOCK_CHAINS = 64
+# Steps per outer scan iteration of `plain_jax_batch` (the inner scan is fully unrolled).
+PLAIN_JAX_BLOCK = 25
 
 
 def _initial(mass_kg, v0):
@@ -191,3 +200,63 @@ def numba_batch(mass_kg, kappa, wall_kappa, v0, dt_s, n_steps, rows):
         np.ascontiguousarray(v0, float), float(dt_s), int(n_steps), int(rows[0]), int(rows[1]), out,
     )
     return out
+
+
+def plain_jax_batch(mass_kg, kappa, wall_kappa, v0, dt_s, n_steps, rows, block=PLAIN_JAX_BLOCK, devices=None):
+    """B chains in plain JAX, (n_bodies, B) layout, sharded over `devices` (default: all
+    devices when B divides among them): forces (n_steps, 3, B), N. Compiled once per
+    problem shape (the compiled function is cached on its static arguments)."""
+    import jax
+
+    devices = tuple(jax.devices()) if devices is None else tuple(devices)
+    if len(wall_kappa) % len(devices):
+        devices = devices[:1]
+    run = _plain_jax_compiled(int(n_steps), int(block), tuple(int(r) for r in rows), float(dt_s), devices)
+    return np.asarray(run(np.asarray(mass_kg, float), np.asarray(kappa, float),
+                          np.asarray(wall_kappa, float), np.asarray(v0, float)))
+
+
+@functools.cache
+def _plain_jax_compiled(n_steps, block, rows, dt, devices):
+    """The jitted `plain_jax_batch` for one problem shape."""
+    import jax
+    import jax.numpy as jnp
+    from jax.sharding import Mesh
+    from jax.sharding import PartitionSpec as P
+
+    jax.config.update("jax_enable_x64", True)
+    h = 0.5 * dt
+
+    def local(mass, kappa, wall_kappa, v0):
+        inv = (1.0 / mass)[:, None]
+        k = kappa[:, None]
+        x = jnp.zeros((mass.shape[0], 1)) * v0  # zeros that vary along the batch, as v0
+        v = x.at[0].set(v0)
+
+        def step(state, _):
+            x, v, a = state
+            v = v + h * a
+            x = x + dt * v
+            d = jnp.maximum(x[:-1] - x[1:], 0.0)
+            f = k * d * jnp.sqrt(d)
+            dw = jnp.maximum(x[-1:], 0.0)
+            fw = wall_kappa * dw * jnp.sqrt(dw)
+            zero = jnp.zeros_like(fw)
+            a = (jnp.concatenate([zero, f]) - jnp.concatenate([f, fw])) * inv
+            v = v + h * a
+            return (x, v, a), jnp.concatenate([f[rows[0] : rows[0] + 1], f[rows[1] : rows[1] + 1], fw])
+
+        def outer(state, _):
+            return jax.lax.scan(step, state, None, length=block, unroll=block)
+
+        state, out = jax.lax.scan(outer, (x, v, jnp.zeros_like(x)), None, length=n_steps // block)
+        out = out.reshape(-1, 3, v0.shape[0])
+        if n_steps % block:
+            out = jnp.concatenate([out, jax.lax.scan(step, state, None, length=n_steps % block)[1]])
+        return out
+
+    if len(devices) > 1:
+        mesh = Mesh(np.asarray(devices), ("batch",))
+        local = jax.shard_map(local, mesh=mesh, in_specs=(P(), P(), P("batch"), P("batch")),
+                              out_specs=P(None, None, "batch"))
+    return jax.jit(local)

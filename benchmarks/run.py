@@ -1,9 +1,9 @@
-"""Benchmarks: hertzchain against NumPy and Numba velocity-Verlet solvers, in one run.
+"""Benchmarks: hertzchain against NumPy, Numba and plain-JAX velocity-Verlet solvers, in one run.
 
     python benchmarks/run.py [--quick] [--gpu-sweep] --out DIR
 
 Every measurement runs in its own process (so peak memory and compile time are its own;
-the hertzchain batch runs with the CPU's cores as host devices,
+the hertzchain batch and the plain-JAX baseline run with the CPU's cores as host devices,
 `--xla_force_host_platform_device_count`). Writes `DIR/bench.json`, `DIR/bench.csv` (one row
 per implementation and size), `DIR/throughput.png` (bead-steps/s against batch size) and
 `DIR/table.md` (the table for `benchmarks/README.md`).
@@ -40,7 +40,7 @@ QUICK_B = (1, 64, 1024)
 STANDARD = (21, 1024)
 DT_S = 1e-6
 STANDARD_STEPS = 2500
-# Extra (hertzchain, Numba) pairs run on the standard case for the ratio's spread.
+# Extra (hertzchain, Numba, plain JAX) triples run on the standard case for the ratios' spread.
 STANDARD_PAIRS = 3
 # Bead-steps per timed run of the larger cases (fewer steps there, same physics per step).
 WORK_PER_RUN = 2e8
@@ -94,6 +94,13 @@ def jax_vmap_wall_kappa(setup):
     return jax.vmap(lambda s: s.wall_kappa())(setup)
 
 
+def jax_devices(count: int):
+    """The first `count` JAX devices (host devices on a CPU)."""
+    import jax
+
+    return jax.devices()[:count]
+
+
 def _time(fn, repeats: int):
     """(first call s, median s, min s, max s) of `fn()` (which blocks until done)."""
     start = time.perf_counter()
@@ -135,6 +142,16 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
         first, median, low, high, result = _time(fn, repeats)
         forces = np.stack([np.asarray(result[k]) for k in result], axis=1)  # (B, 3, n)
         forces = np.transpose(forces, (2, 1, 0))  # (n, 3, B)
+    elif impl == "plain-jax":
+        import baselines
+
+        use = jax_devices(devices)
+
+        def fn():
+            return baselines.plain_jax_batch(*args, devices=use)
+
+        first, median, low, high, result = _time(fn, repeats)
+        forces = result
     elif impl == "hertzchain-solve":
         # The general solver on one chain (full energy ledger every sample), as `simulate` runs it.
         import jax
@@ -179,7 +196,7 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
         "n_beads": n_beads,
         "batch": batch,
         "steps": steps,
-        "devices": devices if impl == "hertzchain" else (os.cpu_count() if impl == "numba" and batch > 1 else 1),
+        "devices": devices if impl in ("hertzchain", "plain-jax") and batch % devices == 0 else (os.cpu_count() if impl == "numba" and batch > 1 else 1),
         "first_call_s": first,
         "run_s": median,
         "run_min_s": low,
@@ -388,7 +405,7 @@ def _load() -> str:
 
 
 def _table(rows, machine) -> str:
-    impls = ("hertzchain", "hertzchain-1dev", "numba", "numpy")
+    impls = ("hertzchain", "hertzchain-1dev", "plain-jax", "numba", "numpy")
     sizes = sorted({(r["n_beads"], r["batch"]) for r in rows if r.get("available")})
     header = "| implementation | " + " | ".join(f"N={n} B={b}" for n, b in sizes) + " |"
     lines = [header, "|" + "---|" * (len(sizes) + 1)]
@@ -412,7 +429,8 @@ def _plot(rows, path):
 
     fig, axes = plt.subplots(1, len({r["n_beads"] for r in rows}), figsize=(12, 4), squeeze=False)
     for ax, n in zip(axes[0], sorted({r["n_beads"] for r in rows})):
-        for label, marker in (("hertzchain", "o"), ("hertzchain-1dev", "s"), ("numba", "^"), ("numpy", "v")):
+        for label, marker in (("hertzchain", "o"), ("hertzchain-1dev", "s"), ("plain-jax", "D"), ("numba", "^"),
+                              ("numpy", "v")):
             pts = sorted((r["batch"], r["bead_steps_per_s"]) for r in rows if r["label"] == label and r["n_beads"] == n)
             if pts:
                 ax.plot(*zip(*pts), marker=marker, label=label)
@@ -454,8 +472,9 @@ def main(argv=None) -> int:
     jobs = []
     for n, b in sizes:
         steps = STANDARD_STEPS if (n, b) == STANDARD else steps_for(n, b)
-        for impl in ("hertzchain", "numba", "numpy"):
-            jobs.append(dict(impl=impl, n_beads=n, batch=b, steps=steps, devices=cores if impl == "hertzchain" else 1))
+        for impl in ("hertzchain", "numba", "plain-jax", "numpy"):
+            devices = cores if impl in ("hertzchain", "plain-jax") else 1
+            jobs.append(dict(impl=impl, n_beads=n, batch=b, steps=steps, devices=devices))
         if b > 1:
             jobs.append(dict(impl="hertzchain", n_beads=n, batch=b, steps=steps, devices=1))
     jobs.append(dict(impl="hertzchain-solve", n_beads=21, batch=1, steps=STANDARD_STEPS, devices=1))
@@ -474,16 +493,20 @@ def main(argv=None) -> int:
         else:
             print(f"{job}: {result.get('reason')}", file=sys.stderr)
         progress.advance()
-    # The standard case's ratio again, in pairs (hertzchain, then Numba right after it): on a
-    # shared machine the load changes between runs, and a pair shares most of it.
-    pairs = []
+    # The standard case's ratios again, in triples (hertzchain, then Numba and plain JAX right
+    # after it): on a shared machine the load changes between runs, and a triple shares most of it.
+    pairs, plain_pairs = [], []
     for _ in range(STANDARD_PAIRS):
         n, b = STANDARD
         ours = _spawn("throughput", host_devices=cores, impl="hertzchain", n_beads=n, batch=b,
                       steps=STANDARD_STEPS, devices=cores)
         numba = _spawn("throughput", impl="numba", n_beads=n, batch=b, steps=STANDARD_STEPS, devices=1)
+        plain = _spawn("throughput", host_devices=cores, impl="plain-jax", n_beads=n, batch=b,
+                       steps=STANDARD_STEPS, devices=cores)
         if ours.get("available") and numba.get("available"):
             pairs.append((ours["bead_steps_per_s"], numba["bead_steps_per_s"]))
+            if plain.get("available"):
+                plain_pairs.append((ours["bead_steps_per_s"], numba["bead_steps_per_s"], plain["bead_steps_per_s"]))
         progress.advance()
     gradient = _spawn("gradient")
     progress.advance()
@@ -494,11 +517,16 @@ def main(argv=None) -> int:
         match = [r for r in rows if r["label"] == label and (r["n_beads"], r["batch"]) == (n, b)]
         return match[0] if match else None
 
-    standard = {label: pick(label, *STANDARD) for label in ("hertzchain", "hertzchain-1dev", "numba", "numpy")}
+    labels = ("hertzchain", "hertzchain-1dev", "plain-jax", "numba", "numpy")
+    standard = {label: pick(label, *STANDARD) for label in labels}
     bead_steps = {k: v["bead_steps_per_s"] for k, v in standard.items() if v and k != "hertzchain-1dev"}
     if {"hertzchain", "numba"} <= bead_steps.keys():
         pairs.insert(0, (bead_steps["hertzchain"], bead_steps["numba"]))
+        if "plain-jax" in bead_steps:
+            plain_pairs.insert(0, tuple(bead_steps[k] for k in ("hertzchain", "numba", "plain-jax")))
     ratios = [ours / numba for ours, numba in pairs]
+    over_plain = [ours / plain for ours, _, plain in plain_pairs]
+    plain_over_numba = [plain / numba for _, numba, plain in plain_pairs]
     single = pick("hertzchain", 21, 1)
     solve_single = pick("hertzchain-solve", 21, 1)
     limit = machine.get("limit_bead_steps_per_s")
@@ -512,6 +540,11 @@ def main(argv=None) -> int:
         "hertzchain_over_numba": float(np.median(ratios)) if ratios else None,
         "hertzchain_over_numba_pairs": ratios,
         "hertzchain_over_numba_pairs_bead_steps_per_s": pairs,
+        "hertzchain_over_plain_jax": float(np.median(over_plain)) if over_plain else None,
+        "hertzchain_over_plain_jax_runs": over_plain,
+        "plain_jax_over_numba": float(np.median(plain_over_numba)) if plain_over_numba else None,
+        "plain_jax_over_numba_runs": plain_over_numba,
+        "triples_bead_steps_per_s": {"order": ["hertzchain", "numba", "plain-jax"], "runs": plain_pairs},
         "hertzchain_one_device_bead_steps_per_s": standard["hertzchain-1dev"]["bead_steps_per_s"]
         if standard["hertzchain-1dev"] else None,
         "fraction_of_machine_limit": {k: v / limit for k, v in bead_steps.items()} if limit else None,
@@ -543,7 +576,8 @@ def main(argv=None) -> int:
     if args.gpu_sweep:
         subprocess.run([sys.executable, str(HERE / "gpu_sweep.py"), "--out", str(out / "gpu_sweep.json")], check=False)
     print(json.dumps({k: summary[k] for k in ("bead_steps_per_s", "hertzchain_over_numba", "hertzchain_over_numba_pairs",
-                                              "paper_run_ms", "compile_s", "grad_over_forward")}, indent=1))
+                                              "hertzchain_over_plain_jax", "plain_jax_over_numba", "paper_run_ms",
+                                              "compile_s", "grad_over_forward")}, indent=1))
     return 0
 
 

@@ -11,10 +11,12 @@ same contact laws from `contact`, so the results agree to round-off), but
   a step is one vector instruction over chains; the wall is one more body (at rest), so
   that all contact forces, wall included, are one elementwise expression;
 - the state (displacements, half-step velocities, running maxima) is one packed array,
-  rebuilt by each step behind an `optimization_barrier`: XLA compiles the whole step into
-  one fused loop (it would otherwise make one loop per state variable and per shifted
-  copy, and fuse successive steps' concatenations into each other), plus a small one for
-  the recorded channels; see `benchmarks/README.md`;
+  rebuilt by each step behind an `optimization_barrier`: XLA compiles a step into two
+  fused loops, the new displacements with every contact force, then the velocities and
+  maxima from those forces (it would otherwise make one loop per state variable and per
+  shifted copy, fuse successive steps' concatenations into each other, or evaluate each
+  contact force once for each of the two bodies it pushes), plus a small one for the
+  recorded channels; see `benchmarks/README.md`;
 - a `lax.scan` iteration advances a block of about `block_steps` steps, fully unrolled,
   and writes the chosen forces of all its samples straight into (B, n_samples) outputs;
 - the batch can be split over several devices (`devices=`) with `jax.shard_map`, e.g. the
@@ -213,7 +215,8 @@ def _contact_forces(p, flags: _Flags, x, v, contacts=None):
     if flags.viscous:
         front_v, back_v = pair(v)
         rate = front_v - back_v
-    return _forces_at(p, flags, front - back + rows(p["overlap0"]), rate, rows)
+    overlap = front - back + rows(p["overlap0"]) if flags.preload else front - back
+    return _forces_at(p, flags, overlap, rate, rows)
 
 
 def _forces_at(p, flags: _Flags, overlap, rate, rows=lambda a: a):
@@ -229,9 +232,10 @@ def _forces_at(p, flags: _Flags, overlap, rate, rows=lambda a: a):
     return total, elastic
 
 
-def _overlaps(p, x):
-    """Overlap of every contact, wall last (n_bodies, B), m."""
-    return x[:-1] - x[1:] + p["overlap0"]
+def _overlaps(p, flags: _Flags, x):
+    """Overlap of every contact, wall last (n_bodies, B), m. Without preload every static
+    overlap is 0 and is not added (one array less to read per step)."""
+    return x[:-1] - x[1:] + p["overlap0"] if flags.preload else x[:-1] - x[1:]
 
 
 def _body_force(force, external=None):
@@ -246,7 +250,7 @@ def _energy(p, flags: _Flags, x, v):
     """Kinetic and potential (elastic plus preload) energy, J, each (B,)."""
     n = p["mass"].shape[0]
     kinetic = 0.5 * jnp.sum(p["mass"] * v[:n] ** 2, axis=0)
-    overlap = x[:-1] - x[1:] + p["overlap0"]
+    overlap = _overlaps(p, flags, x)
     potential = jnp.sum(contact.hertz_potential(overlap, p["kappa"]), axis=0)
     if flags.springs:
         potential = potential + jnp.sum(contact.spring_potential(overlap, p["spring"]), axis=0)
@@ -289,9 +293,14 @@ def _step(p, flags: _Flags, layout: _Layout, dt: float, state):
     if not flags.viscous:
         x = s["x"] + dt * s["u"]
         force = _contact_forces(p, flags, x, None)[0]
+        # Displacements and contact forces materialised together (one loop), so that the
+        # next loop reads each contact's force instead of evaluating it again for each of
+        # the two bodies it pushes (a square root per contact and step less).
+        both = barrier(jnp.concatenate([x, force]))
+        x, force = both[: layout.bodies + 1], both[layout.bodies + 1 :]
         a = _body_force(force, p["external"] if flags.preload else None) * p["inv_mass"]
         v = s["u"] + h * a
-        new = {"x": x, "u": v + h * a, "max": jnp.maximum(s["max"], _overlaps(p, x))}
+        new = {"x": x, "u": v + h * a, "max": jnp.maximum(s["max"], _overlaps(p, flags, x))}
         return barrier(layout.pack(flags, new))
     v_half = s["v"] + h * s["a"]
     x = s["x"] + dt * v_half
@@ -323,7 +332,7 @@ def _initial(p, flags: _Flags, layout: _Layout, dt: float):
         parts = {"x": x, "v": v, "a": a, "max": total, "viscous": _body_force(total - elastic),
                  "dissipated": jnp.zeros_like(x[:1])}
     else:
-        parts = {"x": x, "u": v + 0.5 * dt * a, "max": _overlaps(p, x)}
+        parts = {"x": x, "u": v + 0.5 * dt * a, "max": _overlaps(p, flags, x)}
     return layout.pack(flags, parts), x, v
 
 

@@ -45,3 +45,11 @@ def test_numba_baselines_match_hertzchain(case):
     np.testing.assert_allclose(baselines.numba_batch(*args), reference, rtol=0, atol=1e-9 * np.max(reference))
     single = baselines.numba_single(args[0], args[1], float(args[2][0]), float(args[3][0]), *args[4:])
     np.testing.assert_allclose(single, reference[:, :, 0], rtol=0, atol=1e-9 * np.max(reference))
+
+
+def test_plain_jax_baseline_matches_hertzchain(case):
+    args, reference = case
+    # 400 steps in blocks of 30: 13 unrolled blocks and a remainder of 10 steps.
+    out = baselines.plain_jax_batch(*args, block=30)
+    assert out.shape == reference.shape
+    np.testing.assert_allclose(out, reference, rtol=0, atol=1e-9 * np.max(reference))
