@@ -54,10 +54,15 @@ and repeat until nothing significant is left.
    large) without a name.
 
 All fits share one compiled forward model and Jacobian (every candidate strength is a
-parameter of it, held at 0 when off), and a small Levenberg-Marquardt in NumPy frees or
-holds columns and rows, so the whole diagnosis compiles the simulator once, twice when
-`plasticity` is tried: points where its strength is 0 run on Hertz contacts, the same
-model there at a quarter of the cost of the elastic-plastic contact law (`_Evaluator`).
+parameter of it, held at 0 when off), so the whole diagnosis compiles the simulator once,
+twice when `plasticity` is tried: points where its strength is 0 run on Hertz contacts, the
+same model there at a quarter of the cost of the elastic-plastic contact law (`_Evaluator`,
+which also computes only the Jacobian columns a fit frees and caches recent points). The
+fits are `fitting.fit`'s Levenberg-Marquardt (`fitting.fit.least_squares`: optimistix with
+the fit's termination and test of an optimum) on the evaluator's residuals, with columns
+freed or held, rows weighted in or out (the time windows of `bead_dispersion`) and points
+clipped to the parameters' bounds (`_Bounded`); the held-out check's step
+(`_Search._damped_step`) is one damped Gauss-Newton step, not a fit.
 """
 
 from __future__ import annotations
@@ -76,7 +81,7 @@ from hertzchain.progress import Progress
 
 from . import effects as fx
 from .data import Experiment, as_experiments
-from .fit import initial_values, make_problem
+from .fit import initial_values, least_squares, make_problem
 from .locate import describe, locate
 from .model import Problem, residuals_and_jacobian
 from .parameters import ParameterInstance, get_spec, parse_parameter_list
@@ -88,6 +93,10 @@ WINDOW_FRACTIONS = (0.45, 0.7)
 # Each window's fit only has to bring the radii into the basin of the next: a few loose steps.
 WINDOW_MAX_STEPS = 8
 WINDOW_RTOL = 1e-3
+# Tolerance of the other fits: a step that changes the whitened residuals by less than
+# FIT_ATOL + FIT_RTOL chi^2 (2-norm) ends a fit (`fitting.fit.least_squares`).
+FIT_ATOL = 0.05
+FIT_RTOL = 1e-5
 # Resonance frequencies of the starts of `sensor_dynamics` refits, Hz.
 SENSOR_START_F0_HZ = (30e3, 45e3, 65e3, 90e3, 130e3, 190e3)
 # Refits per candidate, from its best secant starts (default 1); candidates with variants
@@ -183,56 +192,29 @@ class _Evaluator:
         return self._residual_cache[key]
 
 
+class _Bounded:
+    """The evaluator as `fitting.fit.least_squares` sees it: at points clipped to the bounds
+    (`_Search.lower`, `upper`: the registry's, one-sided strengths from 0), with the Jacobian
+    at the clipped point, so that a fit can leave a bound again (a projected
+    Levenberg-Marquardt); the fits' end points are clipped too (`_Search.fit`)."""
+
+    def __init__(self, evaluate: _Evaluator, lower, upper):
+        self.evaluate = evaluate
+        self.lower = lower
+        self.upper = upper
+
+    def residuals(self, x):
+        return self.evaluate.residuals(np.clip(x, self.lower, self.upper))
+
+    def linearize(self, x, columns):
+        """(r, J[:, columns]) at x: the residuals and the Jacobian columns `columns` only."""
+        r, jac = self.evaluate(np.clip(x, self.lower, self.upper), columns)
+        return r, jac[:, list(columns)]
+
+
 @eqx.filter_jit
 def _residuals(problem, x):
     return problem.residuals(x)
-
-
-def _levenberg_marquardt(evaluate, x0, active, rows, lower, upper, *, max_steps: int = 40,
-                         rtol: float = 1e-5, atol: float = 0.05):
-    """Minimise the squared residuals `rows` over the columns `active` (bounded by clipping).
-
-    Trial steps use residuals only; the Jacobian is evaluated at accepted points. Stops when
-    an accepted step lowers chi^2 by less than `rtol` chi^2 + `atol`. Returns (x, chi2 on
-    `rows`, steps taken).
-    """
-    x = np.array(x0, dtype=float)
-    active = np.asarray(active, dtype=int)
-    if active.size == 0:
-        r = evaluate.residuals(x)
-        return x, float(r[rows] @ r[rows]), 0
-    r, jac = evaluate(x, active)
-    chi2 = float(r[rows] @ r[rows])
-    damping = 1e-3
-    steps = 0
-    for steps in range(1, max_steps + 1):
-        ja = jac[np.ix_(rows, active)]
-        gradient = ja.T @ r[rows]
-        normal = ja.T @ ja
-        diag = np.diag(normal).copy()
-        diag[~(diag > 0)] = 1.0
-        accepted = False
-        for _ in range(8):
-            try:
-                step = -np.linalg.solve(normal + damping * np.diag(diag), gradient)
-            except np.linalg.LinAlgError:
-                damping *= 10
-                continue
-            trial = x.copy()
-            trial[active] = np.clip(x[active] + step, lower[active], upper[active])
-            r_new = evaluate.residuals(trial)
-            chi2_new = float(r_new[rows] @ r_new[rows])
-            if math.isfinite(chi2_new) and chi2_new < chi2:
-                accepted = True
-                decrease = chi2 - chi2_new
-                x, chi2 = trial, chi2_new
-                damping = max(damping / 5, 1e-9)
-                break
-            damping *= 10
-        if not accepted or decrease <= rtol * chi2 + atol:
-            break
-        r, jac = evaluate(x, active)
-    return x, chi2, steps
 
 
 # --- results ------------------------------------------------------------------------------------
@@ -432,7 +414,6 @@ class _Search:
         self.n = self.problem.n_residuals
         self.min_share = min_share
         self.report = report
-        self.rows_all = np.arange(self.n)
         self.row_time_fraction = np.concatenate([
             np.asarray(e.time_s) / float(e.time_s[-1]) for e in self.problem.experiments for _ in e.channels
         ])
@@ -458,11 +439,20 @@ class _Search:
             cols += self.effect_columns[name]
         return cols
 
-    def fit(self, x_start, effects, *, rows=None, columns=None, max_steps=40, rtol=1e-5):
-        cols = self.columns(effects) if columns is None else columns
-        rows = self.rows_all if rows is None else rows
-        return _levenberg_marquardt(self.evaluate, x_start, cols, rows, self.lower, self.upper,
-                                    max_steps=max_steps, rtol=rtol)
+    def fit(self, x_start, effects, *, rows=None, columns=None, max_steps=40, rtol=FIT_RTOL):
+        """Least squares (`fitting.fit.least_squares`) of the columns of `effects` (or
+        `columns`) on the residuals `rows` (default all) from `x_start`, to a tolerance of
+        `FIT_ATOL` + `rtol` times the starting chi^2. Returns (x, chi2 on `rows`, steps)."""
+        cols = self.columns(effects) if columns is None else list(columns)
+        weights = None
+        if rows is not None:
+            weights = np.zeros(self.n)
+            weights[rows] = 1.0
+        r0 = self.evaluate.residuals(x_start)
+        chi2_start = float(np.sum(r0**2 if weights is None else (weights * r0) ** 2))
+        result = least_squares(_Bounded(self.evaluate, self.lower, self.upper), x_start, cols,
+                               weights=weights, max_steps=max_steps, tolerance=FIT_ATOL + rtol * chi2_start)
+        return np.clip(result.x, self.lower, self.upper), result.chi2, result.steps
 
     def fresh(self, x) -> np.ndarray:
         """`x` with every per-file nuisance back at its start value (header velocity, zero

@@ -11,6 +11,7 @@ identifiability warnings come from `fitting.uncertainty`; profile likelihoods on
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import sys
 import time
@@ -200,10 +201,35 @@ def _make_solver(tolerance: float, n_residuals: int, report=None):
     With `rtol = 0`, `atol = tolerance/sqrt(n)` and the RMS norm, optimistix's Cauchy
     criterion reads: the last accepted step changed the residual vector by less than
     `tolerance` in 2-norm (so chi^2 by about 2 tolerance |r|/sqrt(n)) and the transformed
-    coordinates by less than tolerance/sqrt(n) RMS.
+    coordinates by less than tolerance/sqrt(n) RMS. The tolerances are arrays, not constants
+    of the compiled solver: fits to other tolerances reuse it.
     """
-    atol = tolerance / math.sqrt(max(n_residuals, 1))
-    return optx.LevenbergMarquardt(rtol=0.0, atol=atol, norm=optx.rms_norm, verbose=_make_verbose(report))
+    atol = jnp.asarray(tolerance / math.sqrt(max(n_residuals, 1)))
+    return optx.LevenbergMarquardt(rtol=jnp.asarray(0.0), atol=atol, norm=optx.rms_norm,
+                                   verbose=_make_verbose(report))
+
+
+def _optimum_test(chi2_of, x, r, jac, mask, stopped, tolerance):
+    """Whether `x` is an optimum of the free (`mask`) columns, to `tolerance` in chi^2.
+
+    Gauss-Newton's predicted remaining decrease of chi^2 at `x` (residuals `r`, Jacobian
+    `jac` with respect to `x`) is below `tolerance`; or, where the loss is only piecewise
+    smooth (stick-slip friction) and the prediction can promise a decrease no step
+    delivers: the optimiser `stopped` by its own test and no fraction of the Gauss-Newton
+    step (1, 1/2, ... 1/32) lowers `chi2_of` by `tolerance` either (evaluated only then).
+    """
+    free_jac = jnp.where(mask[None, :], jac, 0.0)
+    step = jnp.linalg.lstsq(free_jac, r)[0]
+    decrement = jnp.sum((free_jac @ step) ** 2)
+    near = decrement < tolerance
+
+    def at_kink():
+        chi2_at = jax.vmap(lambda t: chi2_of(x - t * step))(_LINE_FRACTIONS)
+        realised = jnp.sum(r**2) - jnp.min(jnp.where(jnp.isfinite(chi2_at), chi2_at, jnp.inf))
+        return realised < tolerance
+
+    kink = jax.lax.cond(near | ~stopped, lambda: jnp.asarray(False), at_kink)
+    return jnp.all(jnp.isfinite(r)) & (near | kink)
 
 
 def _run_least_squares(problem: Problem, constants, templates, masks, starts, *, max_steps: int,
@@ -240,18 +266,8 @@ def _solve_batch(problem, constants, solver, max_steps, tolerance, batched_data,
         x = from_unbounded(constants, z)
         r = problem.residuals(x, y)
         jac = jax.jacfwd(problem.residuals)(x, y)  # with respect to the physical values
-        # Gauss-Newton's predicted remaining decrease of chi^2 at the end point (free columns);
-        # where the loss is only piecewise smooth (stick-slip friction) the prediction can
-        # promise a decrease no step delivers: when the optimiser stopped by its own test, the
-        # end point is an optimum if no fraction of the Gauss-Newton step (1, 1/2, ... 1/32)
-        # lowers chi^2 by `tolerance` either
-        free_jac = jnp.where(mask[None, :], jac, 0.0)
-        step = jnp.linalg.lstsq(free_jac, r)[0]
-        decrement = jnp.sum((free_jac @ step) ** 2)
-        chi2_at = jax.vmap(lambda t: jnp.sum(problem.residuals(x - t * step, y) ** 2))(_LINE_FRACTIONS)
-        realised = jnp.sum(r**2) - jnp.min(jnp.where(jnp.isfinite(chi2_at), chi2_at, jnp.inf))
-        at_kink = (solution.result == optx.RESULTS.successful) & (realised < tolerance)
-        ok = jnp.all(jnp.isfinite(r)) & ((decrement < tolerance) | at_kink)
+        ok = _optimum_test(lambda xx: jnp.sum(problem.residuals(xx, y) ** 2), x, r, jac, mask,
+                           solution.result == optx.RESULTS.successful, tolerance)
         return z, ok, solution.stats["num_steps"], jnp.sum(r**2), r, jac
 
     if starts.shape[0] == 1 and not batched_data:
@@ -268,6 +284,135 @@ def _solve_batch(problem, constants, solver, max_steps, tolerance, batched_data,
     if batched_data:  # one Jacobian per data set
         return z, ok, steps, chi2, best, r[best], jac
     return z, ok, steps, chi2, best, r[best], jac[best]
+
+
+# --- fits evaluated outside the compiled loop ---------------------------------------------------
+# The width of the free block of `least_squares` is rounded up to a power of two, at least this,
+# so that fits of different subsets share a compilation.
+_MIN_WIDTH = 8
+# Damping of `least_squares`'s first step relative to each free column's curvature (Marquardt's).
+_START_DAMPING = 1e-3
+
+
+@dataclasses.dataclass(frozen=True)
+class LeastSquares:
+    """One fit of some of the parameters (`least_squares`).
+
+    **Fields:** `x` (p,) values (SI) at the end, the held ones unchanged; `chi2` the sum of
+    squared weighted whitened residuals there; `steps` optimiser iterations; `converged`
+    (`fit`'s test of an optimum, see its `tolerance`).
+    """
+
+    x: np.ndarray
+    chi2: float
+    steps: int
+    converged: bool
+
+
+def _host_point(x_start, columns, mask, values):
+    x = np.array(x_start, dtype=float)
+    free = np.asarray(columns)[np.asarray(mask)]
+    x[free] = np.asarray(values)[np.asarray(mask)]
+    return x, [int(c) for c in free]
+
+
+# Inside a callback JAX sets the default device, which is part of the key of its compilation
+# caches: the model is evaluated with it unset, so that it reuses (and leaves for later calls)
+# the compilations made outside.
+def _host_residuals(model, x_start, columns, mask, weights, values):
+    x, _ = _host_point(x_start, columns, mask, values)
+    with jax.default_device(None):
+        r = model.residuals(x)
+    return np.asarray(weights) * np.asarray(r, dtype=float)
+
+
+def _host_linearize(model, x_start, columns, mask, weights, values):
+    x, free = _host_point(x_start, columns, mask, values)
+    with jax.default_device(None):
+        r, jac = model.linearize(x, free)
+    full = np.zeros((np.size(r), len(np.asarray(columns))))
+    full[:, np.asarray(mask)] = jac
+    weights = np.asarray(weights)
+    return weights * np.asarray(r, dtype=float), weights[:, None] * full
+
+
+@eqx.filter_jit
+def _solve_host(model, solver, max_steps, tolerance, x_start, columns, mask, weights):
+    values0 = jnp.where(mask, x_start[columns], 0.0)
+    shapes = (jax.ShapeDtypeStruct(weights.shape, weights.dtype),
+              jax.ShapeDtypeStruct(weights.shape + values0.shape, weights.dtype))
+    point = (x_start, columns, mask, weights)
+
+    def residuals_at(values):
+        return jax.pure_callback(functools.partial(_host_residuals, model), shapes[0], *point, values,
+                                 vmap_method="sequential")
+
+    def linearize_at(values):
+        return jax.pure_callback(functools.partial(_host_linearize, model), shapes, *point, values)
+
+    @jax.custom_jvp
+    def model_fn(values):
+        return residuals_at(values)
+
+    @model_fn.defjvp
+    def _model_jvp(primals, tangents):
+        r, jac = linearize_at(primals[0])  # residuals and Jacobian in one evaluation
+        return r, jac @ tangents[0]
+
+    # coordinates v = (x - x_start) scale in which the Jacobian's columns all have the norm
+    # 1/sqrt(_START_DAMPING) at the start: the optimiser damps with a multiple of the identity
+    # (1 at first), which is then Marquardt's damping of each column by _START_DAMPING of its
+    # own curvature; parameters whose sizes differ by orders of magnitude (a damping time in s
+    # beside a dashpot in N s/m) are damped alike only in such coordinates
+    _, jac0 = linearize_at(values0)
+    scale = jnp.linalg.norm(jac0, axis=0) * math.sqrt(_START_DAMPING)
+    scale = jnp.where(jnp.isfinite(scale) & (scale > 0), scale, 1.0)
+    solution = optx.least_squares(
+        lambda v, args: model_fn(values0 + v / scale), solver, jnp.zeros_like(values0),
+        max_steps=max_steps, throw=False, options={"jac": "fwd"},
+    )
+    values = values0 + solution.value / scale
+    r, jac = linearize_at(values)
+    ok = _optimum_test(lambda v: jnp.sum(residuals_at(v) ** 2), values, r, jac, mask,
+                       solution.result == optx.RESULTS.successful, tolerance)
+    return values, ok, solution.stats["num_steps"], jnp.sum(r**2)
+
+
+def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
+                  tolerance: float = 0.1) -> LeastSquares:
+    """Fit the parameters `free` (indices) from the values `x_start` (SI), the others held
+    there, with `fit`'s solver and test of an optimum, on residuals a caller evaluates
+    outside the compiled loop.
+
+    `model` gives the whitened residuals, `model.residuals(x)` (n,), and with their
+    Jacobian, `model.linearize(x, columns)` -> (r (n,), J (n, len(columns))) with respect
+    to `x[columns]`: a caller that keeps compiled models, caches and variants of its problem
+    (`fitting.diagnosis`) evaluates them as it does elsewhere. The optimiser moves the
+    values themselves (scaled, see `_solve_host`), not `fit`'s bounded transforms: bounds
+    are the model's to apply (the diagnosis clips to them, as a projected Levenberg-Marquardt
+    does), so that an optimum on a bound (a sensor read in the filter form, coupling 0) is
+    reached and kept, where a transform's Gauss-Newton step from near one bound can leap to
+    the other one and stay there. `weights` (n,): factors of the residuals (0 leaves a sample
+    out, e.g. the end of a record; default 1). `tolerance`: as `fit`'s (chi^2,
+    dimensionless). The free block is padded to a width of 8, 16, 32, ... so that fits of
+    different subsets share a compilation; neither `tolerance` nor `weights` recompiles.
+    """
+    x_start = np.array(x_start, dtype=float)
+    free = [int(c) for c in free]
+    weights = np.ones(np.size(model.residuals(x_start))) if weights is None else np.asarray(weights, float)
+    if not free:
+        r = weights * np.asarray(model.residuals(x_start))
+        return LeastSquares(x_start, float(r @ r), 0, True)
+    width = max(_MIN_WIDTH, 1 << (len(free) - 1).bit_length())
+    columns = np.zeros(width, dtype=int)
+    columns[:len(free)] = free
+    mask = np.arange(width) < len(free)
+    values, ok, steps, chi2 = _solve_host(
+        model, _make_solver(tolerance, weights.size), max_steps, jnp.asarray(float(tolerance)),
+        jnp.asarray(x_start), jnp.asarray(columns), jnp.asarray(mask), jnp.asarray(weights),
+    )
+    x, _ = _host_point(x_start, columns, mask, np.asarray(values))
+    return LeastSquares(x, float(chi2), int(steps), bool(ok))
 
 
 def _multistart_points(problem: Problem, z0: np.ndarray, k: int, seed: int) -> np.ndarray:

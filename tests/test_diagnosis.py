@@ -152,6 +152,43 @@ def test_hidden_traces_carry_the_nominal_header():
         hidden_effect_traces(["air_drag"], n_beads=5)
 
 
+# --- the fits' solver ---------------------------------------------------------------------------
+class _Linear:
+    """Whitened residuals A x - y of a linear model, in the protocol of `least_squares`."""
+
+    def __init__(self, a, y):
+        self.a, self.y = a, y
+
+    def residuals(self, x):
+        return self.a @ x - self.y
+
+    def linearize(self, x, columns):
+        return self.residuals(x), self.a[:, columns]
+
+
+def test_least_squares_frees_columns_and_weights_rows():
+    """`fitting.fit.least_squares` against the closed-form linear least squares: columns 0 and
+    2 free (sizes 10^5 apart), column 1 held, the last 10 rows weighted out."""
+    from fitting.fit import least_squares
+
+    rng = np.random.default_rng(3)
+    a = rng.standard_normal((50, 3)) * [1.0, 1.0, 1e-5]
+    truth = np.array([0.3, 0.1, 2e4])
+    y = a @ truth + 0.01 * rng.standard_normal(50)
+    y[40:] += 100.0  # rows that would pull the fit away if they were counted
+    weights = np.ones(50)
+    weights[40:] = 0.0
+    result = least_squares(_Linear(a, y), np.array([0.0, 0.1, 0.0]), [0, 2], weights=weights,
+                           tolerance=1e-6)
+    rows = slice(0, 40)
+    expected = np.linalg.lstsq(a[rows][:, [0, 2]], y[rows] - a[rows, 1] * 0.1, rcond=None)[0]
+    assert result.converged
+    assert result.x[1] == 0.1
+    np.testing.assert_allclose(result.x[[0, 2]], expected, rtol=1e-9)
+    r = weights * (a @ result.x - y)
+    assert result.chi2 == pytest.approx(float(r @ r), rel=1e-9)
+
+
 # --- the workflow -------------------------------------------------------------------------------------
 SHORT = dict(n_beads=6, contacts=(2, 4), velocities_m_s=(0.03, 0.1, 0.3, 0.6), sample_interval_s=1e-6)
 
