@@ -49,6 +49,9 @@ unit):
 - `[[shot]]`: `SHOT_KEYS`: also `label`, `nominal_velocity_m_s` (shots at the same nominal
   velocity are repeats, see `hertzchain analyze`), and any `[chain]` key that differs for
   this shot (another wall, say).
+- `[prior]` (optional): the lab's tolerances, `name = "TEXT"` in the syntax of
+  `fitting.priors` (`bead_youngs = "203GPa+-4GPa"`, `sensor_gain = "+-2%"`); `hertzchain
+  fit` uses them as if given with `--prior`.
 
 Conditioning (`hertzchain.conditioning`), each step written in the header as `x_import_*`
 keys so a result can be traced back to the files: the time grid made exact; time zero set
@@ -86,7 +89,7 @@ SCOPE_KEYS = ("format", "time_zero", "baseline_end_s")
 CHANNEL_KEYS = ("source", "measures", "sensitivity_v_per_n", "coupling", "noise_std_n", "offset_v",
                 "range_v", "invert", "sensor_beta", "sensor_f0_hz")
 SHOT_KEYS = ("files", "label", "striker_velocity_m_s", "nominal_velocity_m_s", "time_zero") + CHAIN_KEYS
-_TOP_KEYS = ("chain", "scope", "channel", "shot")
+_TOP_KEYS = ("chain", "scope", "channel", "shot", "prior")
 # Units of keys that may be written as strings with a unit ("13mm").
 _UNITS = {"_m": "m", "_pa": "Pa", "_kg": "kg", "_s": "s", "_hz": "Hz", "_n": "N", "_m_s": "m/s",
           "_kg_m3": "", "_v": "V"}
@@ -139,6 +142,7 @@ class ExperimentDescription:
     baseline_end_s: float
     channels: tuple[Channel, ...]
     shots: tuple[Shot, ...]
+    priors: tuple[str, ...] = ()
 
 
 def _fail(where, message):
@@ -315,7 +319,12 @@ def load_experiment(path) -> ExperimentDescription:
             time_zero=None if "time_zero" not in table else _time_zero(table["time_zero"], at),
             chain=overrides,
         ))
-    return ExperimentDescription(path, chain, file_format, time_zero, baseline_end, channels, tuple(shots))
+    priors = document.get("prior", {})
+    if not isinstance(priors, dict) or not all(isinstance(v, str) for v in priors.values()):
+        _fail(f"{where} [prior]", 'each entry is name = "TEXT", e.g. bead_youngs = "203GPa+-4GPa" '
+                                  'or sensor_gain = "+-2%".')
+    return ExperimentDescription(path, chain, file_format, time_zero, baseline_end, channels, tuple(shots),
+                                 tuple(f"{key}={value}" for key, value in priors.items()))
 
 
 def _read_shot(description: ExperimentDescription, shot: Shot, where: str):
@@ -443,6 +452,24 @@ def is_experiment_file(path) -> bool:
     return str(path).lower().endswith(".toml")
 
 
+def experiment_priors(paths) -> tuple[str, ...]:
+    """The `[prior]` entries (`"name=TEXT"`) of the experiment files among `paths`; the same
+    entry in several files counts once, different ones for one name are an error naming both."""
+    found: dict[str, tuple[str, Path]] = {}
+    for path in paths:
+        if not is_experiment_file(path):
+            continue
+        for text in load_experiment(path).priors:
+            key = text.split("=", 1)[0]
+            if key in found and found[key][0] != text:
+                raise ExperimentFileError(
+                    f"{path} [prior]: {text!r} differs from {found[key][0]!r} in {found[key][1]}; "
+                    "one experiment's tolerances must agree."
+                )
+            found[key] = (text, Path(path))
+    return tuple(text for text, _ in found.values())
+
+
 def expand_sources(paths) -> list:
     """Paths of trace files as given, with each experiment file replaced by its shots'
     `TraceFile`s (imported in memory)."""
@@ -457,6 +484,6 @@ def expand_sources(paths) -> list:
 
 __all__ = [
     "COUPLINGS", "Channel", "ExperimentDescription", "ExperimentFileError", "MEASURES", "Shot",
-    "condition_shot", "expand_sources", "import_experiment", "is_experiment_file", "load_experiment",
+    "condition_shot", "expand_sources", "experiment_priors", "import_experiment", "is_experiment_file", "load_experiment",
     "write_imported",
 ]

@@ -280,3 +280,22 @@ def test_analyze_and_design_take_the_experiment_file(lab, tmp_path):
                  "--out", str(tmp_path / "design")]) == 0
     planned = json.loads((tmp_path / "design" / "design.json").read_text())
     assert planned["params"]["eta"]["stderr"] > 0 and len(planned["plan"]) == 3
+
+
+def test_experiment_priors_are_read_and_must_agree(tmp_path, lab):
+    from fitting.priors import parse_priors
+    from hertzchain.importer import experiment_priors
+
+    path = _experiment(tmp_path, lab)
+    path.write_text(path.read_text() + '\n[prior]\nbead_youngs = "110GPa+-2GPa"\nsensor_gain = "+-2%"\n')
+    assert load_experiment(path).priors == ("bead_youngs=110GPa+-2GPa", "sensor_gain=+-2%")
+    parsed = {p.key: p for p in parse_priors(experiment_priors([path, "shot.csv"]))}
+    assert parsed["bead_youngs"].sd == pytest.approx(2e9)
+    other = tmp_path / "other" / "experiment.toml"
+    other.parent.mkdir()
+    other.write_text(path.read_text().replace('"110GPa+-2GPa"', '"110GPa+-5GPa"'))
+    with pytest.raises(ExperimentFileError, match=r"'bead_youngs=110GPa\+-5GPa' differs from 'bead_youngs=110GPa\+-2GPa'"):
+        experiment_priors([path, other])
+    path.write_text(path.read_text().replace('sensor_gain = "+-2%"', "sensor_gain = 0.02"))
+    with pytest.raises(ExperimentFileError, match=r"\[prior\]: each entry is name = \"TEXT\""):
+        load_experiment(path)

@@ -2,8 +2,13 @@
 
 The chain of each file is described by its header (see `hertzchain.tracefile`); the
 command fits the chosen parameters and writes `fit.json`, CSV tables and PNG plots
-(`fitting.report`) into `--out`. Exit status: 0 converged, 3 not converged (the report
-is still written, marked `"converged": false`), 2 bad input.
+(`fitting.report`) into `--out`. `--prior` (and an experiment file's `[prior]` table)
+states a lab's tolerances (`fitting.priors`): each frees its parameter and the optimum is
+the MAP point. `--posterior` then samples the posterior by NUTS (`fitting.posterior`) and
+writes `posterior.json`, `posterior.nc`, `draws.csv`, `posterior_summary.md` and plots
+(`fitting.posterior_report`) beside the fit's files. Exit status: 0 converged, 3 not
+converged (the report is still written, marked `"converged": false`), 4 the posterior's
+diagnostics fail and `--strict` was given, 2 bad input.
 """
 
 from __future__ import annotations
@@ -15,10 +20,15 @@ from pathlib import Path
 
 from hertzchain.units import parse_quantity
 
+from hertzchain.importer import experiment_priors
+
 from ..data import load_experiments
 from ..fit import FitWarning, fit
 from ..model import STEPS_PER_CONTACT, ForwardModel
 from ..parameters import REGISTRY, get_spec, parse_parameter_list
+from ..posterior import PosteriorWarning, sample_posterior
+from ..posterior_report import write_posterior_report
+from ..priors import parse_priors
 from ..report import summary_text, write_report
 
 
@@ -64,6 +74,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--steps-per-contact", type=int, default=STEPS_PER_CONTACT,
         help=f"Verlet steps per shortest contact time [{STEPS_PER_CONTACT}]",
     )
+    parser.add_argument(
+        "--prior", action="append", default=[], metavar="NAME=VALUE",
+        help="a tolerance, e.g. bead_youngs=203GPa+-4GPa, sensor_gain=+-2%%, bead_radius=+-62.5um, "
+        "eta=0..10us (repeat the option; frees the parameter)",
+    )
+    parser.add_argument("--posterior", action="store_true",
+                        help="sample the posterior by NUTS after the fit (posterior.json, draws, plots)")
+    parser.add_argument("--chains", type=int, default=4, help="posterior: chains, run as one batch [4]")
+    parser.add_argument("--warmup", type=int, default=150, help="posterior: warmup iterations per chain [150]")
+    parser.add_argument("--draws", type=int, default=200, help="posterior: kept draws per chain [200]")
+    parser.add_argument("--adapt-metric", action="store_true",
+                        help="posterior: adapt a diagonal metric during warmup as well")
+    parser.add_argument("--strict", action="store_true",
+                        help="posterior: exit with status 4 when R-hat, ESS or divergences fail")
     parser.add_argument("--no-plots", action="store_true", help="write JSON and CSV only")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
 
@@ -77,15 +101,18 @@ def run(args: argparse.Namespace) -> int:
     noise = parse_quantity(args.noise_std, "N", name="--noise-std") if args.noise_std else None
     experiments = load_experiments(args.files, channels=channels, noise_std_n=noise)
     profile = tuple(p.strip() for p in args.profile.split(",") if p.strip())
+    priors = parse_priors(list(experiment_priors(args.files)) + list(args.prior))
+    if args.posterior and args.covariance == "residual":
+        raise ValueError("--posterior samples the likelihood of the stated noise; use --covariance auto or noise.")
     print(f"fitting {', '.join(params)} to {len(experiments)} file(s) ...", flush=True)
     with warnings.catch_warnings():  # the summary below and fit.json carry every warning
         warnings.simplefilter("ignore", FitWarning)
         result = fit(
             experiments, params, start=_assignments(args.start, "--start"),
             fixed=_assignments(args.fixed, "--fixed"), multistart=args.multistart, seed=args.seed,
-            max_steps=args.max_steps, covariance=args.covariance, profile=profile,
-            forward=ForwardModel(steps_per_contact=args.steps_per_contact),
-            progress=not args.quiet, throw=False,
+            max_steps=args.max_steps, covariance="noise" if args.posterior else args.covariance,
+            profile=profile, forward=ForwardModel(steps_per_contact=args.steps_per_contact),
+            progress=not args.quiet, throw=False, priors=priors,
         )
     written = write_report(result, args.out, plots=not args.no_plots)
     print(summary_text(result))
@@ -93,4 +120,24 @@ def run(args: argparse.Namespace) -> int:
     if not result.converged:
         print(f"hertzchain fit: error: {result.message}", file=sys.stderr)
         return 3
+    if not args.posterior:
+        return 0
+    print(f"sampling the posterior: {args.chains} chains x ({args.warmup} warmup + {args.draws} draws) ...",
+          flush=True)
+    with warnings.catch_warnings():  # posterior.json and the summary carry every warning
+        warnings.simplefilter("ignore", PosteriorWarning)
+        posterior = sample_posterior(
+            experiments, params, priors=priors, chains=args.chains, warmup=args.warmup,
+            draws=args.draws, seed=args.seed, adapt_metric=args.adapt_metric,
+            progress=not args.quiet, fit_result=result,
+        )
+    written = write_posterior_report(posterior, args.out, plots=not args.no_plots)
+    print((Path(args.out) / "posterior_summary.md").read_text())
+    print(f"wrote {len(written)} files to {args.out} (posterior.json, posterior.nc, draws.csv, plots)")
+    failed = posterior.failed_diagnostics()
+    if failed:
+        print("hertzchain fit: WARNING: the posterior's diagnostics fail: " + "; ".join(failed)
+              + ". Do not use these intervals; raise --warmup/--draws or --chains.", file=sys.stderr)
+        if args.strict:
+            return 4
     return 0

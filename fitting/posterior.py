@@ -1,0 +1,389 @@
+"""Posterior distributions of chain parameters by Hamiltonian Monte Carlo (NUTS).
+
+`sample_posterior(experiments, ("eta", "mu", "C"), priors=["bead_youngs=203GPa+-4GPa"])`
+samples $p(x \\mid y) \\propto \\exp(-\\chi^2(x)/2)\\, p(x)$ with the same whitened
+residuals as the least-squares fit (`fitting.model`, stated noise sigma), so the
+posterior is marginal over every nuisance that has a prior (bead modulus and radius,
+sensor gains, wall modulus, striker velocities: `fitting.priors`).
+
+How it is sampled:
+
+1. `fitting.fit` finds the maximum a posteriori point (normal priors are residual rows)
+   and its Jacobian; the Laplace covariance $(J^T J)^{-1}$ of the transformed coordinates
+   $z$ of `fitting.parameters` is the sampler's metric.
+2. NUTS (NumPyro, `potential_fn` interface) runs on whitened coordinates
+   $u = L^{-1}(z - \\hat z)$, $L L^T$ the Laplace covariance (plus, for a direction the data
+   do not determine, the width of its bounds), where the posterior is close to a unit
+   normal whenever the Laplace approximation holds: the step size is then of order one
+   and the metric is the identity (the Laplace covariance is the mass matrix); the step
+   size is adapted during warmup. The potential is
+   $U(u) = \\chi^2(x(z))/2 - \\sum_i \\log|dx_i/dz_i|$: a flat prior on the physical value
+   within the parameter's bounds unless a normal prior row is in $\\chi^2$.
+3. Several chains run as one vectorised batch (`chain_method="vectorized"`), started at
+   draws from the Laplace approximation, so R-hat compares chains from dispersed starts.
+
+NumPyro rather than BlackJAX: its `NUTS(potential_fn=...)` takes the fit's likelihood as
+it is, adapts the step size (and, on request, a metric, with Stan's windows), vectorises
+chains, and hands back divergences and tree sizes; ArviZ reads its output for R-hat, ESS
+and the InferenceData file.
+
+Diagnostics that stop a wrong answer: R-hat above `RHAT_LIMIT`, bulk or tail ESS below
+`ESS_MIN`, or any divergent transition give a warning (and a non-zero exit of
+`hertzchain fit --posterior --strict`). The comparison with the Laplace approximation
+flags a parameter whose posterior sd, or either half of its 90 % interval, differs from
+the Laplace value by more than `LAPLACE_TOLERANCE` (the covariance approximation fails
+there: a bound, a banana, a skew).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from hertzchain.atomic import json_ready
+
+from .fit import FitResult, FitWarning, fit
+from .model import ForwardModel, Problem
+from .parameters import from_unbounded, to_unbounded, transform_arrays
+from .priors import describe
+
+RHAT_LIMIT = 1.01
+ESS_MIN = 400
+LAPLACE_TOLERANCE = 0.2
+# 90 % interval of a normal: +-1.6449 sd
+_Z90 = 1.6448536269514722
+
+
+class PosteriorWarning(UserWarning):
+    """A posterior whose diagnostics fail, or whose Laplace approximation does not hold."""
+
+
+@dataclasses.dataclass
+class PosteriorResult:
+    """Draws of the posterior and what they say.
+
+    **Fields:**
+
+    - `labels`, `units`: the sampled parameters (the fit's labels) and their SI units.
+    - `draws`: (chains, draws, p) physical values (SI).
+    - `summary`: label -> mean, sd, q05, q50, q95, r_hat, ess (bulk), ess_tail.
+    - `laplace`: label -> the MAP value and the Laplace sd, with the ratios to the posterior
+      and whether the approximation is flagged (`fails`).
+    - `sample_stats`: (chains, draws) arrays `diverging`, `num_steps`, `accept_prob`,
+      `potential_energy`.
+    - `divergences`, `step_size`, `elapsed_s` (fit, warmup and sampling, total),
+      `gradient_evaluations`, `seconds_per_effective_sample` (sampling time over the
+      smallest ESS).
+    - `priors`: label -> the prior each parameter carries.
+    - `warnings`: failed diagnostics and Laplace flags, in words.
+    - `fit`: the `FitResult` of the MAP point (its problem evaluates predictions).
+    - `settings`: chains, warmup, draws, seed, target acceptance, maximum tree depth.
+    """
+
+    labels: tuple
+    units: dict
+    draws: np.ndarray
+    summary: dict
+    laplace: dict
+    sample_stats: dict
+    divergences: int
+    step_size: float
+    elapsed_s: dict
+    gradient_evaluations: int
+    seconds_per_effective_sample: float
+    priors: dict
+    warnings: list
+    fit: FitResult
+    settings: dict
+
+    @property
+    def problem(self) -> Problem:
+        return self.fit.problem
+
+    @property
+    def passed(self) -> bool:
+        """Whether R-hat, ESS and divergences all pass."""
+        return not self.failed_diagnostics()
+
+    def failed_diagnostics(self) -> list[str]:
+        """What fails of R-hat < RHAT_LIMIT, ESS >= ESS_MIN and no divergences, in words."""
+        failed = []
+        for label, row in self.summary.items():
+            if not row["r_hat"] <= RHAT_LIMIT:
+                failed.append(f"R-hat of {label} is {row['r_hat']:.4f} (> {RHAT_LIMIT})")
+            ess = min(row["ess"], row["ess_tail"])
+            if not ess >= ESS_MIN:
+                failed.append(f"ESS of {label} is {ess:.0f} (< {ESS_MIN})")
+        if self.divergences:
+            failed.append(f"{self.divergences} divergent transitions")
+        return failed
+
+    def flat_draws(self) -> np.ndarray:
+        """(chains x draws, p) physical values."""
+        return self.draws.reshape(-1, self.draws.shape[-1])
+
+    def to_json(self) -> dict:
+        """JSON-ready dict (SI units; non-finite numbers as null)."""
+        return {
+            "params": {
+                label: {**{k: json_ready(v) for k, v in row.items()}, "unit": self.units[label]}
+                for label, row in self.summary.items()
+            },
+            "laplace": {
+                label: {k: (v if isinstance(v, bool) else json_ready(v)) for k, v in row.items()}
+                for label, row in self.laplace.items()
+            },
+            "priors": {label: {k: json_ready(v) if not isinstance(v, str) else v for k, v in p.items()}
+                       for label, p in self.priors.items()},
+            "divergences": int(self.divergences),
+            "step_size": json_ready(self.step_size),
+            "mean_tree_size": json_ready(float(np.mean(self.sample_stats["num_steps"]))),
+            "mean_accept_prob": json_ready(float(np.mean(self.sample_stats["accept_prob"]))),
+            "gradient_evaluations": int(self.gradient_evaluations),
+            "timing_s": {k: json_ready(v) for k, v in self.elapsed_s.items()},
+            "seconds_per_effective_sample": json_ready(self.seconds_per_effective_sample),
+            "diagnostics_passed": self.passed,
+            "failed_diagnostics": self.failed_diagnostics(),
+            "warnings": list(self.warnings),
+            "map": {label: json_ready(v) for label, v in self.fit.values.items()},
+            "map_reduced_chi2": json_ready(self.fit.reduced_chi2),
+            "settings": self.settings,
+            "files": [e.trace.path or e.label for e in self.problem.experiments],
+        }
+
+
+def _laplace_whitening(instances, constants, x_hat, covariance):
+    """(z_hat, L) with L L^T the Laplace covariance of the transformed coordinates.
+
+    From the fit's covariance of the physical values, $\Sigma_z = D^{-1}\Sigma_x D^{-1}$
+    with $D = \mathrm{diag}(dx/dz)$. Directions the data and priors do not determine (the
+    fit's pseudo-inverse leaves them out) get the width of the bounds: the precision is
+    regularised by diag(1/h^2), h the half-width of each coordinate's bounded range.
+    """
+    z_hat = jnp.asarray(to_unbounded(instances, x_hat))
+    _, dx_dz = jax.jvp(lambda z: from_unbounded(constants, z), (z_hat,), (jnp.ones_like(z_hat),))
+    scale = np.abs(np.asarray(dx_dz))
+    cov_z = np.nan_to_num(np.asarray(covariance, dtype=float), nan=0.0, posinf=0.0, neginf=0.0)
+    cov_z = cov_z / np.outer(scale, scale)
+    sd = np.sqrt(np.clip(np.diag(cov_z), 0.0, None))
+    sd = np.where(sd > 0, sd, 1.0)
+    precision = np.linalg.pinv(cov_z / np.outer(sd, sd), rcond=1e-12, hermitian=True) / np.outer(sd, sd)
+    precision = precision + np.diag(1.0 / np.asarray(constants[2]) ** 2)
+    values, vectors = np.linalg.eigh(0.5 * (precision + precision.T))
+    chol = vectors / np.sqrt(values)[None, :]  # chol @ chol.T = precision^-1
+    return z_hat, jnp.asarray(chol)
+
+
+def _potential(problem: Problem, constants, z_hat, chol):
+    """U(u) = chi^2/2 - sum log|dx/dz| at z = z_hat + L u (+inf where not finite)."""
+
+    def potential(u):
+        z = z_hat + chol @ u
+        x, dx_dz = jax.jvp(lambda zz: from_unbounded(constants, zz), (z,), (jnp.ones_like(z),))
+        r = problem.residuals(x)
+        value = 0.5 * jnp.sum(r**2) - jnp.sum(jnp.log(jnp.abs(dx_dz)))
+        return jnp.where(jnp.isfinite(value), value, jnp.inf)
+
+    return potential
+
+
+def _summaries(labels, draws) -> dict:
+    import arviz as az
+
+    data = az.convert_to_dataset({f"p{i}": draws[..., i] for i in range(len(labels))})
+    rhat = az.rhat(data)
+    ess_bulk = az.ess(data, method="bulk")
+    ess_tail = az.ess(data, method="tail")
+    summary = {}
+    for i, label in enumerate(labels):
+        flat = draws[..., i].reshape(-1)
+        q05, q50, q95 = np.quantile(flat, [0.05, 0.5, 0.95])
+        summary[label] = {
+            "mean": float(np.mean(flat)), "sd": float(np.std(flat, ddof=1)),
+            "q05": float(q05), "q50": float(q50), "q95": float(q95),
+            "r_hat": float(rhat[f"p{i}"]), "ess": float(ess_bulk[f"p{i}"]),
+            "ess_tail": float(ess_tail[f"p{i}"]),
+        }
+    return summary
+
+
+def compare_with_laplace(summary: dict, values: dict, stderr: dict, *,
+                         tolerance: float = LAPLACE_TOLERANCE) -> dict:
+    """Per label: the posterior against the Laplace approximation (MAP +- stderr).
+
+    Ratios of the posterior sd and of each half of the 90 % interval (q50 - q05, q95 - q50)
+    to the Laplace values (stderr, 1.645 stderr); `fails` where any differs from 1 by more
+    than `tolerance`, or the Laplace stderr is not finite.
+    """
+    out = {}
+    for label, row in summary.items():
+        sd = stderr[label]
+        finite = math.isfinite(sd) and sd > 0
+        ratios = {
+            "sd_ratio": row["sd"] / sd if finite else math.nan,
+            "lower_ratio": (row["q50"] - row["q05"]) / (_Z90 * sd) if finite else math.nan,
+            "upper_ratio": (row["q95"] - row["q50"]) / (_Z90 * sd) if finite else math.nan,
+        }
+        fails = not finite or any(abs(r - 1.0) > tolerance for r in ratios.values())
+        out[label] = {"map": values[label], "laplace_sd": sd, **ratios, "fails": bool(fails)}
+    return out
+
+
+def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chains: int = 4,
+                     warmup: int = 150, draws: int = 200, seed: int = 0, target_accept: float = 0.8,
+                     max_tree_depth: int = 8, adapt_metric: bool = False,
+                     forward: ForwardModel | None = None,
+                     fixed=None, start=None, multistart: int = 1, progress: bool = True,
+                     fit_result: FitResult | None = None) -> PosteriorResult:
+    """Sample the posterior of `params` (and every parameter with a prior) by NUTS.
+
+    **Arguments:**
+
+    - `experiments`, `params`, `fixed`, `start`, `multistart`, `forward`: as for `fitting.fit`.
+    - `priors`: tolerances (`fitting.priors`), e.g. `["bead_youngs=203GPa+-4GPa",
+      "sensor_gain=+-2%", "bead_radius=+-62.5um"]`; parameters without one are flat
+      within their bounds.
+    - `chains`, `warmup`, `draws`: chains (one vectorised batch), warmup iterations
+      (step size and diagonal metric adaptation) and kept draws per chain.
+    - `seed`: random seed (chain starts and the sampler).
+    - `target_accept`, `max_tree_depth`: NUTS settings.
+    - `adapt_metric`: also adapt a diagonal metric in the whitened coordinates during
+      warmup (NumPyro's windowed schedule). Off by default: where the Laplace approximation
+      holds, the whitening already makes the identity the right metric; an adapted one
+      helps only where it does not hold, and needs several hundred warmup draws.
+    - `progress`: NumPyro's progress bar and the fit's progress lines.
+    - `fit_result`: a MAP fit already made with the same problem (skips step 1).
+
+    **Returns:** `PosteriorResult`. Warnings (`PosteriorWarning`) name failed diagnostics
+    and parameters where the Laplace approximation does not hold.
+    """
+    from numpyro.infer import MCMC, NUTS
+
+    if chains < 1 or warmup < 1 or draws < 2:
+        raise ValueError(f"chains >= 1, warmup >= 1 and draws >= 2 needed; got {chains}, {warmup}, {draws}.")
+    began = time.perf_counter()
+    if fit_result is None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitWarning)
+            fit_result = fit(experiments, params, priors=priors, fixed=fixed, start=start,
+                             multistart=multistart, seed=seed, covariance="noise", forward=forward,
+                             progress=progress, throw=False)
+    problem = fit_result.problem
+    messages = []
+    if not fit_result.converged:
+        messages.append(f"the MAP fit did not converge ({fit_result.message}); the chains start "
+                        "from where it stopped.")
+    if fit_result.dof > 0 and fit_result.reduced_chi2 > 1.5:
+        messages.append(
+            f"reduced chi^2 = {fit_result.reduced_chi2:.3g} at the MAP point: the model does not "
+            "explain the data to the stated noise, so the posterior is too narrow (look for a "
+            "missing effect with `hertzchain diagnose`)."
+        )
+    fit_s = time.perf_counter() - began
+
+    constants = tuple(jnp.asarray(a) for a in transform_arrays(problem.instances))
+    x_hat = np.asarray(fit_result.x, dtype=float)
+    z_hat, chol = _laplace_whitening(problem.instances, constants, x_hat, fit_result.covariance)
+    potential = _potential(problem, constants, z_hat, chol)
+    p = len(problem.instances)
+    key_init, key_run = jax.random.split(jax.random.PRNGKey(seed))
+    starts = jnp.clip(jax.random.normal(key_init, (chains, p)), -2.0, 2.0)
+    kernel = NUTS(potential_fn=potential, target_accept_prob=target_accept,
+                  max_tree_depth=max_tree_depth, dense_mass=False, adapt_mass_matrix=adapt_metric,
+                  find_heuristic_step_size=True)
+    mcmc = MCMC(kernel, num_warmup=warmup, num_samples=draws, num_chains=chains,
+                chain_method="vectorized", progress_bar=progress)
+    start_time = time.perf_counter()
+    mcmc.warmup(key_run, init_params=starts if chains > 1 else starts[0],
+                extra_fields=("num_steps",), collect_warmup=True)
+    warmup_steps = np.asarray(mcmc.get_extra_fields(group_by_chain=True)["num_steps"])
+    warmup_s = time.perf_counter() - start_time
+    start_time = time.perf_counter()
+    mcmc.run(mcmc.post_warmup_state.rng_key,
+             extra_fields=("diverging", "num_steps", "accept_prob", "potential_energy"))
+    sampling_s = time.perf_counter() - start_time
+
+    u = np.asarray(mcmc.get_samples(group_by_chain=True)).reshape(chains, draws, p)
+    z = np.asarray(z_hat) + np.einsum("ij,cdj->cdi", np.asarray(chol), u)
+    x_draws = np.asarray(jax.vmap(lambda zz: from_unbounded(constants, zz))(
+        jnp.asarray(z.reshape(-1, p)))).reshape(chains, draws, p)
+    extra = mcmc.get_extra_fields(group_by_chain=True)
+    stats = {k: np.asarray(v).reshape(chains, draws) for k, v in extra.items()}
+    labels = problem.labels
+    summary = _summaries(labels, x_draws)
+    laplace = compare_with_laplace(summary, fit_result.values, fit_result.stderr)
+    state = mcmc.last_state
+    step_size = float(np.mean(np.asarray(state.adapt_state.step_size)))
+    gradient_evaluations = int(np.sum(stats["num_steps"]) + np.sum(warmup_steps))
+    smallest_ess = min(min(row["ess"], row["ess_tail"]) for row in summary.values())
+    result = PosteriorResult(
+        labels=labels,
+        units={inst.label: inst.spec.unit for inst in problem.instances},
+        draws=x_draws,
+        summary=summary,
+        laplace=laplace,
+        sample_stats=stats,
+        divergences=int(np.sum(stats["diverging"])),
+        step_size=step_size,
+        elapsed_s={"fit": fit_s, "warmup": warmup_s, "sampling": sampling_s,
+                   "total": time.perf_counter() - began},
+        gradient_evaluations=gradient_evaluations,
+        seconds_per_effective_sample=sampling_s / smallest_ess if smallest_ess > 0 else math.inf,
+        priors=describe(problem.instances, problem.priors),
+        warnings=messages,
+        fit=fit_result,
+        settings={"chains": chains, "warmup": warmup, "draws": draws, "seed": seed,
+                  "target_accept": target_accept, "max_tree_depth": max_tree_depth,
+                  "adapt_metric": adapt_metric,
+                  "sampler": "numpyro NUTS, whitened by the Laplace covariance"},
+    )
+    failed = result.failed_diagnostics()
+    if failed:
+        result.warnings.append(
+            "the sampler's diagnostics fail (" + "; ".join(failed) + "): do not trust these "
+            "numbers; run more warmup and draws, or more chains."
+        )
+    flagged = [label for label, row in laplace.items() if row["fails"]]
+    if flagged:
+        worst = ", ".join(
+            f"{label} (sd x{laplace[label]['sd_ratio']:.2f}, 90 % interval halves "
+            f"x{laplace[label]['lower_ratio']:.2f}/x{laplace[label]['upper_ratio']:.2f})"
+            for label in flagged
+        )
+        result.warnings.append(
+            f"the covariance (Laplace) approximation fails for {worst}: quote the posterior's "
+            "intervals, not the fit's standard errors."
+        )
+    for text in result.warnings:
+        warnings.warn(text, PosteriorWarning, stacklevel=2)
+    return result
+
+
+def posterior_predictive(result: PosteriorResult, *, n_draws: int = 100, seed: int = 0,
+                         quantiles=(0.05, 0.5, 0.95)) -> list[dict]:
+    """Per file, channel -> (len(quantiles), n_samples) quantiles of the model over
+    `n_draws` posterior draws (the model's spread; the noise is not added)."""
+    flat = result.flat_draws()
+    rng = np.random.default_rng(seed)
+    chosen = flat[rng.choice(len(flat), size=min(n_draws, len(flat)), replace=False)]
+    problem = result.problem
+    model = jax.jit(jax.vmap(problem.model_vector))
+    rows = [np.asarray(model(jnp.asarray(block))) for block in np.array_split(chosen, max(1, len(chosen) // 16))]
+    models = np.concatenate(rows)
+    bands = np.quantile(models, quantiles, axis=0)
+    out = []
+    start = 0
+    for experiment in problem.experiments:
+        entry = {}
+        for name in experiment.channels:
+            n = len(experiment.time_s)
+            entry[name] = bands[:, start:start + n]
+            start += n
+        out.append(entry)
+    return out

@@ -1,0 +1,150 @@
+"""The posterior sampler against what it must reproduce where the answer is known.
+
+Data: a brass chain (not the paper's steel) simulated by the diffrax reference solver and
+recorded through `hertzchain.acquisition` (another integrator and another writer than the
+fit's model). Checked against independent numbers:
+
+- with nothing uncertain but the noise, the posterior's means are the least-squares
+  optimum and its sds the Cramér-Rao standard errors of `fitting.design` (20 %);
+- with tolerance priors on the sensor gains and the bead radius, the marginal sds are
+  those of a linearised propagation written here in NumPy from the Jacobian without the
+  priors, plus the prior precision (20 %);
+- the outputs (`posterior.json` keys, draws, InferenceData) are whole and consistent.
+"""
+
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+import fitting
+import hertzchain as hc
+from fitting.design import design
+from fitting.model import residuals_and_jacobian
+from fitting.posterior import PosteriorWarning, compare_with_laplace, sample_posterior
+from hertzchain.acquisition import Acquisition, acquire_trace
+from hertzchain.materials import BRASS
+from hertzchain.reference import simulate_reference
+
+ETA_S = 1.5e-6
+NOISE_N = 0.05
+
+
+def _brass(velocity):
+    return hc.ChainSetup(8, bead_radius_m=5e-3, bead_density_kg_m3=BRASS.density_kg_m3,
+                         bead_youngs_pa=BRASS.youngs_pa, bead_poisson=BRASS.poisson,
+                         striker_radius_m=4e-3, striker_velocity_m_s=velocity, eta_s=ETA_S)
+
+
+@pytest.fixture(scope="module")
+def brass_traces():
+    traces = []
+    for k, velocity in enumerate((0.2, 0.5)):
+        setup = _brass(velocity)
+        sim = simulate_reference(setup, t_end_s=0.45e-3, sample_interval_s=0.25e-6, contacts=(3,), rtol=1e-9)
+        forces = {name: np.asarray(sim.forces_n[name]) for name in sim.channel_names}
+        setting = Acquisition(sample_interval_s=1e-6, record_length=400, pre_trigger_samples=20,
+                              noise_std_n=NOISE_N, coupling="dc")
+        trace = acquire_trace(setup, np.asarray(sim.time_s), forces, setting, seed=10 + k)
+        traces.append(trace)
+    return traces
+
+
+@pytest.fixture(scope="module")
+def noise_only(brass_traces):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PosteriorWarning)
+        return sample_posterior(brass_traces, ("eta", "C"), chains=2, warmup=80, draws=250, seed=3,
+                                progress=False)
+
+
+def test_noise_only_posterior_is_the_optimum_with_cramer_rao_widths(noise_only, brass_traces):
+    result = noise_only
+    assert result.fit.converged and result.fit.reduced_chi2 < 1.2
+    bound = design(brass_traces, ("eta", "C"), values={"eta": result.fit.values["eta"],
+                                                         "C": result.fit.values["C"]})
+    for label in ("eta", "C"):
+        row = result.summary[label]
+        crb = bound.stderr[label]
+        assert row["sd"] == pytest.approx(crb, rel=0.2), label
+        assert abs(row["mean"] - result.fit.values[label]) < 0.25 * crb, label
+        assert row["r_hat"] < 1.02
+    # the truth is inside the 90 % interval for eta (the diffrax data's eta)
+    assert result.summary["eta"]["q05"] < ETA_S < result.summary["eta"]["q95"]
+    assert result.divergences == 0
+
+
+def test_tolerance_priors_widen_as_linear_propagation_predicts(brass_traces):
+    priors = ["sensor_gain=+-2%", "bead_radius=+-0.5%"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PosteriorWarning)
+        result = sample_posterior(brass_traces, ("eta", "C"), priors=priors, chains=2, warmup=80,
+                                  draws=250, seed=4, progress=False)
+    # linear propagation: J of the data residuals alone, prior precision added by hand
+    plain = fitting.make_problem(brass_traces, ("eta", "C", "sensor_gain", "bead_radius"))
+    assert plain.labels == result.labels
+    _, jac = residuals_and_jacobian(plain, result.fit.x)
+    prior_sd = {"bead_radius": 0.005 * 5e-3, "sensor_gain[contact_3]": 0.02, "sensor_gain[wall]": 0.02}
+    precision = jac.T @ jac + np.diag([1 / prior_sd[label] ** 2 if label in prior_sd else 0.0
+                                       for label in result.labels])
+    linear = np.sqrt(np.diag(np.linalg.inv(precision)))
+    widened = 0
+    for i, label in enumerate(result.labels):
+        assert result.summary[label]["sd"] == pytest.approx(linear[i], rel=0.2), label
+    noise_only = np.sqrt(np.diag(np.linalg.inv(jac[:, :2].T @ jac[:, :2])))
+    for i, label in enumerate(("eta", "C")):
+        widened += result.summary[label]["sd"] > 1.5 * noise_only[i]
+    assert widened >= 1  # the tolerances matter: at least one of eta, C is much wider
+
+
+def test_laplace_comparison_flags_a_skewed_marginal():
+    summary = {"a": {"sd": 1.0, "q05": -1.645, "q50": 0.0, "q95": 1.645},
+               "b": {"sd": 1.0, "q05": -1.0, "q50": 0.0, "q95": 2.3}}
+    out = compare_with_laplace(summary, {"a": 0.0, "b": 0.0}, {"a": 1.0, "b": 1.0})
+    assert not out["a"]["fails"] and out["b"]["fails"]
+    assert out["b"]["upper_ratio"] == pytest.approx(2.3 / 1.6448536, rel=1e-6)
+
+
+def test_report_files_are_whole_and_agree(noise_only, tmp_path):
+    from fitting.posterior_report import write_posterior_report
+
+    written = write_posterior_report(noise_only, tmp_path)
+    names = {p.name for p in written}
+    assert {"posterior.json", "posterior.nc", "draws.csv", "posterior_summary.md", "posterior_pairs.png",
+            "posterior_trace.png"} <= names
+    report = json.loads((tmp_path / "posterior.json").read_text())
+    for label in ("eta", "C"):
+        entry = report["params"][label]
+        assert set(entry) >= {"mean", "sd", "q05", "q50", "q95", "r_hat", "ess", "unit"}
+        assert entry["mean"] == pytest.approx(noise_only.summary[label]["mean"], rel=1e-12)
+    draws = np.genfromtxt(tmp_path / "draws.csv", delimiter=",", names=True)
+    assert draws.size == 2 * 250
+    assert np.mean(draws["eta"]) == pytest.approx(report["params"]["eta"]["mean"], rel=1e-9)
+    import arviz as az
+
+    idata = az.from_netcdf(tmp_path / "posterior.nc")
+    assert idata.posterior["C"].shape == (2, 250)
+    assert math.isclose(float(idata.posterior["C"].mean()), report["params"]["C"]["mean"], rel_tol=1e-12)
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_command_line_posterior_is_strict_about_too_few_draws(brass_traces, tmp_path):
+    from hertzchain.cli import main
+    from hertzchain.tracefile import write_trace
+
+    path = tmp_path / "shot.csv"
+    write_trace(path, brass_traces[1])
+    out = tmp_path / "out"
+    base = ["fit", str(path), "--params", "eta", "--quiet", "--no-plots", "--out", str(out)]
+    assert main(base + ["--posterior", "--covariance", "residual"]) == 2
+    # 2 x 20 draws cannot reach an ESS of 400: a loud failure, exit 4 with --strict
+    code = main(base + ["--posterior", "--chains", "2", "--warmup", "20", "--draws", "20", "--strict",
+                        "--prior", "sensor_gain=+-2%"])
+    assert code == 4
+    report = json.loads((out / "posterior.json").read_text())
+    assert not report["diagnostics_passed"]
+    assert any("ESS" in text for text in report["failed_diagnostics"])
+    assert set(report["params"]) == {"eta", "sensor_gain[contact_3]", "sensor_gain[wall]"}
+    assert report["priors"]["sensor_gain[wall]"]["sd"] == pytest.approx(0.02)
