@@ -40,7 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from hertzchain.chain import ChainSetup
-from hertzchain.integrate import Recording, solve
+from hertzchain.integrate import Recording, solve, stack_setups
 from hertzchain.theory import DISCRETE_FWHM_FACTOR, DISCRETE_SPEED_FACTOR
 from hertzchain.timegrid import TimeGrid, choose_time_grid, shortest_contact_time_s
 
@@ -145,10 +145,6 @@ def interpolate_rows(series, rows, position):
     )
 
 
-def _stack(setups):
-    return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *setups)
-
-
 class Problem:
     """A least-squares problem: experiments, free parameters and the forward model.
 
@@ -237,14 +233,14 @@ class Problem:
                 )
                 for e in members
             ]
-            dt = time_step_s(_stack(margin), interval, steps_per_contact=self.forward.steps_per_contact)
-            grid = choose_time_grid(_stack(margin), t_end_s=t_end, sample_interval_s=interval, dt_s=dt)
+            dt = time_step_s(stack_setups(margin), interval, steps_per_contact=self.forward.steps_per_contact)
+            grid = choose_time_grid(stack_setups(margin), t_end_s=t_end, sample_interval_s=interval, dt_s=dt)
             n_local = len(self.local_sim[members[0]])
             local = np.array([self.local_sim[e] for e in members], dtype=int).reshape(len(members), n_local)
             groups.append(
                 _Group(
                     experiments=tuple(members),
-                    setups=_stack([setups[e] for e in members]),
+                    setups=stack_setups([setups[e] for e in members]),
                     grid=grid,
                     recording=recording,
                     channels=channels,

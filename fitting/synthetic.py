@@ -7,12 +7,11 @@ trigger offset, scaled by channel gains, and given white Gaussian noise.
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from hertzchain.chain import ChainSetup
-from hertzchain.integrate import Recording, solve
+from hertzchain.integrate import Recording, solve_stacked, stack_setups
 from hertzchain.timegrid import choose_time_grid
 from hertzchain.tracefile import TraceFile, setup_header
 
@@ -24,12 +23,12 @@ DATA_STEPS_PER_CONTACT = 800
 def simulate_clean(setups, *, contacts=(), t_end_s: float, sample_interval_s: float,
                    steps_per_contact: int = DATA_STEPS_PER_CONTACT) -> list[dict]:
     """Noise-free channels of several setups of one structure (one vmapped run), per setup."""
-    stacked = jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *setups)
+    stacked = stack_setups(setups)
     dt = time_step_s(stacked, sample_interval_s, steps_per_contact=steps_per_contact,
                      sensor_steps=2 * SENSOR_STEPS_PER_HALF_PERIOD)
     grid = choose_time_grid(stacked, t_end_s=t_end_s, sample_interval_s=sample_interval_s, dt_s=dt)
     recording = Recording(contacts=tuple(contacts))
-    traces = jax.jit(jax.vmap(lambda s: solve(s, grid, recording)))(stacked)
+    traces = solve_stacked(stacked, grid, recording)
     out = []
     for b in range(len(setups)):
         channels = {name: np.asarray(traces.forces_n[name][b]) for name in traces.channel_names}

@@ -42,7 +42,7 @@ from jax.sharding import Mesh, PartitionSpec
 
 from . import contact
 from .chain import ChainSetup, build_model, internal_contact_index, internal_sensor_index
-from .integrate import Recording, _channel_names, _layout, solve
+from .integrate import Recording, _channel_names, _layout, solve_stacked, stack_setups  # noqa: F401
 from .timegrid import TimeGrid
 
 # Steps advanced per scan iteration (fully unrolled): enough to hide the loop overhead,
@@ -95,14 +95,6 @@ def batch_size(setup: ChainSetup) -> int:
             "hertzchain.batch_setup(setup, striker_velocity_m_s=[...], ...) or stack_setups)."
         )
     return sizes.pop()
-
-
-def stack_setups(setups) -> ChainSetup:
-    """Stack setups of the same structure (same N, end, sensors) into one batched setup."""
-    setups = list(setups)
-    if not setups:
-        raise ValueError("stack_setups needs at least one setup.")
-    return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *setups)
 
 
 def build_model_contacts(setup: ChainSetup) -> range:
@@ -521,13 +513,8 @@ def solve_batched(
     return _solve_fast(params, batch, flags, grid, rows, names, user, int(block_steps), devices)
 
 
-@eqx.filter_jit
-def _vmapped_solve(setup, grid, recording):
-    return jax.vmap(lambda s: solve(s, grid, recording))(setup)
-
-
 def _solve_general(setup, grid, recording, names, time) -> BatchedTraces:
-    traces = _vmapped_solve(setup, grid, recording)
+    traces = solve_stacked(setup, grid, recording)
     return BatchedTraces(
         time_s=time,
         forces_n={name: traces.forces_n[name] for name in names},

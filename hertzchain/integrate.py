@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import equinox as eqx
@@ -516,6 +517,40 @@ def batch_setup(setup: ChainSetup, **values) -> tuple[ChainSetup, tuple[int, ...
     return batched, shape
 
 
+def stack_setups(setups: Sequence[ChainSetup]) -> ChainSetup:
+    """One setup whose array fields carry a leading axis over `setups`, for `solve_stacked`
+    and `hertzchain.batched.solve_batched`.
+
+    **Raises:** `ValueError` if the list is empty or the setups differ in their static
+    structure (number of beads, end, sensor beads), which a single vmapped solve cannot mix.
+    """
+    setups = list(setups)
+    if not setups:
+        raise ValueError("setups is empty: give at least one ChainSetup.")
+    first = setups[0]
+    for i, setup in enumerate(setups[1:], start=1):
+        same = (
+            setup.n_beads == first.n_beads
+            and setup.end == first.end
+            and setup.sensor_beads == first.sensor_beads
+            and jax.tree_util.tree_structure(setup) == jax.tree_util.tree_structure(first)
+        )
+        if not same:
+            raise ValueError(
+                f"setups[{i}] differs from setups[0] in n_beads, end or sensor_beads; "
+                "run such setups in separate batches."
+            )
+    return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *setups)
+
+
+@eqx.filter_jit
+def solve_stacked(setups: ChainSetup, grid: TimeGrid, recording: Recording, unroll: int = 1) -> Traces:
+    """`solve` vmapped over the leading axis of a batched setup (from `stack_setups` or
+    `batch_setup`), compiled once per structure, grid and recording: every array of the
+    returned `Traces` has that leading axis."""
+    return jax.vmap(lambda s: solve(s, grid, recording, unroll=unroll))(setups)
+
+
 def simulate_batch(setup: ChainSetup, *, t_end_s: float = 2.5e-3, sample_interval_s: float = 1e-6,
                    contacts=(), dt_s: float | None = None,
                    steps_per_contact: int = DEFAULT_STEPS_PER_CONTACT, record_all: bool = False,
@@ -534,11 +569,7 @@ def simulate_batch(setup: ChainSetup, *, t_end_s: float = 2.5e-3, sample_interva
         batched, t_end_s=t_end_s, sample_interval_s=sample_interval_s, dt_s=dt_s,
         steps_per_contact=steps_per_contact,
     )
-    traces = _solve_batch_jit(batched, grid, recording, unroll)
+    traces = solve_stacked(batched, grid, recording, unroll)
     check_yield(traces, on_yield, plastic=setup.plasticity)
     return jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), traces)
 
-
-@eqx.filter_jit
-def _solve_batch_jit(batched, grid, recording, unroll):
-    return jax.vmap(lambda s: solve(s, grid, recording, unroll=unroll))(batched)

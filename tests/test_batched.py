@@ -12,7 +12,7 @@ import pytest
 
 import hertzchain as hc
 from hertzchain.batched import fast_path_reason, solve_batched, stack_setups
-from hertzchain.integrate import Recording, solve
+from hertzchain.integrate import Recording, solve_stacked
 
 N = 10
 T_END = 0.8e-3
@@ -26,7 +26,7 @@ def _batch(**kwargs):
 
 
 def _reference(setup, grid, recording):
-    return jax.jit(jax.vmap(lambda s: solve(s, grid, recording)))(setup)
+    return solve_stacked(setup, grid, recording)
 
 
 CASES = {

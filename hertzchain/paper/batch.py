@@ -11,12 +11,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-import equinox as eqx
-import jax
-import jax.numpy as jnp
-
 from ..chain import ChainSetup
-from ..integrate import Recording, check_yield, solve
+from ..integrate import Recording, check_yield, solve_stacked, stack_setups
 from ..timegrid import (
     DEFAULT_STEPS_PER_CONTACT,
     TimeGrid,
@@ -24,30 +20,6 @@ from ..timegrid import (
     shortest_contact_time_s,
 )
 from ..traces import Traces
-
-
-def stack_setups(setups: Sequence[ChainSetup]) -> ChainSetup:
-    """One setup whose array fields carry a leading axis over `setups`.
-
-    **Raises:** `ValueError` if the list is empty or the setups differ in their static
-    structure (number of beads, end, sensor beads), which a single vmapped solve cannot mix.
-    """
-    if not setups:
-        raise ValueError("setups is empty: give at least one ChainSetup.")
-    first = setups[0]
-    for i, setup in enumerate(setups[1:], start=1):
-        same = (
-            setup.n_beads == first.n_beads
-            and setup.end == first.end
-            and setup.sensor_beads == first.sensor_beads
-            and jax.tree_util.tree_structure(setup) == jax.tree_util.tree_structure(first)
-        )
-        if not same:
-            raise ValueError(
-                f"setups[{i}] differs from setups[0] in n_beads, end or sensor_beads; "
-                "run such setups in separate batches."
-            )
-    return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *setups)
 
 
 def batch_time_grid(
@@ -64,11 +36,6 @@ def batch_time_grid(
         setups[0], t_end_s=t_end_s, sample_interval_s=sample_interval_s,
         dt_s=sample_interval_s / steps,
     )
-
-
-@eqx.filter_jit
-def _solve_stacked(stacked: ChainSetup, grid: TimeGrid, recording: Recording) -> Traces:
-    return jax.vmap(lambda setup: solve(setup, grid, recording))(stacked)
 
 
 def run_setups(
@@ -106,6 +73,6 @@ def run_setups(
             raise ValueError(
                 f"contacts: contact {k} is not in the chain (0..{setups[0].n_beads - 1})."
             )
-    traces = _solve_stacked(stacked, grid, recording)
+    traces = solve_stacked(stacked, grid, recording)
     check_yield(traces, on_yield)
     return traces
