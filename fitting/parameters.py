@@ -28,7 +28,8 @@ Scopes:
 
 Kinds (what a value acts on):
 
-- `"setup"`: a field of the `ChainSetup` (through `ParameterSpec.apply`).
+- `"setup"`: a field of the `ChainSetup` (through `ParameterSpec.apply`; a name that
+  `hertzchain.parameters` also has is set and read by that registry's `set` and `get`).
 - `"time_offset"`: the model is compared with the data at $t - t_{off}$, i.e. the data's
   clock reads $t_{off}$ at the impact.
 - `"gain"`: the data channel is modelled as gain x the simulated force.
@@ -50,6 +51,7 @@ import numpy as np
 
 from hertzchain import contact
 from hertzchain.chain import ChainSetup
+from hertzchain.parameters import PARAMETERS as SETUP_PARAMETERS
 from hertzchain.theory import DISCRETE_SPEED_FACTOR, LONG_WAVE_SPEED_FACTOR
 
 SCOPES = ("global", "experiment", "channel", "sensor")
@@ -144,29 +146,15 @@ class ParameterSpec:
         return self.lower < value < self.upper
 
 
-def _apply_field(field: str):
-    def apply(setup: ChainSetup, value):
-        return eqx.tree_at(lambda s: getattr(s, field), setup, jnp.asarray(value, dtype=jnp.float64))
-
-    return apply
+def _apply(name: str):
+    """The setter of `hertzchain.parameters` for `name` (a pure, differentiable setup update)."""
+    return SETUP_PARAMETERS[name].set
 
 
-def _read_field(field: str):
-    return lambda setup: float(np.asarray(getattr(setup, field)))
-
-
-def _apply_bead_scale(field: str):
-    """Set every bead's `field` so that bead 1 has `value` (the others keep their ratio to it)."""
-
-    def apply(setup: ChainSetup, value):
-        current = getattr(setup, field)
-        return eqx.tree_at(lambda s: getattr(s, field), setup, current * (value / current[0]))
-
-    return apply
-
-
-def _read_first_bead(field: str):
-    return lambda setup: float(np.asarray(getattr(setup, field))[0])
+def _read(name: str):
+    """The getter of `hertzchain.parameters` for `name`, as a Python float."""
+    get = SETUP_PARAMETERS[name].get
+    return lambda setup: float(np.asarray(get(setup)))
 
 
 def bare_speed_constant(setup: ChainSetup) -> float:
@@ -194,12 +182,7 @@ def _read_speed_constant(setup: ChainSetup) -> float:
 
 
 def _read_wall_youngs(setup: ChainSetup) -> float:
-    value = float(np.asarray(setup.wall_youngs_pa))
-    return min(value, 1e12)  # a rigid wall starts as a very stiff one
-
-
-def _read_precompression(setup: ChainSetup) -> float:
-    return float(np.asarray(setup.precompression_n))
+    return min(_read("wall_youngs")(setup), 1e12)  # a rigid wall starts as a very stiff one
 
 
 REGISTRY: dict[str, ParameterSpec] = {}
@@ -215,13 +198,13 @@ def register_parameter(spec: ParameterSpec, *, replace: bool = False) -> Paramet
 
 for _spec in (
     ParameterSpec(
-        "eta", "s", "global", "asinh", 0.0, 1e-3, scale=1e-8, apply=_apply_field("eta_s"),
-        read=_read_field("eta_s"),
+        "eta", "s", "global", "asinh", 0.0, 1e-3, scale=1e-8, apply=_apply("eta"),
+        read=_read("eta"),
         description="viscoelastic time eta of F_v = eta kappa d(delta^3/2)/dt (s)",
     ),
     ParameterSpec(
-        "mu", "", "global", "asinh", 0.0, 3.0, scale=1e-4, apply=_apply_field("mu"),
-        read=_read_field("mu"),
+        "mu", "", "global", "asinh", 0.0, 3.0, scale=1e-4, apply=_apply("mu"),
+        read=_read("mu"),
         description="friction coefficient of the beads on the track",
     ),
     ParameterSpec(
@@ -231,39 +214,39 @@ for _spec in (
         "through the stiffness scale kappa* = (1+mu*) kappa (C proportional to (1+mu*)^(1/3))",
     ),
     ParameterSpec(
-        "mu_star", "", "global", "linear", -0.5, 1.0, scale=0.01, apply=_apply_field("mu_star"),
-        read=_read_field("mu_star"), stage=1,
+        "mu_star", "", "global", "linear", -0.5, 1.0, scale=0.01, apply=_apply("mu_star"),
+        read=_read("mu_star"), stage=1,
         description="thwarted-rotation friction, kappa* = (1+mu*) kappa (same physics as C)",
     ),
     ParameterSpec(
-        "wall_youngs", "Pa", "global", "log", 1e6, 1e13, apply=_apply_field("wall_youngs_pa"),
+        "wall_youngs", "Pa", "global", "log", 1e6, 1e13, apply=_apply("wall_youngs"),
         read=_read_wall_youngs, description="Young's modulus of the wall (Pa)",
     ),
     ParameterSpec(
         "wall_poisson", "", "global", "linear", -0.9, 0.499, scale=0.1,
-        apply=_apply_field("wall_poisson"), read=_read_field("wall_poisson"),
+        apply=_apply("wall_poisson"), read=_read("wall_poisson"),
         description="Poisson ratio of the wall",
     ),
     ParameterSpec(
         "precompression", "N", "global", "asinh", 0.0, 1e4, scale=1e-3,
-        apply=_apply_field("precompression_n"),
-        read=_read_precompression, description="static preload pressing the chain (N)",
+        apply=_apply("precompression"),
+        read=_read("precompression"), description="static preload pressing the chain (N)",
     ),
     ParameterSpec(
-        "bead_youngs", "Pa", "global", "log", 1e6, 1e13, apply=_apply_bead_scale("bead_youngs_pa"),
-        read=_read_first_bead("bead_youngs_pa"),
+        "bead_youngs", "Pa", "global", "log", 1e6, 1e13, apply=_apply("bead_youngs"),
+        read=_read("bead_youngs"),
         description="Young's modulus of the chain's beads (Pa; all beads scaled together, the "
         "striker keeps its own)",
     ),
     ParameterSpec(
-        "bead_radius", "m", "global", "log", 1e-5, 1.0, apply=_apply_bead_scale("bead_radius_m"),
-        read=_read_first_bead("bead_radius_m"),
+        "bead_radius", "m", "global", "log", 1e-5, 1.0, apply=_apply("bead_radius"),
+        read=_read("bead_radius"),
         description="radius of the chain's beads (m; all beads scaled together at their density, "
         "so the mass follows R^3; the striker keeps its own)",
     ),
     ParameterSpec(
         "striker_velocity", "m/s", "experiment", "log", 1e-4, 50.0,
-        apply=_apply_field("striker_velocity_m_s"), read=_read_field("striker_velocity_m_s"),
+        apply=_apply("striker_velocity"), read=_read("striker_velocity"),
         description="impact velocity of each file (m/s)",
     ),
     ParameterSpec(
