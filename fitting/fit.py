@@ -11,7 +11,6 @@ identifiability warnings come from `fitting.uncertainty`; profile likelihoods on
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import sys
 import time
@@ -209,6 +208,14 @@ def _make_solver(tolerance: float, n_residuals: int, report=None):
                                    verbose=_make_verbose(report))
 
 
+def _gauss_newton_decrement(r, jac, mask):
+    """Gauss-Newton's step on the free (`mask`) columns at residuals `r`, Jacobian `jac`, and
+    the decrease of chi^2 it predicts."""
+    free_jac = jnp.where(mask[None, :], jac, 0.0)
+    step = jnp.linalg.lstsq(free_jac, r)[0]
+    return step, jnp.sum((free_jac @ step) ** 2)
+
+
 def _optimum_test(chi2_of, x, r, jac, mask, stopped, tolerance):
     """Whether `x` is an optimum of the free (`mask`) columns, to `tolerance` in chi^2.
 
@@ -218,9 +225,7 @@ def _optimum_test(chi2_of, x, r, jac, mask, stopped, tolerance):
     delivers: the optimiser `stopped` by its own test and no fraction of the Gauss-Newton
     step (1, 1/2, ... 1/32) lowers `chi2_of` by `tolerance` either (evaluated only then).
     """
-    free_jac = jnp.where(mask[None, :], jac, 0.0)
-    step = jnp.linalg.lstsq(free_jac, r)[0]
-    decrement = jnp.sum((free_jac @ step) ** 2)
+    step, decrement = _gauss_newton_decrement(r, jac, mask)
     near = decrement < tolerance
 
     def at_kink():
@@ -309,88 +314,80 @@ class LeastSquares:
     converged: bool
 
 
-def _host_point(x_start, columns, mask, values):
-    x = np.array(x_start, dtype=float)
-    free = np.asarray(columns)[np.asarray(mask)]
-    x[free] = np.asarray(values)[np.asarray(mask)]
-    return x, [int(c) for c in free]
+# The loop runs on the host, one compiled optimistix step per iteration, and the model is
+# evaluated between steps: evaluated inside the compiled loop (a `jax.pure_callback` running
+# the caller's own compiled simulator), it deadlocked on a single CPU core, the callback holding
+# the thread that the nested computation waits for. Each step of optimistix's Gauss-Newton
+# family (Levenberg-Marquardt included) evaluates its function and Jacobian at one point only,
+# `state.y_eval`, known before the step: the host evaluates the model there and the step sees
+# the model's linearisation at that point (`_linearised`), exact where it is evaluated.
+_OPTIONS = {"jac": "fwd"}
 
 
-# Inside a callback JAX sets the default device, which is part of the key of its compilation
-# caches: the model is evaluated with it unset, so that it reuses (and leaves for later calls)
-# the compilations made outside.
-def _host_residuals(model, x_start, columns, mask, weights, values):
-    x, _ = _host_point(x_start, columns, mask, values)
-    with jax.default_device(None):
-        r = model.residuals(x)
-    return np.asarray(weights) * np.asarray(r, dtype=float)
-
-
-def _host_linearize(model, x_start, columns, mask, weights, values):
-    x, free = _host_point(x_start, columns, mask, values)
-    with jax.default_device(None):
-        r, jac = model.linearize(x, free)
-    full = np.zeros((np.size(r), len(np.asarray(columns))))
-    full[:, np.asarray(mask)] = jac
-    weights = np.asarray(weights)
-    return weights * np.asarray(r, dtype=float), weights[:, None] * full
+def _linearised(v, args):
+    r, jac, at = args
+    return r + jac @ (v - at), None
 
 
 @eqx.filter_jit
-def _solve_host(model, solver, max_steps, tolerance, x_start, columns, mask, weights):
-    values0 = jnp.where(mask, x_start[columns], 0.0)
-    shapes = (jax.ShapeDtypeStruct(weights.shape, weights.dtype),
-              jax.ShapeDtypeStruct(weights.shape + values0.shape, weights.dtype))
-    point = (x_start, columns, mask, weights)
+def _lm_init(solver, v0, args):
+    f_struct = jax.ShapeDtypeStruct(args[0].shape, args[0].dtype)
+    return solver.init(_linearised, v0, args, _OPTIONS, f_struct, None, frozenset())
 
-    def residuals_at(values):
-        return jax.pure_callback(functools.partial(_host_residuals, model), shapes[0], *point, values,
-                                 vmap_method="sequential")
 
-    def linearize_at(values):
-        return jax.pure_callback(functools.partial(_host_linearize, model), shapes, *point, values)
+@eqx.filter_jit
+def _lm_step(solver, v, state, args):
+    v, state, _ = solver.step(_linearised, v, args, _OPTIONS, state, frozenset())
+    done, result = solver.terminate(_linearised, v, args, _OPTIONS, state, frozenset())
+    return v, state, done, result
 
-    @jax.custom_jvp
-    def model_fn(values):
-        return residuals_at(values)
 
-    @model_fn.defjvp
-    def _model_jvp(primals, tangents):
-        r, jac = linearize_at(primals[0])  # residuals and Jacobian in one evaluation
-        return r, jac @ tangents[0]
+_decrement = jax.jit(_gauss_newton_decrement)
 
-    # coordinates v = (x - x_start) scale in which the Jacobian's columns all have the norm
-    # 1/sqrt(_START_DAMPING) at the start: the optimiser damps with a multiple of the identity
-    # (1 at first), which is then Marquardt's damping of each column by _START_DAMPING of its
-    # own curvature; parameters whose sizes differ by orders of magnitude (a damping time in s
-    # beside a dashpot in N s/m) are damped alike only in such coordinates
-    _, jac0 = linearize_at(values0)
-    scale = jnp.linalg.norm(jac0, axis=0) * math.sqrt(_START_DAMPING)
-    scale = jnp.where(jnp.isfinite(scale) & (scale > 0), scale, 1.0)
-    solution = optx.least_squares(
-        lambda v, args: model_fn(values0 + v / scale), solver, jnp.zeros_like(values0),
-        max_steps=max_steps, throw=False, options={"jac": "fwd"},
-    )
-    values = values0 + solution.value / scale
-    r, jac = linearize_at(values)
-    ok = _optimum_test(lambda v: jnp.sum(residuals_at(v) ** 2), values, r, jac, mask,
-                       solution.result == optx.RESULTS.successful, tolerance)
-    return values, ok, solution.stats["num_steps"], jnp.sum(r**2)
+
+class _Scaled:
+    """The caller's model in the optimiser's coordinates: v = (values - values0) scale on the
+    free columns (padded to `width`), the held ones at `x_start`; rows multiplied by `weights`."""
+
+    def __init__(self, model, x_start, free, width, weights):
+        self.model, self.x_start, self.free, self.weights = model, x_start, free, weights
+        self.values0 = np.zeros(width)
+        self.values0[:len(free)] = x_start[free]
+        self.scale = np.ones(width)
+
+    def values(self, v):
+        return self.values0 + np.asarray(v) / self.scale
+
+    def point(self, values):
+        x = np.array(self.x_start, dtype=float)
+        x[self.free] = values[:len(self.free)]
+        return x
+
+    def residuals(self, values):
+        return self.weights * np.asarray(self.model.residuals(self.point(values)), dtype=float)
+
+    def linearize(self, values):
+        """Weighted residuals and Jacobian with respect to the (padded) values."""
+        r, jac = self.model.linearize(self.point(values), self.free)
+        full = np.zeros((np.size(r), self.values0.size))
+        full[:, :len(self.free)] = jac
+        return self.weights * np.asarray(r, dtype=float), self.weights[:, None] * full
 
 
 def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
                   tolerance: float = 0.1) -> LeastSquares:
     """Fit the parameters `free` (indices) from the values `x_start` (SI), the others held
     there, with `fit`'s solver and test of an optimum, on residuals a caller evaluates
-    outside the compiled loop.
+    between the optimiser's compiled steps (one optimistix Levenberg-Marquardt step per
+    iteration, driven from the host; see `_lm_step`).
 
     `model` gives the whitened residuals, `model.residuals(x)` (n,), and with their
     Jacobian, `model.linearize(x, columns)` -> (r (n,), J (n, len(columns))) with respect
     to `x[columns]`: a caller that keeps compiled models, caches and variants of its problem
     (`fitting.diagnosis`) evaluates them as it does elsewhere. The optimiser moves the
-    values themselves (scaled, see `_solve_host`), not `fit`'s bounded transforms: bounds
-    are the model's to apply (the diagnosis clips to them, as a projected Levenberg-Marquardt
-    does), so that an optimum on a bound (a sensor read in the filter form, coupling 0) is
+    values themselves (scaled by each column's norm at the start), not `fit`'s bounded
+    transforms: bounds are the model's to apply (the diagnosis clips to them, as a
+    projected Levenberg-Marquardt does), so that an optimum on a bound (a sensor read in the filter form, coupling 0) is
     reached and kept, where a transform's Gauss-Newton step from near one bound can leap to
     the other one and stay there. `weights` (n,): factors of the residuals (0 leaves a sample
     out, e.g. the end of a record; default 1). `tolerance`: as `fit`'s (chi^2,
@@ -404,15 +401,46 @@ def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
         r = weights * np.asarray(model.residuals(x_start))
         return LeastSquares(x_start, float(r @ r), 0, True)
     width = max(_MIN_WIDTH, 1 << (len(free) - 1).bit_length())
-    columns = np.zeros(width, dtype=int)
-    columns[:len(free)] = free
     mask = np.arange(width) < len(free)
-    values, ok, steps, chi2 = _solve_host(
-        model, _make_solver(tolerance, weights.size), max_steps, jnp.asarray(float(tolerance)),
-        jnp.asarray(x_start), jnp.asarray(columns), jnp.asarray(mask), jnp.asarray(weights),
-    )
-    x, _ = _host_point(x_start, columns, mask, np.asarray(values))
-    return LeastSquares(x, float(chi2), int(steps), bool(ok))
+    scaled = _Scaled(model, x_start, free, width, weights)
+    # coordinates in which the Jacobian's columns all have the norm 1/sqrt(_START_DAMPING) at the
+    # start: the optimiser damps with a multiple of the identity (1 at first), which is then
+    # Marquardt's damping of each column by _START_DAMPING of its own curvature; parameters whose
+    # sizes differ by orders of magnitude (a damping time in s beside a dashpot in N s/m) are
+    # damped alike only in such coordinates
+    r, jac = scaled.linearize(scaled.values0)
+    scale = np.linalg.norm(jac, axis=0) * math.sqrt(_START_DAMPING)
+    scaled.scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
+    solver = _make_solver(tolerance, weights.size)
+    v = jnp.zeros(width)
+    at = v
+    state = _lm_init(solver, v, (jnp.asarray(r), jnp.asarray(jac / scaled.scale), at))
+    steps, done, result = 0, False, optx.RESULTS.successful
+    while steps < max_steps:
+        at = np.asarray(state.y_eval)
+        if steps:  # the start's evaluation is the one above
+            r, jac = scaled.linearize(scaled.values(at))
+        v, state, done, result = _lm_step(solver, v, state,
+                                          (jnp.asarray(r), jnp.asarray(jac / scaled.scale), jnp.asarray(at)))
+        steps += 1
+        if not bool(np.all(np.isfinite(np.asarray(v)))):
+            result = optx.RESULTS.nonfinite
+        if bool(done) or not bool(result == optx.RESULTS.successful):
+            break
+    stopped = bool(done) and bool(result == optx.RESULTS.successful)
+    values = scaled.values(v)
+    # `fit`'s test of an optimum (`_optimum_test`), the line evaluations on the host
+    r, jac = scaled.linearize(values)
+    step, decrement = (np.asarray(a) for a in _decrement(jnp.asarray(r), jnp.asarray(jac), jnp.asarray(mask)))
+    chi2 = float(r @ r)
+    near = float(decrement) < tolerance
+    kink = False
+    if not near and stopped:
+        chi2_at = [float(np.sum(scaled.residuals(values - t * step) ** 2)) for t in np.asarray(_LINE_FRACTIONS)]
+        finite = [c for c in chi2_at if math.isfinite(c)]
+        kink = chi2 - (min(finite) if finite else math.inf) < tolerance
+    ok = bool(np.all(np.isfinite(r))) and (near or kink)
+    return LeastSquares(scaled.point(values), chi2, steps, ok)
 
 
 def _multistart_points(problem: Problem, z0: np.ndarray, k: int, seed: int) -> np.ndarray:
