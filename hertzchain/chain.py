@@ -12,7 +12,6 @@ Job et al.).
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -348,7 +347,7 @@ class ChainSetup(eqx.Module):
         return omega0**2 * self.sensor_beta * (1.0 - self.sensor_beta) * mass
 
 
-class CompliantSensorModel(NamedTuple):
+class CompliantSensorModel(eqx.Module):
     """Embedded sensors as compliances of unsplit beads (`hertzchain.compliant_sensor`).
 
     Sensor j sits in bead `beads[j]`: its back contact is internal contact `beads[j] - 1`
@@ -356,7 +355,7 @@ class CompliantSensorModel(NamedTuple):
     `back_m_n * F_s` and `front_m_n * F_s`.
     """
 
-    beads: tuple[int, ...]  # static
+    beads: tuple[int, ...] = eqx.field(static=True)
     beta: jax.Array  # (n_sensors,) mass fraction of the front half
     inv_omega0_sq_s2: jax.Array  # (n_sensors,) 1/omega0^2, s^2 (0: rigid sensor)
     back_m_n: jax.Array  # (n_sensors,) m/N
@@ -364,7 +363,7 @@ class CompliantSensorModel(NamedTuple):
     reduced_mass_kg: jax.Array  # (n_sensors,) beta (1 - beta) m
 
 
-class ChainModel(NamedTuple):
+class ChainModel(eqx.Module):
     """The mechanical model of a setup: bodies on a line, joined by contacts.
 
     Bodies are the striker, then the beads, with each sensor bead split in two halves.
@@ -380,7 +379,7 @@ class ChainModel(NamedTuple):
     wall_overlap0_m: jax.Array  # scalar
     yield_force_n: jax.Array  # (n_contacts,) used when plastic
     wall_yield_force_n: jax.Array  # scalar
-    plastic: bool  # Thornton elastic-plastic contacts instead of Hertz
+    plastic: bool = eqx.field(static=True)  # Thornton elastic-plastic contacts instead of Hertz
     eta_s: jax.Array
     dashpot_n_s_m: jax.Array  # linear dashpot of every contact in compression
     friction_decel_m_s2: jax.Array  # mu * g

@@ -29,6 +29,7 @@ booked).
 
 from __future__ import annotations
 
+import dataclasses
 from typing import NamedTuple
 
 import jax
@@ -89,7 +90,7 @@ def with_compliant_sensors(model: ChainModel, beads, *, beta, inv_omega0_sq_s2) 
         front_m_n=inv / (jnp.maximum(beta, BETA_FLOOR) * mass),
         reduced_mass_kg=jnp.maximum(beta, BETA_FLOOR) * (1.0 - beta) * mass,
     )
-    return model._replace(compliant=sensors)
+    return dataclasses.replace(model, compliant=sensors)
 
 
 def overlap_offsets(model: ChainModel, sensor_force_n) -> jax.Array:
