@@ -41,7 +41,7 @@ import numpy as np
 
 from hertzchain.chain import ChainSetup
 from hertzchain.integrate import Recording, solve, stack_setups
-from hertzchain.theory import DISCRETE_FWHM_FACTOR, DISCRETE_SPEED_FACTOR
+from hertzchain.theory import DISCRETE_FWHM_FACTOR, discrete_velocity_constant
 from hertzchain.timegrid import TimeGrid, choose_time_grid, shortest_contact_time_s
 
 from .data import Experiment
@@ -199,7 +199,7 @@ class Problem:
         kappa = float(setup.contact_kappa()[min(1, setup.n_beads - 1)])
         mass = float(setup.bead_mass_kg[0])
         radius = float(setup.bead_radius_m[0])
-        speed = DISCRETE_SPEED_FACTOR * 2 * radius * kappa ** (1 / 3) / math.sqrt(mass) * max(peak, 1e-6) ** (1 / 6)
+        speed = float(discrete_velocity_constant(radius, mass, kappa)) * max(peak, 1e-6) ** (1 / 6)
         fwhm = _FWHM_FACTOR * 2 * radius * math.sqrt(10.0) / speed
         return interval / max(1, math.ceil(interval / (fwhm / _SAMPLES_PER_FWHM)))
 

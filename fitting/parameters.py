@@ -52,7 +52,11 @@ import numpy as np
 from hertzchain import contact
 from hertzchain.chain import ChainSetup
 from hertzchain.parameters import PARAMETERS as SETUP_PARAMETERS
-from hertzchain.theory import DISCRETE_SPEED_FACTOR, LONG_WAVE_SPEED_FACTOR
+from hertzchain.theory import (  # noqa: F401
+    DISCRETE_SPEED_FACTOR,  # imported from here by fitting.fit
+    LONG_WAVE_SPEED_FACTOR,
+    discrete_velocity_constant,
+)
 
 SCOPES = ("global", "experiment", "channel", "sensor")
 SPACES = ("log", "asinh", "linear")
@@ -168,7 +172,7 @@ def bare_speed_constant(setup: ChainSetup) -> float:
         radius, setup.bead_youngs_pa[0], setup.bead_poisson[0],
         radius, setup.bead_youngs_pa[0], setup.bead_poisson[0],
     )
-    return DISCRETE_SPEED_FACTOR * 2.0 * radius * kappa ** (1.0 / 3.0) / jnp.sqrt(setup.bead_mass_kg[0])
+    return discrete_velocity_constant(radius, setup.bead_mass_kg[0], kappa)
 
 
 def _apply_speed_constant(setup: ChainSetup, value):
