@@ -170,7 +170,9 @@ def test_restitution_coefficients_and_law():
     )
     assert fit.c_v == pytest.approx(0.008, rel=1e-9)
     assert fit.c_s == pytest.approx(0.11, rel=1e-9)
-    assert fit.eta_paper_s == pytest.approx(float(theory.eta_from_c_v(0.008, 201.4, R)), rel=1e-9)
+    # the paper's conversions written out: eta = 2 sqrt(10) R C_v / (5 C), mu = 4 C_s / (5 m g)
+    assert fit.eta_paper_s == pytest.approx(2 * math.sqrt(10) * R * 0.008 / (5 * 201.4), rel=1e-9)
+    assert fit.mu_paper == pytest.approx(4 * 0.11 / (5 * 0.0716 * 9.81), rel=1e-9)
     viscous_only = pulses.fit_restitution_law(
         f, theory.restitution_law(f, 0.008, 0.0), friction=False
     )
