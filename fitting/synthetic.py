@@ -36,6 +36,34 @@ def simulate_clean(setups, *, contacts=(), t_end_s: float, sample_interval_s: fl
     return out
 
 
+def sampled_clean(setups, *, contacts=(), t_end_s: float, sample_interval_s: float,
+                  time_offset_s=0.0, fine_factor: int = 4) -> tuple[np.ndarray, list[dict]]:
+    """Noise-free channels of `setups` on the data's time axis, as a recording shifted by a
+    trigger offset sees them.
+
+    The setups are simulated `fine_factor` times finer than `sample_interval_s` (with
+    `simulate_clean`), and each channel, preceded by its value before the impact (the
+    preload), is interpolated at $(t - t_{off})$ for the data times
+    $t = k \\cdot$ `sample_interval_s`, k = 1 .. `t_end_s`/`sample_interval_s`.
+
+    **Returns:** the data times (n,) and, per setup, a dict channel -> (n,) force, N.
+    """
+    offsets = np.broadcast_to(np.asarray(time_offset_s, dtype=float), (len(setups),))
+    fine = sample_interval_s / fine_factor
+    margin = float(np.max(np.abs(offsets))) + 4 * sample_interval_s
+    clean = simulate_clean(setups, contacts=contacts, t_end_s=t_end_s + margin, sample_interval_s=fine)
+    time = sample_interval_s * np.arange(1, round(t_end_s / sample_interval_s) + 1)
+    sampled = []
+    for b, setup in enumerate(setups):
+        channels = {}
+        for name, series in clean[b].items():
+            full = np.concatenate([[float(setup.precompression_n)], series])
+            where = jnp.asarray((time - offsets[b]) / fine)
+            channels[name] = np.asarray(interpolate(jnp.asarray(full), where))
+        sampled.append(channels)
+    return time, sampled
+
+
 def synthetic_traces(setups, *, contacts=(), t_end_s: float = 2.5e-3, sample_interval_s: float = 1e-6,
                      noise_std_n=0.0, time_offset_s=0.0, gains=None, seed: int = 0,
                      fine_factor: int = 4, header_velocity: bool = True,
@@ -59,17 +87,14 @@ def synthetic_traces(setups, *, contacts=(), t_end_s: float = 2.5e-3, sample_int
     n = len(setups)
     noise = np.broadcast_to(np.asarray(noise_std_n, dtype=float), (n,))
     offsets = np.broadcast_to(np.asarray(time_offset_s, dtype=float), (n,))
-    fine = sample_interval_s / fine_factor
-    margin = float(np.max(np.abs(offsets))) + 4 * sample_interval_s
-    clean = simulate_clean(setups, contacts=contacts, t_end_s=t_end_s + margin, sample_interval_s=fine)
+    time, clean = sampled_clean(setups, contacts=contacts, t_end_s=t_end_s,
+                                sample_interval_s=sample_interval_s, time_offset_s=offsets,
+                                fine_factor=fine_factor)
     rng = np.random.default_rng(seed)
-    time = sample_interval_s * np.arange(1, round(t_end_s / sample_interval_s) + 1)
     files = []
     for b, setup in enumerate(setups):
         channels = {}
-        for name, series in clean[b].items():
-            full = np.concatenate([[float(setup.precompression_n)], series])
-            value = np.asarray(interpolate(jnp.asarray(full), jnp.asarray((time - offsets[b]) / fine)))
+        for name, value in clean[b].items():
             gain = (gains[b] if gains is not None else {}).get(name, 1.0)
             channels[name] = gain * value + noise[b] * rng.standard_normal(time.size)
         header = setup_header(setup)
