@@ -18,14 +18,13 @@ model's change of force since before the impact (`fitting.model`).
 from __future__ import annotations
 
 import dataclasses
-import math
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from hertzchain.pulses import estimate_noise_std_n
-from hertzchain.theory import DISCRETE_FWHM_FACTOR
+from hertzchain.theory import discrete_fwhm_s
 from hertzchain.tracefile import TraceFile, read_trace
 
 from .parameters import bare_speed_constant
@@ -33,8 +32,6 @@ from .parameters import bare_speed_constant
 # The fit needs at least this many samples across the half-maximum width of the pulse.
 MIN_SAMPLES_PER_PULSE = 6
 MIN_SAMPLES = 20
-# Half-maximum width of a discrete solitary wave in lattice units 2R sqrt(10)/v.
-_FWHM_FACTOR = DISCRETE_FWHM_FACTOR
 # A channel must show a pulse above this many noise standard deviations.
 MIN_PEAK_SNR = 5.0
 
@@ -190,7 +187,7 @@ def _check_sampling(trace: TraceFile, channels, where: str, striker_velocity_m_s
     # the incident pulse's amplitude sets its speed; the wall force is up to ~2.3x larger
     incident = peak / (2.3 if channels == ("wall",) else 1.0)
     speed = speed_constant * max(incident, 1e-6) ** (1.0 / 6.0)
-    fwhm = _FWHM_FACTOR * 2.0 * float(header["bead_radius_m"]) * math.sqrt(10.0) / speed
+    fwhm = discrete_fwhm_s(float(header["bead_radius_m"]), speed)
     interval = trace.sample_interval_s
     if interval * MIN_SAMPLES_PER_PULSE > fwhm:
         raise FitInputError(

@@ -41,7 +41,7 @@ import numpy as np
 
 from hertzchain.chain import ChainSetup
 from hertzchain.integrate import Recording, solve, stack_setups
-from hertzchain.theory import DISCRETE_FWHM_FACTOR, discrete_velocity_constant
+from hertzchain.theory import discrete_fwhm_s, discrete_velocity_constant
 from hertzchain.timegrid import TimeGrid, choose_time_grid, shortest_contact_time_s
 
 from .data import Experiment
@@ -56,7 +56,6 @@ _MIN_BLOCK = 8
 SENSOR_STEPS_PER_HALF_PERIOD = 40
 # Finest needed simulation sampling, as a fraction of the narrowest pulse's half-maximum width.
 _SAMPLES_PER_FWHM = 40
-_FWHM_FACTOR = DISCRETE_FWHM_FACTOR
 # Margin on the striker velocity when the fixed time grid is chosen (the fit may raise it).
 _VELOCITY_MARGIN = 1.5
 
@@ -200,7 +199,7 @@ class Problem:
         mass = float(setup.bead_mass_kg[0])
         radius = float(setup.bead_radius_m[0])
         speed = float(discrete_velocity_constant(radius, mass, kappa)) * max(peak, 1e-6) ** (1 / 6)
-        fwhm = _FWHM_FACTOR * 2 * radius * math.sqrt(10.0) / speed
+        fwhm = discrete_fwhm_s(radius, speed)
         return interval / max(1, math.ceil(interval / (fwhm / _SAMPLES_PER_FWHM)))
 
     def _make_groups(self, setups) -> list[_Group]:

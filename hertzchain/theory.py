@@ -152,6 +152,12 @@ def solitary_fwhm_s(tau_s):
     return 2.0 * COS6_HALF_WIDTH * tau_s
 
 
+def discrete_fwhm_s(bead_radius_m, speed_m_s):
+    """Full width at half maximum of the discrete chain's solitary-wave contact force, s:
+    `DISCRETE_FWHM_FACTOR` $\\cdot 2R\\sqrt{10}/v$ for a wave of speed $v$ (m/s)."""
+    return DISCRETE_FWHM_FACTOR * 2.0 * bead_radius_m * math.sqrt(10.0) / speed_m_s
+
+
 def wave_amplitude_n(
     striker_velocity_m_s, kappa_n_m1p5, bead_mass_kg, factor=IMPACT_AMPLITUDE_FACTOR
 ):
