@@ -33,10 +33,10 @@ import numpy as np  # noqa: E402
 TRUTH = {"eta": 2e-6, "mu": 0.19, "mu_star": 0.02}
 
 
-def benchmark_fit(n_traces: int = 10, *, t_end_s: float = 2e-3, noise_fraction: float = 0.005,
-                  seed: int = 0) -> dict:
-    """Time a fit of eta, mu, C on `n_traces` synthetic traces; returns a JSON-ready dict."""
-    import fitting
+def benchmark_files(n_traces: int = 10, *, t_end_s: float = 2e-3, noise_fraction: float = 0.005,
+                    seed: int = 0):
+    """The benchmark's traces (see the module docstring): (files, truth of eta, mu, C (SI),
+    seconds to simulate them)."""
     from fitting.parameters import bare_speed_constant
     from fitting.synthetic import paper_setups, synthetic_traces
 
@@ -46,9 +46,18 @@ def benchmark_fit(n_traces: int = 10, *, t_end_s: float = 2e-3, noise_fraction: 
     clean = synthetic_traces(setups, contacts=(6, 11), t_end_s=t_end_s)
     sigma = [noise_fraction * max(np.max(v) for v in f.channels.values()) for f in clean]
     files = synthetic_traces(setups, contacts=(6, 11), t_end_s=t_end_s, noise_std_n=sigma, seed=seed)
-    data_s = time.perf_counter() - began
     truth = np.array([TRUTH["eta"], TRUTH["mu"],
                       float(bare_speed_constant(setups[0])) * (1 + TRUTH["mu_star"]) ** (1 / 3)])
+    return files, truth, time.perf_counter() - began
+
+
+def benchmark_fit(n_traces: int = 10, *, t_end_s: float = 2e-3, noise_fraction: float = 0.005,
+                  seed: int = 0) -> dict:
+    """Time a fit of eta, mu, C on `n_traces` synthetic traces; returns a JSON-ready dict."""
+    import fitting
+
+    files, truth, data_s = benchmark_files(n_traces, t_end_s=t_end_s, noise_fraction=noise_fraction,
+                                           seed=seed)
 
     began = time.perf_counter()
     result = fitting.fit(files, ("eta", "mu", "C"), progress=False, throw=False)
