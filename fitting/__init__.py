@@ -11,6 +11,9 @@ The public API:
 - `REGISTRY`, `ParameterSpec`, `register_parameter`, `ForwardModel`: the parameter
   registry and the hook for model switches.
 - `fit_datasets(problem, datasets)`: one compiled fit over many data sets (noise seeds).
+- `sample_posterior(experiments, params, priors=[...]) -> PosteriorResult`: NUTS on the
+  same likelihood with a lab's tolerances (`fitting.posterior`, `fitting.priors`);
+  `fitting.posterior_report.write_posterior_report(result, out_dir)`: its files.
 - `fitting.report.write_report(result, out_dir)`: fit.json, CSV and PNG files.
 """
 
@@ -29,6 +32,7 @@ from .fit import (
 )
 from .model import ForwardModel, Problem, residuals_and_jacobian
 from .parameters import REGISTRY, ParameterInstance, ParameterSpec, get_spec, register_parameter
+from .posterior import PosteriorResult, PosteriorWarning, sample_posterior
 
 __all__ = [
     "REGISTRY",
@@ -40,6 +44,8 @@ __all__ = [
     "ForwardModel",
     "ParameterInstance",
     "ParameterSpec",
+    "PosteriorResult",
+    "PosteriorWarning",
     "Problem",
     "estimate_noise_std",
     "fit",
@@ -52,6 +58,7 @@ __all__ = [
     "profile_likelihood",
     "register_parameter",
     "residuals_and_jacobian",
+    "sample_posterior",
 ]
 
 # Diagnosis of missing effects (fitting.diagnosis, fitting.effects).
