@@ -27,9 +27,10 @@ from hertzchain.atomic import json_ready
 from . import start as start_values
 from .data import FitInputError, as_experiments
 from .model import ForwardModel, Problem
+from hertzchain.theory import DISCRETE_SPEED_FACTOR
+
 from .parameters import (
     CONTINUUM_SPEED_FACTOR,
-    DISCRETE_SPEED_FACTOR,
     bare_speed_constant,
     build_instances,
     from_unbounded,

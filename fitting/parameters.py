@@ -52,11 +52,7 @@ import numpy as np
 from hertzchain import contact
 from hertzchain.chain import ChainSetup
 from hertzchain.parameters import PARAMETERS as SETUP_PARAMETERS
-from hertzchain.theory import (  # noqa: F401
-    DISCRETE_SPEED_FACTOR,  # imported from here by fitting.fit
-    LONG_WAVE_SPEED_FACTOR,
-    discrete_velocity_constant,
-)
+from hertzchain.theory import LONG_WAVE_SPEED_FACTOR, discrete_velocity_constant
 
 SCOPES = ("global", "experiment", "channel", "sensor")
 SPACES = ("log", "asinh", "linear")
