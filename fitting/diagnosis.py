@@ -496,7 +496,7 @@ class _Search:
             # the windows can lead away from the whole record's optimum (measured: 11-bit data
             # of the paper's chain, whole-record chi^2 up 70 %): then the whole record is
             # also fitted from the best start directly
-            chi2_of = lambda point: float(np.sum(self.evaluate.residuals(point) ** 2))  # noqa: E731
+            chi2_of = lambda point: float(np.sum(self.evaluate.residuals(point) ** 2))
             starts = [x] if chi2_of(x) <= chi2_of(starts[0]) else [x, starts[0]]
         else:
             strengths = self.effect_columns[name]
@@ -744,6 +744,307 @@ class _Search:
         return x_fit
 
 
+class _Workflow:
+    """The steps of one diagnosis (`diagnose`), in the order they run: `base_fit`, then per
+    round `locate`, `screen`, `refit`, `heldout_check` (with the other tests a candidate must
+    pass) and `name`; then `backward_check` and `report`. Holds the current model
+    (`accepted`, its fit `x`, `chi2`) and what the rounds found."""
+
+    def __init__(self, search: _Search, model: str, *, min_share: float, max_refits: int, progress: bool):
+        self.search = search
+        self.model = model
+        self.min_share = min_share
+        self.max_refits = max_refits
+        self.progress = progress
+        self.accepted = parse_model(model, search.n_beads)
+        self.n = search.problem.n_fitted
+        self.penalty = math.log(self.n)
+        self.steps: list[Step] = []
+        self.last_candidates: list[CandidateResult] = []
+        self.not_separable: set = set()
+        self.pairs_seen: list = []
+        self.dropped: list = []
+        self._heldout_cache: dict = {}
+
+    def dof_of(self, effects) -> int:
+        return self.n - len(self.search.columns(effects))
+
+    @staticmethod
+    def band(dof) -> float:
+        """The noise band of the chi^2 excess: NOISE_BAND_SIGMA standard deviations."""
+        return NOISE_BAND_SIGMA * math.sqrt(2 * dof)
+
+    def explains_to_noise(self, candidate: CandidateResult) -> bool:
+        dof_c = self.dof_of(self.accepted + [candidate.effect])
+        return candidate.chi2 - dof_c <= self.band(dof_c)
+
+    # --- 1. base fit --------------------------------------------------------------------------------
+    def base_fit(self):
+        """The stated model with its nuisances (and `free` parameters) fitted."""
+        search = self.search
+        starts = [search.x0.copy()]
+        for name in self.accepted:
+            starts = [s2 for s in starts for s2 in search.start_for(name, s)][:1]
+        self.x, self.chi2, _ = search.fit(starts[0], self.accepted, max_steps=60)
+        search.log(f"base fit: chi^2/dof = {self.chi2 / self.dof_of(self.accepted):.4g}")
+        self.x_base, self.chi2_base = self.x.copy(), self.chi2
+
+    # --- 2. locate ----------------------------------------------------------------------------------
+    def locate(self, x=None) -> dict:
+        """Where the fit `x` (default the current one) misses: `fitting.locate`."""
+        x = self.x if x is None else x
+        return locate(self.search.problem, x, self.search.evaluate.residuals(x))
+
+    # --- 3. screen ----------------------------------------------------------------------------------
+    def screen(self):
+        """Scores and starts of the candidates not in the model (`_Search.screen`); the
+        candidates to refit: the best `max_refits` separable ones by score, whatever their
+        score (a linear score at "off" misjudges effects with a threshold or a singular
+        onset, see `_Search.start_for`), none when the misfit is at the noise level."""
+        search = self.search
+        todo = [c for c in search.candidates if c not in self.accepted]
+        scores, starts, separable, pairs = search.screen(self.x, self.accepted, todo)
+        search.log("screened " + ", ".join(f"{c} {scores[c]:.3g}" for c in todo))
+        for pair in pairs:
+            if pair not in self.pairs_seen:
+                self.pairs_seen.append(pair)
+        dof = self.dof_of(self.accepted)
+        worth = [c for c in todo if separable[c]]
+        worth = sorted(worth, key=lambda c: -scores[c])[:self.max_refits] if self.chi2 - dof > self.band(dof) else []
+        return todo, scores, starts, separable, worth
+
+    # --- 4. refit -----------------------------------------------------------------------------------
+    def refit(self, todo, scores, starts, separable, worth) -> list[CandidateResult]:
+        """Refit the candidates `worth` in order of their number of strengths (`_Search.refit`),
+        skipping those with more strengths once a simpler one explains the misfit to the noise
+        level; one `CandidateResult` per candidate of `todo`."""
+        search = self.search
+        dof = self.dof_of(self.accepted)
+        excess = self.chi2 - dof
+        refitted: dict = {}
+        bar = Progress(len(worth), "diagnose: refitting candidates") if self.progress and worth else None
+        for name in sorted(worth, key=lambda c: (len(search.effect_columns[c]), -scores[c])):
+            cols = search.effect_columns[name]
+            k = len(cols)
+            simpler = [c for c in refitted.values() if c.n_parameters < k and self.explains_to_noise(c)]
+            if simpler:
+                refitted[name] = CandidateResult(
+                    name, k, scores[name],
+                    reason=f"not refitted: {simpler[0].effect} ({simpler[0].n_parameters} parameter(s)) "
+                    "already explains the misfit to the noise level")
+            else:
+                x_c, chi2_c, _ = search.refit(starts[name], self.accepted + [name], name)
+                delta = self.chi2 - chi2_c
+                all_cols = search.columns(self.accepted + [name])
+                err = search.stderr(x_c, all_cols, chi2_c)
+                refitted[name] = CandidateResult(
+                    name, k, scores[name], chi2=chi2_c, delta_chi2=delta, bic_gain=delta - k * self.penalty,
+                    share_of_excess=delta / excess if excess > 0 else 0.0,
+                    values={search.labels[c]: float(x_c[c]) for c in cols},
+                    stderr={search.labels[c]: float(err[all_cols.index(c)]) for c in cols}, x=x_c)
+            if bar:
+                bar.advance()
+        results = []
+        for name in todo:
+            k = len(search.effect_columns[name])
+            if name in refitted:
+                results.append(refitted[name])
+            elif not separable[name]:
+                self.not_separable.add(name)
+                results.append(CandidateResult(name, k, scores[name], separable=False, chi2=self.chi2,
+                                               delta_chi2=0.0, bic_gain=-k * self.penalty, share_of_excess=0.0,
+                                               reason="not separable from the free parameters"))
+            else:
+                results.append(CandidateResult(
+                    name, k, scores[name],
+                    reason="the misfit is already at the noise level" if excess <= self.band(dof) else
+                    f"score {scores[name]:.4g} not among the {self.max_refits} best, which are refitted"))
+        return results
+
+    # --- 5. decide, with the held-out check ---------------------------------------------------------
+    def heldout(self, x_fit, effects):
+        """Summed held-out chi^2 of the model `effects` fitted at `x_fit` (cached per model)."""
+        key = tuple(effects)
+        if key not in self._heldout_cache:
+            self._heldout_cache[key] = self.search.heldout_chi2(x_fit, effects)
+        return self._heldout_cache[key]
+
+    def heldout_check(self, results) -> list[CandidateResult]:
+        """Mark the refitted candidates that pass (a) BIC, (b) practical significance (and the
+        parsimony rule for many strengths) and (c) the held-out check (module docstring);
+        returns those that pass. Each candidate's `reason` says why it passed or not."""
+        search = self.search
+        dof = self.dof_of(self.accepted)
+        excess = self.chi2 - dof
+        at_noise = excess <= self.band(dof)
+        base_heldout = None
+        for c in sorted(results, key=lambda c: -(c.delta_chi2 if math.isfinite(c.delta_chi2) else -1)):
+            if not c.separable or not math.isfinite(c.delta_chi2):
+                continue
+            if at_noise:
+                c.reason = "the misfit is already at the noise level"
+                continue
+            if c.bic_gain <= 0:
+                c.reason = f"delta chi^2 {c.delta_chi2:.4g} below the BIC penalty {c.n_parameters * self.penalty:.4g}"
+                continue
+            if c.share_of_excess < self.min_share:
+                c.reason = (f"removes only {100 * c.share_of_excess:.3g} % of the excess misfit "
+                            f"(needs {100 * self.min_share:.3g} %)")
+                continue
+            many = c.n_parameters > FEW_STRENGTHS
+            if many and excess < PRACTICAL_GAP * dof:
+                c.reason = (f"possible, not needed: {c.n_parameters} strengths for a misfit of "
+                            f"{excess / dof:.3g} per degree of freedom above the noise (named from "
+                            f"{PRACTICAL_GAP:g} on)")
+                continue
+            if search.folds:
+                search.log(f"held-out check of {c.effect}")
+                if base_heldout is None:
+                    base_heldout = self.heldout(self.x, self.accepted)
+                cand = self.heldout(c.x, self.accepted + [c.effect])
+                c.heldout_gain = base_heldout - cand
+                margin = c.n_parameters * (self.penalty if many else 1.0)
+                if c.heldout_gain <= margin:
+                    c.reason = f"held-out chi^2 improves by only {c.heldout_gain:.4g} (needs {margin:.4g})"
+                    continue
+            c.passed = True
+            c.reason = "passes BIC, practical-significance and held-out checks"
+        return [c for c in results if c.passed]
+
+    def name(self, passed, results, location):
+        """Add the candidate of `passed` with the largest held-out gain to the model, refit."""
+        search = self.search
+        winner = max(passed, key=lambda c: (c.heldout_gain if c.heldout_gain is not None else c.delta_chi2))
+        effects = self.accepted + [winner.effect]
+        x_new, chi2_new, _ = search.fit(winner.x, effects, max_steps=20)
+        dof, dof_new = self.dof_of(self.accepted), self.dof_of(effects)
+        self.steps.append(Step(
+            effect=winner.effect,
+            gap_before=self.chi2 / dof, gap_after=chi2_new / dof_new,
+            chi2_before=self.chi2, chi2_after=chi2_new, dof_before=dof, dof_after=dof_new,
+            values=winner.values, stderr=winner.stderr, candidates=results,
+            location_before=location, location_after=self.locate(x_new), x_before=self.x, x_after=x_new,
+        ))
+        search.log(f"named {winner.effect}: chi^2/dof {self.chi2 / dof:.4g} -> {chi2_new / dof_new:.4g}")
+        self.accepted = effects
+        self.x, self.chi2 = x_new, chi2_new
+
+    def round(self) -> bool:
+        """One round: locate, screen, refit, check; names one effect (True) or none (False)."""
+        location = self.locate()
+        todo, scores, starts, separable, worth = self.screen()
+        results = self.refit(todo, scores, starts, separable, worth)
+        passed = self.heldout_check(results)
+        if not passed:
+            self.last_candidates = results
+            return False
+        self.name(passed, results, location)
+        return True
+
+    # --- 6. backward check --------------------------------------------------------------------------
+    def backward_check(self):
+        """Refit without each named effect in turn; drop any that no longer passes (a) and (b)."""
+        named = [s.effect for s in self.steps]
+        if len(named) < 2:
+            return
+        search = self.search
+        search.log("backward check of " + ", ".join(named))
+        for name in named:
+            others = [e for e in self.accepted if e != name]
+            x_wo = self.x.copy()
+            for c in search.effect_columns[name]:
+                x_wo[c] = 0.0
+            x_wo, chi2_wo, _ = search.fit(x_wo, others)
+            delta = chi2_wo - self.chi2
+            k = len(search.effect_columns[name])
+            excess_wo = chi2_wo - self.dof_of(others)
+            if delta - k * self.penalty <= 0 or (excess_wo > 0 and delta / excess_wo < self.min_share):
+                self.dropped.append(name)
+                self.accepted = others
+                self.x, self.chi2 = x_wo, chi2_wo
+
+    # --- 7. report ----------------------------------------------------------------------------------
+    def conclusion(self, named, final_location) -> tuple[bool, str, list]:
+        """(misspecification alarm, the conclusion in words, where the final misfit lies)."""
+        search, x, chi2 = self.search, self.x, self.chi2
+        dof = self.dof_of(self.accepted)
+        excess = chi2 - dof
+        alarm = excess > self.band(dof)
+        where = describe(final_location)
+        if named:
+            text = f"Named missing effect(s), in order: {', '.join(named)}."
+            for name in named:
+                text += search.interpret(name, x)
+        else:
+            text = "No missing effect detected: no candidate passes the tests."
+        if "rotational_friction" in named:
+            text += (" rotational_friction is a uniform scale of the contact stiffness, kappa* = (1+mu*) kappa: "
+                     "in this form it cannot be told apart from an error in the beads' Young's modulus.")
+        if alarm:
+            text += (f" MISSPECIFICATION ALARM: the final misfit is still {excess / math.sqrt(2 * dof):.1f} noise "
+                     f"units above the noise level (chi^2/dof = {chi2 / dof:.4g}); the library does not explain "
+                     f"it. Largest gaps: {'; '.join(where)}.")
+        else:
+            text += f" The final misfit is at the noise level (chi^2/dof = {chi2 / dof:.4g})."
+        if self.not_separable:
+            text += (f" Not separable from the free parameters and the named effects: "
+                     f"{', '.join(sorted(self.not_separable))} (e.g. a uniform stiffness scale while both striker "
+                     "velocity and gain are free, or once contact_exponent, which fits the stiffness too, is named).")
+        return alarm, text, where
+
+    def summary(self, xv, chi, effects) -> dict:
+        search = self.search
+        d = self.dof_of(effects)
+        cols = search.columns(effects)
+        err = search.stderr(xv, cols, chi)
+        return {
+            "effects": list(effects), "chi2": chi, "dof": d, "gap": chi / d,
+            "excess_sigma": (chi - d) / math.sqrt(2 * d),
+            "values": {search.labels[c]: float(xv[c]) for c in cols},
+            "stderr": {search.labels[c]: float(err[i]) for i, c in enumerate(cols)},
+        }
+
+    def report(self, settings: dict, began: float) -> Diagnosis:
+        """The `Diagnosis`: named effects, base and final fits, alarm and conclusion;
+        `settings`: the arguments of `diagnose` it records (free, nuisances, max_effects,
+        steps_per_contact)."""
+        search = self.search
+        named = [s.effect for s in self.steps if s.effect not in self.dropped]
+        final_location = self.locate()
+        alarm, text, where = self.conclusion(named, final_location)
+        base_summary = self.summary(self.x_base, self.chi2_base, parse_model(self.model, search.n_beads))
+        base_summary["location"] = (self.steps[0].location_before if self.steps else self.locate(self.x_base))
+        final_summary = self.summary(self.x, self.chi2, self.accepted)
+        final_summary["location"] = final_location
+        final_summary["where"] = where
+        return Diagnosis(
+            missing_effects=named,
+            steps=self.steps,
+            base_fit=base_summary,
+            final=final_summary,
+            last_candidates=self.last_candidates,
+            not_separable=sorted(self.not_separable),
+            indistinguishable=self.pairs_seen,
+            dropped_in_backward_check=self.dropped,
+            misspecification=bool(alarm),
+            conclusion=text,
+            settings={
+                "model": self.model, "free": settings["free"], "nuisances": settings["nuisances"],
+                "candidates": search.candidates, "left_out": search.skipped, "max_effects": settings["max_effects"],
+                "min_share": self.min_share, "noise_band_sigma": NOISE_BAND_SIGMA,
+                "bic_penalty_per_parameter": self.penalty, "steps_per_contact": settings["steps_per_contact"],
+                "folds": [[search.problem.experiments[e].label for e in f] for f in search.folds],
+            },
+            problem=search.problem,
+            x_base=self.x_base,
+            x_final=self.x,
+            elapsed_s=time.perf_counter() - began,
+            evaluations=search.evaluate.calls,
+            evaluation_seconds=search.evaluate.seconds,
+            residual_evaluations=search.evaluate.residual_calls,
+        )
+
+
 def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, candidates=None,
              max_effects: int = 3, min_share: float = MIN_SHARE, steps_per_contact: int = 200,
              max_refits: int = 3, progress: bool = True) -> Diagnosis:
@@ -766,6 +1067,9 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
     - `progress`: report on stderr.
 
     **Returns:** `Diagnosis`.
+
+    The steps (`_Workflow`): base fit; then, until nothing passes or `max_effects` are named,
+    locate, screen, refit, held-out check and name; backward check; report.
     """
     began = time.perf_counter()
     experiments = as_experiments(experiments)
@@ -780,231 +1084,12 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
                 raise DiagnosisError(f"candidates: unknown effect {name!r}; effects: {', '.join(fx.EFFECT_NAMES)}.")
     search = _Search(experiments, free=free, nuisances=nuisances, steps_per_contact=steps_per_contact,
                      candidates=candidates, min_share=min_share, report=progress)
-    accepted = parse_model(model, search.n_beads)
+    run = _Workflow(search, model, min_share=min_share, max_refits=max_refits, progress=progress)
     search.log(f"{len(experiments)} files, {search.n} residuals; compiling the model ...")
-    n = search.problem.n_fitted
-    penalty = math.log(n)
-
-    x = search.x0.copy()
-    starts = [x]
-    for name in accepted:
-        starts = [s2 for s in starts for s2 in search.start_for(name, s)][:1]
-    x, chi2, _ = search.fit(starts[0], accepted, max_steps=60)
-    search.log(f"base fit: chi^2/dof = {chi2 / (n - len(search.columns(accepted))):.4g}")
-    x_base, chi2_base = x.copy(), chi2
-
-    def dof_of(effects):
-        return n - len(search.columns(effects))
-
-    def band(dof):
-        return NOISE_BAND_SIGMA * math.sqrt(2 * dof)
-
-    def explains_to_noise(candidate):
-        dof_c = dof_of(accepted + [candidate.effect])
-        return candidate.chi2 - dof_c <= band(dof_c)
-
-    steps: list[Step] = []
-    last_candidates: list[CandidateResult] = []
-    not_separable: set = set()
-    pairs_seen: list = []
-    heldout_cache: dict = {}
-
-    def heldout(x_fit, effects):
-        key = tuple(effects)
-        if key not in heldout_cache:
-            heldout_cache[key] = search.heldout_chi2(x_fit, effects)
-        return heldout_cache[key]
-
-    while len(steps) < max_effects:
-        dof = dof_of(accepted)
-        excess = chi2 - dof
-        location = locate(search.problem, x, search.evaluate.residuals(x))
-        todo = [c for c in search.candidates if c not in accepted]
-        scores, best_starts, separable, pairs = search.screen(x, accepted, todo)
-        search.log("screened " + ", ".join(f"{c} {scores[c]:.3g}" for c in todo))
-        for pair in pairs:
-            if pair not in pairs_seen:
-                pairs_seen.append(pair)
-        # the best few by score are refitted whatever their score: a linear score at "off"
-        # misjudges effects with a threshold or a singular onset (see `_Search.start_for`)
-        worth = [c for c in todo if separable[c]]
-        worth = sorted(worth, key=lambda c: -scores[c])[:max_refits] if excess > band(dof) else []
-        refitted: dict = {}
-        bar = Progress(len(worth), "diagnose: refitting candidates") if progress and worth else None
-        for name in sorted(worth, key=lambda c: (len(search.effect_columns[c]), -scores[c])):
-            cols = search.effect_columns[name]
-            k = len(cols)
-            simpler = [c for c in refitted.values() if c.n_parameters < k and explains_to_noise(c)]
-            if simpler:
-                refitted[name] = CandidateResult(
-                    name, k, scores[name],
-                    reason=f"not refitted: {simpler[0].effect} ({simpler[0].n_parameters} parameter(s)) "
-                    "already explains the misfit to the noise level")
-            else:
-                x_c, chi2_c, _ = search.refit(best_starts[name], accepted + [name], name)
-                delta = chi2 - chi2_c
-                all_cols = search.columns(accepted + [name])
-                err = search.stderr(x_c, all_cols, chi2_c)
-                refitted[name] = CandidateResult(
-                    name, k, scores[name], chi2=chi2_c, delta_chi2=delta, bic_gain=delta - k * penalty,
-                    share_of_excess=delta / excess if excess > 0 else 0.0,
-                    values={search.labels[c]: float(x_c[c]) for c in cols},
-                    stderr={search.labels[c]: float(err[all_cols.index(c)]) for c in cols}, x=x_c)
-            if bar:
-                bar.advance()
-        results = []
-        for name in todo:
-            k = len(search.effect_columns[name])
-            if name in refitted:
-                results.append(refitted[name])
-            elif not separable[name]:
-                not_separable.add(name)
-                results.append(CandidateResult(name, k, scores[name], separable=False, chi2=chi2, delta_chi2=0.0,
-                                               bic_gain=-k * penalty, share_of_excess=0.0,
-                                               reason="not separable from the free parameters"))
-            else:
-                results.append(CandidateResult(
-                    name, k, scores[name],
-                    reason="the misfit is already at the noise level" if excess <= band(dof) else
-                    f"score {scores[name]:.4g} not among the {max_refits} best, which are refitted"))
-        # decide
-        at_noise = excess <= band(dof)
-        base_heldout = None
-        for c in sorted(results, key=lambda c: -(c.delta_chi2 if math.isfinite(c.delta_chi2) else -1)):
-            if not c.separable or not math.isfinite(c.delta_chi2):
-                continue
-            if at_noise:
-                c.reason = "the misfit is already at the noise level"
-                continue
-            if c.bic_gain <= 0:
-                c.reason = f"delta chi^2 {c.delta_chi2:.4g} below the BIC penalty {c.n_parameters * penalty:.4g}"
-                continue
-            if c.share_of_excess < min_share:
-                c.reason = (f"removes only {100 * c.share_of_excess:.3g} % of the excess misfit "
-                            f"(needs {100 * min_share:.3g} %)")
-                continue
-            many = c.n_parameters > FEW_STRENGTHS
-            if many and excess < PRACTICAL_GAP * dof:
-                c.reason = (f"possible, not needed: {c.n_parameters} strengths for a misfit of "
-                            f"{excess / dof:.3g} per degree of freedom above the noise (named from "
-                            f"{PRACTICAL_GAP:g} on)")
-                continue
-            if search.folds:
-                search.log(f"held-out check of {c.effect}")
-                if base_heldout is None:
-                    base_heldout = heldout(x, accepted)
-                cand = heldout(c.x, accepted + [c.effect])
-                c.heldout_gain = base_heldout - cand
-                margin = c.n_parameters * (penalty if many else 1.0)
-                if c.heldout_gain <= margin:
-                    c.reason = f"held-out chi^2 improves by only {c.heldout_gain:.4g} (needs {margin:.4g})"
-                    continue
-            c.passed = True
-            c.reason = "passes BIC, practical-significance and held-out checks"
-        passed = [c for c in results if c.passed]
-        if not passed:
-            last_candidates = results
-            break
-        winner = max(passed, key=lambda c: (c.heldout_gain if c.heldout_gain is not None else c.delta_chi2))
-        x_new = winner.x
-        x_new, chi2_new, _ = search.fit(x_new, accepted + [winner.effect], max_steps=20)
-        location_after = locate(search.problem, x_new, search.evaluate.residuals(x_new))
-        steps.append(Step(
-            effect=winner.effect,
-            gap_before=chi2 / dof, gap_after=chi2_new / dof_of(accepted + [winner.effect]),
-            chi2_before=chi2, chi2_after=chi2_new, dof_before=dof, dof_after=dof_of(accepted + [winner.effect]),
-            values=winner.values, stderr=winner.stderr, candidates=results,
-            location_before=location, location_after=location_after, x_before=x, x_after=x_new,
-        ))
-        search.log(f"named {winner.effect}: chi^2/dof {chi2 / dof:.4g} -> {chi2_new / dof_of(accepted + [winner.effect]):.4g}")
-        accepted = accepted + [winner.effect]
-        x, chi2 = x_new, chi2_new
-    named = [s.effect for s in steps]
-
-    # backward check: each named effect must still be needed with the others present
-    dropped = []
-    if len(named) >= 2:
-        search.log("backward check of " + ", ".join(named))
-        for name in list(named):
-            others = [e for e in accepted if e != name]
-            x_wo = x.copy()
-            for c in search.effect_columns[name]:
-                x_wo[c] = 0.0
-            x_wo, chi2_wo, _ = search.fit(x_wo, others)
-            delta = chi2_wo - chi2
-            k = len(search.effect_columns[name])
-            excess_wo = chi2_wo - dof_of(others)
-            if delta - k * penalty <= 0 or (excess_wo > 0 and delta / excess_wo < min_share):
-                dropped.append(name)
-                accepted = others
-                x, chi2 = x_wo, chi2_wo
-        named = [e for e in named if e not in dropped]
-
-    dof = dof_of(accepted)
-    excess = chi2 - dof
-    alarm = excess > band(dof)
-    final_location = locate(search.problem, x, search.evaluate.residuals(x))
-    where = describe(final_location)
-    if named:
-        text = f"Named missing effect(s), in order: {', '.join(named)}."
-        for name in named:
-            text += search.interpret(name, x)
-    else:
-        text = "No missing effect detected: no candidate passes the tests."
-    if "rotational_friction" in named:
-        text += (" rotational_friction is a uniform scale of the contact stiffness, kappa* = (1+mu*) kappa: "
-                 "in this form it cannot be told apart from an error in the beads' Young's modulus.")
-    if alarm:
-        text += (f" MISSPECIFICATION ALARM: the final misfit is still {excess / math.sqrt(2 * dof):.1f} noise "
-                 f"units above the noise level (chi^2/dof = {chi2 / dof:.4g}); the library does not explain "
-                 f"it. Largest gaps: {'; '.join(where)}.")
-    else:
-        text += f" The final misfit is at the noise level (chi^2/dof = {chi2 / dof:.4g})."
-    if not_separable:
-        text += (f" Not separable from the free parameters and the named effects: {', '.join(sorted(not_separable))}"
-                 " (e.g. a uniform stiffness scale while both striker velocity and gain are free, or once "
-                 "contact_exponent, which fits the stiffness too, is named).")
-
-    def summary(xv, chi, effects):
-        d = dof_of(effects)
-        cols = search.columns(effects)
-        err = search.stderr(xv, cols, chi)
-        return {
-            "effects": list(effects), "chi2": chi, "dof": d, "gap": chi / d,
-            "excess_sigma": (chi - d) / math.sqrt(2 * d),
-            "values": {search.labels[c]: float(xv[c]) for c in cols},
-            "stderr": {search.labels[c]: float(err[i]) for i, c in enumerate(cols)},
-        }
-
-    base_summary = summary(x_base, chi2_base, parse_model(model, search.n_beads))
-    base_summary["location"] = steps[0].location_before if steps else locate(
-        search.problem, x_base, search.evaluate.residuals(x_base))
-    final_summary = summary(x, chi2, accepted)
-    final_summary["location"] = final_location
-    final_summary["where"] = where
-    return Diagnosis(
-        missing_effects=named,
-        steps=steps,
-        base_fit=base_summary,
-        final=final_summary,
-        last_candidates=last_candidates,
-        not_separable=sorted(not_separable),
-        indistinguishable=pairs_seen,
-        dropped_in_backward_check=dropped,
-        misspecification=bool(alarm),
-        conclusion=text,
-        settings={
-            "model": model, "free": list(free), "nuisances": list(nuisances),
-            "candidates": search.candidates, "left_out": search.skipped, "max_effects": max_effects,
-            "min_share": min_share, "noise_band_sigma": NOISE_BAND_SIGMA, "bic_penalty_per_parameter": penalty,
-            "steps_per_contact": steps_per_contact, "folds": [[search.problem.experiments[e].label for e in f]
-                                                              for f in search.folds],
-        },
-        problem=search.problem,
-        x_base=x_base,
-        x_final=x,
-        elapsed_s=time.perf_counter() - began,
-        evaluations=search.evaluate.calls,
-        evaluation_seconds=search.evaluate.seconds,
-        residual_evaluations=search.evaluate.residual_calls,
-    )
+    run.base_fit()
+    while len(run.steps) < max_effects and run.round():
+        pass
+    run.backward_check()
+    settings = {"free": list(free), "nuisances": list(nuisances), "max_effects": max_effects,
+                "steps_per_contact": steps_per_contact}
+    return run.report(settings, began)
