@@ -656,6 +656,12 @@ class _Search:
                 if not np.any(delta != 0):
                     continue
                 secant = (self.evaluate.residuals(start) - r)[:, None]
+                # separable also when a secant keeps its part off the free parameters: the
+                # derivative at "off" can miss the effect (contact_exponent's, on Hertz contacts,
+                # is only its stiffness prefactor, a uniform scale that per-bead radii span)
+                norm = float(np.linalg.norm(secant))
+                if norm > 0 and float(np.linalg.norm(project(secant))) > 1e-4 * norm:
+                    separable[name] = True
                 g, v = gain(secant)
                 secants.append((g, start))
                 if g > best:
