@@ -4,12 +4,14 @@ For every candidate effect (and for "none" and a few pairs), synthetic trace fil
 with that effect hidden (`fitting.hidden.hidden_effect_traces`, nominal strengths, noise
 and nuisances drawn per seed), the diagnosis runs from the base model, and the named
 effects are tallied. Writes `confusion.csv`, `confusion.json` and `confusion.md` (with the
-run time of every diagnosis) into `--out`.
+run time of every diagnosis) into `--out`; `confusion_quick.*` with --quick, and
+`confusion_independent_<code path>.*` with --independent.
 
     python benchmarks/confusion.py --quick            # 8-bead chain, one seed per row
     python benchmarks/confusion.py --seeds 3 --pairs  # the paper's 21-bead chain, pairs too
     python benchmarks/confusion.py --independent      # data from elsewhere (independent_data.py):
                                                       # paper and brass setups, diffrax, piezo, 11 bits
+    python benchmarks/confusion.py --independent --code-path verlet  # the same from the Verlet solver
 """
 
 from __future__ import annotations
@@ -127,7 +129,10 @@ def main(argv=None) -> int:
     elapsed = time.perf_counter() - began
     columns = ["none"] + list(EFFECT_NAMES)
     out = Path(args.out)
-    stem = "confusion_independent" if args.independent else ("confusion_quick" if args.quick else "confusion")
+    if args.independent:  # one file set per code path, so the paths' tables sit side by side
+        stem = f"confusion_independent_{args.code_path}"
+    else:
+        stem = "confusion_quick" if args.quick else "confusion"
     settings = {"n_beads": n_beads, "contacts": contacts, "velocities_m_s": velocities, "noise_fraction": args.noise,
                 "seeds": args.seeds, "quick": args.quick}
     if args.independent:
