@@ -1,6 +1,11 @@
 """Records with a hidden effect made outside the diagnosis's own generator (`fitting.hidden`),
 for the confusion table of `benchmarks/confusion.py --independent`.
 
+What an effect and its strength change in the chain is taken from
+`fitting.hidden.truth_fields` (the definition of the effect, not a code path under test);
+everything else differs from that generator's: the solver, the sensors, the setups, the
+acquisition and the files.
+
 Two setups: the paper's chain (21 steel beads of 13 mm, an identical striker) and a brass
 one (15 beads of 5 mm radius struck by a 3 mm brass ball). Two code paths: the diffrax
 reference solver (adaptive Dopri8, `hertzchain.reference`; Coulomb friction there is its
@@ -21,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import hertzchain as hc
+from fitting.hidden import truth_fields
 from hertzchain.acquisition import Acquisition, acquire
 from hertzchain.materials import BRASS
 from hertzchain.reference import simulate_reference
@@ -45,40 +51,27 @@ STRENGTHS = {"viscous_damping": 1e-6, "dashpot_damping": 20.0, "track_friction":
 
 
 def _true_fields(setup_name: str, hidden, rng) -> dict:
+    """The true chain's `ChainSetup` keywords: `fitting.hidden.truth_fields` (what each effect
+    is in the core's model) for the strengths of this generator; embedded sensors are left out
+    (applied after the simulation in the filter form)."""
     spec = SETUPS[setup_name]
     nominal = hc.ChainSetup(spec["n_beads"], **spec["fields"])
-    fields = dict(spec["fields"])
+    strengths = {}
     for name in hidden:
         value = STRENGTHS[name]
-        if name == "viscous_damping":
-            fields["eta_s"] = value
-        elif name == "dashpot_damping":
-            fields["dashpot_n_s_m"] = value
-        elif name == "track_friction":
-            fields["mu"] = value
-        elif name == "rotational_friction":
-            fields["mu_star"] = value
-        elif name == "wall_compliance":
-            fields["wall_youngs_pa"] = value
-        elif name == "precompression":
-            fields["precompression_n"] = value
-        elif name == "contact_exponent":  # the Hertz force at an overlap typical of the setup
-            fields["contact_exponent"] = value
-            fields["exponent_reference_overlap_m"] = spec["reference_overlap_m"]
-        elif name == "bead_dispersion":
-            scatter = np.clip(rng.standard_normal(spec["n_beads"]), -2.5, 2.5)
-            fields["bead_radius_m"] = np.asarray(nominal.bead_radius_m) * (1.0 + value * scatter)
-            fields["bead_density_kg_m3"] = np.asarray(nominal.bead_density_kg_m3)
-            fields["striker_radius_m"] = float(nominal.striker_radius_m)
-        elif name == "plasticity":
+        if name == "sensor_dynamics":
+            continue
+        if name == "contact_exponent":  # Hertz's force at an overlap typical of the setup
+            value = (value, spec["reference_overlap_m"])
+        elif name == "plasticity":  # the yield force as a share of the elastic peak force
             fastest = hc.ChainSetup(spec["n_beads"], striker_velocity_m_s=max(spec["velocities_m_s"]),
                                     **spec["fields"])
             peak = float(np.max(np.asarray(hc.simulate(fastest, t_end_s=spec["record_s"], contacts=(2,),
                                                        on_yield="ignore").forces_n["contact_2"])))
             nominal_force = float(nominal.contact_yield_force_n()[1])
-            fields["plasticity"] = True
-            fields["bead_yield_stress_pa"] = float(nominal.bead_yield_stress_pa) * (value * peak / nominal_force) ** (1 / 3)
-    return fields
+            value = float(nominal.bead_yield_stress_pa) * (value * peak / nominal_force) ** (1 / 3)
+        strengths[name] = value
+    return dict(spec["fields"]) | truth_fields(nominal, strengths, rng)
 
 
 def hidden_records(setup_name: str, hidden=(), *, code_path: str = "diffrax", seed: int = 0) -> list[TraceFile]:

@@ -1,27 +1,31 @@
 """Synthetic trace files with a known missing effect hidden in them (tests, benchmarks).
 
-The data are simulated with the effect switched on (the "truth"), on a time step four
-times finer than a diagnosis uses, and written with the header of the *nominal* chain (the
+The data are simulated with the effect switched on (the "truth") and sampled as a recording
+with a trigger offset sees them (`fitting.synthetic.sampled_clean`: a finer time step and
+sampling than a diagnosis uses), and written with the header of the *nominal* chain (the
 base model's view: no dissipation, ideal force sensors, the header's wall and beads). Each
 file gets its own striker-velocity error in the header, a trigger offset, and white
 Gaussian noise of a given fraction of its largest signal.
 
-How each effect is hidden (`NOMINAL` holds the default strengths):
+How each effect is hidden (`NOMINAL` holds the default strengths; `truth_fields` makes the
+changes):
 
-- `viscous_damping`: `eta_s`; `track_friction`: `mu`; `rotational_friction`: `mu_star`;
-- `sensor_dynamics`: every `contact_K` channel is the signal of a sensor embedded in bead K
-  (the core's split-bead model with `sensor_beta`, `sensor_f0_hz`), a different code path
+- `viscous_damping`: `eta_s` (s); `dashpot_damping`: `dashpot_n_s_m` (N s/m);
+  `track_friction`: `mu`; `rotational_friction`: `mu_star`;
+- `sensor_dynamics`: (`sensor_beta`, `sensor_f0_hz`): every `contact_K` channel is the
+  signal of a sensor embedded in bead K (the core's split-bead model), a different code path
   from the diagnosis's compliance form of the same mechanics;
 - `wall_compliance`: the wall's Young's modulus (Pa) differs from the header's;
 - `bead_dispersion`: bead radii scattered by this relative standard deviation (fixed per
   data set, density fixed, so masses scatter three times as much);
 - `precompression`: a static preload (N);
+- `contact_exponent`: (n, $\\delta_r$ in m): power-law contacts
+  $F = \\kappa\\delta_r^{3/2}(\\delta/\\delta_r)^n$, Hertz's force at the overlap $\\delta_r$;
 - `plasticity`: Thornton elastic-plastic contacts with this yield stress (Pa).
 """
 
 from __future__ import annotations
 
-import jax.numpy as jnp
 import numpy as np
 
 from hertzchain.chain import ChainSetup
@@ -29,29 +33,37 @@ from hertzchain.theory import wave_amplitude_n
 from hertzchain.tracefile import TraceFile, setup_header
 
 from .effects import EFFECT_NAMES
-from .model import interpolate
 from .parameters import bare_speed_constant
-from .synthetic import simulate_clean
+from .synthetic import sampled_clean
 
 NOMINAL = {
     "viscous_damping": 1e-6,
+    "dashpot_damping": 20.0,
     "track_friction": 0.19,
     "rotational_friction": 0.03,
     "sensor_dynamics": (0.11, 85e3),
     "wall_compliance": 20e9,
     "bead_dispersion": 0.005,
     "precompression": 2.0,
+    "contact_exponent": (1.6, 5e-6),
     "plasticity": 2e9,
 }
 DEFAULT_VELOCITIES_M_S = (0.02, 0.05, 0.12, 0.3, 0.6)
 
 
-def _truth(nominal: ChainSetup, hidden: dict, rng) -> dict:
-    """Keyword changes of the true setup for the `hidden` effects."""
+def truth_fields(nominal: ChainSetup, hidden: dict, rng: np.random.Generator) -> dict:
+    """`ChainSetup` keyword changes that turn the `nominal` chain into the true one.
+
+    `hidden`: effect identifier -> strength (units in the module docstring); `rng` draws
+    the bead scatter of `bead_dispersion`. What an effect is in the core's model is stated
+    here once, for these files and for the benchmarks' independent generator.
+    """
     changes: dict = {}
     for name, value in hidden.items():
         if name == "viscous_damping":
             changes["eta_s"] = value
+        elif name == "dashpot_damping":
+            changes["dashpot_n_s_m"] = value
         elif name == "track_friction":
             changes["mu"] = value
         elif name == "rotational_friction":
@@ -65,13 +77,13 @@ def _truth(nominal: ChainSetup, hidden: dict, rng) -> dict:
             changes["striker_radius_m"] = float(nominal.striker_radius_m)
         elif name == "precompression":
             changes["precompression_n"] = value
+        elif name == "contact_exponent":
+            changes["contact_exponent"], changes["exponent_reference_overlap_m"] = value
         elif name == "plasticity":
             changes["plasticity"] = True
             changes["bead_yield_stress_pa"] = value
         elif name == "sensor_dynamics":
-            beta, f0 = value
-            changes["sensor_beta"] = beta
-            changes["sensor_f0_hz"] = f0
+            changes["sensor_beta"], changes["sensor_f0_hz"] = value
         else:
             raise ValueError(f"hidden: unknown effect {name!r}; effects: {', '.join(EFFECT_NAMES)}.")
     return changes
@@ -105,45 +117,32 @@ def hidden_effect_traces(hidden=(), *, n_beads: int = 21, velocities_m_s=DEFAULT
     - `trigger_jitter_s`: standard deviation of the trigger offset.
     - `seed`: seeds noise, offsets, velocity errors and bead scatter.
     """
-    if not isinstance(hidden, dict):
-        hidden = {name: NOMINAL[name] if name in NOMINAL else None for name in hidden}
     for name in hidden:
         if name not in EFFECT_NAMES:
             raise ValueError(f"hidden: unknown effect {name!r}; effects: {', '.join(EFFECT_NAMES)}.")
+    if not isinstance(hidden, dict):
+        hidden = {name: NOMINAL[name] for name in hidden}
     rng = np.random.default_rng(seed)
     contacts = tuple(contacts)
     nominal = [ChainSetup(n_beads, striker_velocity_m_s=v, **setup_fields) for v in velocities_m_s]
-    changes = _truth(nominal[0], hidden, rng)
-    sensor = "sensor_dynamics" in hidden
-    if sensor:
-        changes["sensor_beads"] = tuple(k for k in contacts if k >= 1)
-    truth = []
-    for setup in nominal:
-        fields = dict(setup_fields)
-        fields.update(changes)
-        truth.append(ChainSetup(n_beads, striker_velocity_m_s=float(setup.striker_velocity_m_s), **fields))
+    changes = truth_fields(nominal[0], hidden, rng)
+    sensor_beads = tuple(k for k in contacts if k >= 1) if "sensor_dynamics" in hidden else ()
+    if sensor_beads:
+        changes["sensor_beads"] = sensor_beads
+    truth = [ChainSetup(n_beads, striker_velocity_m_s=v, **(setup_fields | changes)) for v in velocities_m_s]
     if t_end_s is None:
         t_end_s = default_record_s(nominal[0], float(min(velocities_m_s)))
     offsets = trigger_jitter_s * rng.standard_normal(len(truth))
-    fine = sample_interval_s / 4
-    margin = float(np.max(np.abs(offsets))) + 4 * sample_interval_s
-    clean = simulate_clean(truth, contacts=contacts, t_end_s=t_end_s + margin, sample_interval_s=fine)
-    time = sample_interval_s * np.arange(1, round(t_end_s / sample_interval_s) + 1)
+    time, clean = sampled_clean(truth, contacts=contacts, t_end_s=t_end_s, sample_interval_s=sample_interval_s,
+                                time_offset_s=offsets)
     files = []
-    for b, (setup, true_setup) in enumerate(zip(nominal, truth)):
-        channels = {}
-        for name, series in clean[b].items():
-            if sensor and name.startswith("contact_") and int(name.split("_")[1]) in changes["sensor_beads"]:
-                continue
-            full = np.concatenate([[float(true_setup.precompression_n)], series])
-            value = np.asarray(interpolate(jnp.asarray(full), jnp.asarray((time - offsets[b]) / fine)))
-            out = name.replace("sensor_", "contact_") if sensor else name
-            channels[out] = value
-        ordered = {f"contact_{k}": channels[f"contact_{k}"] for k in contacts}
-        ordered["wall"] = channels["wall"]
+    for b, setup in enumerate(nominal):
+        # a sensor bead's channel is its sensor's force
+        ordered = {f"contact_{k}": clean[b][f"sensor_{k}" if k in sensor_beads else f"contact_{k}"]
+                   for k in contacts}
+        ordered["wall"] = clean[b]["wall"]
         sigma = noise_fraction * max(float(np.max(v)) for v in ordered.values())
-        for name in ordered:
-            ordered[name] = ordered[name] + sigma * rng.standard_normal(time.size)
+        ordered = {name: value + sigma * rng.standard_normal(time.size) for name, value in ordered.items()}
         header = setup_header(setup)
         true_velocity = float(setup.striker_velocity_m_s)
         header["striker_velocity_m_s"] = true_velocity * (1.0 + velocity_error * rng.standard_normal())
@@ -155,4 +154,3 @@ def hidden_effect_traces(hidden=(), *, n_beads: int = 21, velocities_m_s=DEFAULT
             header[f"x_true_{name}"] = repr(value)
         files.append(TraceFile(header=header, time_s=time, channels=ordered, path=None))
     return files
-

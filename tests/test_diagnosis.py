@@ -15,7 +15,7 @@ import hertzchain  # noqa: F401
 from fitting import effects as fx
 from fitting.diagnosis import DiagnosisError, diagnose, parse_model
 from fitting.diagnosis_report import write_diagnosis_report
-from fitting.hidden import NOMINAL, hidden_effect_traces
+from fitting.hidden import NOMINAL, hidden_effect_traces, truth_fields
 from fitting.locate import cell, window_masks
 from hertzchain.chain import ChainSetup
 from hertzchain.integrate import Recording, solve
@@ -172,6 +172,16 @@ def test_hidden_traces_carry_the_nominal_header():
     assert files[0].channels["contact_2"][0] == pytest.approx(2.0, abs=6 * header["noise_std_n"])
     with pytest.raises(ValueError, match="unknown effect"):
         hidden_effect_traces(["air_drag"], n_beads=5)
+
+
+def test_every_effect_can_be_hidden():
+    """`NOMINAL` has a strength for every candidate effect and `truth_fields` turns each into
+    fields of a valid chain (the confusion table hides every effect in turn)."""
+    nominal = ChainSetup(6)
+    for name in fx.EFFECT_NAMES:
+        fields = truth_fields(nominal, {name: NOMINAL[name]}, np.random.default_rng(0))
+        assert fields, name
+        ChainSetup(6, **fields)
 
 
 # --- the fits' solver ---------------------------------------------------------------------------
