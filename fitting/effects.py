@@ -194,6 +194,15 @@ def sensor_output(front_n, back_n, beta, rate, step_s):
     return jnp.where(exact, filtered, series_first)
 
 
+# apply_effects is not a set of `hertzchain.parameters` setters (the registry `fitting.parameters`
+# uses): those write the absolute value of a named quantity, while an effect strength is a
+# departure from the header's chain whose 0 is the base model (added to its eta, mu, dashpot
+# and preload, composed with its mu*, scaling its wall modulus and yield stress), several act
+# on what no registry name covers (each bead's radius at fixed density, the contact exponent at
+# a reference overlap) or switch the contact law (`plastic`, `power_law`: static fields, a new
+# setup), and `sensor_*` and `preload_seen` act on the sensors and the channels, not on the
+# setup. Their names, units and bounds are registered once, in `fitting.parameters` (kind
+# "extra", `_SPECS`); what they do to a chain is defined here only.
 def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True,
                   power_law: bool = False) -> ChainSetup:
     """The setup with every effect strength of `extras` applied.
