@@ -34,6 +34,8 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from hertzchain.chain import ChainSetup
@@ -55,7 +57,7 @@ _RIGID_WALL_FACTOR = 1e3
 PREFIX = "dx_"
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class Effect:
     """A candidate missing effect.
 
@@ -112,40 +114,84 @@ def library(n_beads: int) -> dict[str, Effect]:
     """The candidate effects for a chain of `n_beads`, by identifier, in a fixed order."""
     p = PREFIX
     effects = (
-        Effect("viscous_damping", (p + "eta_s",), "F_v = eta kappa d(delta^3/2)/dt (Kuwabara-Kono)",
-               "peaks lower and pulses broader, increasingly along the chain, most at high amplitude; "
-               "a slow trailing tail"),
-        Effect("dashpot_damping", (p + "dashpot_n_s_m",), "F_v = gamma d(delta)/dt, a linear dashpot",
-               "peaks lower along the chain with a loss that does not vanish at contact onset: relatively "
-               "larger at low amplitude than viscous_damping's"),
-        Effect("track_friction", (p + "mu",), "Coulomb friction mu m g of every bead on the track",
-               "amplitude loss mostly at low amplitude (relative loss ~ 1/F_m); beads behind the pulse stop"),
-        Effect("rotational_friction", (p + "mu_star",),
-               "uniform contact-stiffness scale kappa* = (1+mu*) kappa (thwarted rotation, or equally an "
-               "error in the beads' Young's modulus: not separable in this form)",
-               "phase misfit only: pulses earlier (mu* > 0) by ~mu*/3 of the travel time, at all amplitudes",
-               one_sided=False),
-        Effect("sensor_dynamics", (p + "sensor_beta", p + "sensor_rate", p + "sensor_coupling"),
-               "contact channels are embedded-sensor signals (Eq. 4, unknown beta and f0; split-bead "
-               "mechanics or the filter form, by the coupling c)",
-               "odd (derivative-shaped) residual in contact channels only, high-frequency ringing; "
-               "the wall channel is untouched"),
-        Effect("wall_compliance", (p + "wall_softening",), "wall Young's modulus differs from the header's",
-               "wall peak lower and longer (softer wall), later reflected pulse; nothing before the wall",
-               one_sided=False),
-        Effect("bead_dispersion", tuple(dispersion_parameter(b) for b in range(1, n_beads + 1)),
-               "bead radii (and masses, at fixed density) vary along the chain",
-               "position-specific pattern of amplitude and arrival residuals, same at every amplitude",
-               one_sided=False),
-        Effect("precompression", (p + "preload_n", p + "preload_seen"),
-               "static preload F0 on the chain, read by DC sensors or not by AC (piezo) ones",
-               "faster, wider pulses at low amplitude; a baseline offset only on DC-coupled channels"),
-        Effect("contact_exponent", (p + "exponent_shift", p + "exponent_stiffness"),
-               "F = kappa_n delta^n at every contact, n and the stiffness at a reference overlap free",
-               "pulses narrower or wider than Hertz's and a speed that scales with amplitude other than "
-               "F^(1/6): (n - 1)/(2n) instead", one_sided=False),
-        Effect("plasticity", (p + "yield_softening",), "Thornton (1997) elastic-plastic contacts",
-               "flattened peaks and extra loss only above the yield force (a threshold in amplitude)"),
+        Effect(
+            name="viscous_damping",
+            parameters=(p + "eta_s",),
+            summary="F_v = eta kappa d(delta^3/2)/dt (Kuwabara-Kono)",
+            signature=("peaks lower and pulses broader, increasingly along the chain, most at "
+                       "high amplitude; a slow trailing tail"),
+        ),
+        Effect(
+            name="dashpot_damping",
+            parameters=(p + "dashpot_n_s_m",),
+            summary="F_v = gamma d(delta)/dt, a linear dashpot",
+            signature=("peaks lower along the chain with a loss that does not vanish at contact "
+                       "onset: relatively larger at low amplitude than viscous_damping's"),
+        ),
+        Effect(
+            name="track_friction",
+            parameters=(p + "mu",),
+            summary="Coulomb friction mu m g of every bead on the track",
+            signature=("amplitude loss mostly at low amplitude (relative loss ~ 1/F_m); beads "
+                       "behind the pulse stop"),
+        ),
+        Effect(
+            name="rotational_friction",
+            parameters=(p + "mu_star",),
+            summary=("uniform contact-stiffness scale kappa* = (1+mu*) kappa (thwarted rotation, "
+                     "or equally an error in the beads' Young's modulus: not separable in this "
+                     "form)"),
+            signature=("phase misfit only: pulses earlier (mu* > 0) by ~mu*/3 of the travel time, "
+                       "at all amplitudes"),
+            one_sided=False,
+        ),
+        Effect(
+            name="sensor_dynamics",
+            parameters=(p + "sensor_beta", p + "sensor_rate", p + "sensor_coupling"),
+            summary=("contact channels are embedded-sensor signals (Eq. 4, unknown beta and f0; "
+                     "split-bead mechanics or the filter form, by the coupling c)"),
+            signature=("odd (derivative-shaped) residual in contact channels only, high-frequency "
+                       "ringing; the wall channel is untouched"),
+        ),
+        Effect(
+            name="wall_compliance",
+            parameters=(p + "wall_softening",),
+            summary="wall Young's modulus differs from the header's",
+            signature=("wall peak lower and longer (softer wall), later reflected pulse; nothing "
+                       "before the wall"),
+            one_sided=False,
+        ),
+        Effect(
+            name="bead_dispersion",
+            parameters=tuple(dispersion_parameter(b) for b in range(1, n_beads + 1)),
+            summary="bead radii (and masses, at fixed density) vary along the chain",
+            signature=("position-specific pattern of amplitude and arrival residuals, same at "
+                       "every amplitude"),
+            one_sided=False,
+        ),
+        Effect(
+            name="precompression",
+            parameters=(p + "preload_n", p + "preload_seen"),
+            summary="static preload F0 on the chain, read by DC sensors or not by AC (piezo) ones",
+            signature=("faster, wider pulses at low amplitude; a baseline offset only on "
+                       "DC-coupled channels"),
+        ),
+        Effect(
+            name="contact_exponent",
+            parameters=(p + "exponent_shift", p + "exponent_stiffness"),
+            summary=("F = kappa_n delta^n at every contact, n and the stiffness at a reference "
+                     "overlap free"),
+            signature=("pulses narrower or wider than Hertz's and a speed that scales with "
+                       "amplitude other than F^(1/6): (n - 1)/(2n) instead"),
+            one_sided=False,
+        ),
+        Effect(
+            name="plasticity",
+            parameters=(p + "yield_softening",),
+            summary="Thornton (1997) elastic-plastic contacts",
+            signature=("flattened peaks and extra loss only above the yield force (a threshold in "
+                       "amplitude)"),
+        ),
     )
     return {effect.name: effect for effect in effects}
 
@@ -246,13 +292,12 @@ def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True,
     )
 
 
-class _Forces:
+class _Forces(eqx.Module):
     """The part of `hertzchain.Traces` a fit reads: `forces_n`, and `rest_n`, what the
     channels read with the chain at rest before the impact (N)."""
 
-    def __init__(self, forces_n, rest_n):
-        self.forces_n = forces_n
-        self.rest_n = rest_n
+    forces_n: dict
+    rest_n: jax.Array
 
 
 def _simulate_with_effects(setup, grid, recording, extras, *, plastic: bool, power_law: bool = False):
@@ -273,7 +318,7 @@ def _simulate_with_effects(setup, grid, recording, extras, *, plastic: bool, pow
         back = front if k == 0 else jnp.concatenate([start[None], forces[f"contact_{k - 1}"]])
         signal = sensor_output(front, back, extras[p + "sensor_beta"], extras[p + "sensor_rate"], step)
         forces[f"contact_{k}"] = signal[1:]
-    return _Forces(forces, start)
+    return _Forces(forces_n=forces, rest_n=start)
 
 
 def _simulate_plastic(setup, grid, recording, extras):
