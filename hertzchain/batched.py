@@ -23,10 +23,12 @@ same contact laws from `contact`, so the results agree to round-off), but
   two cores of a CPU run as two host devices
   (`XLA_FLAGS=--xla_force_host_platform_device_count=2`, set before JAX starts), or GPUs.
 
-It covers Hertz contacts, embedded sensors, rigid/elastic walls and free ends, preload and
-viscoelastic damping. Track friction and elastic-plastic contacts are not in the fast path:
-`solve_batched` then runs the general solver (`solve` under `vmap`), with the same result
-type. `fast_path_reason(setup)` says which path a setup takes.
+It covers Hertz contacts, embedded sensors, rigid/elastic walls and free ends, preload,
+viscoelastic damping and track friction. Elastic-plastic contacts, linear dashpots and
+power-law contacts are not in the fast path: `solve_batched` then runs the general solver
+(`solve` under `vmap`), with the same result type. `fast_path_reason(setup)` says which
+path a setup takes. `record_batched` is the same kernel for setups whose values are traced
+(inside `jit`, `jax.jacfwd`): `fitting` runs its model and its Jacobian through it.
 """
 
 from __future__ import annotations
@@ -79,10 +81,21 @@ class BatchedTraces(eqx.Module):
     channel_names: tuple[str, ...] = eqx.field(static=True, default=())
 
 
-class _Flags(NamedTuple):
+class KernelFlags(NamedTuple):
+    """The physics a compiled kernel includes (static: each combination is its own kernel)."""
+
     viscous: bool
     springs: bool
     preload: bool
+    friction: bool = False
+
+    @property
+    def full_state(self) -> bool:
+        """Velocities and accelerations kept apart (damping or friction acts between the
+        two half kicks), rather than the next half kick's velocity alone."""
+        return self.viscous or self.friction
+
+
 
 
 def batch_size(setup: ChainSetup) -> int:
@@ -106,9 +119,6 @@ def fast_path_reason(setup: ChainSetup) -> str | None:
     """None if `solve_batched` can use the fast path for `setup`, else why not."""
     if setup.plasticity:
         return "elastic-plastic contacts (plasticity=True)"
-    friction = np.asarray(setup.mu) * np.asarray(setup.gravity_m_s2)
-    if np.any(friction != 0.0):
-        return "track friction (mu > 0)"
     if np.any(np.asarray(setup.dashpot_n_s_m) != 0.0):
         return "a linear dashpot (dashpot_n_s_m > 0)"
     if setup.power_law:
@@ -116,11 +126,20 @@ def fast_path_reason(setup: ChainSetup) -> str | None:
     return None
 
 
-def _flags(setup: ChainSetup) -> _Flags:
-    return _Flags(
-        viscous=bool(np.any(np.asarray(setup.eta_s) != 0.0)),
+def kernel_flags(setup: ChainSetup, *, switched_on=()) -> KernelFlags:
+    """The kernel a concrete (possibly batched) setup needs: damping, friction and preload
+    where any chain has them, or where named in `switched_on` ("viscous", "friction",
+    "preload": e.g. parameters a fit frees from 0)."""
+    on = set(switched_on)
+    unknown = on - {"viscous", "friction", "preload"}
+    if unknown:
+        raise ValueError(f"switched_on: unknown physics {sorted(unknown)}; use viscous, friction, preload.")
+    friction = np.asarray(setup.mu) * np.asarray(setup.gravity_m_s2)
+    return KernelFlags(
+        viscous="viscous" in on or bool(np.any(np.asarray(setup.eta_s) != 0.0)),
         springs=bool(setup.sensor_beads),
-        preload=bool(np.any(np.asarray(setup.precompression_n) != 0.0)),
+        preload="preload" in on or bool(np.any(np.asarray(setup.precompression_n) != 0.0)),
+        friction="friction" in on or bool(np.any(friction != 0.0)),
     )
 
 
@@ -132,6 +151,7 @@ class _Model(NamedTuple):
     wall_kappa: jax.Array
     wall_overlap0_m: jax.Array
     eta_s: jax.Array
+    friction_decel_m_s2: jax.Array
     first_bead_force_n: jax.Array
     last_body_force_n: jax.Array
     striker_velocity_m_s: jax.Array
@@ -157,6 +177,7 @@ def _vector_model(setup: ChainSetup) -> _Model:
         wall_kappa=wall_kappa,
         wall_overlap0_m=contact.overlap_at_force(preload, setup.wall_kappa()) if has_wall else jnp.zeros(()),
         eta_s=setup.eta_s,
+        friction_decel_m_s2=setup.mu * setup.gravity_m_s2,
         first_bead_force_n=preload,
         last_body_force_n=jnp.zeros(()) if has_wall else -preload,
         striker_velocity_m_s=setup.striker_velocity_m_s,
@@ -178,6 +199,7 @@ def _chain_params(setup: ChainSetup) -> dict:
         "spring": jnp.concatenate([model.spring_n_m, jnp.zeros(1)]),
         "overlap0": jnp.concatenate([model.overlap0_m, model.wall_overlap0_m[None]]),
         "eta": model.eta_s,
+        "friction": model.friction_decel_m_s2,
         "external": jnp.concatenate([external, jnp.zeros(1)]),
         "first_force": model.first_bead_force_n,
         "last_force": model.last_body_force_n,
@@ -191,7 +213,7 @@ def _chain_params(setup: ChainSetup) -> dict:
 # k: one elementwise expression of row slices. Contact forces have n_bodies rows.
 
 
-def _contact_forces(p, flags: _Flags, x, v, contacts=None):
+def _contact_forces(p, flags: KernelFlags, x, v, contacts=None):
     """Total and elastic force of every contact, wall last (n_bodies, B), or of the listed
     `contacts` only, N, from displacements x (m) and velocities v (m/s) of the bodies and
     the wall: the laws of `contact` (the ones `forces.chain_forces` uses), elementwise."""
@@ -211,7 +233,7 @@ def _contact_forces(p, flags: _Flags, x, v, contacts=None):
     return _forces_at(p, flags, overlap, rate, rows)
 
 
-def _forces_at(p, flags: _Flags, overlap, rate, rows=lambda a: a):
+def _forces_at(p, flags: KernelFlags, overlap, rate, rows=lambda a: a):
     """Total and elastic contact forces, N, at the given overlaps (m) and overlap rates
     (m/s; None without damping), of the contacts that `rows` picks from the parameters."""
     if flags.viscous:
@@ -224,7 +246,7 @@ def _forces_at(p, flags: _Flags, overlap, rate, rows=lambda a: a):
     return total, elastic
 
 
-def _overlaps(p, flags: _Flags, x):
+def _overlaps(p, flags: KernelFlags, x):
     """Overlap of every contact, wall last (n_bodies, B), m. Without preload every static
     overlap is 0 and is not added (one array less to read per step)."""
     return x[:-1] - x[1:] + p["overlap0"] if flags.preload else x[:-1] - x[1:]
@@ -238,7 +260,7 @@ def _body_force(force, external=None):
     return body if external is None else body + external
 
 
-def _energy(p, flags: _Flags, x, v):
+def _energy(p, flags: KernelFlags, x, v):
     """Kinetic and potential (elastic plus preload) energy, J, each (B,)."""
     n = p["mass"].shape[0]
     kinetic = 0.5 * jnp.sum(p["mass"] * v[:n] ** 2, axis=0)
@@ -257,32 +279,33 @@ class _Layout(NamedTuple):
 
     bodies: int
 
-    def fields(self, flags: _Flags) -> tuple[tuple[str, int], ...]:
+    def fields(self, flags: KernelFlags) -> tuple[tuple[str, int], ...]:
         b, c = self.bodies + 1, self.bodies
-        if flags.viscous:
+        if flags.full_state:
             # x, v, a at the step; running maxima; viscous body forces; dissipated energy
-            return (("x", b), ("v", b), ("a", b), ("max", c), ("viscous", b), ("dissipated", 1))
+            viscous = (("viscous", b),) if flags.viscous else ()
+            return (("x", b), ("v", b), ("a", b), ("max", c)) + viscous + (("dissipated", 1),)
         # x, u = v + (dt/2) a (the next half-kick's velocity), largest overlaps so far
         # (the elastic forces grow with the overlap, so their maxima are the forces there)
         return (("x", b), ("u", b), ("max", c))
 
-    def unpack(self, flags: _Flags, state) -> dict:
+    def unpack(self, flags: KernelFlags, state) -> dict:
         out, row = {}, 0
         for name, rows in self.fields(flags):
             out[name] = state[row : row + rows]
             row += rows
         return out
 
-    def pack(self, flags: _Flags, parts: dict):
+    def pack(self, flags: KernelFlags, parts: dict):
         return jnp.concatenate([parts[name] for name, _ in self.fields(flags)])
 
 
-def _step(p, flags: _Flags, layout: _Layout, dt: float, state):
+def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
     """One velocity-Verlet step on the packed state (the order of `integrate.verlet_step`)."""
     h = 0.5 * dt
     s = layout.unpack(flags, state)
     barrier = jax.lax.optimization_barrier
-    if not flags.viscous:
+    if not flags.full_state:
         x = s["x"] + dt * s["u"]
         force = _contact_forces(p, flags, x, None)[0]
         # Displacements and contact forces materialised together (one loop), so that the
@@ -295,43 +318,64 @@ def _step(p, flags: _Flags, layout: _Layout, dt: float, state):
         new = {"x": x, "u": v + h * a, "max": jnp.maximum(s["max"], _overlaps(p, flags, x))}
         return barrier(layout.pack(flags, new))
     v_half = s["v"] + h * s["a"]
+    work = lost = 0.0
+    if flags.viscous:
+        work = jnp.sum(s["viscous"] * h * 0.5 * (s["v"] + v_half), axis=0)
+    if flags.friction:
+        v_half, lost = _friction_kick(p, v_half, h)
     x = s["x"] + dt * v_half
-    total, elastic = _contact_forces(p, flags, x, v_half + h * s["a"])
-    both = barrier(jnp.concatenate([total, elastic]))
-    total, elastic = both[: layout.bodies], both[layout.bodies :]
+    if flags.viscous:
+        total, elastic = _contact_forces(p, flags, x, v_half + h * s["a"])
+        both = barrier(jnp.concatenate([total, elastic]))
+        total, elastic = both[: layout.bodies], both[layout.bodies :]
+    else:
+        total = barrier(_contact_forces(p, flags, x, None)[0])
     a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
     v = v_half + h * a
-    viscous = _body_force(total - elastic)
-    work = jnp.sum(s["viscous"] * h * 0.5 * (s["v"] + v_half), axis=0)
-    work = work + jnp.sum(viscous * h * 0.5 * (v_half + v), axis=0)
-    # Chains without damping in a damped batch dissipate nothing, exactly (total - elastic
-    # can be an ulp off zero when XLA contracts the force law into fused multiply-adds).
-    work = jnp.where(p["eta"] != 0.0, work, 0.0)
-    new = {
-        "x": x, "v": v, "a": a, "max": jnp.maximum(s["max"], total), "viscous": viscous,
-        "dissipated": s["dissipated"] - work[None],
-    }
+    new = {"x": x, "a": a, "max": jnp.maximum(s["max"], total)}
+    if flags.viscous:
+        viscous = _body_force(total - elastic)
+        work = work + jnp.sum(viscous * h * 0.5 * (v_half + v), axis=0)
+        # Chains without damping in a damped batch dissipate nothing, exactly (total - elastic
+        # can be an ulp off zero when XLA contracts the force law into fused multiply-adds).
+        work = jnp.where(p["eta"] != 0.0, work, 0.0)
+        new["viscous"] = viscous
+    if flags.friction:
+        v, lost_end = _friction_kick(p, v, h)
+        lost = lost + lost_end
+    new["v"] = v
+    new["dissipated"] = s["dissipated"] - work + lost
     return barrier(layout.pack(flags, new))
 
 
-def _initial(p, flags: _Flags, layout: _Layout, dt: float):
+def _friction_kick(p, v, half_step_s):
+    """Track friction over half a step (`contact.track_friction_kick`) on every body:
+    the new velocities (n_bodies + 1, B), m/s, and the energy it took, (1, B), J."""
+    clamped = contact.track_friction_kick(v, p["friction"], half_step_s)
+    n = p["mass"].shape[0]
+    lost = 0.5 * jnp.sum(p["mass"] * (v[:n] ** 2 - clamped[:n] ** 2), axis=0)
+    return clamped, lost[None]
+
+
+def _initial(p, flags: KernelFlags, layout: _Layout, dt: float):
     """Packed state at the impact and the bodies' (x, v) there."""
     x = jnp.zeros_like(p["inv_mass"])
     v = x.at[0].set(p["v0"])
     total, elastic = _contact_forces(p, flags, x, v)
     a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
-    if flags.viscous:
-        parts = {"x": x, "v": v, "a": a, "max": total, "viscous": _body_force(total - elastic),
-                 "dissipated": jnp.zeros_like(x[:1])}
+    if flags.full_state:
+        parts = {"x": x, "v": v, "a": a, "max": total, "dissipated": jnp.zeros_like(x[:1])}
+        if flags.viscous:
+            parts["viscous"] = _body_force(total - elastic)
     else:
         parts = {"x": x, "u": v + 0.5 * dt * a, "max": _overlaps(p, flags, x)}
     return layout.pack(flags, parts), x, v
 
 
-def _final(p, flags: _Flags, layout: _Layout, dt: float, state):
+def _final(p, flags: KernelFlags, layout: _Layout, dt: float, state):
     """Displacements, velocities and dissipated energy at the end of the run."""
     s = layout.unpack(flags, state)
-    if flags.viscous:
+    if flags.full_state:
         return s["x"], s["v"], s["dissipated"][0]
     total = _contact_forces(p, flags, s["x"], None)[0]
     a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
@@ -345,7 +389,7 @@ def _block_plan(grid: TimeGrid, block_steps: int) -> tuple[int, int, int]:
     return per_iteration, grid.n_samples // per_iteration, grid.n_samples % per_iteration
 
 
-def _kernel(p, *, flags: _Flags, grid: TimeGrid, rows: tuple[int, ...], block_steps: int):
+def _kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ...], block_steps: int):
     """Integrate chains laid out as (rows, B): the recorded forces, one (B, n_samples)
     array per channel (the chosen contacts, then the wall), N, and the final packed state."""
     layout = _Layout(p["mass"].shape[0])
@@ -407,7 +451,7 @@ def _run(params, flags, grid, rows, block_steps, devices):
         kinetic, potential = _energy(p, flags, x, v)
         summary = jnp.stack([initial, kinetic, potential, dissipated])
         maxima = layout.unpack(flags, state)["max"]
-        if not flags.viscous:
+        if not flags.full_state:
             maxima = _forces_at(p, flags, maxima, None)[0]
         return traces, maxima, summary
 
@@ -446,10 +490,8 @@ def kernel_params(setup: ChainSetup, pad_to: int | None = None) -> dict:
 _params_jit = eqx.filter_jit(_params)
 
 
-@eqx.filter_jit
-def _solve_fast(params, batch, flags, grid, rows, names, user, block_steps, devices):
-    """The kernel and the output layout in one compiled call. The parameters are computed
-    apart, on one device, so that sharded and unsharded runs see the very same numbers."""
+def _assemble(params, batch, flags, grid, rows, names, user, block_steps, devices):
+    """The kernel and the output layout."""
     traces, maxima, summary = _run(params, flags, grid, rows, block_steps, devices)
     maxima, summary = maxima[..., :batch], summary[..., :batch]
     initial, kinetic, potential, dissipated = summary
@@ -466,6 +508,26 @@ def _solve_fast(params, batch, flags, grid, rows, names, user, block_steps, devi
     )
 
 
+# The kernel and the output layout in one compiled call. The parameters are computed apart,
+# on one device, so that sharded and unsharded runs see the very same numbers.
+_solve_fast = eqx.filter_jit(_assemble)
+
+
+def _plan(setup: ChainSetup, recording: Recording):
+    """(channel names, kernel rows of the recorded channels, kernel rows of every contact
+    and the wall for the maxima) of a setup: its structure only, never its values."""
+    if recording.record_all:
+        raise ValueError("record_all is not available in solve_batched; use solve (or simulate).")
+    _layout(setup, recording)
+    names = _channel_names(setup, recording)
+    rows = tuple(internal_contact_index(setup, k) for k in recording.contacts) + tuple(
+        internal_sensor_index(setup, b) for b in setup.sensor_beads
+    )
+    n_internal = len(build_model_contacts(setup))
+    user = tuple(internal_contact_index(setup, k) for k in range(setup.n_beads)) + (n_internal,)
+    return names, rows, user
+
+
 def solve_batched(
     setup: ChainSetup,
     grid: TimeGrid,
@@ -480,7 +542,7 @@ def solve_batched(
     **Arguments:**
 
     - `setup`: a batched `ChainSetup` (every field with a leading axis of length B, e.g. from
-      `hertzchain.batch_setup` or `stack_setups`), concrete (not traced).
+      `hertzchain.batch_setup` or `stack_setups`), concrete (not traced; see `record_batched`).
     - `grid`: the time grid (`choose_time_grid(setup, ...)`: the most demanding chain sets the step).
     - `recording`: contacts to record (`record_all` is not supported here: use `solve`).
     - `block_steps`: steps advanced per loop iteration, unrolled (speed only).
@@ -488,29 +550,53 @@ def solve_batched(
     - `pad_to`: run at least this many chains (copies of the last one, dropped from the
       result), so that batches of different sizes reuse one compiled kernel.
 
-    **Returns:** `BatchedTraces`. Setups with track friction or plastic contacts run the
-    general solver (same result, slower): see `fast_path_reason`.
+    **Returns:** `BatchedTraces`. Setups with plastic contacts, dashpots or power-law
+    contacts run the general solver (same result, slower): see `fast_path_reason`.
     """
-    if recording.record_all:
-        raise ValueError("record_all is not available in solve_batched; use solve (or simulate).")
     batch = batch_size(setup)
-    _layout(setup, recording)
-    names = _channel_names(setup, recording)
+    names, rows, user = _plan(setup, recording)
     if fast_path_reason(setup) is not None:
         time = grid.sample_interval_s * jnp.arange(1, grid.n_samples + 1, dtype=jnp.float64)
         return _solve_general(setup, grid, recording, names, time)
-    flags = _flags(setup)
-    rows = tuple(internal_contact_index(setup, k) for k in recording.contacts) + tuple(
-        internal_sensor_index(setup, b) for b in setup.sensor_beads
-    )
+    flags = kernel_flags(setup)
     devices = None if devices is None or len(devices) <= 1 else tuple(devices)
     padded = max(batch, pad_to or 0)
     if devices is not None:
         padded = len(devices) * math.ceil(padded / len(devices))
-    n_internal = len(build_model_contacts(setup))
-    user = tuple(internal_contact_index(setup, k) for k in range(setup.n_beads)) + (n_internal,)
     params = kernel_params(setup, pad_to=padded)
     return _solve_fast(params, batch, flags, grid, rows, names, user, int(block_steps), devices)
+
+
+def record_batched(
+    setup: ChainSetup,
+    grid: TimeGrid,
+    recording: Recording,
+    flags: KernelFlags,
+    *,
+    block_steps: int = DEFAULT_BLOCK_STEPS,
+) -> BatchedTraces:
+    """`solve_batched`'s fast kernel for a batched setup whose values may be traced
+    (inside `jit`, `vmap`, `jax.jacfwd`), on one device.
+
+    **Arguments:**
+
+    - `setup`: a batched `ChainSetup` (leading axis B on every field); its structure (bead
+      count, sensors, end, contact law) must allow the fast path (`fast_path_reason` of a
+      concrete setup of the same structure is None).
+    - `grid`, `recording`, `block_steps`: as for `solve_batched`.
+    - `flags`: the physics compiled in, `kernel_flags(concrete_setup, switched_on=...)`:
+      it must include every effect that is non-zero in any chain at any value the caller
+      will pass (damping, friction and preload that are off in `flags` are not simulated).
+
+    **Returns:** `BatchedTraces`. Forward-mode derivatives (`jax.jvp`, `jax.jacfwd`) go
+    through the kernel as through `solve`.
+    """
+    if setup.plasticity or setup.power_law:
+        raise ValueError("record_batched: the setup needs the general solver "
+                         "(elastic-plastic or power-law contacts); use solve.")
+    names, rows, user = _plan(setup, recording)
+    batch = batch_size(setup)
+    return _assemble(_params(setup, None), batch, flags, grid, rows, names, user, int(block_steps), None)
 
 
 def _solve_general(setup, grid, recording, names, time) -> BatchedTraces:

@@ -112,6 +112,19 @@ def contact_force(overlap_m, overlap_rate_m_s, kappa_n_m1p5, eta_s, elastic_n=No
     return elastic, total
 
 
+def track_friction_kick(velocity_m_s, deceleration_m_s2, duration_s):
+    """A bead's velocity after Coulomb friction on the track acts for `duration_s`, m/s.
+
+    The exact limit of Coulomb's law over an interval in which nothing else acts:
+    $w \\leftarrow \\mathrm{sign}(w)\\max(|w| - \\mu g\\,\\Delta t, 0)$, with
+    `deceleration_m_s2` $= \\mu g$. A bead slower than the friction can stop comes to rest
+    (stick) instead of reversing. Elementwise; differentiable everywhere but at $w = 0$ and
+    at the stick threshold.
+    """
+    speed = jnp.abs(velocity_m_s)
+    return jnp.sign(velocity_m_s) * jnp.maximum(speed - deceleration_m_s2 * duration_s, 0.0)
+
+
 def thornton_contact(overlap_m, max_overlap_m, kappa_n_m1p5, yield_force_n):
     """Elastic-plastic normal contact of Thornton (J. Appl. Mech. 64, 383, 1997).
 

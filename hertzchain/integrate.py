@@ -41,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import compliant_sensor as cs
+from . import contact
 from .chain import (
     ChainModel,
     ChainSetup,
@@ -125,8 +126,7 @@ def initial_state(model: ChainModel) -> ChainState:
 
 def _friction_kick(model: ChainModel, velocity, half_step_s):
     """Coulomb friction over half a step as a clamped kick: (velocity, dissipated J, impulse N s)."""
-    speed = jnp.abs(velocity)
-    clamped = jnp.sign(velocity) * jnp.maximum(speed - model.friction_decel_m_s2 * half_step_s, 0.0)
+    clamped = contact.track_friction_kick(velocity, model.friction_decel_m_s2, half_step_s)
     dissipated = 0.5 * jnp.sum(model.mass_kg * (velocity**2 - clamped**2))
     impulse = jnp.sum(model.mass_kg * (clamped - velocity))
     return clamped, dissipated, impulse
