@@ -288,7 +288,8 @@ class Problem:
         if any(spec.kind == "setup" and spec.name not in FAST_PATH_PHYSICS for spec in specs):
             return None
         switched_on = {FAST_PATH_PHYSICS[spec.name] for spec in specs if spec.kind == "setup"} - {None}
-        return kernel_flags(group.setups, switched_on=switched_on)
+        # a fit reads the recorded forces only: no running maxima, no energy books
+        return kernel_flags(group.setups, switched_on=switched_on)._replace(ledger=False)
 
     def _group_simulator(self, group: _Group):
         global_specs = [self.instances[i].spec for i in group.global_index]

@@ -88,6 +88,9 @@ class KernelFlags(NamedTuple):
     springs: bool
     preload: bool
     friction: bool = False
+    # The running maxima of every contact and the energy books (reductions over the chain at
+    # every step); callers that read the recorded forces only (fits) switch them off.
+    ledger: bool = True
 
     @property
     def full_state(self) -> bool:
@@ -284,10 +287,11 @@ class _Layout(NamedTuple):
         if flags.full_state:
             # x, v, a at the step; running maxima; viscous body forces; dissipated energy
             viscous = (("viscous", b),) if flags.viscous else ()
-            return (("x", b), ("v", b), ("a", b), ("max", c)) + viscous + (("dissipated", 1),)
+            books = (("max", c),) + viscous + (("dissipated", 1),)
+            return (("x", b), ("v", b), ("a", b)) + (books if flags.ledger else ())
         # x, u = v + (dt/2) a (the next half-kick's velocity), largest overlaps so far
         # (the elastic forces grow with the overlap, so their maxima are the forces there)
-        return (("x", b), ("u", b), ("max", c))
+        return (("x", b), ("u", b)) + ((("max", c),) if flags.ledger else ())
 
     def unpack(self, flags: KernelFlags, state) -> dict:
         out, row = {}, 0
@@ -315,14 +319,16 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
         x, force = both[: layout.bodies + 1], both[layout.bodies + 1 :]
         a = _body_force(force, p["external"] if flags.preload else None) * p["inv_mass"]
         v = s["u"] + h * a
-        new = {"x": x, "u": v + h * a, "max": jnp.maximum(s["max"], _overlaps(p, flags, x))}
+        new = {"x": x, "u": v + h * a}
+        if flags.ledger:
+            new["max"] = jnp.maximum(s["max"], _overlaps(p, flags, x))
         return barrier(layout.pack(flags, new))
     v_half = s["v"] + h * s["a"]
     work = lost = 0.0
-    if flags.viscous:
+    if flags.viscous and flags.ledger:
         work = jnp.sum(s["viscous"] * h * 0.5 * (s["v"] + v_half), axis=0)
     if flags.friction:
-        v_half, lost = _friction_kick(p, v_half, h)
+        v_half, lost = _friction_kick(p, flags, v_half, h)
     x = s["x"] + dt * v_half
     if flags.viscous:
         total, elastic = _contact_forces(p, flags, x, v_half + h * s["a"])
@@ -332,8 +338,8 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
         total = barrier(_contact_forces(p, flags, x, None)[0])
     a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
     v = v_half + h * a
-    new = {"x": x, "a": a, "max": jnp.maximum(s["max"], total)}
-    if flags.viscous:
+    new = {"x": x, "a": a, "v": v}
+    if flags.viscous and flags.ledger:
         viscous = _body_force(total - elastic)
         work = work + jnp.sum(viscous * h * 0.5 * (v_half + v), axis=0)
         # Chains without damping in a damped batch dissipate nothing, exactly (total - elastic
@@ -341,17 +347,21 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
         work = jnp.where(p["eta"] != 0.0, work, 0.0)
         new["viscous"] = viscous
     if flags.friction:
-        v, lost_end = _friction_kick(p, v, h)
+        new["v"], lost_end = _friction_kick(p, flags, v, h)
         lost = lost + lost_end
-    new["v"] = v
-    new["dissipated"] = s["dissipated"] - work + lost
+    if flags.ledger:
+        new["max"] = jnp.maximum(s["max"], total)
+        new["dissipated"] = s["dissipated"] - work + lost
     return barrier(layout.pack(flags, new))
 
 
-def _friction_kick(p, v, half_step_s):
+def _friction_kick(p, flags: KernelFlags, v, half_step_s):
     """Track friction over half a step (`contact.track_friction_kick`) on every body:
-    the new velocities (n_bodies + 1, B), m/s, and the energy it took, (1, B), J."""
+    the new velocities (n_bodies + 1, B), m/s, and the energy it took, (1, B), J (0 when
+    the kernel keeps no books)."""
     clamped = contact.track_friction_kick(v, p["friction"], half_step_s)
+    if not flags.ledger:
+        return clamped, 0.0
     n = p["mass"].shape[0]
     lost = 0.5 * jnp.sum(p["mass"] * (v[:n] ** 2 - clamped[:n] ** 2), axis=0)
     return clamped, lost[None]
@@ -445,6 +455,9 @@ def _run(params, flags, grid, rows, block_steps, devices):
 
     def local(p):
         traces, state, layout = _kernel(p, flags=flags, grid=grid, rows=rows, block_steps=block_steps)
+        if not flags.ledger:
+            nan = jnp.full_like(p["inv_mass"], jnp.nan)
+            return traces, nan[:-1], jnp.stack([nan[0]] * 4)
         _, x0, v0 = _initial(p, flags, layout, grid.dt_s)
         initial = sum(_energy(p, flags, x0, v0))
         x, v, dissipated = _final(p, flags, layout, grid.dt_s, state)
@@ -588,8 +601,9 @@ def record_batched(
       it must include every effect that is non-zero in any chain at any value the caller
       will pass (damping, friction and preload that are off in `flags` are not simulated).
 
-    **Returns:** `BatchedTraces`. Forward-mode derivatives (`jax.jvp`, `jax.jacfwd`) go
-    through the kernel as through `solve`.
+    **Returns:** `BatchedTraces`; with `flags.ledger` off, its maxima and energies are NaN
+    (not computed). Forward-mode derivatives (`jax.jvp`, `jax.jacfwd`) go through the
+    kernel as through `solve`.
     """
     if setup.plasticity or setup.power_law:
         raise ValueError("record_batched: the setup needs the general solver "

@@ -165,3 +165,19 @@ def test_fast_path_uses_the_force_laws_of_solve(case):
         elastic_j = float(jnp.sum(contacts_j) + wall_j + forces.preload_potential(model, jnp.asarray(x[:, i])))
         np.testing.assert_allclose(potential[i], elastic_j, rtol=1e-13, atol=1e-15)
         np.testing.assert_allclose(kinetic[i], 0.5 * float(jnp.sum(model.mass_kg * v[:, i] ** 2)), rtol=1e-14)
+
+
+def test_kernel_without_books_records_the_same_forces():
+    """`ledger=False` (what fits run) drops the maxima and the energy books, not the physics:
+    the recorded forces are bit-identical, the books NaN."""
+    from hertzchain.batched import kernel_flags, record_batched
+
+    setup, grid = _batch(**CASES["friction_viscous_preload"])
+    recording = Recording((2, 6))
+    flags = kernel_flags(setup)
+    with_books = record_batched(setup, grid, recording, flags)
+    without = record_batched(setup, grid, recording, flags._replace(ledger=False))
+    for name in with_books.channel_names:
+        np.testing.assert_array_equal(without.forces_n[name], with_books.forces_n[name])
+    assert np.all(np.isnan(without.max_force_n)) and np.all(np.isnan(without.energy_error_j))
+    np.testing.assert_array_equal(with_books.max_force_n, solve_batched(setup, grid, recording).max_force_n)
