@@ -169,6 +169,16 @@ class Problem:
 
     `priors`: normal priors (`fitting.priors.NormalRow`), each appended to the residuals
     as $(x_i - \mathrm{centre})/\mathrm{sd}$ after the data's samples.
+
+    A plain class, hashed by identity where it is a static argument of a compiled function
+    (`_residuals_jit`, the optimiser), not an `eqx.Module` whose arrays would be traced: what
+    it holds is the structure of one compiled model (time grids and recordings chosen from
+    the data, the sample layout, the group simulators jitted at construction), so every
+    Problem is one compilation by design, and building it twice from the same files gives
+    two. What varies between compiled calls is passed as arguments instead: the parameter
+    vector, and the measured samples (`residuals(x, data)`, `fitting.fit_datasets`: one
+    compiled fit over many data sets). It is never changed after construction
+    (`with_setups` builds a new one).
     """
 
     def __init__(self, experiments, instances, base_setups, forward: ForwardModel, priors=()):
