@@ -59,6 +59,9 @@ def run_case(hidden, seed, *, n_beads=None, noise_fraction=None, contacts=None, 
         "gap_base": result.base_fit["gap"],
         "gap_final": result.final["gap"],
         "not_separable": result.not_separable,
+        # the candidates refitted in each round (the screen's choice), first round first
+        "refitted": [[c.effect for c in candidates if c.separable and c.chi2 == c.chi2]
+                     for candidates in [s.candidates for s in result.steps] + [result.last_candidates]],
         "runtime_s": time.perf_counter() - began,
     }
 
