@@ -11,8 +11,10 @@ and repeat until nothing significant is left.
    (amplitude) and by frequency band.
 3. **Screen and refit.** Every candidate of the library (`fitting.effects`) is ranked by
    its score (the $\\chi^2$ a Gauss-Newton step on its strength alone would remove, from
-   the Jacobian at the current fit, projected off the free parameters) and then refitted
-   with its strength(s) free, from the start values whose secant removes the most
+   the Jacobian at the current fit, projected off the free parameters; a strength whose
+   law is off at the fit, such as the contact exponent on Hertz contacts, has no derivative
+   there and is scored by its secants, together with the candidate's other columns) and
+   then refitted with its strength(s) free, from the start values whose secant removes the most
    $\\chi^2$ (a grid of resonance frequencies for `sensor_dynamics`, whose misfit is
    multimodal in f0: the three best are refitted) and from fresh nuisances (a base fit
    pays for a missing effect with its nuisances, which can leave them in a basin the
