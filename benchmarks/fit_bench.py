@@ -90,9 +90,14 @@ def benchmark_fit(n_traces: int = 10, *, t_end_s: float = 2e-3, noise_fraction: 
         "values": dict(zip(("eta", "mu", "C"), values.tolist())),
         "stderr": dict(zip(("eta", "mu", "C"), stderr.tolist())),
         "z_scores": dict(zip(("eta", "mu", "C"), ((values - truth) / stderr).tolist())),
-        "machine": {"cpus": os.cpu_count(), "processor": platform.processor() or platform.machine(),
-                    "load_average_1min": os.getloadavg()[0]},
+        "machine": machine_info(),
     }
+
+
+def machine_info() -> dict:
+    """The cores, the processor and the 1-minute load average when a benchmark ends."""
+    return {"cpus": os.cpu_count(), "processor": platform.processor() or platform.machine(),
+            "load_average_1min": os.getloadavg()[0]}
 
 
 def main(argv=None) -> int:

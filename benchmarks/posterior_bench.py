@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import sys
 import time
 import warnings
@@ -31,7 +29,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from fit_bench import benchmark_files  # noqa: E402
+from fit_bench import benchmark_files, machine_info  # noqa: E402
 
 PARAMS = ("eta", "mu", "C")
 GAIN_PRIOR = "sensor_gain=+-2%"
@@ -96,8 +94,7 @@ def benchmark_posterior(n_traces: int = 10, *, chains: int = 4, warmup: int = 15
             "relative_stderr_C": youngs.stderr["C"] / youngs.values["C"],
         },
         "truth": truth,
-        "machine": {"cpus": os.cpu_count(), "processor": platform.processor() or platform.machine(),
-                    "load_average_1min": os.getloadavg()[0]},
+        "machine": machine_info(),
     }
 
 

@@ -233,7 +233,7 @@ def _residuals(problem, x):
 
 
 # --- results ------------------------------------------------------------------------------------
-@dataclasses.dataclass
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class CandidateResult:
     """One candidate effect at one step of the search: refitted (`chi2`, `delta_chi2`,
     `bic_gain`, `share_of_excess`, `values`, `stderr`, `x` its parameter vector) or not
@@ -869,7 +869,7 @@ class _Workflow:
             simpler = [c for c in refitted.values() if c.n_parameters < k and self.explains_to_noise(c)]
             if simpler:
                 refitted[name] = CandidateResult(
-                    name, k, scores[name],
+                    effect=name, n_parameters=k, score_chi2=scores[name],
                     reason=f"not refitted: {simpler[0].effect} ({simpler[0].n_parameters} parameter(s)) "
                     "already explains the misfit to the noise level")
             else:
@@ -878,7 +878,8 @@ class _Workflow:
                 all_cols = search.columns(self.accepted + [name])
                 err = search.stderr(x_c, all_cols, chi2_c)
                 refitted[name] = CandidateResult(
-                    name, k, scores[name], chi2=chi2_c, delta_chi2=delta, bic_gain=delta - k * self.penalty,
+                    effect=name, n_parameters=k, score_chi2=scores[name], chi2=chi2_c, delta_chi2=delta,
+                    bic_gain=delta - k * self.penalty,
                     share_of_excess=delta / excess if excess > 0 else 0.0,
                     values={search.labels[c]: float(x_c[c]) for c in cols},
                     stderr={search.labels[c]: float(err[all_cols.index(c)]) for c in cols}, x=x_c)
@@ -891,12 +892,13 @@ class _Workflow:
                 results.append(refitted[name])
             elif not separable[name]:
                 self.not_separable.add(name)
-                results.append(CandidateResult(name, k, scores[name], separable=False, chi2=self.chi2,
+                results.append(CandidateResult(effect=name, n_parameters=k, score_chi2=scores[name],
+                                               separable=False, chi2=self.chi2,
                                                delta_chi2=0.0, bic_gain=-k * self.penalty, share_of_excess=0.0,
                                                reason="not separable from the free parameters"))
             else:
                 results.append(CandidateResult(
-                    name, k, scores[name],
+                    effect=name, n_parameters=k, score_chi2=scores[name],
                     reason="the misfit is already at the noise level" if excess <= self.band(dof) else
                     f"score {scores[name]:.4g} not among the {self.max_refits} best, which are refitted"))
         return results
@@ -910,46 +912,45 @@ class _Workflow:
         return self._heldout_cache[key]
 
     def heldout_check(self, results) -> list[CandidateResult]:
-        """Mark the refitted candidates that pass (a) BIC, (b) practical significance (and the
-        parsimony rule for many strengths) and (c) the held-out check (module docstring);
-        returns those that pass. Each candidate's `reason` says why it passed or not."""
-        search = self.search
+        """Judge the refitted candidates by (a) BIC, (b) practical significance (and the
+        parsimony rule for many strengths) and (c) the held-out check (module docstring):
+        `results` again, each refitted candidate with `passed` and a `reason` saying why it
+        passed or not."""
         dof = self.dof_of(self.accepted)
         excess = self.chi2 - dof
         at_noise = excess <= self.band(dof)
-        base_heldout = None
-        for c in sorted(results, key=lambda c: -(c.delta_chi2 if math.isfinite(c.delta_chi2) else -1)):
-            if not c.separable or not math.isfinite(c.delta_chi2):
-                continue
-            if at_noise:
-                c.reason = "the misfit is already at the noise level"
-                continue
-            if c.bic_gain <= 0:
-                c.reason = f"delta chi^2 {c.delta_chi2:.4g} below the BIC penalty {c.n_parameters * self.penalty:.4g}"
-                continue
-            if c.share_of_excess < self.min_share:
-                c.reason = (f"removes only {100 * c.share_of_excess:.3g} % of the excess misfit "
-                            f"(needs {100 * self.min_share:.3g} %)")
-                continue
-            many = c.n_parameters > FEW_STRENGTHS
-            if many and excess < PRACTICAL_GAP * dof:
-                c.reason = (f"possible, not needed: {c.n_parameters} strengths for a misfit of "
-                            f"{excess / dof:.3g} per degree of freedom above the noise (named from "
-                            f"{PRACTICAL_GAP:g} on)")
-                continue
-            if search.folds:
-                search.log(f"held-out check of {c.effect}")
-                if base_heldout is None:
-                    base_heldout = self.heldout(self.x, self.accepted)
-                cand = self.heldout(c.x, self.accepted + [c.effect])
-                c.heldout_gain = base_heldout - cand
-                margin = c.n_parameters * (self.penalty if many else 1.0)
-                if c.heldout_gain <= margin:
-                    c.reason = f"held-out chi^2 improves by only {c.heldout_gain:.4g} (needs {margin:.4g})"
-                    continue
-            c.passed = True
-            c.reason = "passes BIC, practical-significance and held-out checks"
-        return [c for c in results if c.passed]
+        order = sorted(results, key=lambda c: -(c.delta_chi2 if math.isfinite(c.delta_chi2) else -1))
+        judged = {id(c): self._verdict(c, excess, dof, at_noise) for c in order
+                  if c.separable and math.isfinite(c.delta_chi2)}
+        return [judged.get(id(c), c) for c in results]
+
+    def _verdict(self, c: CandidateResult, excess, dof, at_noise) -> CandidateResult:
+        """`c` with `passed`, `reason` and `heldout_gain` set by the checks of `heldout_check`."""
+        if at_noise:
+            return dataclasses.replace(c, reason="the misfit is already at the noise level")
+        if c.bic_gain <= 0:
+            return dataclasses.replace(c, reason=f"delta chi^2 {c.delta_chi2:.4g} below the BIC penalty "
+                                                 f"{c.n_parameters * self.penalty:.4g}")
+        if c.share_of_excess < self.min_share:
+            return dataclasses.replace(c, reason=f"removes only {100 * c.share_of_excess:.3g} % of the excess "
+                                                 f"misfit (needs {100 * self.min_share:.3g} %)")
+        many = c.n_parameters > FEW_STRENGTHS
+        if many and excess < PRACTICAL_GAP * dof:
+            return dataclasses.replace(c, reason=(
+                f"possible, not needed: {c.n_parameters} strengths for a misfit of {excess / dof:.3g} per "
+                f"degree of freedom above the noise (named from {PRACTICAL_GAP:g} on)"))
+        heldout_gain = None
+        search = self.search
+        if search.folds:
+            search.log(f"held-out check of {c.effect}")
+            heldout_gain = (self.heldout(self.x, self.accepted)
+                            - self.heldout(c.x, self.accepted + [c.effect]))
+            margin = c.n_parameters * (self.penalty if many else 1.0)
+            if heldout_gain <= margin:
+                return dataclasses.replace(c, heldout_gain=heldout_gain, reason=(
+                    f"held-out chi^2 improves by only {heldout_gain:.4g} (needs {margin:.4g})"))
+        return dataclasses.replace(c, heldout_gain=heldout_gain, passed=True,
+                                   reason="passes BIC, practical-significance and held-out checks")
 
     def name(self, passed, results, location):
         """Add the candidate of `passed` with the largest held-out gain to the model, refit."""
@@ -973,8 +974,8 @@ class _Workflow:
         """One round: locate, screen, refit, check; names one effect (True) or none (False)."""
         location = self.locate()
         todo, scores, starts, separable, worth = self.screen()
-        results = self.refit(todo, scores, starts, separable, worth)
-        passed = self.heldout_check(results)
+        results = self.heldout_check(self.refit(todo, scores, starts, separable, worth))
+        passed = [c for c in results if c.passed]
         if not passed:
             self.last_candidates = results
             return False

@@ -22,7 +22,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hertzchain.atomic import save_figure, write_json, write_text  # noqa: E402
+from hertzchain.atomic import save_figure, write_csv, write_json, write_text  # noqa: E402
 
 from .diagnosis import Diagnosis  # noqa: E402
 from .locate import WINDOWS  # noqa: E402
@@ -172,13 +172,15 @@ def _gap_figure(diagnosis: Diagnosis):
     return fig
 
 
-def _gap_rows(diagnosis: Diagnosis) -> str:
-    lines = ["stage,channel,window,n,chi2_per_sample,excess_sigma"]
-    for stage, location in _stages(diagnosis):
-        for channel, windows in location["by_channel_window"].items():
-            for window, c in windows.items():
-                lines.append(f"{stage},{channel},{window},{c['n']},{c['chi2_per_sample']!r},{c['excess_sigma']!r}")
-    return "\n".join(lines) + "\n"
+GAP_HEADER = ["stage", "channel", "window", "n", "chi2_per_sample", "excess_sigma"]
+
+
+def _gap_rows(diagnosis: Diagnosis) -> list[list]:
+    """Rows of `gaps.csv`: the misfit per channel and window at every stage."""
+    return [[stage, channel, window, c["n"], float(c["chi2_per_sample"]), float(c["excess_sigma"])]
+            for stage, location in _stages(diagnosis)
+            for channel, windows in location["by_channel_window"].items()
+            for window, c in windows.items()]
 
 
 def write_diagnosis_report(diagnosis: Diagnosis, out_dir) -> dict:
@@ -189,7 +191,7 @@ def write_diagnosis_report(diagnosis: Diagnosis, out_dir) -> dict:
              "gaps_csv": out / "gaps.csv"}
     write_json(paths["json"], diagnosis.to_json())
     write_text(paths["markdown"], markdown(diagnosis))
-    write_text(paths["gaps_csv"], _gap_rows(diagnosis))
+    write_csv(paths["gaps_csv"], GAP_HEADER, _gap_rows(diagnosis))
     fig = _gap_figure(diagnosis)
     save_figure(fig, paths["gap_png"], dpi=110)
     plt.close(fig)
