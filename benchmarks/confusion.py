@@ -24,16 +24,31 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import hertzchain  # noqa: E402,F401
 import jax  # noqa: E402
 from fitting.diagnosis import diagnose  # noqa: E402
 from fitting.effects import EFFECT_NAMES  # noqa: E402
 from fitting.hidden import hidden_effect_traces  # noqa: E402
-from independent_data import SETUPS, hidden_records  # noqa: E402
-from hertzchain.atomic import write_json, write_text  # noqa: E402
+import hertzchain as hc  # noqa: E402
+from independent_data import SETUPS, hidden_records, true_strength  # noqa: E402
+from hertzchain.atomic import write_csv, write_json, write_text  # noqa: E402
 
 PAIRS = (("viscous_damping", "wall_compliance"), ("track_friction", "sensor_dynamics"),
          ("viscous_damping", "track_friction"))
+
+
+def recovered(setup: str, effect: str, values: dict) -> float | None:
+    """The strength of a named `effect` as `independent_data.true_strength` states it (yield
+    force in N, exponent n, preload in N, beta, SI values), from the diagnosis's fitted
+    `values`; None for an effect stated otherwise (wall softening, bead radii)."""
+    if effect == "plasticity":  # the softening scales the nominal yield force by its cube
+        spec = SETUPS[setup]
+        nominal = float(hc.ChainSetup(spec["n_beads"], **spec["fields"]).contact_yield_force_n()[1])
+        return nominal / values["yield_softening"] ** 3
+    if effect == "contact_exponent":
+        return 1.5 + values["exponent_shift"]
+    direct = {"viscous_damping": "eta_s", "dashpot_damping": "dashpot_n_s_m", "track_friction": "mu",
+              "rotational_friction": "mu_star", "precompression": "preload_n", "sensor_dynamics": "sensor_beta"}
+    return values[direct[effect]] if effect in direct else None
 
 
 def run_case(hidden, seed, *, n_beads=None, noise_fraction=None, contacts=None, velocities=None, setup=None,
@@ -63,7 +78,9 @@ def run_case(hidden, seed, *, n_beads=None, noise_fraction=None, contacts=None, 
         "refitted": [[c.effect for c in candidates if c.separable and c.chi2 == c.chi2]
                      for candidates in [s.candidates for s in result.steps] + [result.last_candidates]],
         "runtime_s": time.perf_counter() - began,
-    }
+    } | ({"strengths": {step.effect: {"true": true_strength(setup, step.effect) if step.effect in hidden else None,
+                                      "fitted": recovered(setup, step.effect, step.values)}
+                        for step in result.steps}} if setup else {})
 
 
 def table(rows, columns) -> str:
@@ -143,15 +160,24 @@ def main(argv=None) -> int:
                     "code_path": args.code_path, "seeds": args.seeds,
                     "data": "independent_data.py: 0.5 % noise, 11 bits, 2 us, piezo channels, true header velocity"}
     write_json(out / f"{stem}.json", {"settings": settings, "rows": rows, "runtime_s": elapsed})
-    csv = ["setup,code_path,hidden,seed,named,correct,alarm,gap_base,gap_final,runtime_s"]
-    for r in rows:
-        csv.append(f"{r['setup']},{r['code_path']},{'+'.join(r['hidden']) or 'none'},{r['seed']},"
-                   f"{'+'.join(r['named']) or 'none'},{r['correct']},{r['alarm']},{r['gap_base']:.6g},"
-                   f"{r['gap_final']:.6g},{r['runtime_s']:.1f}")
-    write_text(out / f"{stem}.csv", "\n".join(csv) + "\n")
+    write_csv(out / f"{stem}.csv",
+              ["setup", "code_path", "hidden", "seed", "named", "correct", "alarm", "gap_base", "gap_final",
+               "runtime_s"],
+              [[r["setup"], r["code_path"], "+".join(r["hidden"]) or "none", r["seed"],
+                "+".join(r["named"]) or "none", r["correct"], r["alarm"], f"{r['gap_base']:.6g}",
+                f"{r['gap_final']:.6g}", f"{r['runtime_s']:.1f}"] for r in rows])
     md = f"# Diagnosis confusion table\n\n{json.dumps(settings)}\n\n"
     for setup in dict.fromkeys(r["setup"] for r in rows):
         md += f"## {setup}\n\n" + table([r for r in rows if r["setup"] == setup], columns) + "\n"
+    recovered_rows = [(r, effect, s) for r in rows for effect, s in r.get("strengths", {}).items()
+                      if s["true"] is not None and s["fitted"] is not None]
+    if recovered_rows:
+        md += ("## Strengths recovered\n\n| setup | hidden | named | true | fitted | relative error |\n"
+               "|---|---|---|---|---|---|\n")
+        for r, effect, s in recovered_rows:
+            md += (f"| {r['setup']} | {'+'.join(r['hidden'])} | {effect} | {s['true']:.5g} | {s['fitted']:.5g} | "
+                   f"{(s['fitted'] - s['true']) / s['true']:+.2%} |\n")
+        md += "\n"
     md += f"Total run time {elapsed:.0f} s ({len(rows)} diagnoses).\n"
     write_text(out / f"{stem}.md", md)
     print(md)

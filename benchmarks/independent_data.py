@@ -63,15 +63,29 @@ def _true_fields(setup_name: str, hidden, rng) -> dict:
             continue
         if name == "contact_exponent":  # Hertz's force at an overlap typical of the setup
             value = (value, spec["reference_overlap_m"])
-        elif name == "plasticity":  # the yield force as a share of the elastic peak force
-            fastest = hc.ChainSetup(spec["n_beads"], striker_velocity_m_s=max(spec["velocities_m_s"]),
-                                    **spec["fields"])
-            peak = float(np.max(np.asarray(hc.simulate(fastest, t_end_s=spec["record_s"], contacts=(2,),
-                                                       on_yield="ignore").forces_n["contact_2"])))
-            nominal_force = float(nominal.contact_yield_force_n()[1])
-            value = float(nominal.bead_yield_stress_pa) * (value * peak / nominal_force) ** (1 / 3)
+        elif name == "plasticity":  # the yield stress that gives the hidden yield force
+            share = true_strength(setup_name, name) / float(nominal.contact_yield_force_n()[1])
+            value = float(nominal.bead_yield_stress_pa) * share ** (1 / 3)
         strengths[name] = value
     return dict(spec["fields"]) | truth_fields(nominal, strengths, rng)
+
+
+def true_strength(setup_name: str, effect: str) -> float:
+    """The hidden strength of `effect` on `setup_name` as a physicist states it: the yield
+    force of a bead-bead contact (N) for plasticity (`STRENGTHS` share of the largest elastic
+    force at contact 2 of the fastest shot), the exponent n for contact_exponent, beta for
+    sensor_dynamics, `STRENGTHS` (SI) for the others."""
+    spec = SETUPS[setup_name]
+    value = STRENGTHS[effect]
+    if effect == "sensor_dynamics":
+        return value[0]
+    if effect == "plasticity":
+        fastest = hc.ChainSetup(spec["n_beads"], striker_velocity_m_s=max(spec["velocities_m_s"]),
+                                **spec["fields"])
+        peak = float(np.max(np.asarray(hc.simulate(fastest, t_end_s=spec["record_s"], contacts=(2,),
+                                                   on_yield="ignore").forces_n["contact_2"])))
+        return value * peak
+    return value
 
 
 def hidden_records(setup_name: str, hidden=(), *, code_path: str = "diffrax", seed: int = 0) -> list[TraceFile]:
