@@ -485,11 +485,11 @@ class _Search:
         return s
 
     def refit(self, starts, effects, name: str, *, max_steps=20):
-        """Fit with candidate `name` added from each of `starts`; the best fit is kept.
+        """Fit with candidate `name` added, from the best of `starts`.
 
         From each start, the candidate's strengths are first fitted alone, with the other
         parameters held either where the current fit has them or at fresh nuisances
-        (`fresh`), whichever ends lower; then everything is fitted together. Fresh nuisances
+        (`fresh`); from the lowest of these ends everything is fitted together. Fresh nuisances
         matter because a model that lacks an effect pays for it with its nuisances: without
         a softer wall and damping, a base fit lowers the striker velocities by tens of
         percent and moves the trigger to its bound, a basin from which the candidate's own
@@ -522,15 +522,29 @@ class _Search:
             chi2_of = lambda point: float(np.sum(self.evaluate.residuals(point) ** 2))
             starts = [x] if chi2_of(x) <= chi2_of(starts[0]) else [x, starts[0]]
         else:
+            # strengths alone cost a tangent each; everything free costs one per free parameter
+            # (a per-bead effect already named: one per bead), so only the best is continued
             strengths = self.effect_columns[name]
-            starts = [min((self.fit(x, effects, columns=strengths, max_steps=max_steps) for x in (s, self.fresh(s))),
-                          key=lambda result: result[1])[0] for s in starts]
+            starts = [min((self.fit(x, effects, columns=strengths, max_steps=max_steps)
+                           for s in starts for x in (s, self.fresh(s))), key=lambda result: result[1])[0]]
+        # per-bead strengths named before stay where they are (`held_for`)
+        columns = [c for c in self.columns(effects) if c not in self.held_for(name, effects)]
         best = None
         for x in starts:
-            result = self.fit(x, effects, max_steps=max_steps)
+            result = self.fit(x, effects, columns=columns, max_steps=max_steps)
             if best is None or result[1] < best[1]:
                 best = result
         return best
+
+    def held_for(self, name: str, effects) -> set[int]:
+        """Columns a refit of candidate `name` holds: the strengths of the effects of
+        `effects` named before it that have more than `FEW_STRENGTHS` of them (per-bead
+        radii). Freed, each costs a tangent per step of every candidate's refit (15-21 of
+        the 25-35 a refit carries); held at their fit, a candidate's delta chi^2 can only be
+        underestimated (a conservative check), and the model it wins is refitted with
+        everything free when it is named (`_Workflow.name`)."""
+        return {c for effect in effects if effect != name and len(self.effect_columns[effect]) > FEW_STRENGTHS
+                for c in self.effect_columns[effect]}
 
     def stderr(self, x, columns, chi2) -> np.ndarray:
         _, jac = self.evaluate(x, columns)
