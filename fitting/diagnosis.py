@@ -933,10 +933,8 @@ class _Workflow:
         dof = self.dof_of(self.accepted)
         excess = self.chi2 - dof
         at_noise = excess <= self.band(dof)
-        order = sorted(results, key=lambda c: -(c.delta_chi2 if math.isfinite(c.delta_chi2) else -1))
-        judged = {id(c): self._verdict(c, excess, dof, at_noise) for c in order
-                  if c.separable and math.isfinite(c.delta_chi2)}
-        return [judged.get(id(c), c) for c in results]
+        return [self._verdict(c, excess, dof, at_noise) if c.separable and math.isfinite(c.delta_chi2) else c
+                for c in results]
 
     def _verdict(self, c: CandidateResult, excess, dof, at_noise) -> CandidateResult:
         """`c` with `passed`, `reason` and `heldout_gain` set by the checks of `heldout_check`."""
