@@ -608,7 +608,7 @@ class _Search:
             return [start(fraction * smallest, seen) for seen in (0.0, 1.0)
                     for fraction in PRELOAD_START_FRACTIONS]
         if effect == "plasticity":
-            nominal = self._nominal_yield_force()
+            nominal = float(np.min(self._nominal_yield_forces()))
             return [start((nominal / (fraction * largest)) ** (1 / 3)) for fraction in YIELD_START_FRACTIONS]
         if effect == "wall_compliance":
             return [start(value) for value in (0.0, 2.0)]
@@ -635,16 +635,20 @@ class _Search:
         if effect == "contact_exponent":
             return f" contact_exponent: contacts follow F ~ delta^n with n = {1.5 + value['exponent_shift']:.4g}."
         if effect == "plasticity" and value["yield_softening"] > 0:
-            force = self._nominal_yield_force() / value["yield_softening"] ** 3
+            # the first bead-bead contact (a smaller striker's contact yields at a lower force)
+            forces = self._nominal_yield_forces()
+            force = forces[1 if forces.size > 2 else 0] / value["yield_softening"] ** 3
             return f" plasticity: contacts between beads yield from {force:.4g} N (Thornton 1997)."
         return ""
 
-    def _nominal_yield_force(self) -> float:
+    def _nominal_yield_forces(self) -> np.ndarray:
+        """Every contact's yield force (N) at yield_softening 1: striker-bead, bead-bead...,
+        wall (the header's yield stress, else `fitting.effects.DEFAULT_YIELD_STRESS_PA`)."""
         setup = self.problem.base_setups[0]
         stress = float(setup.bead_yield_stress_pa)
         if not math.isfinite(stress):
             setup = fx.rebuild_setup(setup, bead_yield_stress_pa=fx.DEFAULT_YIELD_STRESS_PA)
-        return float(np.min(np.asarray(setup.contact_yield_force_n())))
+        return np.asarray(setup.contact_yield_force_n(), dtype=float)
 
     # --- screening --------------------------------------------------------------------------------
     def screen(self, x, effects_in, names) -> tuple[dict, dict, dict, list]:
