@@ -335,44 +335,55 @@ class Problem:
         # `jax.jit` on the heavy parts: an optimiser traces the residuals many times (init,
         # step, linearisation, covariance); the jitted simulation is traced once per shape
         # and lowered once, which cuts a fit's compile time severalfold.
+        # Every function below takes C parameter sets at once (a leading axis: theta_global
+        # (C, n_global), theta_local (C, n_experiments, n_local)) and returns
+        # (C, n_experiments, n_channels, n_samples + 1); a fit passes C = 1, the posterior's
+        # chains C > 1 (one simulation of C x n_experiments chains on the batched kernel).
         if flags is None:
+            per_experiment = jax.vmap(one, in_axes=(0, None, 0))
+
             @jax.jit
-            def batch(theta_global, theta_local):  # (n_experiments, n_channels, n_samples + 1)
-                return jax.vmap(one, in_axes=(0, None, 0))(group.setups, theta_global, theta_local)
+            def batch(theta_global, theta_local):
+                return jax.vmap(per_experiment, in_axes=(None, 0, 0))(group.setups, theta_global, theta_local)
+
+            def jac_one(setup, theta_global, local):
+                def f(p):
+                    out = one(setup, p[:n_global], p[n_global:])
+                    return out, out
+
+                return jax.jacfwd(f, has_aux=True)(jnp.concatenate([theta_global, local]))
 
             @jax.jit
             def jacobian(theta_global, theta_local):
-                def jac_one(setup, local):
-                    def f(p):
-                        out = one(setup, p[:n_global], p[n_global:])
-                        return out, out
-
-                    p = jnp.concatenate([theta_global, local])
-                    return jax.jacfwd(f, has_aux=True)(p)
-
-                return jax.vmap(jac_one)(group.setups, theta_local)
+                per_chain = jax.vmap(jac_one, in_axes=(0, None, 0))
+                return jax.vmap(per_chain, in_axes=(None, 0, 0))(group.setups, theta_global, theta_local)
         else:
             @jax.jit
             def batch(theta_global, theta_local):
-                setups, _ = jax.vmap(applied, in_axes=(0, None, 0))(group.setups, theta_global, theta_local)
+                chains, experiments = theta_local.shape[:2]
+                per_experiment = jax.vmap(applied, in_axes=(0, None, 0))
+                setups, _ = jax.vmap(per_experiment, in_axes=(None, 0, 0))(group.setups, theta_global, theta_local)
+                # chains x experiments on the kernel's batch axis
+                setups = jax.tree_util.tree_map(lambda a: a.reshape((chains * experiments,) + a.shape[2:]), setups)
                 # one sample per loop iteration: a fit's batch is small, so the loop overhead
                 # that longer unrolled blocks hide matters less than their compile time
                 # (fit benchmark: 20 steps per block compiled in 6.7 s, one sample of 6 in 3.4 s,
                 # the same run time)
                 traces = record_batched(setups, group.grid, group.recording, flags,
                                         block_steps=group.grid.steps_per_sample)
-                return channels(traces.forces_n, setups.precompression_n, 1)
+                out = channels(traces.forces_n, setups.precompression_n, 1)
+                return out.reshape((chains, experiments) + out.shape[1:])
 
             @jax.jit
             def jacobian(theta_global, theta_local):
-                # The experiments are independent, so one tangent that moves a local
-                # parameter of every experiment at once gives each its own derivative.
+                # Experiments and parameter sets are independent, so one tangent that moves
+                # a parameter of every experiment and every set at once gives each its own
+                # derivative.
                 def f(p):
-                    out = batch(p[:n_global], theta_local + p[n_global:])
+                    out = batch(theta_global + p[:n_global], theta_local + p[n_global:])
                     return out, out
 
-                p = jnp.concatenate([theta_global, jnp.zeros(theta_local.shape[1])])
-                return jax.jacfwd(f, has_aux=True)(p)
+                return jax.jacfwd(f, has_aux=True)(jnp.zeros(n_global + theta_local.shape[2]))
 
         @jax.custom_jvp
         def simulate(theta_global, theta_local):
@@ -382,15 +393,16 @@ class Problem:
         def simulate_jvp(primals, tangents):
             theta_global, theta_local = primals
             d_global, d_local = tangents
-            if n_global + theta_local.shape[1] == 0:
+            if n_global + theta_local.shape[2] == 0:
                 out = batch(theta_global, theta_local)
                 return out, jnp.zeros_like(out)
 
             jac, out = jacobian(theta_global, theta_local)
+            chains, experiments = theta_local.shape[:2]
             direction = jnp.concatenate(
-                [jnp.broadcast_to(d_global, (theta_local.shape[0], n_global)), d_local], axis=1
+                [jnp.broadcast_to(d_global[:, None, :], (chains, experiments, n_global)), d_local], axis=2
             )
-            return out, jnp.einsum("ecsp,ep->ecs", jac, direction)
+            return out, jnp.einsum("cexsp,cep->cexs", jac, direction)
 
         return simulate, batch
 
@@ -402,13 +414,20 @@ class Problem:
         full Jacobian); with `directional=True` JAX's own forward mode pushes just the
         given tangents through the solver (best for a few columns).
         """
-        x = jnp.asarray(x)
+        return [output[0] for output in self.simulated_many(jnp.asarray(x)[None], directional=directional)]
+
+    def simulated_many(self, xs, *, directional: bool = False):
+        """`simulated` at C parameter vectors `xs` (C, p) in one simulation: list of
+        (C, n_experiments, n_channels, n_samples + 1). On the batched kernel the C x
+        n_experiments chains run as one batch, which costs much less than C simulations
+        (`jax.vmap` of `simulated` would run them as C batches)."""
+        xs = jnp.asarray(xs)
         outputs = []
         for group, (full, plain) in zip(self.groups, self._simulators):
             simulator = plain if directional else full
-            theta_global = x[np.asarray(group.global_index, dtype=int)]
-            theta_local = x[group.local_index] if group.local_index.size else jnp.zeros(
-                (len(group.experiments), 0)
+            theta_global = xs[:, np.asarray(group.global_index, dtype=int)]
+            theta_local = xs[:, group.local_index] if group.local_index.size else jnp.zeros(
+                (xs.shape[0], len(group.experiments), 0)
             )
             outputs.append(simulator(theta_global, theta_local))
         return outputs
@@ -476,6 +495,10 @@ class Problem:
         """The model of every fitted channel on the data's times, concatenated, N (jax)."""
         return self.model_from_outputs(x, self.simulated(x))
 
+    def model_many(self, xs):
+        """`model_vector` at C parameter vectors `xs` (C, p), one simulation: (C, n), N."""
+        return jax.vmap(self.model_from_outputs)(jnp.asarray(xs), self.simulated_many(xs))
+
     def residuals(self, x, data=None, *, directional: bool = False):
         """Whitened residuals $(g F(t - t_{off}) - y)/\\sigma$ of every channel, concatenated.
 
@@ -484,6 +507,11 @@ class Problem:
         `directional`: see `simulated`.
         """
         return self.residuals_from_outputs(x, self.simulated(x, directional=directional), data)
+
+    def residuals_many(self, xs, data=None):
+        """`residuals` at C parameter vectors `xs` (C, p), one simulation: (C, n)."""
+        outputs = self.simulated_many(xs)
+        return jax.vmap(lambda x, out: self.residuals_from_outputs(x, out, data))(jnp.asarray(xs), outputs)
 
     def residuals_from_outputs(self, x, outputs, data=None):
         """`residuals` from the simulated `outputs` of `simulated` (no simulation here)."""

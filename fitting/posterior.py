@@ -190,26 +190,60 @@ def _potential(problem: Problem, constants, z_hat, chol):
     integrates the adjoint back: 6-13x a forward run for one trace loss
     (`benchmarks/README.md`, gradient table) against 2-4x for forward mode with the few
     parameters a posterior has.
+
+    Chains: NumPyro's vectorised chains evaluate the gradient under `jax.vmap`. Its batching
+    rule (`jax.custom_batching.custom_vmap`) evaluates the C chains' parameter vectors in
+    one simulation (`Problem.residuals_many`: C x n_experiments chains on the batched
+    kernel's SIMD axis) rather than C simulations; 4 chains of 10 traces of 21 beads cost
+    1.5x one chain instead of 4x (`benchmarks/README.md`, posterior).
     """
 
-    def parts(u):
-        z = z_hat + chol @ u
-        x, dx_dz = jax.jvp(lambda zz: from_unbounded(constants, zz), (z,), (jnp.ones_like(z),))
-        out = (problem.residuals(x), jnp.sum(jnp.log(jnp.abs(dx_dz))))
-        return out, out
+    def parts(u):  # u: (C, p) -> residuals (C, n), sum log|dx/dz| (C,)
+        z = z_hat + u @ chol.T
+        x, dx_dz = jax.vmap(lambda zz: jax.jvp(lambda w: from_unbounded(constants, w), (zz,),
+                                                (jnp.ones_like(zz),)))(z)
+        return problem.residuals_many(x), jnp.sum(jnp.log(jnp.abs(dx_dz)), axis=1)
+
+    def value(r, log_jac):
+        value = 0.5 * jnp.sum(r**2, axis=-1) - log_jac
+        return jnp.where(jnp.isfinite(value), value, jnp.inf)
+
+    def value_and_gradient_many(u):
+        # The chains are independent: one tangent that moves parameter j of every chain
+        # gives each chain its own derivative.
+        def shifted(d):
+            out = parts(u + d)
+            return out, out
+
+        (jac_r, jac_log), (r, log_jac) = jax.jacfwd(shifted, has_aux=True)(jnp.zeros(u.shape[1]))
+        total = value(r, log_jac)
+        gradient = jnp.einsum("cnp,cn->cp", jac_r, r) - jac_log
+        return total, jnp.where(jnp.isfinite(total)[:, None], gradient, 0.0)
+
+    # One chain's value and gradient as a jaxpr whose constants (the data, the sample
+    # layout) are arguments: JAX refuses a batching rule for a function that closes over
+    # arrays, and NumPyro's conditionals on per-chain predicates batch those arrays along
+    # with everything else. The rule itself ignores them (they are the same for every chain).
+    single = jax.make_jaxpr(lambda u: value_and_gradient_many(u[None]))(jnp.zeros(chol.shape[1]))
+
+    @jax.custom_batching.custom_vmap
+    def value_and_gradient_of(u, constants_):
+        total, gradient = jax.core.eval_jaxpr(single.jaxpr, constants_, u)
+        return total[0], gradient[0]
+
+    @value_and_gradient_of.def_vmap
+    def _chains(axis_size, in_batched, u, constants_):
+        del constants_
+        if not in_batched[0]:
+            u = jnp.broadcast_to(u, (axis_size,) + u.shape)
+        return value_and_gradient_many(u), (True, True)
 
     def value_and_gradient(u):
-        (jac_r, jac_log), (r, log_jac) = jax.jacfwd(parts, has_aux=True)(u)
-        value = 0.5 * jnp.sum(r**2) - log_jac
-        finite = jnp.isfinite(value)
-        gradient = jnp.where(finite, jac_r.T @ r - jac_log, 0.0)
-        return jnp.where(finite, value, jnp.inf), gradient
+        return value_and_gradient_of(u, single.consts)
 
     @jax.custom_vjp
     def potential(u):
-        (r, log_jac), _ = parts(u)
-        value = 0.5 * jnp.sum(r**2) - log_jac
-        return jnp.where(jnp.isfinite(value), value, jnp.inf)
+        return value(*parts(u[None]))[0]
 
     def backward(gradient, cotangent):
         return (cotangent * gradient,)
@@ -398,7 +432,7 @@ def posterior_predictive(result: PosteriorResult, *, n_draws: int = 100, seed: i
     rng = np.random.default_rng(seed)
     chosen = flat[rng.choice(len(flat), size=min(n_draws, len(flat)), replace=False)]
     problem = result.problem
-    model = jax.jit(jax.vmap(problem.model_vector))
+    model = jax.jit(problem.model_many)
     rows = [np.asarray(model(jnp.asarray(block))) for block in np.array_split(chosen, max(1, len(chosen) // 16))]
     models = np.concatenate(rows)
     bands = np.quantile(models, quantiles, axis=0)

@@ -133,9 +133,13 @@ def test_potential_gradient_matches_reverse_mode_and_central_differences(noise_o
         e = jnp.zeros(2).at[i].set(step)
         central = (float(plain(u + e)) - float(plain(u - e))) / (2 * step)
         assert float(gradient[i]) == pytest.approx(central, rel=1e-5)
-    # vectorised chains call it under vmap
-    batch = jnp.stack([u, -u])
-    np.testing.assert_allclose(np.asarray(jax.vmap(jax.grad(potential))(batch))[0], reverse, rtol=1e-8)
+    # vectorised chains call it under vmap: all chains in one simulation (its batching
+    # rule), each chain's value and gradient those of its own reverse-mode evaluation
+    batch = jnp.stack([u, -u, 0.5 * u])
+    values, gradients = jax.vmap(jax.value_and_grad(potential))(batch)
+    for k in range(3):
+        assert float(values[k]) == pytest.approx(float(plain(batch[k])), rel=1e-12)
+        np.testing.assert_allclose(np.asarray(gradients[k]), np.asarray(jax.grad(plain)(batch[k])), rtol=1e-8)
 
 
 def test_laplace_comparison_flags_a_skewed_marginal():
