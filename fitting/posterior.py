@@ -20,7 +20,11 @@ How it is sampled:
    $U(u) = \\chi^2(x(z))/2 - \\sum_i \\log|dx_i/dz_i|$: a flat prior on the physical value
    within the parameter's bounds unless a normal prior row is in $\\chi^2$.
 3. Several chains run as one vectorised batch (`chain_method="vectorized"`), started at
-   draws from the Laplace approximation, so R-hat compares chains from dispersed starts.
+   draws from the Laplace approximation, so R-hat compares chains from dispersed starts;
+   their gradients come from one simulation of all chains' experiments (`_potential`).
+   With several JAX devices (a CPU's cores exposed as devices, as `hertzchain fit` does:
+   `hertzchain.cli.expose_cpu_cores`), the chains are split into one batch per device,
+   each run in its own thread as its own program (no communication between devices).
 
 NumPyro rather than BlackJAX: its `NUTS(potential_fn=...)` takes the fit's likelihood as
 it is, adapts the step size (and, on request, a metric, with Stan's windows), vectorises
@@ -41,6 +45,7 @@ import dataclasses
 import math
 import time
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 
 import jax
 import jax.numpy as jnp
@@ -195,7 +200,8 @@ def _potential(problem: Problem, constants, z_hat, chol):
     rule (`jax.custom_batching.custom_vmap`) evaluates the C chains' parameter vectors in
     one simulation (`Problem.residuals_many`: C x n_experiments chains on the batched
     kernel's SIMD axis) rather than C simulations; 4 chains of 10 traces of 21 beads cost
-    1.5x one chain instead of 4x (`benchmarks/README.md`, posterior).
+    1.5x one chain instead of 4x (274 against 180 ms on one core; `jax.vmap` of one chain's
+    gradient took 714 ms).
     """
 
     def parts(u):  # u: (C, p) -> residuals (C, n), sum log|dx/dz| (C,)
@@ -295,7 +301,7 @@ def compare_with_laplace(summary: dict, values: dict, stderr: dict, *,
 
 
 def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chains: int = 4,
-                     warmup: int = 150, draws: int = 200, seed: int = 0, target_accept: float = 0.8,
+                     warmup: int = 100, draws: int = 200, seed: int = 0, target_accept: float = 0.8,
                      max_tree_depth: int = 8, adapt_metric: bool = False,
                      forward: ForwardModel | None = None,
                      fixed=None, start=None, multistart: int = 1, progress: bool = True,
@@ -308,7 +314,7 @@ def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chain
     - `priors`: tolerances (`fitting.priors`), e.g. `["bead_youngs=203GPa+-4GPa",
       "sensor_gain=+-2%", "bead_radius=+-62.5um"]`; parameters without one are flat
       within their bounds.
-    - `chains`, `warmup`, `draws`: chains (one vectorised batch), warmup iterations
+    - `chains`, `warmup`, `draws`: chains (one vectorised batch per device), warmup iterations
       (step size and diagonal metric adaptation) and kept draws per chain.
     - `seed`: random seed (chain starts and the sampler).
     - `target_accept`, `max_tree_depth`: NUTS settings.
@@ -322,8 +328,6 @@ def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chain
     **Returns:** `PosteriorResult`. Warnings (`PosteriorWarning`) name failed diagnostics
     and parameters where the Laplace approximation does not hold.
     """
-    from numpyro.infer import MCMC, NUTS
-
     if chains < 1 or warmup < 1 or draws < 2:
         raise ValueError(f"chains >= 1, warmup >= 1 and draws >= 2 needed; got {chains}, {warmup}, {draws}.")
     began = time.perf_counter()
@@ -353,33 +357,35 @@ def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chain
     p = len(problem.instances)
     key_init, key_run = jax.random.split(jax.random.PRNGKey(seed))
     starts = jnp.clip(jax.random.normal(key_init, (chains, p)), -2.0, 2.0)
-    kernel = NUTS(potential_fn=potential, target_accept_prob=target_accept,
-                  max_tree_depth=max_tree_depth, dense_mass=False, adapt_mass_matrix=adapt_metric,
-                  find_heuristic_step_size=True)
-    mcmc = MCMC(kernel, num_warmup=warmup, num_samples=draws, num_chains=chains,
-                chain_method="vectorized", progress_bar=progress)
-    start_time = time.perf_counter()
-    mcmc.warmup(key_run, init_params=starts if chains > 1 else starts[0],
-                extra_fields=("num_steps",), collect_warmup=True)
-    warmup_steps = np.asarray(mcmc.get_extra_fields(group_by_chain=True)["num_steps"])
-    warmup_s = time.perf_counter() - start_time
-    start_time = time.perf_counter()
-    mcmc.run(mcmc.post_warmup_state.rng_key,
-             extra_fields=("diverging", "num_steps", "accept_prob", "potential_energy"))
-    sampling_s = time.perf_counter() - start_time
-
-    u = np.asarray(mcmc.get_samples(group_by_chain=True)).reshape(chains, draws, p)
+    devices = jax.local_devices()[:chains]
+    groups = np.array_split(np.arange(chains), len(devices))
+    keys = [key_run] if len(groups) == 1 else list(jax.random.split(key_run, len(groups)))
+    settings = dict(potential=potential, warmup=warmup, draws=draws, target_accept=target_accept,
+                    max_tree_depth=max_tree_depth, adapt_metric=adapt_metric)
+    chains_began = time.perf_counter()
+    if len(groups) == 1:
+        runs = [_run_chains(starts, keys[0], progress=progress, **settings)]
+    else:
+        # one group of chains per device, each its own program: the devices (a CPU's cores,
+        # `hertzchain.cli.expose_cpu_cores`) run them side by side, without communicating
+        with ThreadPoolExecutor(len(groups)) as pool:
+            futures = [pool.submit(_on_device, device, _run_chains, starts[group], key,
+                                   progress=progress and k == 0, **settings)
+                       for k, (device, group, key) in enumerate(zip(devices, groups, keys))]
+            runs = [future.result() for future in futures]
+    # wall times: compilation is in the warmup; with several devices, until the last ends
+    warmup_s = max(run["warmed"] for run in runs) - chains_began
+    sampling_s = max(run["ended"] for run in runs) - max(run["warmed"] for run in runs)
+    u = np.concatenate([run["u"] for run in runs])
     z = np.asarray(z_hat) + np.einsum("ij,cdj->cdi", np.asarray(chol), u)
     x_draws = np.asarray(jax.vmap(lambda zz: from_unbounded(constants, zz))(
         jnp.asarray(z.reshape(-1, p)))).reshape(chains, draws, p)
-    extra = mcmc.get_extra_fields(group_by_chain=True)
-    stats = {k: np.asarray(v).reshape(chains, draws) for k, v in extra.items()}
+    stats = {k: np.concatenate([run["stats"][k] for run in runs]) for k in runs[0]["stats"]}
     labels = problem.labels
     summary = _summaries(labels, x_draws)
     laplace = compare_with_laplace(summary, fit_result.values, fit_result.stderr)
-    state = mcmc.last_state
-    step_size = float(np.mean(np.asarray(state.adapt_state.step_size)))
-    gradient_evaluations = int(np.sum(stats["num_steps"]) + np.sum(warmup_steps))
+    step_size = float(np.mean(np.concatenate([run["step_size"] for run in runs])))
+    gradient_evaluations = int(np.sum(stats["num_steps"]) + sum(run["warmup_steps"] for run in runs))
     smallest_ess = min(min(row["ess"], row["ess_tail"]) for row in summary.values())
     result = PosteriorResult(
         labels=labels,
@@ -397,7 +403,7 @@ def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chain
         priors=describe(problem.instances, problem.priors),
         warnings=messages,
         fit=fit_result,
-        settings={"chains": chains, "warmup": warmup, "draws": draws, "seed": seed,
+        settings={"chains": chains, "devices": len(groups), "warmup": warmup, "draws": draws, "seed": seed,
                   "target_accept": target_accept, "max_tree_depth": max_tree_depth,
                   "adapt_metric": adapt_metric,
                   "sampler": "numpyro NUTS, whitened by the Laplace covariance"},
@@ -422,6 +428,39 @@ def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chain
     for text in result.warnings:
         warnings.warn(text, PosteriorWarning, stacklevel=2)
     return result
+
+
+def _run_chains(starts, key, *, potential, warmup, draws, target_accept, max_tree_depth, adapt_metric,
+                progress) -> dict:
+    """NUTS (NumPyro) from `starts` (chains, p), the chains as one vectorised batch: the
+    whitened draws (chains, draws, p), sample statistics, step sizes, the warmup's tree
+    sizes and when the warmup and the sampling ended (`time.perf_counter`)."""
+    from numpyro.infer import MCMC, NUTS
+
+    chains = starts.shape[0]
+    kernel = NUTS(potential_fn=potential, target_accept_prob=target_accept,
+                  max_tree_depth=max_tree_depth, dense_mass=False, adapt_mass_matrix=adapt_metric,
+                  find_heuristic_step_size=True)
+    mcmc = MCMC(kernel, num_warmup=warmup, num_samples=draws, num_chains=chains,
+                chain_method="vectorized", progress_bar=progress)
+    mcmc.warmup(key, init_params=starts if chains > 1 else starts[0], extra_fields=("num_steps",),
+                collect_warmup=True)
+    warmup_steps = int(np.sum(mcmc.get_extra_fields(group_by_chain=True)["num_steps"]))
+    warmed = time.perf_counter()
+    mcmc.run(mcmc.post_warmup_state.rng_key,
+             extra_fields=("diverging", "num_steps", "accept_prob", "potential_energy"))
+    u = np.asarray(mcmc.get_samples(group_by_chain=True)).reshape(chains, draws, -1)
+    stats = {k: np.asarray(v).reshape(chains, draws)
+             for k, v in mcmc.get_extra_fields(group_by_chain=True).items()}
+    step_size = np.asarray(mcmc.last_state.adapt_state.step_size).reshape(-1)
+    return {"u": u, "stats": stats, "step_size": step_size, "warmup_steps": warmup_steps,
+            "warmed": warmed, "ended": time.perf_counter()}
+
+
+def _on_device(device, function, *args, **kwargs):
+    """`function(*args, **kwargs)` with `device` as JAX's default (this thread only)."""
+    with jax.default_device(device):
+        return function(*args, **kwargs)
 
 
 def posterior_predictive(result: PosteriorResult, *, n_draws: int = 100, seed: int = 0,

@@ -107,3 +107,27 @@ def test_batched_kernel_and_solve_give_the_same_model_and_jacobian():
         scale = np.abs(j_general[:, j]).max()
         assert scale > 0, label
         np.testing.assert_allclose(j_fast[:, j], j_general[:, j], rtol=0, atol=1e-8 * scale, err_msg=label)
+
+
+
+def test_many_parameter_sets_in_one_simulation_equal_each_set_alone():
+    """`Problem.residuals_many` (the posterior's chains): 8 parameter sets x 4 files run as
+    one batch of 32 chains; each set's residuals and Jacobian equal its own `residuals` and
+    their forward-mode Jacobian (round-off: the batch width changes XLA's vector loops)."""
+    from fitting.fit import initial_values
+
+    setups = paper_setups([0.1, 0.2, 0.3, 0.4], eta_s=2e-6, mu=0.1, n_beads=8)
+    files = synthetic_traces(setups, contacts=(3,), t_end_s=0.6e-3, noise_std_n=0.2, seed=1)
+    problem = fitting.make_problem(files, ("eta", "mu", "C", "gain"))
+    x0 = np.asarray(initial_values(problem, None))
+    xs = jnp.asarray(x0 * (1 + 0.01 * np.random.default_rng(0).standard_normal((8, x0.size))))
+    many = np.asarray(problem.residuals_many(xs))
+    # the sets are independent: a tangent that moves parameter j of every set at once
+    jac_many = np.asarray(jax.jacfwd(lambda d: problem.residuals_many(xs + d))(jnp.zeros(x0.size)))
+    scale = np.max(np.abs(many))
+    for k in (0, 5):
+        alone = np.asarray(problem.residuals(xs[k]))
+        np.testing.assert_allclose(many[k], alone, rtol=0, atol=1e-12 * scale)
+        jac_alone = np.asarray(jax.jacfwd(problem.residuals)(xs[k]))
+        np.testing.assert_allclose(jac_many[k], jac_alone, rtol=1e-10, atol=1e-12 * np.max(np.abs(jac_alone)))
+    assert not np.allclose(many[0], many[5])  # the sets differ

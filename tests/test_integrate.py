@@ -105,7 +105,7 @@ def test_scaling_symmetry_forces_and_times_from_5_to_500_newtons():
         wall = np.asarray(run.forces_n["wall"]).max()
         incident = np.asarray(run.forces_n["contact_15"]).max()
         kinetic_share = np.asarray(run.kinetic_j)[len(run.time_s) // 4] / float(run.initial_energy_j)
-        (f8, t8), (f15, t15) = _peak(run, "contact_8"), _peak(run, "contact_15")
+        (_, t8), (f15, t15) = _peak(run, "contact_8"), _peak(run, "contact_15")
         speed = 7 * 2 * 0.013 / (t15 - t8)
         ratios.append((wall / incident, kinetic_share, speed / f15 ** (1 / 6)))
     np.testing.assert_allclose(ratios[0], ratios[1], rtol=1e-6)

@@ -82,7 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--posterior", action="store_true",
                         help="sample the posterior by NUTS after the fit (posterior.json, draws, plots)")
     parser.add_argument("--chains", type=int, default=4, help="posterior: chains, run as one batch [4]")
-    parser.add_argument("--warmup", type=int, default=150, help="posterior: warmup iterations per chain [150]")
+    parser.add_argument("--warmup", type=int, default=100, help="posterior: warmup iterations per chain [100]")
     parser.add_argument("--draws", type=int, default=200, help="posterior: kept draws per chain [200]")
     parser.add_argument("--adapt-metric", action="store_true",
                         help="posterior: adapt a diagonal metric during warmup as well")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 COMMANDS = {
@@ -26,8 +27,35 @@ COMMANDS = {
 }
 
 
+# Commands that run on every CPU core as a JAX device by default: `fit` (a posterior's
+# chains run as one group per device). Sweeps keep the devices the user gives them: with
+# the cores exposed in each process, the two-process distributed sweep's table differed in
+# its last digits from the one-process table (tests/test_sweep.py).
+CORES_AS_DEVICES = ("fit",)
+
+
+def expose_cpu_cores() -> None:
+    """Let JAX see every CPU core this process may use as a device (`jax_num_cpu_devices`),
+    so that work split over devices (the posterior's chains) uses them all. Only before
+    JAX's first computation, and not where the user chose a device count
+    (`--xla_force_host_platform_device_count` in `XLA_FLAGS`, `JAX_NUM_CPU_DEVICES`);
+    elsewhere nothing changes. GPU runs are not affected."""
+    if "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", "") or \
+            "JAX_NUM_CPU_DEVICES" in os.environ:
+        return
+    import jax
+
+    try:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+        jax.config.update("jax_num_cpu_devices", cores or 1)
+    except RuntimeError:  # JAX already started (the command run from Python): keep its devices
+        pass
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] in CORES_AS_DEVICES:
+        expose_cpu_cores()
     parser = argparse.ArgumentParser(
         prog="hertzchain",
         description="Differentiable simulation and fitting of 1-D Hertzian bead chains "
