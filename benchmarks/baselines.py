@@ -202,18 +202,21 @@ def numba_batch(mass_kg, kappa, wall_kappa, v0, dt_s, n_steps, rows):
     return out
 
 
-def plain_jax_batch(mass_kg, kappa, wall_kappa, v0, dt_s, n_steps, rows, block=PLAIN_JAX_BLOCK, devices=None):
+def plain_jax_batch(mass_kg, kappa, wall_kappa, v0, dt_s, n_steps, rows, block=PLAIN_JAX_BLOCK, devices=None,
+                    to_numpy=True):
     """B chains in plain JAX, (n_bodies, B) layout, sharded over `devices` (default: all
-    devices when B divides among them): forces (n_steps, 3, B), N. Compiled once per
-    problem shape (the compiled function is cached on its static arguments)."""
+    devices when B divides among them): forces (n_steps, 3, B), N (a NumPy array, or with
+    `to_numpy=False` the JAX array as computed). Compiled once per problem shape (the
+    compiled function is cached on its static arguments)."""
     import jax
 
     devices = tuple(jax.devices()) if devices is None else tuple(devices)
     if len(wall_kappa) % len(devices):
         devices = devices[:1]
     run = _plain_jax_compiled(int(n_steps), int(block), tuple(int(r) for r in rows), float(dt_s), devices)
-    return np.asarray(run(np.asarray(mass_kg, float), np.asarray(kappa, float),
-                          np.asarray(wall_kappa, float), np.asarray(v0, float)))
+    out = run(np.asarray(mass_kg, float), np.asarray(kappa, float), np.asarray(wall_kappa, float),
+              np.asarray(v0, float))
+    return np.asarray(out) if to_numpy else out
 
 
 @functools.cache

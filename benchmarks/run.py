@@ -125,8 +125,9 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
     base_rss = _rss_mb()
     setup, grid, arrays, rows = _case(n_beads, batch, steps)
     args = (arrays["mass_kg"], arrays["kappa"], arrays["wall_kappa"], arrays["v0"], DT_S, steps, rows)
-    repeats = 5
-    if impl == "hertzchain":
+    # runs of 0.05-0.1 s on a machine whose other core may be busy: the median of 11
+    repeats = 11
+    if impl in ("hertzchain", "hertzchain-books"):
         import jax
 
         from hertzchain.batched import solve_batched
@@ -134,24 +135,29 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
 
         recording = Recording(tuple(rows))
         use = jax.devices()[:devices] if batch >= 2 * devices else None
+        # "hertzchain": the baselines' work (three forces every step); "hertzchain-books":
+        # also the largest force of every contact at every step and the energy balance
+        books = impl == "hertzchain-books"
 
         def fn():
-            out = solve_batched(setup, grid, recording, devices=use)
+            out = solve_batched(setup, grid, recording, devices=use, books=books)
             return jax.block_until_ready(out.forces_n)
 
         first, median, low, high, result = _time(fn, repeats)
         forces = np.stack([np.asarray(result[k]) for k in result], axis=1)  # (B, 3, n)
         forces = np.transpose(forces, (2, 1, 0))  # (n, 3, B)
     elif impl == "plain-jax":
+        import jax
+
         import baselines
 
         use = jax_devices(devices)
 
-        def fn():
-            return baselines.plain_jax_batch(*args, devices=use)
+        def fn():  # as for hertzchain: the forces on the device, not copied into NumPy
+            return jax.block_until_ready(baselines.plain_jax_batch(*args, devices=use, to_numpy=False))
 
         first, median, low, high, result = _time(fn, repeats)
-        forces = result
+        forces = np.asarray(result)
     elif impl == "hertzchain-solve":
         # The general solver on one chain (full energy ledger every sample), as `simulate` runs it.
         import jax
@@ -196,7 +202,7 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
         "n_beads": n_beads,
         "batch": batch,
         "steps": steps,
-        "devices": devices if impl in ("hertzchain", "plain-jax") and batch % devices == 0 else (os.cpu_count() if impl == "numba" and batch > 1 else 1),
+        "devices": devices if impl in ("hertzchain", "hertzchain-books", "plain-jax") and batch % devices == 0 else (os.cpu_count() if impl == "numba" and batch > 1 else 1),
         "first_call_s": first,
         "run_s": median,
         "run_min_s": low,
@@ -405,7 +411,7 @@ def _load() -> str:
 
 
 def _table(rows, machine) -> str:
-    impls = ("hertzchain", "hertzchain-1dev", "plain-jax", "numba", "numpy")
+    impls = ("hertzchain", "hertzchain-books", "hertzchain-1dev", "plain-jax", "numba", "numpy")
     sizes = sorted({(r["n_beads"], r["batch"]) for r in rows if r.get("available")})
     header = "| implementation | " + " | ".join(f"N={n} B={b}" for n, b in sizes) + " |"
     lines = [header, "|" + "---|" * (len(sizes) + 1)]
@@ -429,8 +435,8 @@ def _plot(rows, path):
 
     fig, axes = plt.subplots(1, len({r["n_beads"] for r in rows}), figsize=(12, 4), squeeze=False)
     for ax, n in zip(axes[0], sorted({r["n_beads"] for r in rows})):
-        for label, marker in (("hertzchain", "o"), ("hertzchain-1dev", "s"), ("plain-jax", "D"), ("numba", "^"),
-                              ("numpy", "v")):
+        for label, marker in (("hertzchain", "o"), ("hertzchain-books", "P"), ("hertzchain-1dev", "s"),
+                              ("plain-jax", "D"), ("numba", "^"), ("numpy", "v")):
             pts = sorted((r["batch"], r["bead_steps_per_s"]) for r in rows if r["label"] == label and r["n_beads"] == n)
             if pts:
                 ax.plot(*zip(*pts), marker=marker, label=label)
@@ -472,8 +478,8 @@ def main(argv=None) -> int:
     jobs = []
     for n, b in sizes:
         steps = STANDARD_STEPS if (n, b) == STANDARD else steps_for(n, b)
-        for impl in ("hertzchain", "numba", "plain-jax", "numpy"):
-            devices = cores if impl in ("hertzchain", "plain-jax") else 1
+        for impl in ("hertzchain", "hertzchain-books", "numba", "plain-jax", "numpy"):
+            devices = cores if impl in ("hertzchain", "hertzchain-books", "plain-jax") else 1
             jobs.append(dict(impl=impl, n_beads=n, batch=b, steps=steps, devices=devices))
         if b > 1:
             jobs.append(dict(impl="hertzchain", n_beads=n, batch=b, steps=steps, devices=1))
@@ -493,9 +499,10 @@ def main(argv=None) -> int:
         else:
             print(f"{job}: {result.get('reason')}", file=sys.stderr)
         progress.advance()
-    # The standard case's ratios again, in triples (hertzchain, then Numba and plain JAX right
-    # after it): on a shared machine the load changes between runs, and a triple shares most of it.
-    pairs, plain_pairs = [], []
+    # The standard case's ratios again, in runs of hertzchain, then Numba, plain JAX and
+    # hertzchain with books right after it: on a shared machine the load changes between
+    # runs, and neighbouring runs share most of it.
+    pairs, plain_pairs, books_pairs = [], [], []
     for _ in range(STANDARD_PAIRS):
         n, b = STANDARD
         ours = _spawn("throughput", host_devices=cores, impl="hertzchain", n_beads=n, batch=b,
@@ -503,10 +510,14 @@ def main(argv=None) -> int:
         numba = _spawn("throughput", impl="numba", n_beads=n, batch=b, steps=STANDARD_STEPS, devices=1)
         plain = _spawn("throughput", host_devices=cores, impl="plain-jax", n_beads=n, batch=b,
                        steps=STANDARD_STEPS, devices=cores)
+        books = _spawn("throughput", host_devices=cores, impl="hertzchain-books", n_beads=n, batch=b,
+                       steps=STANDARD_STEPS, devices=cores)
         if ours.get("available") and numba.get("available"):
             pairs.append((ours["bead_steps_per_s"], numba["bead_steps_per_s"]))
             if plain.get("available"):
                 plain_pairs.append((ours["bead_steps_per_s"], numba["bead_steps_per_s"], plain["bead_steps_per_s"]))
+            if books.get("available"):
+                books_pairs.append((books["bead_steps_per_s"], numba["bead_steps_per_s"]))
         progress.advance()
     gradient = _spawn("gradient")
     progress.advance()
@@ -517,17 +528,21 @@ def main(argv=None) -> int:
         match = [r for r in rows if r["label"] == label and (r["n_beads"], r["batch"]) == (n, b)]
         return match[0] if match else None
 
-    labels = ("hertzchain", "hertzchain-1dev", "plain-jax", "numba", "numpy")
+    labels = ("hertzchain", "hertzchain-books", "hertzchain-1dev", "plain-jax", "numba", "numpy")
     standard = {label: pick(label, *STANDARD) for label in labels}
     bead_steps = {k: v["bead_steps_per_s"] for k, v in standard.items() if v and k != "hertzchain-1dev"}
     if {"hertzchain", "numba"} <= bead_steps.keys():
         pairs.insert(0, (bead_steps["hertzchain"], bead_steps["numba"]))
         if "plain-jax" in bead_steps:
             plain_pairs.insert(0, tuple(bead_steps[k] for k in ("hertzchain", "numba", "plain-jax")))
+        if "hertzchain-books" in bead_steps:
+            books_pairs.insert(0, (bead_steps["hertzchain-books"], bead_steps["numba"]))
     ratios = [ours / numba for ours, numba in pairs]
+    books_ratios = [books / numba for books, numba in books_pairs]
     over_plain = [ours / plain for ours, _, plain in plain_pairs]
     plain_over_numba = [plain / numba for _, numba, plain in plain_pairs]
-    single = pick("hertzchain", 21, 1)
+    single = pick("hertzchain-books", 21, 1)
+    single_forces_only = pick("hertzchain", 21, 1)
     solve_single = pick("hertzchain-solve", 21, 1)
     limit = machine.get("limit_bead_steps_per_s")
     grad = gradient.get("forward_mode_2.5ms", {}) if isinstance(gradient, dict) else {}
@@ -535,11 +550,14 @@ def main(argv=None) -> int:
     summary = {
         "machine": {**machine, "load_average_before": load_before, "load_average_after": _load()},
         "standard_case": "N=21, B=1024, dissipationless, dt=1us, 2500 steps, v0 0.1-1 m/s, "
-        "Y_wall 3-400 GPa, 3 forces recorded every step",
+        "Y_wall 3-400 GPa, 3 forces recorded every step (hertzchain-books: also the largest force "
+        "of every contact at every step and the final energy balance)",
         "bead_steps_per_s": bead_steps,
         "hertzchain_over_numba": float(np.median(ratios)) if ratios else None,
         "hertzchain_over_numba_pairs": ratios,
         "hertzchain_over_numba_pairs_bead_steps_per_s": pairs,
+        "hertzchain_books_over_numba": float(np.median(books_ratios)) if books_ratios else None,
+        "hertzchain_books_over_numba_pairs": books_ratios,
         "hertzchain_over_plain_jax": float(np.median(over_plain)) if over_plain else None,
         "hertzchain_over_plain_jax_runs": over_plain,
         "plain_jax_over_numba": float(np.median(plain_over_numba)) if plain_over_numba else None,
@@ -550,11 +568,12 @@ def main(argv=None) -> int:
         "fraction_of_machine_limit": {k: v / limit for k, v in bead_steps.items()} if limit else None,
         "paper_run_ms": {
             "solve_batched_B1": single["run_s"] * 1e3 if single else None,
+            "solve_batched_B1_forces_only": single_forces_only["run_s"] * 1e3 if single_forces_only else None,
             "solve": solve_single["run_s"] * 1e3 if solve_single else None,
             "numba": pick("numba", 21, 1)["run_s"] * 1e3 if pick("numba", 21, 1) else None,
         },
         "compile_s": {
-            "solve_batched_standard": standard["hertzchain"]["compile_s"] if standard["hertzchain"] else None,
+            "solve_batched_standard": standard["hertzchain-books"]["compile_s"] if standard["hertzchain-books"] else None,
             "solve_batched_B1": single["compile_s"] if single else None,
             "solve": solve_single["compile_s"] if solve_single else None,
         },
@@ -576,6 +595,7 @@ def main(argv=None) -> int:
     if args.gpu_sweep:
         subprocess.run([sys.executable, str(HERE / "gpu_sweep.py"), "--out", str(out / "gpu_sweep.json")], check=False)
     print(json.dumps({k: summary[k] for k in ("bead_steps_per_s", "hertzchain_over_numba", "hertzchain_over_numba_pairs",
+                                              "hertzchain_books_over_numba",
                                               "hertzchain_over_plain_jax", "plain_jax_over_numba", "paper_run_ms",
                                               "compile_s", "grad_over_forward")}, indent=1))
     return 0

@@ -549,6 +549,7 @@ def solve_batched(
     block_steps: int = DEFAULT_BLOCK_STEPS,
     devices=None,
     pad_to: int | None = None,
+    books: bool = True,
 ) -> BatchedTraces:
     """Simulate a batch of chains, recording forces and the final energy balance.
 
@@ -562,16 +563,21 @@ def solve_batched(
     - `devices`: split the batch over these devices (default: one device).
     - `pad_to`: run at least this many chains (copies of the last one, dropped from the
       result), so that batches of different sizes reuse one compiled kernel.
+    - `books`: keep the largest force of every contact over every step and the energy
+      balance (default). False: the recorded forces only, for callers that read nothing
+      else (the maxima and energies of the result are then NaN); one pass over the
+      contacts per step less (`benchmarks/README.md`).
 
     **Returns:** `BatchedTraces`. Setups with plastic contacts, dashpots or power-law
-    contacts run the general solver (same result, slower): see `fast_path_reason`.
+    contacts run the general solver (same result, slower, books always kept): see
+    `fast_path_reason`.
     """
     batch = batch_size(setup)
     names, rows, user = _plan(setup, recording)
     if fast_path_reason(setup) is not None:
         time = grid.sample_interval_s * jnp.arange(1, grid.n_samples + 1, dtype=jnp.float64)
         return _solve_general(setup, grid, recording, names, time)
-    flags = kernel_flags(setup)
+    flags = kernel_flags(setup)._replace(ledger=bool(books))
     devices = None if devices is None or len(devices) <= 1 else tuple(devices)
     padded = max(batch, pad_to or 0)
     if devices is not None:

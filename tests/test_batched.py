@@ -181,3 +181,18 @@ def test_kernel_without_books_records_the_same_forces():
         np.testing.assert_array_equal(without.forces_n[name], with_books.forces_n[name])
     assert np.all(np.isnan(without.max_force_n)) and np.all(np.isnan(without.energy_error_j))
     np.testing.assert_array_equal(with_books.max_force_n, solve_batched(setup, grid, recording).max_force_n)
+
+
+@pytest.mark.parametrize("case", ["elastic", "sensors_preload_viscous"])
+def test_solve_batched_without_books_records_the_same_forces(case):
+    """`solve_batched(books=False)` (the benchmarks' like-for-like case) on the undamped
+    kernel (velocities carried as the next half kick's) and the damped one: the recorded
+    forces bit-identical to the run with books, the maxima and energies NaN."""
+    setup, grid = _batch(**CASES[case])
+    recording = Recording((2, 6))
+    with_books = solve_batched(setup, grid, recording)
+    without = solve_batched(setup, grid, recording, books=False)
+    for name in with_books.channel_names:
+        np.testing.assert_array_equal(without.forces_n[name], with_books.forces_n[name])
+    assert np.all(np.isnan(without.max_force_n)) and np.all(np.isnan(without.initial_energy_j))
+    assert np.all(np.isfinite(with_books.max_force_n))
