@@ -1,3 +1,5 @@
+import math
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -45,6 +47,16 @@ def test_hertz_gradients_are_finite_and_zero_at_contact_onset():
     # and the viscous term's derivative with respect to the rate at onset
     g = jax.grad(lambda r: contact.contact_force(0.0, r, 1.2e10, 2e-6)[1])(jnp.asarray(0.3))
     assert float(g) == 0.0
+    # in contact, the written-out derivatives are the calculus ones: dF/d(delta) =
+    # 3/2 kappa sqrt(delta), d2F/d(delta)2 = 3/4 kappa / sqrt(delta), dV/d(delta) = F
+    for delta in (1e-9, 3.7e-6):
+        d = jnp.asarray(delta)
+        assert float(jax.grad(lambda x: contact.hertz_force(x, 1.2e10))(d)) == pytest.approx(
+            1.5 * 1.2e10 * math.sqrt(delta), rel=1e-14)
+        assert float(jax.grad(jax.grad(lambda x: contact.hertz_force(x, 1.2e10)))(d)) == pytest.approx(
+            0.75 * 1.2e10 / math.sqrt(delta), rel=1e-14)
+        assert float(jax.jacfwd(lambda x: contact.hertz_potential(x, 1.2e10))(d)) == pytest.approx(
+            float(contact.hertz_force(d, 1.2e10)), rel=1e-14)
 
 
 def test_binary_collision_time_matches_simulated_two_body_collision():
