@@ -193,6 +193,7 @@ def test_command_line_posterior_is_strict_about_too_few_draws(brass_traces, tmp_
     assert report["priors"]["sensor_gain[wall]"]["sd"] == pytest.approx(0.02)
 
 
+@pytest.mark.slow  # a new process compiles the model and the sampler again (about a minute)
 def test_command_line_posterior_splits_chains_over_the_cpu_cores(brass_traces, noise_only, tmp_path):
     """`hertzchain fit --posterior` as a user runs it (a new process): the CPU's cores become
     JAX devices and the chains are split between them, each group its own program; the
