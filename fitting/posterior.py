@@ -211,8 +211,8 @@ def _potential(problem: Problem, constants, z_hat, chol):
         return problem.residuals_many(x), jnp.sum(jnp.log(jnp.abs(dx_dz)), axis=1)
 
     def value(r, log_jac):
-        value = 0.5 * jnp.sum(r**2, axis=-1) - log_jac
-        return jnp.where(jnp.isfinite(value), value, jnp.inf)
+        total = 0.5 * jnp.sum(r**2, axis=-1) - log_jac
+        return jnp.where(jnp.isfinite(total), total, jnp.inf)
 
     def value_and_gradient_many(u):
         # The chains are independent: one tangent that moves parameter j of every chain
@@ -363,16 +363,13 @@ def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chain
     settings = dict(potential=potential, warmup=warmup, draws=draws, target_accept=target_accept,
                     max_tree_depth=max_tree_depth, adapt_metric=adapt_metric)
     chains_began = time.perf_counter()
-    if len(groups) == 1:
-        runs = [_run_chains(starts, keys[0], progress=progress, **settings)]
-    else:
-        # one group of chains per device, each its own program: the devices (a CPU's cores,
-        # `hertzchain.cli.expose_cpu_cores`) run them side by side, without communicating
-        with ThreadPoolExecutor(len(groups)) as pool:
-            futures = [pool.submit(_on_device, device, _run_chains, starts[group], key,
-                                   progress=progress and k == 0, **settings)
-                       for k, (device, group, key) in enumerate(zip(devices, groups, keys))]
-            runs = [future.result() for future in futures]
+    # one group of chains per device, each its own program: the devices (a CPU's cores,
+    # `hertzchain.cli.expose_cpu_cores`) run them side by side, without communicating
+    with ThreadPoolExecutor(len(groups)) as pool:
+        futures = [pool.submit(_on_device, device, _run_chains, starts[group], key,
+                               progress=progress and k == 0, **settings)
+                   for k, (device, group, key) in enumerate(zip(devices, groups, keys))]
+        runs = [future.result() for future in futures]
     # wall times: compilation is in the warmup; with several devices, until the last ends
     warmup_s = max(run["warmed"] for run in runs) - chains_began
     sampling_s = max(run["ended"] for run in runs) - max(run["warmed"] for run in runs)
