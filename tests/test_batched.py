@@ -74,6 +74,29 @@ def test_padding_does_not_change_results():
     np.testing.assert_array_equal(padded.max_force_n, plain.max_force_n)
 
 
+@pytest.mark.parametrize("case", ["sensors_preload_viscous", "friction_viscous_preload"])
+def test_parameters_shared_by_the_batch_give_the_same_results(case):
+    """A sweep over striker speeds and walls shares the bodies' masses: the kernel reads
+    them as one column. The results are those of per-chain copies, bit for bit
+    (same numbers through the same arithmetic), the books included (the sharded
+    tests run shared columns on several devices)."""
+    from hertzchain import batched
+
+    setup, grid = _batch(**CASES[case])
+    params = batched.kernel_params(setup)
+    shared = batched.share_uniform(params)
+    assert shared["inv_mass"].shape[-1] == 1 and shared["mass"].shape[-1] == 1
+    assert shared["kappa"].shape[-1] == 4 and shared["v0"].shape[-1] == 4  # the walls differ
+    names, rows, user = batched._plan(setup, Recording((2, 6)))
+    flags = batched.kernel_flags(setup)
+    run = lambda p: batched._solve_fast(p, 4, flags, grid, rows, names, user, 20, None)  # noqa: E731
+    full, reduced = run(params), run(shared)
+    for name in names:
+        np.testing.assert_array_equal(reduced.forces_n[name], full.forces_n[name])
+    np.testing.assert_array_equal(reduced.max_force_n, full.max_force_n)
+    np.testing.assert_array_equal(reduced.energy_error_j, full.energy_error_j)
+
+
 def test_general_path_for_plasticity():
     setups = [hc.ChainSetup(N, plasticity=True, striker_velocity_m_s=v) for v in (0.3, 0.6)]
     setup = stack_setups(setups)
@@ -144,7 +167,7 @@ def test_fast_path_uses_the_force_laws_of_solve(case):
 
     setup, _ = _batch(**CASES[case])
     flags = batched.kernel_flags(setup)
-    params = batched.kernel_params(setup)
+    params = batched.share_uniform(batched.kernel_params(setup))
     models = [hc.build_model(jax.tree_util.tree_map(lambda leaf, i=i: leaf[i], setup)) for i in range(4)]
     n_bodies = models[0].mass_kg.shape[0]
     rng = np.random.default_rng(3)
