@@ -12,7 +12,10 @@ The case: the paper's chain (steel beads R = 13 mm, kappa = 1.2e10 N/m^1.5), N b
 striker of the same steel, a Hertz wall; batches sweep the impact velocity over
 0.1..1 m/s and the wall modulus over 3..400 GPa (log-spaced); dissipationless; dt = 1 us;
 three forces recorded every step (contacts N//2 - 1, N//2 and the wall). Throughput is
-bead-steps per second: N * B * steps / median wall time after compilation.
+bead-steps per second: N * B * steps / median wall time after compilation. `hertzchain` is
+`solve_batched` as users call it (the fused C++ kernel where it is built), `hertzchain-jax`
+the same call with `kernel="jax"` (the pure-JAX kernel), `hertzchain-books` the default
+call with the maxima of every contact and the energy balance.
 """
 
 from __future__ import annotations
@@ -127,7 +130,7 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
     args = (arrays["mass_kg"], arrays["kappa"], arrays["wall_kappa"], arrays["v0"], DT_S, steps, rows)
     # runs of 0.05-0.1 s on a machine whose other core may be busy: the median of 11
     repeats = 11
-    if impl in ("hertzchain", "hertzchain-books"):
+    if impl in ("hertzchain", "hertzchain-books", "hertzchain-jax"):
         import jax
 
         from hertzchain.batched import solve_batched
@@ -138,9 +141,11 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
         # "hertzchain": the baselines' work (three forces every step); "hertzchain-books":
         # also the largest force of every contact at every step and the energy balance
         books = impl == "hertzchain-books"
+        # "hertzchain-jax": the JAX kernel (the reference) where the default runs the C++ one
+        kernel = "jax" if impl == "hertzchain-jax" else "auto"
 
         def fn():
-            out = solve_batched(setup, grid, recording, devices=use, books=books)
+            out = solve_batched(setup, grid, recording, devices=use, books=books, kernel=kernel)
             return jax.block_until_ready(out.forces_n)
 
         first, median, low, high, result = _time(fn, repeats)
@@ -202,7 +207,7 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
         "n_beads": n_beads,
         "batch": batch,
         "steps": steps,
-        "devices": devices if impl in ("hertzchain", "hertzchain-books", "plain-jax") and batch % devices == 0 else (os.cpu_count() if impl == "numba" and batch > 1 else 1),
+        "devices": devices if impl in ("hertzchain", "hertzchain-books", "hertzchain-jax", "plain-jax") and batch % devices == 0 else (os.cpu_count() if impl == "numba" and batch > 1 else 1),
         "first_call_s": first,
         "run_s": median,
         "run_min_s": low,
@@ -411,7 +416,7 @@ def _load() -> str:
 
 
 def _table(rows, machine) -> str:
-    impls = ("hertzchain", "hertzchain-books", "hertzchain-1dev", "plain-jax", "numba", "numpy")
+    impls = ("hertzchain", "hertzchain-books", "hertzchain-jax", "hertzchain-1dev", "plain-jax", "numba", "numpy")
     sizes = sorted({(r["n_beads"], r["batch"]) for r in rows if r.get("available")})
     header = "| implementation | " + " | ".join(f"N={n} B={b}" for n, b in sizes) + " |"
     lines = [header, "|" + "---|" * (len(sizes) + 1)]
@@ -435,7 +440,8 @@ def _plot(rows, path):
 
     fig, axes = plt.subplots(1, len({r["n_beads"] for r in rows}), figsize=(12, 4), squeeze=False)
     for ax, n in zip(axes[0], sorted({r["n_beads"] for r in rows})):
-        for label, marker in (("hertzchain", "o"), ("hertzchain-books", "P"), ("hertzchain-1dev", "s"),
+        for label, marker in (("hertzchain", "o"), ("hertzchain-books", "P"), ("hertzchain-jax", "X"),
+                              ("hertzchain-1dev", "s"),
                               ("plain-jax", "D"), ("numba", "^"), ("numpy", "v")):
             pts = sorted((r["batch"], r["bead_steps_per_s"]) for r in rows if r["label"] == label and r["n_beads"] == n)
             if pts:
@@ -478,8 +484,8 @@ def main(argv=None) -> int:
     jobs = []
     for n, b in sizes:
         steps = STANDARD_STEPS if (n, b) == STANDARD else steps_for(n, b)
-        for impl in ("hertzchain", "hertzchain-books", "numba", "plain-jax", "numpy"):
-            devices = cores if impl in ("hertzchain", "hertzchain-books", "plain-jax") else 1
+        for impl in ("hertzchain", "hertzchain-books", "hertzchain-jax", "numba", "plain-jax", "numpy"):
+            devices = cores if impl in ("hertzchain", "hertzchain-books", "hertzchain-jax", "plain-jax") else 1
             jobs.append(dict(impl=impl, n_beads=n, batch=b, steps=steps, devices=devices))
         if b > 1:
             jobs.append(dict(impl="hertzchain", n_beads=n, batch=b, steps=steps, devices=1))
@@ -502,7 +508,7 @@ def main(argv=None) -> int:
     # The standard case's ratios again, in runs of hertzchain, then Numba, plain JAX and
     # hertzchain with books right after it: on a shared machine the load changes between
     # runs, and neighbouring runs share most of it.
-    pairs, plain_pairs, books_pairs = [], [], []
+    pairs, plain_pairs, books_pairs, jax_pairs = [], [], [], []
     for _ in range(STANDARD_PAIRS):
         n, b = STANDARD
         ours = _spawn("throughput", host_devices=cores, impl="hertzchain", n_beads=n, batch=b,
@@ -512,12 +518,16 @@ def main(argv=None) -> int:
                        steps=STANDARD_STEPS, devices=cores)
         books = _spawn("throughput", host_devices=cores, impl="hertzchain-books", n_beads=n, batch=b,
                        steps=STANDARD_STEPS, devices=cores)
+        jax_kernel = _spawn("throughput", host_devices=cores, impl="hertzchain-jax", n_beads=n, batch=b,
+                            steps=STANDARD_STEPS, devices=cores)
         if ours.get("available") and numba.get("available"):
             pairs.append((ours["bead_steps_per_s"], numba["bead_steps_per_s"]))
             if plain.get("available"):
                 plain_pairs.append((ours["bead_steps_per_s"], numba["bead_steps_per_s"], plain["bead_steps_per_s"]))
             if books.get("available"):
                 books_pairs.append((books["bead_steps_per_s"], numba["bead_steps_per_s"]))
+            if jax_kernel.get("available"):
+                jax_pairs.append((jax_kernel["bead_steps_per_s"], numba["bead_steps_per_s"]))
         progress.advance()
     gradient = _spawn("gradient")
     progress.advance()
@@ -528,7 +538,7 @@ def main(argv=None) -> int:
         match = [r for r in rows if r["label"] == label and (r["n_beads"], r["batch"]) == (n, b)]
         return match[0] if match else None
 
-    labels = ("hertzchain", "hertzchain-books", "hertzchain-1dev", "plain-jax", "numba", "numpy")
+    labels = ("hertzchain", "hertzchain-books", "hertzchain-jax", "hertzchain-1dev", "plain-jax", "numba", "numpy")
     standard = {label: pick(label, *STANDARD) for label in labels}
     bead_steps = {k: v["bead_steps_per_s"] for k, v in standard.items() if v and k != "hertzchain-1dev"}
     if {"hertzchain", "numba"} <= bead_steps.keys():
@@ -537,8 +547,11 @@ def main(argv=None) -> int:
             plain_pairs.insert(0, tuple(bead_steps[k] for k in ("hertzchain", "numba", "plain-jax")))
         if "hertzchain-books" in bead_steps:
             books_pairs.insert(0, (bead_steps["hertzchain-books"], bead_steps["numba"]))
+        if "hertzchain-jax" in bead_steps:
+            jax_pairs.insert(0, (bead_steps["hertzchain-jax"], bead_steps["numba"]))
     ratios = [ours / numba for ours, numba in pairs]
     books_ratios = [books / numba for books, numba in books_pairs]
+    jax_ratios = [ours / numba for ours, numba in jax_pairs]
     over_plain = [ours / plain for ours, _, plain in plain_pairs]
     plain_over_numba = [plain / numba for _, numba, plain in plain_pairs]
     single = pick("hertzchain-books", 21, 1)
@@ -558,6 +571,8 @@ def main(argv=None) -> int:
         "hertzchain_over_numba_pairs_bead_steps_per_s": pairs,
         "hertzchain_books_over_numba": float(np.median(books_ratios)) if books_ratios else None,
         "hertzchain_books_over_numba_pairs": books_ratios,
+        "hertzchain_jax_kernel_over_numba": float(np.median(jax_ratios)) if jax_ratios else None,
+        "hertzchain_jax_kernel_over_numba_pairs": jax_ratios,
         "hertzchain_over_plain_jax": float(np.median(over_plain)) if over_plain else None,
         "hertzchain_over_plain_jax_runs": over_plain,
         "plain_jax_over_numba": float(np.median(plain_over_numba)) if plain_over_numba else None,
@@ -569,6 +584,8 @@ def main(argv=None) -> int:
         "paper_run_ms": {
             "solve_batched_B1": single["run_s"] * 1e3 if single else None,
             "solve_batched_B1_forces_only": single_forces_only["run_s"] * 1e3 if single_forces_only else None,
+            "solve_batched_B1_jax_kernel": pick("hertzchain-jax", 21, 1)["run_s"] * 1e3
+            if pick("hertzchain-jax", 21, 1) else None,
             "solve": solve_single["run_s"] * 1e3 if solve_single else None,
             "numba": pick("numba", 21, 1)["run_s"] * 1e3 if pick("numba", 21, 1) else None,
         },
@@ -595,7 +612,7 @@ def main(argv=None) -> int:
     if args.gpu_sweep:
         subprocess.run([sys.executable, str(HERE / "gpu_sweep.py"), "--out", str(out / "gpu_sweep.json")], check=False)
     print(json.dumps({k: summary[k] for k in ("bead_steps_per_s", "hertzchain_over_numba", "hertzchain_over_numba_pairs",
-                                              "hertzchain_books_over_numba",
+                                              "hertzchain_books_over_numba", "hertzchain_jax_kernel_over_numba",
                                               "hertzchain_over_plain_jax", "plain_jax_over_numba", "paper_run_ms",
                                               "compile_s", "grad_over_forward")}, indent=1))
     return 0

@@ -42,7 +42,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
-from . import contact
+from . import contact, native
 from .chain import ChainSetup, build_model, internal_contact_index, internal_sensor_index
 from .integrate import Recording, _channel_names, _layout, solve_stacked, stack_setups  # noqa: F401
 from .timegrid import TimeGrid
@@ -450,11 +450,26 @@ def _kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ...], blo
     return traces, state, layout
 
 
-def _run(params, flags, grid, rows, block_steps, devices):
-    """The kernel, sharded over `devices` along the batch axis when there are several."""
+def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ...]):
+    """`_kernel`'s results from the fused C++ kernel (`native`; conservative physics)."""
+    layout = _Layout(p["mass"].shape[0])
+    state, _, _ = _initial(p, flags, layout, grid.dt_s)
+    traces, state = native.run(
+        p, state, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
+        channels=rows + (layout.bodies - 1,), preload=flags.preload, springs=flags.springs, books=flags.ledger,
+    )
+    return traces, state, layout
+
+
+def _run(params, flags, grid, rows, block_steps, devices, fused=False):
+    """The kernel (the C++ one when `fused`), sharded over `devices` along the batch axis
+    when there are several."""
 
     def local(p):
-        traces, state, layout = _kernel(p, flags=flags, grid=grid, rows=rows, block_steps=block_steps)
+        if fused:
+            traces, state, layout = _native_kernel(p, flags=flags, grid=grid, rows=rows)
+        else:
+            traces, state, layout = _kernel(p, flags=flags, grid=grid, rows=rows, block_steps=block_steps)
         if not flags.ledger:
             nan = jnp.full_like(p["inv_mass"], jnp.nan) + jnp.zeros_like(p["v0"])
             return traces, nan[:-1], jnp.stack([nan[0]] * 4)
@@ -523,9 +538,9 @@ def share_uniform(params: dict) -> dict:
     return {name: shrink(name, leaf) for name, leaf in params.items()}
 
 
-def _assemble(params, batch, flags, grid, rows, names, user, block_steps, devices):
+def _assemble(params, batch, flags, grid, rows, names, user, block_steps, devices, fused=False):
     """The kernel and the output layout."""
-    traces, maxima, summary = _run(params, flags, grid, rows, block_steps, devices)
+    traces, maxima, summary = _run(params, flags, grid, rows, block_steps, devices, fused)
     maxima, summary = maxima[..., :batch], summary[..., :batch]
     initial, kinetic, potential, dissipated = summary
     return BatchedTraces(
@@ -570,6 +585,7 @@ def solve_batched(
     devices=None,
     pad_to: int | None = None,
     books: bool = True,
+    kernel: str = "auto",
 ) -> BatchedTraces:
     """Simulate a batch of chains, recording forces and the final energy balance.
 
@@ -587,11 +603,16 @@ def solve_batched(
       balance (default). False: the recorded forces only, for callers that read nothing
       else (the maxima and energies of the result are then NaN); one pass over the
       contacts per step less (`benchmarks/README.md`).
+    - `kernel`: "auto" (default) runs the fused C++ kernel (`hertzchain.native`) where it
+      covers the setup (no damping or friction, CPU) and is built, else the JAX kernel;
+      "jax" always runs the JAX kernel (the reference; the two agree to round-off).
 
     **Returns:** `BatchedTraces`. Setups with plastic contacts, dashpots or power-law
     contacts run the general solver (same result, slower, books always kept): see
     `fast_path_reason`.
     """
+    if kernel not in ("auto", "jax"):
+        raise ValueError(f'kernel must be "auto" or "jax", got {kernel!r}.')
     batch = batch_size(setup)
     names, rows, user = _plan(setup, recording)
     if fast_path_reason(setup) is not None:
@@ -603,7 +624,8 @@ def solve_batched(
     if devices is not None:
         padded = len(devices) * math.ceil(padded / len(devices))
     params = share_uniform(kernel_params(setup, pad_to=padded))
-    return _solve_fast(params, batch, flags, grid, rows, names, user, int(block_steps), devices)
+    fused = kernel == "auto" and native.supports(flags, devices)
+    return _solve_fast(params, batch, flags, grid, rows, names, user, int(block_steps), devices, fused)
 
 
 def record_batched(

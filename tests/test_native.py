@@ -1,0 +1,119 @@
+"""The fused C++ kernel (`hertzchain.native`) against the JAX kernel and the general solver."""
+
+import json
+import os
+import subprocess
+import sys
+
+import jax
+import numpy as np
+import pytest
+
+import hertzchain as hc
+from hertzchain import native
+from hertzchain.batched import solve_batched
+from hertzchain.integrate import Recording, solve_stacked
+
+pytestmark = pytest.mark.skipif(not native.available(), reason=f"no native kernel: {native.unavailable_reason()}")
+
+CASES = {
+    "rigid_and_soft_walls": {},
+    "sensors_preload": {"sensor_beads": (3, 7), "precompression_n": 3.0},
+    "free_end_preload": {"end": "free", "precompression_n": 2.0},
+    "brass_beads": {"bead_radius_m": 2.5e-3, "bead_youngs_pa": 110e9, "bead_poisson": 0.34,
+                    "bead_density_kg_m3": 8500.0},
+}
+
+
+def _batch(speeds=(0.3, 1.0), **kwargs):
+    setup, _ = hc.batch_setup(hc.ChainSetup(10, **kwargs), striker_velocity_m_s=list(speeds),
+                              wall_youngs_pa=[3e9, 4e11])
+    return setup, hc.choose_time_grid(setup, t_end_s=0.8e-3, sample_interval_s=2e-6)
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_agrees_with_the_jax_kernel_and_solve(case):
+    """Forces, maxima and energy books of the C++ kernel equal the JAX kernel's to
+    round-off (no fused multiply-adds in the C++ kernel, XLA may use them) and the general
+    solver's within its own round-off tolerance."""
+    setup, grid = _batch(**CASES[case])
+    recording = Recording((2, 6))
+    fused = solve_batched(setup, grid, recording)
+    reference = solve_batched(setup, grid, recording, kernel="jax")
+    general = solve_stacked(setup, grid, recording)
+    energy = np.asarray(general.initial_energy_j)
+    for name in fused.channel_names:
+        scale = float(np.max(np.abs(general.forces_n[name])))
+        assert scale > 1.0 or (name == "wall" and setup.end == "free")
+        np.testing.assert_allclose(fused.forces_n[name], reference.forces_n[name], rtol=0, atol=1e-12 * scale)
+        np.testing.assert_allclose(fused.forces_n[name], general.forces_n[name], rtol=0, atol=1e-11 * scale)
+    np.testing.assert_allclose(fused.max_force_n, reference.max_force_n, rtol=1e-12)
+    np.testing.assert_allclose(fused.max_force_n, general.max_force_n, rtol=1e-12)
+    np.testing.assert_allclose(fused.energy_error_j, general.energy_error_j[:, -1], rtol=0, atol=1e-11 * energy.max())
+    assert np.all(np.abs(np.asarray(fused.energy_error_j)) < 1e-4 * energy)  # Verlet's own error is small
+
+
+def test_chains_do_not_depend_on_their_neighbours_in_a_block():
+    """70 chains run as one block of 64, then 6 single chains: each chain's trace is the
+    one it gets alone, bit for bit (the lanes of a block never mix)."""
+    speeds = np.linspace(0.2, 1.2, 35)
+    setup, grid = _batch(speeds=speeds)
+    together = solve_batched(setup, grid, Recording((4,)))
+    for i in (0, 37, 63, 64, 69):
+        alone = jax.tree_util.tree_map(lambda leaf, i=i: leaf[i : i + 1], setup)
+        one = solve_batched(alone, grid, Recording((4,)))
+        for name in together.channel_names:
+            np.testing.assert_array_equal(together.forces_n[name][i], one.forces_n[name][0])
+        np.testing.assert_array_equal(together.max_force_n[i], one.max_force_n[0])
+
+
+def test_damping_and_friction_run_the_jax_kernel():
+    """The C++ kernel has no damping or friction: such setups run the JAX kernel, so
+    "auto" and "jax" give the same numbers to the bit."""
+    setup, grid = _batch(eta_s=1e-6, mu=0.1)
+    auto = solve_batched(setup, grid, Recording((4,)))
+    reference = solve_batched(setup, grid, Recording((4,)), kernel="jax")
+    np.testing.assert_array_equal(auto.forces_n["wall"], reference.forces_n["wall"])
+
+
+def test_unknown_kernel_is_refused():
+    setup, grid = _batch()
+    with pytest.raises(ValueError, match="kernel must be"):
+        solve_batched(setup, grid, Recording((4,)), kernel="c++")
+
+
+_SWITCHED_OFF = r"""
+import json, numpy as np, hertzchain as hc
+from hertzchain import native
+from hertzchain.batched import solve_batched
+from hertzchain.integrate import Recording
+setup, _ = hc.batch_setup(hc.ChainSetup(10), striker_velocity_m_s=[0.3, 1.0], wall_youngs_pa=[3e9, 4e11])
+grid = hc.choose_time_grid(setup, t_end_s=0.8e-3, sample_interval_s=2e-6)
+out = solve_batched(setup, grid, Recording((4,)))
+print(json.dumps({"reason": native.unavailable_reason(), "wall": np.asarray(out.forces_n["wall"]).tolist()}))
+"""
+
+
+def test_switched_off_runs_the_jax_kernel(tmp_path):
+    """HERTZCHAIN_NATIVE=0: the kernel is not loaded, says why, and the JAX kernel runs."""
+    env = dict(os.environ, HERTZCHAIN_NATIVE="0", JAX_PLATFORMS="cpu")
+    proc = subprocess.run([sys.executable, "-c", _SWITCHED_OFF], capture_output=True, text=True, env=env,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert "HERTZCHAIN_NATIVE=0" in result["reason"]
+    setup, grid = _batch()
+    reference = solve_batched(setup, grid, Recording((4,)), kernel="jax")
+    np.testing.assert_array_equal(np.asarray(result["wall"]), reference.forces_n["wall"])
+
+
+def test_failed_build_names_the_compiler_error(tmp_path, monkeypatch):
+    """A source that does not compile: the build raises with the compiler's message and
+    leaves no library behind (written whole or not at all)."""
+    broken = tmp_path / "chain_kernel.cc"
+    broken.write_text("this is not C++\n")
+    monkeypatch.setattr(native, "SOURCE", broken)
+    target = tmp_path / "cache" / "kernel.so"
+    with pytest.raises(RuntimeError, match="compiling chain_kernel.cc failed"):
+        native._build(target)
+    assert not target.exists() and list(target.parent.iterdir()) == []
