@@ -67,6 +67,35 @@ def test_chains_do_not_depend_on_their_neighbours_in_a_block():
         np.testing.assert_array_equal(together.max_force_n[i], one.max_force_n[0])
 
 
+_SHARDED = r"""
+import json, numpy as np, jax, hertzchain as hc
+from hertzchain import native
+from hertzchain.batched import solve_batched
+from hertzchain.integrate import Recording
+setup, _ = hc.batch_setup(hc.ChainSetup(10, precompression_n=2.0), striker_velocity_m_s=[0.3, 0.5, 1.0],
+                          wall_youngs_pa=[3e9, 4e11])
+grid = hc.choose_time_grid(setup, t_end_s=0.8e-3, sample_interval_s=2e-6)
+one = solve_batched(setup, grid, Recording((4,)))
+two = solve_batched(setup, grid, Recording((4,)), devices=jax.devices())
+diff = max(float(np.max(np.abs(np.asarray(one.forces_n[k]) - np.asarray(two.forces_n[k]))))
+           for k in one.channel_names)
+print(json.dumps({"devices": len(jax.devices()), "native": native.available(), "diff": diff,
+                  "max_diff": float(np.max(np.abs(one.max_force_n - two.max_force_n))),
+                  "energy_diff": float(np.max(np.abs(one.energy_error_j - two.energy_error_j)))}))
+"""
+
+
+def test_split_over_devices_gives_the_one_device_numbers():
+    """The kernel inside `shard_map` over two host devices (one thread each): the same
+    traces, maxima and energies as on one device, bit for bit."""
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
+    proc = subprocess.run([sys.executable, "-c", _SHARDED], capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert result["devices"] == 2 and result["native"]
+    assert result["diff"] == 0.0 and result["max_diff"] == 0.0 and result["energy_diff"] == 0.0
+
+
 def test_damping_and_friction_run_the_jax_kernel():
     """The C++ kernel has no damping or friction: such setups run the JAX kernel, so
     "auto" and "jax" give the same numbers to the bit."""
