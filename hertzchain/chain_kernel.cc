@@ -18,6 +18,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 #include "xla/ffi/api/ffi.h"
@@ -39,16 +40,12 @@ struct Param {
   int64_t width;  // 1 (shared by the batch) or B
 };
 
-// Rows of `p` for chains lo..lo+count-1 into a (rows, kLanes) block; the lanes past
-// `count` repeat the first chain (computed, never written out).
+// Rows of `p` for chains lo..lo+kLanes-1 into a (rows, kLanes) block.
 template <int64_t kLanes>
-void Load(Param p, int64_t rows, int64_t lo, int64_t count, double* block) {
-  for (int64_t r = 0; r < rows; ++r) {
-    for (int64_t j = 0; j < kLanes; ++j) {
-      int64_t chain = lo + (j < count ? j : 0);
-      block[r * kLanes + j] = p.width == 1 ? p.data[r] : p.data[r * p.width + chain];
-    }
-  }
+void Load(Param p, int64_t rows, int64_t lo, double* block) {
+  for (int64_t r = 0; r < rows; ++r)
+    for (int64_t j = 0; j < kLanes; ++j)
+      block[r * kLanes + j] = p.width == 1 ? p.data[r] : p.data[r * p.width + lo + j];
 }
 
 template <bool kPreload, bool kSprings>
@@ -61,7 +58,7 @@ inline double ContactForce(double overlap, double kappa, double spring) {
 }
 
 template <int64_t kLanes, bool kPreload, bool kSprings, bool kBooks>
-void RunBlock(int64_t bodies, int64_t lo, int64_t count, int64_t batch, int64_t n_samples,
+void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               int64_t steps_per_sample, double dt, const double* state0, Param inv_mass,
               Param kappa, Param overlap0, Param spring, Param external,
               const std::vector<int64_t>& channels, double* state,
@@ -73,20 +70,20 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t count, int64_t batch, int64_t 
   std::vector<double> inv(rows_x * kLanes), kap(contacts * kLanes), ov0(contacts * kLanes);
   std::vector<double> spr(contacts * kLanes), ext(rows_x * kLanes);
   std::vector<double> record(n_channels * kLanes * kSampleBuffer);
-  Load<kLanes>({state0, batch}, rows_x, lo, count, x.data());
-  Load<kLanes>({state0 + rows_x * batch, batch}, rows_x, lo, count, u.data());
-  if (kBooks) Load<kLanes>({state0 + 2 * rows_x * batch, batch}, contacts, lo, count, mx.data());
-  Load<kLanes>(inv_mass, rows_x, lo, count, inv.data());
-  Load<kLanes>(kappa, contacts, lo, count, kap.data());
-  Load<kLanes>(overlap0, contacts, lo, count, ov0.data());
-  Load<kLanes>(spring, contacts, lo, count, spr.data());
-  Load<kLanes>(external, rows_x, lo, count, ext.data());
+  Load<kLanes>({state0, batch}, rows_x, lo, x.data());
+  Load<kLanes>({state0 + rows_x * batch, batch}, rows_x, lo, u.data());
+  if (kBooks) Load<kLanes>({state0 + 2 * rows_x * batch, batch}, contacts, lo, mx.data());
+  Load<kLanes>(inv_mass, rows_x, lo, inv.data());
+  Load<kLanes>(kappa, contacts, lo, kap.data());
+  Load<kLanes>(overlap0, contacts, lo, ov0.data());
+  Load<kLanes>(spring, contacts, lo, spr.data());
+  Load<kLanes>(external, rows_x, lo, ext.data());
 
   double force_before[kLanes];
   int64_t buffered = 0, written = 0;
   auto flush = [&]() {
     for (int64_t c = 0; c < n_channels; ++c)
-      for (int64_t j = 0; j < count; ++j) {
+      for (int64_t j = 0; j < kLanes; ++j) {
         double* out = traces[c] + (lo + j) * n_samples + written;
         const double* in = &record[(c * kLanes + j) * kSampleBuffer];
         std::copy(in, in + buffered, out);
@@ -157,7 +154,7 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t count, int64_t batch, int64_t 
 
   auto store = [&](const std::vector<double>& block, int64_t rows, double* dst) {
     for (int64_t r = 0; r < rows; ++r)
-      for (int64_t j = 0; j < count; ++j) dst[r * batch + lo + j] = block[r * kLanes + j];
+      for (int64_t j = 0; j < kLanes; ++j) dst[r * batch + lo + j] = block[r * kLanes + j];
   };
   store(x, rows_x, state);
   store(u, rows_x, state + rows_x * batch);
@@ -199,23 +196,17 @@ ffi::Error Forward(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
     constexpr bool kP = decltype(preload_tag)::value, kS = decltype(springs_tag)::value,
                    kB = decltype(books_tag)::value;
     int64_t lo = 0;
-    for (; lo + kWideLanes <= batch; lo += kWideLanes)
-      RunBlock<kWideLanes, kP, kS, kB>(bodies, lo, kWideLanes, batch, n_samples,
-                                       steps_per_sample, dt, state0.typed_data(),
-                                       AsParam(inv_mass), AsParam(kappa), AsParam(overlap0),
-                                       AsParam(spring), AsParam(external), rows,
-                                       state->typed_data(), outs);
-    for (; lo + kNarrowLanes <= batch; lo += kNarrowLanes)
-      RunBlock<kNarrowLanes, kP, kS, kB>(bodies, lo, kNarrowLanes, batch, n_samples,
-                                         steps_per_sample, dt, state0.typed_data(),
-                                         AsParam(inv_mass), AsParam(kappa), AsParam(overlap0),
-                                         AsParam(spring), AsParam(external), rows,
-                                         state->typed_data(), outs);
-    for (; lo < batch; ++lo)
-      RunBlock<1, kP, kS, kB>(bodies, lo, 1, batch, n_samples, steps_per_sample, dt,
-                              state0.typed_data(), AsParam(inv_mass), AsParam(kappa),
-                              AsParam(overlap0), AsParam(spring), AsParam(external), rows,
-                              state->typed_data(), outs);
+    auto advance = [&](auto lanes) {
+      constexpr int64_t kL = decltype(lanes)::value;
+      RunBlock<kL, kP, kS, kB>(bodies, lo, batch, n_samples, steps_per_sample, dt,
+                               state0.typed_data(), AsParam(inv_mass), AsParam(kappa),
+                               AsParam(overlap0), AsParam(spring), AsParam(external), rows,
+                               state->typed_data(), outs);
+      lo += kL;
+    };
+    while (lo + kWideLanes <= batch) advance(std::integral_constant<int64_t, kWideLanes>{});
+    while (lo + kNarrowLanes <= batch) advance(std::integral_constant<int64_t, kNarrowLanes>{});
+    while (lo < batch) advance(std::integral_constant<int64_t, 1>{});
   };
   using T = std::true_type;
   using F = std::false_type;
