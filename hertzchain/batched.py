@@ -533,13 +533,18 @@ def share_uniform(params: dict) -> dict:
     one copy of the bead masses per step instead of one per chain (about 10 % of the
     step's time; `benchmarks/README.md`). Same numbers, same results. The striker speeds
     stay per chain (they carry the batch size). Concrete arrays only."""
+    if params["v0"].shape[-1] == 1:
+        return params
+    names = sorted(params)
+    uniform = np.asarray(_uniform_columns([params[name] for name in names]))  # one transfer
+    shared = {name for name, same in zip(names, uniform) if same and name != "v0"}
+    return {name: leaf[..., :1] if name in shared else leaf for name, leaf in params.items()}
 
-    def shrink(name, leaf):
-        values = np.asarray(leaf)
-        uniform = name != "v0" and values.shape[-1] > 1 and bool(np.all(values == values[..., :1]))
-        return leaf[..., :1] if uniform else leaf
 
-    return {name: shrink(name, leaf) for name, leaf in params.items()}
+@jax.jit
+def _uniform_columns(leaves: list) -> jax.Array:
+    """Whether each kernel array has the same value in every chain (last axis), (n,) bool."""
+    return jnp.stack([jnp.all(leaf == leaf[..., :1]) for leaf in leaves])
 
 
 def _assemble(params, batch, flags, grid, rows, names, user, block_steps, devices, fused=False):

@@ -121,6 +121,9 @@ def run(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
     """Advance the packed state `state0` (rows, B) of `batched._Layout` through
     `n_samples` samples of `steps_per_sample` steps of `dt_s` seconds: returns the final
     state (rows, B) and one (B, n_samples) force trace per channel, N."""
+    reason = _load()
+    if reason is not None:
+        raise RuntimeError(f"the fused chain kernel is unavailable: {reason}")
     batch = state0.shape[-1]
     zeros = np.zeros((p["kappa"].shape[0], 1))
     args = (
