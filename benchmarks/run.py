@@ -45,6 +45,12 @@ DT_S = 1e-6
 STANDARD_STEPS = 2500
 # Extra (hertzchain, Numba, plain JAX) triples run on the standard case for the ratios' spread.
 STANDARD_PAIRS = 3
+# solve_batched as users call it (fused kernel where built), with the books, with the JAX kernel
+HERTZCHAIN_IMPLS = ("hertzchain", "hertzchain-books", "hertzchain-jax")
+# implementations that split the batch over the CPU's cores as host devices
+SHARDED_IMPLS = HERTZCHAIN_IMPLS + ("plain-jax",)
+# rows of the table, the plot and the summary
+LABELS = HERTZCHAIN_IMPLS + ("hertzchain-1dev", "plain-jax", "numba", "numpy")
 # Bead-steps per timed run of the larger cases (fewer steps there, same physics per step).
 WORK_PER_RUN = 2e8
 
@@ -130,7 +136,7 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
     args = (arrays["mass_kg"], arrays["kappa"], arrays["wall_kappa"], arrays["v0"], DT_S, steps, rows)
     # runs of 0.05-0.1 s on a machine whose other core may be busy: the median of 11
     repeats = 11
-    if impl in ("hertzchain", "hertzchain-books", "hertzchain-jax"):
+    if impl in HERTZCHAIN_IMPLS:
         import jax
 
         from hertzchain.batched import solve_batched
@@ -207,7 +213,7 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
         "n_beads": n_beads,
         "batch": batch,
         "steps": steps,
-        "devices": devices if impl in ("hertzchain", "hertzchain-books", "hertzchain-jax", "plain-jax") and batch % devices == 0 else (os.cpu_count() if impl == "numba" and batch > 1 else 1),
+        "devices": devices if impl in SHARDED_IMPLS and batch % devices == 0 else (os.cpu_count() if impl == "numba" and batch > 1 else 1),
         "first_call_s": first,
         "run_s": median,
         "run_min_s": low,
@@ -417,11 +423,10 @@ def _load() -> str:
 
 
 def _table(rows, machine) -> str:
-    impls = ("hertzchain", "hertzchain-books", "hertzchain-jax", "hertzchain-1dev", "plain-jax", "numba", "numpy")
     sizes = sorted({(r["n_beads"], r["batch"]) for r in rows if r.get("available")})
     header = "| implementation | " + " | ".join(f"N={n} B={b}" for n, b in sizes) + " |"
     lines = [header, "|" + "---|" * (len(sizes) + 1)]
-    for impl in impls:
+    for impl in LABELS:
         cells = []
         for n, b in sizes:
             match = [r for r in rows if r.get("label") == impl and (r["n_beads"], r["batch"]) == (n, b)]
@@ -485,8 +490,8 @@ def main(argv=None) -> int:
     jobs = []
     for n, b in sizes:
         steps = STANDARD_STEPS if (n, b) == STANDARD else steps_for(n, b)
-        for impl in ("hertzchain", "hertzchain-books", "hertzchain-jax", "numba", "plain-jax", "numpy"):
-            devices = cores if impl in ("hertzchain", "hertzchain-books", "hertzchain-jax", "plain-jax") else 1
+        for impl in HERTZCHAIN_IMPLS + ("numba", "plain-jax", "numpy"):
+            devices = cores if impl in SHARDED_IMPLS else 1
             jobs.append(dict(impl=impl, n_beads=n, batch=b, steps=steps, devices=devices))
         if b > 1:
             jobs.append(dict(impl="hertzchain", n_beads=n, batch=b, steps=steps, devices=1))
@@ -539,8 +544,7 @@ def main(argv=None) -> int:
         match = [r for r in rows if r["label"] == label and (r["n_beads"], r["batch"]) == (n, b)]
         return match[0] if match else None
 
-    labels = ("hertzchain", "hertzchain-books", "hertzchain-jax", "hertzchain-1dev", "plain-jax", "numba", "numpy")
-    standard = {label: pick(label, *STANDARD) for label in labels}
+    standard = {label: pick(label, *STANDARD) for label in LABELS}
     bead_steps = {k: v["bead_steps_per_s"] for k, v in standard.items() if v and k != "hertzchain-1dev"}
     if {"hertzchain", "numba"} <= bead_steps.keys():
         pairs.insert(0, (bead_steps["hertzchain"], bead_steps["numba"]))

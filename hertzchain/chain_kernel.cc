@@ -48,7 +48,7 @@ void Load(Param p, int64_t rows, int64_t lo, double* block) {
       block[r * kLanes + j] = p.width == 1 ? p.data[r] : p.data[r * p.width + lo + j];
 }
 
-template <bool kPreload, bool kSprings>
+template <bool kSprings>
 inline double ContactForce(double overlap, double kappa, double spring) {
   // contact.hertz_force: kappa * delta_+ * sqrt(delta_+), then + spring * delta
   double positive = overlap > 0.0 ? overlap : 0.0;
@@ -116,7 +116,7 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         for (int64_t j = 0; j < kLanes; ++j) {
           xn[j] = xn[j] + dt * un[j];
           double overlap = kPreload ? (xi[j] - xn[j]) + o[j] : xi[j] - xn[j];
-          double force = ContactForce<kPreload, kSprings>(overlap, k[j], sp[j]);
+          double force = ContactForce<kSprings>(overlap, k[j], sp[j]);
           if (kBooks) top[j] = std::max(top[j], overlap);
           double body = force_before[j] - force;
           if (kPreload) body = body + e[j];
@@ -145,7 +145,7 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         double overlap = x[i * kLanes + j] - x[(i + 1) * kLanes + j];
         if (kPreload) overlap = overlap + ov0[i * kLanes + j];
         record[(c * kLanes + j) * kSampleBuffer + buffered] =
-            ContactForce<kPreload, kSprings>(overlap, kap[i * kLanes + j], spr[i * kLanes + j]);
+            ContactForce<kSprings>(overlap, kap[i * kLanes + j], spr[i * kLanes + j]);
       }
     }
     if (++buffered == kSampleBuffer) flush();
