@@ -19,5 +19,26 @@ from .grid import lockin_grid as lockin_grid
 from .grid import settle_periods as settle_periods
 from .lockin import LockIn as LockIn
 from .lockin import lockin as lockin
+from .schedule import DrivenTraces as DrivenTraces
+from .schedule import HarmonicSchedule as HarmonicSchedule
+from .schedule import ScheduleLockin as ScheduleLockin
+from .schedule import chirp as chirp
+from .schedule import lockin_schedule as lockin_schedule
+from .schedule import record_sampled as record_sampled
+from .schedule import record_schedule as record_schedule
 
-__all__ = ["DrivenChain", "LockIn", "LockinGrid", "lockin", "lockin_grid", "settle_periods"]
+__all__ = [
+    "DrivenChain",
+    "DrivenTraces",
+    "HarmonicSchedule",
+    "LockIn",
+    "LockinGrid",
+    "ScheduleLockin",
+    "chirp",
+    "lockin",
+    "lockin_grid",
+    "lockin_schedule",
+    "record_sampled",
+    "record_schedule",
+    "settle_periods",
+]

@@ -27,15 +27,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import drive as drives
 from . import kernel
 from .chain import DrivenChain
-from .lockin import lockin_steps
-
-QUANTITIES = ("velocity", "displacement")
-# The largest (highest linear mode's angular frequency × step) accepted: velocity-Verlet is
-# stable below 2, and accurate to about (omega dt)^2 / 24 of the mode's frequency.
-MAX_OMEGA_DT = 1.0
+from .schedule import HarmonicSchedule, check_readout, lockin_levels
 
 
 class LockinGrid(eqx.Module):
@@ -113,47 +107,18 @@ def lockin_grid(
 def _lockin_grid(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
                  hold_periods, window_periods, steps_per_period, unroll):
     n_freq, n_amp = frequencies_hz.shape[0], drive_amplitudes_m.shape[0]
-    frequency = jnp.repeat(frequencies_hz, n_amp)  # run index = i_f * A + i_a
-    amplitude = jnp.tile(drive_amplitudes_m, n_freq)
-    readings = run_harmonic(chain, frequency, amplitude, bead=bead, quantity=quantity, harmonics=harmonics,
-                            ramp_periods=ramp_periods, hold_periods=hold_periods, window_periods=window_periods,
-                            steps_per_period=steps_per_period, unroll=unroll)
+    # one level per run, run index = i_f * A + i_a
+    schedule = HarmonicSchedule(jnp.repeat(frequencies_hz, n_amp)[None], jnp.tile(drive_amplitudes_m, n_freq)[None],
+                                steps_per_period, ramp_periods, hold_periods, 0)
+    readings = lockin_levels(chain, schedule, bead, quantity, harmonics, window_periods, unroll)
     return LockinGrid(
-        complex_amplitude=readings.reshape(len(harmonics), n_freq, n_amp),
+        complex_amplitude=readings.complex_amplitude.reshape(len(harmonics), n_freq, n_amp),
         frequencies_hz=frequencies_hz,
         drive_amplitudes_m=drive_amplitudes_m,
         harmonics=harmonics,
         quantity=quantity,
         bead=bead,
     )
-
-
-def run_harmonic(chain, frequency_hz, amplitude_m, *, bead, quantity, harmonics, ramp_periods, hold_periods,
-                 window_periods, steps_per_period, unroll=kernel.DEFAULT_UNROLL, state=None):
-    """The runs of `lockin_grid`, given run by run: `frequency_hz`, `amplitude_m` (B,).
-    **Returns:** (n_harmonics, B) complex amplitudes (traceable; arguments as `lockin_grid`'s,
-    already checked). With `state` (a `kernel.State` of B runs), start there and drive at
-    full amplitude at once instead of from rest with a ramp (`ramp_periods` must be 0)."""
-    p = kernel.kernel_params(chain)
-    n = steps_per_period
-    dt = 1.0 / (frequency_hz * n)
-    batch = frequency_hz.shape[0]
-    if state is None:
-        state = kernel.static_state(p, batch)
-    drive = drives.harmonic_segment(frequency_hz, dt, n, 0.0 * amplitude_m, amplitude_m, ramp_periods * n)
-    settle = (ramp_periods + hold_periods - window_periods) * n
-    state, _ = kernel.advance(p, state, dt, drive, jnp.arange(1, settle + 1), unroll=unroll)
-    row = bead - 1
-    if quantity == "velocity":
-        def record(s, u, u_dot):
-            return s.velocity_m_s[row]
-    else:
-        def record(s, u, u_dot):
-            return s.displacement_m[row]
-    first = settle + 1
-    _, samples = kernel.advance(p, state, dt, drive, jnp.arange(first, first + window_periods * n), record=record,
-                                unroll=unroll)
-    return jnp.stack([lockin_steps(samples, n, h, first).complex_amplitude for h in harmonics])
 
 
 def settle_periods(chain: DrivenChain, frequency_hz: float, tolerance: float = 1e-4) -> int:
@@ -168,30 +133,9 @@ def settle_periods(chain: DrivenChain, frequency_hz: float, tolerance: float = 1
 
 def _check_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
                      hold_periods, window_periods, steps_per_period) -> None:
-    if not isinstance(chain, DrivenChain):
-        raise ValueError(f"chain: expected a DrivenChain, got {type(chain).__name__}.")
-    if quantity not in QUANTITIES:
-        raise ValueError(f"quantity: expected one of {QUANTITIES}, got {quantity!r}.")
-    if int(bead) != bead or not 1 <= bead <= chain.n_beads:
-        raise ValueError(f"bead: beads are numbered 1..{chain.n_beads} from the driver, got {bead}.")
-    for name, value in (("ramp_periods", ramp_periods), ("hold_periods", hold_periods),
-                        ("window_periods", window_periods), ("steps_per_period", steps_per_period)):
+    for name, value in (("ramp_periods", ramp_periods), ("hold_periods", hold_periods)):
         if int(value) != value or value < 0:
-            raise ValueError(f"{name}: expected a whole number of periods/steps >= 0, got {value}.")
-    if window_periods < 1 or window_periods > hold_periods:
-        raise ValueError(f"window_periods: must be 1..hold_periods ({hold_periods}), got {window_periods}.")
-    if steps_per_period < 8:
-        raise ValueError(f"steps_per_period: at least 8 steps per drive period, got {steps_per_period}.")
-    if not harmonics:
-        raise ValueError("harmonics: give at least one multiple of the drive frequency, e.g. (1.0, 0.5).")
-    for h in harmonics:
-        if h <= 0 or abs(h * window_periods - round(h * window_periods)) > 1e-9:
-            raise ValueError(
-                f"harmonics: {h} × window_periods ({window_periods}) must be a whole number of periods of "
-                f"the demodulated component (h > 0); e.g. an even window for h = 0.5."
-            )
-        if h * 2 >= steps_per_period:
-            raise ValueError(f"harmonics: {h} × f is above the Nyquist frequency of {steps_per_period} steps a period.")
+            raise ValueError(f"{name}: expected a whole number of periods >= 0, got {value}.")
     for name, values, unit in (("frequencies_hz", frequencies_hz, "Hz"), ("drive_amplitudes_m", drive_amplitudes_m, "m")):
         if isinstance(values, jax.core.Tracer):
             continue
@@ -201,14 +145,4 @@ def _check_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, 
         if not np.all(np.isfinite(array)) or (name == "frequencies_hz" and np.any(array <= 0)) or np.any(array < 0):
             raise ValueError(f"{name}: values must be finite and {'> 0' if name == 'frequencies_hz' else '>= 0'} "
                              f"({unit}), got {array}.")
-    traced = [leaf for leaf in jax.tree_util.tree_leaves((chain, frequencies_hz)) if isinstance(leaf, jax.core.Tracer)]
-    if not traced:
-        omega_dt = 2.0 * np.pi * float(chain.highest_frequency_bound_hz()) / (
-            float(np.min(np.asarray(frequencies_hz))) * steps_per_period)
-        if omega_dt > MAX_OMEGA_DT:
-            needed = int(np.ceil(steps_per_period * omega_dt / MAX_OMEGA_DT))
-            raise ValueError(
-                f"steps_per_period: {steps_per_period} steps per period of the lowest frequency "
-                f"({float(np.min(np.asarray(frequencies_hz))):.6g} Hz) under-resolve the chain's highest mode "
-                f"(ω dt = {omega_dt:.3g} > {MAX_OMEGA_DT}); use steps_per_period >= {needed}."
-            )
+    check_readout(chain, bead, quantity, harmonics, window_periods, hold_periods, steps_per_period, frequencies_hz)

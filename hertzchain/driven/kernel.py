@@ -132,3 +132,28 @@ def advance(
         return state, (None if record is None else record(state, u, u_dot))
 
     return jax.lax.scan(body, state, steps, unroll=max(1, min(int(unroll), int(steps.shape[0]) or 1)))
+
+
+def advance_sampled(
+    p: KernelParams,
+    state: State,
+    dt_s,
+    drive: DriveFn,
+    first_step: int,
+    n_samples: int,
+    every_steps: int,
+    record: RecordFn,
+    *,
+    unroll: int = DEFAULT_UNROLL,
+):
+    """`advance` through steps `first_step` .. `first_step` + `n_samples` × `every_steps` - 1,
+    recording after every `every_steps`-th step only. **Returns:** (final state, records
+    stacked along a new leading axis of length `n_samples`)."""
+
+    def sample(state, start):
+        steps = start + jnp.arange(every_steps)
+        state, _ = advance(p, state, dt_s, drive, steps, unroll=unroll)
+        u, u_dot = drive(steps[-1])
+        return state, record(state, u, u_dot)
+
+    return jax.lax.scan(sample, state, first_step + every_steps * jnp.arange(n_samples))
