@@ -14,6 +14,9 @@ displacement at harmonics of the drive, differentiable in forward mode:
 """
 
 from .chain import DrivenChain as DrivenChain
+from .floquet import Floquet as Floquet
+from .floquet import floquet_multipliers as floquet_multipliers
+from .floquet import period_doubling_threshold as period_doubling_threshold
 from .grid import LockinGrid as LockinGrid
 from .grid import lockin_grid as lockin_grid
 from .grid import settle_periods as settle_periods
@@ -30,14 +33,17 @@ from .schedule import record_schedule as record_schedule
 __all__ = [
     "DrivenChain",
     "DrivenTraces",
+    "Floquet",
     "HarmonicSchedule",
     "LockIn",
     "LockinGrid",
     "ScheduleLockin",
     "chirp",
+    "floquet_multipliers",
     "lockin",
     "lockin_grid",
     "lockin_schedule",
+    "period_doubling_threshold",
     "record_sampled",
     "record_schedule",
     "settle_periods",
