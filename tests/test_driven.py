@@ -43,7 +43,7 @@ def test_from_materials_stiffness_and_static_equilibrium():
     np.testing.assert_allclose(kappa * overlap**1.5, 4.5, rtol=1e-13)
     for c in (chain, uneven_chain()):
         p = kernel.kernel_params(c)
-        state = kernel.static_state(p, 3)
+        state = kernel.static_state(p, jnp.zeros(3))
         force = kernel.contact_forces(p, state.displacement_m, state.velocity_m_s, jnp.zeros(3), jnp.zeros(3))
         np.testing.assert_allclose(np.asarray(force), float(c.precompression_n), rtol=1e-13)
         net = np.asarray(state.contact_accel_m_s2) * np.asarray(c.bead_mass_kg)[:, None]
@@ -112,7 +112,7 @@ def _run_recorded(chain, frequency_hz, amplitude_m, periods, ramp_periods, steps
         force = kernel.contact_forces(p, s.displacement_m, s.velocity_m_s, u, u_dot)
         return s.displacement_m[:, 0], s.velocity_m_s[:, 0], u[0], u_dot[0], force[:, 0]
 
-    state = kernel.static_state(p, 1)
+    state = kernel.static_state(p, f)
     _, rec = kernel.advance(p, state, dt, drive, jnp.arange(1, periods * steps_per_period + 1), record=record)
     return float(dt[0]), [np.asarray(r) for r in rec]
 

@@ -79,11 +79,13 @@ def contact_accel(p: KernelParams, force_n) -> jax.Array:
     return (force_n[:-1] - force_n[1:]) * p.inv_mass_per_kg
 
 
-def static_state(p: KernelParams, batch: int) -> State:
-    """B runs at rest in the static equilibrium, the driver at 0."""
+def static_state(p: KernelParams, runs: jax.Array) -> State:
+    """B runs at rest in the static equilibrium, the driver at 0. `runs`: any (B,) per-run
+    array (e.g. the frequencies): the state takes its length, and under `shard_map` its
+    sharding (zeros built from it vary along the batch as the runs do)."""
     n = p.inv_mass_per_kg.shape[0]
-    zeros = jnp.zeros((n, batch), dtype=jnp.float64)
-    rest = jnp.zeros((batch,), dtype=jnp.float64)
+    rest = 0.0 * jnp.asarray(runs, dtype=jnp.float64)
+    zeros = jnp.zeros((n, 1), dtype=jnp.float64) + rest
     return State(zeros, zeros, contact_accel(p, contact_forces(p, zeros, zeros, rest, rest)))
 
 

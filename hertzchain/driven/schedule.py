@@ -104,7 +104,7 @@ def _levels(chain: DrivenChain, schedule: HarmonicSchedule, window_steps: int, r
                                                 record, unroll=unroll)
         return state, records
 
-    state = kernel.static_state(p, schedule.batch)
+    state = kernel.static_state(p, f[0])
     first_periods = schedule.ramp_periods + schedule.periods_per_level
     state, first_records = level(state, f[0], 0.0 * a[0], a[0], schedule.ramp_periods, first_periods)
     if schedule.n_levels == 1:
@@ -326,7 +326,7 @@ def record_sampled(chain: DrivenChain, displacement_m, dt_s, *, beads: tuple[int
 @eqx.filter_jit
 def _record_sampled(chain, displacement, dt, beads, contacts, every_steps, unroll):
     p = kernel.kernel_params(chain)
-    state = kernel.static_state(p, displacement.shape[1])
+    state = kernel.static_state(p, dt)
     n_samples = (displacement.shape[0] - 1) // every_steps
     _, records = kernel.advance_sampled(p, state, dt, drives.sampled(displacement, dt), 1, n_samples, every_steps,
                                         _recorder(p, beads, contacts), unroll=unroll)
