@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from hertzchain.driven import DrivenChain, lockin, lockin_grid, settle_periods
+from hertzchain.driven import DrivenChain, kernel, lockin, lockin_grid, settle_periods
 from hertzchain.driven import drive as drives
-from hertzchain.driven import kernel
 
 
 def lydon_bead(n_beads=1, precompression_n=4.5, damping_rate_per_s=1800.0):
@@ -140,7 +139,7 @@ def test_energy_balance_of_a_driven_conservative_chain():
 
 def test_momentum_balance_with_damping():
     chain = uneven_chain()
-    dt, (x, v, u, u_dot, force) = _run_recorded(chain, 2500.0, 30e-9, periods=10, ramp_periods=3,
+    dt, (_, v, _, _, force) = _run_recorded(chain, 2500.0, 30e-9, periods=10, ramp_periods=3,
                                                 steps_per_period=400)
     m = np.asarray(chain.bead_mass_kg)
     gamma = np.asarray(chain.damping_rate_per_s)
@@ -155,7 +154,8 @@ def test_jacfwd_matches_finite_differences():
     chain = lydon_bead(precompression_n=0.2, damping_rate_per_s=1500.0)
     frequencies = np.array([3900.0, 4300.0, 4600.0])
     amplitudes = np.array([2e-9, 20e-9])
-    options = dict(harmonics=(1.0, 0.5), ramp_periods=6, hold_periods=10, window_periods=2, steps_per_period=32)
+    options = {"harmonics": (1.0, 0.5), "ramp_periods": 6, "hold_periods": 10, "window_periods": 2,
+               "steps_per_period": 32}
 
     def model(theta):
         f0, kappa_scale, gamma, drive_scale = theta

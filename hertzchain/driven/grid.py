@@ -29,10 +29,11 @@ import numpy as np
 
 from . import kernel
 from .chain import DrivenChain
+from .lockin import AbstractReading
 from .schedule import HarmonicSchedule, check_readout, lockin_levels
 
 
-class LockinGrid(eqx.Module):
+class LockinGrid(AbstractReading):
     """What `lockin_grid` returns.
 
     **Fields:**
@@ -51,14 +52,6 @@ class LockinGrid(eqx.Module):
     harmonics: tuple[float, ...] = eqx.field(static=True)
     quantity: str = eqx.field(static=True)
     bead: int = eqx.field(static=True)
-
-    @property
-    def rms(self) -> jax.Array:
-        return jnp.abs(self.complex_amplitude) / jnp.sqrt(2.0)
-
-    @property
-    def phase_rad(self) -> jax.Array:
-        return jnp.angle(self.complex_amplitude)
 
 
 def lockin_grid(
@@ -96,7 +89,7 @@ def lockin_grid(
     **Returns:** `LockinGrid` with `.rms` and `.phase_rad` of shape (n_harmonics, F, A).
     """
     harmonics = tuple(float(h) for h in harmonics)
-    _check_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
+    check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
                      hold_periods, window_periods, steps_per_period)
     return _lockin_grid(chain, jnp.asarray(frequencies_hz, dtype=jnp.float64),
                         jnp.asarray(drive_amplitudes_m, dtype=jnp.float64), int(bead), quantity, harmonics,
@@ -131,7 +124,7 @@ def settle_periods(chain: DrivenChain, frequency_hz: float, tolerance: float = 1
     return int(np.ceil(2.0 * np.log(1.0 / tolerance) * float(frequency_hz) / rate))
 
 
-def _check_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
+def check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
                      hold_periods, window_periods, steps_per_period) -> None:
     for name, value in (("ramp_periods", ramp_periods), ("hold_periods", hold_periods)):
         if int(value) != value or value < 0:

@@ -33,7 +33,7 @@ from ..progress import Progress
 from ..sweep import _read_parquet, _write_parquet, _write_table_csv
 from . import kernel
 from .chain import DrivenChain
-from .grid import LockinGrid, _check_arguments
+from .grid import LockinGrid, check_grid_arguments
 from .schedule import HarmonicSchedule, lockin_levels
 
 LOCKIN_SWEEP_FORMAT = "hertzchain-lockin-sweep/1"
@@ -87,7 +87,7 @@ def run_lockin_sweep(
     **Returns:** `LockinSweepResult`.
     """
     harmonics = tuple(float(h) for h in harmonics)
-    _check_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
+    check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
                      hold_periods, window_periods, steps_per_period)
     frequencies = np.asarray(frequencies_hz, dtype=float)
     amplitudes = np.asarray(drive_amplitudes_m, dtype=float)
@@ -100,9 +100,9 @@ def run_lockin_sweep(
         raise ValueError(f"chunk_size must be a positive whole number of runs, got {chunk_size}.")
     chunk_size = len(devices) * math.ceil(int(chunk_size) / len(devices))
     n_chunks = math.ceil(n_runs / chunk_size)
-    options = dict(bead=int(bead), quantity=quantity, harmonics=list(harmonics), ramp_periods=int(ramp_periods),
-                   hold_periods=int(hold_periods), window_periods=int(window_periods),
-                   steps_per_period=int(steps_per_period))
+    options = {"bead": int(bead), "quantity": quantity, "harmonics": list(harmonics),
+               "ramp_periods": int(ramp_periods), "hold_periods": int(hold_periods),
+               "window_periods": int(window_periods), "steps_per_period": int(steps_per_period)}
     manifest = {
         "format": LOCKIN_SWEEP_FORMAT,
         "chain": {name: np.asarray(getattr(chain, name)).tolist() for name in chain.__dataclass_fields__},

@@ -21,7 +21,8 @@ the scheme stays symmetric, second order and stable for any damping. The contact
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp

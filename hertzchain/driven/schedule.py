@@ -29,7 +29,7 @@ import numpy as np
 from . import drive as drives
 from . import kernel
 from .chain import DrivenChain
-from .lockin import lockin_steps
+from .lockin import AbstractReading, lockin_steps
 
 
 class HarmonicSchedule(eqx.Module):
@@ -119,20 +119,12 @@ def _levels(chain: DrivenChain, schedule: HarmonicSchedule, window_steps: int, r
     return first_records, records, state
 
 
-class ScheduleLockin(eqx.Module):
+class ScheduleLockin(AbstractReading):
     """Lock-in at the end of every level: `complex_amplitude` (n_harmonics, S, B), `.rms`,
     `.phase_rad` (against the drive's cos), `harmonics` (static)."""
 
     complex_amplitude: jax.Array
     harmonics: tuple[float, ...] = eqx.field(static=True)
-
-    @property
-    def rms(self) -> jax.Array:
-        return jnp.abs(self.complex_amplitude) / jnp.sqrt(2.0)
-
-    @property
-    def phase_rad(self) -> jax.Array:
-        return jnp.angle(self.complex_amplitude)
 
 
 def lockin_schedule(chain: DrivenChain, schedule: HarmonicSchedule, *, bead: int = 1, quantity: str = "velocity",
@@ -179,7 +171,7 @@ def check_readout(chain, bead, quantity, harmonics, window_periods, hold_periods
                   frequencies_hz) -> None:
     """ValueError naming the argument for a lock-in read-out the run cannot give."""
     if not isinstance(chain, DrivenChain):
-        raise ValueError(f"chain: expected a DrivenChain, got {type(chain).__name__}.")
+        raise TypeError(f"chain: expected a DrivenChain, got {type(chain).__name__}.")
     if quantity not in QUANTITIES:
         raise ValueError(f"quantity: expected one of {QUANTITIES}, got {quantity!r}.")
     if int(bead) != bead or not 1 <= bead <= chain.n_beads:
@@ -294,7 +286,7 @@ def chirp(start_hz: float, stop_hz: float, duration_s: float, dt_s: float, ampli
     `record_sampled` that starts and ends at rest."""
     if not 0 < 2 * taper_s <= duration_s or dt_s <= 0:
         raise ValueError("chirp: need dt_s > 0 and 0 < 2 taper_s <= duration_s (s).")
-    t = np.arange(int(round(duration_s / dt_s)) + 1) * dt_s
+    t = np.arange(round(duration_s / dt_s) + 1) * dt_s
     rise = np.asarray(drives.smooth_step(jnp.asarray(t / taper_s))[0])
     fall = np.asarray(drives.smooth_step(jnp.asarray((duration_s - t) / taper_s))[0])
     phase = 2 * np.pi * (start_hz * t + 0.5 * (stop_hz - start_hz) * t**2 / duration_s)

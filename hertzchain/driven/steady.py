@@ -17,11 +17,11 @@ import jax.numpy as jnp
 from . import drive as drives
 from . import kernel
 from .chain import DrivenChain
-from .grid import _check_arguments
-from .lockin import lockin_steps
+from .grid import check_grid_arguments
+from .lockin import AbstractReading, lockin_steps
 
 
-class SteadyLockin(eqx.Module):
+class SteadyLockin(AbstractReading):
     """What `lockin_until_steady` returns.
 
     **Fields:** `complex_amplitude` (n_harmonics, F, A) of the last window (`.rms`,
@@ -36,14 +36,6 @@ class SteadyLockin(eqx.Module):
     periods_run: jax.Array
     harmonics: tuple[float, ...] = eqx.field(static=True)
 
-    @property
-    def rms(self) -> jax.Array:
-        return jnp.abs(self.complex_amplitude) / jnp.sqrt(2.0)
-
-    @property
-    def phase_rad(self) -> jax.Array:
-        return jnp.angle(self.complex_amplitude)
-
 
 def lockin_until_steady(chain: DrivenChain, frequencies_hz, drive_amplitudes_m, *, rtol: float = 1e-4,
                         bead: int = 1, quantity: str = "velocity", harmonics: tuple[float, ...] = (1.0, 0.5),
@@ -54,7 +46,7 @@ def lockin_until_steady(chain: DrivenChain, frequencies_hz, drive_amplitudes_m, 
     most `max_windows` windows after the ramp). Forward-mode differentiable (the number of
     windows is decided by the values, not differentiated)."""
     harmonics = tuple(float(h) for h in harmonics)
-    _check_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
+    check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
                      window_periods, window_periods, steps_per_period)
     if int(max_windows) != max_windows or max_windows < 2:
         raise ValueError(f"max_windows: at least 2 windows to compare, got {max_windows}.")
