@@ -101,3 +101,32 @@ def test_chirp_drive_starts_and_ends_at_rest_and_excites_the_resonance():
     assert 0.5 * duration < t_peak < 0.5 * duration + 0.004
     with pytest.raises(ValueError, match="first sample"):
         record_sampled(chain, np.ones(9), dt)
+
+
+def test_which_branch_the_ramp_lands_on_in_a_bistable_window():
+    # Lighter damping: the 6.66 nm response bends past its width and is bistable over a window
+    # of frequencies, where the phase-continuous sweeps up and down follow different branches.
+    frequencies_rel = np.linspace(0.90, 1.0, 21)
+    landed = {}
+    for gamma in (400.0, 250.0):
+        chain = lydon_bead(precompression_n=0.133, damping_rate_per_s=gamma)
+        frequencies = linear_mode_frequencies_hz(chain)[0] * frequencies_rel
+        hold = settle_periods(chain, frequencies.max(), tolerance=1e-5)
+        sweeps = HarmonicSchedule.levels(np.stack([frequencies, frequencies[::-1]], 1), 6.66e-9,
+                                         periods_per_level=hold)
+        swept = np.asarray(lockin_schedule(chain, sweeps, harmonics=(1.0,)).complex_amplitude[0])
+        up, down = swept[:, 0], swept[::-1, 1]
+        ramped = np.asarray(lockin_grid(chain, frequencies, [6.66e-9], harmonics=(1.0,),
+                                        hold_periods=hold).complex_amplitude[0, :, 0])
+        peak = np.abs(up).max()
+        bistable = np.abs(down - up) > 0.1 * peak
+        assert bistable.sum() >= 4  # a window of several frequencies
+        on_up = np.abs(ramped - up) < 1e-3 * peak
+        on_down = np.abs(ramped - down) < 1e-3 * peak
+        assert np.all(on_up | on_down)  # always on one of the two swept branches
+        landed[gamma] = (on_up[bistable].all(), on_down[bistable].any())
+    # gamma = 400 /s: on the upward-sweep branch throughout the window (measured); gamma = 250 /s:
+    # in part of the window the ramp ends on the resonant (downward-sweep) branch instead, a
+    # 25- to 200-periods ramp alike: there only a sweep up (`lockin_schedule`) gives the upward branch
+    assert landed[400.0] == (True, False)
+    assert landed[250.0][1]

@@ -8,8 +8,7 @@ Every (f, a) pair is one run: the chain starts at rest in its static equilibrium
 driver's amplitude rises from 0 to a over `ramp_periods` periods (`drive.smooth_step`) and
 holds for `hold_periods` more; the lock-in reads the chosen bead's velocity (or
 displacement) over the last `window_periods` whole periods of the hold, at each harmonic
-(× f) in `harmonics`. The smooth ramp lands on the branch an upward amplitude sweep
-follows. All F × A runs advance together as one batch on the SIMD axis of one `lax.scan`
+(× f) in `harmonics`. All F × A runs advance together as one batch on the SIMD axis of one `lax.scan`
 (`kernel`), each run with its own step $1/(f N)$, $N$ = `steps_per_period`: the same number
 of steps per period in every run, the same phase $2\\pi j/N$ at step j. Forward-mode
 derivatives (`jax.jacfwd`, `jax.jvp`) go through everything, with respect to the chain's
@@ -18,6 +17,18 @@ fields and the drive amplitudes (and the frequencies).
 Accuracy: velocity-Verlet shifts a linear resonance by about $(2\\pi/N)^2/24$ of its
 frequency (4e-4 at N = 64), and a transient decays as $e^{-\\gamma t/2}$: over the hold it
 falls by $e^{-\\gamma H/(2f)}$ (`settle_periods` gives the hold for a tolerance).
+
+Which branch: where the response is bistable, the ramp (the amplitude rising at a fixed
+frequency) ends on the branch that path reaches. In the single-bead regime of Lydon et al.
+that is the branch of a phase-continuous upward frequency sweep, and it stays so through a
+bistable window at lighter damping (tests: ζ ≈ 0.036, and γ = 400 /s); at lighter damping
+still (γ = 250 /s) part of the window ends on the resonant branch instead, however slow the
+ramp. A sweep up with `lockin_schedule` follows the upward branch by construction.
+
+Period doubling: without noise, a subharmonic grows only from what the ramp leaves at
+f/2, at the rate set by the Floquet multiplier (`floquet_multipliers`): just past a
+threshold it may not show within the hold. `period_doubling_threshold` finds the
+threshold itself.
 """
 
 from __future__ import annotations
