@@ -130,3 +130,33 @@ def test_which_branch_the_ramp_lands_on_in_a_bistable_window():
     # 25- to 200-periods ramp alike: there only a sweep up (`lockin_schedule`) gives the upward branch
     assert landed[400.0] == (True, False)
     assert landed[250.0][1]
+
+
+def test_amplitude_loop_shows_hysteresis_and_decimated_records_agree():
+    # gamma = 400 /s, 0.935 of the linear resonance: inside the bistable window at the top drive
+    chain = lydon_bead(precompression_n=0.133, damping_rate_per_s=400.0)
+    frequency = linear_mode_frequencies_hz(chain)[0] * 0.935
+    amplitudes = np.linspace(1e-9, 10e-9, 19)
+    hold = settle_periods(chain, frequency, tolerance=1e-5)
+    loop = HarmonicSchedule.levels(frequency, np.r_[amplitudes, amplitudes[::-1]], periods_per_level=hold)
+    rms = np.asarray(lockin_schedule(chain, loop, harmonics=(1.0,)).rms[0, :, 0])
+    gain_up, gain_down = rms[:19] / amplitudes, rms[19:][::-1] / amplitudes
+    jumped_up = np.flatnonzero(gain_up > 2 * gain_up[0])
+    stayed_down = np.flatnonzero(gain_down > 2 * gain_down[0])
+    assert jumped_up.size and stayed_down.size
+    # going up the response jumps to the resonant branch later than it falls off going down
+    assert amplitudes[stayed_down[0]] < amplitudes[jumped_up[0]] - 2e-9
+    both = np.ones(19, bool)
+    both[stayed_down[0]: jumped_up[0]] = False
+    # outside the loop one branch: measured 1.1e-3 apart at most, next to the fold, where the
+    # transient decays slowest (critical slowing down); the bound was set above that measurement
+    np.testing.assert_allclose(gain_up[both], gain_down[both], rtol=3e-3)
+    # records every 4th step equal every 4th of the full record, times included
+    short = HarmonicSchedule.levels(frequency, np.array([2e-9, 6e-9, 3e-9]), steps_per_period=32, ramp_periods=3,
+                                    periods_per_level=4)
+    full = record_schedule(chain, short, beads=(1,), contacts=(0, 1))
+    sparse = record_schedule(chain, short, beads=(1,), contacts=(0, 1), every_steps=4)
+    np.testing.assert_allclose(np.asarray(sparse.time_s), np.asarray(full.time_s)[:, 3::4], rtol=1e-13)
+    np.testing.assert_allclose(np.asarray(sparse.contact_force_n), np.asarray(full.contact_force_n)[..., 3::4],
+                               rtol=1e-12)
+    assert full.time_s.shape[1] == (3 + 4 + 4 + 4) * 32
