@@ -10,9 +10,11 @@ grid (`lockin_grid`, RMS and phase at f and f/2) and its Jacobian with respect t
 parameters (precompression, contact-stiffness scale, damping rate, drive scale) by
 `jax.jacfwd`. The JSON records the machine (CPU count, load average) with the numbers.
 
-Two physics checks are stored with them (`checks`): the period-doubling threshold at 7.9 kHz
-of the single bead as the research notes fitted it (delta_0 = 22.6 nm at F0 = 0.133 N,
-zeta = 0.036; their independent model: 12 nm), from the Floquet multipliers; and the largest
+Physics checks are stored with them (`checks`): for the single bead as the research notes
+fitted it (delta_0 = 22.6 nm at F0 = 0.133 N, zeta = 0.036, drive scale 1.12), the resonance
+shift from the lowest to the highest drive and the fall of the peak velocity per nm of drive
+(their independent model: -6.5 % and 0.87) and the period-doubling threshold at 7.9 kHz from
+the Floquet multipliers (their model: 12 nm); and the largest
 difference between the ramped runs of `lockin_grid` and a phase-continuous upward frequency
 sweep (`lockin_schedule`) at 6.66 nm over 0.86-1.06 of the linear resonance, relative to
 the peak (both held until transients decay to 1e-6, `settle_periods`).
@@ -63,6 +65,11 @@ def physics_checks() -> dict:
     fitted = DrivenChain(bead_mass_kg=[0.028], contact_kappa_n_m1p5=[kappa, kappa], precompression_n=0.133,
                          damping_rate_per_s=2 * 0.036 * 2 * np.pi * 3993.0)
     threshold = period_doubling_threshold(fitted, 7900.0, np.linspace(2e-9, 40e-9, 20))
+    bending_hz = np.arange(3000.0, 4700.1, 5.0)
+    drives = 1.12 * np.array([0.683e-9, 6.66e-9])
+    rms = np.asarray(lockin_grid(fitted, bending_hz, drives, harmonics=(1.0,)).rms[0])
+    peak_hz = bending_hz[np.argmax(rms, axis=0)]
+    gain = rms.max(axis=0) / drives
     chain = DrivenChain.from_materials(
         n_beads=1, bead_radius_m=9.525e-3, bead_mass_kg=0.028, bead_youngs_pa=193e9, bead_poisson=0.3,
         driver_youngs_pa=193e9, driver_poisson=0.3, wall_youngs_pa=193e9, wall_poisson=0.3,
@@ -75,6 +82,10 @@ def physics_checks() -> dict:
                          harmonics=(1.0,)).complex_amplitude[0, :, 0]
     ramped = lockin_grid(chain, frequencies, [6.66e-9], harmonics=(1.0,), hold_periods=hold).complex_amplitude[0, :, 0]
     return {
+        "fitted_bead_resonance_shift": float(peak_hz[1] / peak_hz[0] - 1),
+        "fitted_bead_resonance_shift_independent_model": -0.065,
+        "fitted_bead_peak_per_nm_top_over_lowest": float(gain[1] / gain[0]),
+        "fitted_bead_peak_per_nm_top_over_lowest_independent_model": 0.87,
         "tongue_tip_threshold_at_7900_hz_m": threshold,
         "tongue_tip_independent_model_m": 12e-9,
         "ramp_vs_upward_sweep_max_difference_over_peak": float(jnp.max(jnp.abs(ramped - up)) / jnp.max(jnp.abs(up))),

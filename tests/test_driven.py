@@ -21,6 +21,14 @@ def lydon_bead(n_beads=1, precompression_n=4.5, damping_rate_per_s=1800.0):
     )
 
 
+def lydon_fitted_bead():
+    """The single bead as the research notes fitted it: delta_0 = 22.6 nm at F0 = 0.133 N
+    (linear resonance 3993 Hz), zeta = 0.036."""
+    kappa = 0.133 / (22.6e-9) ** 1.5
+    return DrivenChain(bead_mass_kg=[0.028], contact_kappa_n_m1p5=[kappa, kappa], precompression_n=0.133,
+                       damping_rate_per_s=2 * 0.036 * 2 * np.pi * 3993.0)
+
+
 def uneven_chain():
     """A second setup: three unequal beads, unequal contacts, unequal damping."""
     return DrivenChain(
@@ -256,3 +264,17 @@ def test_smooth_step_is_smooth():
     assert float(value[0]) == 0.0 and float(value[-1]) == 1.0
     numeric = np.gradient(np.asarray(value), np.asarray(s))
     np.testing.assert_allclose(np.asarray(slope)[1:-1], numeric[1:-1], atol=2e-3)
+
+
+def test_resonance_bending_of_the_fitted_bead_matches_the_independent_model():
+    # research notes (real-data.md): the fitted model (drive scale 1.12 x the files' 6.834e-7 m/V)
+    # bends the resonance by -6.5 % from the lowest to the highest drive, and its peak velocity
+    # per nm of drive falls to 0.87 of the lowest drive's
+    chain = lydon_fitted_bead()
+    frequencies = np.arange(3000.0, 4700.1, 5.0)
+    drives = 1.12 * np.array([0.683e-9, 6.66e-9])
+    rms = np.asarray(lockin_grid(chain, frequencies, drives, harmonics=(1.0,)).rms[0])
+    peak = frequencies[np.argmax(rms, axis=0)]
+    assert peak[1] / peak[0] - 1 == pytest.approx(-0.065, abs=0.005)  # the notes quote two digits
+    gain = rms.max(axis=0) / drives
+    assert gain[1] / gain[0] == pytest.approx(0.87, abs=0.01)

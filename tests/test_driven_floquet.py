@@ -6,18 +6,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy.linalg import expm
-from test_driven import linear_mode_frequencies_hz, lydon_bead, uneven_chain
+from test_driven import linear_mode_frequencies_hz, lydon_bead, lydon_fitted_bead, uneven_chain
 
-from hertzchain.driven import DrivenChain
 from hertzchain.driven.floquet import floquet_multipliers, period_doubling_threshold, period_map
-
-
-def lydon_fitted_bead():
-    """The single bead as the research notes fitted it: delta_0 = 22.6 nm at F0 = 0.133 N
-    (linear resonance 3993 Hz), zeta = 0.036."""
-    kappa = 0.133 / (22.6e-9) ** 1.5
-    return DrivenChain(bead_mass_kg=[0.028], contact_kappa_n_m1p5=[kappa, kappa], precompression_n=0.133,
-                       damping_rate_per_s=2 * 0.036 * 2 * np.pi * 3993.0)
 
 
 def test_multipliers_of_a_damped_linear_oscillator_in_closed_form():
@@ -91,3 +82,4 @@ def test_period_doubling_tongue_tip_matches_the_independent_model():
     # below every threshold the orbit is stable, with no multiplier beyond -1
     below = floquet_multipliers(chain, [7900.0], [0.8 * at_tip])
     assert below.largest_modulus[0] < 1.0
+
