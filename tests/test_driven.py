@@ -48,6 +48,13 @@ def test_from_materials_stiffness_and_static_equilibrium():
     assert kappa[3] == pytest.approx(kappa[0], rel=1e-12)
     overlap = np.asarray(chain.static_overlap_m())
     np.testing.assert_allclose(kappa * overlap**1.5, 4.5, rtol=1e-13)
+    # a rigid wall (Y = inf) doubles the compliance's share: 2 sqrt(2) x sphere-sphere; and the
+    # mass from the density of a full sphere (316 steel, 7990 kg/m^3: 28.9 g, Lydon's README)
+    rigid = DrivenChain.from_materials(
+        n_beads=2, bead_radius_m=9.525e-3, bead_density_kg_m3=7990.0, bead_youngs_pa=193e9, bead_poisson=0.3,
+        driver_youngs_pa=193e9, driver_poisson=0.3, wall_youngs_pa=np.inf, wall_poisson=0.3, precompression_n=3.0)
+    assert float(rigid.contact_kappa_n_m1p5[2]) == pytest.approx(2 * np.sqrt(2) * kappa[1], rel=1e-12)
+    assert float(rigid.bead_mass_kg[0]) == pytest.approx(0.0289, abs=5e-5)
     for c in (chain, uneven_chain()):
         p = kernel.kernel_params(c)
         state = kernel.static_state(p, jnp.zeros(3))
