@@ -99,6 +99,16 @@ def test_lockin_of_linear_response_matches_closed_form(chain_name):
         # Verlet at 1500 steps a period shifts the resonance by ~(2 pi / 1500)^2 / 24 = 7e-7
         assert np.max(np.abs(got - exact)) < 1e-4 * scale, (bead, got, exact)
         np.testing.assert_allclose(np.asarray(grid.rms[0, :, 0]), np.abs(exact) / np.sqrt(2), rtol=2e-4)
+    if chain_name == "one_bead":
+        return
+    # force sensors at the driver face and at the wall: k_0 (a - X_1) and k_n X_n
+    k = np.asarray(chain.contact_stiffness_n_m())
+    displacement = linear_response(chain, frequencies) * amplitude / (2j * np.pi * frequencies)
+    for contact, exact in ((0, k[0] * (amplitude - displacement[0])), (chain.n_beads, k[-1] * displacement[-1])):
+        grid = lockin_grid(chain, frequencies, [amplitude], quantity="force", contact=contact, harmonics=(1.0,),
+                           ramp_periods=10, hold_periods=hold, window_periods=2, steps_per_period=1500)
+        got = np.asarray(grid.complex_amplitude[0, :, 0])
+        assert np.max(np.abs(got - exact)) < 1e-4 * np.max(np.abs(exact)), (contact, got, exact)
 
 
 def test_lockin_function_reads_amplitude_phase_and_rejects_partial_periods():
@@ -263,6 +273,10 @@ def test_bad_input_names_the_field():
                     damping_rate_per_s=0.0)
     with pytest.raises(ValueError, match="drive_amplitudes_m"):
         lockin_grid(chain, [4000.0], [-1e-9])
+    with pytest.raises(ValueError, match="contact"):
+        lockin_grid(chain, [4000.0], [1e-9], quantity="force")
+    with pytest.raises(ValueError, match="contact"):
+        lockin_grid(chain, [4000.0], [1e-9], contact=1)
 
 
 def test_smooth_step_is_smooth():

@@ -63,6 +63,7 @@ class LockinGrid(AbstractReading):
     harmonics: tuple[float, ...] = eqx.field(static=True)
     quantity: str = eqx.field(static=True)
     bead: int = eqx.field(static=True)
+    contact: int | None = eqx.field(static=True, default=None)
 
 
 def lockin_grid(
@@ -77,6 +78,7 @@ def lockin_grid(
     hold_periods: int = 35,
     window_periods: int = 4,
     steps_per_period: int = 64,
+    contact: int | None = None,
     unroll: int = kernel.DEFAULT_UNROLL,
 ) -> LockinGrid:
     """Lock-in response of `chain` over the grid `frequencies_hz` (F,) × `drive_amplitudes_m`
@@ -88,33 +90,38 @@ def lockin_grid(
     - `frequencies_hz`: (F,) drive frequencies, Hz (> 0).
     - `drive_amplitudes_m`: (A,) drive displacement amplitudes, m.
     - `bead`: which bead the vibrometer reads, 1..n (1 = next to the driver).
-    - `quantity`: "velocity" (m/s) or "displacement" (m, from the static equilibrium).
+    - `quantity`: "velocity" (m/s) or "displacement" (m, from the static equilibrium) of
+      `bead`, or "force" (N) of `contact`.
     - `harmonics`: multiples of f to demodulate (1.0 = the drive's, 0.5 = the subharmonic);
       `window_periods` × each must be whole (e.g. an even window for 0.5).
     - `ramp_periods`, `hold_periods`: periods of the amplitude ramp from 0 and of the hold
       after it; `window_periods` (≤ `hold_periods`): the last periods, read by the lock-in.
     - `steps_per_period`: velocity-Verlet steps per drive period N (each run's step is
       1/(f N)); checked against the chain's highest linear mode (ω dt ≤ 1).
+    - `contact`: with `quantity="force"`, the contact whose total force the lock-in reads
+      (0 = driver face .. n = wall; N), as a force sensor there would.
     - `unroll`: steps per scan iteration (speed only).
 
     **Returns:** `LockinGrid` with `.rms` and `.phase_rad` of shape (n_harmonics, F, A).
     """
     harmonics = tuple(float(h) for h in harmonics)
     check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
-                     hold_periods, window_periods, steps_per_period)
+                         hold_periods, window_periods, steps_per_period, contact)
+    contact = None if contact is None else int(contact)
     return _lockin_grid(chain, jnp.asarray(frequencies_hz, dtype=jnp.float64),
                         jnp.asarray(drive_amplitudes_m, dtype=jnp.float64), int(bead), quantity, harmonics,
-                        int(ramp_periods), int(hold_periods), int(window_periods), int(steps_per_period), int(unroll))
+                        int(ramp_periods), int(hold_periods), int(window_periods), int(steps_per_period), int(unroll),
+                        contact)
 
 
 @eqx.filter_jit
 def _lockin_grid(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
-                 hold_periods, window_periods, steps_per_period, unroll):
+                 hold_periods, window_periods, steps_per_period, unroll, contact):
     n_freq, n_amp = frequencies_hz.shape[0], drive_amplitudes_m.shape[0]
     # one level per run, run index = i_f * A + i_a
     schedule = HarmonicSchedule(jnp.repeat(frequencies_hz, n_amp)[None], jnp.tile(drive_amplitudes_m, n_freq)[None],
                                 steps_per_period, ramp_periods, hold_periods, 0)
-    readings = lockin_levels(chain, schedule, bead, quantity, harmonics, window_periods, unroll)
+    readings = lockin_levels(chain, schedule, bead, quantity, harmonics, window_periods, unroll, contact)
     return LockinGrid(
         complex_amplitude=readings.complex_amplitude.reshape(len(harmonics), n_freq, n_amp),
         frequencies_hz=frequencies_hz,
@@ -122,6 +129,7 @@ def _lockin_grid(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harm
         harmonics=harmonics,
         quantity=quantity,
         bead=bead,
+        contact=contact,
     )
 
 
@@ -136,7 +144,8 @@ def settle_periods(chain: DrivenChain, frequency_hz: float, tolerance: float = 1
 
 
 def check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
-                     hold_periods, window_periods, steps_per_period) -> None:
+                         hold_periods, window_periods, steps_per_period, contact=None) -> None:
+    """ValueError naming the argument for a grid `lockin_grid` cannot run (concrete values)."""
     for name, value in (("ramp_periods", ramp_periods), ("hold_periods", hold_periods)):
         if int(value) != value or value < 0:
             raise ValueError(f"{name}: expected a whole number of periods >= 0, got {value}.")
@@ -149,4 +158,5 @@ def check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quanti
         if not np.all(np.isfinite(array)) or (name == "frequencies_hz" and np.any(array <= 0)) or np.any(array < 0):
             raise ValueError(f"{name}: values must be finite and {'> 0' if name == 'frequencies_hz' else '>= 0'} "
                              f"({unit}), got {array}.")
-    check_readout(chain, bead, quantity, harmonics, window_periods, hold_periods, steps_per_period, frequencies_hz)
+    check_readout(chain, bead, quantity, harmonics, window_periods, hold_periods, steps_per_period, frequencies_hz,
+                  contact)

@@ -70,6 +70,7 @@ def run_lockin_sweep(
     hold_periods: int = 35,
     window_periods: int = 4,
     steps_per_period: int = 64,
+    contact: int | None = None,
     chunk_size: int | None = None,
     devices=None,
     max_chunks: int | None = None,
@@ -88,7 +89,7 @@ def run_lockin_sweep(
     """
     harmonics = tuple(float(h) for h in harmonics)
     check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
-                     hold_periods, window_periods, steps_per_period)
+                         hold_periods, window_periods, steps_per_period, contact)
     frequencies = np.asarray(frequencies_hz, dtype=float)
     amplitudes = np.asarray(drive_amplitudes_m, dtype=float)
     folder = Path(folder)
@@ -102,7 +103,8 @@ def run_lockin_sweep(
     n_chunks = math.ceil(n_runs / chunk_size)
     options = {"bead": int(bead), "quantity": quantity, "harmonics": list(harmonics),
                "ramp_periods": int(ramp_periods), "hold_periods": int(hold_periods),
-               "window_periods": int(window_periods), "steps_per_period": int(steps_per_period)}
+               "window_periods": int(window_periods), "steps_per_period": int(steps_per_period),
+               "contact": None if contact is None else int(contact)}
     manifest = {
         "format": LOCKIN_SWEEP_FORMAT,
         "chain": {name: np.asarray(getattr(chain, name)).tolist() for name in chain.__dataclass_fields__},
@@ -130,14 +132,13 @@ def run_lockin_sweep(
     bar = Progress(sum(min((i + 1) * chunk_size, n_runs) - i * chunk_size for i in todo), "lock-in sweep (runs)") \
         if progress and todo else None
     evaluate = _chunk_function(tuple(devices) if len(devices) > 1 else None)
+    settings = tuple((name, tuple(value) if isinstance(value, list) else value) for name, value in options.items())
     for index in todo:
         start, stop = index * chunk_size, min((index + 1) * chunk_size, n_runs)
         pad = chunk_size - (stop - start)
         f = np.concatenate([run_frequency[start:stop], np.repeat(run_frequency[stop - 1], pad)])
         a = np.concatenate([run_amplitude[start:stop], np.repeat(run_amplitude[stop - 1], pad)])
-        readings = np.asarray(evaluate(chain, jnp.asarray(f), jnp.asarray(a), options["bead"], quantity, harmonics,
-                                       options["ramp_periods"], options["hold_periods"], options["window_periods"],
-                                       options["steps_per_period"]))[:, : stop - start]
+        readings = np.asarray(evaluate(chain, jnp.asarray(f), jnp.asarray(a), settings))[:, : stop - start]
         columns = {"run": np.arange(start, stop, dtype=np.int64), "frequency_hz": run_frequency[start:stop],
                    "drive_amplitude_m": run_amplitude[start:stop]}
         for h, reading in zip(harmonics, readings):
@@ -153,7 +154,7 @@ def run_lockin_sweep(
     table = {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
     _write_parquet(folder / "lockin.parquet", table)
     _write_table_csv(folder / "lockin.csv", table)
-    grid = _grid_from_table(table, frequencies, amplitudes, harmonics, quantity, int(bead))
+    grid = _grid_from_table(table, frequencies, amplitudes, options)
     if plots:
         plot_lockin(grid, folder / "lockin.png")
     return LockinSweepResult(True, done, n_chunks, len(todo), grid, folder)
@@ -166,18 +167,19 @@ def read_lockin_sweep(folder) -> LockinGrid:
     options = manifest["options"]
     table = _read_parquet(folder / "lockin.parquet")
     return _grid_from_table(table, np.asarray(manifest["frequencies_hz"]), np.asarray(manifest["drive_amplitudes_m"]),
-                            tuple(options["harmonics"]), options["quantity"], options["bead"])
+                            options)
 
 
-def _grid_from_table(table, frequencies, amplitudes, harmonics, quantity, bead) -> LockinGrid:
+def _grid_from_table(table, frequencies, amplitudes, options) -> LockinGrid:
     shape = (frequencies.size, amplitudes.size)
+    harmonics = tuple(options["harmonics"])
     readings = np.stack([
         np.sqrt(2.0) * table[f"rms_{harmonic_column(h)}"].reshape(shape)
         * np.exp(1j * table[f"phase_{harmonic_column(h)}_rad"].reshape(shape))
         for h in harmonics
     ])
-    return LockinGrid(jnp.asarray(readings), jnp.asarray(frequencies), jnp.asarray(amplitudes), tuple(harmonics),
-                      quantity, bead)
+    return LockinGrid(jnp.asarray(readings), jnp.asarray(frequencies), jnp.asarray(amplitudes), harmonics,
+                      options["quantity"], options["bead"], options["contact"])
 
 
 def _chunk_path(folder: Path, index: int) -> Path:
@@ -185,22 +187,25 @@ def _chunk_path(folder: Path, index: int) -> Path:
 
 
 def _chunk_function(devices):
-    """(chain, frequencies (B,), amplitudes (B,), static read-out...) -> (n_harmonics, B)
-    complex readings, compiled, the batch split over `devices` when given."""
+    """(chain, frequencies (B,), amplitudes (B,), settings) -> (n_harmonics, B) complex
+    readings, compiled, the batch split over `devices` when given; `settings`: the manifest's
+    run options as a tuple of (name, value) pairs (static)."""
 
-    def local(chain, frequency, amplitude, bead, quantity, harmonics, ramp, hold, window, steps):
-        schedule = HarmonicSchedule(frequency[None], amplitude[None], steps, ramp, hold, 0)
-        return lockin_levels(chain, schedule, bead, quantity, harmonics, window, kernel.DEFAULT_UNROLL
-                             ).complex_amplitude[:, 0]
+    def local(chain, frequency, amplitude, settings):
+        o = dict(settings)
+        schedule = HarmonicSchedule(frequency[None], amplitude[None], o["steps_per_period"], o["ramp_periods"],
+                                    o["hold_periods"], 0)
+        return lockin_levels(chain, schedule, o["bead"], o["quantity"], o["harmonics"], o["window_periods"],
+                             kernel.DEFAULT_UNROLL, o["contact"]).complex_amplitude[:, 0]
 
     if devices is None:
         return eqx.filter_jit(local)
     mesh = Mesh(np.asarray(devices), ("batch",))
 
     @eqx.filter_jit
-    def sharded(chain, frequency, amplitude, bead, quantity, harmonics, ramp, hold, window, steps):
+    def sharded(chain, frequency, amplitude, settings):
         def per_device(c, f, a):
-            return local(c, f, a, bead, quantity, harmonics, ramp, hold, window, steps)
+            return local(c, f, a, settings)
 
         specs = (PartitionSpec(), PartitionSpec("batch"), PartitionSpec("batch"))  # the chain on every device
         return jax.shard_map(per_device, mesh=mesh, in_specs=specs, out_specs=PartitionSpec(None, "batch"))(

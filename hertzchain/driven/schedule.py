@@ -128,29 +128,43 @@ class ScheduleLockin(AbstractReading):
 
 
 def lockin_schedule(chain: DrivenChain, schedule: HarmonicSchedule, *, bead: int = 1, quantity: str = "velocity",
-                    harmonics: tuple[float, ...] = (1.0, 0.5), window_periods: int = 4,
+                    harmonics: tuple[float, ...] = (1.0, 0.5), window_periods: int = 4, contact: int | None = None,
                     unroll: int = kernel.DEFAULT_UNROLL) -> ScheduleLockin:
-    """The lock-in (RMS, phase) of `bead`'s velocity or displacement over the last
-    `window_periods` whole periods of every level of `schedule` (arguments as `lockin_grid`'s;
-    `window_periods` ≤ `periods_per_level`). **Returns:** `ScheduleLockin`, (n_harmonics, S, B)."""
+    """The lock-in (RMS, phase) of `bead`'s velocity or displacement (or of the force of
+    `contact`, with `quantity="force"`) over the last `window_periods` whole periods of every
+    level of `schedule` (arguments as `lockin_grid`'s; `window_periods` ≤ `periods_per_level`).
+    **Returns:** `ScheduleLockin`, (n_harmonics, S, B)."""
     harmonics = tuple(float(h) for h in harmonics)
     check_readout(chain, bead, quantity, harmonics, window_periods, schedule.periods_per_level,
-                  schedule.steps_per_period, schedule.frequency_hz)
+                  schedule.steps_per_period, schedule.frequency_hz, contact)
     return eqx.filter_jit(lockin_levels)(chain, schedule, int(bead), quantity, harmonics, int(window_periods),
-                                         int(unroll))
+                                         int(unroll), contact)
 
 
-def lockin_levels(chain, schedule, bead, quantity, harmonics, window_periods, unroll) -> ScheduleLockin:
-    """`lockin_schedule` without the checks (traceable; static arguments as Python values)."""
-    n = schedule.steps_per_period
-    window = window_periods * n
-    row = bead - 1
+def readout(chain: DrivenChain, quantity: str, bead: int, contact: int | None):
+    """`record(state, u, u_dot)` of what the lock-in reads: bead `bead`'s velocity (m/s) or
+    displacement (m), or the total force of `contact` (N) for `quantity="force"`."""
+    if quantity == "force":
+        p = kernel.kernel_params(chain)
+
+        def record(s, u, u_dot):
+            return kernel.contact_forces(p, s.displacement_m, s.velocity_m_s, u, u_dot)[contact]
+
+        return record
     field = "velocity_m_s" if quantity == "velocity" else "displacement_m"
 
     def record(s, u, u_dot):
-        return getattr(s, field)[row]
+        return getattr(s, field)[bead - 1]
 
-    first, rest, _ = _levels(chain, schedule, window, record, unroll)
+    return record
+
+
+def lockin_levels(chain, schedule, bead, quantity, harmonics, window_periods, unroll,
+                  contact=None) -> ScheduleLockin:
+    """`lockin_schedule` without the checks (traceable; static arguments as Python values)."""
+    n = schedule.steps_per_period
+    window = window_periods * n
+    first, rest, _ = _levels(chain, schedule, window, readout(chain, quantity, bead, contact), unroll)
     # the drive's phase at step j of a level is 2 pi j / N (levels are whole periods)
     start = (schedule.ramp_periods + schedule.periods_per_level) * n - window + 1
     readings = [jnp.stack([lockin_steps(first, n, h, start).complex_amplitude for h in harmonics])[:, None]]
@@ -161,14 +175,14 @@ def lockin_levels(chain, schedule, bead, quantity, harmonics, window_periods, un
     return ScheduleLockin(jnp.concatenate(readings, axis=1), harmonics)
 
 
-QUANTITIES = ("velocity", "displacement")
+QUANTITIES = ("velocity", "displacement", "force")
 # The largest (highest linear mode's angular frequency × step) accepted: velocity-Verlet is
 # stable below 2, and accurate to about (omega dt)^2 / 24 of the mode's frequency.
 MAX_OMEGA_DT = 1.0
 
 
 def check_readout(chain, bead, quantity, harmonics, window_periods, hold_periods, steps_per_period,
-                  frequencies_hz) -> None:
+                  frequencies_hz, contact=None) -> None:
     """ValueError naming the argument for a lock-in read-out the run cannot give."""
     if not isinstance(chain, DrivenChain):
         raise TypeError(f"chain: expected a DrivenChain, got {type(chain).__name__}.")
@@ -176,6 +190,12 @@ def check_readout(chain, bead, quantity, harmonics, window_periods, hold_periods
         raise ValueError(f"quantity: expected one of {QUANTITIES}, got {quantity!r}.")
     if int(bead) != bead or not 1 <= bead <= chain.n_beads:
         raise ValueError(f"bead: beads are numbered 1..{chain.n_beads} from the driver, got {bead}.")
+    if quantity == "force":
+        if contact is None or int(contact) != contact or not 0 <= contact <= chain.n_beads:
+            raise ValueError(f'contact: quantity="force" reads one contact, 0 (driver) .. {chain.n_beads} (wall); '
+                             f"got {contact}.")
+    elif contact is not None:
+        raise ValueError(f'contact: only read with quantity="force" (got quantity={quantity!r}, contact={contact}).')
     if int(window_periods) != window_periods or not 1 <= window_periods <= hold_periods:
         raise ValueError(f"window_periods: must be a whole number 1..{hold_periods} (the periods held), "
                          f"got {window_periods}.")

@@ -19,6 +19,7 @@ from . import kernel
 from .chain import DrivenChain
 from .grid import check_grid_arguments
 from .lockin import AbstractReading, lockin_steps
+from .schedule import readout
 
 
 class SteadyLockin(AbstractReading):
@@ -40,14 +41,15 @@ class SteadyLockin(AbstractReading):
 def lockin_until_steady(chain: DrivenChain, frequencies_hz, drive_amplitudes_m, *, rtol: float = 1e-4,
                         bead: int = 1, quantity: str = "velocity", harmonics: tuple[float, ...] = (1.0, 0.5),
                         ramp_periods: int = 25, window_periods: int = 4, max_windows: int = 50,
-                        steps_per_period: int = 64, unroll: int = kernel.DEFAULT_UNROLL) -> SteadyLockin:
+                        steps_per_period: int = 64, contact: int | None = None,
+                        unroll: int = kernel.DEFAULT_UNROLL) -> SteadyLockin:
     """Lock-in over the grid `frequencies_hz` (F,) × `drive_amplitudes_m` (A,), driven until
     steady (see the module docstring; arguments as `lockin_grid`'s, `rtol` relative, and at
     most `max_windows` windows after the ramp). Forward-mode differentiable (the number of
     windows is decided by the values, not differentiated)."""
     harmonics = tuple(float(h) for h in harmonics)
     check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
-                     window_periods, window_periods, steps_per_period)
+                         window_periods, window_periods, steps_per_period, contact)
     if int(max_windows) != max_windows or max_windows < 2:
         raise ValueError(f"max_windows: at least 2 windows to compare, got {max_windows}.")
     if not rtol > 0:
@@ -55,12 +57,12 @@ def lockin_until_steady(chain: DrivenChain, frequencies_hz, drive_amplitudes_m, 
     return _until_steady(chain, jnp.asarray(frequencies_hz, dtype=jnp.float64),
                          jnp.asarray(drive_amplitudes_m, dtype=jnp.float64), float(rtol), int(bead), quantity,
                          harmonics, int(ramp_periods), int(window_periods), int(max_windows), int(steps_per_period),
-                         int(unroll))
+                         int(unroll), None if contact is None else int(contact))
 
 
 @eqx.filter_jit
 def _until_steady(chain, frequencies_hz, drive_amplitudes_m, rtol, bead, quantity, harmonics, ramp_periods,
-                  window_periods, max_windows, steps_per_period, unroll):
+                  window_periods, max_windows, steps_per_period, unroll, contact):
     n_freq, n_amp = frequencies_hz.shape[0], drive_amplitudes_m.shape[0]
     frequency = jnp.repeat(frequencies_hz, n_amp)
     amplitude = jnp.tile(drive_amplitudes_m, n_freq)
@@ -70,16 +72,12 @@ def _until_steady(chain, frequencies_hz, drive_amplitudes_m, rtol, bead, quantit
     drive = drives.harmonic_segment(frequency, dt, n, 0.0 * amplitude, amplitude, ramp_periods * n)
     state, _ = kernel.advance(p, kernel.static_state(p, frequency), dt, drive, jnp.arange(1, ramp_periods * n + 1),
                               unroll=unroll)
-    row = bead - 1
-    field = "velocity_m_s" if quantity == "velocity" else "displacement_m"
+    record = readout(chain, quantity, bead, contact)
     window = window_periods * n
 
     def read(state):
-        # the phase of step j is 2 pi j / N: windows are whole periods, so step 1 of a window
-        # has the phase of step 1 of the run
-        def record(s, u, u_dot):
-            return getattr(s, field)[row]
-
+        # the phase of step j is 2 pi j / N: windows are whole periods, so every window's
+        # first step has the phase of the step after the ramp
         state, samples = kernel.advance(p, state, dt, drive, jnp.arange(1, window + 1) + ramp_periods * n,
                                         record=record, unroll=unroll)
         first = ramp_periods * n + 1
