@@ -103,6 +103,7 @@ def test_chirp_drive_starts_and_ends_at_rest_and_excites_the_resonance():
         record_sampled(chain, np.ones(9), dt)
 
 
+@pytest.mark.slow  # 30 s on two loaded cores: `pytest -m slow tests/test_driven_schedule.py`
 def test_which_branch_the_ramp_lands_on_in_a_bistable_window():
     # Lighter damping: the 6.66 nm response bends past its width and is bistable over a window
     # of frequencies, where the phase-continuous sweeps up and down follow different branches.

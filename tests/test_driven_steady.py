@@ -3,6 +3,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from test_driven import linear_response, lydon_bead
 
 from hertzchain.driven import lockin_grid
@@ -41,6 +42,7 @@ def test_reports_runs_that_never_settle():
     assert int(steady.windows[0, 0]) == 7 and int(steady.periods_run) == 12
 
 
+@pytest.mark.slow  # 25 s on two loaded cores: `pytest -m slow tests/test_driven_steady.py`
 def test_forward_derivative_through_the_stopping_loop():
     chain = lydon_bead(damping_rate_per_s=3000.0)
 

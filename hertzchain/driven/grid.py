@@ -2,14 +2,16 @@
 
     lockin_grid(chain, frequencies_hz, drive_amplitudes_m, *, bead=1, quantity="velocity",
                 harmonics=(1.0, 0.5), ramp_periods=25, hold_periods=35, window_periods=4,
-                steps_per_period=64, unroll=8) -> LockinGrid
+                steps_per_period=64, contact=None, unroll=8) -> LockinGrid
+    LockinGrid: .rms, .phase_rad, .complex_amplitude (n_harmonics, F, A); .frequencies_hz,
+                .drive_amplitudes_m; static .harmonics, .quantity, .bead, .contact
 
 Every (f, a) pair is one run: the chain starts at rest in its static equilibrium, the
 driver's amplitude rises from 0 to a over `ramp_periods` periods (`drive.smooth_step`) and
 holds for `hold_periods` more; the lock-in reads the chosen bead's velocity (or
-displacement) over the last `window_periods` whole periods of the hold, at each harmonic
-(× f) in `harmonics`. All F × A runs advance together as one batch on the SIMD axis of one `lax.scan`
-(`kernel`), each run with its own step $1/(f N)$, $N$ = `steps_per_period`: the same number
+displacement, or a contact's force) over the last `window_periods` whole periods of the
+hold, at each harmonic (× f) in `harmonics`. All F × A runs advance together as one batch
+on the SIMD axis of one `lax.scan` (`kernel`), each run with its own step $1/(f N)$, $N$ = `steps_per_period`: the same number
 of steps per period in every run, the same phase $2\\pi j/N$ at step j. Forward-mode
 derivatives (`jax.jacfwd`, `jax.jvp`) go through everything, with respect to the chain's
 fields and the drive amplitudes (and the frequencies).
@@ -50,11 +52,12 @@ class LockinGrid(AbstractReading):
     **Fields:**
 
     - `rms`: (n_harmonics, F, A) lock-in RMS of the bead's velocity (m/s) or displacement
-      (m) at each harmonic of each drive frequency, for each drive amplitude.
+      (m), or of the contact's force (N), at each harmonic of each drive frequency, for each
+      drive amplitude.
     - `phase_rad`: (n_harmonics, F, A) its phase against the drive $\\cos(2\\pi f t)$, rad.
     - `complex_amplitude`: (n_harmonics, F, A) $A e^{i\\varphi}$ ($A = \\sqrt2$ RMS).
     - `frequencies_hz` (F,), `drive_amplitudes_m` (A,): the grid.
-    - `harmonics`, `quantity`, `bead`: what was demodulated (static).
+    - `harmonics`, `quantity`, `bead`, `contact`: what was demodulated (static).
     """
 
     complex_amplitude: jax.Array
