@@ -203,23 +203,30 @@ def test_jacfwd_matches_finite_differences():
 
 def independent_lockin(chain, frequency_hz, amplitude_m, ramp, hold, window, bead):
     """The same experiment integrated by scipy (DOP853, rtol 1e-11) on an ODE written here:
-    Hertz contacts, drag -m gamma v, smooth ramp, lock-in on 256 samples a period."""
+    Hertz contacts with Kuwabara-Kono damping (clipped at 0), drag -m gamma v, smooth ramp,
+    lock-in on 256 samples a period."""
     m = np.asarray(chain.bead_mass_kg)
     kappa = np.asarray(chain.contact_kappa_n_m1p5)
     gamma = np.asarray(chain.damping_rate_per_s)
+    eta = float(chain.eta_s)
     d0 = (float(chain.precompression_n) / kappa) ** (2 / 3)
     n = m.size
     w = 2 * np.pi * frequency_hz
     t_ramp = ramp / frequency_hz
 
-    def driver(t):
+    def driver(t):  # displacement and velocity
         s = min(max(t / t_ramp, 0.0), 1.0)
-        return amplitude_m * (10 * s**3 - 15 * s**4 + 6 * s**5) * np.cos(w * t)
+        envelope = amplitude_m * (10 * s**3 - 15 * s**4 + 6 * s**5)
+        rate = amplitude_m * 30 * s**2 * (1 - s) ** 2 / t_ramp if s < 1 else 0.0
+        return envelope * np.cos(w * t), rate * np.cos(w * t) - envelope * w * np.sin(w * t)
 
     def rhs(t, y):
         x, v = y[:n], y[n:]
-        overlap = d0 + np.concatenate([[driver(t)], x]) - np.concatenate([x, [0.0]])
-        force = kappa * np.maximum(overlap, 0.0) ** 1.5
+        u, u_dot = driver(t)
+        overlap = d0 + np.concatenate([[u], x]) - np.concatenate([x, [0.0]])
+        rate = np.concatenate([[u_dot], v]) - np.concatenate([v, [0.0]])
+        closed = np.maximum(overlap, 0.0)
+        force = np.where(overlap > 0, np.maximum(kappa * closed**1.5 + 1.5 * eta * kappa * np.sqrt(closed) * rate, 0), 0)
         return np.concatenate([v, (force[:-1] - force[1:]) / m - gamma * v])
 
     t_end = (ramp + hold) / frequency_hz
@@ -237,11 +244,12 @@ def linear_mode_frequencies_hz(chain):
     return np.sqrt(np.sort(np.linalg.eigvals(stiffness / np.asarray(chain.bead_mass_kg)[:, None]).real)) / (2 * np.pi)
 
 
-@pytest.mark.parametrize("n_beads", [1, 2])
-def test_agrees_with_an_independent_integrator_in_the_nonlinear_regime(n_beads):
+@pytest.mark.parametrize("n_beads, eta_s", [(1, 0.0), (2, 0.0), (2, 2e-6)])
+def test_agrees_with_an_independent_integrator_in_the_nonlinear_regime(n_beads, eta_s):
     # F0 = 0.15 N: static overlaps of 49 nm (faces) and 78 nm (between beads), so a few nm of
-    # drive near a resonance bends it (Lydon's regime)
-    chain = lydon_bead(n_beads=n_beads, precompression_n=0.15, damping_rate_per_s=1500.0)
+    # drive near a resonance bends it (Lydon's regime); with and without contact damping
+    chain = eqx.tree_at(lambda c: c.eta_s, lydon_bead(n_beads=n_beads, precompression_n=0.15,
+                                                       damping_rate_per_s=1500.0), jnp.asarray(eta_s))
     frequencies = linear_mode_frequencies_hz(chain)[-1] * np.array([0.9, 0.98])
     amplitude = 4e-9
     ramp, hold, window = 8, 24, 2
@@ -255,6 +263,11 @@ def test_agrees_with_an_independent_integrator_in_the_nonlinear_regime(n_beads):
     # and the nonlinearity is really at work: the response is 3.6-7 % off the linearised chain's
     linear = linear_response(chain, frequencies)[n_beads - 1] * amplitude
     assert np.max(np.abs(linear - reference) / np.abs(reference)) > 0.02
+    if eta_s > 0:  # and the contact damping is really at work
+        undamped = lockin_grid(eqx.tree_at(lambda c: c.eta_s, chain, jnp.asarray(0.0)), frequencies, [amplitude],
+                               bead=n_beads, harmonics=(1.0,), ramp_periods=ramp, hold_periods=hold,
+                               window_periods=window, steps_per_period=512)
+        assert np.min(np.abs(np.asarray(undamped.complex_amplitude[0, :, 0]) - got) / np.abs(got)) > 0.05
 
 
 def test_bad_input_names_the_field():

@@ -76,7 +76,7 @@ def floquet_multipliers(chain: DrivenChain, frequencies_hz, amplitudes_m, *, ste
         raise ValueError("frequencies_hz must be > 0 Hz and amplitudes_m >= 0 m (finite).")
     if int(newton_steps) != newton_steps or newton_steps < 0:
         raise ValueError(f"newton_steps: expected a whole number >= 0, got {newton_steps}.")
-    monodromy, orbit, residual = _monodromy(chain, jnp.asarray(f), jnp.asarray(a), int(steps_per_period), int(ramp_periods),
+    monodromy, orbit, residual = _monodromy(chain.for_kernel(), jnp.asarray(f), jnp.asarray(a), int(steps_per_period), int(ramp_periods),
                                      int(hold_periods), int(newton_steps), int(unroll))
     monodromy = np.asarray(monodromy)
     multipliers = np.linalg.eigvals(monodromy)

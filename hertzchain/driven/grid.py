@@ -111,7 +111,7 @@ def lockin_grid(
     check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
                          hold_periods, window_periods, steps_per_period, contact)
     contact = None if contact is None else int(contact)
-    return _lockin_grid(chain, jnp.asarray(frequencies_hz, dtype=jnp.float64),
+    return _lockin_grid(chain.for_kernel(), jnp.asarray(frequencies_hz, dtype=jnp.float64),
                         jnp.asarray(drive_amplitudes_m, dtype=jnp.float64), int(bead), quantity, harmonics,
                         int(ramp_periods), int(hold_periods), int(window_periods), int(steps_per_period), int(unroll),
                         contact)

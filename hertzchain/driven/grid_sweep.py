@@ -132,6 +132,7 @@ def run_lockin_sweep(
     bar = Progress(sum(min((i + 1) * chunk_size, n_runs) - i * chunk_size for i in todo), "lock-in sweep (runs)") \
         if progress and todo else None
     evaluate = _chunk_function(tuple(devices) if len(devices) > 1 else None)
+    chain = chain.for_kernel()
     settings = tuple((name, tuple(value) if isinstance(value, list) else value) for name, value in options.items())
     for index in todo:
         start, stop = index * chunk_size, min((index + 1) * chunk_size, n_runs)

@@ -41,7 +41,7 @@ class KernelParams(NamedTuple):
     damping_rate_per_s: jax.Array  # (n, 1)
     kappa_n_m1p5: jax.Array  # (n + 1, 1)
     static_overlap_m: jax.Array  # (n + 1, 1)
-    eta_s: jax.Array  # ()
+    eta_s: jax.Array | None  # (); None: no contact damping (compiled without it)
 
 
 class State(NamedTuple):
@@ -70,9 +70,11 @@ def contact_forces(p: KernelParams, x, v, drive_m, drive_m_s) -> jax.Array:
     zero = jnp.zeros_like(x[:1])
     front = jnp.concatenate([drive_m[None] + zero, x])
     back = jnp.concatenate([x, zero])
+    overlap = p.static_overlap_m + front - back
+    if p.eta_s is None:
+        return contact.hertz_force(overlap, p.kappa_n_m1p5)
     rate = jnp.concatenate([drive_m_s[None] + zero, v]) - jnp.concatenate([v, zero])
-    _, total = contact.contact_force(p.static_overlap_m + front - back, rate, p.kappa_n_m1p5, p.eta_s)
-    return total
+    return contact.contact_force(overlap, rate, p.kappa_n_m1p5, p.eta_s)[1]
 
 
 def contact_accel(p: KernelParams, force_n) -> jax.Array:

@@ -137,7 +137,7 @@ def lockin_schedule(chain: DrivenChain, schedule: HarmonicSchedule, *, bead: int
     harmonics = tuple(float(h) for h in harmonics)
     check_readout(chain, bead, quantity, harmonics, window_periods, schedule.periods_per_level,
                   schedule.steps_per_period, schedule.frequency_hz, contact)
-    return eqx.filter_jit(lockin_levels)(chain, schedule, int(bead), quantity, harmonics, int(window_periods),
+    return eqx.filter_jit(lockin_levels)(chain.for_kernel(), schedule, int(bead), quantity, harmonics, int(window_periods),
                                          int(unroll), contact)
 
 
@@ -214,7 +214,9 @@ def check_readout(chain, bead, quantity, harmonics, window_periods, hold_periods
     traced = [leaf for leaf in jax.tree_util.tree_leaves((chain, frequencies_hz)) if isinstance(leaf, jax.core.Tracer)]
     if not traced:
         lowest = float(np.min(np.asarray(frequencies_hz)))
-        omega_dt = 2.0 * np.pi * float(chain.highest_frequency_bound_hz()) / (lowest * steps_per_period)
+        # the chain's own bound, in NumPy: this check may run while an outer `jit` traces
+        concrete = jax.tree_util.tree_map(np.asarray, chain)
+        omega_dt = 2.0 * np.pi * float(concrete.highest_frequency_bound_hz()) / (lowest * steps_per_period)
         if omega_dt > MAX_OMEGA_DT:
             needed = int(np.ceil(steps_per_period * omega_dt / MAX_OMEGA_DT))
             raise ValueError(
@@ -275,7 +277,7 @@ def record_schedule(chain: DrivenChain, schedule: HarmonicSchedule, *, beads: tu
     if int(every_steps) != every_steps or every_steps < 1 or schedule.steps_per_period % every_steps:
         raise ValueError(f"every_steps: must be a whole divisor of steps_per_period ({schedule.steps_per_period}), "
                          f"got {every_steps}.")
-    return _record_schedule(chain, schedule, beads, contacts, int(every_steps), int(unroll))
+    return _record_schedule(chain.for_kernel(), schedule, beads, contacts, int(every_steps), int(unroll))
 
 
 @eqx.filter_jit
@@ -332,7 +334,7 @@ def record_sampled(chain: DrivenChain, displacement_m, dt_s, *, beads: tuple[int
     if int(every_steps) != every_steps or every_steps < 1 or steps % every_steps:
         raise ValueError(f"every_steps: must divide the {steps} steps of the drive, got {every_steps}.")
     dt = jnp.broadcast_to(jnp.asarray(dt_s, dtype=jnp.float64), displacement.shape[1:])
-    return _record_sampled(chain, displacement, dt, beads, contacts, int(every_steps), int(unroll))
+    return _record_sampled(chain.for_kernel(), displacement, dt, beads, contacts, int(every_steps), int(unroll))
 
 
 @eqx.filter_jit

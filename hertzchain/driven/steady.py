@@ -54,7 +54,7 @@ def lockin_until_steady(chain: DrivenChain, frequencies_hz, drive_amplitudes_m, 
         raise ValueError(f"max_windows: at least 2 windows to compare, got {max_windows}.")
     if not rtol > 0:
         raise ValueError(f"rtol: a relative tolerance > 0, got {rtol}.")
-    return _until_steady(chain, jnp.asarray(frequencies_hz, dtype=jnp.float64),
+    return _until_steady(chain.for_kernel(), jnp.asarray(frequencies_hz, dtype=jnp.float64),
                          jnp.asarray(drive_amplitudes_m, dtype=jnp.float64), float(rtol), int(bead), quantity,
                          harmonics, int(ramp_periods), int(window_periods), int(max_windows), int(steps_per_period),
                          int(unroll), None if contact is None else int(contact))
