@@ -191,6 +191,8 @@ def test_jacfwd_matches_finite_differences():
 
     theta = jnp.array([0.2, 1.0, 1500.0, 1.0])
     jac = np.asarray(jax.jacfwd(model)(theta))
+    # the same numbers with the whole model under an outer jit (the chain's constants then traced too)
+    np.testing.assert_allclose(np.asarray(jax.jit(model)(theta)), np.asarray(model(theta)), rtol=1e-12, atol=1e-15)
     for i in range(4):
         step = 1e-5 * float(theta[i])
         up = np.asarray(model(theta.at[i].add(step)))
