@@ -7,39 +7,39 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from hertzchain.contact import hertz_force
-from hertzchain.driven.linear import (
-    band_structure,
-    contact_stiffness_n_m,
-    frequency_response,
-    monatomic_band_edge_hz,
-    normal_modes,
-)
+from hertzchain.driven import DrivenChain
+from hertzchain.driven.linear import band_structure, frequency_response, monatomic_band_edge_hz, normal_modes
 
 MASS = 0.028  # kg, the 19.05 mm stainless beads of Lydon et al.
 KAPPA = 9.7576e9  # N/m^1.5, their sphere-sphere Hertz constant
 
 
+def _chain(masses, kappas, f0, gamma=0.0):
+    return DrivenChain(np.asarray(masses, float), np.asarray(kappas, float), f0, gamma)
+
+
 def test_contact_stiffness_is_the_slope_of_the_hertz_law():
-    f0 = np.array([0.1, 1.0, 4.5])
-    k = np.asarray(contact_stiffness_n_m(KAPPA, f0))
-    np.testing.assert_allclose(k, 1.5 * KAPPA ** (2 / 3) * f0 ** (1 / 3), rtol=1e-12)
-    delta0 = (f0 / KAPPA) ** (2 / 3)
-    h = 1e-4 * delta0
-    slope = (np.asarray(hertz_force(delta0 + h, KAPPA)) - np.asarray(hertz_force(delta0 - h, KAPPA))) / (2 * h)
-    np.testing.assert_allclose(k, slope, rtol=1e-7)
+    for f0 in (0.1, 1.0, 4.5):
+        k = np.asarray(_chain([MASS], [KAPPA, 2 * KAPPA], f0).contact_stiffness_n_m())
+        delta0 = (f0 / np.array([KAPPA, 2 * KAPPA])) ** (2 / 3)
+        h = 1e-4 * delta0
+        slope = (np.asarray(hertz_force(delta0 + h, np.array([KAPPA, 2 * KAPPA])))
+                 - np.asarray(hertz_force(delta0 - h, np.array([KAPPA, 2 * KAPPA])))) / (2 * h)
+        np.testing.assert_allclose(k, slope, rtol=1e-7)
 
 
 def test_one_bead_between_two_flats():
     """The setup's constants give 5077 Hz (sphere-flat kappa = sqrt(2) x sphere-sphere, F0 = 4.5 N),
     and the response is the driven oscillator's k0 / (k0 + k1 - w^2 m + i w m gamma)."""
     kappa = np.full(2, KAPPA * np.sqrt(2))
-    (f,), _ = normal_modes(np.array([MASS]), kappa, 4.5)
+    gamma = 900.0
+    chain = _chain([MASS], kappa, 4.5, gamma)
+    (f,), _ = normal_modes(chain)
     assert float(f) == pytest.approx(5077, abs=1)
-    k = np.asarray(contact_stiffness_n_m(kappa, 4.5))
+    k = 1.5 * kappa ** (2 / 3) * 4.5 ** (1 / 3)
     freqs = np.linspace(3000, 7000, 9)
     w = 2 * np.pi * freqs
-    gamma = 900.0
-    x, force = frequency_response(np.array([MASS]), kappa, 4.5, gamma, freqs)
+    x, force = frequency_response(chain, freqs)
     expected = k[0] / (k.sum() - w**2 * MASS + 1j * w * MASS * gamma)
     np.testing.assert_allclose(np.asarray(x[:, 0]), expected, rtol=1e-12)
     np.testing.assert_allclose(np.asarray(force[:, 0]), k[0] * (1 - expected), rtol=1e-12)
@@ -51,7 +51,7 @@ def test_monatomic_chain_modes_and_band():
     periodic chain's band 2 sqrt(k/m)|sin(q/2)| and its edge, which for these beads is the
     4.96 kHz F0^(1/6) of the authors' scripts."""
     n, f0 = 12, 5.0
-    modes, shapes = normal_modes(np.full(n, MASS), np.full(n + 1, KAPPA), f0)
+    modes, shapes = normal_modes(_chain(np.full(n, MASS), np.full(n + 1, KAPPA), f0))
     k = 1.5 * KAPPA ** (2 / 3) * f0 ** (1 / 3)
     j = np.arange(1, n + 1)
     np.testing.assert_allclose(np.asarray(modes), np.sqrt(k / MASS) / np.pi * np.sin(j * np.pi / (2 * (n + 1))), rtol=1e-10)
@@ -102,7 +102,7 @@ def test_response_equals_the_small_drive_limit_of_the_hertz_chain():
     x = sol.y[:3, :-1] - positions0[:, None]
     t = samples[:-1]
     measured = 2 * np.mean(x * np.exp(-1j * w * t), axis=1)  # x = Re(X e^{iwt}) -> X
-    response, _ = frequency_response(masses, kappas, f0, gamma, np.array([freq]))
+    response, _ = frequency_response(_chain(masses, kappas, f0, gamma), np.array([freq]))
     expected = np.asarray(response[0]) * drive * -1j  # drive sin(wt) = Re(-i e^{iwt})
     np.testing.assert_allclose(measured, expected, rtol=1e-3, atol=1e-3 * np.max(np.abs(expected)))
 
@@ -111,7 +111,7 @@ def test_response_is_differentiable_in_the_precompression():
     masses, kappas = np.full(2, MASS), np.array([KAPPA * np.sqrt(2), KAPPA, KAPPA * np.sqrt(2)])
 
     def peak(f0):
-        x, _ = frequency_response(masses, kappas, f0, 500.0, np.array([2500.0]))
+        x, _ = frequency_response(DrivenChain(masses, kappas, f0, 500.0), np.array([2500.0]))
         return jax.numpy.abs(x[0, 1])
 
     h = 1e-4

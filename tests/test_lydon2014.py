@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hertzchain.driven import DrivenChain
 from hertzchain.driven.linear import frequency_response, monatomic_band_edge_hz, normal_modes
 
 from fitting.driven_band import band_edge_hz, lydon2014_band_edges, power_law
@@ -22,9 +23,10 @@ def test_criterion_finds_the_top_mode_of_a_simulated_chain(precompression_n):
     criterion's own bias, against the 5-7 % by which the measured edge exceeds the model's."""
     n = 31
     freqs = np.arange(1000.0, 9000.0, 5.0)
-    _, force = frequency_response(np.full(n, MASS), np.full(n + 1, KAPPA), precompression_n, 30.0, freqs)
+    chain = DrivenChain(np.full(n, MASS), np.full(n + 1, KAPPA), precompression_n, 30.0)
+    _, force = frequency_response(chain, freqs)
     edge = band_edge_hz(freqs, np.abs(np.asarray(force[:, 2])), above_hz=3000.0, prominence_db=6.0)
-    top = np.asarray(normal_modes(np.full(n, MASS), np.full(n + 1, KAPPA), precompression_n)[0])[-3:]
+    top = np.asarray(normal_modes(chain)[0])[-3:]
     assert np.min(np.abs(top - edge)) < 5.0
     assert edge == pytest.approx(float(monatomic_band_edge_hz(MASS, KAPPA, precompression_n)), rel=5e-3)
 

@@ -21,6 +21,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from hertzchain.atomic import save_figure, write_csv, write_json  # noqa: E402
+from hertzchain.driven import DrivenChain  # noqa: E402
 from hertzchain.driven.linear import monatomic_band_edge_hz, normal_modes  # noqa: E402
 
 from fitting.driven_band import PAPER_EDGE_HZ, lydon2014_band_edges, power_law  # noqa: E402
@@ -50,7 +51,8 @@ def main(argv=None) -> dict:
     force = edges.precompression_n
     model_edge = np.asarray(monatomic_band_edge_hz(BEAD_MASS_KG, KAPPA_N_M1P5, force))
     top_mode = np.array([
-        float(normal_modes(np.full(CHAIN_BEADS, BEAD_MASS_KG), np.full(CHAIN_BEADS + 1, KAPPA_N_M1P5), f)[0][-1])
+        float(normal_modes(DrivenChain(np.full(CHAIN_BEADS, BEAD_MASS_KG), np.full(CHAIN_BEADS + 1, KAPPA_N_M1P5),
+                                       f, 0.0))[0][-1])
         for f in force
     ])
     model_prefactor = float(np.mean(model_edge / force ** (1 / 6)))

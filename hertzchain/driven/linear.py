@@ -2,8 +2,8 @@
 
 Under a static force $F_0$ every Hertz contact sits at the overlap $\\delta_0 = (F_0/\\kappa)^{2/3}$
 and, for small motion about it, acts as a spring of stiffness
-$k = dF/d\\delta|_{\\delta_0} = \\tfrac32\\kappa^{2/3}F_0^{1/3}$ (`contact_stiffness_n_m`, the
-derivative of `hertzchain.contact.hertz_force` itself). A chain of n beads between a driven
+$k = dF/d\\delta|_{\\delta_0} = \\tfrac32\\kappa^{2/3}F_0^{1/3}$
+(`DrivenChain.contact_stiffness_n_m`). A chain of n beads between a driven
 face (contact 0) and a wall (contact n) then has the stiffness matrix K (n, n), tridiagonal,
 the mass matrix M = diag(m) and the viscous matrix C = diag(m gamma) (a force $-m\\gamma v$ on
 each bead), and:
@@ -17,7 +17,8 @@ each bead), and:
   of masses and contact stiffnesses; a monatomic chain's band edge is
   $f = \\frac1\\pi\\sqrt{k/m}$ (`monatomic_band_edge_hz`).
 
-Everything is `jax.numpy`, float64, differentiable in every physical argument.
+The chain is a `DrivenChain` (the constants the nonlinear `lockin_grid` runs on). Everything
+is `jax.numpy`, float64, differentiable in every physical argument.
 """
 
 from __future__ import annotations
@@ -25,16 +26,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ..contact import hertz_force, overlap_at_force
-
-
-def contact_stiffness_n_m(contact_kappa_n_m1p5, precompression_n):
-    """Tangent stiffness $dF/d\\delta$ (N/m) of Hertz contacts ($\\kappa$, N/m^{3/2}) carrying the
-    static force `precompression_n` (N): $\\tfrac32\\kappa^{2/3}F_0^{1/3}$."""
-    kappa = jnp.asarray(contact_kappa_n_m1p5, dtype=float)
-    overlap = overlap_at_force(jnp.asarray(precompression_n, dtype=float), kappa)
-    slope = jax.grad(hertz_force)
-    return jnp.vectorize(slope)(overlap * jnp.ones_like(kappa), kappa)
+from .chain import DrivenChain
 
 
 def stiffness_matrix(contact_stiffness_n_m):
@@ -46,34 +38,31 @@ def stiffness_matrix(contact_stiffness_n_m):
     return jnp.diag(diagonal) + jnp.diag(off, 1) + jnp.diag(off, -1)
 
 
-def normal_modes(bead_mass_kg, contact_kappa_n_m1p5, precompression_n):
-    """Normal modes of the linearised chain, face and wall held.
+def normal_modes(chain: DrivenChain):
+    """Normal modes of the linearised `chain`, face and wall held.
 
     **Returns:** `(frequencies_hz (n,), shapes (n, n))`, ascending; column j of `shapes` is
     mode j, normalised so that shapes.T M shapes = 1 (m in units of sqrt(kg)^-1).
     """
-    mass = jnp.asarray(bead_mass_kg, dtype=float)
-    stiffness = stiffness_matrix(contact_stiffness_n_m(contact_kappa_n_m1p5, precompression_n))
-    scale = 1.0 / jnp.sqrt(mass)
+    stiffness = stiffness_matrix(chain.contact_stiffness_n_m())
+    scale = 1.0 / jnp.sqrt(chain.bead_mass_kg)
     omega2, vectors = jnp.linalg.eigh(scale[:, None] * stiffness * scale[None, :])
     return jnp.sqrt(jnp.maximum(omega2, 0.0)) / (2 * jnp.pi), scale[:, None] * vectors
 
 
-def frequency_response(bead_mass_kg, contact_kappa_n_m1p5, precompression_n, damping_rate_per_s, frequencies_hz):
-    """Steady response of the linearised chain to the face moving as $u\\,e^{i\\omega t}$.
-
-    **Arguments:** `bead_mass_kg` (n,), `contact_kappa_n_m1p5` (n+1,), `precompression_n` (N),
-    `damping_rate_per_s` (n,) or a number (gamma of the viscous force $-m\\gamma v$),
-    `frequencies_hz` (F,).
+def frequency_response(chain: DrivenChain, frequencies_hz):
+    """Steady response of the linearised `chain` to the face moving as $u\\,e^{i\\omega t}$ at
+    `frequencies_hz` (F,), with the chain's viscous damping ($-m\\gamma v$ on each bead; its
+    Kuwabara-Kono `eta_s` is not part of the linear model).
 
     **Returns:** `(displacement, contact_force)`: complex (F, n) bead displacements per metre
     of face amplitude (m/m; the velocity is $i\\omega$ times it) and complex (F, n+1) dynamic
     forces of the contacts per metre of face amplitude (N/m), compression positive.
     """
-    mass = jnp.asarray(bead_mass_kg, dtype=float)
-    k = contact_stiffness_n_m(contact_kappa_n_m1p5, precompression_n)
+    mass = chain.bead_mass_kg
+    k = chain.contact_stiffness_n_m()
     stiffness = stiffness_matrix(k)
-    damping = jnp.broadcast_to(jnp.asarray(damping_rate_per_s, dtype=float), mass.shape) * mass
+    damping = chain.damping_rate_per_s * mass
     omega = 2 * jnp.pi * jnp.asarray(frequencies_hz, dtype=float)
     load = jnp.zeros(mass.shape, complex).at[0].set(k[0])
 
@@ -87,16 +76,20 @@ def frequency_response(bead_mass_kg, contact_kappa_n_m1p5, precompression_n, dam
 
 
 def band_structure(cell_mass_kg, cell_kappa_n_m1p5, precompression_n, wavenumbers):
-    """Bloch frequencies (Hz) of the infinite periodic chain.
+    """Bloch frequencies (Hz) of the infinite periodic chain under the static force
+    `precompression_n` (N).
 
-    The unit cell holds p beads (`cell_mass_kg` (p,)) and p contacts (`cell_kappa_n_m1p5`
-    (p,)): contact j joins bead j to bead j+1, the last one bead p-1 to bead 0 of the next
-    cell. `wavenumbers` (Q,) are q times the cell length (radians per cell, -pi..pi).
+    The unit cell holds p beads (`cell_mass_kg` (p,)) and p Hertz contacts
+    (`cell_kappa_n_m1p5` (p,), N/m^{3/2}): contact j joins bead j to bead j+1, the last one
+    bead p-1 to bead 0 of the next cell. `wavenumbers` (Q,) are q times the cell length
+    (radians per cell, -pi..pi).
 
     **Returns:** (Q, p) frequencies in Hz, ascending in each row.
     """
-    mass = jnp.asarray(cell_mass_kg, dtype=float)
-    k = contact_stiffness_n_m(cell_kappa_n_m1p5, precompression_n)
+    mass = jnp.atleast_1d(jnp.asarray(cell_mass_kg, dtype=float))
+    kappa = jnp.atleast_1d(jnp.asarray(cell_kappa_n_m1p5, dtype=float))
+    # the cell's contacts as a chain's (its last contact repeated as the closing one)
+    k = DrivenChain(mass, jnp.concatenate([kappa, kappa[-1:]]), precompression_n, 0.0).contact_stiffness_n_m()[:-1]
     p = mass.shape[0]
     index = jnp.arange(p)
     following = (index + 1) % p
@@ -116,6 +109,9 @@ def band_structure(cell_mass_kg, cell_kappa_n_m1p5, precompression_n, wavenumber
 
 
 def monatomic_band_edge_hz(bead_mass_kg, contact_kappa_n_m1p5, precompression_n):
-    """Top of the acoustic band of a chain of equal beads: $\\frac1\\pi\\sqrt{k/m}$, Hz."""
-    k = contact_stiffness_n_m(contact_kappa_n_m1p5, precompression_n)
-    return jnp.sqrt(k / jnp.asarray(bead_mass_kg, dtype=float)) / jnp.pi
+    """Top of the acoustic band of a chain of equal beads (kg) and contacts (N/m^{3/2}) under
+    `precompression_n` (N; scalar or array): $\\frac1\\pi\\sqrt{k/m}$, Hz."""
+    def edge(force_n):
+        return band_structure(bead_mass_kg, contact_kappa_n_m1p5, force_n, jnp.array([jnp.pi]))[0, 0]
+
+    return jnp.vectorize(edge)(jnp.asarray(precompression_n, dtype=float))
