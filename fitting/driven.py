@@ -51,8 +51,12 @@ from .uncertainty import covariance_from_jacobian
 # sweeps the misfit is a few % of a peak, correlated over ~50 points along frequency (lag-1
 # correlation ~0.96), so a point's effective standard deviation is 3 % x sqrt(1.96/0.04) ~ 0.2.
 NOMINAL_SCALE = 0.2
-# A fit first runs on every COARSE_STRIDE-th drive level, then on all from there.
-COARSE_STRIDE = 4
+# A fit first runs on every COARSE_ROW_STRIDE-th frequency of every COARSE_LEVEL_STRIDE-th drive
+# level (36 levels: 1, 8, ..., 36, the lowest and the highest among them), then on all from there:
+# the optimiser's slow early iterations (the effective precompression moves by a factor ~30
+# from the file's) cost a twentieth as much.
+COARSE_ROW_STRIDE = 3
+COARSE_LEVEL_STRIDE = 7
 PARAMETERS = ("linear_resonance_hz", "precompression_n", "damping_rate_per_s", "drive_scale", "eta_s")
 UNITS = {"linear_resonance_hz": "Hz", "precompression_n": "N", "damping_rate_per_s": "1/s", "drive_scale": "1",
          "eta_s": "s"}
@@ -304,9 +308,9 @@ def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "pr
     """Fit the parameters `free` (names of `PARAMETERS`) to a driven experiment.
 
     Starts from `x_start` (default: `linear_start`, then the best of `precompression_grid`
-    (N) on every 4th drive level, when the precompression is free). With more than 12 drive
-    levels the fit runs first on every `COARSE_STRIDE`-th level, then on all of them from
-    there. `max_steps` optimiser iterations per stage; each costs one batched grid run and
+    (N) on the coarse grid, when the precompression is free). With 14 drive levels or
+    more the fit runs first on a coarse grid (`COARSE_ROW_STRIDE`, `COARSE_LEVEL_STRIDE`),
+    then on every point from there. `max_steps` optimiser iterations per stage; each costs one batched grid run and
     its forward-mode tangents.
     """
     began = time.perf_counter()
@@ -323,8 +327,9 @@ def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "pr
         print(f"fitting {', '.join(layout.labels[c] for c in columns)} to {model.measured.size} points ...",
               file=sys.stderr, flush=True)
     steps = 0
-    if model.levels.size > 3 * COARSE_STRIDE:  # first on every COARSE_STRIDE-th drive level: a quarter the cost
-        coarse = DrivenModel(experiment, levels=model.levels[::COARSE_STRIDE], progress=progress)
+    if model.levels.size >= 2 * COARSE_LEVEL_STRIDE:  # first on a coarse grid: a twentieth of the cost
+        coarse = DrivenModel(experiment, rows=model.rows[::COARSE_ROW_STRIDE], levels=model.levels[::COARSE_LEVEL_STRIDE],
+                             progress=progress)
         first = least_squares(coarse, x, columns, max_steps=max_steps)
         x, steps = coarse.clip(first.x), first.steps
     result = least_squares(model, x, columns, max_steps=max_steps)
@@ -333,11 +338,12 @@ def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "pr
 
 def scan_precompression(experiment, x, grid=None, *, progress=False) -> np.ndarray:
     """`x` with the precompression set to the best of `grid` (N; default 12 values from 0.01 to
-    10 N), each scored on every 4th drive level with the other parameters at `x`."""
+    10 N), each scored on the coarse grid of `fit_driven` with the other parameters at `x`."""
     layout = DrivenLayout.for_beads(experiment.n_beads)
     grid = np.geomspace(0.01, 10.0, 12) if grid is None else np.asarray(grid, dtype=float)
-    levels = np.arange(0, experiment.sweep.drive_amplitudes_m.size, 4)
-    model = DrivenModel(experiment, levels=levels)
+    rows = np.nonzero(experiment.fit_mask)[0][::COARSE_ROW_STRIDE]
+    levels = np.arange(0, experiment.sweep.drive_amplitudes_m.size, COARSE_LEVEL_STRIDE)
+    model = DrivenModel(experiment, rows=rows, levels=levels)
     best, best_chi2 = x, math.inf
     for value in grid:
         trial = x.copy()

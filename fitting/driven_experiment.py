@@ -56,7 +56,8 @@ import numpy as np
 
 from hertzchain.contact import kappa_sphere_flat, kappa_sphere_sphere
 from hertzchain.driven.sweeper_files import LockinSweep, SweeperFileError, lockin_sweep, read_sweeper_table
-from hertzchain.units import parse_quantity
+from hertzchain.importer import ExperimentFileError
+from hertzchain.importer import _quantity as quantity_of_key
 
 KIND = "driven"
 TOP_KEYS = ("kind", "label", "chain", "drive", "sensor", "sweep", "model")
@@ -67,10 +68,9 @@ SENSOR_KEYS = ("bead", "quantity", "calibration_m_s_per_v", "reading")
 SWEEP_KEYS = ("amplitude_file", "exclude_hz")
 MODEL_KEYS = ("ramp_periods", "hold_periods", "window_periods", "steps_per_period")
 MODEL_DEFAULTS = {"ramp_periods": 25, "hold_periods": 35, "window_periods": 4, "steps_per_period": 48}
-_UNITS = {"_kg": "kg", "_m": "m", "_pa": "Pa", "_n": "N", "_m_per_v": "m/V", "_m_s_per_v": "m/s/V"}
 
 
-class DrivenExperimentError(ValueError):
+class DrivenExperimentError(ExperimentFileError):
     """An experiment file that cannot be used; the message names the file, the key and the fix."""
 
 
@@ -133,20 +133,12 @@ def _table(content: dict, name: str, keys, where: str, required=True) -> dict:
 
 
 def _number(table: dict, key: str, where: str, default=None) -> float:
+    """A number, or a string with a unit matching the key's suffix ("9.525mm" for *_m)."""
     if key not in table:
         if default is None:
             _fail(where, f"missing key {key!r}.")
         return float(default)
-    value = table[key]
-    if isinstance(value, bool):
-        _fail(where, f"{key} must be a number, got {value!r}.")
-    if isinstance(value, (int, float)):
-        return float(value)
-    unit = next((u for suffix, u in sorted(_UNITS.items(), key=lambda s: -len(s[0])) if key.endswith(suffix)), "")
-    try:
-        return parse_quantity(str(value), unit, name=f"{where}: {key}")
-    except ValueError as error:
-        raise DrivenExperimentError(str(error)) from None
+    return quantity_of_key(table[key], key, where)
 
 
 def _positive(table, key, where, default=None) -> float:

@@ -57,11 +57,15 @@ def _experiment(mass_kg, frequencies, drives, velocity, *, drive_m_per_v=1e-7, n
 
 @pytest.mark.slow  # a scipy integration of 120 runs and a fit: about a minute on a loaded 2-core machine
 def test_fit_recovers_constants_of_a_scipy_simulated_bead():
-    """A 15 g bead (not the paper's), 2.6 kHz linear resonance, F0 = 0.3 N, gamma = 1200/s,
-    true drive 1.15 x nominal, three drives bending the resonance by ~1-5 %: the fit (from
-    the data's own start values and the precompression scan) recovers every constant, within
-    its standard error x 3 and within 0.5 % (resonance), 10 % (F0, drive scale, damping)."""
-    mass, f_lin, f0, gamma, scale = 0.015, 2600.0, 0.3, 1200.0, 1.15
+    """A 15 g bead (not the paper's), 2.6 kHz linear resonance, F0 = 0.1 N (static overlap 75
+    nm), gamma = 1200/s, true drive 1.15 x nominal, three drives (the bead swinging by up to
+    ~30 nm: the resonance softens by less than one 17 Hz bin, yet the curves' shapes change):
+    the fit, from the data's own start values and the precompression scan, recovers every
+    constant to 2e-3 (measured: 4e-4, 1.0e-3, 8e-4, 1.6e-3). The resonance comes out low by
+    velocity-Verlet's (2 pi/64)^2/24 = 4.0e-4 at 64 steps a period. The standard errors
+    here reflect only the tiny residuals (the two integrators agree to 3e-5 of a peak), not
+    this discretisation bias, so the test compares with the truth, not with them."""
+    mass, f_lin, f0, gamma, scale = 0.015, 2600.0, 0.1, 1200.0, 1.15
     k_each = mass * (2 * np.pi * f_lin) ** 2 / 2
     kappa = np.full(2, (k_each / (1.5 * f0 ** (1 / 3))) ** 1.5)
     frequencies = np.linspace(2200.0, 2850.0, 40)
@@ -71,13 +75,14 @@ def test_fit_recovers_constants_of_a_scipy_simulated_bead():
     result = fit_driven(experiment, progress=False)
     layout = DrivenLayout.for_beads(1)
     truth = {"linear_resonance_hz": f_lin, "precompression_n": f0, "damping_rate_per_s": gamma, "drive_scale": scale}
-    tolerance = {"linear_resonance_hz": 0.005, "precompression_n": 0.1, "damping_rate_per_s": 0.1, "drive_scale": 0.1}
     assert result.converged
-    assert np.max(result.misfit) < 2e-3  # the two integrators agree to 0.2 % of a peak
+    assert np.max(result.misfit) < 2e-4
     for name, true in truth.items():
         i = layout.index(name)[0]
-        assert result.x[i] == pytest.approx(true, rel=tolerance[name]), name
-        assert abs(result.x[i] - true) < 3 * result.stderr[i] + 1e-3 * true, name
+        assert result.x[i] == pytest.approx(true, rel=2e-3), name
+        assert 0 < result.stderr[i] < np.inf, name
+    f = layout.index("linear_resonance_hz")[0]
+    assert result.x[f] / f_lin - 1 == pytest.approx(-(2 * np.pi / 64) ** 2 / 24, abs=2e-4)
 
 
 def test_lag1_autocorrelation_of_an_ar1_series():
