@@ -153,3 +153,29 @@ def test_experiment_file_errors_name_key_and_fix(tmp_path, change, message):
 def test_experiment_file_needs_the_data_dir(tmp_path):
     with pytest.raises(DrivenExperimentError, match="--data-dir"):
         load_driven_experiment(_write(tmp_path, GOOD), None)
+
+
+def test_command_line_refuses_what_a_driven_fit_cannot_use(tmp_path, capsys):
+    """`hertzchain fit/diagnose` dispatch on the file's kind; trace-fit options given for a
+    driven file, a driven file mixed with a trace file, and --data-dir for trace files are
+    refused by name (exit status 2), nothing silently dropped."""
+    from hertzchain.cli import main
+
+    data = tmp_path / "data"
+    data.mkdir()
+    rows = ["Frequency (Hz)\t0.001V"] + [f"{3000 + 5 * i}\t1e-3" for i in range(20)]
+    (data / "run Signal Amplitude_02013Jul3_10h29m15s.txt").write_text("\n".join(rows) + "\n")
+    toml = _write(tmp_path, GOOD)
+    trace = tmp_path / "trace.csv"
+    trace.write_text("# format = hertzchain-trace/1\ntime_s,wall\n0,0\n")
+    cases = [
+        (["fit", str(toml), "--data-dir", str(data), "--posterior"], "--posterior"),
+        (["fit", str(toml), "--data-dir", str(data), "--params", "eta"], "not driven parameters"),
+        (["diagnose", str(toml), "--data-dir", str(data), "--free", "C"], "--free"),
+        (["fit", str(toml), str(trace), "--data-dir", str(data)], "cannot be mixed"),
+        (["fit", str(trace), "--data-dir", str(data)], "--data-dir is for driven"),
+        (["fit", str(toml)], "give --data-dir"),
+    ]
+    for argv, message in cases:
+        assert main(argv + ["--out", str(tmp_path / "out")]) == 2, argv
+        assert message in capsys.readouterr().err, argv
