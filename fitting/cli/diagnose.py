@@ -36,9 +36,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--steps-per-contact", type=int, default=200,
                         help="Verlet steps per shortest contact time of the model (default 200)")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    parser.add_argument("--data-dir", help="driven experiments (kind = \"driven\"): the folder their sweep files "
+                        "are relative to")
 
 
 def run(args) -> int:
+    # driven experiment files (lock-in sweeps of a driven chain) have their own diagnosis
+    from fitting.driven_cli import is_driven_run, run_diagnose as run_driven_diagnose
+
+    if is_driven_run(args.files, args.data_dir):
+        return run_driven_diagnose(args)
     from fitting.data import load_experiments
     from fitting.diagnosis import diagnose
     from fitting.diagnosis_report import write_diagnosis_report

@@ -90,13 +90,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="posterior: exit with status 4 when R-hat, ESS or divergences fail")
     parser.add_argument("--no-plots", action="store_true", help="write JSON and CSV only")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    parser.add_argument("--data-dir", help="driven experiments (kind = \"driven\"): the folder their sweep files "
+                        "are relative to")
 
 
 def run(args: argparse.Namespace) -> int:
-    params = parse_parameter_list(args.params)
     missing = [f for f in args.files if not Path(f).is_file()]
     if missing:
         raise FileNotFoundError(f"no such trace file: {', '.join(missing)}")
+    # driven experiment files (lock-in sweeps of a driven chain) have their own fit
+    from ..driven_cli import is_driven_run, run_fit as run_driven_fit
+
+    if is_driven_run(args.files, args.data_dir):
+        return run_driven_fit(args)
+    params = parse_parameter_list(args.params)
     channels = tuple(c.strip() for c in args.channels.split(",") if c.strip()) if args.channels else None
     noise = parse_quantity(args.noise_std, "N", name="--noise-std") if args.noise_std else None
     experiments = load_experiments(args.files, channels=channels, noise_std_n=noise)

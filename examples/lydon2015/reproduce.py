@@ -1,0 +1,74 @@
+"""Every Lydon et al. result of the README, in one command:
+
+    python examples/lydon2015/reproduce.py --data-root ../shared/data/real [--out examples/lydon2015/results]
+
+runs `hertzchain fit` on the single- and two-bead bending files, `hertzchain diagnose` on the
+single bead, and the 2014 band-edge script, each into its own folder under `--out`, and writes
+`summary.json`: the acceptance numbers of each, the wall time of each command (with the
+machine's load average at the start: timings from a loaded machine are marked so) and the
+command lines.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from hertzchain.atomic import write_json
+
+HERE = Path(__file__).resolve().parent
+
+
+def _run(command: list[str]) -> float:
+    began = time.perf_counter()
+    print("$ " + " ".join(command), flush=True)
+    subprocess.run(command, check=True)
+    return time.perf_counter() - began
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data-root", required=True, type=Path, help="folder holding lydon-2015/ and lydon-2014/")
+    parser.add_argument("--out", type=Path, default=HERE / "results")
+    args = parser.parse_args(argv)
+    python = sys.executable
+    data_2015 = str(args.data_root / "lydon-2015")
+    summary = {"cpu_count": os.cpu_count(), "load_average_at_start": os.getloadavg()[0], "runs": {}}
+    jobs = {
+        "single_bead_fit": ["fit", str(HERE / "single_bead_bending.toml")],
+        "two_bead_fit": ["fit", str(HERE / "two_bead_bending.toml")],
+        "single_bead_diagnosis": ["diagnose", str(HERE / "single_bead_bending.toml")],
+    }
+    for name, (command, toml) in jobs.items():
+        out = args.out / name
+        line = [python, "-m", "hertzchain", command, toml, "--data-dir", data_2015, "--out", str(out)]
+        load = os.getloadavg()[0]
+        seconds = _run(line)
+        summary["runs"][name] = {"command": " ".join(line[1:]), "wall_s": seconds, "load_average": load}
+    line = [python, str(HERE / "lydon2014_band_edge.py"), "--data-dir", str(args.data_root / "lydon-2014"),
+            "--out", str(args.out / "lydon2014_band_edge")]
+    summary["runs"]["lydon2014_band_edge"] = {"command": " ".join(line[1:]), "wall_s": _run(line)}
+    for name in ("single_bead_fit", "two_bead_fit"):
+        fit = json.loads((args.out / name / "fit.json").read_text())
+        summary["runs"][name]["result"] = {
+            "linear_resonance_hz": fit["params"]["linear_resonance_hz"],
+            "precompression_n": fit["params"]["precompression_n"],
+            "drive_scale": fit["params"]["drive_scale"],
+            "damping_rate_per_s": fit["params"]["damping_rate_per_s"],
+            "misfit_median": fit["misfit"]["median"],
+            "misfit_max": fit["misfit"]["max"],
+            "bending": fit["bending"],
+        }
+    summary["loaded_machine"] = summary["load_average_at_start"] > 0.5 * (os.cpu_count() or 1)
+    write_json(args.out / "summary.json", summary)
+    print(f"wrote {args.out / 'summary.json'}")
+    return summary
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,253 @@
+"""Driven measurements described by an experiment file (`kind = "driven"`).
+
+A lab that drives a precompressed chain harmonically and records a bead's motion through a
+lock-in keeps: the chain (beads and contacts, the static precompression), the drive (a piezo:
+its calibration in m per lock-in output volt, with its uncertainty), the sensor (a laser
+vibrometer: (m/s) per volt, read as the lock-in's RMS at the drive frequency) and the sweep
+files as the instruments wrote them. That is the experiment file::
+
+    kind = "driven"
+    label = "single bead, resonance bending"
+
+    [chain]
+    n_beads = 1
+    bead_mass_kg = 0.028
+    bead_radius_m = "9.525mm"
+    bead_youngs_pa = "193GPa"
+    bead_poisson = 0.3
+    face_youngs_pa = "193GPa"      # the piezo's face (sphere-flat contact 0)
+    face_poisson = 0.3
+    wall_youngs_pa = "193GPa"      # the wall (sphere-flat contact n)
+    wall_poisson = 0.3
+    precompression_n = 4.5
+    # contact_kappa_n_m1p5 = [...] # n + 1 Hertz constants, instead of the materials
+
+    [drive]
+    calibration_m_per_v = 6.834e-7
+    calibration_uncertainty = 0.41 # relative (1 sigma)
+
+    [sensor]
+    bead = 1                       # 1 = next to the piezo
+    quantity = "velocity"
+    calibration_m_s_per_v = 0.02125
+    reading = "lockin_rms"         # the lock-in's R: RMS at the drive frequency
+
+    [sweep]
+    amplitude_file = "SingleBead/.../SingleBead_Bending Signal Amplitude_02013Jul3_10h29m15s.txt"
+    # exclude_hz = [[2150, 2300]]  # bands left out of fits (say why in a comment)
+
+    [model]                        # how the model emulates the lock-in (hertzchain.driven)
+    ramp_periods = 25
+    hold_periods = 35
+    window_periods = 4
+    steps_per_period = 48
+
+File paths are relative to the data folder given on the command line (`--data-dir`), so that
+the description can live beside the code and the data stay where the lab keeps them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from hertzchain.contact import kappa_sphere_flat, kappa_sphere_sphere
+from hertzchain.driven.sweeper_files import LockinSweep, SweeperFileError, lockin_sweep, read_sweeper_table
+from hertzchain.importer import ExperimentFileError
+from hertzchain.importer import _quantity as quantity_of_key
+
+KIND = "driven"
+TOP_KEYS = ("kind", "label", "chain", "drive", "sensor", "sweep", "model")
+CHAIN_KEYS = ("n_beads", "bead_mass_kg", "bead_radius_m", "bead_youngs_pa", "bead_poisson", "face_youngs_pa",
+              "face_poisson", "wall_youngs_pa", "wall_poisson", "precompression_n", "contact_kappa_n_m1p5")
+DRIVE_KEYS = ("calibration_m_per_v", "calibration_uncertainty")
+SENSOR_KEYS = ("bead", "quantity", "calibration_m_s_per_v", "reading")
+SWEEP_KEYS = ("amplitude_file", "exclude_hz")
+MODEL_KEYS = ("ramp_periods", "hold_periods", "window_periods", "steps_per_period")
+MODEL_DEFAULTS = {"ramp_periods": 25, "hold_periods": 35, "window_periods": 4, "steps_per_period": 48}
+
+
+class DrivenExperimentError(ExperimentFileError):
+    """An experiment file that cannot be used; the message names the file, the key and the fix."""
+
+
+@dataclasses.dataclass(frozen=True)
+class DrivenExperiment:
+    """A parsed driven experiment.
+
+    **Fields:** `path`, `label`; `bead_mass_kg` (n,); `contact_kappa_n_m1p5` (n+1,) nominal
+    Hertz constants (0 = face-bead 1, n = bead n-wall); `precompression_n` nominal;
+    `drive_m_per_v` and its relative `drive_uncertainty`; `sensor_bead` (1-based), `quantity`;
+    `sweep` (`LockinSweep`, SI); `fit_mask` (F,) False on excluded frequencies; `model`:
+    the steady-state settings (`MODEL_KEYS`).
+    """
+
+    path: Path
+    label: str
+    bead_mass_kg: np.ndarray
+    contact_kappa_n_m1p5: np.ndarray
+    precompression_n: float
+    drive_m_per_v: float
+    drive_uncertainty: float
+    sensor_bead: int
+    quantity: str
+    sweep: LockinSweep
+    fit_mask: np.ndarray
+    model: dict
+
+    @property
+    def n_beads(self) -> int:
+        return int(self.bead_mass_kg.size)
+
+
+def is_driven_experiment(path) -> bool:
+    """Whether `path` is a `.toml` experiment file with `kind = "driven"`."""
+    path = Path(path)
+    if path.suffix.lower() != ".toml" or not path.is_file():
+        return False
+    try:
+        return tomllib.loads(path.read_text()).get("kind") == KIND
+    except tomllib.TOMLDecodeError:
+        return False
+
+
+def _fail(where, message):
+    raise DrivenExperimentError(f"{where}: {message}")
+
+
+def _table(content: dict, name: str, keys, where: str, required=True) -> dict:
+    table = content.get(name)
+    if table is None:
+        if required:
+            _fail(where, f"missing table [{name}] (keys: {', '.join(keys)}).")
+        return {}
+    if not isinstance(table, dict):
+        _fail(where, f"[{name}] must be a table.")
+    for key in table:
+        if key not in keys:
+            _fail(f"{where} [{name}]", f"unknown key {key!r}; valid keys: {', '.join(keys)}.")
+    return table
+
+
+def _number(table: dict, key: str, where: str, default=None) -> float:
+    """A number, or a string with a unit matching the key's suffix ("9.525mm" for *_m)."""
+    if key not in table:
+        if default is None:
+            _fail(where, f"missing key {key!r}.")
+        return float(default)
+    return quantity_of_key(table[key], key, where)
+
+
+def _positive(table, key, where, default=None) -> float:
+    value = _number(table, key, where, default)
+    if not (np.isfinite(value) and value > 0):
+        _fail(where, f"{key} = {value!r} must be positive.")
+    return value
+
+
+def _contacts(chain: dict, n: int, where: str) -> np.ndarray:
+    if "contact_kappa_n_m1p5" in chain:
+        given = chain["contact_kappa_n_m1p5"]
+        if not isinstance(given, list) or len(given) != n + 1:
+            _fail(where, f"contact_kappa_n_m1p5 must list n_beads + 1 = {n + 1} Hertz constants (N/m^1.5), "
+                         "face-bead 1 first, last bead-wall last.")
+        kappa = np.array([_number({"k": v}, "k", where) for v in given])
+        if np.any(kappa <= 0):
+            _fail(where, "contact_kappa_n_m1p5 must all be positive.")
+        return kappa
+    radius = _positive(chain, "bead_radius_m", where)
+    youngs = _positive(chain, "bead_youngs_pa", where)
+    poisson = _number(chain, "bead_poisson", where)
+    face = kappa_sphere_flat(radius, youngs, poisson, _positive(chain, "face_youngs_pa", where),
+                             _number(chain, "face_poisson", where))
+    wall = kappa_sphere_flat(radius, youngs, poisson, _positive(chain, "wall_youngs_pa", where),
+                             _number(chain, "wall_poisson", where))
+    between = kappa_sphere_sphere(radius, youngs, poisson, radius, youngs, poisson)
+    return np.array([float(face)] + [float(between)] * (n - 1) + [float(wall)])
+
+
+def load_driven_experiment(path, data_dir) -> DrivenExperiment:
+    """Read and check a driven experiment file; sweep files are read from `data_dir`.
+
+    **Raises:** `DrivenExperimentError` (a `ValueError`) naming the file, the key and the fix;
+    `FileNotFoundError` when the file or `data_dir` is missing.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no such experiment file: {path}")
+    if data_dir is None:
+        _fail(path, "the sweep files are relative to the data folder: give --data-dir DIR.")
+    data_dir = Path(data_dir)
+    if not data_dir.is_dir():
+        raise FileNotFoundError(f"--data-dir {data_dir}: no such folder (it should hold the lab's sweep files).")
+    try:
+        content = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as error:
+        _fail(path, f"not valid TOML ({error}).")
+    for key in content:
+        if key not in TOP_KEYS:
+            _fail(path, f"unknown key or table {key!r}; valid: {', '.join(TOP_KEYS)}.")
+    if content.get("kind") != KIND:
+        _fail(path, f"kind = {content.get('kind')!r}; a driven experiment says kind = \"{KIND}\".")
+    chain = _table(content, "chain", CHAIN_KEYS, path)
+    drive = _table(content, "drive", DRIVE_KEYS, path)
+    sensor = _table(content, "sensor", SENSOR_KEYS, path)
+    sweep = _table(content, "sweep", SWEEP_KEYS, path)
+    model = _table(content, "model", MODEL_KEYS, path, required=False)
+
+    where = f"{path} [chain]"
+    n = chain.get("n_beads")
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        _fail(where, f"n_beads = {n!r} must be a positive integer.")
+    masses = np.full(n, _positive(chain, "bead_mass_kg", where))
+    kappa = _contacts(chain, n, where)
+    precompression = _positive(chain, "precompression_n", where)
+
+    where = f"{path} [drive]"
+    drive_m_per_v = _positive(drive, "calibration_m_per_v", where)
+    uncertainty = _number(drive, "calibration_uncertainty", where, default=0.0)
+    if not 0 <= uncertainty < 1:
+        _fail(where, f"calibration_uncertainty = {uncertainty!r} is relative (0.41 = 41 %); give 0 <= u < 1.")
+
+    where = f"{path} [sensor]"
+    bead = sensor.get("bead", 1)
+    if isinstance(bead, bool) or not isinstance(bead, int) or not 1 <= bead <= n:
+        _fail(where, f"bead = {bead!r}: the sensed bead, 1 (next to the drive) to n_beads = {n}.")
+    quantity = str(sensor.get("quantity", "velocity"))
+    if quantity != "velocity":
+        _fail(where, f"quantity = {quantity!r}: only a vibrometer's \"velocity\" is supported.")
+    reading = str(sensor.get("reading", "lockin_rms"))
+    if reading != "lockin_rms":
+        _fail(where, f"reading = {reading!r}: only \"lockin_rms\" (the lock-in's R) is supported.")
+    sensor_m_s_per_v = _positive(sensor, "calibration_m_s_per_v", where)
+
+    where = f"{path} [sweep]"
+    if "amplitude_file" not in sweep:
+        _fail(where, "missing key 'amplitude_file' (the sweeper's 'Signal Amplitude_0' text file, "
+                     "relative to --data-dir).")
+    try:
+        table = read_sweeper_table(data_dir / str(sweep["amplitude_file"]))
+        measured = lockin_sweep(table, drive_m_per_v=drive_m_per_v, sensor_m_s_per_v=sensor_m_s_per_v)
+    except SweeperFileError as error:
+        _fail(where, str(error))
+    mask = np.ones(measured.frequencies_hz.size, bool)
+    for band in sweep.get("exclude_hz", []):
+        if not isinstance(band, list) or len(band) != 2 or not band[0] < band[1]:
+            _fail(where, f"exclude_hz entry {band!r} must be [low_hz, high_hz] with low < high.")
+        mask &= ~((measured.frequencies_hz >= band[0]) & (measured.frequencies_hz <= band[1]))
+    if mask.sum() < 10:
+        _fail(where, f"exclude_hz leaves {int(mask.sum())} frequencies; a fit needs at least 10.")
+
+    settings = dict(MODEL_DEFAULTS)
+    for key, value in model.items():
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            _fail(f"{path} [model]", f"{key} = {value!r} must be a positive integer.")
+        settings[key] = value
+    return DrivenExperiment(
+        path=path, label=str(content.get("label", path.stem)), bead_mass_kg=masses, contact_kappa_n_m1p5=kappa,
+        precompression_n=precompression, drive_m_per_v=drive_m_per_v, drive_uncertainty=uncertainty,
+        sensor_bead=bead, quantity=quantity, sweep=measured, fit_mask=mask, model=settings,
+    )
