@@ -329,7 +329,14 @@ class ChainSetup(eqx.Module):
         return (1.0 + self.mu_star) * bare
 
     def contact_yield_force_n(self) -> jax.Array:
-        """Yield force of contacts 0..N-1 and of the wall contact (last entry), N."""
+        """Yield force of contacts 0..N-1 and of the wall contact (last entry), N: the paper's
+        mean-pressure estimate (`contact.yield_force`), or with `plastic_law="jackson_green"`
+        the force at which that law leaves Hertz (`contact.jackson_green_yield_force`)."""
+        if self.plastic_law == "jackson_green":
+            kappa = jnp.concatenate([self.contact_kappa(), self.wall_kappa()[None]])
+            poisson = jnp.concatenate([self.bead_poisson, self.bead_poisson[-1:]])
+            return contact.jackson_green_yield_force(kappa, self.contact_reduced_radius_m(),
+                                                     self.bead_yield_stress_pa, poisson)
         radius = jnp.concatenate([self.striker_radius_m[None], self.bead_radius_m])
         theta = contact.theta(
             jnp.concatenate([self.striker_youngs_pa[None], self.bead_youngs_pa]),

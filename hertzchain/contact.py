@@ -338,3 +338,10 @@ def jackson_green_contact_radius(max_overlap_m, kappa_n_m1p5, reduced_radius_m, 
     safe = jnp.where(yielded, ratio / JG_TRANSITION_RATIO, 1.0)
     _, root = _positive_part_and_root(max_overlap_m)
     return jnp.sqrt(reduced_radius_m) * root * jnp.where(yielded, safe ** (0.5 * area_exponent), 1.0)
+
+
+def jackson_green_yield_force(kappa_n_m1p5, reduced_radius_m, yield_stress_pa, poisson):
+    """Force at which `jackson_green_contact` leaves Hertz, $\\kappa(1.9\\,\\delta_c)^{3/2}$, N
+    (1.9^{3/2} = 2.62 times JG's critical load $P_c$, the von Mises onset below the surface)."""
+    _, _, delta_c, _, _ = _jg_constants(kappa_n_m1p5, reduced_radius_m, yield_stress_pa, poisson)
+    return kappa_n_m1p5 * (JG_TRANSITION_RATIO * delta_c) ** 1.5
