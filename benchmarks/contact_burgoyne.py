@@ -1,7 +1,7 @@
 """The contact law on the measured sphere-sphere curves of Burgoyne & Daraio (PRE 89, 032203,
 2014): `hertzchain contact` on the 15 Caltech curves, and how the data's caveats move it.
 
-    python benchmarks/contact_burgoyne.py [--data PATH] [--out benchmarks/results/contact_burgoyne]
+    python benchmarks/contact_burgoyne.py [--data PATH] [--out benchmarks/results/contact_burgoyne] [--reuse]
 
 Runs, each into its own folder under --out:
 
@@ -24,6 +24,7 @@ Writes `summary.json` and `summary.md` (the acceptance numbers) into --out.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -43,11 +44,14 @@ CALTECH = {
 GEOMETRY = ContactGeometry("sphere-sphere", 3.175e-3)  # two hemispheres of 1/8 in
 
 
-def _run(curves, out, title, **options):
+def _run(curves, out, title, reuse=False, **options):
+    if reuse and (out / "contact.json").is_file():
+        return json.loads((out / "contact.json").read_text())
     start = time.perf_counter()
     report = calibrate(curves, GEOMETRY, progress=lambda text: print(f"  {text}", file=sys.stderr), **options)
     data = write_outputs(report, curves, out, title=title)
     data["elapsed_s"] = time.perf_counter() - start
+    atomic.write_json(out / "contact.json", atomic.json_ready(data))
     return data
 
 
@@ -60,6 +64,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default=str(DATA))
     parser.add_argument("--out", default="benchmarks/results/contact_burgoyne")
+    parser.add_argument("--reuse", action="store_true", help="read runs whose contact.json exists instead of rerunning")
     args = parser.parse_args(argv)
     data_dir, out = Path(args.data), Path(args.out)
     if not (data_dir / "ExperimentalData").is_dir():
@@ -74,7 +79,7 @@ def main(argv=None) -> int:
         ("rate_fitted", "sigma_Y and rate constant fitted", {"fit_rate_constant": True}),
     ):
         print(f"{label} ...", file=sys.stderr)
-        runs[label] = _run(caltech, out / label, title, **options)
+        runs[label] = _run(caltech, out / label, title, args.reuse, **options)
     rate_440c = float(np.median([c["strain_rate_s"] for c in runs["published"]["curves"]
                                  if c["material"] == STEEL_440C.name]))
     processings = {
@@ -88,7 +93,8 @@ def main(argv=None) -> int:
         curves = [read_curve(p, STEEL_440C) for p in paths]
         curves = [c.__class__(f"{p.parent.name[-4:]}_{c.name}", c.time_s, c.approach_m, c.force_n, c.material)
                   for c, p in zip(curves, paths)]
-        runs[label] = _run(curves, out / label, f"440C, {label.replace('_', ' ')}", strain_rate_s_given=rate_440c)
+        runs[label] = _run(curves, out / label, f"440C, {label.replace('_', ' ')}", args.reuse,
+                           strain_rate_s_given=rate_440c)
 
     published = runs["published"]
     summary = {"data": "Burgoyne & Daraio 2014 (CC-BY 4.0), ExperimentalData: 15 Caltech curves",
@@ -124,7 +130,7 @@ def main(argv=None) -> int:
             "rms_over_peak_fitted": _span(runs[label], "rms_over_peak_fitted", STEEL_440C.name),
             "peak_force_measured_kn": [c["peak_force_measured_n"] / 1e3 for c in runs[label]["curves"]],
         }
-    summary["elapsed_s"] = {label: run["elapsed_s"] for label, run in runs.items()}
+    summary["elapsed_s"] = {label: run.get("elapsed_s") for label, run in runs.items()}
     summary["elapsed_note"] = "timed on a shared 2-core machine under load"
     atomic.write_json(out / "summary.json", atomic.json_ready(summary))
     atomic.write_text(out / "summary.md", _markdown(summary))

@@ -108,7 +108,7 @@ def read_curve(path, material: Material) -> ContactCurve:
     """Read a force-approach file as it is, SI units.
 
     - `.mat`: `Fexternal` (N x 3: time s, approach m, force N; Burgoyne & Daraio's curves) or
-      `fdK` / `fd1` (N x 2: approach m, force N; no time).
+      `fdK`, `fd1`, `fd2`, ... (N x 2: approach m, force N; no time).
     - `.csv`: a header with `approach_m` and `force_n` (or `force_measured_n`), optionally
       `time_s`.
     """
@@ -126,9 +126,9 @@ def read_curve(path, material: Material) -> ContactCurve:
                                  f"got shape {table.shape}.")
             time, approach, force = table.T
         else:
-            key = next((k for k in ("fdK", "fd1") if k in variables), None)
+            key = next((k for k in variables if k.startswith("fd")), None)
             if key is None:
-                raise ValueError(f"{path}: no Fexternal, fdK or fd1 variable (found: {', '.join(variables)}).")
+                raise ValueError(f"{path}: no Fexternal or fd* (fdK, fd1, ...) variable (found: {', '.join(variables)}).")
             table = np.asarray(variables[key], dtype=float)
             if table.ndim != 2 or table.shape[1] != 2:
                 raise ValueError(f"{path}: {key} must be N x 2 (approach m, force N), got shape {table.shape}.")

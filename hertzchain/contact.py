@@ -280,8 +280,8 @@ def jackson_green_contact(overlap_m, max_overlap_m, kappa_n_m1p5, reduced_radius
 
     JG let $H/\\sigma_Y$ fall from 2.84 as $a/R$ grows (an elastic-perfectly plastic
     material); the measured contacts of Burgoyne & Daraio (PRE 89, 032203, 2014: 440C, 302,
-    Al 2017 hemispheres at 300-750 /s) keep $F/(2\\pi R^*\\delta) \\approx 2.8$-$3.9\\,\\sigma_Y$ up to
-    $a/R \\approx 0.7$ (work hardening), and JG's falling hardness puts their peaks 20-40 %
+    Al 2017 hemispheres at 300-750 /s) keep $F/(2\\pi R^*\\delta) \\approx 2.7$-$4.0\\,\\sigma_Y$ up to
+    $a/R \\approx 0.7$ (work hardening), and JG's falling hardness puts their peaks 4-38 %
     low; with $h$ = 2.84 held, the peaks of all 440C and 302 curves fall within 15 %
     (`benchmarks/results/contact_burgoyne/`). Use the dynamic $\\sigma_Y$
     (`rate_hardened_yield_stress`) for impacts.
