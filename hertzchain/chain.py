@@ -65,8 +65,9 @@ class ChainSetup(eqx.Module):
     - `bead_mass_kg`: alternative to the density (scalar or length N); the density is then
       derived from it and the radius.
     - `bead_yield_stress_pa`: the beads' yield stress (paper: 2 GPa). It sets each contact's
-      yield force (the paper's mean-pressure estimate, `contact_yield_force_n`), used for the
-      yield check and, with `plasticity=True`, by the elastic-plastic contact law.
+      yield force (`contact_yield_force_n`: the paper's mean-pressure estimate, or where the
+      `plastic_law` "jackson_green" leaves Hertz), used for the yield check and, with
+      `plasticity=True`, by the elastic-plastic contact law.
     - `plasticity`: contacts above their yield force deform plastically instead of staying
       Hertzian; default False (the paper's beads stay elastic).
     - `plastic_law`: the elastic-plastic law with `plasticity`: `"thornton"` (Thornton 1997,
