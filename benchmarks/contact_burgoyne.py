@@ -60,6 +60,13 @@ def _span(data, key, material):
     return [min(values), max(values)] if values else None
 
 
+def _shift(base, other, material):
+    """Range over a material's curves of the change of the peak-force error between two runs."""
+    changes = [o["peak_force_error_model"] - b["peak_force_error_model"]
+               for b, o in zip(base["curves"], other["curves"]) if b["material"] == material]
+    return [min(changes), max(changes)]
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default=str(DATA))
@@ -114,6 +121,8 @@ def main(argv=None) -> int:
             "unloading_radius_needed_over_reduced_radius": _span(
                 published, "unloading_radius_needed_over_reduced_radius", name),
             "offset_kept_peak_force_error_published": _span(runs["offset_kept"], "peak_force_error_model", name),
+            "offset_kept_peak_error_shift": _shift(published, runs["offset_kept"], name),
+            "approach_offset_um": [1e6 * v for v in _span(published, "approach_offset_m", name)],
             "offset_kept_fitted_yield_stress_mpa":
                 runs["offset_kept"]["materials"][name]["fitted"]["yield_stress_pa"] / 1e6,
             "rate_fitted": runs["rate_fitted"]["materials"][name]["fitted"],
@@ -162,6 +171,8 @@ def _markdown(summary) -> str:
         ("contact radius the data's unloading needs ÷ law's", lambda m: _plain(m["unloading_radius_needed_over_law"])),
         ("same ÷ R*", lambda m: _plain(m["unloading_radius_needed_over_reduced_radius"])),
         ("offset kept: peak force error, published", lambda m: _pct(m["offset_kept_peak_force_error_published"])),
+        ("offset kept: change of the peak error (points)", lambda m: _pct(m["offset_kept_peak_error_shift"])),
+        ("approach offset at the first sample (µm)", lambda m: _plain(m["approach_offset_um"], 0)),
         ("offset kept: fitted σ_Y (MPa)", lambda m: f"{m['offset_kept_fitted_yield_stress_mpa']:.0f}"),
         ("σ_Y and C fitted: σ_Y (MPa), C", lambda m: f"{m['rate_fitted']['yield_stress_pa'] / 1e6:.0f}, "
                                                      f"{m['rate_fitted']['rate_constant']:.3f}"),
