@@ -274,7 +274,7 @@ def _fit_material(curves, approaches, rates, geometry, material, fit_rate_consta
     return values, errors, bool(result.converged), singles
 
 
-def _curve_report(curve, approach, rate, kappa, geometry, given, fitted):
+def _curve_report(curve, approach, rate, kappa, geometry, given, fitted, own_stress_pa=None):
     """Numbers of one curve at the given and the fitted constants."""
     smooth = _smoothed(curve)
     peak = float(np.max(smooth))
@@ -291,6 +291,9 @@ def _curve_report(curve, approach, rate, kappa, geometry, given, fitted):
     secants = {label: unloading_secant_n_m(approach, f) for label, f in (("model", model), ("fitted", fit))}
     i_peak = int(np.argmax(smooth))
     loading, unloading = slice(0, i_peak + 1), slice(i_peak + 1, None)
+    own = None if own_stress_pa is None else np.asarray(law_force(
+        jnp.asarray(approach), kappa, geometry,
+        contact.rate_hardened_yield_stress(own_stress_pa, fitted["rate_constant"], rate), curve.material.poisson))
     modulus = 0.75 * kappa / math.sqrt(geometry.reduced_radius_m)
     fitted_stress = contact.rate_hardened_yield_stress(fitted["yield_stress_pa"], fitted["rate_constant"], rate)
     radius = float(contact.jackson_green_contact_radius(float(np.max(approach)), kappa, geometry.reduced_radius_m,
@@ -310,6 +313,9 @@ def _curve_report(curve, approach, rate, kappa, geometry, given, fitted):
         "peak_force_error_thornton": float(np.max(old)) / peak - 1.0,
         "rms_over_peak_model": float(np.sqrt(np.mean((model - curve.force_n) ** 2))) / peak,
         "rms_over_peak_fitted": float(np.sqrt(np.mean((fit - curve.force_n) ** 2))) / peak,
+        # sigma_Y fitted to this curve alone: what the law's shape leaves whatever the constant
+        "yield_stress_own_fit_pa": own_stress_pa,
+        "rms_over_peak_own_fit": None if own is None else float(np.sqrt(np.mean((own - curve.force_n) ** 2))) / peak,
         "rms_over_peak_fitted_loading": float(np.sqrt(np.mean((fit - curve.force_n)[loading] ** 2))) / peak,
         "rms_over_peak_fitted_unloading": float(np.sqrt(np.mean((fit - curve.force_n)[unloading] ** 2))) / peak
         if i_peak + 1 < curve.force_n.size else None,
@@ -367,8 +373,9 @@ def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample"
             "files": [curves[i].name for i in members],
         }
         kappa = _kappa(material, geometry)
-        for i in members:
-            report["curves"].append(_curve_report(curves[i], approaches[i], rates[i], kappa, geometry, given, values))
+        for k, i in enumerate(members):
+            report["curves"].append(_curve_report(curves[i], approaches[i], rates[i], kappa, geometry, given, values,
+                                                  singles[k] if singles else None))
     return report
 
 
