@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import jax  # noqa: E402
 from fitting.diagnosis import diagnose  # noqa: E402
-from fitting.effects import EFFECT_NAMES  # noqa: E402
+from fitting.effects import EFFECT_NAMES, nominal_yield_forces_n  # noqa: E402
 from fitting.hidden import hidden_effect_traces  # noqa: E402
 import hertzchain as hc  # noqa: E402
 from independent_data import SETUPS, hidden_records, true_strength  # noqa: E402
@@ -42,7 +42,7 @@ def recovered(setup: str, effect: str, values: dict) -> float | None:
     `values`; None for an effect stated otherwise (wall softening, bead radii)."""
     if effect == "plasticity":  # the softening scales the nominal yield force by its cube
         spec = SETUPS[setup]
-        nominal = float(hc.ChainSetup(spec["n_beads"], **spec["fields"]).contact_yield_force_n()[1])
+        nominal = float(nominal_yield_forces_n(hc.ChainSetup(spec["n_beads"], **spec["fields"]))[1])
         return nominal / values["yield_softening"] ** 3
     if effect == "contact_exponent":
         return 1.5 + values["exponent_shift"]

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import hertzchain as hc
+from fitting.effects import nominal_yield_forces_n
 from fitting.hidden import truth_fields
 from hertzchain.acquisition import Acquisition, acquire
 from hertzchain.materials import BRASS
@@ -64,7 +65,7 @@ def _true_fields(setup_name: str, hidden, rng) -> dict:
         if name == "contact_exponent":  # Hertz's force at an overlap typical of the setup
             value = (value, spec["reference_overlap_m"])
         elif name == "plasticity":  # the yield stress that gives the hidden yield force
-            share = true_strength(setup_name, name) / float(nominal.contact_yield_force_n()[1])
+            share = true_strength(setup_name, name) / float(nominal_yield_forces_n(nominal)[1])
             value = float(nominal.bead_yield_stress_pa) * share ** (1 / 3)
         strengths[name] = value
     return dict(spec["fields"]) | truth_fields(nominal, strengths, rng)

@@ -616,9 +616,9 @@ class _Search:
             return [start(shift) for shift in (-0.1, -0.04, 0.04, 0.1, 0.2)]
         return [x]
 
-    def interpret(self, effect: str, x) -> str:
+    def interpret(self, effect: str, x, effects=(), chi2: float = 0.0) -> str:
         """A sentence on which law or reading of a named effect the fitted strengths say
-        (empty for effects with one law)."""
+        (empty for effects with one law); `effects` and `chi2`: the fit's, for standard errors."""
         value = {self.labels[c]: float(x[c]) for c in self.effect_columns[effect]}
         if effect == "sensor_dynamics":
             c = value["sensor_coupling"]
@@ -635,20 +635,15 @@ class _Search:
         if effect == "contact_exponent":
             return f" contact_exponent: contacts follow F ~ delta^n with n = {1.5 + value['exponent_shift']:.4g}."
         if effect == "plasticity" and value["yield_softening"] > 0:
-            # the first bead-bead contact (a smaller striker's contact yields at a lower force)
-            forces = self._nominal_yield_forces()
-            force = forces[1 if forces.size > 2 else 0] / value["yield_softening"] ** 3
-            return f" plasticity: contacts between beads yield from {force:.4g} N (Thornton 1997)."
+            cols = self.columns(effects)
+            column = self.effect_columns[effect][0]
+            error = float(self.stderr(x, cols, chi2)[cols.index(column)]) if column in cols else math.nan
+            return fx.describe_plasticity(self.problem.base_setups[0], value["yield_softening"], error)
         return ""
 
     def _nominal_yield_forces(self) -> np.ndarray:
-        """Every contact's yield force (N) at yield_softening 1: striker-bead, bead-bead...,
-        wall (the header's yield stress, else `fitting.effects.DEFAULT_YIELD_STRESS_PA`)."""
-        setup = self.problem.base_setups[0]
-        stress = float(setup.bead_yield_stress_pa)
-        if not math.isfinite(stress):
-            setup = fx.rebuild_setup(setup, bead_yield_stress_pa=fx.DEFAULT_YIELD_STRESS_PA)
-        return np.asarray(setup.contact_yield_force_n(), dtype=float)
+        """Every contact's yield force (N) at yield_softening 1 (`fitting.effects.nominal_yield_forces_n`)."""
+        return fx.nominal_yield_forces_n(self.problem.base_setups[0])
 
     # --- screening --------------------------------------------------------------------------------
     def screen(self, x, effects_in, names) -> tuple[dict, dict, dict, list]:
@@ -1031,7 +1026,7 @@ class _Workflow:
         if named:
             text = f"Named missing effect(s), in order: {', '.join(named)}."
             for name in named:
-                text += search.interpret(name, x)
+                text += search.interpret(name, x, self.accepted, chi2)
         else:
             text = "No missing effect detected: no candidate passes the tests."
         if "rotational_friction" in named:

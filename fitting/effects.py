@@ -16,7 +16,7 @@ frees or holds strengths as it goes.
 | `bead_dispersion` | `bead_radius_dev_1..N` | relative radius deviation of each bead at fixed density (mass $\\propto R^3$, stiffness follows) |
 | `precompression` | `preload_n` (N), `preload_seen` | static preload added to the header's; `preload_seen` is the share of it the channels read (0: piezo sensors, which read changes of force only; 1: DC sensors); channels a file lists in `ac_channels` never read it |
 | `contact_exponent` | `exponent_shift`, `exponent_stiffness` | every contact follows $F = (1+s)\\kappa\\,\\delta_r^{3/2}(\\delta/\\delta_r)^n$ with $n = 3/2 + $ `exponent_shift` (non-ideal, rough or non-spherical contacts; `hertzchain.contact.power_law_force`): the stiffness at the overlap $\\delta_r$ of a reference force near the data's is fitted with it (`exponent_stiffness` s), so that n and the stiffness stay apart and a law normalised elsewhere is still matched |
-| `plasticity` | `yield_softening` | Thornton (1997) elastic-plastic contacts (`hertzchain.contact.thornton_contact`) with yield stress $\\sigma_{Y,0}/y$, i.e. yield forces $F_{Y,0}/y^3$ ($\\sigma_{Y,0}$: the header's, else 2 GPa); y = 0 never yields, y = 1 is the paper's 470 N |
+| `plasticity` | `yield_softening` | elastic-plastic contacts that match measured ones (`hertzchain.contact.jackson_green_contact`: Jackson & Green 2005 loading to a hardness of 2.84 $\\sigma_Y$, Hertzian unloading from the flattened contact) with yield stress $\\sigma_{Y,0}/y$, i.e. yield forces $F_{Y,0}/y^3$ ($\\sigma_{Y,0}$: the header's, else 2 GPa); y = 0 never yields, y = 1 leaves Hertz at 1.55 kN between the paper's beads |
 
 `sensor_dynamics` has two parts, both exact for a bead cut in two around a sensor (the
 core's split-bead model, `ChainSetup.sensor_beads`) and both regular at $f_0 = \\infty$ (the
@@ -37,6 +37,7 @@ import math
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from hertzchain.chain import ChainSetup
 from hertzchain.compliant_sensor import CompliantSensors
@@ -52,6 +53,8 @@ _SENSOR_EXACT_BELOW_HZ = 2e6
 _SENSOR_SWITCH_RATE = (SENSOR_REFERENCE_HZ / _SENSOR_EXACT_BELOW_HZ) ** 2
 # Yield stress used by `plasticity` when the header's beads never yield (the paper's 2 GPa).
 DEFAULT_YIELD_STRESS_PA = 2e9
+# The contact law of `plasticity` (`hertzchain.ChainSetup.plastic_law`).
+PLASTIC_LAW = "jackson_green"
 # A rigid nominal wall is represented as this many times stiffer than the beads.
 _RIGID_WALL_FACTOR = 1e3
 PREFIX = "dx_"
@@ -188,7 +191,7 @@ def library(n_beads: int) -> dict[str, Effect]:
         Effect(
             name="plasticity",
             parameters=(p + "yield_softening",),
-            summary="Thornton (1997) elastic-plastic contacts",
+            summary="elastic-plastic contacts (Jackson & Green 2005 loading, hardness 2.84 sigma_Y)",
             signature=("flattened peaks and extra loss only above the yield force (a threshold in "
                        "amplitude)"),
         ),
@@ -253,7 +256,7 @@ def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True,
                   power_law: bool = False) -> ChainSetup:
     """The setup with every effect strength of `extras` applied.
 
-    `plastic`: Thornton elastic-plastic contacts (needed as soon as `yield_softening` > 0);
+    `plastic`: elastic-plastic contacts, `PLASTIC_LAW` (needed as soon as `yield_softening` > 0);
     `False` gives Hertz contacts, the same model where `yield_softening` is 0 (an infinite
     yield force) at a fraction of the cost. `power_law`: power-law contacts of exponent
     3/2 + `exponent_shift`, equal to Hertz at the overlap of `extras["reference_force_n"]`
@@ -285,6 +288,7 @@ def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True,
         precompression_n=setup.precompression_n + extras[p + "preload_n"],
         bead_yield_stress_pa=sigma,
         plasticity=plastic,
+        plastic_law=PLASTIC_LAW,
         power_law=power_law,
         contact_exponent=1.5 + extras[p + "exponent_shift"],
         exponent_reference_overlap_m=(extras["reference_force_n"] / setup.contact_kappa()[min(1, n - 1)])
@@ -351,3 +355,26 @@ def effects_forward_model(n_beads: int, steps_per_contact: int = 200, *, plastic
     defaults["reference_force_n"] = float(reference_force_n)
     simulate = _simulate_power_law if power_law else (_simulate_plastic if plastic else _simulate_elastic)
     return ForwardModel(simulate=simulate, steps_per_contact=steps_per_contact, extras_defaults=defaults)
+
+
+def nominal_yield_forces_n(setup: ChainSetup) -> np.ndarray:
+    """Every contact's yield force under `plasticity` at yield_softening 1, N: striker-bead,
+    bead-bead..., wall (the header's yield stress, else `DEFAULT_YIELD_STRESS_PA`)."""
+    stress = float(setup.bead_yield_stress_pa)
+    nominal = rebuild_setup(setup, plastic_law=PLASTIC_LAW,
+                            bead_yield_stress_pa=stress if math.isfinite(stress) else DEFAULT_YIELD_STRESS_PA)
+    return np.asarray(nominal.contact_yield_force_n(), dtype=float)
+
+
+def describe_plasticity(setup: ChainSetup, softening: float, softening_stderr: float) -> str:
+    """The fitted `yield_softening` in words: the yield stress (MPa) with its standard error,
+    and the force at which contacts between beads then leave Hertz (N)."""
+    stress = float(setup.bead_yield_stress_pa)
+    sigma0 = stress if math.isfinite(stress) else DEFAULT_YIELD_STRESS_PA
+    fitted = sigma0 / softening
+    error = sigma0 * softening_stderr / softening**2
+    forces = nominal_yield_forces_n(setup) / softening**3
+    force = forces[1 if forces.size > 2 else 0]  # the first bead-bead contact
+    return (f" plasticity: yield stress {fitted / 1e6:.4g} +- {error / 1e6:.2g} MPa (contacts: Jackson & Green "
+            f"2005 loading to 2.84 sigma_Y); contacts between beads leave Hertz from {force:.4g} N, the wall "
+            f"contact from {forces[-1]:.4g} N.")

@@ -22,6 +22,7 @@ from . import contact
 from .materials import BEAD_STEEL
 
 ENDS = ("wall", "free")
+PLASTIC_LAWS = ("thornton", "jackson_green")
 
 
 def _is_concrete(x) -> bool:
@@ -64,11 +65,17 @@ class ChainSetup(eqx.Module):
     - `bead_mass_kg`: alternative to the density (scalar or length N); the density is then
       derived from it and the radius.
     - `bead_yield_stress_pa`: the beads' yield stress (paper: 2 GPa). It sets each contact's
-      yield force (the paper's mean-pressure estimate, `contact_yield_force_n`), used for the
-      yield check and, with `plasticity=True`, by the elastic-plastic contact law.
-    - `plasticity`: contacts above their yield force deform plastically (Thornton 1997, see
-      `contact.thornton_contact`) instead of staying Hertzian; default False (the paper's
-      beads stay elastic).
+      yield force (`contact_yield_force_n`: the paper's mean-pressure estimate, or where the
+      `plastic_law` "jackson_green" leaves Hertz), used for the yield check and, with
+      `plasticity=True`, by the elastic-plastic contact law.
+    - `plasticity`: contacts above their yield force deform plastically instead of staying
+      Hertzian; default False (the paper's beads stay elastic).
+    - `plastic_law`: the elastic-plastic law with `plasticity`: `"thornton"` (Thornton 1997,
+      `contact.thornton_contact`, yield at `contact_yield_force_n`) or `"jackson_green"`
+      (`contact.jackson_green_contact`: first yield from the von Mises criterion, hardness
+      2.84 $\sigma_Y$ when fully plastic, unloading from the flattened contact; it matches
+      measured sphere-sphere curves, the other does not). Give the dynamic yield stress for
+      impacts (`contact.rate_hardened_yield_stress`).
     - `contact_exponent`, `exponent_reference_overlap_m`: every contact (wall included)
       follows $F = \\kappa\\,\\delta_r^{3/2}(\\delta/\\delta_r)^n$ (`contact.power_law_force`) with
       n = `contact_exponent` instead of Hertz's 3/2; it equals the Hertz force at the
@@ -122,6 +129,7 @@ class ChainSetup(eqx.Module):
     sensor_beads: tuple[int, ...] = eqx.field(static=True)
     plasticity: bool = eqx.field(static=True)
     power_law: bool = eqx.field(static=True)
+    plastic_law: str = eqx.field(static=True)
 
     def __init__(
         self,
@@ -155,6 +163,7 @@ class ChainSetup(eqx.Module):
         contact_exponent=1.5,
         exponent_reference_overlap_m=1e-5,
         power_law: bool | None = None,
+        plastic_law: str = "thornton",
     ):
         if isinstance(n_beads, bool) or not isinstance(n_beads, (int, np.integer)) or n_beads < 1:
             raise ValueError(f"n_beads must be a positive integer, got {n_beads!r}.")
@@ -229,6 +238,9 @@ class ChainSetup(eqx.Module):
         self.sensor_beta = _as_float(sensor_beta, "sensor_beta")
         self.sensor_f0_hz = _as_float(sensor_f0_hz, "sensor_f0_hz")
         self.plasticity = bool(plasticity)
+        if plastic_law not in PLASTIC_LAWS:
+            raise ValueError(f"plastic_law must be one of {PLASTIC_LAWS}, got {plastic_law!r}.")
+        self.plastic_law = plastic_law
         self.contact_exponent = _as_float(contact_exponent, "contact_exponent")
         self.exponent_reference_overlap_m = _as_float(exponent_reference_overlap_m, "exponent_reference_overlap_m")
         if power_law is None:
@@ -318,7 +330,14 @@ class ChainSetup(eqx.Module):
         return (1.0 + self.mu_star) * bare
 
     def contact_yield_force_n(self) -> jax.Array:
-        """Yield force of contacts 0..N-1 and of the wall contact (last entry), N."""
+        """Yield force of contacts 0..N-1 and of the wall contact (last entry), N: the paper's
+        mean-pressure estimate (`contact.yield_force`), or with `plastic_law="jackson_green"`
+        the force at which that law leaves Hertz (`contact.jackson_green_yield_force`)."""
+        if self.plastic_law == "jackson_green":
+            kappa = jnp.concatenate([self.contact_kappa(), self.wall_kappa()[None]])
+            poisson = jnp.concatenate([self.bead_poisson, self.bead_poisson[-1:]])
+            return contact.jackson_green_yield_force(kappa, self.contact_reduced_radius_m(),
+                                                     self.bead_yield_stress_pa, poisson)
         radius = jnp.concatenate([self.striker_radius_m[None], self.bead_radius_m])
         theta = contact.theta(
             jnp.concatenate([self.striker_youngs_pa[None], self.bead_youngs_pa]),
@@ -334,6 +353,13 @@ class ChainSetup(eqx.Module):
             theta_b=contact.theta(self.wall_youngs_pa, self.wall_poisson),
         )
         return jnp.concatenate([beads, wall[None]])
+
+    def contact_reduced_radius_m(self) -> jax.Array:
+        """Reduced radius $R^* = RR'/(R+R')$ of contacts 0..N-1 and of the wall contact (last,
+        the bead's radius), m."""
+        radius = jnp.concatenate([self.striker_radius_m[None], self.bead_radius_m])
+        beads = 1.0 / (1.0 / radius[:-1] + 1.0 / radius[1:])
+        return jnp.concatenate([beads, self.bead_radius_m[-1:]])
 
     def sensor_spring_n_m(self) -> jax.Array:
         """Spring stiffness $k_s$ of each embedded sensor, N/m (in `sensor_beads` order).
@@ -379,7 +405,7 @@ class ChainModel(eqx.Module):
     wall_overlap0_m: jax.Array  # scalar
     yield_force_n: jax.Array  # (n_contacts,) used when plastic
     wall_yield_force_n: jax.Array  # scalar
-    plastic: bool = eqx.field(static=True)  # Thornton elastic-plastic contacts instead of Hertz
+    plastic: bool = eqx.field(static=True)  # elastic-plastic contacts instead of Hertz
     eta_s: jax.Array
     dashpot_n_s_m: jax.Array  # linear dashpot of every contact in compression
     friction_decel_m_s2: jax.Array  # mu * g
@@ -391,6 +417,11 @@ class ChainModel(eqx.Module):
     # Power-law contacts (`contact.power_law_force`): exponent and reference overlap, or None (Hertz).
     contact_exponent: jax.Array | None = None
     reference_overlap_m: jax.Array | None = None
+    # `plastic_law="jackson_green"`: reduced radius (m) and Poisson ratio of every internal contact
+    # then the wall (n_contacts + 1,), and the yield stress (Pa); None for Thornton's law.
+    reduced_radius_m: jax.Array | None = None
+    contact_poisson: jax.Array | None = None
+    yield_stress_pa: jax.Array | None = None
 
 
 def internal_contact_index(setup: ChainSetup, contact_number: int) -> int:
@@ -434,13 +465,17 @@ def build_model(setup: ChainSetup) -> ChainModel:
     for bead in range(1, setup.n_beads + 1):
         m = bead_mass[bead - 1]
         masses += [(1.0 - beta) * m, beta * m] if bead in sensor_rank else [m]
-    # (Hertz stiffness, spring stiffness, is a sensor spring, yield force) per internal contact
-    links = [(kappa[0], zero, False, yield_force[0])]
+    reduced_radius = setup.contact_reduced_radius_m()
+    one = jnp.ones(())
+    # (Hertz stiffness, spring stiffness, is a sensor spring, yield force, reduced radius,
+    # Poisson ratio of the bead behind) per internal contact
+    links = [(kappa[0], zero, False, yield_force[0], reduced_radius[0], setup.bead_poisson[0])]
     for bead, kind in _bead_links(setup):
         if kind == "spring":
-            links.append((zero, springs_k[sensor_rank[bead]], True, never))
+            links.append((zero, springs_k[sensor_rank[bead]], True, never, one, setup.bead_poisson[bead - 1]))
         else:
-            links.append((kappa[bead], zero, False, yield_force[bead]))
+            links.append((kappa[bead], zero, False, yield_force[bead], reduced_radius[bead],
+                          setup.bead_poisson[bead]))
     kappa_all = jnp.stack([link[0] for link in links])
     spring_all = jnp.stack([link[1] for link in links])
     is_spring = jnp.asarray([link[2] for link in links])
@@ -490,4 +525,12 @@ def build_model(setup: ChainSetup) -> ChainModel:
         striker_velocity_m_s=setup.striker_velocity_m_s,
         contact_exponent=law[0],
         reference_overlap_m=law[1],
+        **(_jackson_green_fields(setup, links) if setup.plasticity and setup.plastic_law == "jackson_green" else {}),
     )
+
+
+def _jackson_green_fields(setup: ChainSetup, links) -> dict:
+    """The `ChainModel` fields of `plastic_law="jackson_green"`."""
+    radius = jnp.stack([link[4] for link in links] + [setup.bead_radius_m[-1]])
+    poisson = jnp.stack([link[5] for link in links] + [setup.bead_poisson[-1]])
+    return {"reduced_radius_m": radius, "contact_poisson": poisson, "yield_stress_pa": setup.bead_yield_stress_pa}

@@ -53,7 +53,7 @@ def initial_max_overlap(model: ChainModel):
 def _elastic_parts(model: ChainModel, displacement_m, max_overlap_m, sensor_force_n=None):
     """Elastic (rate-independent) force, stored energy and plastic dissipation of every
     contact and of the wall (last), for Hertz, power-law or, if the model is plastic,
-    Thornton contacts."""
+    Thornton or Jackson-Green contacts."""
     contacts, wall = overlaps(model, displacement_m, sensor_force_n)
     overlap = jnp.concatenate([contacts, wall[None]])
     kappa = jnp.concatenate([model.kappa, model.wall_kappa[None]])
@@ -66,8 +66,15 @@ def _elastic_parts(model: ChainModel, displacement_m, max_overlap_m, sensor_forc
         return overlap, contact.hertz_force(overlap, kappa), contact.hertz_potential(overlap, kappa), zero
     yield_force = jnp.concatenate([model.yield_force_n, model.wall_yield_force_n[None]])
     plastic = jnp.isfinite(yield_force)
-    safe_yield = jnp.where(plastic, yield_force, 1.0)
-    force, energy, dissipated = contact.thornton_contact(overlap, max_overlap_m, kappa, safe_yield)
+    if model.reduced_radius_m is None:
+        safe_yield = jnp.where(plastic, yield_force, 1.0)
+        force, energy, dissipated = contact.thornton_contact(overlap, max_overlap_m, kappa, safe_yield)
+    else:
+        plastic = plastic & (kappa > 0.0)  # a free end has no wall contact
+        safe_kappa = jnp.where(plastic, kappa, 1.0)
+        safe_stress = jnp.where(plastic, model.yield_stress_pa, 1.0)
+        force, energy, dissipated = contact.jackson_green_contact(
+            overlap, max_overlap_m, safe_kappa, model.reduced_radius_m, safe_stress, model.contact_poisson)
     hertz = contact.hertz_force(overlap, kappa), contact.hertz_potential(overlap, kappa)
     return (
         overlap,

@@ -25,6 +25,8 @@ class Material:
       density does not enter the dynamics).
     - `yield_stress_pa`: compressive yield stress $\\sigma_Y$, Pa (None if unknown).
     - `source`: where the numbers come from.
+    - `yield_rate_constant`: C of the rate hardening $\\sigma_Y(1 + C\\ln(\\dot\\varepsilon/10^{-3}\\,
+      \\mathrm{s}^{-1}))$ (`contact.rate_hardened_yield_stress`); None if unknown.
     """
 
     name: str
@@ -33,6 +35,7 @@ class Material:
     density_kg_m3: float | None = None
     yield_stress_pa: float | None = None
     source: str = ""
+    yield_rate_constant: float | None = None
 
     def __post_init__(self):
         if not (math.isfinite(self.youngs_pa) or self.youngs_pa == math.inf) or self.youngs_pa <= 0:
@@ -78,6 +81,11 @@ SOFT_5GPA = Material(
 PTFE = Material("PTFE", 1.46e9, 0.46, 2200.0, source="Daraio et al., PRE 72, 016603 (2005)")
 BRASS = Material("brass", 110e9, 0.34, 8500.0, source=_HANDBOOK)
 GLASS = Material("glass", 63e9, 0.22, 2500.0, source="soda-lime glass, " + _HANDBOOK)
+_BURGOYNE = ("Burgoyne & Daraio, PRE 89, 032203 (2014), Table I and Fig. 4 (the constants of their "
+             "contact model; rate constant of Al 2017 from Fig. 4c)")
+STEEL_440C = Material("steel_440C", 200e9, 0.3, 7650.0, 1896e6, _BURGOYNE, yield_rate_constant=0.035)
+STEEL_302 = Material("steel_302", 200e9, 0.3, 7900.0, 600e6, _BURGOYNE, yield_rate_constant=0.025)
+ALUMINIUM_2017 = Material("Al_2017", 76e9, 0.3, 2700.0, 276e6, _BURGOYNE, yield_rate_constant=0.003)
 
 MATERIALS: dict[str, Material] = {
     m.name: m
@@ -93,6 +101,9 @@ MATERIALS: dict[str, Material] = {
         PTFE,
         BRASS,
         GLASS,
+        STEEL_440C,
+        STEEL_302,
+        ALUMINIUM_2017,
     )
 }
 

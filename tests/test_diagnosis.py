@@ -282,7 +282,7 @@ EFFECT_CASES = {
     "wall_compliance": 20e9,
     "bead_dispersion": 0.01,
     "precompression": 2.0,
-    "plasticity": 2e9,
+    "plasticity": NOMINAL["plasticity"],
 }
 
 

@@ -4,8 +4,8 @@ made outside the diagnosis's own generator (`fitting.hidden`):
 - a static preload read by piezo (AC-coupled) sensors on 15 brass beads with a striker
   smaller than the beads, simulated by the diffrax reference solver, and files that do not
   say their channels are AC-coupled (as an independent generator writes them);
-- a yield force below the peak forces on the paper's chain (Thornton contacts, simulated on
-  a finer grid than the diagnosis's model);
+- (plasticity on the paper's chain: `tests/test_contact_plasticity_diagnosis.py`, data from
+  an independent integrator with the diagnosis's contact law);
 - embedded sensors read as the paper's filter form of Eq. 4 (the chain not affected by
   them), applied after the simulation;
 - a linear dashpot and Kuwabara-Kono damping on the brass chain (diffrax data), each to be
@@ -54,26 +54,6 @@ def test_preload_read_by_piezo_sensors_is_named_precompression():
     assert values["preload_n"] == pytest.approx(2.0, rel=0.2)
     assert values["preload_seen"] < 0.5  # the channels read changes of force only
     assert "AC-coupled" in diagnosis.conclusion and not diagnosis.misspecification
-
-
-def test_yield_force_below_the_peak_forces_is_named_plasticity():
-    yield_force_n = 250.0
-    nominal = float(hc.ChainSetup(21).contact_yield_force_n()[1])
-    stress = float(hc.ChainSetup(21).bead_yield_stress_pa) * (yield_force_n / nominal) ** (1 / 3)
-    files = []
-    for k, velocity in enumerate((0.1, 0.3, 0.8, 1.5)):
-        setup = hc.ChainSetup(21, striker_velocity_m_s=velocity, plasticity=True, bead_yield_stress_pa=stress)
-        run = hc.simulate(setup, t_end_s=1.6e-3, sample_interval_s=0.25e-6, contacts=(6, 11),
-                          on_yield="ignore", steps_per_contact=800)
-        forces = {n: np.asarray(run.forces_n[n]) for n in run.channel_names}
-        trace = _record(setup, run.time_s, forces, k, 11)
-        files.append(TraceFile(trace.header, trace.time_s, trace.channels, path=f"steel_{velocity}"))
-    assert max(float(np.max(f.channels["contact_6"])) for f in files) > 1.2 * yield_force_n
-    diagnosis = diagnose(files, progress=False)
-    assert diagnosis.missing_effects == ["plasticity"]
-    fitted = nominal / diagnosis.steps[0].values["yield_softening"] ** 3
-    assert fitted == pytest.approx(yield_force_n, rel=0.1)
-    assert not diagnosis.misspecification
 
 
 def test_filter_form_sensors_are_named_sensor_dynamics_alone():

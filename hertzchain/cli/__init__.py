@@ -24,6 +24,7 @@ COMMANDS = {
     "sweep": ("hertzchain.cli.sweep", "sweep a grid of setups, streamed to disk, resumable"),
     "sensitivity": ("hertzchain.cli.sensitivity", "exact sensitivities of observables to parameters"),
     "design": ("fitting.cli.design", "predicted uncertainties and optimal experiment plans"),
+    "contact": ("fitting.cli.contact", "calibrate the elastic-plastic contact law on force-approach curves"),
 }
 
 

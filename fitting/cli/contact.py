@@ -1,0 +1,99 @@
+"""`hertzchain contact`: drive the elastic-plastic contact law along measured force-approach
+curves, report it at the given constants and calibrate its yield stress per material.
+
+    hertzchain contact force10.mat force15.mat s302_10.mat --material steel_440C \\
+        --material steel_440C --material steel_302 --radius 3.175e-3 --out out/contact
+
+Each file is read as it is (`.mat` with `Fexternal` [s, m, N] or `fdK` [m, N]; CSV with
+`approach_m`, `force_n`, optionally `time_s`). `--material` is given once (all files) or
+once per file, a materials-table name; `--youngs`, `--poisson`, `--yield-stress`,
+`--rate-constant` replace its constants (or stand for it). Writes `contact.json`, one
+`<stem>.csv` per file, `contact.png` and `residuals.png` into `--out`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+
+from hertzchain.materials import Material, material
+from hertzchain.units import parse_quantity
+
+from ..contact_calibration import GEOMETRIES, OFFSETS, ContactGeometry, calibrate, read_curve, write_outputs
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("files", nargs="+", help="force-approach files (.mat Fexternal/fdK, .csv)")
+    parser.add_argument("--material", action="append", default=[],
+                        help="materials-table name, once for all files or once per file")
+    parser.add_argument("--youngs", help="Young's modulus (Pa, or with a unit: 200GPa)")
+    parser.add_argument("--poisson", type=float, help="Poisson ratio")
+    parser.add_argument("--yield-stress", help="quasi-static yield stress (Pa, or 600MPa)")
+    parser.add_argument("--rate-constant", type=float,
+                        help="C of sigma_Y (1 + C ln(strain rate / 1e-3 /s)); 0: no rate hardening")
+    parser.add_argument("--geometry", choices=GEOMETRIES, default="sphere-sphere",
+                        help="two spheres or a sphere on a flat of the same material [sphere-sphere]")
+    parser.add_argument("--radius", required=True, help="sphere radius (m, or 3.175mm)")
+    parser.add_argument("--radius-b", help="second sphere's radius (m) if it differs")
+    parser.add_argument("--offset", choices=OFFSETS, default="first-sample",
+                        help="approach offset: subtract the first sample's [first-sample] or keep it (none)")
+    parser.add_argument("--strain-rate", type=float,
+                        help="strain rate (1/s) for files without a time column (rate hardening needs one)")
+    parser.add_argument("--fit-rate-constant", action="store_true", help="fit the rate constant as well")
+    parser.add_argument("--out", default="out/contact", help="output folder [out/contact]")
+
+
+def _length(text, name):
+    try:
+        return parse_quantity(text, "m")
+    except ValueError as error:
+        raise ValueError(f"--{name}: {error}") from None
+
+
+def _materials(args) -> list[Material]:
+    names = args.material
+    if len(names) not in (0, 1, len(args.files)):
+        raise ValueError(f"--material given {len(names)} times for {len(args.files)} files: give it once "
+                         "(all files) or once per file.")
+    overrides = {}
+    if args.youngs is not None:
+        overrides["youngs_pa"] = parse_quantity(args.youngs, "Pa")
+    if args.poisson is not None:
+        overrides["poisson"] = args.poisson
+    if args.yield_stress is not None:
+        overrides["yield_stress_pa"] = parse_quantity(args.yield_stress, "Pa")
+    if args.rate_constant is not None:
+        overrides["yield_rate_constant"] = args.rate_constant
+    if not names:
+        missing = [f"--{k}" for k, key in (("youngs", "youngs_pa"), ("poisson", "poisson"),
+                                          ("yield-stress", "yield_stress_pa")) if key not in overrides]
+        if missing:
+            raise ValueError(f"no --material: give {', '.join(missing)} (or a materials-table name with --material).")
+        return [Material(name="given", **overrides)] * len(args.files)
+    chosen = [material(n) for n in names]
+    chosen = [dataclasses.replace(m, **overrides) for m in chosen]
+    return chosen * len(args.files) if len(chosen) == 1 else chosen
+
+
+def run(args: argparse.Namespace) -> int:
+    geometry = ContactGeometry(args.geometry, _length(args.radius, "radius"),
+                               None if args.radius_b is None else _length(args.radius_b, "radius-b"))
+    curves = [read_curve(path, m) for path, m in zip(args.files, _materials(args))]
+    names = [c.name for c in curves]
+    if len(set(names)) != len(names):
+        raise ValueError("two input files have the same stem; their <stem>.csv outputs would collide: rename one.")
+    report = calibrate(curves, geometry, offset=args.offset, fit_rate_constant=args.fit_rate_constant,
+                       strain_rate_s_given=args.strain_rate,
+                       progress=lambda text: print(text, file=sys.stderr, flush=True))
+    data = write_outputs(report, curves, args.out)
+    for name, entry in data["materials"].items():
+        fitted, given, errors = entry["fitted"], entry["given"], entry["stderr"]
+        print(f"{name}: sigma_Y fitted {fitted['yield_stress_pa'] / 1e6:.0f} +- {errors['yield_stress_pa'] / 1e6:.0f} MPa "
+              f"(given {given['yield_stress_pa'] / 1e6:.0f} MPa), rate constant {fitted['rate_constant']:.4g}")
+    for entry in data["curves"]:
+        print(f"  {entry['file']}: peak force {entry['peak_force_measured_n'] / 1e3:.3g} kN, error at given "
+              f"constants {100 * entry['peak_force_error_model']:+.1f} %, RMS/peak fitted "
+              f"{100 * entry['rms_over_peak_fitted']:.1f} %")
+    print(f"wrote contact.json, contact.png, residuals.png and {len(curves)} CSV files to {args.out}")
+    return 0

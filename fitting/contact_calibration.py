@@ -1,0 +1,461 @@
+"""Calibrate an elastic-plastic contact law on measured force-approach curves.
+
+A curve is a contact's force against the approach of the two bodies (sphere-sphere or
+sphere-flat), sampled in time, loading and unloading. The law
+(`hertzchain.contact.jackson_green_contact`) is driven along each measured approach
+history: at each sample the force at the current approach and the largest approach so
+far. Its yield stress is the dynamic one, $\\sigma_Y(1 + C\\ln(\\dot\\varepsilon/10^{-3}\\,
+\\mathrm{s}^{-1}))$ with one strain rate per curve, the mean approach speed to the peak force
+divided by the sum of the bodies' radii (the convention of Burgoyne & Daraio, PRE 89,
+032203, 2014).
+
+`calibrate` reports, per curve, the prediction at the given constants and at constants
+fitted per material across its curves (the yield stress, optionally the rate constant),
+through the project's least squares (`fitting.fit.least_squares`, optimistix
+Levenberg-Marquardt). Each curve weighs the same in the fit: residuals are
+$(F_{model} - F_{measured})/F_{peak}$ divided by the square root of the curve's sample count,
+so the fit minimises the sum over curves of the squared RMS misfit relative to each peak.
+Standard errors: the Gauss-Newton one from the residual variance, which treats thousands of
+strongly correlated samples as independent and is far too small, and the scatter of the
+yield stresses fitted to each curve alone (standard deviation / sqrt(curves)); the larger
+is reported as `stderr`.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from hertzchain import contact
+from hertzchain.materials import Material
+
+from .fit import least_squares
+from .uncertainty import covariance_from_jacobian
+
+GEOMETRIES = ("sphere-sphere", "sphere-flat")
+OFFSETS = ("first-sample", "none")
+# Window of the moving mean that gives a measured peak force (the data's ringing), s.
+PEAK_WINDOW_S = 1e-6
+# Unloading secant stiffness between these fractions of the peak force.
+SECANT_FRACTIONS = (0.9, 0.5)
+
+
+@dataclasses.dataclass(frozen=True)
+class ContactGeometry:
+    """Two bodies in contact: `kind` "sphere-sphere" (radii `radius_m`, `radius_b_m`; None
+    means equal) or "sphere-flat" (a sphere of `radius_m` on a flat of the same material)."""
+
+    kind: str
+    radius_m: float
+    radius_b_m: float | None = None
+
+    def __post_init__(self):
+        if self.kind not in GEOMETRIES:
+            raise ValueError(f"geometry must be one of {GEOMETRIES}, got {self.kind!r}.")
+        for name in ("radius_m", "radius_b_m"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be positive and finite (m), got {value}.")
+        if self.kind == "sphere-flat" and self.radius_b_m is not None:
+            raise ValueError("radius_b_m is for sphere-sphere contacts; a flat has none.")
+
+    @property
+    def other_radius_m(self) -> float:
+        """Radius of the second body, m (inf for a flat)."""
+        if self.kind == "sphere-flat":
+            return math.inf
+        return self.radius_m if self.radius_b_m is None else self.radius_b_m
+
+    @property
+    def reduced_radius_m(self) -> float:
+        return 1.0 / (1.0 / self.radius_m + 1.0 / self.other_radius_m)
+
+    @property
+    def strain_length_m(self) -> float:
+        """Length that turns the approach speed into a strain rate: the sum of the radii, m."""
+        return self.radius_m + (0.0 if self.kind == "sphere-flat" else self.other_radius_m)
+
+
+@dataclasses.dataclass(frozen=True)
+class ContactCurve:
+    """A measured force-approach curve, SI: `time_s` (None where the file has no time),
+    `approach_m` as stored, `force_n`; `name` (the file's stem), `material` (both bodies)."""
+
+    name: str
+    time_s: np.ndarray | None
+    approach_m: np.ndarray
+    force_n: np.ndarray
+    material: Material
+
+
+def _column(table, names, path, required=True):
+    for name in names:
+        if name in table:
+            return np.asarray(table[name], dtype=float)
+    if required:
+        raise ValueError(f"{path}: no column {names[0]!r} (columns: {', '.join(table)}); "
+                         f"give a header with {names[0]}.")
+    return None
+
+
+def read_curve(path, material: Material) -> ContactCurve:
+    """Read a force-approach file as it is, SI units.
+
+    - `.mat`: `Fexternal` (N x 3: time s, approach m, force N; Burgoyne & Daraio's curves) or
+      `fdK`, `fd1`, `fd2`, ... (N x 2: approach m, force N; no time).
+    - `.csv`: a header with `approach_m` and `force_n` (or `force_measured_n`), optionally
+      `time_s`.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"force-approach file {path} not found.")
+    if path.suffix.lower() == ".mat":
+        import scipy.io
+
+        variables = {k: v for k, v in scipy.io.loadmat(path).items() if not k.startswith("__")}
+        if "Fexternal" in variables:
+            table = np.asarray(variables["Fexternal"], dtype=float)
+            if table.ndim != 2 or table.shape[1] != 3:
+                raise ValueError(f"{path}: Fexternal must be N x 3 (time s, approach m, force N), "
+                                 f"got shape {table.shape}.")
+            time, approach, force = table.T
+        else:
+            key = next((k for k in variables if k.startswith("fd")), None)
+            if key is None:
+                raise ValueError(f"{path}: no Fexternal or fd* (fdK, fd1, ...) variable (found: {', '.join(variables)}).")
+            table = np.asarray(variables[key], dtype=float)
+            if table.ndim != 2 or table.shape[1] != 2:
+                raise ValueError(f"{path}: {key} must be N x 2 (approach m, force N), got shape {table.shape}.")
+            time, (approach, force) = None, table.T
+    elif path.suffix.lower() == ".csv":
+        with open(path, newline="") as handle:
+            rows = list(csv.DictReader(handle))
+        if not rows:
+            raise ValueError(f"{path}: no data rows under a header (approach_m, force_n, optional time_s).")
+        table = {name.strip(): [float(row[name]) for row in rows] for name in rows[0]}
+        approach = _column(table, ("approach_m",), path)
+        force = _column(table, ("force_n", "force_measured_n"), path)
+        time = _column(table, ("time_s",), path, required=False)
+    else:
+        raise ValueError(f"{path}: unknown file type {path.suffix!r}; give .mat (Fexternal, fdK) or .csv.")
+    for label, values in (("approach", approach), ("force", force), ("time", time)):
+        if values is not None and not np.all(np.isfinite(values)):
+            raise ValueError(f"{path}: the {label} column holds non-finite values.")
+    if approach.size < 10:
+        raise ValueError(f"{path}: {approach.size} samples; a curve needs at least 10.")
+    return ContactCurve(path.stem, time, approach, force, material)
+
+
+def shifted_approach(curve: ContactCurve, offset: str) -> np.ndarray:
+    """The approach the law is driven with, m: `offset` "first-sample" subtracts the first
+    sample's (the measured curves start at 5-60 um with no force), "none" keeps it."""
+    if offset not in OFFSETS:
+        raise ValueError(f"offset must be one of {OFFSETS}, got {offset!r}.")
+    return curve.approach_m - curve.approach_m[0] if offset == "first-sample" else curve.approach_m
+
+
+def _smoothed(curve: ContactCurve) -> np.ndarray:
+    """Force averaged over `PEAK_WINDOW_S` (11 samples where there is no time), N."""
+    if curve.time_s is None:
+        width = 11
+    else:
+        width = max(1, int(round(PEAK_WINDOW_S / float(np.median(np.diff(curve.time_s))))))
+    return np.convolve(curve.force_n, np.ones(width) / width, mode="same")
+
+
+def strain_rate_s(curve: ContactCurve, geometry: ContactGeometry, given: float | None = None) -> float:
+    """Strain rate of a curve, 1/s: approach at the peak force over the time to it, over the
+    sum of the radii; `given` where the file has no time."""
+    if curve.time_s is None:
+        if given is None:
+            raise ValueError(f"{curve.name}: the file has no time column; give the strain rate (strain_rate_s, "
+                             "--strain-rate) or no rate hardening.")
+        return float(given)
+    peak = int(np.argmax(_smoothed(curve)))
+    speed = (curve.approach_m[peak] - curve.approach_m[0]) / (curve.time_s[peak] - curve.time_s[0])
+    return float(speed / geometry.strain_length_m)
+
+
+def _kappa(material: Material, geometry: ContactGeometry) -> float:
+    theta = contact.theta(material.youngs_pa, material.poisson)
+    if geometry.kind == "sphere-flat":
+        return float(contact.kappa_sphere_flat(geometry.radius_m, material.youngs_pa, material.poisson,
+                                               material.youngs_pa, material.poisson))
+    return float(1.0 / (2 * theta * math.sqrt(1.0 / geometry.radius_m + 1.0 / geometry.other_radius_m)))
+
+
+def law_force(approach_m, kappa, geometry: ContactGeometry, yield_stress_pa, poisson):
+    """`jackson_green_contact` along an approach history, N."""
+    peak = jax.lax.cummax(approach_m)
+    return contact.jackson_green_contact(approach_m, peak, kappa, geometry.reduced_radius_m, yield_stress_pa,
+                                         poisson)[0]
+
+
+def thornton_force(approach_m, material: Material, geometry: ContactGeometry, yield_stress_pa):
+    """The earlier law, `thornton_contact` with `yield_force`, along an approach history, N."""
+    theta = contact.theta(material.youngs_pa, material.poisson)
+    other_theta = theta
+    yield_force = contact.yield_force(yield_stress_pa, geometry.radius_m, theta, geometry.other_radius_m, other_theta)
+    peak = jax.lax.cummax(jnp.asarray(approach_m))
+    return contact.thornton_contact(jnp.asarray(approach_m), peak, _kappa(material, geometry), yield_force)[0]
+
+
+def unloading_secant_n_m(approach_m, force_n) -> float | None:
+    """Secant stiffness of the unloading branch from 90 % to 50 % of the peak force, N/m
+    (None if the record does not unload to 50 %)."""
+    peak = int(np.argmax(force_n))
+    after = force_n[peak:]
+    high, low = (np.nonzero(after < f * force_n[peak])[0] for f in SECANT_FRACTIONS)
+    if high.size == 0 or low.size == 0:
+        return None
+    i, j = peak + high[0], peak + low[0]
+    change = approach_m[i] - approach_m[j]
+    return float((force_n[i] - force_n[j]) / change) if change > 0 else None
+
+
+class _Residuals:
+    """The whitened residuals of one material's curves in x = (ln sigma_Y, C), for
+    `fitting.fit.least_squares`."""
+
+    def __init__(self, approaches, forces, peaks, rates, kappa, geometry, poisson):
+        self.pieces = [(jnp.asarray(a), jnp.asarray(f), p, r) for a, f, p, r in zip(approaches, forces, peaks, rates)]
+
+        def residuals(x):
+            out = []
+            for approach, force, peak, rate in self.pieces:
+                stress = contact.rate_hardened_yield_stress(jnp.exp(x[0]), x[1], rate)
+                model = law_force(approach, kappa, geometry, stress, poisson)
+                out.append((model - force) / (peak * math.sqrt(force.size)))
+            return jnp.concatenate(out)
+
+        self._residuals = jax.jit(residuals)
+        self._jacobian = jax.jit(jax.jacfwd(residuals))
+
+    def residuals(self, x):
+        return np.asarray(self._residuals(jnp.asarray(x, dtype=float)))
+
+    def linearize(self, x, columns):
+        x = jnp.asarray(x, dtype=float)
+        return np.asarray(self._residuals(x)), np.asarray(self._jacobian(x))[:, list(columns)]
+
+
+def _fit_material(curves, approaches, rates, geometry, material, fit_rate_constant):
+    """(values {yield_stress_pa, rate_constant}, stderr {...}, converged, per-curve sigma_Y)."""
+    kappa = _kappa(material, geometry)
+    forces = [c.force_n for c in curves]
+    start = np.array([math.log(material.yield_stress_pa), material.yield_rate_constant or 0.0])
+    free = [0, 1] if fit_rate_constant else [0]
+
+    def solve(indices):
+        problem = _Residuals([approaches[i] for i in indices], [forces[i] for i in indices],
+                             [float(np.max(_smoothed(curves[i]))) for i in indices], [rates[i] for i in indices],
+                             kappa, geometry, material.poisson)
+        result = least_squares(problem, start, free, max_steps=60, tolerance=1e-8)
+        return problem, result
+
+    problem, result = solve(range(len(curves)))
+    r, jac = problem.linearize(result.x, free)
+    labels = ["ln_yield_stress", "rate_constant"][: len(free)]
+    cov = covariance_from_jacobian(jac, labels, chi2=float(r @ r), dof=max(r.size - len(free), 1), scale="residual")
+    stress = math.exp(result.x[0])
+    singles = [math.exp(solve([i])[1].x[0]) for i in range(len(curves))] if not fit_rate_constant else []
+    scatter = float(np.std(singles, ddof=1) / math.sqrt(len(singles))) if len(singles) > 1 else math.nan
+    gauss_newton = stress * float(cov.stderr[0])
+    values = {"yield_stress_pa": stress, "rate_constant": float(result.x[1])}
+    errors = {"yield_stress_gauss_newton_pa": gauss_newton, "yield_stress_curve_scatter_pa": scatter,
+              "yield_stress_pa": float(np.nanmax([gauss_newton, scatter])),
+              "rate_constant": float(cov.stderr[1]) if fit_rate_constant else None}
+    return values, errors, bool(result.converged), singles
+
+
+def _curve_report(curve, approach, rate, kappa, geometry, given, fitted, own_stress_pa=None):
+    """Numbers of one curve at the given and the fitted constants."""
+    smooth = _smoothed(curve)
+    peak = float(np.max(smooth))
+    model = np.asarray(law_force(jnp.asarray(approach), kappa, geometry,
+                                 contact.rate_hardened_yield_stress(given["yield_stress_pa"],
+                                                                    given["rate_constant"], rate),
+                                 curve.material.poisson))
+    fit = np.asarray(law_force(jnp.asarray(approach), kappa, geometry,
+                               contact.rate_hardened_yield_stress(fitted["yield_stress_pa"],
+                                                                  fitted["rate_constant"], rate),
+                               curve.material.poisson))
+    old = np.asarray(thornton_force(approach, curve.material, geometry, given["yield_stress_pa"]))
+    data_secant = unloading_secant_n_m(approach, smooth)
+    secants = {label: unloading_secant_n_m(approach, f) for label, f in (("model", model), ("fitted", fit))}
+    i_peak = int(np.argmax(smooth))
+    loading, unloading = slice(0, i_peak + 1), slice(i_peak + 1, None)
+    own = None if own_stress_pa is None else np.asarray(law_force(
+        jnp.asarray(approach), kappa, geometry,
+        contact.rate_hardened_yield_stress(own_stress_pa, fitted["rate_constant"], rate), curve.material.poisson))
+    modulus = 0.75 * kappa / math.sqrt(geometry.reduced_radius_m)
+    fitted_stress = contact.rate_hardened_yield_stress(fitted["yield_stress_pa"], fitted["rate_constant"], rate)
+    radius = float(contact.jackson_green_contact_radius(float(np.max(approach)), kappa, geometry.reduced_radius_m,
+                                                        fitted_stress, curve.material.poisson))
+    return {
+        "file": curve.name,
+        "material": curve.material.name,
+        "samples": int(curve.force_n.size),
+        "approach_offset_m": float(curve.approach_m[0]),
+        "strain_rate_s": rate,
+        "peak_force_measured_n": peak,
+        "approach_at_peak_m": float(approach[i_peak]),
+        "mean_pressure_truncated_area_over_yield_stress": peak / (
+            2 * math.pi * geometry.reduced_radius_m * float(approach[i_peak])) / curve.material.yield_stress_pa,
+        "peak_force_error_model": float(np.max(model)) / peak - 1.0,
+        "peak_force_error_fitted": float(np.max(fit)) / peak - 1.0,
+        "peak_force_error_thornton": float(np.max(old)) / peak - 1.0,
+        "rms_over_peak_model": float(np.sqrt(np.mean((model - curve.force_n) ** 2))) / peak,
+        "rms_over_peak_fitted": float(np.sqrt(np.mean((fit - curve.force_n) ** 2))) / peak,
+        # sigma_Y fitted to this curve alone: what the law's shape leaves whatever the constant
+        "yield_stress_own_fit_pa": own_stress_pa,
+        "rms_over_peak_own_fit": None if own is None else float(np.sqrt(np.mean((own - curve.force_n) ** 2))) / peak,
+        "rms_over_peak_fitted_loading": float(np.sqrt(np.mean((fit - curve.force_n)[loading] ** 2))) / peak,
+        "rms_over_peak_fitted_unloading": float(np.sqrt(np.mean((fit - curve.force_n)[unloading] ** 2))) / peak
+        if i_peak + 1 < curve.force_n.size else None,
+        # the contact radius a Hertzian unloading (secant 90 -> 50 % = 1.76 E* a) needs to match the measured
+        # secant, over the law's contact radius at the largest approach and over the reduced radius
+        "unloading_radius_needed_over_law": None if data_secant is None else data_secant / (1.76 * modulus) / radius,
+        "unloading_radius_needed_over_reduced_radius": None if data_secant is None
+        else data_secant / (1.76 * modulus) / geometry.reduced_radius_m,
+        "unloading_secant_measured_n_m": data_secant,
+        "unloading_secant_ratio_model": None if data_secant is None or secants["model"] is None
+        else secants["model"] / data_secant,
+        "unloading_secant_ratio_fitted": None if data_secant is None or secants["fitted"] is None
+        else secants["fitted"] / data_secant,
+        "_series": {"approach_m": approach, "force_model_n": model, "force_fitted_n": fit, "force_thornton_n": old},
+    }
+
+
+def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample", fit_rate_constant: bool = False,
+              strain_rate_s_given: float | None = None, progress=None) -> dict:
+    """Predict and calibrate the contact law on `curves` (`ContactCurve`, grouped by material).
+
+    **Returns:** a dict: `materials` (per material: given and fitted constants with standard
+    errors, converged flag, per-curve yield stresses) and `curves` (per curve: strain rate,
+    measured peak, peak-force errors at the given constants, the fitted ones and with the
+    earlier Thornton law, RMS misfit over the peak, unloading secant stiffness 90 -> 50 % of
+    the peak, measured and as ratios). `_series` entries hold the model forces for the
+    per-file CSV and the figure.
+    """
+    if not curves:
+        raise ValueError("no force-approach curves given.")
+    groups: dict[str, list[int]] = {}
+    for i, curve in enumerate(curves):
+        if curve.material.yield_stress_pa is None:
+            raise ValueError(f"{curve.name}: material {curve.material.name!r} has no yield stress; "
+                             "give one (--yield-stress, Pa).")
+        groups.setdefault(curve.material.name, []).append(i)
+    approaches = [shifted_approach(c, offset) for c in curves]
+    rates = [strain_rate_s(c, geometry, strain_rate_s_given) if (c.material.yield_rate_constant or
+             fit_rate_constant) else 1e-3 for c in curves]
+    report = {"geometry": dataclasses.asdict(geometry), "reduced_radius_m": geometry.reduced_radius_m,
+              "offset": offset, "fit_rate_constant": fit_rate_constant, "materials": {}, "curves": []}
+    for name, members in groups.items():
+        material = curves[members[0]].material
+        if progress:
+            progress(f"fitting {name} on {len(members)} curve(s)")
+        values, errors, converged, singles = _fit_material(
+            [curves[i] for i in members], [approaches[i] for i in members], [rates[i] for i in members],
+            geometry, material, fit_rate_constant)
+        given = {"yield_stress_pa": material.yield_stress_pa, "rate_constant": material.yield_rate_constant or 0.0}
+        report["materials"][name] = {
+            "youngs_pa": material.youngs_pa, "poisson": material.poisson, "given": given, "fitted": values,
+            "stderr": errors, "converged": converged,
+            "fitted_over_given_yield_stress": values["yield_stress_pa"] / material.yield_stress_pa,
+            "yield_stress_per_curve_pa": dict(zip([curves[i].name for i in members], singles)),
+            "files": [curves[i].name for i in members],
+        }
+        kappa = _kappa(material, geometry)
+        for k, i in enumerate(members):
+            report["curves"].append(_curve_report(curves[i], approaches[i], rates[i], kappa, geometry, given, values,
+                                                  singles[k] if singles else None))
+    return report
+
+
+def summary_table(report: dict) -> list[dict]:
+    """Per material: ranges of the per-curve numbers (for the JSON and the console)."""
+    rows = []
+    for name, entry in report["materials"].items():
+        mine = [c for c in report["curves"] if c["material"] == name]
+
+        def span(key):
+            values = [c[key] for c in mine if c[key] is not None]
+            return [min(values), max(values)] if values else None
+
+        rows.append({"material": name, "curves": len(mine), "peak_force_error_model": span("peak_force_error_model"),
+                     "peak_force_error_thornton": span("peak_force_error_thornton"),
+                     "rms_over_peak_fitted": span("rms_over_peak_fitted"),
+                     "fitted_over_given_yield_stress": entry["fitted_over_given_yield_stress"],
+                     "unloading_secant_ratio_fitted": span("unloading_secant_ratio_fitted")})
+    return rows
+
+
+def median_secant_ratio(report: dict, key: str = "unloading_secant_ratio_fitted") -> float | None:
+    values = [c[key] for c in report["curves"] if c[key] is not None]
+    return float(np.median(values)) if values else None
+
+
+def write_outputs(report: dict, curves, out_dir, *, title: str = "") -> dict:
+    """Write `contact.json`, one `<stem>.csv` per curve (time_s, approach_m, force_measured_n,
+    force_model_n, force_fitted_n), `contact.png` (data and laws) and `residuals.png`.
+    Returns the JSON written (without the series)."""
+    from hertzchain import atomic
+    from hertzchain.plotting import plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    for curve, entry in zip(curves, report["curves"]):
+        series = entry["_series"]
+        time = curve.time_s if curve.time_s is not None else np.full(curve.force_n.size, np.nan)
+        rows = [[f"{t:.9g}" if np.isfinite(t) else "", f"{a:.9g}", f"{m:.9g}", f"{p:.9g}", f"{f:.9g}"]
+                for t, a, m, p, f in zip(time, series["approach_m"], curve.force_n, series["force_model_n"],
+                                         series["force_fitted_n"])]
+        atomic.write_csv(out / f"{curve.name}.csv",
+                         ["time_s", "approach_m", "force_measured_n", "force_model_n", "force_fitted_n"], rows)
+    columns = min(5, len(curves))
+    lines = -(-len(curves) // columns)
+    laws, axes = plt.subplots(lines, columns, figsize=(3.6 * columns, 3.0 * lines), squeeze=False)
+    residual_figure, residual_axes = plt.subplots(lines, columns, figsize=(3.6 * columns, 2.4 * lines), squeeze=False)
+    for k, (curve, entry) in enumerate(zip(curves, report["curves"])):
+        series = entry["_series"]
+        approach_mm = series["approach_m"] * 1e3
+        ax = axes.flat[k]
+        ax.plot(approach_mm, curve.force_n * 1e-3, color="0.4", lw=0.8, label="measured")
+        ax.plot(approach_mm, series["force_model_n"] * 1e-3, "b--", lw=1.2, label="given constants")
+        ax.plot(approach_mm, series["force_fitted_n"] * 1e-3, "r-", lw=1.2, label="fitted sigma_Y")
+        ax.plot(approach_mm, series["force_thornton_n"] * 1e-3, "g:", lw=1.2, label="Thornton (given)")
+        ax.set_title(f"{curve.name} ({curve.material.name})", fontsize=9)
+        ax.set_xlabel("approach (mm)", fontsize=8)
+        ax.set_ylabel("force (kN)", fontsize=8)
+        x = np.arange(curve.force_n.size) if curve.time_s is None else (curve.time_s - curve.time_s[0]) * 1e6
+        rax = residual_axes.flat[k]
+        rax.plot(x, (series["force_model_n"] - curve.force_n) / entry["peak_force_measured_n"], "b--", lw=0.8)
+        rax.plot(x, (series["force_fitted_n"] - curve.force_n) / entry["peak_force_measured_n"], "r-", lw=0.8)
+        rax.axhline(0.0, color="k", lw=0.5)
+        rax.set_title(curve.name, fontsize=9)
+        rax.set_xlabel("time (us)" if curve.time_s is not None else "sample", fontsize=8)
+        rax.set_ylabel("(model - data) / peak", fontsize=8)
+    for ax in list(axes.flat[len(curves):]) + list(residual_axes.flat[len(curves):]):
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=7)
+    laws.suptitle(title or "force-approach: data and contact laws")
+    residual_figure.suptitle("residuals: given constants (blue dashed), fitted (red)")
+    for figure, name in ((laws, "contact.png"), (residual_figure, "residuals.png")):
+        figure.tight_layout()
+        atomic.save_figure(figure, out / name, dpi=90)
+        plt.close(figure)
+    data = {key: value for key, value in report.items() if key != "curves"}
+    data["curves"] = [{k: v for k, v in entry.items() if k != "_series"} for entry in report["curves"]]
+    data["summary"] = summary_table(report)
+    data["median_unloading_secant_ratio_fitted"] = median_secant_ratio(report)
+    data["median_unloading_secant_ratio_model"] = median_secant_ratio(report, "unloading_secant_ratio_model")
+    data = atomic.json_ready(data)
+    atomic.write_json(out / "contact.json", data)
+    return data
