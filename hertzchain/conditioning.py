@@ -20,16 +20,19 @@ Each step is a small pure function on numpy arrays, so that an importer (see
    the mean. With one, the analogue noise sigma_a is the maximum-likelihood width of a
    normal distribution seen through the converter's bins (each sample a count in the bin
    of its code: interval-censored data), which holds from sigma_a below a step, where the
-   spread of a resting record says little, to many steps (on two codes the width is not
-   identifiable and their spread, an upper estimate, is taken; on one, 0);
+   spread of a resting record says little, to many steps (on one or two codes the width
+   is not identifiable: the posterior mean of its square, see `binned_noise_std`);
    the channel's noise is then sigma^2 = sigma_a^2 + step^2/12, the error of a moving
-   signal through a uniform converter.
+   signal through a uniform converter. (The resting parts of a record have their own
+   error, between 0 and step/2 depending on where the level sits between two codes; over
+   channels with independent offsets it averages to the same sigma^2.)
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 
 import numpy as np
 
@@ -198,25 +201,36 @@ def baseline(values, before: np.ndarray, step: float | None, where: str) -> Base
     return Baseline(offset, math.hypot(binned_noise_std(segment, step), floor), int(segment.size), floor)
 
 
-def binned_noise_std(values, step: float) -> float:
-    """Maximum-likelihood standard deviation of normal noise about a constant level, from
-    samples quantised to multiples of `step` (same unit); 0 when they all share one code,
-    and the codes' spread (an upper estimate) when they fall on two.
+class NoiseEstimateWarning(UserWarning):
+    """The maximum-likelihood noise fit did not converge; a moment estimate was used."""
 
-    Each sample counts in the bin [k - 1/2, k + 1/2) step of its code k; the level and the
-    width maximise sum_k n_k log(Phi(b_k) - Phi(a_k)) (scipy's Nelder-Mead on the level
-    and the log width)."""
+
+def binned_noise_std(values, step: float) -> float:
+    """Standard deviation of normal noise about a constant level, from samples quantised to
+    multiples of `step` (same unit).
+
+    Each sample counts in the bin [k - 1/2, k + 1/2) step of its code k, so the level and the
+    width have the likelihood sum_k n_k log(Phi(b_k) - Phi(a_k)) (interval-censored data).
+
+    - Three or more codes: the maximum-likelihood width (scipy's Nelder-Mead on the level
+      and the log width). If it does not converge, a `NoiseEstimateWarning` says so and
+      the codes' variance less step^2/12 (Sheppard's correction) is used.
+    - One or two codes: the width is not identifiable (two bins fix only (boundary -
+      level)/width, and the likelihood grows as the width shrinks to 0); what the record
+      says is that no third code appeared. The estimate is the posterior mean of the
+      width's square under flat priors on the level and the width (`_few_codes_width_sq`).
+      On simulated 200-sample records it lies within 0.83-1.17 of the truth in
+      sqrt(width^2 + step^2/12) for noise of 0.05-0.35 steps, where the codes' spread,
+      taken before, was 1.2-1.8 times too large (it holds the quantisation error that the
+      step^2/12 term adds again).
+    """
     from scipy import optimize, special
 
     values = np.asarray(values, dtype=float)
     codes = np.round((values - np.median(values)) / step)
     levels, counts = np.unique(codes, return_counts=True)
-    if levels.size == 1:
-        return 0.0
-    if levels.size == 2:
-        # two bins fix only (boundary - level)/width: the width is not identifiable; the
-        # codes' spread bounds it from above (it is at most half a step)
-        return step * float(np.std(codes, ddof=1))
+    if levels.size <= 2:
+        return step * math.sqrt(_few_codes_width_sq(levels, counts))
 
     def negative_log_likelihood(theta):
         level, width = theta[0], math.exp(theta[1])
@@ -227,4 +241,26 @@ def binned_noise_std(values, step: float) -> float:
     spread = max(float(np.std(codes)), 0.1)
     best = optimize.minimize(negative_log_likelihood, [float(np.mean(codes)), math.log(spread)],
                              method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9})
+    if not best.success:
+        sheppard = max(float(np.var(codes, ddof=1)) - 1.0 / 12.0, 0.0)
+        warnings.warn(f"the noise fit on {codes.size} quantised samples did not converge ({best.message}); "
+                      f"using the codes' variance less step^2/12: {step * math.sqrt(sheppard):.4g}.",
+                      NoiseEstimateWarning, stacklevel=2)
+        return step * math.sqrt(sheppard)
     return step * math.exp(float(best.x[1]))
+
+
+def _few_codes_width_sq(levels, counts, grid: int = 400) -> float:
+    """Posterior mean of the noise width squared (in steps^2) from the counts of one or two
+    adjacent codes: flat priors on the level (within half a step of the codes seen) and on
+    the width (0 to 1 step; wider noise would have shown a third code), on a grid."""
+    from scipy import special
+
+    level = np.linspace(levels[0] - 0.5, levels[-1] + 0.5, grid)[:, None]
+    width = np.linspace(1.0 / grid, 1.0, grid)[None, :]
+    log_likelihood = np.zeros((grid, grid))
+    for code, count in zip(levels, counts):
+        mass = special.ndtr((code + 0.5 - level) / width) - special.ndtr((code - 0.5 - level) / width)
+        log_likelihood += count * np.log(np.maximum(mass, 1e-300))
+    weight = np.exp(log_likelihood - log_likelihood.max())
+    return float(np.sum(weight * width**2) / np.sum(weight))
