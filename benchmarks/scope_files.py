@@ -142,7 +142,7 @@ def hertzchain(*args, cwd) -> dict:
     start = time.perf_counter()
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     done = subprocess.run([sys.executable, "-m", "hertzchain", *args], cwd=cwd, env=env,
-                          capture_output=True, text=True)
+                          capture_output=True, text=True, check=False)
     return {"command": "hertzchain " + " ".join(args), "exit_status": done.returncode,
             "wall_s": time.perf_counter() - start, "output_tail": (done.stdout + done.stderr)[-1500:]}
 

@@ -360,61 +360,57 @@ def _column(path: Path, header: str, is_time: bool) -> tuple[str, float]:
 
 
 def _read_csv(path: Path) -> Waveforms:
-    lines = [(k, line) for k, line in enumerate(_decode(path).split("\n"), start=1)
-             if line.strip() and not line.lstrip().startswith("#")]
-    if not lines:
+    rows = [(number, cells) for number, cells in _csv_rows(path) if not cells[0].startswith("#")]
+    if not rows:
         raise ScopeFileError(f"{path}: no header row; the file holds only comments or blank lines.")
-    header_row, header_line = lines[0]
-    headers = [c.strip() for c in next(csv.reader([header_line]))]
-    while headers and not headers[-1]:
-        headers.pop()
+    header_row, headers = rows[0][0], _trimmed(rows[0][1])
     if len(headers) < 2:
         raise ScopeFileError(f"{path}: row {header_row}: the header names {len(headers)} column(s); give "
                              f"time and at least one channel, e.g. 'time (ms), CH1 (mV)'.")
     columns = [_column(path, h, k == 0) for k, h in enumerate(headers)]
-    names = [n for n, _ in columns[1:]]
-    for name in names:
-        if names.count(name) > 1:
-            raise ScopeFileError(f"{path}: row {header_row}: channel {name!r} is named twice in the header.")
-    data, file_rows = [], []
-    for number, line in lines[1:]:
-        cells = [c.strip() for c in next(csv.reader([line]))]
-        while len(cells) > len(headers) and not cells[-1]:
-            cells.pop()
-        if len(cells) != len(headers):
-            raise ScopeFileError(f"{path}: row {number} has {len(cells)} cells and the header {len(headers)}; "
-                                 f"time and every channel need a value in every row.")
-        data.append([_number(path, number, f"{k + 1} ({headers[k]})", c) for k, c in enumerate(cells)])
-        file_rows.append(number)
-    if not data:
-        raise ScopeFileError(f"{path}: a header but no data rows.")
-    table = np.asarray(data, dtype=np.float64) * np.asarray([f for _, f in columns])
-    time_s = table[:, 0].copy()
-    _check_time(path, time_s, file_rows)
-    channels = {name: table[:, k + 1].copy() for k, name in enumerate(names)}
-    return Waveforms(str(path), "csv", time_s, channels, dict.fromkeys(names), dict.fromkeys(names),
-                     {"columns": ", ".join(headers)})
+    table, numbers = _numeric_table(path, rows[1:], headers)
+    return _table_waveforms(path, "csv", table[:, 0] * columns[0][1], numbers, [n for n, _ in columns[1:]],
+                            table[:, 1:], [f for _, f in columns[1:]], {"columns": ", ".join(headers)})
 
 
-# --- vendor CSV exports (rigol-csv, keysight-csv, lecroy-csv, pico-csv) -------------------
+# --- tables of rows (csv, rigol-csv, keysight-csv, lecroy-csv, pico-csv) ------------------
 
 def _csv_rows(path: Path) -> list[tuple[int, list[str]]]:
-    """(file row number, stripped cells) of every non-blank row; trailing empty cells dropped
-    (Rigol ends every row with a comma)."""
+    """(file row number, stripped cells) of every row with a non-empty cell."""
     rows = []
     for number, row in enumerate(csv.reader(io.StringIO(_decode(path))), start=1):
         cells = [c.strip() for c in row]
-        while cells and not cells[-1]:
-            cells.pop()
-        if cells:
+        if any(cells):
             rows.append((number, cells))
     return rows
+
+
+def _trimmed(cells: list[str]) -> list[str]:
+    """`cells` without trailing empty ones (Rigol ends every row with a comma)."""
+    cells = list(cells)
+    while cells and not cells[-1]:
+        cells.pop()
+    return cells
+
+
+def _header_rows(path: Path, layout: str):
+    """The rows of a CSV whose first two rows name the columns and give their units:
+    (rows, (row number, names), (row number, units)), with trailing empty cells dropped."""
+    rows = _csv_rows(path)
+    if len(rows) < 3:
+        raise ScopeFileError(f"{path}: a {layout} CSV needs a names row, a units row and data rows; "
+                             f"the file has {len(rows)} rows.")
+    (header_row, header), (units_row, units) = [(n, _trimmed(c)) for n, c in rows[:2]]
+    return rows, (header_row, header), (units_row, units)
 
 
 def _numeric_table(path: Path, rows, names: list[str]) -> tuple[np.ndarray, list[int]]:
     """(n, len(names)) floats from data rows, each with exactly one cell per name."""
     data, numbers = [], []
     for number, cells in rows:
+        cells = list(cells)
+        while len(cells) > len(names) and not cells[-1]:
+            cells.pop()
         if len(cells) != len(names):
             raise ScopeFileError(f"{path}: row {number} has {len(cells)} cells and the header {len(names)} "
                                  f"({', '.join(names)}); every data row needs a value in every column.")
@@ -425,8 +421,8 @@ def _numeric_table(path: Path, rows, names: list[str]) -> tuple[np.ndarray, list
     return np.asarray(data, dtype=np.float64), numbers
 
 
-def _vendor_waveforms(path: Path, format: str, time_s, file_rows, names, table, factors, info) -> Waveforms:
-    """Waveforms of a vendor CSV whose channel columns `table[:, k]` are in volts x `factors[k]`."""
+def _table_waveforms(path: Path, format: str, time_s, file_rows, names, table, factors, info) -> Waveforms:
+    """Waveforms of a CSV table whose channel columns `table[:, k]` are in volts x `factors[k]`."""
     _check_time(path, time_s, file_rows)
     for name in names:
         if names.count(name) > 1:
@@ -436,11 +432,7 @@ def _vendor_waveforms(path: Path, format: str, time_s, file_rows, names, table, 
 
 
 def _read_rigol_csv(path: Path) -> Waveforms:
-    rows = _csv_rows(path)
-    if len(rows) < 3:
-        raise ScopeFileError(f"{path}: a Rigol CSV needs a header row, a units row and data rows; "
-                             f"the file has {len(rows)} rows.")
-    (header_row, header), (units_row, units) = rows[0], rows[1]
+    rows, (header_row, header), (units_row, units) = _header_rows(path, "Rigol")
     if "Start" not in header or "Increment" not in header or header[0] != "X":
         raise ScopeFileError(f"{path}: row {header_row}: a Rigol CSV header reads 'X,CH1,...,Start,Increment,'; "
                              f"got {','.join(header)!r} (use format 'csv' for a generic CSV).")
@@ -469,7 +461,7 @@ def _read_rigol_csv(path: Path) -> Waveforms:
         time_s = table[:, 0] * _unit_factor(path, f"row {units_row}, column 1 (X)", x_unit, TIME_UNITS_S)
     info = {"columns": ",".join(header), "units": ",".join(units[:len(names) + 1]),
             "start_s": repr(start), "increment_s": repr(increment)}
-    return _vendor_waveforms(path, "rigol-csv", time_s, numbers, names, table[:, 1:], factors, info)
+    return _table_waveforms(path, "rigol-csv", time_s, numbers, names, table[:, 1:], factors, info)
 
 
 def _keysight_name(source: str) -> str:
@@ -480,10 +472,7 @@ def _read_keysight_csv(path: Path) -> Waveforms:
     rows = _csv_rows(path)
     if rows and rows[0][1][0].lower() == "revision":
         return _read_infiniium_csv(path, rows)
-    if len(rows) < 3:
-        raise ScopeFileError(f"{path}: a Keysight CSV needs a sources row ('x-axis,1,2'), a units row "
-                             f"('second,Volt,Volt') and data rows; the file has {len(rows)} rows.")
-    (header_row, header), (units_row, units) = rows[0], rows[1]
+    rows, (_, header), (units_row, units) = _header_rows(path, "Keysight InfiniiVision")
     if len(units) != len(header):
         raise ScopeFileError(f"{path}: row {units_row} gives {len(units)} units for {len(header)} columns.")
     names = [_keysight_name(h) for h in header[1:]]
@@ -492,7 +481,7 @@ def _read_keysight_csv(path: Path) -> Waveforms:
                for k, n in enumerate(names)]
     table, numbers = _numeric_table(path, rows[2:], [header[0], *names])
     info = {"sources": ",".join(header), "units": ",".join(units)}
-    return _vendor_waveforms(path, "keysight-csv", table[:, 0] * time_factor, numbers, names,
+    return _table_waveforms(path, "keysight-csv", table[:, 0] * time_factor, numbers, names,
                              table[:, 1:], factors, info)
 
 
@@ -501,7 +490,7 @@ def _read_infiniium_csv(path: Path, rows) -> Waveforms:
     if data_at is None:
         raise ScopeFileError(f"{path}: an Infiniium CSV header (Revision, ..., XInc, XOrg) must end with a "
                              f"'Data' row before the samples; none found.")
-    settings = {cells[0]: cells[1:] for _, cells in rows[:data_at]}
+    settings = {cells[0]: _trimmed(cells[1:]) for _, cells in rows[:data_at]}
     where = {cells[0]: number for number, cells in rows[:data_at]}
     for key in ("XInc", "XOrg"):
         if key not in settings or not settings[key]:
@@ -525,7 +514,7 @@ def _read_infiniium_csv(path: Path, rows) -> Waveforms:
                                  f"the file is truncated or edited.")
     time_s = origin + increment * np.arange(len(numbers))
     info = {key: ",".join(value) for key, value in settings.items()}
-    return _vendor_waveforms(path, "keysight-csv", time_s, numbers, names, table, factors, info)
+    return _table_waveforms(path, "keysight-csv", time_s, numbers, names, table, factors, info)
 
 
 def _read_lecroy_csv(path: Path) -> Waveforms:
@@ -539,7 +528,7 @@ def _read_lecroy_csv(path: Path) -> Waveforms:
     if segments and len(segments) > 1 and segments[1] not in ("1", "1.0"):
         raise ScopeFileError(f"{path}: {segments[1]} segments; one shot per file is read, save each "
                              f"segment to its own file.")
-    header_row, header = rows[at]
+    header_row, header = rows[at][0], _trimmed(rows[at][1])
     if len(header) != 2:
         raise ScopeFileError(f"{path}: row {header_row}: {','.join(header)!r}; one channel per file "
                              f"(Time,Ampl) is read.")
@@ -547,15 +536,11 @@ def _read_lecroy_csv(path: Path) -> Waveforms:
     name = match.group(1).upper() if match else path.stem
     table, numbers = _numeric_table(path, rows[at + 1:], ["Time", name])
     info = {"instrument": ",".join(rows[0][1]), **{k: ",".join(v[1:]) for k, v in settings.items()}}
-    return _vendor_waveforms(path, "lecroy-csv", table[:, 0], numbers, [name], table[:, 1:], [1.0], info)
+    return _table_waveforms(path, "lecroy-csv", table[:, 0], numbers, [name], table[:, 1:], [1.0], info)
 
 
 def _read_pico_csv(path: Path) -> Waveforms:
-    rows = _csv_rows(path)
-    if len(rows) < 3:
-        raise ScopeFileError(f"{path}: a PicoScope CSV needs a names row, a units row and data rows; "
-                             f"the file has {len(rows)} rows.")
-    (header_row, header), (units_row, units) = rows[0], rows[1]
+    rows, (_, header), (units_row, units) = _header_rows(path, "PicoScope")
     if len(units) != len(header):
         raise ScopeFileError(f"{path}: row {units_row} gives {len(units)} units for {len(header)} columns.")
     bare = [u.strip("()").strip() for u in units]
@@ -571,7 +556,7 @@ def _read_pico_csv(path: Path) -> Waveforms:
                                      f"sample beyond the range; record with a larger range or cut the record.")
     table, numbers = _numeric_table(path, data, header)
     info = {"columns": ",".join(header), "units": ",".join(units)}
-    return _vendor_waveforms(path, "pico-csv", table[:, 0] * time_factor, numbers, names, table[:, 1:],
+    return _table_waveforms(path, "pico-csv", table[:, 0] * time_factor, numbers, names, table[:, 1:],
                              factors, info)
 
 
