@@ -20,7 +20,7 @@ import hertzchain as hc
 from hertzchain.importer import TimeZeroWarning, import_experiment
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
-import scope_files  # noqa: E402 (after the path insert)
+import scope_files  # noqa: E402
 
 SPEC = scope_files.LAB_SETUP
 GATE_S = SPEC["gate_s"]
