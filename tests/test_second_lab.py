@@ -8,6 +8,7 @@ plus its delay, and the gate without its delay named by the warning. Slow
 `benchmarks/scope_files.py --second-lab`'s run on diffrax reference data, fit and
 diagnosis as a user runs them."""
 
+import json
 import re
 import sys
 import warnings
@@ -17,6 +18,7 @@ import numpy as np
 import pytest
 
 import hertzchain as hc
+from hertzchain.cli import main
 from hertzchain.importer import TimeZeroWarning, import_experiment
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
@@ -47,10 +49,14 @@ def lab(tmp_path_factory):
     return folder
 
 
-def test_rigol_files_with_a_light_gate_import_at_the_impact(lab):
+def test_rigol_files_with_a_light_gate_import_at_the_impact(lab, tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error", TimeZeroWarning)
         traces = import_experiment(lab / "experiment.toml")
+        assert main(["import", str(lab / "experiment.toml"), "--out", str(tmp_path), "--no-plots"]) == 0
+    listing = json.loads((tmp_path / "import.json").read_text())["shots"]
+    assert [shot["time_zero_check"][:3] for shot in listing] == ["ok:", "ok:"]
+    assert [shot["time_zero_s"] for shot in listing] == pytest.approx([GATE_S, GATE_S], abs=0.05e-6)
     for trace in traces:
         assert trace.header["x_import_format"] == "rigol-csv"
         assert trace.channel_names == ("contact_8", "wall")
