@@ -33,10 +33,11 @@ Formats (`FORMATS`; `read_waveforms(path, format="auto")` picks one with `detect
   row names the columns, ``X,CH1,CH2,...,Start,Increment,``; the second holds units under the
   channel names (``Sequence,Volt,Volt,...``) and, under ``Start`` and ``Increment``, the
   record's first time and sample interval in s; then one row per sample: the sample index
-  and each channel's volts. Time = Start + index x Increment. (Layout as the issue reports
-  a lab's DS1000Z exports and as RigolWFM's DS1000Z CSV export writes it; a file whose X
-  column is in ``Second`` holds times instead of indices and is read so.) The CSV states no
-  digitiser step or range: ``lsb_v`` is estimated from the values by the importer.
+  and each channel's volts. Time = Start + index x Increment. (Layout: the DS1000Z exports
+  reported by a lab in issue 29, and public readers of these files, which take Start and
+  Increment from the second row's cells under those names; a file whose X column is in
+  ``Second`` holds times instead of indices and is read so.) The CSV states no digitiser
+  step or range: ``lsb_v`` is estimated from the values by the importer.
 - ``keysight-csv``: Keysight/Agilent CSV. InfiniiVision (2000/3000/4000 X) writes two
   header rows, the sources (``x-axis,1,2``) and their units (``second,Volt,Volt``), then
   time and values per row (InfiniiVision 3000 X-Series User's Guide, "CSV and ASCII XY file
