@@ -40,8 +40,10 @@ Formats (`FORMATS`; `read_waveforms(path, format="auto")` picks one with `detect
   step or range: ``lsb_v`` is estimated from the values by the importer.
 - ``keysight-csv``: Keysight/Agilent CSV. InfiniiVision (2000/3000/4000 X) writes two
   header rows, the sources (``x-axis,1,2``) and their units (``second,Volt,Volt``), then
-  time and values per row (InfiniiVision 3000 X-Series User's Guide, "CSV and ASCII XY file
-  structure"); channels are named ``CH<n>`` from the source numbers. Infiniium writes a
+  time and values per row (the header rows and the per-segment rows are described in the
+  InfiniiVision 2000/3000 X-Series User's Guides, "CSV and ASCII XY file structure"; the
+  header cells as these scopes write them); channels are named ``CH<n>`` from the source
+  numbers. Infiniium writes a
   block of ``key,value`` rows (``Revision``, ``Type``, ``Points``, ``XInc``, ``XOrg``,
   ``XUnits``, ``YUnits``, ..., Infiniium 90000 Programmer's Reference, "CSV and TSV Header
   Format") and then, after a ``Data`` row, one value per row (one column per source);
@@ -53,7 +55,9 @@ Formats (`FORMATS`; `read_waveforms(path, format="auto")` picks one with `detect
   The channel is named from the file stem's leading ``C<n>`` (LeCroy's ``C1--Trace--00000``),
   else the whole stem.
 - ``pico-csv``: PicoScope 6/7 CSV export: a row of names (``Time,Channel A,Channel B``), a
-  row of units in parentheses (``(ms),(mV),(V)``), an optional blank row, then the samples.
+  row of units in parentheses (``(ms),(mV),(V)``), an optional blank row, then the samples
+  (the layout public readers of these exports check: names ``Time,Channel X...`` and units
+  ``(s|ms|µs)``/``(V|mV|µV)``).
   Channels keep PicoScope's names (``Channel A``). A sample PicoScope marks over-range
   (``∞``/``-∞``) is an error naming the row (set a larger range, or cut the record).
 - ``npz``: ``numpy.load``. The time array is ``time_s`` (or ``t``/``time``), in seconds;
