@@ -459,17 +459,22 @@ def check_time_zero(time_s, channels: dict, n_beads, where: str, time_zero, zero
     """Whether the shot's pulse arrivals agree with its time zero; the text for the header.
 
     The half-rise times of the first pulse at two or more positions, extrapolated to the
-    striker contact (`conditioning.impact_time_s`), give the impact time on the new clock.
-    Beyond `conditioning.IMPACT_BAND_TRANSITS` one-bead transit times of 0 a
-    `TimeZeroWarning` names the delay seen and the fix (for a trigger channel: the delay
-    to add, `'channel:CH3>2.5V+40us'`)."""
-    positions = {p: force for name, force in channels.items()
-                 if (p := _position(name, n_beads)) is not None}
-    found = conditioning.impact_time_s(time_s, positions)
+    striker contact (`conditioning.impact_time_s`), give the impact time on the new clock:
+    from the contacts and sensors when two or more show the pulse, else with the wall's
+    channel as well (its rise depends on the wall's stiffness: a wider band,
+    `conditioning.IMPACT_BAND_WITH_WALL_TRANSITS`). Beyond the band (in one-bead transit
+    times about 0) a `TimeZeroWarning` names the delay seen and the fix (for a trigger
+    channel: the delay to add, `'channel:CH3>2.5V+40us'`)."""
+    inside = {p: force for name, force in channels.items()
+              if name != "wall" and (p := _position(name, n_beads)) is not None}
+    found = conditioning.impact_time_s(time_s, inside)
+    low, high = conditioning.IMPACT_BAND_TRANSITS
+    if found is None and "wall" in channels and n_beads:
+        found = conditioning.impact_time_s(time_s, inside | {float(n_beads): channels["wall"]})
+        low, high = conditioning.IMPACT_BAND_WITH_WALL_TRANSITS
     if found is None:
         return "not checked: fewer than two channels at different positions show the pulse"
     impact, transit = found
-    low, high = conditioning.IMPACT_BAND_TRANSITS
     text = (f"the arrivals put the impact at {impact * 1e6:+.1f} us ({impact / transit:+.2f} transits of "
             f"one bead, {transit * 1e6:.1f} us); expected {low:+g} to {high:+g}")
     if not low * transit <= impact <= high * transit:
