@@ -9,7 +9,8 @@ text by this script, not by hertzchain's writers. Every command runs as a user r
 
 ``--noise``: 15 brass beads of 5 mm struck by a 3 mm brass ball, six shots (0.05-1.0 m/s),
 contact 5 and the wall, each channel in its own Tektronix TDS CSV file; analogue noise of a
-quarter of a converter step (a resting record sits on one or two codes). Per noise seed:
+quarter of a converter step (a resting record sits on one or two codes; `--noise-steps`
+sets another). Per noise seed:
 `hertzchain fit experiment.toml --params eta,mu,C`; stored: exit status, chi^2/dof, values,
 standard errors, and over the seeds the ratio of the mean standard error to the spread of
 the fitted values.
@@ -153,7 +154,7 @@ NOISE_SETUP = dict(n_beads=15, radius_m=5e-3, striker_radius_m=3e-3, contacts=(5
                    velocities_m_s=(0.05, 0.1, 0.2, 0.4, 0.7, 1.0), record_s=1.0e-3)
 
 
-def noise_check(seeds: int, out: Path) -> dict:
+def noise_check(seeds: int, out: Path, noise_steps: float = 0.25) -> dict:
     spec = NOISE_SETUP
     runs = []
     for velocity in spec["velocities_m_s"]:
@@ -169,7 +170,7 @@ def noise_check(seeds: int, out: Path) -> dict:
             text += '\n[scope]\nformat = "auto"\ntime_zero = "trigger"\n'
             text += "".join(channel_toml(s, n) for s, n in sources.items())
             for k, ((time_s, forces), velocity) in enumerate(zip(runs, spec["velocities_m_s"])):
-                t, volts, scale = record(time_s, forces, sources, noise_steps=0.25, seed=1000 * seed + k,
+                t, volts, scale = record(time_s, forces, sources, noise_steps=noise_steps, seed=1000 * seed + k,
                                          record_s=spec["record_s"])
                 files = []
                 for source in sources:
@@ -190,7 +191,7 @@ def noise_check(seeds: int, out: Path) -> dict:
         print(f"seed {seed}: exit {run['exit_status']}, chi2/dof {row.get('reduced_chi2')}, "
               f"{run['wall_s']:.0f} s", flush=True)
         summary = _noise_summary(rows)
-        write_json(out, json_ready({"setup": spec | {"truth": TRUTH, "noise_steps": 0.25, "bits": 8,
+        write_json(out, json_ready({"setup": spec | {"truth": TRUTH, "noise_steps": noise_steps, "bits": 8,
                                                       "coupling": "ac", "generator": "diffrax reference"},
                                     "seeds": rows, "summary": summary}))
     return summary
@@ -280,11 +281,14 @@ def main(argv=None) -> int:
     parser.add_argument("--noise", action="store_true", help="8-bit AC-coupled Tektronix files, several seeds")
     parser.add_argument("--second-lab", action="store_true", help="Rigol CSV files with a light gate")
     parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--noise-steps", type=float, default=0.25,
+                        help="--noise: analogue noise in converter steps [0.25: a resting record on 1-2 codes]")
     parser.add_argument("--label", default="", help="appended to the result file names (e.g. the machine)")
     args = parser.parse_args(argv)
     suffix = f"_{args.label}" if args.label else ""
     if args.noise:
-        print(json.dumps(noise_check(args.seeds, RESULTS / f"scope_noise_tek8bit{suffix}.json"), indent=1))
+        name = "scope_noise_tek8bit" + ("" if args.noise_steps == 0.25 else f"_noise{args.noise_steps:g}steps")
+        print(json.dumps(noise_check(args.seeds, RESULTS / f"{name}{suffix}.json", args.noise_steps), indent=1))
     if args.second_lab:
         second_lab(RESULTS / f"scope_second_lab_rigol{suffix}.json")
     return 0
