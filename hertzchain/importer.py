@@ -16,7 +16,8 @@ That is the experiment file::
 
     [scope]
     format = "tek-csv"          # or "auto"; hertzchain.scopefiles.FORMATS lists them
-    time_zero = "trigger"       # or a delay in s ("12us"), or "channel:CH3>2.5V" / "channel:CH3<-1V"
+    time_zero = "trigger"       # or a delay in s ("12us"), or "channel:CH3>2.5V" / "channel:CH3<-1V",
+                                # or "channel:CH3>2.5V+40us" (a light gate 40 us before the impact)
 
     [[channel]]
     source = "CH1"              # the scope's name of the channel
@@ -55,7 +56,9 @@ unit):
 
 Conditioning (`hertzchain.conditioning`), each step written in the header as `x_import_*`
 keys so a result can be traced back to the files: the time grid made exact; time zero set
-as `time_zero` says, pre-trigger samples kept with negative times; offset removed (the
+as `time_zero` says, pre-trigger samples kept with negative times, and checked against the
+pulse's arrivals (`check_time_zero`: a `TimeZeroWarning` that names the delay it sees when
+they put the impact elsewhere); offset removed (the
 notebook's `offset_v`, else the pre-trigger mean); volts to newtons by the sensitivity;
 noise sigma per channel (the notebook's, else the pre-trigger standard deviation with the
 quantisation floor) written as `noise_std_n_<channel>`; samples at the range limit written
@@ -67,7 +70,9 @@ impact: it is listed in `ac_channels`, and the model compares it with that chang
 from __future__ import annotations
 
 import dataclasses
+import re
 import tomllib
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -93,6 +98,11 @@ _TOP_KEYS = ("chain", "scope", "channel", "shot", "prior")
 # Units of keys that may be written as strings with a unit ("13mm").
 _UNITS = {"_m": "m", "_pa": "Pa", "_kg": "kg", "_s": "s", "_hz": "Hz", "_n": "N", "_m_s": "m/s",
           "_kg_m3": "", "_v": "V"}
+
+
+class TimeZeroWarning(UserWarning):
+    """A shot whose pulse arrivals put the impact far from its time zero (see
+    `check_time_zero`)."""
 
 
 class ExperimentFileError(ValueError):
@@ -184,27 +194,37 @@ def _chain_values(table: dict, where: str) -> dict:
     return values
 
 
+_TIME_ZERO_CHANNEL = re.compile(r"^channel:(?P<source>[^<>]+?)\s*(?P<sign>[<>])\s*(?P<level>[-+]?[^-+]+?)"
+                                r"\s*(?:(?P<after>[-+])\s*(?P<delay>[^-+].*))?$")
+
+
 def _time_zero(value, where: str):
     """'trigger', a delay in s (the impact's time on the scope's clock), or
-    ('channel', source, level_v, rising)."""
+    ('channel', source, level_v, rising, delay_s): the impact `delay_s` after the channel
+    crosses the level (`"channel:CH3>2.5V+40us"`, a light gate 40 us before the impact)."""
     if value == "trigger":
         return value
     if isinstance(value, str) and value.startswith("channel:"):
-        spec = value[len("channel:"):]
-        for sign, rising in ((">", True), ("<", False)):
-            if sign in spec:
-                source, level = spec.split(sign, 1)
-                try:
-                    return ("channel", source.strip(), parse_quantity(level.strip(), "V"), rising)
-                except ValueError:
-                    break
-        _fail(where, f"time_zero = {value!r}: write 'channel:NAME>LEVEL' or 'channel:NAME<LEVEL' "
-                     "with the level in volts, e.g. 'channel:CH3>2.5V'.")
+        match = _TIME_ZERO_CHANNEL.match(value.strip())
+        try:
+            if match is None:
+                raise ValueError(value)
+            level = parse_quantity(match["level"].strip(), "V")
+            delay = 0.0
+            if match["delay"] is not None:
+                delay = parse_quantity(match["delay"].strip(), "s")
+                delay = -delay if match["after"] == "-" else delay
+            return ("channel", match["source"].strip(), level, match["sign"] == ">", delay)
+        except ValueError:
+            _fail(where, f"time_zero = {value!r}: write 'channel:NAME>LEVEL' or 'channel:NAME<LEVEL' with "
+                         "the level in volts, and, when the channel fires before the impact (a light "
+                         "gate), '+DELAY' for the time from the crossing to the impact: "
+                         "'channel:CH3>2.5V+40us'.")
     try:
         return _quantity(value, "time_zero_s", where)
     except ExperimentFileError:
         _fail(where, f"time_zero = {value!r}: use 'trigger', a delay such as '12us', or "
-                     "'channel:NAME>LEVEL'.")
+                     "'channel:NAME>LEVEL' (optionally '+DELAY', e.g. 'channel:CH3>2.5V+40us').")
 
 
 def _channel(table: dict, where: str) -> Channel:
@@ -354,11 +374,12 @@ def condition_shot(description: ExperimentDescription, shot: Shot) -> TraceFile:
         if time_zero == "trigger":
             zero = 0.0
         elif isinstance(time_zero, tuple):
-            _, source, level, rising = time_zero
+            _, source, level, rising, delay = time_zero
             if source not in waves.channels:
                 _fail(where, f"time_zero names channel {source!r}, which the files do not have "
                              f"({', '.join(waves.channels)}).")
-            zero = conditioning.crossing_time_s(time, waves.channels[source], level, rising, f"{where} {source}")
+            zero = delay + conditioning.crossing_time_s(time, waves.channels[source], level, rising,
+                                                        f"{where} {source}")
         else:
             zero = float(time_zero)
         time = time - zero
@@ -415,6 +436,8 @@ def condition_shot(description: ExperimentDescription, shot: Shot) -> TraceFile:
                 else "force (zero from the notebook's offset_v)",
             }
         header["noise_std_n"] = max(noise.values())
+        info["time_zero_check"] = check_time_zero(time, channels, header.get("n_beads"), where,
+                                                  time_zero, zero)
         if ac:
             header["ac_channels"] = ",".join(ac)
         header |= {f"x_import_{k}": v for k, v in info.items()}
@@ -422,6 +445,50 @@ def condition_shot(description: ExperimentDescription, shot: Shot) -> TraceFile:
         return TraceFile(header=header, time_s=time, channels=channels, path=where)
     except (conditioning.ConditioningError, TraceFileError) as error:
         raise ExperimentFileError(str(error)) from error
+
+
+def _position(name: str, n_beads: int | None) -> float | None:
+    """Position of a trace channel in bead diameters from the striker contact."""
+    kind, _, index = name.partition("_")
+    if kind in ("contact", "sensor") and index.isdigit():
+        return float(index)
+    return float(n_beads) if name == "wall" and n_beads else None
+
+
+def check_time_zero(time_s, channels: dict, n_beads, where: str, time_zero, zero_s: float) -> str:
+    """Whether the shot's pulse arrivals agree with its time zero; the text for the header.
+
+    The half-rise times of the first pulse at two or more positions, extrapolated to the
+    striker contact (`conditioning.impact_time_s`), give the impact time on the new clock:
+    from the contacts and sensors when two or more show the pulse, else with the wall's
+    channel as well (its rise depends on the wall's stiffness: a wider band,
+    `conditioning.IMPACT_BAND_WITH_WALL_TRANSITS`). Beyond the band (in one-bead transit
+    times about 0) a `TimeZeroWarning` names the delay seen and the fix (for a trigger
+    channel: the delay to add, `'channel:CH3>2.5V+40us'`)."""
+    inside = {p: force for name, force in channels.items()
+              if name != "wall" and (p := _position(name, n_beads)) is not None}
+    found = conditioning.impact_time_s(time_s, inside)
+    low, high = conditioning.IMPACT_BAND_TRANSITS
+    if found is None and "wall" in channels and n_beads:
+        found = conditioning.impact_time_s(time_s, inside | {float(n_beads): channels["wall"]})
+        low, high = conditioning.IMPACT_BAND_WITH_WALL_TRANSITS
+    if found is None:
+        return "not checked: fewer than two channels at different positions show the pulse"
+    impact, transit = found
+    text = (f"the arrivals put the impact at {impact * 1e6:+.1f} us ({impact / transit:+.2f} transits of "
+            f"one bead, {transit * 1e6:.1f} us); expected {low:+g} to {high:+g}")
+    if not low * transit <= impact <= high * transit:
+        if isinstance(time_zero, tuple):
+            _, source, level, rising, delay = time_zero
+            fix = (f"if {source} fires {impact * 1e6:.0f} us before the impact (a light gate), write "
+                   f"time_zero = 'channel:{source}{'>' if rising else '<'}{level:g}V"
+                   f"{delay * 1e6 + impact * 1e6:+.0f}us'")
+        else:
+            fix = f"give the impact's time on the scope's clock, e.g. time_zero = '{(zero_s + impact) * 1e6:.0f}us'"
+        warnings.warn(f"{where}: time zero looks wrong: {text}; {fix}. A wrong time zero shows in a fit "
+                      "as a large chi^2 and a biased striker velocity.", TimeZeroWarning, stacklevel=3)
+        return "off: " + text
+    return "ok: " + text
 
 
 def import_experiment(path) -> list[TraceFile]:
@@ -483,7 +550,8 @@ def expand_sources(paths) -> list:
 
 
 __all__ = [
-    "COUPLINGS", "Channel", "ExperimentDescription", "ExperimentFileError", "MEASURES", "Shot",
+    "COUPLINGS", "Channel", "ExperimentDescription", "ExperimentFileError", "MEASURES", "Shot", "TimeZeroWarning",
+    "check_time_zero",
     "condition_shot", "expand_sources", "experiment_priors", "import_experiment", "is_experiment_file", "load_experiment",
     "write_imported",
 ]

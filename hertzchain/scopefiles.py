@@ -29,6 +29,37 @@ Formats (`FORMATS`; `read_waveforms(path, format="auto")` picks one with `detect
   or after an underscore (``time (ms), CH1 (mV), wall [V]`` or ``time_s,CH1_V``); the first
   column is time. Time units s, ms, us/µs, ns; value units V, mV, uV/µV, kV. A column without
   a unit is in s (the time column) or V (the others). Lines starting with ``#`` are skipped.
+- ``rigol-csv``: the CSV that Rigol DS1000Z/MSO1000Z scopes save (Storage > CSV). The first
+  row names the columns, ``X,CH1,CH2,...,Start,Increment,``; the second holds units under the
+  channel names (``Sequence,Volt,Volt,...``) and, under ``Start`` and ``Increment``, the
+  record's first time and sample interval in s; then one row per sample: the sample index
+  and each channel's volts. Time = Start + index x Increment. (Layout: the DS1000Z exports
+  reported by a lab in issue 29, and public readers of these files, which take Start and
+  Increment from the second row's cells under those names; a file whose X column is in
+  ``Second`` holds times instead of indices and is read so.) The CSV states no digitiser
+  step or range: ``lsb_v`` is estimated from the values by the importer.
+- ``keysight-csv``: Keysight/Agilent CSV. InfiniiVision (2000/3000/4000 X) writes two
+  header rows, the sources (``x-axis,1,2``) and their units (``second,Volt,Volt``), then
+  time and values per row (the header rows and the per-segment rows are described in the
+  InfiniiVision 2000/3000 X-Series User's Guides, "CSV and ASCII XY file structure"; the
+  header cells as these scopes write them); channels are named ``CH<n>`` from the source
+  numbers. Infiniium writes a
+  block of ``key,value`` rows (``Revision``, ``Type``, ``Points``, ``XInc``, ``XOrg``,
+  ``XUnits``, ``YUnits``, ..., Infiniium 90000 Programmer's Reference, "CSV and TSV Header
+  Format") and then, after a ``Data`` row, one value per row (one column per source);
+  time = XOrg + k x XInc.
+- ``lecroy-csv``: LeCroy "Spreadsheet" ASCII export (LeCroy 9300C manual, Appendix E,
+  "ASCII Waveform Export"; MAUI scopes write the same block): ``LECROY<model>,<serial>``,
+  ``Segments,<n>,SegmentSize,<m>``, a ``Segment,TrigTime,...`` table, then ``Time,Ampl``
+  and rows of time (s) and volts. One segment is read (a multi-segment file is refused).
+  The channel is named from the file stem's leading ``C<n>`` (LeCroy's ``C1--Trace--00000``),
+  else the whole stem.
+- ``pico-csv``: PicoScope 6/7 CSV export: a row of names (``Time,Channel A,Channel B``), a
+  row of units in parentheses (``(ms),(mV),(V)``), an optional blank row, then the samples
+  (the layout public readers of these exports check: names ``Time,Channel X...`` and units
+  ``(s|ms|µs)``/``(V|mV|µV)``).
+  Channels keep PicoScope's names (``Channel A``). A sample PicoScope marks over-range
+  (``∞``/``-∞``) is an error naming the row (set a larger range, or cut the record).
 - ``npz``: ``numpy.load``. The time array is ``time_s`` (or ``t``/``time``), in seconds;
   every other array that is 1-D after squeezing and has the time's length is a channel in
   volts, named by its key; ``<name>_range_v`` (2 values) gives that channel's range; other
@@ -79,6 +110,10 @@ import numpy as np
 
 FORMATS: dict[str, str] = {
     "tek-csv": "Tektronix TDS1000/TDS2000-series CSV: settings in columns 1-2, time and value in columns 4-5",
+    "rigol-csv": "Rigol DS1000Z CSV: 'X,CH1,...,Start,Increment,' then 'Sequence,Volt,...' and sample indices",
+    "keysight-csv": "Keysight InfiniiVision CSV ('x-axis,1,2' / 'second,Volt,Volt') or Infiniium CSV (header rows, then Data)",
+    "lecroy-csv": "LeCroy spreadsheet ASCII: 'LECROY...' header, Segments, then 'Time,Ampl' rows",
+    "pico-csv": "PicoScope 6/7 CSV: 'Time,Channel A,...' then a units row '(ms),(mV),...'",
     "csv": "generic CSV: a header row of names with units, e.g. 'time (ms), CH1 (mV)'; first column is time",
     "npz": "NumPy .npz: time_s (or t/time) in s and one 1-D array per channel in V; <name>_range_v optional",
     "mat": "MATLAB .mat v4-v7 (not v7.3): names as for npz, or t/time with y/ch1/... vectors",
@@ -89,6 +124,8 @@ FORMATS: dict[str, str] = {
 TIME_UNITS_S = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "ns": 1e-9}
 VOLTAGE_UNITS_V = {"V": 1.0, "mV": 1e-3, "uV": 1e-6, "µV": 1e-6, "μV": 1e-6, "kV": 1e3}
 TIME_NAMES = ("time_s", "t", "time")
+# Unit words of Rigol and Keysight exports, as the unit symbols of the tables above.
+UNIT_WORDS = {"Volt": "V", "volt": "V", "Second": "s", "second": "s"}
 # TDS1000/2000: 8-bit codes, 25 codes per vertical division (Programmer Manual 071-1075).
 TDS_CODES_PER_DIVISION = 25
 TDS_CODE_RANGE = (-128, 127)
@@ -135,9 +172,9 @@ def _check_file(path: Path) -> None:
 
 
 def detect_format(path) -> str:
-    """The format name of `path` (a key of `FORMATS`), by suffix and, for .csv/.txt, content:
-    .isf -> tek-isf, .wfm -> rigol-wfm, .npz, .mat, and .csv/.txt -> tek-csv when the first
-    cell is ``Record Length``, else csv."""
+    """The format name of `path` (a key of `FORMATS`), by suffix and, for .csv/.txt, content
+    (`_csv_layout`): .isf -> tek-isf, .wfm -> rigol-wfm, .npz, .mat, and .csv/.txt -> the
+    vendor layout its first rows show, else csv."""
     path = Path(path)
     _check_file(path)
     suffix = path.suffix.lower()
@@ -145,11 +182,28 @@ def detect_format(path) -> str:
     if suffix in by_suffix:
         return by_suffix[suffix]
     if suffix in (".csv", ".txt"):
-        first = _decode(path).lstrip().split("\n", 1)[0]
-        first_cell = first.split(",", 1)[0].strip().strip('"').strip()
-        return "tek-csv" if first_cell.lower() == "record length" else "csv"
+        return _csv_layout(_decode(path))
     raise ScopeFileError(f"{path}: unknown suffix {path.suffix!r}; name the format "
                          f"(format = ...) as one of: {_formats_text()}.")
+
+
+def _csv_layout(text: str) -> str:
+    """The CSV format a file's first two non-blank rows show (see the module docstring)."""
+    rows = [next(csv.reader([line])) for line in text.split("\n")[:40] if line.strip()][:2]
+    first = [c.strip().strip('"').strip() for c in rows[0]] if rows else [""]
+    second = [c.strip() for c in rows[1]] if len(rows) > 1 else []
+    head = first[0].lower()
+    if head == "record length":
+        return "tek-csv"
+    if head == "x" and "Start" in first and "Increment" in first:
+        return "rigol-csv"
+    if head == "x-axis" or head == "revision":
+        return "keysight-csv"
+    if head.startswith("lecroy"):
+        return "lecroy-csv"
+    if head == "time" and second and all(re.fullmatch(r"\(.*\)", c) for c in second if c):
+        return "pico-csv"
+    return "csv"
 
 
 def read_waveforms(path, format: str = "auto") -> Waveforms:
@@ -160,7 +214,8 @@ def read_waveforms(path, format: str = "auto") -> Waveforms:
     path = Path(path)
     _check_file(path)
     name = detect_format(path) if format == "auto" else format
-    readers = {"tek-csv": _read_tek_csv, "csv": _read_csv, "npz": _read_npz, "mat": _read_mat,
+    readers = {"tek-csv": _read_tek_csv, "csv": _read_csv, "rigol-csv": _read_rigol_csv,
+               "keysight-csv": _read_keysight_csv, "lecroy-csv": _read_lecroy_csv, "pico-csv": _read_pico_csv, "npz": _read_npz, "mat": _read_mat,
                "tek-isf": _read_tek_isf, "rigol-wfm": _read_rigol_wfm}
     return readers[name](path)
 
@@ -220,6 +275,7 @@ def _number(path: Path, row: int, column: str, text: str) -> float:
 
 
 def _unit_factor(path: Path, where: str, unit: str, table: dict[str, float]) -> float:
+    unit = UNIT_WORDS.get(unit, unit)
     if unit not in table:
         raise ScopeFileError(f"{path}: {where}: unknown unit {unit!r}; known units: "
                              f"{', '.join(table)}.")
@@ -309,40 +365,204 @@ def _column(path: Path, header: str, is_time: bool) -> tuple[str, float]:
 
 
 def _read_csv(path: Path) -> Waveforms:
-    lines = [(k, line) for k, line in enumerate(_decode(path).split("\n"), start=1)
-             if line.strip() and not line.lstrip().startswith("#")]
-    if not lines:
+    rows = [(number, cells) for number, cells in _csv_rows(path) if not cells[0].startswith("#")]
+    if not rows:
         raise ScopeFileError(f"{path}: no header row; the file holds only comments or blank lines.")
-    header_row, header_line = lines[0]
-    headers = [c.strip() for c in next(csv.reader([header_line]))]
-    while headers and not headers[-1]:
-        headers.pop()
+    header_row, headers = rows[0][0], _trimmed(rows[0][1])
     if len(headers) < 2:
         raise ScopeFileError(f"{path}: row {header_row}: the header names {len(headers)} column(s); give "
                              f"time and at least one channel, e.g. 'time (ms), CH1 (mV)'.")
     columns = [_column(path, h, k == 0) for k, h in enumerate(headers)]
-    names = [n for n, _ in columns[1:]]
-    for name in names:
-        if names.count(name) > 1:
-            raise ScopeFileError(f"{path}: row {header_row}: channel {name!r} is named twice in the header.")
-    data, file_rows = [], []
-    for number, line in lines[1:]:
-        cells = [c.strip() for c in next(csv.reader([line]))]
-        while len(cells) > len(headers) and not cells[-1]:
+    table, numbers = _numeric_table(path, rows[1:], headers)
+    return _table_waveforms(path, "csv", table[:, 0] * columns[0][1], numbers, [n for n, _ in columns[1:]],
+                            table[:, 1:], [f for _, f in columns[1:]], {"columns": ", ".join(headers)})
+
+
+# --- tables of rows (csv, rigol-csv, keysight-csv, lecroy-csv, pico-csv) ------------------
+
+def _csv_rows(path: Path) -> list[tuple[int, list[str]]]:
+    """(file row number, stripped cells) of every row with a non-empty cell."""
+    rows = []
+    for number, row in enumerate(csv.reader(io.StringIO(_decode(path))), start=1):
+        cells = [c.strip() for c in row]
+        if any(cells):
+            rows.append((number, cells))
+    return rows
+
+
+def _trimmed(cells: list[str]) -> list[str]:
+    """`cells` without trailing empty ones (Rigol ends every row with a comma)."""
+    cells = list(cells)
+    while cells and not cells[-1]:
+        cells.pop()
+    return cells
+
+
+def _header_rows(path: Path, layout: str):
+    """The rows of a CSV whose first two rows name the columns and give their units:
+    (rows, (row number, names), (row number, units)), with trailing empty cells dropped."""
+    rows = _csv_rows(path)
+    if len(rows) < 3:
+        raise ScopeFileError(f"{path}: a {layout} CSV needs a names row, a units row and data rows; "
+                             f"the file has {len(rows)} rows.")
+    (header_row, header), (units_row, units) = [(n, _trimmed(c)) for n, c in rows[:2]]
+    return rows, (header_row, header), (units_row, units)
+
+
+def _numeric_table(path: Path, rows, names: list[str]) -> tuple[np.ndarray, list[int]]:
+    """(n, len(names)) floats from data rows, each with exactly one cell per name."""
+    data, numbers = [], []
+    for number, cells in rows:
+        cells = list(cells)
+        while len(cells) > len(names) and not cells[-1]:
             cells.pop()
-        if len(cells) != len(headers):
-            raise ScopeFileError(f"{path}: row {number} has {len(cells)} cells and the header {len(headers)}; "
-                                 f"time and every channel need a value in every row.")
-        data.append([_number(path, number, f"{k + 1} ({headers[k]})", c) for k, c in enumerate(cells)])
-        file_rows.append(number)
+        if len(cells) != len(names):
+            raise ScopeFileError(f"{path}: row {number} has {len(cells)} cells and the header {len(names)} "
+                                 f"({', '.join(names)}); every data row needs a value in every column.")
+        data.append([_number(path, number, f"{k + 1} ({names[k]})", c) for k, c in enumerate(cells)])
+        numbers.append(number)
     if not data:
         raise ScopeFileError(f"{path}: a header but no data rows.")
-    table = np.asarray(data, dtype=np.float64) * np.asarray([f for _, f in columns])
-    time_s = table[:, 0].copy()
+    return np.asarray(data, dtype=np.float64), numbers
+
+
+def _table_waveforms(path: Path, format: str, time_s, file_rows, names, table, factors, info) -> Waveforms:
+    """Waveforms of a CSV table whose channel columns `table[:, k]` are in volts x `factors[k]`."""
     _check_time(path, time_s, file_rows)
-    channels = {name: table[:, k + 1].copy() for k, name in enumerate(names)}
-    return Waveforms(str(path), "csv", time_s, channels, dict.fromkeys(names), dict.fromkeys(names),
-                     {"columns": ", ".join(headers)})
+    for name in names:
+        if names.count(name) > 1:
+            raise ScopeFileError(f"{path}: channel {name!r} is named twice in the header.")
+    channels = {name: table[:, k] * factors[k] for k, name in enumerate(names)}
+    return Waveforms(str(path), format, time_s, channels, dict.fromkeys(names), dict.fromkeys(names), info)
+
+
+def _read_rigol_csv(path: Path) -> Waveforms:
+    rows, (header_row, header), (units_row, units) = _header_rows(path, "Rigol")
+    if "Start" not in header or "Increment" not in header or header[0] != "X":
+        raise ScopeFileError(f"{path}: row {header_row}: a Rigol CSV header reads 'X,CH1,...,Start,Increment,'; "
+                             f"got {','.join(header)!r} (use format 'csv' for a generic CSV).")
+    start_at, increment_at = header.index("Start"), header.index("Increment")
+    names = header[1:min(start_at, increment_at)]
+    if not names:
+        raise ScopeFileError(f"{path}: row {header_row}: no channel columns between X and Start.")
+    if len(units) <= max(start_at, increment_at):
+        raise ScopeFileError(f"{path}: row {units_row}: the units row must give Start and Increment "
+                             f"under their header columns (e.g. 'Sequence,Volt,-6.0e-03,2.0e-06,').")
+    start = _number(path, units_row, f"{start_at + 1} (Start)", units[start_at])
+    increment = _number(path, units_row, f"{increment_at + 1} (Increment)", units[increment_at])
+    if not increment > 0:
+        raise ScopeFileError(f"{path}: row {units_row}: Increment is {increment!r}; it is the sample "
+                             f"interval in s and must be positive.")
+    factors = [_unit_factor(path, f"row {units_row}, column {k + 2} ({n})", units[k + 1], VOLTAGE_UNITS_V)
+               for k, n in enumerate(names)]
+    x_unit = units[0]
+    if x_unit != "Sequence" and UNIT_WORDS.get(x_unit, x_unit) not in TIME_UNITS_S:
+        raise ScopeFileError(f"{path}: row {units_row}, column 1 (X): {x_unit!r}; expected 'Sequence' "
+                             f"(sample indices) or a time unit ({', '.join(TIME_UNITS_S)}).")
+    table, numbers = _numeric_table(path, [(n, c[:len(names) + 1]) for n, c in rows[2:]], ["X", *names])
+    if x_unit == "Sequence":
+        time_s = start + table[:, 0] * increment
+    else:
+        time_s = table[:, 0] * _unit_factor(path, f"row {units_row}, column 1 (X)", x_unit, TIME_UNITS_S)
+    info = {"columns": ",".join(header), "units": ",".join(units[:len(names) + 1]),
+            "start_s": repr(start), "increment_s": repr(increment)}
+    return _table_waveforms(path, "rigol-csv", time_s, numbers, names, table[:, 1:], factors, info)
+
+
+def _keysight_name(source: str) -> str:
+    return f"CH{source}" if source.isdigit() else source
+
+
+def _read_keysight_csv(path: Path) -> Waveforms:
+    rows = _csv_rows(path)
+    if rows and rows[0][1][0].lower() == "revision":
+        return _read_infiniium_csv(path, rows)
+    rows, (_, header), (units_row, units) = _header_rows(path, "Keysight InfiniiVision")
+    if len(units) != len(header):
+        raise ScopeFileError(f"{path}: row {units_row} gives {len(units)} units for {len(header)} columns.")
+    names = [_keysight_name(h) for h in header[1:]]
+    time_factor = _unit_factor(path, f"row {units_row}, column 1 (x-axis)", units[0], TIME_UNITS_S)
+    factors = [_unit_factor(path, f"row {units_row}, column {k + 2} ({n})", units[k + 1], VOLTAGE_UNITS_V)
+               for k, n in enumerate(names)]
+    table, numbers = _numeric_table(path, rows[2:], [header[0], *names])
+    info = {"sources": ",".join(header), "units": ",".join(units)}
+    return _table_waveforms(path, "keysight-csv", table[:, 0] * time_factor, numbers, names,
+                             table[:, 1:], factors, info)
+
+
+def _read_infiniium_csv(path: Path, rows) -> Waveforms:
+    data_at = next((k for k, (_, cells) in enumerate(rows) if cells[0].lower() == "data"), None)
+    if data_at is None:
+        raise ScopeFileError(f"{path}: an Infiniium CSV header (Revision, ..., XInc, XOrg) must end with a "
+                             f"'Data' row before the samples; none found.")
+    settings = {cells[0]: _trimmed(cells[1:]) for _, cells in rows[:data_at]}
+    where = {cells[0]: number for number, cells in rows[:data_at]}
+    for key in ("XInc", "XOrg"):
+        if key not in settings or not settings[key]:
+            raise ScopeFileError(f"{path}: the Infiniium header has no {key} row; it is needed for the "
+                                 f"time axis (time = XOrg + k x XInc).")
+    n_sources = len(settings["XInc"])
+    x_unit = (settings.get("XUnits") or ["Second"])[0]
+    time_factor = _unit_factor(path, f"XUnits {x_unit!r}", x_unit, TIME_UNITS_S)
+    y_units = settings.get("YUnits") or ["Volt"] * n_sources
+    factors = [_unit_factor(path, f"YUnits {u!r}", u, VOLTAGE_UNITS_V) for u in y_units[:n_sources]]
+    increment = _number(path, where["XInc"], "2 (XInc)", settings["XInc"][0]) * time_factor
+    origin = _number(path, where["XOrg"], "2 (XOrg)", settings["XOrg"][0]) * time_factor
+    if not increment > 0:
+        raise ScopeFileError(f"{path}: row {where['XInc']}: XInc is {increment!r}; it must be positive.")
+    names = [f"CH{k + 1}" for k in range(n_sources)] if n_sources > 1 else [_stem_channel_name(path)]
+    table, numbers = _numeric_table(path, rows[data_at + 1:], names)
+    if "Points" in settings:
+        stated = _number(path, where["Points"], "2 (Points)", settings["Points"][0])
+        if stated != len(numbers):
+            raise ScopeFileError(f"{path}: Points says {stated:g} but the file has {len(numbers)} data rows; "
+                                 f"the file is truncated or edited.")
+    time_s = origin + increment * np.arange(len(numbers))
+    info = {key: ",".join(value) for key, value in settings.items()}
+    return _table_waveforms(path, "keysight-csv", time_s, numbers, names, table, factors, info)
+
+
+def _read_lecroy_csv(path: Path) -> Waveforms:
+    rows = _csv_rows(path)
+    at = next((k for k, (_, cells) in enumerate(rows) if [c.lower() for c in cells[:2]] == ["time", "ampl"]), None)
+    if at is None:
+        raise ScopeFileError(f"{path}: a LeCroy spreadsheet export has a 'Time,Ampl' row before the samples; "
+                             f"none found.")
+    settings = {cells[0]: cells for _, cells in rows[:at]}
+    segments = settings.get("Segments")
+    if segments and len(segments) > 1 and segments[1] not in ("1", "1.0"):
+        raise ScopeFileError(f"{path}: {segments[1]} segments; one shot per file is read, save each "
+                             f"segment to its own file.")
+    header_row, header = rows[at][0], _trimmed(rows[at][1])
+    if len(header) != 2:
+        raise ScopeFileError(f"{path}: row {header_row}: {','.join(header)!r}; one channel per file "
+                             f"(Time,Ampl) is read.")
+    match = re.match(r"(C\d+|F\d+|M\d+|Z\d+)", path.stem, flags=re.IGNORECASE)
+    name = match.group(1).upper() if match else path.stem
+    table, numbers = _numeric_table(path, rows[at + 1:], ["Time", name])
+    info = {"instrument": ",".join(rows[0][1]), **{k: ",".join(v[1:]) for k, v in settings.items()}}
+    return _table_waveforms(path, "lecroy-csv", table[:, 0], numbers, [name], table[:, 1:], [1.0], info)
+
+
+def _read_pico_csv(path: Path) -> Waveforms:
+    rows, (_, header), (units_row, units) = _header_rows(path, "PicoScope")
+    if len(units) != len(header):
+        raise ScopeFileError(f"{path}: row {units_row} gives {len(units)} units for {len(header)} columns.")
+    bare = [u.strip("()").strip() for u in units]
+    time_factor = _unit_factor(path, f"row {units_row}, column 1 ({header[0]})", bare[0], TIME_UNITS_S)
+    names = header[1:]
+    factors = [_unit_factor(path, f"row {units_row}, column {k + 2} ({n})", bare[k + 1], VOLTAGE_UNITS_V)
+               for k, n in enumerate(names)]
+    data = rows[2:]
+    for number, cells in data:
+        for k, cell in enumerate(cells):
+            if cell.lstrip("+-") in ("∞", "inf", "Infinity"):
+                raise ScopeFileError(f"{path}: row {number}, column {k + 1}: {cell!r}, PicoScope's mark of a "
+                                     f"sample beyond the range; record with a larger range or cut the record.")
+    table, numbers = _numeric_table(path, data, header)
+    info = {"columns": ",".join(header), "units": ",".join(units)}
+    return _table_waveforms(path, "pico-csv", table[:, 0] * time_factor, numbers, names, table[:, 1:],
+                             factors, info)
 
 
 # --- npz and mat --------------------------------------------------------------------------

@@ -124,3 +124,33 @@ def test_repeated_shots_report_their_scatter(tmp_path):
     # noise of 2 N on a 300 N pulse: the amplitudes scatter by a few tenths of a newton
     assert 0.01 < group["amplitude_n_sd"] < 2.0
     assert (out / "repeats.csv").read_text().startswith("velocity_m_s,n_shots,shots,amplitude_n_mean")
+
+
+def test_one_contact_channel_gives_amplitudes_and_says_why_no_speed(tmp_path, capsys):
+    """Repeated shots with one contact channel (and the wall): the amplitude is measured
+    (equal to the incident pulse's parabolic peak), the speed is not, and the output says
+    why instead of printing NaN."""
+    import hertzchain as hc
+    from hertzchain.acquisition import Acquisition, record_simulation
+    from hertzchain.tracefile import write_trace
+
+    paths = []
+    for k in range(2):
+        setup = hc.ChainSetup(striker_velocity_m_s=0.3)
+        run = hc.simulate(setup, t_end_s=1.2e-3, sample_interval_s=0.1e-6, contacts=(6,))
+        trace = record_simulation(setup, run, Acquisition(noise_std_n=2.0), seed=k)
+        paths.append(tmp_path / f"shot{k}.csv")
+        write_trace(paths[-1], trace)
+    out = tmp_path / "analysis"
+    assert main(["analyze", *map(str, paths), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "nan" not in printed.lower()
+    assert "no speed: the incident pulse is seen at one contact only (contact 6)" in printed
+    assert "speed not measured in these shots" in printed
+    result = json.loads((out / "analysis.json").read_text())
+    peaks = [r["peak_force_n"] for r in result["pulses"] if r["channel"] == "contact_6" and r["label"] == "incident"]
+    for summary, peak in zip(result["files"], peaks):
+        assert summary["amplitude_n"] == pytest.approx(peak, rel=1e-12)
+        assert "speed_m_s" not in summary and "two or more contacts" in summary["speed_not_measured"]
+    (group,) = result["repeats"]
+    assert group["speed_m_s_mean"] is None and group["amplitude_n_mean"] == pytest.approx(np.mean(peaks))

@@ -4,8 +4,9 @@ through a converter, Tektronix-style rounded time columns, trigger crossings, cl
 import numpy as np
 import pytest
 
-from hertzchain.conditioning import (ConditioningError, baseline, binned_noise_std, clipped_mask,
-                                     crossing_time_s, quantisation_step, regular_time_grid)
+from hertzchain.conditioning import (ConditioningError, NoiseEstimateWarning, baseline, binned_noise_std,
+                                     clipped_mask, crossing_time_s, impact_time_s, quantisation_step,
+                                     regular_time_grid)
 
 
 @pytest.mark.parametrize("width_steps", [0.35, 0.7, 2.0, 6.0])
@@ -19,6 +20,57 @@ def test_binned_noise_width_recovers_the_analogue_noise(width_steps):
         widths.append(binned_noise_std(values, step))
     # unbiased to a few percent over 20 records of 400 samples; the plain spread is not at low width
     assert np.mean(widths) / (width_steps * step) == pytest.approx(1.0, abs=0.06)
+
+
+@pytest.mark.parametrize("width_steps", [0.15, 0.25, 0.3])
+def test_resting_records_on_two_codes_give_the_noise_of_a_moving_signal(width_steps):
+    """Analogue noise below a third of a step leaves a resting 8-bit record on one or two
+    codes. What the fit needs is the error of the moving signal, sqrt(sigma^2 + step^2/12),
+    measured here directly: a ramp through many codes with the same noise, quantised, less
+    the ramp. The baseline's estimate from the resting records matches it on average over
+    offsets (the codes' spread, used before, was 1.2-1.5x too large here)."""
+    rng = np.random.default_rng(7)
+    step = 0.02
+    ramp = np.linspace(0.0, 40 * step, 20000)
+    moving = step * np.round((ramp + width_steps * step * rng.standard_normal(ramp.size)) / step) - ramp
+    truth = float(np.sqrt(np.mean(moving**2)))
+    estimates, spreads = [], []
+    for seed in range(40):
+        level = rng.uniform(0, 1) * step
+        values = step * np.round((level + width_steps * step * rng.standard_normal(300)) / step)
+        estimates.append(baseline(values, np.ones(values.size, bool), step, "rest").noise_std)
+        spreads.append(np.hypot(np.std(values, ddof=1), step / np.sqrt(12)))
+    assert np.mean(estimates) / truth == pytest.approx(1.0, abs=0.08)
+    assert np.mean(spreads) / truth > 1.15
+
+
+def test_a_noise_fit_that_does_not_converge_is_said_and_replaced(monkeypatch):
+    from scipy import optimize
+
+    rng = np.random.default_rng(3)
+    step = 0.01
+    values = step * np.round(3 * step * rng.standard_normal(4000) / step)
+    failing = optimize.minimize
+
+    def one_step(*args, **kwargs):
+        return failing(*args, **(kwargs | {"options": {"maxiter": 2}}))
+
+    monkeypatch.setattr(optimize, "minimize", one_step)
+    with pytest.warns(NoiseEstimateWarning, match="did not converge .*codes' variance less step"):
+        width = binned_noise_std(values, step)
+    # Sheppard's corrected spread: within a few percent of the 3-step noise
+    assert width == pytest.approx(3 * step, rel=0.05)
+
+
+def test_impact_time_from_arrivals_at_several_positions():
+    time = np.arange(0, 2e-3, 1e-6)
+    transit = 50e-6
+    pulses = {k: np.exp(-(((time - 30e-6 - k * transit) / 20e-6) ** 2)) for k in (4, 9, 16)}
+    impact, slope = impact_time_s(time, pulses)
+    # half-rise of a Gaussian of width 20 us: sqrt(ln 2) x 20 us before its centre
+    assert slope == pytest.approx(transit, rel=1e-6)
+    assert impact == pytest.approx(30e-6 - np.sqrt(np.log(2)) * 20e-6, abs=1e-7)
+    assert impact_time_s(time, {4: pulses[4]}) is None
 
 
 def test_baseline_adds_the_quantisation_error_of_a_moving_signal():

@@ -264,3 +264,115 @@ def test_merge(tmp_path):
     for name, message in cases:
         with pytest.raises(ScopeFileError, match=message):
             merge_waveforms([a, read_waveforms(tmp_path / f"{name}.npz")], "shot 1")
+
+
+# --- vendor CSV exports, each written by the csv module or as plain text ------------------
+
+def vendor_record(n=400, dt_s=2e-6, pre=80):
+    """Time (s) and two channels (V) on an 8-bit-like lattice, and a TTL light gate."""
+    time_s = (np.arange(n) - pre) * dt_s
+    lsb = 0.0016
+    ch1 = np.round(pulse_v(time_s * 5.0, offset_v=0.01, amplitude_v=0.3) / lsb) * lsb
+    ch3 = np.where(time_s >= -40e-6, 5.0, 0.0) + np.round(0.02 * np.sin(time_s * 1e5) / 0.04) * 0.04
+    return time_s, {"CH1": ch1, "CH3": ch3}
+
+
+def test_rigol_csv_sequence_rows_start_increment(tmp_path):
+    time_s, volts = vendor_record()
+    start, increment = float(time_s[0]), 2e-6
+    path = tmp_path / "NewFile1.csv"
+    with open(path, "w", newline="") as handle:
+        writer = csv.writer(handle, lineterminator="\r\n")
+        writer.writerow(["X", "CH1", "CH3", "Start", "Increment", ""])
+        writer.writerow(["Sequence", "Volt", "Volt", f"{start:e}", f"{increment:e}", ""])
+        for k in range(time_s.size):
+            writer.writerow([k, f"{volts['CH1'][k]:e}", f"{volts['CH3'][k]:e}", ""])
+    assert detect_format(path) == "rigol-csv"
+    waves = read_waveforms(path, "auto")
+    assert waves.format == "rigol-csv" and list(waves.channels) == ["CH1", "CH3"]
+    np.testing.assert_allclose(waves.time_s, start + increment * np.arange(time_s.size), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(waves.time_s, time_s, rtol=0, atol=1e-12)
+    for name in ("CH1", "CH3"):
+        np.testing.assert_allclose(waves.channels[name], volts[name], rtol=1e-6, atol=1e-12)
+    assert waves.lsb_v["CH1"] is None and waves.range_v["CH1"] is None
+    # the same record refused with the reason when a row is short or the units row lacks Start
+    text = path.read_text().splitlines()
+    bad = tmp_path / "short.csv"
+    bad.write_text("\n".join(text[:7] + [text[7].split(",")[0] + "," + text[7].split(",")[1]] + text[8:]))
+    with pytest.raises(ScopeFileError, match=r"row 8 has 2 cells"):
+        read_waveforms(bad)
+    units_only = tmp_path / "nostart.csv"
+    units_only.write_text("X,CH1,Start,Increment,\nSequence,Volt,\n0,1.0e-02,\n1,1.2e-02,\n")
+    with pytest.raises(ScopeFileError, match="Start and Increment"):
+        read_waveforms(units_only)
+
+
+def test_keysight_infiniivision_and_infiniium_csv(tmp_path):
+    time_s, volts = vendor_record()
+    path = tmp_path / "scope_0.csv"
+    lines = ["x-axis,1,3", "second,Volt,Volt"]
+    lines += [f"{t:.6E},{a:.5E},{b:.5E}" for t, a, b in zip(time_s, volts["CH1"], volts["CH3"])]
+    path.write_text("\n".join(lines) + "\n")
+    assert detect_format(path) == "keysight-csv"
+    waves = read_waveforms(path)
+    assert list(waves.channels) == ["CH1", "CH3"]
+    np.testing.assert_allclose(waves.time_s, time_s, rtol=1e-6, atol=0)
+    np.testing.assert_allclose(waves.channels["CH3"], volts["CH3"], rtol=1e-5, atol=1e-12)
+
+    infiniium = tmp_path / "wave_CH2.csv"
+    header = ["Revision,0", "Type,raw", "Start,0", f"Points,{time_s.size}", "Count,1",
+              "XDispRange,8.0E-04", f"XDispOrg,{time_s[0]:.9E}", "XInc,2.0E-06", f"XOrg,{time_s[0]:.9E}",
+              "XUnits,Second", "YDispRange,8.0E-01", "YDispOrg,-4.0E-01", "YInc,1.6E-03", "YOrg,0.0",
+              "YUnits,Volt", "Frame,DSO9104A:MY12345678", "Data"]
+    infiniium.write_text("\n".join(header + [f"{v:.6E}" for v in volts["CH1"] * 1.0]) + "\n")
+    assert detect_format(infiniium) == "keysight-csv"
+    waves = read_waveforms(infiniium)
+    assert list(waves.channels) == ["CH2"]
+    np.testing.assert_allclose(waves.time_s, time_s, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(waves.channels["CH2"], volts["CH1"], rtol=1e-6, atol=1e-12)
+    infiniium.write_text("\n".join(header[:3] + ["Points,5"] + header[4:] + ["1.0", "2.0"]) + "\n")
+    with pytest.raises(ScopeFileError, match="Points says 5 but the file has 2"):
+        read_waveforms(infiniium)
+
+
+def test_lecroy_spreadsheet_csv(tmp_path):
+    time_s, volts = vendor_record()
+    path = tmp_path / "C2--shot--00003.txt"
+    lines = ["LECROYWR640Zi,12345,Waveform", f"Segments,1,SegmentSize,{time_s.size}",
+             "Segment,TrigTime,TimeSinceSegment1", "#1,26-Nov-2026 04:00:00,0", "Time,Ampl"]
+    lines += [f"{t:.9e},{v:.6e}" for t, v in zip(time_s, volts["CH1"])]
+    path.write_text("\r\n".join(lines) + "\r\n")
+    assert detect_format(path) == "lecroy-csv"
+    waves = read_waveforms(path)
+    assert list(waves.channels) == ["C2"] and waves.info["instrument"].startswith("LECROYWR640Zi")
+    np.testing.assert_allclose(waves.time_s, time_s, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(waves.channels["C2"], volts["CH1"], rtol=1e-6, atol=1e-12)
+    lines[1] = "Segments,4,SegmentSize,100"
+    path.write_text("\n".join(lines))
+    with pytest.raises(ScopeFileError, match="4 segments"):
+        read_waveforms(path)
+
+
+@pytest.mark.parametrize("time_unit, factor, volt_unit, scale",
+                         [("(ms)", 1e-3, "(mV)", 1e-3), ("(µs)", 1e-6, "(V)", 1.0)])
+def test_picoscope_csv_units_row(tmp_path, time_unit, factor, volt_unit, scale):
+    time_s, volts = vendor_record()
+    path = tmp_path / "20261126-0001.csv"
+    with open(path, "w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle, lineterminator="\r\n")
+        writer.writerow(["Time", "Channel A", "Channel B"])
+        writer.writerow([time_unit, volt_unit, "(V)"])
+        writer.writerow([])
+        for t, a, b in zip(time_s, volts["CH1"], volts["CH3"]):
+            writer.writerow([f"{t / factor:.8f}", f"{a / scale:.8f}", f"{b:.8f}"])
+    assert detect_format(path) == "pico-csv"
+    waves = read_waveforms(path)
+    assert list(waves.channels) == ["Channel A", "Channel B"]
+    np.testing.assert_allclose(waves.time_s, time_s, rtol=1e-6, atol=1e-14)
+    np.testing.assert_allclose(waves.channels["Channel A"], volts["CH1"], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(waves.channels["Channel B"], volts["CH3"], rtol=1e-6, atol=1e-9)
+    text = path.read_text(encoding="utf-8").splitlines()
+    text[10] = text[10].rsplit(",", 1)[0] + ",∞"
+    path.write_text("\n".join(text), encoding="utf-8")
+    with pytest.raises(ScopeFileError, match=r"row 11, column 3: '∞'.*beyond the range"):
+        read_waveforms(path)

@@ -217,14 +217,16 @@ def analyze_trace(trace, args):
             "wall_force_ratio_eq5": float(constants["wall_force_ratio"]),
         },
     }
+    if incident:
+        summary["amplitude_n"] = float(np.mean([incident[k][1] for k in incident]))
     if speed is not None:
-        amplitude = float(np.mean([incident[k][1] for k in incident]))
         summary.update(
             speed_m_s=speed.speed_m_s,
             speed_stderr_m_s=speed.speed_stderr_m_s,
-            amplitude_n=amplitude,
-            velocity_constant=speed.speed_m_s / amplitude ** (1 / 6),
+            velocity_constant=speed.speed_m_s / summary["amplitude_n"] ** (1 / 6),
         )
+    else:
+        summary["speed_not_measured"] = _why_no_speed(trace, incident)
     ks = sorted(incident)
     summary["restitution"] = [
         {
@@ -237,7 +239,7 @@ def analyze_trace(trace, args):
     ]
     if "wall" in plotted and plotted["wall"][1] and incident:
         wall_peak = plotted["wall"][1][0][0].peak_force_n
-        amplitude = summary.get("amplitude_n", float(np.mean([incident[k][1] for k in incident])))
+        amplitude = summary["amplitude_n"]
         summary["wall_force_ratio"] = wall_peak / amplitude
         summary["momentum_check"] = {}
         for name in trace.channels:
@@ -250,6 +252,19 @@ def analyze_trace(trace, args):
                 )
                 summary["momentum_check"][name] = check._asdict()
     return rows, summary, plotted
+
+
+def _why_no_speed(trace, incident) -> str:
+    """Why a file gives no wave speed: a speed needs incident pulses at two contacts."""
+    contacts = [n for n in trace.channels if n.startswith(("contact_", "sensor_"))]
+    if not contacts:
+        return "no contact or sensor channel (the wall alone gives no arrival times to time the wave)"
+    if not incident:
+        return (f"no incident pulse found on {', '.join(contacts)} (a speed needs the incident pulse's "
+                "arrival at two contacts)")
+    (k,) = incident
+    return (f"the incident pulse is seen at one contact only (contact {k}); a speed needs its arrival "
+            "at two or more contacts: record a second contact or sensor channel")
 
 
 def _plot_file(time, plotted, title, path):
@@ -376,14 +391,7 @@ def run(args: argparse.Namespace) -> int:
             summary["file"],
             out / f"{Path(summary['file']).stem}_pulses.png",
         )
-        print(
-            f"{summary['file']}: {len(rows)} pulses"
-            + (
-                f", v = {summary['speed_m_s']:.2f} m/s at F_m = {summary['amplitude_n']:.4g} N"
-                if "speed_m_s" in summary
-                else ""
-            )
-        )
+        print(f"{summary['file']}: {len(rows)} pulses" + _file_line(summary))
     result = {"definitions": DEFINITIONS, "files": summaries}
     with_speed = [s for s in summaries if "speed_m_s" in s]
     if with_speed:
@@ -425,9 +433,7 @@ def run(args: argparse.Namespace) -> int:
         writer.writerows(repeats)
         write_text(out / "repeats.csv", buffer.getvalue())
         for row in repeats:
-            print(f"{row['n_shots']} shots at {row['velocity_m_s']:.4g} m/s: amplitude "
-                  f"{row['amplitude_n_mean']:.4g} +- {row['amplitude_n_sd']:.2g} N, speed "
-                  f"{row['speed_m_s_mean']:.4g} +- {row['speed_m_s_sd']:.2g} m/s (shot-to-shot sd)")
+            print(_repeat_line(row))
     result["pulses"] = all_rows
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=COLUMNS)
@@ -439,16 +445,39 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _file_line(summary) -> str:
+    """The per-file line's measured part: speed and amplitude, or what was measured and why
+    the speed was not."""
+    if "speed_m_s" in summary:
+        return f", v = {summary['speed_m_s']:.2f} m/s at F_m = {summary['amplitude_n']:.4g} N"
+    amplitude = f", F_m = {summary['amplitude_n']:.4g} N" if "amplitude_n" in summary else ""
+    return f"{amplitude}; no speed: {summary['speed_not_measured']}"
+
+
 def _nominal_velocity(trace):
     value = trace.header.get("x_import_nominal_velocity_m_s")
     return float(value) if value is not None else trace.striker_velocity_m_s
+
+
+def _repeat_line(row) -> str:
+    """One group of repeats: the amplitude's and the speed's mean and scatter, or why not."""
+    parts = []
+    for name, label, unit in (("amplitude_n", "amplitude", "N"), ("speed_m_s", "speed", "m/s")):
+        if row[f"{name}_mean"] is None:
+            parts.append(f"{label} not measured in these shots")
+        elif row[f"{name}_sd"] is None:
+            parts.append(f"{label} {row[f'{name}_mean']:.4g} {unit} (measured in one shot only)")
+        else:
+            parts.append(f"{label} {row[f'{name}_mean']:.4g} +- {row[f'{name}_sd']:.2g} {unit}")
+    return f"{row['n_shots']} shots at {row['velocity_m_s']:.4g} m/s: {', '.join(parts)} (shot-to-shot sd)"
 
 
 def repeat_scatter(summaries) -> list[dict]:
     """Shot-to-shot scatter of repeated shots: per group of two or more shots at the same
     nominal velocity (or measured velocities within `REPEAT_TOLERANCE`), the mean and the
     sample standard deviation of amplitude, speed, velocity constant, restitution (mean
-    over each shot's contact pairs) and wall force ratio."""
+    over each shot's contact pairs) and wall force ratio; None where the shots do not
+    measure a quantity (a speed needs two contacts) or, for the sd, measure it once."""
     groups: list[list[dict]] = []
     for summary in sorted((s for s in summaries if s["nominal_velocity_m_s"]),
                           key=lambda s: s["nominal_velocity_m_s"]):
@@ -468,8 +497,8 @@ def repeat_scatter(summaries) -> list[dict]:
                       (float(np.mean([p["restitution"] for p in s["restitution"]])) if s["restitution"] else None)
                       for s in group]
             values = [v for v in values if v is not None]
-            row[f"{name}_mean"] = float(np.mean(values)) if values else math.nan
-            row[f"{name}_sd"] = float(np.std(values, ddof=1)) if len(values) >= 2 else math.nan
+            row[f"{name}_mean"] = float(np.mean(values)) if values else None
+            row[f"{name}_sd"] = float(np.std(values, ddof=1)) if len(values) >= 2 else None
         rows.append(row)
     return rows
 

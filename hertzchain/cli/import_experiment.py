@@ -4,7 +4,8 @@ Reads the experiment file (`hertzchain.importer`: chain, scope settings, channel
 their sensitivities and coupling, shots and their files), conditions every shot (offset,
 volts to newtons, noise, time zero, clipping, each step recorded as `x_import_*` header
 keys) and writes `DIR/<shot>.csv` per shot, a plot of each, and `import.json` listing the
-files with each channel's offset, noise and clipped samples. Nothing is written unless
+files with each channel's offset, noise and clipped samples, and each shot's time zero with
+its check against the pulse's arrivals (`importer.check_time_zero`). Nothing is written unless
 every shot imports. `fit`, `diagnose`, `analyze` and `design` also take the experiment
 file directly (imported in memory).
 """
@@ -82,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
             "pre_trigger_samples": int(np.sum(trace.time_s < 0)),
             "sample_interval_s": trace.sample_interval_s,
             "striker_velocity_m_s": trace.striker_velocity_m_s, "channels": channels,
+            "time_zero_s": float(trace.header["x_import_time_zero_s"]),
+            "time_zero_check": trace.header["x_import_time_zero_check"],
         })
         print(f"{label}: {len(trace.time_s)} samples ({listing[-1]['pre_trigger_samples']} before the "
               f"impact), channels {', '.join(trace.channels)} -> {path}")
