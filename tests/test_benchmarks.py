@@ -53,3 +53,21 @@ def test_plain_jax_baseline_matches_hertzchain(case):
     out = baselines.plain_jax_batch(*args, block=30)
     assert out.shape == reference.shape
     np.testing.assert_allclose(out, reference, rtol=0, atol=1e-9 * np.max(reference))
+
+
+@pytest.mark.skipif(not baselines.HAVE_NUMBA, reason="numba not installed")
+def test_damped_numba_baseline_matches_hertzchain():
+    """The damped and frictional Numba kernel (Kuwabara-Kono at every contact, the total
+    clipped at 0, track friction) is the physics of hertzchain's damped kernel: the same
+    recorded forces on a 70-chain batch (a full block of 64 and a padded one)."""
+    speeds = np.linspace(0.2, 1.0, 70)
+    setup, _ = hc.batch_setup(hc.ChainSetup(N, eta_s=2e-6, mu=0.19), striker_velocity_m_s=speeds)
+    model = hc.build_model(hc.ChainSetup(N))
+    wall = np.asarray(jax.vmap(lambda s: s.wall_kappa())(setup))
+    grid = hc.choose_time_grid(setup, t_end_s=STEPS * DT, sample_interval_s=DT, dt_s=DT)
+    out = solve_batched(setup, grid, Recording((2, 5)), books=False, kernel="jax")
+    reference = np.transpose(np.stack([np.asarray(out.forces_n[k]) for k in out.channel_names], axis=1), (2, 1, 0))
+    assert np.max(reference[:, 2]) > 100.0  # the pulse reached the wall
+    got = baselines.numba_damped_batch(np.asarray(model.mass_kg), np.asarray(model.kappa), wall, speeds, DT, STEPS,
+                                       (2, 5), eta_s=2e-6, friction_decel_m_s2=0.19 * 9.81)
+    np.testing.assert_allclose(got, reference, rtol=0, atol=1e-9 * np.max(reference))
