@@ -56,6 +56,9 @@ HERTZCHAIN_IMPLS = ("hertzchain", "hertzchain-books", "hertzchain-jax")
 SHARDED_IMPLS = HERTZCHAIN_IMPLS + ("plain-jax",)
 # rows of the table, the plot and the summary
 LABELS = HERTZCHAIN_IMPLS + ("hertzchain-1dev", "plain-jax", "numba", "numpy")
+# --quick: (hertzchain, Numba) pairs per case, each time the median of this many runs
+QUICK_PAIRS = 4
+QUICK_REPEATS = 5
 # Bead-steps per timed run of the larger cases (fewer steps there, same physics per step).
 WORK_PER_RUN = 2e8
 # The damped + frictional case (the standard case with these): Kuwabara-Kono damping, s;
@@ -420,6 +423,73 @@ def worker_fit() -> dict:
     return result
 
 
+def worker_pairs(damped: bool, pairs: int, repeats: int) -> dict:
+    """The standard case (conservative, or damped + frictional), hertzchain as users call it
+    (`solve_batched`, books off, the batch over the host devices) and the Numba kernel of the
+    same physics, timed in turn in one process, `pairs` times (medians of `repeats` runs
+    each): neighbouring timings share the machine's load. Returns the bead-steps/s of each
+    and their ratios, and the largest difference of the two's wall forces."""
+    import jax
+    import numpy as np
+
+    import baselines
+    from hertzchain import native
+    from hertzchain.batched import kernel_flags, solve_batched
+    from hertzchain.integrate import Recording
+
+    if not baselines.HAVE_NUMBA:
+        return {"available": False, "reason": "numba is not installed"}
+    n, b = STANDARD
+    eta, mu = (DAMPED_ETA_S, DAMPED_MU) if damped else (0.0, 0.0)
+    setup, grid, arrays, rows = _case(n, b, STANDARD_STEPS, eta_s=eta, mu=mu)
+    args = (arrays["mass_kg"], arrays["kappa"], arrays["wall_kappa"], arrays["v0"], DT_S, STANDARD_STEPS, rows)
+    recording = Recording(tuple(rows))
+    devices = jax.devices()
+    use = devices if len(devices) > 1 else None
+
+    def ours():
+        out = solve_batched(setup, grid, recording, devices=use, books=False)
+        return jax.block_until_ready(out.forces_n)
+
+    def numba():
+        if damped:
+            return baselines.numba_damped_batch(*args, eta_s=eta, friction_decel_m_s2=arrays["friction_decel_m_s2"])
+        return baselines.numba_batch(*args)
+
+    ours_first, _, _, _, forces = _time(ours, 1)
+    numba_first, _, _, _, reference = _time(numba, 1)
+    runs = []
+    for _ in range(pairs):
+        a = _time(ours, repeats)[1]
+        c = _time(numba, repeats)[1]
+        work = n * b * STANDARD_STEPS
+        runs.append({"hertzchain": work / a, "numba": work / c, "ratio": c / a})
+    wall = np.asarray(forces["wall"])  # (B, n)
+    ratios = [r["ratio"] for r in runs]
+    return {
+        "available": True,
+        "case": f"N={n}, B={b}, {STANDARD_STEPS} steps of 1 us, 3 forces every step"
+        + (f", eta = {eta * 1e6:g} us, mu = {mu}" if damped else ", dissipationless"),
+        "native_kernel": native.kernel_for(kernel_flags(setup)._replace(ledger=False), use) or "none (JAX kernel)",
+        "host_devices": len(devices),
+        "numba_threads": numba_threads(),
+        "hertzchain_over_numba": float(np.median(ratios)),
+        "runs": runs,
+        "first_call_s": {"hertzchain": ours_first, "numba": numba_first},
+        "wall_force_max_difference_n": float(np.max(np.abs(wall.T - reference[:, 2, :]))),
+        "wall_force_max_n": float(np.max(wall)),
+    }
+
+
+def numba_threads() -> int | None:
+    try:
+        import numba
+
+        return int(numba.get_num_threads())
+    except ImportError:
+        return None
+
+
 def worker_fit_iteration() -> dict:
     """One fit iteration as `fitting` runs it (whitened residuals and their Jacobian in eta,
     mu, C: `residuals_and_jacobian`) on 10 synthetic traces of the paper's chain (0.15-0.6
@@ -489,6 +559,7 @@ WORKERS = {
     "fit": worker_fit,
     "fit_iteration": worker_fit_iteration,
     "build": worker_build,
+    "pairs": worker_pairs,
 }
 
 
@@ -561,37 +632,6 @@ def _plot(rows, path):
     plt.close(fig)
 
 
-def _alternating_pairs(damped: bool, pairs: int, cores: int, progress) -> dict:
-    """The standard case, hertzchain (as users call it, books off, both cores) then the
-    Numba kernel of the same physics right after it, `pairs` times (on a shared machine
-    neighbouring runs share most of the load): the ratios and their median."""
-    import numpy as np
-
-    n, b = STANDARD
-    runs = []
-    for _ in range(pairs):
-        ours = _spawn("throughput", host_devices=cores, impl="hertzchain", n_beads=n, batch=b,
-                      steps=STANDARD_STEPS, devices=cores, damped=damped)
-        numba = _spawn("throughput", impl="numba", n_beads=n, batch=b, steps=STANDARD_STEPS, devices=1,
-                       damped=damped)
-        progress.advance()
-        if ours.get("available") and numba.get("available"):
-            runs.append({"hertzchain": ours["bead_steps_per_s"], "numba": numba["bead_steps_per_s"],
-                         "ratio": ours["bead_steps_per_s"] / numba["bead_steps_per_s"],
-                         "native_kernel": ours.get("native_kernel"),
-                         "wall_peak_difference_n": float(np.max(np.abs(np.subtract(ours["wall_peak_n"],
-                                                                                   numba["wall_peak_n"]))))})
-        else:
-            print(f"pair failed: {ours.get('reason') or numba.get('reason')}", file=sys.stderr)
-    ratios = [r["ratio"] for r in runs]
-    return {
-        "case": "N=21, B=1024, 2500 steps of 1 us, 3 forces every step"
-        + (f", eta = {DAMPED_ETA_S * 1e6:g} us, mu = {DAMPED_MU}" if damped else ", dissipationless"),
-        "hertzchain_over_numba": float(np.median(ratios)) if ratios else None,
-        "runs": runs,
-    }
-
-
 def _fit_iteration(cores: int) -> dict:
     """`worker_fit_iteration` with the fused kernel and with the JAX kernel (in turn)."""
     out = {}
@@ -601,20 +641,22 @@ def _fit_iteration(cores: int) -> dict:
 
 
 def quick(out: Path) -> dict:
-    """The headline ratios in under 3 minutes on 2 cores (see the module docstring)."""
+    """The headline ratios in under 3 minutes on 2 quiet cores (see the module docstring)."""
     from hertzchain.atomic import write_json, write_text
     from hertzchain.progress import Progress
 
     cores = os.cpu_count() or 1
     start = time.perf_counter()
     load_before = _load()
-    progress = Progress(3 + 2 * STANDARD_PAIRS + 1, "quick benchmark")
+    progress = Progress(5, "quick benchmark")
     machine = _spawn("machine")
     progress.advance()
     build = _spawn("build")  # the kernel's one-time compilation, not in any timing
     progress.advance()
-    conservative = _alternating_pairs(False, STANDARD_PAIRS, cores, progress)
-    damped = _alternating_pairs(True, STANDARD_PAIRS, cores, progress)
+    conservative = _spawn("pairs", host_devices=cores, damped=False, pairs=QUICK_PAIRS, repeats=QUICK_REPEATS)
+    progress.advance()
+    damped = _spawn("pairs", host_devices=cores, damped=True, pairs=QUICK_PAIRS, repeats=QUICK_REPEATS)
+    progress.advance()
     fit = _spawn("fit_iteration")
     progress.advance()
     summary = {
@@ -628,7 +670,6 @@ def quick(out: Path) -> dict:
     }
     write_json(out / "quick.json", summary)
     write_text(out / "quick.md", _quick_table(summary) + "\n")
-    progress.advance()
     return summary
 
 
@@ -639,6 +680,9 @@ def _quick_table(summary) -> str:
              "", "| case | hertzchain bead-steps/s | Numba bead-steps/s | ratio (median) |", "|---|---|---|---|"]
     for key in ("conservative", "damped_frictional"):
         part = summary[key]
+        if not part.get("available", True):
+            lines.append(f"| {key} | unavailable: {part.get('reason', '')[-200:]} | | |")
+            continue
         runs = part["runs"]
         cells = " / ".join(f"{r['hertzchain']:.3g}" for r in runs), " / ".join(f"{r['numba']:.3g}" for r in runs)
         ratio = part["hertzchain_over_numba"]
@@ -689,7 +733,7 @@ def main(argv=None) -> int:
         if b > 1:
             jobs.append(dict(impl="hertzchain", n_beads=n, batch=b, steps=steps, devices=1))
     jobs.append(dict(impl="hertzchain-solve", n_beads=21, batch=1, steps=STANDARD_STEPS, devices=1))
-    progress = Progress(len(jobs) + 2 * STANDARD_PAIRS + 4, "benchmarks")
+    progress = Progress(len(jobs) + STANDARD_PAIRS + 4, "benchmarks")
     machine = _spawn("machine")
     progress.advance()
     rows = []
@@ -732,7 +776,7 @@ def main(argv=None) -> int:
     progress.advance()
     fit = {"available": False, "reason": "skipped (--skip-fit)"} if args.skip_fit else _spawn("fit")
     progress.advance()
-    damped = _alternating_pairs(True, STANDARD_PAIRS, cores, progress)
+    damped = _spawn("pairs", host_devices=cores, damped=True, pairs=STANDARD_PAIRS + 1, repeats=11)
     fit_iteration = _fit_iteration(cores)
     progress.advance()
 

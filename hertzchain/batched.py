@@ -24,10 +24,12 @@ same contact laws from `contact`, so the results agree to round-off), but
   (`XLA_FLAGS=--xla_force_host_platform_device_count=2`, set before JAX starts), or GPUs.
 
 It covers Hertz contacts, embedded sensors, rigid/elastic walls and free ends, preload,
-viscoelastic damping and track friction. Without damping and friction, on the CPU,
-`solve_batched` runs the same step in a fused C++ kernel instead (`hertzchain.native`:
-blocks of chains kept in cache through all their steps; agrees with this module's kernel
-to round-off); `kernel="jax"` keeps this one. Parameters that are the same in every chain
+viscoelastic damping and track friction. On the CPU, `solve_batched` runs the same step in
+a fused C++ kernel instead (`hertzchain.native`: blocks of chains kept in cache through all
+their steps; agrees with this module's kernel to round-off): the conservative kernel (with
+or without the books), or the full one for damped and frictional chains without the books;
+`kernel="jax"` keeps this one. `record_batched` (fits) runs the full C++ kernel with its
+forward-mode tangents (`native.run_full`). Parameters that are the same in every chain
 are passed as one column (`share_uniform`). Elastic-plastic contacts, linear dashpots and
 power-law contacts are not in the fast path: `solve_batched` then runs the general solver
 (`solve` under `vmap`), with the same result type. `fast_path_reason(setup)` says which

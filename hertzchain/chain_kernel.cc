@@ -1,13 +1,18 @@
-// A fused multi-step kernel for `hertzchain.batched`: the conservative velocity-Verlet
-// step of `batched._step` (Hertz contacts, linear sensor springs, static overlaps and
-// external forces of a preload, a wall or a free end) for a block of chains at a time,
-// all steps of the run while the block's state sits in the cache, every contact's force
-// computed once per step and used for both bodies it pushes.
+// Fused multi-step kernels for `hertzchain.batched`, a block of chains at a time through all
+// the steps of the run while the block's state sits in the cache, every contact's force
+// computed once per step and used for both bodies it pushes:
+//  - HertzChainForward: the conservative velocity-Verlet step of `batched._step` (Hertz
+//    contacts, linear sensor springs, static overlaps and external forces of a preload, a
+//    wall or a free end), with or without the books (largest overlaps);
+//  - HertzChainFullForward / HertzChainFullTangent: the full step (velocities and
+//    accelerations apart) with Kuwabara-Kono damping and track friction, and its
+//    forward-mode tangents (below, `RunFullBlock`).
 //
 // The arithmetic is that of the JAX kernel, operation for operation and in the same
 // order (compiled without contraction into fused multiply-adds), so that the two agree to
-// round-off; `tests/test_native.py` checks it. Layouts (row-major, the chain on the fast
-// axis, as in `batched`):
+// round-off; `tests/test_native.py` checks it, and `tests/test_batched.py` holds every
+// kernel's laws to `contact`'s. Layouts of the conservative kernel (row-major, the chain on
+// the fast axis, as in `batched`):
 //   state0, state  (R, B): x (bodies + 1 rows, the wall last, at rest), u = v + (dt/2) a
 //                          (bodies + 1), and with books the largest overlap of every
 //                          contact so far (bodies rows).
@@ -40,12 +45,13 @@ struct Param {
   int64_t width;  // 1 (shared by the batch) or B
 };
 
-// Rows of `p` for chains lo..lo+kLanes-1 into a (rows, kLanes) block.
+// Rows of `p` for chains lo..lo+kLanes-1 into a (rows, kLanes) block; lanes from `valid`
+// on (a block past the end of the batch) repeat the last valid chain.
 template <int64_t kLanes>
-void Load(Param p, int64_t rows, int64_t lo, double* block) {
+void Load(Param p, int64_t rows, int64_t lo, double* block, int64_t valid = kLanes) {
   for (int64_t r = 0; r < rows; ++r)
     for (int64_t j = 0; j < kLanes; ++j)
-      block[r * kLanes + j] = p.width == 1 ? p.data[r] : p.data[r * p.width + lo + j];
+      block[r * kLanes + j] = p.width == 1 ? p.data[r] : p.data[r * p.width + lo + std::min(j, valid - 1)];
 }
 
 template <bool kSprings>
@@ -193,12 +199,12 @@ struct TangentInputs {
 // Rows of every tangent direction of chains lo.. into (D, rows, kLanes).
 template <int64_t kLanes>
 void LoadTangent(Tangent t, int64_t directions, int64_t rows, int64_t batch, int64_t lo,
-                 double* block) {
+                 double* block, int64_t valid) {
   for (int64_t d = 0; d < directions; ++d) {
     const double* src = t.data + (t.shared ? 0 : d * rows * batch);
     for (int64_t r = 0; r < rows; ++r)
       for (int64_t j = 0; j < kLanes; ++j)
-        block[(d * rows + r) * kLanes + j] = src[r * batch + lo + j];
+        block[(d * rows + r) * kLanes + j] = src[r * batch + lo + std::min(j, valid - 1)];
   }
 }
 
@@ -214,19 +220,20 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   const double h = 0.5 * dt;
   const int64_t n_channels = static_cast<int64_t>(channels.size());
   const int64_t D = kTangent ? directions : 0;
+  const int64_t valid = std::min(kLanes, batch - lo);  // a last, partial block repeats its last chain
   std::vector<double> x(rows_x * kLanes), v(rows_x * kLanes), a(rows_x * kLanes);
   std::vector<double> inv(rows_x * kLanes), kap(contacts * kLanes), ov0(contacts * kLanes);
   std::vector<double> spr(contacts * kLanes), ext(rows_x * kLanes), eta(kLanes), fr(kLanes);
-  Load<kLanes>({state0, batch}, rows_x, lo, x.data());
-  Load<kLanes>({state0 + rows_x * batch, batch}, rows_x, lo, v.data());
-  Load<kLanes>({state0 + 2 * rows_x * batch, batch}, rows_x, lo, a.data());
-  Load<kLanes>(p.inv_mass, rows_x, lo, inv.data());
-  Load<kLanes>(p.kappa, contacts, lo, kap.data());
-  Load<kLanes>(p.overlap0, contacts, lo, ov0.data());
-  Load<kLanes>(p.spring, contacts, lo, spr.data());
-  Load<kLanes>(p.external, rows_x, lo, ext.data());
-  Load<kLanes>(p.eta, 1, lo, eta.data());
-  Load<kLanes>(p.friction, 1, lo, fr.data());
+  Load<kLanes>({state0, batch}, rows_x, lo, x.data(), valid);
+  Load<kLanes>({state0 + rows_x * batch, batch}, rows_x, lo, v.data(), valid);
+  Load<kLanes>({state0 + 2 * rows_x * batch, batch}, rows_x, lo, a.data(), valid);
+  Load<kLanes>(p.inv_mass, rows_x, lo, inv.data(), valid);
+  Load<kLanes>(p.kappa, contacts, lo, kap.data(), valid);
+  Load<kLanes>(p.overlap0, contacts, lo, ov0.data(), valid);
+  Load<kLanes>(p.spring, contacts, lo, spr.data(), valid);
+  Load<kLanes>(p.external, rows_x, lo, ext.data(), valid);
+  Load<kLanes>(p.eta, 1, lo, eta.data(), valid);
+  Load<kLanes>(p.friction, 1, lo, fr.data(), valid);
   // tangents (D, rows, kLanes)
   std::vector<double> tx(D * rows_x * kLanes), tv(D * rows_x * kLanes), ta(D * rows_x * kLanes);
   std::vector<double> tinv(D * rows_x * kLanes), tkap(D * contacts * kLanes), tov0(D * contacts * kLanes);
@@ -234,17 +241,17 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   if (kTangent) {
     for (int64_t d = 0; d < D; ++d) {
       const double* s0 = tin.state0.data + (tin.state0.shared ? 0 : d * 3 * rows_x * batch);
-      Load<kLanes>({s0, batch}, rows_x, lo, &tx[d * rows_x * kLanes]);
-      Load<kLanes>({s0 + rows_x * batch, batch}, rows_x, lo, &tv[d * rows_x * kLanes]);
-      Load<kLanes>({s0 + 2 * rows_x * batch, batch}, rows_x, lo, &ta[d * rows_x * kLanes]);
+      Load<kLanes>({s0, batch}, rows_x, lo, &tx[d * rows_x * kLanes], valid);
+      Load<kLanes>({s0 + rows_x * batch, batch}, rows_x, lo, &tv[d * rows_x * kLanes], valid);
+      Load<kLanes>({s0 + 2 * rows_x * batch, batch}, rows_x, lo, &ta[d * rows_x * kLanes], valid);
     }
-    LoadTangent<kLanes>(tin.inv_mass, D, rows_x, batch, lo, tinv.data());
-    LoadTangent<kLanes>(tin.kappa, D, contacts, batch, lo, tkap.data());
-    LoadTangent<kLanes>(tin.overlap0, D, contacts, batch, lo, tov0.data());
-    LoadTangent<kLanes>(tin.spring, D, contacts, batch, lo, tspr.data());
-    LoadTangent<kLanes>(tin.external, D, rows_x, batch, lo, text.data());
-    LoadTangent<kLanes>(tin.eta, D, 1, batch, lo, teta.data());
-    LoadTangent<kLanes>(tin.friction, D, 1, batch, lo, tfr.data());
+    LoadTangent<kLanes>(tin.inv_mass, D, rows_x, batch, lo, tinv.data(), valid);
+    LoadTangent<kLanes>(tin.kappa, D, contacts, batch, lo, tkap.data(), valid);
+    LoadTangent<kLanes>(tin.overlap0, D, contacts, batch, lo, tov0.data(), valid);
+    LoadTangent<kLanes>(tin.spring, D, contacts, batch, lo, tspr.data(), valid);
+    LoadTangent<kLanes>(tin.external, D, rows_x, batch, lo, text.data(), valid);
+    LoadTangent<kLanes>(tin.eta, D, 1, batch, lo, teta.data(), valid);
+    LoadTangent<kLanes>(tin.friction, D, 1, batch, lo, tfr.data(), valid);
   }
   const std::vector<double*>& outs = kTangent ? ttraces : traces;
   const int64_t out_sets = kTangent ? D : 1;
@@ -253,7 +260,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   auto flush = [&]() {
     for (int64_t d = 0; d < out_sets; ++d)
       for (int64_t c = 0; c < n_channels; ++c)
-        for (int64_t j = 0; j < kLanes; ++j) {
+        for (int64_t j = 0; j < valid; ++j) {
           double* out = outs[c] + (d * batch + lo + j) * n_samples + written;
           const double* in = &record[((d * n_channels + c) * kLanes + j) * kSampleBuffer];
           std::copy(in, in + buffered, out);
@@ -266,7 +273,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   double loss[kLanes];              // mu g dt/2
   double w_prev[kLanes], p_prev[kLanes], f_prev[kLanes];  // body i: kicked half-step and predicted velocity; force before
   double raw1[kLanes], s1[kLanes];  // body i + 1: half-step velocity before friction, |.| - loss
-  double delta[kLanes], rate[kLanes], root[kLanes], sum[kLanes];
+  double delta[kLanes], rate[kLanes], root[kLanes], half_inv_root[kLanes], sum[kLanes];
   double body[kLanes], raw2[kLanes], s2[kLanes];
   // tangents of w_prev, p_prev, f_prev (D, kLanes)
   std::vector<double> tw_prev(D * kLanes), tp_prev(D * kLanes), tf_prev(D * kLanes);
@@ -304,11 +311,12 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     return f + sp * dl;
   };
   // its tangent
-  auto ttotal_force = [](double dl, double rate, double k, double e, double sp, double rt, double sm,
-                         double tdl, double trate, double tk, double te, double tsp) {
+  // (hr = 0.5 / root where in contact: JAX's sqrt rule, g * (0.5 / sqrt))
+  auto ttotal_force = [](double dl, double rate, double k, double e, double sp, double rt, double hr,
+                         double sm, double tdl, double trate, double tk, double te, double tsp) {
     double positive = dl > 0.0 ? dl : 0.0;
     double tpositive = dl > 0.0 ? tdl : 0.0;
-    double troot = dl > 0.0 ? tdl * (0.5 / rt) : 0.0;
+    double troot = dl > 0.0 ? tdl * hr : 0.0;
     double kp = k * positive;
     double telastic = (tk * positive + k * tpositive) * rt + kp * troot;
     double tf;
@@ -337,6 +345,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
       }
       if (kTangent)
         for (int64_t d = 0; d < D; ++d)
+#pragma GCC ivdep
           for (int64_t j = 0; j < kLanes; ++j) {
             const int64_t q = d * kLanes + j;
             double tw = tv[d * rows_x * kLanes + j] + h * ta[d * rows_x * kLanes + j];
@@ -373,6 +382,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
             s1[j] = s_first;
             rate[j] = rt_rate;
             root[j] = rt;
+            half_inv_root[j] = dl > 0.0 ? 0.5 / rt : 0.0;
             sum[j] = sm;
             delta[j] = dl;
             body[j] = b;
@@ -387,6 +397,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           for (int64_t d = 0; d < D; ++d) {
             const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
             const int64_t tc = (d * contacts + i) * kLanes;
+#pragma GCC ivdep
             for (int64_t j = 0; j < kLanes; ++j) {
               const int64_t q = d * kLanes + j;
               double tw = tv[tn + j] + h * ta[tn + j];
@@ -394,8 +405,9 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               tx[tn + j] = tx[tn + j] + dt * tw;
               double tpred = tw + h * ta[tn + j];
               double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
-              double tf = ttotal_force(delta[j], rate[j], kap[ri + j], eta[j], spr[ri + j], root[j], sum[j],
-                                       tdl, tp_prev[q] - tpred, tkap[tc + j], teta[q], tspr[tc + j]);
+              double tf = ttotal_force(delta[j], rate[j], kap[ri + j], eta[j], spr[ri + j], root[j],
+                                       half_inv_root[j], sum[j], tdl, tp_prev[q] - tpred, tkap[tc + j],
+                                       teta[q], tspr[tc + j]);
               double tb = tf_prev[q] - tf + text[ti + j];
               double tacc = tb * inv[ri + j] + body[j] * tinv[ti + j];
               double tvn = tw_prev[q] + h * tacc;
@@ -422,6 +434,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
       }
       if (kTangent)
         for (int64_t d = 0; d < D; ++d)
+#pragma GCC ivdep
           for (int64_t j = 0; j < kLanes; ++j) {
             const int64_t q = d * kLanes + j, tw_row = (d * rows_x + contacts) * kLanes;
             double tb = tf_prev[q] + text[tw_row + j];
@@ -440,6 +453,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         double rate = v[ri + j] - v[rn + j];
         double rt, sm;
         double f = total_force(dl, rate, kap[ri + j], eta[j], spr[ri + j], &rt, &sm);
+        double hr = dl > 0.0 ? 0.5 / rt : 0.0;
         if (!kTangent) {
           record[(c * kLanes + j) * kSampleBuffer + buffered] = f;
           continue;
@@ -451,7 +465,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
           double trate = tv[ti + j] - tv[tn + j];
           record[((d * n_channels + c) * kLanes + j) * kSampleBuffer + buffered] =
-              ttotal_force(dl, rate, kap[ri + j], eta[j], spr[ri + j], rt, sm, tdl, trate, tkap[tc + j],
+              ttotal_force(dl, rate, kap[ri + j], eta[j], spr[ri + j], rt, hr, sm, tdl, trate, tkap[tc + j],
                            teta[q], tspr[tc + j]);
         }
       }
@@ -565,9 +579,11 @@ ffi::Error RunFull(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                                    tin, kT ? outs : none_out);
       lo += kL;
     };
+    // blocks of 64, then of 8, the last one partial (a vector of 8 lanes costs about what
+    // one chain alone does), a last single chain alone
     while (lo + kWideLanes <= batch) advance(std::integral_constant<int64_t, kWideLanes>{});
-    while (lo + kNarrowLanes <= batch) advance(std::integral_constant<int64_t, kNarrowLanes>{});
-    while (lo < batch) advance(std::integral_constant<int64_t, 1>{});
+    while (batch - lo >= 2) advance(std::integral_constant<int64_t, kNarrowLanes>{});
+    if (lo < batch) advance(std::integral_constant<int64_t, 1>{});
   };
   using T = std::true_type;
   using F = std::false_type;

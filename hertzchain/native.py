@@ -1,12 +1,23 @@
-"""The fused C++ kernel of the batched fast path (`chain_kernel.cc`), through `jax.ffi`.
+"""The fused C++ kernels of the batched fast path (`chain_kernel.cc`), through `jax.ffi`.
 
 XLA compiles the JAX kernel of `batched` into a few loops per step, each a pass over the
 whole batch's state; `chain_kernel.cc` advances a block of 64 chains (8 for the rest of
-the batch) through all the steps of the run while their state stays in the cache, computing every contact's force
-once per step (the loop structure of a hand-written kernel). It covers the setups of the
-fast path without damping or friction (Hertz contacts, sensor springs, preload, walls and
-free ends), with or without the books, on the CPU; everything else runs the JAX kernel,
-which stays the reference: the two agree to round-off (`tests/test_native.py`).
+the batch, then one at a time) through all the steps of the run while their state stays in
+the cache, computing every contact's force once per step (the loop structure of a
+hand-written kernel). Two kernels, each specialised at compile time (C++ templates) for the
+physics it runs, so that the conservative case pays nothing for the rest:
+
+- the conservative one (`run`): Hertz contacts, sensor springs, preload, walls and free
+  ends, with or without the books (running maxima, energies);
+- the full one (`run_full`): the same plus Kuwabara-Kono damping (the total force clipped
+  at 0) and track friction, the recorded forces only, and forward-mode tangents carried
+  through the same loop (`jax.custom_jvp`: `jax.jvp`, `jax.jacfwd`, `jax.linearize`; all
+  the directions of a Jacobian in one run).
+
+Everything else (the books of a damped chain, GPUs, reverse mode) runs the JAX kernel,
+which stays the reference: they agree to round-off, values and derivatives
+(`tests/test_native.py`), and every kernel's laws are held to `contact`'s
+(`tests/test_batched.py::test_every_kernel_applies_the_laws_of_contact`).
 
 The kernel is compiled on first use with the system's C++ compiler against the XLA FFI
 headers that `jax.ffi.include_dir()` gives, for this machine's instruction set, and kept
@@ -89,7 +100,7 @@ def _load() -> str | None:
     try:
         path = _library_path()
         if not path.exists():
-            print(f"hertzchain: compiling the fused chain kernel into {path} (once; ~10 s)",
+            print(f"hertzchain: compiling the fused chain kernel into {path} (once; 30-60 s)",
                   file=sys.stderr, flush=True)
             _build(path)
         library = ctypes.cdll.LoadLibrary(str(path))

@@ -67,6 +67,21 @@ def test_chains_do_not_depend_on_their_neighbours_in_a_block():
         np.testing.assert_array_equal(together.max_force_n[i], one.max_force_n[0])
 
 
+def test_full_kernel_chains_do_not_depend_on_their_neighbours():
+    """The full kernel on 75 damped, frictional chains: a block of 64, one of 8 and a
+    partial block of 3 (its idle lanes repeat the last chain): each chain's trace is the
+    one it gets alone (a single lane), bit for bit."""
+    speeds = np.linspace(0.2, 1.2, 75)
+    setup, _ = hc.batch_setup(hc.ChainSetup(10, eta_s=2e-6, mu=0.19), striker_velocity_m_s=speeds)
+    grid = hc.choose_time_grid(setup, t_end_s=0.5e-3, sample_interval_s=2e-6)
+    together = solve_batched(setup, grid, Recording((4,)), books=False)
+    for i in (0, 63, 64, 71, 72, 74):
+        alone = jax.tree_util.tree_map(lambda leaf, i=i: leaf[i : i + 1], setup)
+        one = solve_batched(alone, grid, Recording((4,)), books=False)
+        for name in together.channel_names:
+            np.testing.assert_array_equal(together.forces_n[name][i], one.forces_n[name][0])
+
+
 _SHARDED = r"""
 import json, numpy as np, jax, hertzchain as hc
 from hertzchain import native
