@@ -211,7 +211,7 @@ void LoadTangent(Tangent t, int64_t directions, int64_t rows, int64_t batch, int
 // d max(s, 0) / ds as JAX's max rule gives it (1/2 at the tie).
 inline double MaxSlope(double s) { return s > 0.0 ? 1.0 : (s == 0.0 ? 0.5 : 0.0); }
 
-template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent>
+template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras>
 void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
                   int64_t steps_per_sample, double dt, const double* state0, FullParams p,
                   const std::vector<int64_t>& channels, const std::vector<double*>& traces,
@@ -234,6 +234,9 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   Load<kLanes>(p.external, rows_x, lo, ext.data(), valid);
   Load<kLanes>(p.eta, 1, lo, eta.data(), valid);
   Load<kLanes>(p.friction, 1, lo, fr.data(), valid);
+  std::vector<double> kvis(contacts * kLanes);  // 1.5 eta kappa of every contact
+  for (int64_t i = 0; i < contacts; ++i)
+    for (int64_t j = 0; j < kLanes; ++j) kvis[i * kLanes + j] = 1.5 * eta[j] * kap[i * kLanes + j];
   // tangents (D, rows, kLanes)
   std::vector<double> tx(D * rows_x * kLanes), tv(D * rows_x * kLanes), ta(D * rows_x * kLanes);
   std::vector<double> tinv(D * rows_x * kLanes), tkap(D * contacts * kLanes), tov0(D * contacts * kLanes);
@@ -293,13 +296,14 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     return sign * ((tspeed - tloss) * MaxSlope(s));
   };
   // contact.contact_force (the total) at overlap delta and rate; root, sum kept.
-  auto total_force = [](double dl, double rate, double k, double e, double sp, double* r, double* sm) {
+  // (kv = 1.5 eta kappa, computed once per block as JAX rounds it: (1.5 eta) kappa)
+  auto total_force = [](double dl, double rate, double k, double kv, double sp, double* r, double* sm) {
     double positive = dl > 0.0 ? dl : 0.0;
     double rt = dl > 0.0 ? std::sqrt(dl) : 0.0;
     double elastic = k * positive * rt;
     double f;
     if (kViscous) {
-      double viscous = (1.5 * e * k * rt + 0.0) * rate;
+      double viscous = (kv * rt) * rate;  // (+ a dashpot of 0 in `contact`: adds nothing)
       double s = elastic + viscous;
       *sm = s;
       f = dl > 0.0 ? (s > 0.0 ? s : 0.0) : 0.0;
@@ -308,7 +312,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
       f = elastic;
     }
     *r = rt;
-    return f + sp * dl;
+    if constexpr (kExtras) f = f + sp * dl;  // (a spring of 0 adds nothing)
+    return f;
   };
   // its tangent
   // (hr = 0.5 / root where in contact: JAX's sqrt rule, g * (0.5 / sqrt))
@@ -366,11 +371,13 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           x[rn + j] = x[rn + j] + dt * w;
           double pred = w + h * a[rn + j];
           // contact i
-          double dl = x[ri + j] - x[rn + j] + ov0[ri + j];
+          double dl = x[ri + j] - x[rn + j];
+          if constexpr (kExtras) dl = dl + ov0[ri + j];
           double rt_rate = p_prev[j] - pred;
-          double f = total_force(dl, rt_rate, kap[ri + j], eta[j], spr[ri + j], &rt, &sm);
+          double f = total_force(dl, rt_rate, kap[ri + j], kvis[ri + j], spr[ri + j], &rt, &sm);
           // body i: second half kick, friction
-          double b = f_prev[j] - f + ext[ri + j];
+          double b = f_prev[j] - f;
+          if constexpr (kExtras) b = b + ext[ri + j];
           double acc = b * inv[ri + j];
           double vn = w_prev[j] + h * acc;
           double vn_raw = vn;
@@ -423,7 +430,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
       // the wall's row (inverse mass 0: it stays at rest, as in the JAX kernel)
       const int64_t rw = contacts * kLanes;
       for (int64_t j = 0; j < kLanes; ++j) {
-        double b = f_prev[j] + ext[rw + j];
+        double b = f_prev[j];
+        if constexpr (kExtras) b = b + ext[rw + j];
         double acc = b * inv[rw + j];
         double vn = w_prev[j] + h * acc;
         raw2[j] = vn;
@@ -449,10 +457,11 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     for (int64_t c = 0; c < n_channels; ++c) {
       const int64_t i = channels[c], ri = i * kLanes, rn = (i + 1) * kLanes;
       for (int64_t j = 0; j < kLanes; ++j) {
-        double dl = x[ri + j] - x[rn + j] + ov0[ri + j];
+        double dl = x[ri + j] - x[rn + j];
+        if constexpr (kExtras) dl = dl + ov0[ri + j];
         double rate = v[ri + j] - v[rn + j];
         double rt, sm;
-        double f = total_force(dl, rate, kap[ri + j], eta[j], spr[ri + j], &rt, &sm);
+        double f = total_force(dl, rate, kap[ri + j], kvis[ri + j], spr[ri + j], &rt, &sm);
         double hr = dl > 0.0 ? 0.5 / rt : 0.0;
         if (!kTangent) {
           record[(c * kLanes + j) * kSampleBuffer + buffered] = f;
@@ -542,8 +551,8 @@ ffi::Error RunFull(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                    ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                    ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
                    ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
-                   int64_t viscous, int64_t friction_on, const TangentInputs* tangents,
-                   ffi::RemainingRets results) {
+                   int64_t viscous, int64_t friction_on, int64_t extras,
+                   const TangentInputs* tangents, ffi::RemainingRets results) {
   auto dims = state0.dimensions();
   const int64_t batch = dims[dims.size() - 1];
   const int64_t bodies = inv_mass.dimensions()[inv_mass.dimensions().size() - 2] - 1;
@@ -567,14 +576,14 @@ ffi::Error RunFull(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                AsParam(external), AsParam(eta), AsParam(friction)};
   TangentInputs none{};
   const TangentInputs& tin = tangents ? *tangents : none;
-  auto run = [&](auto viscous_tag, auto friction_tag, auto tangent_tag) {
+  auto run = [&](auto viscous_tag, auto friction_tag, auto tangent_tag, auto extras_tag) {
     constexpr bool kV = decltype(viscous_tag)::value, kF = decltype(friction_tag)::value,
-                   kT = decltype(tangent_tag)::value;
+                   kT = decltype(tangent_tag)::value, kE = decltype(extras_tag)::value;
     int64_t lo = 0;
     std::vector<double*> none_out;
     auto advance = [&](auto lanes) {
       constexpr int64_t kL = decltype(lanes)::value;
-      RunFullBlock<kL, kV, kF, kT>(bodies, lo, batch, n_samples, steps_per_sample, dt,
+      RunFullBlock<kL, kV, kF, kT, kE>(bodies, lo, batch, n_samples, steps_per_sample, dt,
                                    state0.typed_data(), p, rows, kT ? none_out : outs, directions,
                                    tin, kT ? outs : none_out);
       lo += kL;
@@ -587,7 +596,11 @@ ffi::Error RunFull(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
   };
   using T = std::true_type;
   using F = std::false_type;
-  auto with_tangent = [&](auto v, auto f) { tangents ? run(v, f, T{}) : run(v, f, F{}); };
+  // the tangents always with the preload's and springs' terms (zeros where there are none)
+  auto with_tangent = [&](auto v, auto f) {
+    if (tangents) return run(v, f, T{}, T{});
+    extras ? run(v, f, F{}, T{}) : run(v, f, F{}, F{});
+  };
   auto with_friction = [&](auto v) { friction_on ? with_tangent(v, T{}) : with_tangent(v, F{}); };
   viscous ? with_friction(T{}) : with_friction(F{});
   return ffi::Error::Success();
@@ -598,9 +611,9 @@ ffi::Error FullForward(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_m
                        ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                        ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
                        ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
-                       int64_t viscous, int64_t friction_on, ffi::RemainingRets traces) {
+                       int64_t viscous, int64_t friction_on, int64_t extras, ffi::RemainingRets traces) {
   return RunFull(state0, inv_mass, kappa, overlap0, spring, external, eta, friction, channels, dt,
-                 steps_per_sample, viscous, friction_on, nullptr, traces);
+                 steps_per_sample, viscous, friction_on, extras, nullptr, traces);
 }
 
 ffi::Error FullTangent(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
@@ -612,7 +625,8 @@ ffi::Error FullTangent(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_m
                        ffi::Buffer<ffi::F64> t_spring, ffi::Buffer<ffi::F64> t_external,
                        ffi::Buffer<ffi::F64> t_eta, ffi::Buffer<ffi::F64> t_friction,
                        ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
-                       int64_t viscous, int64_t friction_on, ffi::RemainingRets tangent_traces) {
+                       int64_t viscous, int64_t friction_on, int64_t extras,
+                       ffi::RemainingRets tangent_traces) {
   auto dims = state0.dimensions();
   const int64_t batch = dims[dims.size() - 1];
   const int64_t rows_x = inv_mass.dimensions()[inv_mass.dimensions().size() - 2];
@@ -633,7 +647,7 @@ ffi::Error FullTangent(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_m
                     tangent(t_spring, counts[4]),    tangent(t_external, counts[5]),
                     tangent(t_eta, counts[6]),       tangent(t_friction, counts[7])};
   return RunFull(state0, inv_mass, kappa, overlap0, spring, external, eta, friction, channels, dt,
-                 steps_per_sample, viscous, friction_on, &tin, tangent_traces);
+                 steps_per_sample, viscous, friction_on, extras, &tin, tangent_traces);
 }
 
 }  // namespace
@@ -670,6 +684,7 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullForward, FullForward,
                                   .Attr<int64_t>("steps_per_sample")
                                   .Attr<int64_t>("viscous")
                                   .Attr<int64_t>("friction")
+                                  .Attr<int64_t>("extras")      // preload or springs
                                   .RemainingRets());             // traces
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullTangent, FullTangent,
@@ -695,4 +710,5 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullTangent, FullTangent,
                                   .Attr<int64_t>("steps_per_sample")
                                   .Attr<int64_t>("viscous")
                                   .Attr<int64_t>("friction")
+                                  .Attr<int64_t>("extras")      // preload or springs
                                   .RemainingRets());             // tangent traces

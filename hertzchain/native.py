@@ -194,16 +194,16 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
         jax.numpy.reshape(p["friction"], (1, width(p["friction"]))),
     )
     config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
-              bool(viscous), bool(friction))
+              bool(viscous), bool(friction), bool(preload or springs))
     return _full_call(config)(*args)
 
 
 @functools.cache
 def _full_call(config):
     """The full kernel for one configuration as a function of its arrays, with its JVP."""
-    dt_s, steps_per_sample, n_samples, channels, viscous, friction = config
+    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras = config
     attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample),
-                 viscous=np.int64(viscous), friction=np.int64(friction))
+                 viscous=np.int64(viscous), friction=np.int64(friction), extras=np.int64(extras))
     index = np.asarray(channels, dtype=np.int64)
 
     def shapes(state0, leading=()):
