@@ -167,8 +167,8 @@ def _traced(base, grid, q, kernel):
 def test_forward_mode_derivatives_equal_jacfwd_through_the_jax_kernel(case):
     """`jax.jacfwd` through `record_batched` on the C++ kernel (its own tangents, five
     directions in one run: damping, friction, impact speed, preload, bead modulus) equals
-    `jax.jacfwd` through the JAX kernel to round-off, and `jax.jvp` along one direction
-    equals the Jacobian's column; values equal too."""
+    `jax.jacfwd` through the JAX kernel to round-off, and `jax.jvp` and `jax.linearize`
+    along one direction equal the Jacobian's column; values equal too."""
     import jax.numpy as jnp
 
     q = jnp.asarray([2e-6, 0.19, 1.0, 1.0, 1.0])
@@ -184,6 +184,8 @@ def test_forward_mode_derivatives_equal_jacfwd_through_the_jax_kernel(case):
     direction = jnp.zeros(q.size).at[1].set(1.0)
     value, tangent = jax.jvp(lambda q: _traced(base, grid, q, "auto"), (q,), (direction,))
     np.testing.assert_allclose(np.asarray(tangent), jac[..., 1], rtol=0, atol=1e-12 * np.max(np.abs(jac[..., 1])))
+    _, linear = jax.linearize(lambda q: _traced(base, grid, q, "auto"), q)
+    np.testing.assert_array_equal(np.asarray(linear(direction)), np.asarray(tangent))
     expected = np.asarray(_traced(base, grid, q, "jax"))
     np.testing.assert_allclose(np.asarray(value), expected, rtol=0, atol=2e-12 * np.max(np.abs(expected)))
 
