@@ -33,6 +33,9 @@ import traceback
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from run import _time  # noqa: E402  (first call s, median s, min s, max s, result)
 
 N_BEADS = 21
 DT_S = 1e-6
@@ -118,19 +121,6 @@ def _case(batch: int, damped: bool):
     return setup, grid
 
 
-def _median_time(fn, repeats: int):
-    first_start = time.perf_counter()
-    result = fn()
-    first = time.perf_counter() - first_start
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    times.sort()
-    return first, times[len(times) // 2], result
-
-
 def item_jax(batch: int, damped: bool, repeats: int) -> dict:
     import jax
     import numpy as np
@@ -146,7 +136,7 @@ def item_jax(batch: int, damped: bool, repeats: int) -> dict:
         out = solve_batched(setup, grid, recording, books=False, kernel="jax")
         return jax.block_until_ready(out.forces_n)
 
-    first, median, forces = _median_time(run, repeats)
+    first, median, _, _, forces = _time(run, repeats)
     return {
         "batch": chains, "steps": grid.n_steps, "run_s": median, "compile_s": max(first - median, 0.0),
         "bead_steps_per_s": N_BEADS * chains * grid.n_steps / median,
@@ -186,7 +176,7 @@ def item_cuda(batch: int, damped: bool, repeats: int, reference: dict | None) ->
         cp.cuda.Device().synchronize()
         return out
 
-    first, median, result = _median_time(run, repeats)
+    first, median, _, _, result = _time(run, repeats)
     peaks = cp.asnumpy(cp.max(result[:, 2, :8], axis=0)).tolist()
     row = {
         "batch": chains, "steps": grid.n_steps, "run_s": median, "compile_s": max(first - median, 0.0),

@@ -632,7 +632,7 @@ def _plot(rows, path):
     plt.close(fig)
 
 
-def _fit_iteration(cores: int) -> dict:
+def _fit_iteration() -> dict:
     """`worker_fit_iteration` with the fused kernel and with the JAX kernel (in turn)."""
     out = {}
     for label, env in (("fused", {}), ("jax_kernel", {"HERTZCHAIN_NATIVE": "0"})):
@@ -777,7 +777,7 @@ def main(argv=None) -> int:
     fit = {"available": False, "reason": "skipped (--skip-fit)"} if args.skip_fit else _spawn("fit")
     progress.advance()
     damped = _spawn("pairs", host_devices=cores, damped=True, pairs=STANDARD_PAIRS + 1, repeats=11)
-    fit_iteration = _fit_iteration(cores)
+    fit_iteration = _fit_iteration()
     progress.advance()
 
     def pick(label, n, b):
