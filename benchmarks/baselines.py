@@ -135,50 +135,119 @@ if HAVE_NUMBA:
 
     @numba.njit(fastmath=True, parallel=True, cache=False)
     def _numba_batch(mass, kappa, wall_kappa, v0, dt, n_steps, r0, r1, out):
+        # One block of BLOCK_CHAINS chains per task (the batch is padded to whole blocks),
+        # all steps in cache; one sweep per step: the drift of body i + 1, the force of
+        # contact i, the kick of body i. u = v + (dt/2) a is the next drift's velocity.
         nb = mass.shape[0]
-        batch = wall_kappa.shape[0]
-        h = 0.5 * dt
-        n_blocks = (batch + BLOCK_CHAINS - 1) // BLOCK_CHAINS
+        n_blocks = wall_kappa.shape[0] // BLOCK_CHAINS
+        inv = 1.0 / mass
         for blk in numba.prange(n_blocks):
             lo = blk * BLOCK_CHAINS
-            w = min(BLOCK_CHAINS, batch - lo)
-            x = np.zeros((nb, w))
-            v = np.zeros((nb, w))
-            a = np.zeros((nb, w))
-            f_prev = np.zeros(w)
-            kw = wall_kappa[lo : lo + w].copy()
-            for j in range(w):
-                v[0, j] = v0[lo + j]
-            inv = 1.0 / mass
+            x = np.zeros((nb, BLOCK_CHAINS))
+            u = np.zeros((nb, BLOCK_CHAINS))
+            f_prev = np.zeros(BLOCK_CHAINS)
+            kw = wall_kappa[lo : lo + BLOCK_CHAINS].copy()
+            for j in range(BLOCK_CHAINS):
+                u[0, j] = v0[lo + j]  # a = 0 at the impact
             for n in range(n_steps):
-                for i in range(nb):
-                    for j in range(w):
-                        v[i, j] += h * a[i, j]
-                        x[i, j] += dt * v[i, j]
-                for j in range(w):
+                for j in range(BLOCK_CHAINS):
+                    x[0, j] += dt * u[0, j]
+                    f_prev[j] = 0.0
+                for i in range(nb - 1):
+                    k = kappa[i]
+                    m = dt * inv[i]
+                    for j in range(BLOCK_CHAINS):
+                        x[i + 1, j] += dt * u[i + 1, j]
+                        d = max(x[i, j] - x[i + 1, j], 0.0)
+                        f = k * d * np.sqrt(d)
+                        u[i, j] += (f_prev[j] - f) * m
+                        f_prev[j] = f
+                m = dt * inv[nb - 1]
+                for j in range(BLOCK_CHAINS):
+                    dw = max(x[nb - 1, j], 0.0)
+                    fw = kw[j] * dw * np.sqrt(dw)
+                    u[nb - 1, j] += (f_prev[j] - fw) * m
+                    d0 = max(x[r0, j] - x[r0 + 1, j], 0.0)
+                    d1 = max(x[r1, j] - x[r1 + 1, j], 0.0)
+                    out[n, 0, lo + j] = kappa[r0] * d0 * np.sqrt(d0)
+                    out[n, 1, lo + j] = kappa[r1] * d1 * np.sqrt(d1)
+                    out[n, 2, lo + j] = fw
+
+    @numba.njit(fastmath=True, inline="always")
+    def _kick(w, loss):
+        # contact.track_friction_kick: sign(w) max(|w| - mu g dt/2, 0)
+        s = abs(w) - loss
+        return 0.0 if s <= 0.0 else (s if w > 0.0 else -s)
+
+    @numba.njit(fastmath=True, inline="always")
+    def _damped_force(d, rate, k, c):
+        # contact.contact_force: Hertz plus Kuwabara-Kono (3/2) eta kappa sqrt(delta) rate, clipped at 0
+        if d <= 0.0:
+            return 0.0
+        r = np.sqrt(d)
+        return max(k * d * r + c * k * r * rate, 0.0)
+
+    @numba.njit(fastmath=True, parallel=True, cache=False)
+    def _numba_damped_batch(mass, kappa, wall_kappa, v0, eta, decel, dt, n_steps, r0, r1, out):
+        # The damped, frictional step of hertzchain (integrate.verlet_step): half kick,
+        # friction kick, drift, forces at the predicted velocities v_half + (dt/2) a, half
+        # kick, friction kick; blocks of BLOCK_CHAINS chains, one sweep per step (the drift
+        # of body i + 1, the force of contact i, the second half kick of body i). The
+        # recorded forces are taken at the step's final velocities, as hertzchain records them.
+        nb = mass.shape[0]
+        n_blocks = wall_kappa.shape[0] // BLOCK_CHAINS
+        inv = 1.0 / mass
+        h = 0.5 * dt
+        loss = decel * h
+        c = 1.5 * eta
+        for blk in numba.prange(n_blocks):
+            lo = blk * BLOCK_CHAINS
+            x = np.zeros((nb, BLOCK_CHAINS))
+            v = np.zeros((nb, BLOCK_CHAINS))
+            a = np.zeros((nb, BLOCK_CHAINS))
+            f_prev = np.zeros(BLOCK_CHAINS)
+            p_prev = np.zeros(BLOCK_CHAINS)  # predicted velocity of body i
+            w_prev = np.zeros(BLOCK_CHAINS)  # friction-kicked half-step velocity of body i
+            kw = wall_kappa[lo : lo + BLOCK_CHAINS].copy()
+            for j in range(BLOCK_CHAINS):
+                v[0, j] = v0[lo + j]
+            for n in range(n_steps):
+                for j in range(BLOCK_CHAINS):
+                    w = _kick(v[0, j] + h * a[0, j], loss)
+                    x[0, j] += dt * w
+                    p_prev[j] = w + h * a[0, j]
+                    w_prev[j] = w
                     f_prev[j] = 0.0
                 for i in range(nb - 1):
                     k = kappa[i]
                     m = inv[i]
-                    for j in range(w):
-                        d = max(x[i, j] - x[i + 1, j], 0.0)
-                        f = k * d * np.sqrt(d)
-                        a[i, j] = (f_prev[j] - f) * m
-                        v[i, j] += h * a[i, j]
+                    for j in range(BLOCK_CHAINS):
+                        w = _kick(v[i + 1, j] + h * a[i + 1, j], loss)
+                        x[i + 1, j] += dt * w
+                        p = w + h * a[i + 1, j]
+                        f = _damped_force(x[i, j] - x[i + 1, j], p_prev[j] - p, k, c)
+                        acc = (f_prev[j] - f) * m
+                        a[i, j] = acc
+                        v[i, j] = _kick(w_prev[j] + h * acc, loss)
                         f_prev[j] = f
-                    if i == r0:
-                        for j in range(w):
-                            out[n, 0, lo + j] = f_prev[j]
-                    if i == r1:
-                        for j in range(w):
-                            out[n, 1, lo + j] = f_prev[j]
+                        p_prev[j] = p
+                        w_prev[j] = w
                 m = inv[nb - 1]
-                for j in range(w):
-                    dw = max(x[nb - 1, j], 0.0)
-                    fw = kw[j] * dw * np.sqrt(dw)
-                    a[nb - 1, j] = (f_prev[j] - fw) * m
-                    v[nb - 1, j] += h * a[nb - 1, j]
-                    out[n, 2, lo + j] = fw
+                for j in range(BLOCK_CHAINS):
+                    fw = _damped_force(x[nb - 1, j], p_prev[j], kw[j], c)
+                    acc = (f_prev[j] - fw) * m
+                    a[nb - 1, j] = acc
+                    v[nb - 1, j] = _kick(w_prev[j] + h * acc, loss)
+                for j in range(BLOCK_CHAINS):
+                    out[n, 0, lo + j] = _damped_force(x[r0, j] - x[r0 + 1, j], v[r0, j] - v[r0 + 1, j], kappa[r0], c)
+                    out[n, 1, lo + j] = _damped_force(x[r1, j] - x[r1 + 1, j], v[r1, j] - v[r1 + 1, j], kappa[r1], c)
+                    out[n, 2, lo + j] = _damped_force(x[nb - 1, j], v[nb - 1, j], kw[j], c)
+
+
+def _padded(values, batch):
+    """`values` (B,) extended to `batch` entries by repeating the last (whole blocks)."""
+    values = np.ascontiguousarray(values, float)
+    return np.concatenate([values, np.repeat(values[-1:], batch - values.shape[0])])
 
 
 def numba_single(mass_kg, kappa, wall_kappa, v0, dt_s, n_steps, rows):
@@ -193,13 +262,28 @@ def numba_single(mass_kg, kappa, wall_kappa, v0, dt_s, n_steps, rows):
 
 def numba_batch(mass_kg, kappa, wall_kappa, v0, dt_s, n_steps, rows):
     """B chains, batch on the SIMD axis, compiled with Numba: forces (n_steps, 3, B), N."""
-    wall_kappa = np.ascontiguousarray(wall_kappa, float)
-    out = np.empty((n_steps, 3, wall_kappa.shape[0]))
+    batch = len(wall_kappa)
+    padded = BLOCK_CHAINS * -(-batch // BLOCK_CHAINS)
+    out = np.empty((n_steps, 3, padded))
     _numba_batch(
-        np.asarray(mass_kg, float), np.asarray(kappa, float), wall_kappa,
-        np.ascontiguousarray(v0, float), float(dt_s), int(n_steps), int(rows[0]), int(rows[1]), out,
+        np.asarray(mass_kg, float), np.asarray(kappa, float), _padded(wall_kappa, padded), _padded(v0, padded),
+        float(dt_s), int(n_steps), int(rows[0]), int(rows[1]), out,
     )
-    return out
+    return out[:, :, :batch]
+
+
+def numba_damped_batch(mass_kg, kappa, wall_kappa, v0, dt_s, n_steps, rows, *, eta_s, friction_decel_m_s2):
+    """`numba_batch` with Kuwabara-Kono damping (`eta_s`, s) at every contact, wall
+    included, the total force clipped at 0, and track friction of deceleration
+    `friction_decel_m_s2` (= mu g, m/s^2) on every body: forces (n_steps, 3, B), N."""
+    batch = len(wall_kappa)
+    padded = BLOCK_CHAINS * -(-batch // BLOCK_CHAINS)
+    out = np.empty((n_steps, 3, padded))
+    _numba_damped_batch(
+        np.asarray(mass_kg, float), np.asarray(kappa, float), _padded(wall_kappa, padded), _padded(v0, padded),
+        float(eta_s), float(friction_decel_m_s2), float(dt_s), int(n_steps), int(rows[0]), int(rows[1]), out,
+    )
+    return out[:, :, :batch]
 
 
 def plain_jax_batch(mass_kg, kappa, wall_kappa, v0, dt_s, n_steps, rows, block=PLAIN_JAX_BLOCK, devices=None,

@@ -2,6 +2,13 @@
 
     python benchmarks/run.py [--quick] [--gpu-sweep] --out DIR
 
+`--quick` (under 3 minutes on 2 cores) measures the headline ratios alone: the standard
+case conservative and damped + frictional (eta = 2 us, mu = 0.19), hertzchain against a
+Numba kernel of the same physics, in alternating runs, and one fit iteration (residuals and
+Jacobian of 10 traces in eta, mu, C) against one conservative forward run of the same
+traces; with the machine's CPU flags. Without `--quick` it also sweeps N and B, the
+gradient modes and a whole fit.
+
 Every measurement runs in its own process (so peak memory and compile time are its own;
 the hertzchain batch and the plain-JAX baseline run with the CPU's cores as host devices,
 `--xla_force_host_platform_device_count`). Writes `DIR/bench.json`, `DIR/bench.csv` (one row
@@ -38,8 +45,6 @@ sys.path.insert(0, str(ROOT))
 
 SIZES_N = (21, 200, 2000)
 SIZES_B = (1, 64, 1024)
-QUICK_N = (21, 200)
-QUICK_B = (1, 64, 1024)
 STANDARD = (21, 1024)
 DT_S = 1e-6
 STANDARD_STEPS = 2500
@@ -51,8 +56,15 @@ HERTZCHAIN_IMPLS = ("hertzchain", "hertzchain-books", "hertzchain-jax")
 SHARDED_IMPLS = HERTZCHAIN_IMPLS + ("plain-jax",)
 # rows of the table, the plot and the summary
 LABELS = HERTZCHAIN_IMPLS + ("hertzchain-1dev", "plain-jax", "numba", "numpy")
+# --quick: (hertzchain, Numba) pairs per case, each time the median of this many runs
+QUICK_PAIRS = 4
+QUICK_REPEATS = 5
 # Bead-steps per timed run of the larger cases (fewer steps there, same physics per step).
 WORK_PER_RUN = 2e8
+# The damped + frictional case (the standard case with these): Kuwabara-Kono damping, s;
+# track friction coefficient (deceleration mu g).
+DAMPED_ETA_S = 2e-6
+DAMPED_MU = 0.19
 
 
 def _rss_mb() -> float:
@@ -70,7 +82,7 @@ def steps_for(n_beads: int, batch: int) -> int:
     return int(min(STANDARD_STEPS, max(100, 100 * round(steps / 100))))
 
 
-def _case(n_beads: int, batch: int, steps: int, eta_s: float = 0.0):
+def _case(n_beads: int, batch: int, steps: int, eta_s: float = 0.0, mu: float = 0.0):
     """The batched hertzchain setup, its grid and the arrays the baselines need."""
     import numpy as np
 
@@ -84,7 +96,7 @@ def _case(n_beads: int, batch: int, steps: int, eta_s: float = 0.0):
             "striker_velocity_m_s": np.geomspace(0.1, 1.0, side),
             "wall_youngs_pa": np.geomspace(3e9, 400e9, batch // side),
         }
-    setup, _ = hc.batch_setup(hc.ChainSetup(n_beads, eta_s=eta_s), **values)
+    setup, _ = hc.batch_setup(hc.ChainSetup(n_beads, eta_s=eta_s, mu=mu), **values)
     grid = hc.choose_time_grid(setup, t_end_s=steps * DT_S, sample_interval_s=DT_S, dt_s=DT_S)
     model = hc.build_model(hc.ChainSetup(n_beads))
     arrays = {
@@ -92,6 +104,7 @@ def _case(n_beads: int, batch: int, steps: int, eta_s: float = 0.0):
         "kappa": np.asarray(model.kappa),
         "wall_kappa": np.asarray(jax_vmap_wall_kappa(setup)),
         "v0": np.asarray(setup.striker_velocity_m_s),
+        "friction_decel_m_s2": mu * float(np.asarray(setup.gravity_m_s2)[0]),
     }
     rows = (n_beads // 2 - 1, n_beads // 2)
     return setup, grid, arrays, rows
@@ -128,11 +141,12 @@ def _time(fn, repeats: int):
 # Workers (each runs in its own process)
 
 
-def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: int) -> dict:
+def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: int, damped: bool = False) -> dict:
     import numpy as np
 
     base_rss = _rss_mb()
-    setup, grid, arrays, rows = _case(n_beads, batch, steps)
+    eta, mu = (DAMPED_ETA_S, DAMPED_MU) if damped else (0.0, 0.0)
+    setup, grid, arrays, rows = _case(n_beads, batch, steps, eta_s=eta, mu=mu)
     args = (arrays["mass_kg"], arrays["kappa"], arrays["wall_kappa"], arrays["v0"], DT_S, steps, rows)
     # runs of 0.05-0.1 s on a machine whose other core may be busy: the median of 11
     repeats = 11
@@ -157,6 +171,12 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
         first, median, low, high, result = _time(fn, repeats)
         forces = np.stack([np.asarray(result[k]) for k in result], axis=1)  # (B, 3, n)
         forces = np.transpose(forces, (2, 1, 0))  # (n, 3, B)
+        from hertzchain import native
+        from hertzchain.batched import kernel_flags
+
+        flags = kernel_flags(setup)._replace(ledger=books)
+        ran = native.kernel_for(flags, use) if kernel == "auto" else None
+        native_kernel = ran or "none (JAX kernel)"
     elif impl == "plain-jax":
         import jax
 
@@ -184,6 +204,19 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
         first, median, low, high, result = _time(fn, repeats)
         forces = np.stack([np.asarray(result[f"contact_{r}"]) for r in rows] + [np.asarray(result["wall"])], 1)
         forces = forces[:, :, None]
+    elif damped:
+        import baselines
+
+        if not baselines.HAVE_NUMBA:
+            return {"available": False, "reason": "numba is not installed"}
+        if impl != "numba":
+            return {"available": False, "reason": f"no damped variant of {impl}"}
+
+        def fn():
+            return baselines.numba_damped_batch(*args, eta_s=eta, friction_decel_m_s2=arrays["friction_decel_m_s2"])
+
+        first, median, low, high, result = _time(fn, repeats)
+        forces = result
     else:
         import baselines
 
@@ -208,8 +241,10 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
         forces = result if not single else result[:, :, None]
     bead_steps = n_beads * batch * steps
     return {
+        **({"native_kernel": native_kernel} if impl in HERTZCHAIN_IMPLS else {}),
         "available": True,
         "impl": impl,
+        "damped": damped,
         "n_beads": n_beads,
         "batch": batch,
         "steps": steps,
@@ -307,6 +342,7 @@ def worker_machine() -> dict:
                 info["vector"] = (
                     "AVX-512" if "avx512f" in flags else "AVX2+FMA" if "avx2" in flags else "SSE"
                 )
+                info["cpu_flags"] = " ".join(flags[1:])
     except OSError:
         pass
     n = 2000
@@ -347,7 +383,7 @@ def worker_machine() -> dict:
     return info
 
 
-def worker_fit(quick: bool) -> dict:
+def worker_fit() -> dict:
     """One fit of eta, mu, C on 10 synthetic traces and one diagnosis, with what `fitting` provides."""
     try:
         import fitting
@@ -358,7 +394,7 @@ def worker_fit(quick: bool) -> dict:
 
     truth = {"eta_s": 2e-6, "mu": 0.19}
     velocities = np.linspace(0.15, 0.6, 10)
-    t_end = 1.5e-3 if quick else 2.5e-3
+    t_end = 2.5e-3
     files = synthetic_traces(
         paper_setups(velocities, **truth), contacts=(6, 11), t_end_s=t_end, sample_interval_s=2e-6,
         noise_std_n=0.3, seed=1,
@@ -387,16 +423,148 @@ def worker_fit(quick: bool) -> dict:
     return result
 
 
+def worker_pairs(damped: bool, pairs: int, repeats: int) -> dict:
+    """The standard case (conservative, or damped + frictional), hertzchain as users call it
+    (`solve_batched`, books off, the batch over the host devices) and the Numba kernel of the
+    same physics, timed in turn in one process, `pairs` times (medians of `repeats` runs
+    each): neighbouring timings share the machine's load. Returns the bead-steps/s of each
+    and their ratios, and the largest difference of the two's wall forces."""
+    import jax
+    import numpy as np
+
+    import baselines
+    from hertzchain import native
+    from hertzchain.batched import kernel_flags, solve_batched
+    from hertzchain.integrate import Recording
+
+    if not baselines.HAVE_NUMBA:
+        return {"available": False, "reason": "numba is not installed"}
+    n, b = STANDARD
+    eta, mu = (DAMPED_ETA_S, DAMPED_MU) if damped else (0.0, 0.0)
+    setup, grid, arrays, rows = _case(n, b, STANDARD_STEPS, eta_s=eta, mu=mu)
+    args = (arrays["mass_kg"], arrays["kappa"], arrays["wall_kappa"], arrays["v0"], DT_S, STANDARD_STEPS, rows)
+    recording = Recording(tuple(rows))
+    devices = jax.devices()
+    use = devices if len(devices) > 1 else None
+
+    def ours():
+        out = solve_batched(setup, grid, recording, devices=use, books=False)
+        return jax.block_until_ready(out.forces_n)
+
+    def numba():
+        if damped:
+            return baselines.numba_damped_batch(*args, eta_s=eta, friction_decel_m_s2=arrays["friction_decel_m_s2"])
+        return baselines.numba_batch(*args)
+
+    ours_first, _, _, _, forces = _time(ours, 1)
+    numba_first, _, _, _, reference = _time(numba, 1)
+    runs = []
+    for _ in range(pairs):
+        a = _time(ours, repeats)[1]
+        c = _time(numba, repeats)[1]
+        work = n * b * STANDARD_STEPS
+        runs.append({"hertzchain": work / a, "numba": work / c, "ratio": c / a})
+    wall = np.asarray(forces["wall"])  # (B, n)
+    ratios = [r["ratio"] for r in runs]
+    return {
+        "available": True,
+        "case": f"N={n}, B={b}, {STANDARD_STEPS} steps of 1 us, 3 forces every step"
+        + (f", eta = {eta * 1e6:g} us, mu = {mu}" if damped else ", dissipationless"),
+        "native_kernel": native.kernel_for(kernel_flags(setup)._replace(ledger=False), use) or "none (JAX kernel)",
+        "host_devices": len(devices),
+        "numba_threads": numba_threads(),
+        "hertzchain_over_numba": float(np.median(ratios)),
+        "runs": runs,
+        "first_call_s": {"hertzchain": ours_first, "numba": numba_first},
+        "wall_force_max_difference_n": float(np.max(np.abs(wall.T - reference[:, 2, :]))),
+        "wall_force_max_n": float(np.max(wall)),
+    }
+
+
+def numba_threads() -> int | None:
+    try:
+        import numba
+
+        return int(numba.get_num_threads())
+    except ImportError:
+        return None
+
+
+def worker_fit_iteration() -> dict:
+    """One fit iteration as `fitting` runs it (whitened residuals and their Jacobian in eta,
+    mu, C: `residuals_and_jacobian`) on 10 synthetic traces of the paper's chain (0.15-0.6
+    m/s, eta 2 us, mu 0.19, contacts 6 and 11 and the wall, 2.5 ms at 2 us), against one
+    conservative forward run of the same 10 chains (`solve_batched`, books off, eta = mu = 0)
+    on the fit's own time grid. Kernels as the environment selects them
+    (`HERTZCHAIN_NATIVE=0`: the JAX kernel)."""
+    try:
+        from fitting.fit import initial_values, make_problem
+        from fitting.model import residuals_and_jacobian
+        from fitting.synthetic import paper_setups, synthetic_traces
+    except ImportError as error:
+        return {"available": False, "reason": f"fitting not available: {error}"}
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from hertzchain import native
+    from hertzchain.batched import solve_batched
+
+    files = synthetic_traces(paper_setups(np.linspace(0.15, 0.6, 10)), contacts=(6, 11), t_end_s=2.5e-3,
+                             sample_interval_s=2e-6, noise_std_n=0.3, seed=1)
+    problem = make_problem(files, ("eta", "mu", "C"))
+    x = jnp.asarray(initial_values(problem))
+    first, median, low, high, (r, jac) = _time(lambda: residuals_and_jacobian(problem, x), 7)
+    group = problem.groups[0]
+    zeros = jnp.zeros_like(group.setups.eta_s)
+    conservative = eqx.tree_at(lambda s: (s.eta_s, s.mu), group.setups, (zeros, zeros))
+
+    def forward():
+        out = solve_batched(conservative, group.grid, group.recording, books=False)
+        return jax.block_until_ready(out.forces_n)
+
+    f_first, f_median, *_ = _time(forward, 11)
+    return {
+        "available": True,
+        "native": native.unavailable_reason() is None,
+        "n_traces": len(files),
+        "n_steps": group.grid.n_steps,
+        "n_beads": int(group.setups.n_beads),
+        "n_residuals": int(np.size(r)),
+        "iteration_s": median,
+        "iteration_min_s": low,
+        "iteration_max_s": high,
+        "iteration_compile_s": max(first - median, 0.0),
+        "conservative_forward_s": f_median,
+        "iteration_over_forward": median / f_median,
+        "jacobian_columns": [float(np.linalg.norm(col)) for col in np.asarray(jac).T],
+        "residual_norm": float(np.linalg.norm(r)),
+    }
+
+
+def worker_build() -> dict:
+    """Build (or find) the fused kernel: the seconds it took, or why it is unavailable."""
+    start = time.perf_counter()
+    from hertzchain import native
+
+    reason = native.unavailable_reason()
+    return {"available": reason is None, "reason": reason, "build_or_load_s": time.perf_counter() - start}
+
+
 WORKERS = {
     "throughput": worker_throughput,
     "gradient": worker_gradient,
     "machine": worker_machine,
     "fit": worker_fit,
+    "fit_iteration": worker_fit_iteration,
+    "build": worker_build,
+    "pairs": worker_pairs,
 }
 
 
-def _spawn(kind: str, host_devices: int = 1, **kwargs) -> dict:
-    env = dict(os.environ)
+def _spawn(kind: str, host_devices: int = 1, env_extra=None, **kwargs) -> dict:
+    env = dict(os.environ, **(env_extra or {}))
     env["XLA_FLAGS"] = (
         env.get("XLA_FLAGS", "") + f" --xla_force_host_platform_device_count={host_devices}"
     ).strip()
@@ -464,9 +632,74 @@ def _plot(rows, path):
     plt.close(fig)
 
 
+def _fit_iteration() -> dict:
+    """`worker_fit_iteration` with the fused kernel and with the JAX kernel (in turn)."""
+    out = {}
+    for label, env in (("fused", {}), ("jax_kernel", {"HERTZCHAIN_NATIVE": "0"})):
+        out[label] = _spawn("fit_iteration", host_devices=1, env_extra=env)
+    return out
+
+
+def quick(out: Path) -> dict:
+    """The headline ratios in under 3 minutes on 2 quiet cores (see the module docstring)."""
+    from hertzchain.atomic import write_json, write_text
+    from hertzchain.progress import Progress
+
+    cores = os.cpu_count() or 1
+    start = time.perf_counter()
+    load_before = _load()
+    progress = Progress(5, "quick benchmark")
+    machine = _spawn("machine")
+    progress.advance()
+    build = _spawn("build")  # the kernel's one-time compilation, not in any timing
+    progress.advance()
+    conservative = _spawn("pairs", host_devices=cores, damped=False, pairs=QUICK_PAIRS, repeats=QUICK_REPEATS)
+    progress.advance()
+    damped = _spawn("pairs", host_devices=cores, damped=True, pairs=QUICK_PAIRS, repeats=QUICK_REPEATS)
+    progress.advance()
+    fit = _spawn("fit_iteration")
+    progress.advance()
+    summary = {
+        "mode": "quick",
+        "machine": {**machine, "load_average_before": load_before, "load_average_after": _load()},
+        "kernel_build": build,
+        "conservative": conservative,
+        "damped_frictional": damped,
+        "fit_iteration": fit,
+        "wall_s": time.perf_counter() - start,
+    }
+    write_json(out / "quick.json", summary)
+    write_text(out / "quick.md", _quick_table(summary) + "\n")
+    return summary
+
+
+def _quick_table(summary) -> str:
+    machine = summary["machine"]
+    lines = [f"Machine: {machine.get('cpu')}, {machine.get('cores')} cores, {machine.get('vector')}; "
+             f"load average {machine.get('load_average_before')} before, {machine.get('load_average_after')} after.",
+             "", "| case | hertzchain bead-steps/s | Numba bead-steps/s | ratio (median) |", "|---|---|---|---|"]
+    for key in ("conservative", "damped_frictional"):
+        part = summary[key]
+        if not part.get("available", True):
+            lines.append(f"| {key} | unavailable: {part.get('reason', '')[-200:]} | | |")
+            continue
+        runs = part["runs"]
+        cells = " / ".join(f"{r['hertzchain']:.3g}" for r in runs), " / ".join(f"{r['numba']:.3g}" for r in runs)
+        ratio = part["hertzchain_over_numba"]
+        lines.append(f"| {key} | {cells[0]} | {cells[1]} | {ratio:.2f} |" if ratio else f"| {key} | | | |")
+    fit = summary["fit_iteration"]
+    if fit.get("available"):
+        lines += ["", f"Fit iteration (residuals + Jacobian, {fit['n_traces']} traces, eta, mu, C): "
+                  f"{fit['iteration_s'] * 1e3:.1f} ms = {fit['iteration_over_forward']:.2f}x one conservative "
+                  f"forward run of the same traces ({fit['conservative_forward_s'] * 1e3:.1f} ms)."]
+    lines.append(f"\nWall time of the quick run: {summary['wall_s']:.0f} s.")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="a subset of sizes (N = 21, 200)")
+    parser.add_argument("--quick", action="store_true",
+                        help="the headline ratios only (conservative, damped, fit iteration), < 3 min")
     parser.add_argument("--out", help="output folder")
     parser.add_argument("--gpu-sweep", action="store_true", help="also run benchmarks/gpu_sweep.py")
     parser.add_argument("--skip-fit", action="store_true", help="do not run the fit benchmark")
@@ -478,6 +711,10 @@ def main(argv=None) -> int:
         return 0
     if not args.out:
         parser.error("--out DIR is required")
+    if args.quick:
+        summary = quick(Path(args.out))
+        print(_quick_table(summary))
+        return 0
     import numpy as np
 
     from hertzchain.atomic import write_json, write_text
@@ -486,7 +723,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     cores = os.cpu_count() or 1
     load_before = _load()
-    sizes = [(n, b) for n in (QUICK_N if args.quick else SIZES_N) for b in (QUICK_B if args.quick else SIZES_B)]
+    sizes = [(n, b) for n in SIZES_N for b in SIZES_B]
     jobs = []
     for n, b in sizes:
         steps = STANDARD_STEPS if (n, b) == STANDARD else steps_for(n, b)
@@ -496,7 +733,7 @@ def main(argv=None) -> int:
         if b > 1:
             jobs.append(dict(impl="hertzchain", n_beads=n, batch=b, steps=steps, devices=1))
     jobs.append(dict(impl="hertzchain-solve", n_beads=21, batch=1, steps=STANDARD_STEPS, devices=1))
-    progress = Progress(len(jobs) + STANDARD_PAIRS + 3, "benchmarks")
+    progress = Progress(len(jobs) + STANDARD_PAIRS + 4, "benchmarks")
     machine = _spawn("machine")
     progress.advance()
     rows = []
@@ -537,7 +774,10 @@ def main(argv=None) -> int:
         progress.advance()
     gradient = _spawn("gradient")
     progress.advance()
-    fit = {"available": False, "reason": "skipped (--skip-fit)"} if args.skip_fit else _spawn("fit", quick=args.quick)
+    fit = {"available": False, "reason": "skipped (--skip-fit)"} if args.skip_fit else _spawn("fit")
+    progress.advance()
+    damped = _spawn("pairs", host_devices=cores, damped=True, pairs=STANDARD_PAIRS + 1, repeats=11)
+    fit_iteration = _fit_iteration()
     progress.advance()
 
     def pick(label, n, b):
@@ -604,6 +844,8 @@ def main(argv=None) -> int:
         "grad_over_forward_reverse_mode": reverse.get("grad_over_forward"),
         "gradient": gradient,
         "fit": fit,
+        "damped_frictional": damped,
+        "fit_iteration": fit_iteration,
         "runs": rows,
     }
     write_json(out / "bench.json", summary)

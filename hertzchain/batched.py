@@ -24,10 +24,12 @@ same contact laws from `contact`, so the results agree to round-off), but
   (`XLA_FLAGS=--xla_force_host_platform_device_count=2`, set before JAX starts), or GPUs.
 
 It covers Hertz contacts, embedded sensors, rigid/elastic walls and free ends, preload,
-viscoelastic damping and track friction. Without damping and friction, on the CPU,
-`solve_batched` runs the same step in a fused C++ kernel instead (`hertzchain.native`:
-blocks of chains kept in cache through all their steps; agrees with this module's kernel
-to round-off); `kernel="jax"` keeps this one. Parameters that are the same in every chain
+viscoelastic damping and track friction. On the CPU, `solve_batched` runs the same step in
+a fused C++ kernel instead (`hertzchain.native`: blocks of chains kept in cache through all
+their steps; agrees with this module's kernel to round-off): the conservative kernel (with
+or without the books), or the full one for damped and frictional chains without the books;
+`kernel="jax"` keeps this one. `record_batched` (fits) runs the full C++ kernel with its
+forward-mode tangents (`native.run_full`). Parameters that are the same in every chain
 are passed as one column (`share_uniform`). Elastic-plastic contacts, linear dashpots and
 power-law contacts are not in the fast path: `solve_batched` then runs the general solver
 (`solve` under `vmap`), with the same result type. `fast_path_reason(setup)` says which
@@ -371,12 +373,19 @@ def _friction_kick(p, flags: KernelFlags, v, half_step_s):
     return clamped, lost[None]
 
 
-def _initial(p, flags: KernelFlags, layout: _Layout, dt: float):
-    """Packed state at the impact and the bodies' (x, v) there."""
+def _start(p, flags: KernelFlags):
+    """Displacements, velocities and accelerations of the bodies and the wall at the impact
+    (bodies + 1, B), and the total and elastic contact forces there (bodies, B)."""
     x = jnp.zeros_like(p["inv_mass"]) + jnp.zeros_like(p["v0"])  # (bodies + 1, B)
     v = x.at[0].set(p["v0"])
     total, elastic = _contact_forces(p, flags, x, v)
     a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
+    return x, v, a, total, elastic
+
+
+def _initial(p, flags: KernelFlags, layout: _Layout, dt: float):
+    """Packed state at the impact and the bodies' (x, v) there."""
+    x, v, a, total, elastic = _start(p, flags)
     if flags.full_state:
         parts = {"x": x, "v": v, "a": a, "max": total, "dissipated": jnp.zeros_like(x[:1])}
         if flags.viscous:
@@ -454,24 +463,35 @@ def _kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ...], blo
     return traces, state, layout
 
 
-def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ...]):
-    """`_kernel`'s results from the fused C++ kernel (`native`; conservative physics)."""
+def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ...], which: str):
+    """`_kernel`'s results from a fused C++ kernel (`native`): the conservative one (`which`
+    "conservative"; the packed state of `_Layout` in and out) or the full one ("full":
+    damping and friction, forward-mode derivatives, no books; the final state is not kept)."""
     layout = _Layout(p["mass"].shape[0])
+    channels = rows + (layout.bodies - 1,)
+    if which == "full":
+        x, v, a, _, _ = _start(p, flags)
+        traces = native.run_full(
+            p, x, v, a, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
+            channels=channels, viscous=flags.viscous, friction=flags.friction, preload=flags.preload,
+            springs=flags.springs,
+        )
+        return traces, None, layout
     state, _, _ = _initial(p, flags, layout, grid.dt_s)
     traces, state = native.run(
         p, state, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
-        channels=rows + (layout.bodies - 1,), preload=flags.preload, springs=flags.springs, books=flags.ledger,
+        channels=channels, preload=flags.preload, springs=flags.springs, books=flags.ledger,
     )
     return traces, state, layout
 
 
-def _run(params, flags, grid, rows, block_steps, devices, fused=False):
-    """The kernel (the C++ one when `fused`), sharded over `devices` along the batch axis
-    when there are several."""
+def _run(params, flags, grid, rows, block_steps, devices, fused=None):
+    """The kernel (the C++ one `fused` names, `native.kernel_for`), sharded over `devices`
+    along the batch axis when there are several."""
 
     def local(p):
         if fused:
-            traces, state, layout = _native_kernel(p, flags=flags, grid=grid, rows=rows)
+            traces, state, layout = _native_kernel(p, flags=flags, grid=grid, rows=rows, which=fused)
         else:
             traces, state, layout = _kernel(p, flags=flags, grid=grid, rows=rows, block_steps=block_steps)
         if not flags.ledger:
@@ -547,7 +567,7 @@ def _uniform_columns(leaves: list) -> jax.Array:
     return jnp.stack([jnp.all(leaf == leaf[..., :1]) for leaf in leaves])
 
 
-def _assemble(params, batch, flags, grid, rows, names, user, block_steps, devices, fused=False):
+def _assemble(params, batch, flags, grid, rows, names, user, block_steps, devices, fused=None):
     """The kernel and the output layout."""
     traces, maxima, summary = _run(params, flags, grid, rows, block_steps, devices, fused)
     maxima, summary = maxima[..., :batch], summary[..., :batch]
@@ -612,9 +632,10 @@ def solve_batched(
       balance (default). False: the recorded forces only, for callers that read nothing
       else (the maxima and energies of the result are then NaN); one pass over the
       contacts per step less (`benchmarks/README.md`).
-    - `kernel`: "auto" (default) runs the fused C++ kernel (`hertzchain.native`) where it
-      covers the setup (no damping or friction, CPU) and is built, else the JAX kernel;
-      "jax" always runs the JAX kernel (the reference; the two agree to round-off).
+    - `kernel`: "auto" (default) runs a fused C++ kernel (`hertzchain.native`) where one
+      covers the setup (on the CPU: conservative chains, or damped and frictional ones
+      without `books`) and is built, else the JAX kernel; "jax" always runs the JAX kernel
+      (the reference; they agree to round-off).
 
     **Returns:** `BatchedTraces`. Setups with plastic contacts, dashpots or power-law
     contacts run the general solver (same result, slower, books always kept): see
@@ -633,7 +654,7 @@ def solve_batched(
     if devices is not None:
         padded = len(devices) * math.ceil(padded / len(devices))
     params = share_uniform(kernel_params(setup, pad_to=padded))
-    fused = kernel == "auto" and native.supports(flags, devices)
+    fused = native.kernel_for(flags, devices) if kernel == "auto" else None
     return _solve_fast(params, batch, flags, grid, rows, names, user, int(block_steps), devices, fused)
 
 
@@ -644,6 +665,7 @@ def record_batched(
     flags: KernelFlags,
     *,
     block_steps: int = DEFAULT_BLOCK_STEPS,
+    kernel: str = "auto",
 ) -> BatchedTraces:
     """`solve_batched`'s fast kernel for a batched setup whose values may be traced
     (inside `jit`, `vmap`, `jax.jacfwd`), on one device.
@@ -657,17 +679,23 @@ def record_batched(
     - `flags`: the physics compiled in, `kernel_flags(concrete_setup, switched_on=...)`:
       it must include every effect that is non-zero in any chain at any value the caller
       will pass (damping, friction and preload that are off in `flags` are not simulated).
+    - `kernel`: "auto" (default): with `flags.ledger` off, on the CPU, the fused C++ kernel
+      with its forward-mode tangents (`native.run_full`: `jax.jvp`, `jax.jacfwd` and
+      `jax.linearize` carry all their directions through one run of the kernel; reverse
+      mode is not available there); "jax": the JAX kernel (every transformation).
 
     **Returns:** `BatchedTraces`; with `flags.ledger` off, its maxima and energies are NaN
-    (not computed). Forward-mode derivatives (`jax.jvp`, `jax.jacfwd`) go through the
-    kernel as through `solve`.
+    (not computed). The two kernels agree to round-off, values and derivatives.
     """
+    if kernel not in ("auto", "jax"):
+        raise ValueError(f'kernel must be "auto" or "jax", got {kernel!r}.')
     if setup.plasticity or setup.power_law:
         raise ValueError("record_batched: the setup needs the general solver "
                          "(elastic-plastic or power-law contacts); use solve.")
     names, rows, user = _plan(setup, recording)
     batch = batch_size(setup)
-    return _assemble(_params(setup, None), batch, flags, grid, rows, names, user, int(block_steps), None)
+    fused = "full" if kernel == "auto" and not flags.ledger and native.kernel_for(flags, None) else None
+    return _assemble(_params(setup, None), batch, flags, grid, rows, names, user, int(block_steps), None, fused)
 
 
 def _solve_general(setup, grid, recording, names, time) -> BatchedTraces:

@@ -1,13 +1,18 @@
-// A fused multi-step kernel for `hertzchain.batched`: the conservative velocity-Verlet
-// step of `batched._step` (Hertz contacts, linear sensor springs, static overlaps and
-// external forces of a preload, a wall or a free end) for a block of chains at a time,
-// all steps of the run while the block's state sits in the cache, every contact's force
-// computed once per step and used for both bodies it pushes.
+// Fused multi-step kernels for `hertzchain.batched`, a block of chains at a time through all
+// the steps of the run while the block's state sits in the cache, every contact's force
+// computed once per step and used for both bodies it pushes:
+//  - HertzChainForward: the conservative velocity-Verlet step of `batched._step` (Hertz
+//    contacts, linear sensor springs, static overlaps and external forces of a preload, a
+//    wall or a free end), with or without the books (largest overlaps);
+//  - HertzChainFullForward / HertzChainFullTangent: the full step (velocities and
+//    accelerations apart) with Kuwabara-Kono damping and track friction, and its
+//    forward-mode tangents (below, `RunFullBlock`).
 //
 // The arithmetic is that of the JAX kernel, operation for operation and in the same
 // order (compiled without contraction into fused multiply-adds), so that the two agree to
-// round-off; `tests/test_native.py` checks it. Layouts (row-major, the chain on the fast
-// axis, as in `batched`):
+// round-off; `tests/test_native.py` checks it, and `tests/test_batched.py` holds every
+// kernel's laws to `contact`'s. Layouts of the conservative kernel (row-major, the chain on
+// the fast axis, as in `batched`):
 //   state0, state  (R, B): x (bodies + 1 rows, the wall last, at rest), u = v + (dt/2) a
 //                          (bodies + 1), and with books the largest overlap of every
 //                          contact so far (bodies rows).
@@ -40,12 +45,13 @@ struct Param {
   int64_t width;  // 1 (shared by the batch) or B
 };
 
-// Rows of `p` for chains lo..lo+kLanes-1 into a (rows, kLanes) block.
+// Rows of `p` for chains lo..lo+kLanes-1 into a (rows, kLanes) block; lanes from `valid`
+// on (a block past the end of the batch) repeat the last valid chain.
 template <int64_t kLanes>
-void Load(Param p, int64_t rows, int64_t lo, double* block) {
+void Load(Param p, int64_t rows, int64_t lo, double* block, int64_t valid = kLanes) {
   for (int64_t r = 0; r < rows; ++r)
     for (int64_t j = 0; j < kLanes; ++j)
-      block[r * kLanes + j] = p.width == 1 ? p.data[r] : p.data[r * p.width + lo + j];
+      block[r * kLanes + j] = p.width == 1 ? p.data[r] : p.data[r * p.width + lo + std::min(j, valid - 1)];
 }
 
 template <bool kSprings>
@@ -161,6 +167,323 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   if (kBooks) store(mx, contacts, state + 2 * rows_x * batch);
 }
 
+// ---------------------------------------------------------------------------------------
+// The full step of `batched._step` (velocities and accelerations kept apart): Kuwabara-Kono
+// damping at every contact (`contact.contact_force`: the total force clipped at 0) and
+// track friction (`contact.track_friction_kick`) before the drift and after the second half
+// kick, with sensor springs, static overlaps and external forces of a preload (zeros where
+// there are none: adding 0 changes no bit). kViscous and kFriction select the physics at
+// compile time; kTangent adds forward-mode tangents: the derivatives of every state variable
+// along `directions` tangent directions of the inputs, carried through the same loop with
+// the derivative rules JAX applies to the JAX kernel (`jax.jvp` of it), so that the two
+// agree to round-off.
+//   state0 (3 (bodies + 1), B): x, v, a; parameters (rows, 1 or B); eta, friction (1, 1 or B).
+//   Tangents: every input with a leading direction axis, (D, rows, B); results (D, B, n_samples).
+
+struct FullParams {
+  Param inv_mass, kappa, overlap0, spring, external, eta, friction;
+};
+
+// A tangent input: (D, rows, B), or (1, rows, B) for one tangent shared by every direction
+// (an input that does not vary along a jacfwd's basis).
+struct Tangent {
+  const double* data;
+  bool shared;
+};
+
+struct TangentInputs {
+  Tangent state0;  // x, v, a: (D, 3 (bodies + 1), B)
+  Tangent inv_mass, kappa, overlap0, spring, external, eta, friction;
+};
+
+// Rows of every tangent direction of chains lo.. into (D, rows, kLanes).
+template <int64_t kLanes>
+void LoadTangent(Tangent t, int64_t directions, int64_t rows, int64_t batch, int64_t lo,
+                 double* block, int64_t valid) {
+  for (int64_t d = 0; d < directions; ++d) {
+    const double* src = t.data + (t.shared ? 0 : d * rows * batch);
+    for (int64_t r = 0; r < rows; ++r)
+      for (int64_t j = 0; j < kLanes; ++j)
+        block[(d * rows + r) * kLanes + j] = src[r * batch + lo + std::min(j, valid - 1)];
+  }
+}
+
+// d max(s, 0) / ds as JAX's max rule gives it (1/2 at the tie).
+inline double MaxSlope(double s) { return s > 0.0 ? 1.0 : (s == 0.0 ? 0.5 : 0.0); }
+
+template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras>
+void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
+                  int64_t steps_per_sample, double dt, const double* state0, FullParams p,
+                  const std::vector<int64_t>& channels, const std::vector<double*>& traces,
+                  int64_t directions, TangentInputs tin, const std::vector<double*>& ttraces) {
+  const int64_t rows_x = bodies + 1, contacts = bodies;
+  const double h = 0.5 * dt;
+  const int64_t n_channels = static_cast<int64_t>(channels.size());
+  const int64_t D = kTangent ? directions : 0;
+  const int64_t valid = std::min(kLanes, batch - lo);  // a last, partial block repeats its last chain
+  std::vector<double> x(rows_x * kLanes), v(rows_x * kLanes), a(rows_x * kLanes);
+  std::vector<double> inv(rows_x * kLanes), kap(contacts * kLanes), ov0(contacts * kLanes);
+  std::vector<double> spr(contacts * kLanes), ext(rows_x * kLanes), eta(kLanes), fr(kLanes);
+  Load<kLanes>({state0, batch}, rows_x, lo, x.data(), valid);
+  Load<kLanes>({state0 + rows_x * batch, batch}, rows_x, lo, v.data(), valid);
+  Load<kLanes>({state0 + 2 * rows_x * batch, batch}, rows_x, lo, a.data(), valid);
+  Load<kLanes>(p.inv_mass, rows_x, lo, inv.data(), valid);
+  Load<kLanes>(p.kappa, contacts, lo, kap.data(), valid);
+  Load<kLanes>(p.overlap0, contacts, lo, ov0.data(), valid);
+  Load<kLanes>(p.spring, contacts, lo, spr.data(), valid);
+  Load<kLanes>(p.external, rows_x, lo, ext.data(), valid);
+  Load<kLanes>(p.eta, 1, lo, eta.data(), valid);
+  Load<kLanes>(p.friction, 1, lo, fr.data(), valid);
+  std::vector<double> kvis(contacts * kLanes);  // 1.5 eta kappa of every contact
+  for (int64_t i = 0; i < contacts; ++i)
+    for (int64_t j = 0; j < kLanes; ++j) kvis[i * kLanes + j] = 1.5 * eta[j] * kap[i * kLanes + j];
+  // tangents (D, rows, kLanes)
+  std::vector<double> tx(D * rows_x * kLanes), tv(D * rows_x * kLanes), ta(D * rows_x * kLanes);
+  std::vector<double> tinv(D * rows_x * kLanes), tkap(D * contacts * kLanes), tov0(D * contacts * kLanes);
+  std::vector<double> tspr(D * contacts * kLanes), text(D * rows_x * kLanes), teta(D * kLanes), tfr(D * kLanes);
+  if (kTangent) {
+    for (int64_t d = 0; d < D; ++d) {
+      const double* s0 = tin.state0.data + (tin.state0.shared ? 0 : d * 3 * rows_x * batch);
+      Load<kLanes>({s0, batch}, rows_x, lo, &tx[d * rows_x * kLanes], valid);
+      Load<kLanes>({s0 + rows_x * batch, batch}, rows_x, lo, &tv[d * rows_x * kLanes], valid);
+      Load<kLanes>({s0 + 2 * rows_x * batch, batch}, rows_x, lo, &ta[d * rows_x * kLanes], valid);
+    }
+    LoadTangent<kLanes>(tin.inv_mass, D, rows_x, batch, lo, tinv.data(), valid);
+    LoadTangent<kLanes>(tin.kappa, D, contacts, batch, lo, tkap.data(), valid);
+    LoadTangent<kLanes>(tin.overlap0, D, contacts, batch, lo, tov0.data(), valid);
+    LoadTangent<kLanes>(tin.spring, D, contacts, batch, lo, tspr.data(), valid);
+    LoadTangent<kLanes>(tin.external, D, rows_x, batch, lo, text.data(), valid);
+    LoadTangent<kLanes>(tin.eta, D, 1, batch, lo, teta.data(), valid);
+    LoadTangent<kLanes>(tin.friction, D, 1, batch, lo, tfr.data(), valid);
+  }
+  const std::vector<double*>& outs = kTangent ? ttraces : traces;
+  const int64_t out_sets = kTangent ? D : 1;
+  std::vector<double> record(out_sets * n_channels * kLanes * kSampleBuffer);
+  int64_t buffered = 0, written = 0;
+  auto flush = [&]() {
+    for (int64_t d = 0; d < out_sets; ++d)
+      for (int64_t c = 0; c < n_channels; ++c)
+        for (int64_t j = 0; j < valid; ++j) {
+          double* out = outs[c] + (d * batch + lo + j) * n_samples + written;
+          const double* in = &record[((d * n_channels + c) * kLanes + j) * kSampleBuffer];
+          std::copy(in, in + buffered, out);
+        }
+    written += buffered;
+    buffered = 0;
+  };
+
+  // Per-lane values of the step kept for the tangent pass.
+  double loss[kLanes];              // mu g dt/2
+  double w_prev[kLanes], p_prev[kLanes], f_prev[kLanes];  // body i: kicked half-step and predicted velocity; force before
+  double raw1[kLanes], s1[kLanes];  // body i + 1: half-step velocity before friction, |.| - loss
+  double delta[kLanes], rate[kLanes], root[kLanes], half_inv_root[kLanes], sum[kLanes];
+  double body[kLanes], raw2[kLanes], s2[kLanes];
+  // tangents of w_prev, p_prev, f_prev (D, kLanes)
+  std::vector<double> tw_prev(D * kLanes), tp_prev(D * kLanes), tf_prev(D * kLanes);
+  for (int64_t j = 0; j < kLanes; ++j) loss[j] = fr[j] * h;
+
+  // contact.track_friction_kick: sign(w) max(|w| - loss, 0), with its speed-minus-loss s.
+  auto kick = [](double w, double loss_j, double* s) {
+    double speed = std::fabs(w);
+    *s = speed - loss_j;
+    double kept = *s > 0.0 ? *s : 0.0;
+    double sign = w > 0.0 ? 1.0 : (w < 0.0 ? -1.0 : 0.0);
+    return sign * kept;
+  };
+  auto tkick = [](double w, double s, double tw, double tloss) {
+    double tspeed = w >= 0.0 ? tw : -tw;
+    double sign = w > 0.0 ? 1.0 : (w < 0.0 ? -1.0 : 0.0);
+    return sign * ((tspeed - tloss) * MaxSlope(s));
+  };
+  // contact.contact_force (the total) at overlap delta and rate; root, sum kept.
+  // (kv = 1.5 eta kappa, computed once per block as JAX rounds it: (1.5 eta) kappa)
+  auto total_force = [](double dl, double rate, double k, double kv, double sp, double* r, double* sm) {
+    double positive = dl > 0.0 ? dl : 0.0;
+    double rt = dl > 0.0 ? std::sqrt(dl) : 0.0;
+    double elastic = k * positive * rt;
+    double f;
+    if (kViscous) {
+      double viscous = (kv * rt) * rate;  // (+ a dashpot of 0 in `contact`: adds nothing)
+      double s = elastic + viscous;
+      *sm = s;
+      f = dl > 0.0 ? (s > 0.0 ? s : 0.0) : 0.0;
+    } else {
+      *sm = elastic;
+      f = elastic;
+    }
+    *r = rt;
+    if constexpr (kExtras) f = f + sp * dl;  // (a spring of 0 adds nothing)
+    return f;
+  };
+  // its tangent
+  // (hr = 0.5 / root where in contact: JAX's sqrt rule, g * (0.5 / sqrt))
+  auto ttotal_force = [](double dl, double rate, double k, double e, double sp, double rt, double hr,
+                         double sm, double tdl, double trate, double tk, double te, double tsp) {
+    double positive = dl > 0.0 ? dl : 0.0;
+    double tpositive = dl > 0.0 ? tdl : 0.0;
+    double troot = dl > 0.0 ? tdl * hr : 0.0;
+    double kp = k * positive;
+    double telastic = (tk * positive + k * tpositive) * rt + kp * troot;
+    double tf;
+    if (kViscous) {
+      double c1 = 1.5 * e, c2 = c1 * k, c3 = c2 * rt;
+      double tc3 = ((1.5 * te) * k + c1 * tk) * rt + c2 * troot;
+      double tsum = telastic + (tc3 * rate + c3 * trate);
+      tf = dl > 0.0 ? tsum * MaxSlope(sm) : 0.0;
+    } else {
+      tf = telastic;
+    }
+    return tf + (tsp * dl + sp * tdl);
+  };
+
+  for (int64_t n = 0; n < n_samples; ++n) {
+    for (int64_t s = 0; s < steps_per_sample; ++s) {
+      // body 0: half kick, friction, drift, predicted velocity
+      for (int64_t j = 0; j < kLanes; ++j) {
+        double w = v[j] + h * a[j];
+        raw1[j] = w;
+        if (kFriction) w = kick(w, loss[j], &s1[j]);
+        x[j] = x[j] + dt * w;
+        w_prev[j] = w;
+        p_prev[j] = w + h * a[j];
+        f_prev[j] = 0.0;
+      }
+      if (kTangent)
+        for (int64_t d = 0; d < D; ++d)
+#pragma GCC ivdep
+          for (int64_t j = 0; j < kLanes; ++j) {
+            const int64_t q = d * kLanes + j;
+            double tw = tv[d * rows_x * kLanes + j] + h * ta[d * rows_x * kLanes + j];
+            if (kFriction) tw = tkick(raw1[j], s1[j], tw, tfr[q] * h);
+            tx[d * rows_x * kLanes + j] = tx[d * rows_x * kLanes + j] + dt * tw;
+            tw_prev[q] = tw;
+            tp_prev[q] = tw + h * ta[d * rows_x * kLanes + j];
+            tf_prev[q] = 0.0;
+          }
+      for (int64_t i = 0; i < contacts; ++i) {
+        const int64_t ri = i * kLanes, rn = (i + 1) * kLanes;
+#pragma GCC ivdep
+        for (int64_t j = 0; j < kLanes; ++j) {
+          // body i + 1: half kick, friction, drift, predicted velocity
+          double w = v[rn + j] + h * a[rn + j];
+          double w_raw = w, s_first = 0.0, s_second = 0.0, rt, sm;
+          if (kFriction) w = kick(w, loss[j], &s_first);
+          x[rn + j] = x[rn + j] + dt * w;
+          double pred = w + h * a[rn + j];
+          // contact i
+          double dl = x[ri + j] - x[rn + j];
+          if constexpr (kExtras) dl = dl + ov0[ri + j];
+          double rt_rate = p_prev[j] - pred;
+          double f = total_force(dl, rt_rate, kap[ri + j], kvis[ri + j], spr[ri + j], &rt, &sm);
+          // body i: second half kick, friction
+          double b = f_prev[j] - f;
+          if constexpr (kExtras) b = b + ext[ri + j];
+          double acc = b * inv[ri + j];
+          double vn = w_prev[j] + h * acc;
+          double vn_raw = vn;
+          if (kFriction) vn = kick(vn, loss[j], &s_second);
+          a[ri + j] = acc;
+          v[ri + j] = vn;
+          if constexpr (kTangent) {  // what the tangent pass needs of this step
+            raw1[j] = w_raw;
+            s1[j] = s_first;
+            rate[j] = rt_rate;
+            root[j] = rt;
+            half_inv_root[j] = dl > 0.0 ? 0.5 / rt : 0.0;
+            sum[j] = sm;
+            delta[j] = dl;
+            body[j] = b;
+            raw2[j] = vn_raw;
+            s2[j] = s_second;
+          }
+          f_prev[j] = f;
+          w_prev[j] = w;
+          p_prev[j] = pred;
+        }
+        if (kTangent)
+          for (int64_t d = 0; d < D; ++d) {
+            const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
+            const int64_t tc = (d * contacts + i) * kLanes;
+#pragma GCC ivdep
+            for (int64_t j = 0; j < kLanes; ++j) {
+              const int64_t q = d * kLanes + j;
+              double tw = tv[tn + j] + h * ta[tn + j];
+              if (kFriction) tw = tkick(raw1[j], s1[j], tw, tfr[q] * h);
+              tx[tn + j] = tx[tn + j] + dt * tw;
+              double tpred = tw + h * ta[tn + j];
+              double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
+              double tf = ttotal_force(delta[j], rate[j], kap[ri + j], eta[j], spr[ri + j], root[j],
+                                       half_inv_root[j], sum[j], tdl, tp_prev[q] - tpred, tkap[tc + j],
+                                       teta[q], tspr[tc + j]);
+              double tb = tf_prev[q] - tf + text[ti + j];
+              double tacc = tb * inv[ri + j] + body[j] * tinv[ti + j];
+              double tvn = tw_prev[q] + h * tacc;
+              if (kFriction) tvn = tkick(raw2[j], s2[j], tvn, tfr[q] * h);
+              ta[ti + j] = tacc;
+              tv[ti + j] = tvn;
+              tf_prev[q] = tf;
+              tw_prev[q] = tw;
+              tp_prev[q] = tpred;
+            }
+          }
+      }
+      // the wall's row (inverse mass 0: it stays at rest, as in the JAX kernel)
+      const int64_t rw = contacts * kLanes;
+      for (int64_t j = 0; j < kLanes; ++j) {
+        double b = f_prev[j];
+        if constexpr (kExtras) b = b + ext[rw + j];
+        double acc = b * inv[rw + j];
+        double vn = w_prev[j] + h * acc;
+        raw2[j] = vn;
+        if (kFriction) vn = kick(vn, loss[j], &s2[j]);
+        body[j] = b;
+        a[rw + j] = acc;
+        v[rw + j] = vn;
+      }
+      if (kTangent)
+        for (int64_t d = 0; d < D; ++d)
+#pragma GCC ivdep
+          for (int64_t j = 0; j < kLanes; ++j) {
+            const int64_t q = d * kLanes + j, tw_row = (d * rows_x + contacts) * kLanes;
+            double tb = tf_prev[q] + text[tw_row + j];
+            double tacc = tb * inv[rw + j] + body[j] * tinv[tw_row + j];
+            double tvn = tw_prev[q] + h * tacc;
+            if (kFriction) tvn = tkick(raw2[j], s2[j], tvn, tfr[q] * h);
+            ta[tw_row + j] = tacc;
+            tv[tw_row + j] = tvn;
+          }
+    }
+    // The recorded channels from the new displacements and velocities.
+    for (int64_t c = 0; c < n_channels; ++c) {
+      const int64_t i = channels[c], ri = i * kLanes, rn = (i + 1) * kLanes;
+      for (int64_t j = 0; j < kLanes; ++j) {
+        double dl = x[ri + j] - x[rn + j];
+        if constexpr (kExtras) dl = dl + ov0[ri + j];
+        double rate = v[ri + j] - v[rn + j];
+        double rt, sm;
+        double f = total_force(dl, rate, kap[ri + j], kvis[ri + j], spr[ri + j], &rt, &sm);
+        double hr = dl > 0.0 ? 0.5 / rt : 0.0;
+        if (!kTangent) {
+          record[(c * kLanes + j) * kSampleBuffer + buffered] = f;
+          continue;
+        }
+        for (int64_t d = 0; d < D; ++d) {
+          const int64_t q = d * kLanes + j;
+          const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
+          const int64_t tc = (d * contacts + i) * kLanes;
+          double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
+          double trate = tv[ti + j] - tv[tn + j];
+          record[((d * n_channels + c) * kLanes + j) * kSampleBuffer + buffered] =
+              ttotal_force(dl, rate, kap[ri + j], eta[j], spr[ri + j], rt, hr, sm, tdl, trate, tkap[tc + j],
+                           teta[q], tspr[tc + j]);
+        }
+      }
+    }
+    if (++buffered == kSampleBuffer) flush();
+  }
+  if (buffered) flush();
+}
+
 Param AsParam(const ffi::Buffer<ffi::F64>& buffer) {
   auto dims = buffer.dimensions();
   return {buffer.typed_data(), dims.size() > 1 ? dims[dims.size() - 1] : 1};
@@ -216,6 +539,117 @@ ffi::Error Forward(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
   return ffi::Error::Success();
 }
 
+
+// The leading size of a tangent input: its element count over rows x B.
+int64_t Directions(const ffi::Buffer<ffi::F64>& buffer, int64_t rows, int64_t batch) {
+  return static_cast<int64_t>(buffer.element_count()) / (rows * batch);
+}
+
+// state0 and parameters as for the full kernel; `tangents` null for the forward run.
+ffi::Error RunFull(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
+                   ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
+                   ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
+                   ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
+                   ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
+                   int64_t viscous, int64_t friction_on, int64_t extras,
+                   const TangentInputs* tangents, ffi::RemainingRets results) {
+  auto dims = state0.dimensions();
+  const int64_t batch = dims[dims.size() - 1];
+  const int64_t bodies = inv_mass.dimensions()[inv_mass.dimensions().size() - 2] - 1;
+  if (static_cast<int64_t>(state0.element_count()) != 3 * (bodies + 1) * batch)
+    return ffi::Error::InvalidArgument("state0 must be (3 (bodies + 1), B) for one primal");
+  std::vector<int64_t> rows(channels.typed_data(),
+                            channels.typed_data() + channels.element_count());
+  std::vector<double*> outs;
+  int64_t n_samples = 0, directions = 0;
+  for (size_t c = 0; c < rows.size(); ++c) {
+    auto out = results.get<ffi::Buffer<ffi::F64>>(c);
+    if (out.has_error()) return out.error();
+    auto out_dims = (*out)->dimensions();
+    n_samples = out_dims[out_dims.size() - 1];
+    directions = static_cast<int64_t>((*out)->element_count()) / (batch * n_samples);
+    outs.push_back((*out)->typed_data());
+    if (rows[c] < 0 || rows[c] >= bodies)
+      return ffi::Error::InvalidArgument("a recorded channel is not a contact");
+  }
+  FullParams p{AsParam(inv_mass), AsParam(kappa), AsParam(overlap0), AsParam(spring),
+               AsParam(external), AsParam(eta), AsParam(friction)};
+  TangentInputs none{};
+  const TangentInputs& tin = tangents ? *tangents : none;
+  auto run = [&](auto viscous_tag, auto friction_tag, auto tangent_tag, auto extras_tag) {
+    constexpr bool kV = decltype(viscous_tag)::value, kF = decltype(friction_tag)::value,
+                   kT = decltype(tangent_tag)::value, kE = decltype(extras_tag)::value;
+    int64_t lo = 0;
+    std::vector<double*> none_out;
+    auto advance = [&](auto lanes) {
+      constexpr int64_t kL = decltype(lanes)::value;
+      RunFullBlock<kL, kV, kF, kT, kE>(bodies, lo, batch, n_samples, steps_per_sample, dt,
+                                   state0.typed_data(), p, rows, kT ? none_out : outs, directions,
+                                   tin, kT ? outs : none_out);
+      lo += kL;
+    };
+    // blocks of 64, then of 8, the last one partial (a vector of 8 lanes costs about what
+    // one chain alone does), a last single chain alone
+    while (lo + kWideLanes <= batch) advance(std::integral_constant<int64_t, kWideLanes>{});
+    while (batch - lo >= 2) advance(std::integral_constant<int64_t, kNarrowLanes>{});
+    if (lo < batch) advance(std::integral_constant<int64_t, 1>{});
+  };
+  using T = std::true_type;
+  using F = std::false_type;
+  // the tangents always with the preload's and springs' terms (zeros where there are none)
+  auto with_tangent = [&](auto v, auto f) {
+    if (tangents) return run(v, f, T{}, T{});
+    extras ? run(v, f, F{}, T{}) : run(v, f, F{}, F{});
+  };
+  auto with_friction = [&](auto v) { friction_on ? with_tangent(v, T{}) : with_tangent(v, F{}); };
+  viscous ? with_friction(T{}) : with_friction(F{});
+  return ffi::Error::Success();
+}
+
+ffi::Error FullForward(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
+                       ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
+                       ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
+                       ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
+                       ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
+                       int64_t viscous, int64_t friction_on, int64_t extras, ffi::RemainingRets traces) {
+  return RunFull(state0, inv_mass, kappa, overlap0, spring, external, eta, friction, channels, dt,
+                 steps_per_sample, viscous, friction_on, extras, nullptr, traces);
+}
+
+ffi::Error FullTangent(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
+                       ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
+                       ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
+                       ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
+                       ffi::Buffer<ffi::F64> t_state0, ffi::Buffer<ffi::F64> t_inv_mass,
+                       ffi::Buffer<ffi::F64> t_kappa, ffi::Buffer<ffi::F64> t_overlap0,
+                       ffi::Buffer<ffi::F64> t_spring, ffi::Buffer<ffi::F64> t_external,
+                       ffi::Buffer<ffi::F64> t_eta, ffi::Buffer<ffi::F64> t_friction,
+                       ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
+                       int64_t viscous, int64_t friction_on, int64_t extras,
+                       ffi::RemainingRets tangent_traces) {
+  auto dims = state0.dimensions();
+  const int64_t batch = dims[dims.size() - 1];
+  const int64_t rows_x = inv_mass.dimensions()[inv_mass.dimensions().size() - 2];
+  const int64_t counts[8] = {
+      Directions(t_state0, 3 * rows_x, batch), Directions(t_inv_mass, rows_x, batch),
+      Directions(t_kappa, rows_x - 1, batch),  Directions(t_overlap0, rows_x - 1, batch),
+      Directions(t_spring, rows_x - 1, batch), Directions(t_external, rows_x, batch),
+      Directions(t_eta, 1, batch),             Directions(t_friction, 1, batch)};
+  const int64_t directions = *std::max_element(counts, counts + 8);
+  for (int64_t count : counts)
+    if (count != 1 && count != directions)
+      return ffi::Error::InvalidArgument("tangents must be (directions or 1, rows, B)");
+  auto tangent = [&](const ffi::Buffer<ffi::F64>& buffer, int64_t count) {
+    return Tangent{buffer.typed_data(), count == 1};
+  };
+  TangentInputs tin{tangent(t_state0, counts[0]),    tangent(t_inv_mass, counts[1]),
+                    tangent(t_kappa, counts[2]),     tangent(t_overlap0, counts[3]),
+                    tangent(t_spring, counts[4]),    tangent(t_external, counts[5]),
+                    tangent(t_eta, counts[6]),       tangent(t_friction, counts[7])};
+  return RunFull(state0, inv_mass, kappa, overlap0, spring, external, eta, friction, channels, dt,
+                 steps_per_sample, viscous, friction_on, extras, &tin, tangent_traces);
+}
+
 }  // namespace
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
@@ -234,3 +668,47 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
                                   .Attr<int64_t>("books")
                                   .Ret<ffi::Buffer<ffi::F64>>()  // state
                                   .RemainingRets());             // traces
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullForward, FullForward,
+                              ffi::Ffi::Bind()
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // state0: x, v, a
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // inv_mass
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // kappa
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // overlap0
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // spring
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // external
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // eta
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // friction (mu g)
+                                  .Arg<ffi::Buffer<ffi::S64>>()  // channels
+                                  .Attr<double>("dt")
+                                  .Attr<int64_t>("steps_per_sample")
+                                  .Attr<int64_t>("viscous")
+                                  .Attr<int64_t>("friction")
+                                  .Attr<int64_t>("extras")      // preload or springs
+                                  .RemainingRets());             // traces
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullTangent, FullTangent,
+                              ffi::Ffi::Bind()
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // state0: x, v, a
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // inv_mass
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // kappa
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // overlap0
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // spring
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // external
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // eta
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // friction (mu g)
+                                  .Arg<ffi::Buffer<ffi::F64>>()  // tangents of the eight above
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::S64>>()  // channels
+                                  .Attr<double>("dt")
+                                  .Attr<int64_t>("steps_per_sample")
+                                  .Attr<int64_t>("viscous")
+                                  .Attr<int64_t>("friction")
+                                  .Attr<int64_t>("extras")      // preload or springs
+                                  .RemainingRets());             // tangent traces

@@ -192,14 +192,15 @@ def test_fast_path_uses_the_force_laws_of_solve(case):
 
 def test_kernel_without_books_records_the_same_forces():
     """`ledger=False` (what fits run) drops the maxima and the energy books, not the physics:
-    the recorded forces are bit-identical, the books NaN."""
+    the recorded forces of the JAX kernel are bit-identical, the books NaN (the C++ kernel
+    fits run instead is held to this one in tests/test_native.py)."""
     from hertzchain.batched import kernel_flags, record_batched
 
     setup, grid = _batch(**CASES["friction_viscous_preload"])
     recording = Recording((2, 6))
     flags = kernel_flags(setup)
     with_books = record_batched(setup, grid, recording, flags)
-    without = record_batched(setup, grid, recording, flags._replace(ledger=False))
+    without = record_batched(setup, grid, recording, flags._replace(ledger=False), kernel="jax")
     for name in with_books.channel_names:
         np.testing.assert_array_equal(without.forces_n[name], with_books.forces_n[name])
     assert np.all(np.isnan(without.max_force_n)) and np.all(np.isnan(without.energy_error_j))
@@ -209,13 +210,106 @@ def test_kernel_without_books_records_the_same_forces():
 @pytest.mark.parametrize("case", ["elastic", "sensors_preload_viscous"])
 def test_solve_batched_without_books_records_the_same_forces(case):
     """`solve_batched(books=False)` (the benchmarks' like-for-like case) on the undamped
-    kernel (velocities carried as the next half kick's) and the damped one: the recorded
+    JAX kernel (velocities carried as the next half kick's) and the damped one: the recorded
     forces bit-identical to the run with books, the maxima and energies NaN."""
     setup, grid = _batch(**CASES[case])
     recording = Recording((2, 6))
-    with_books = solve_batched(setup, grid, recording)
-    without = solve_batched(setup, grid, recording, books=False)
+    with_books = solve_batched(setup, grid, recording, kernel="jax")
+    without = solve_batched(setup, grid, recording, books=False, kernel="jax")
     for name in with_books.channel_names:
         np.testing.assert_array_equal(without.forces_n[name], with_books.forces_n[name])
     assert np.all(np.isnan(without.max_force_n)) and np.all(np.isnan(without.initial_energy_j))
     assert np.all(np.isfinite(with_books.max_force_n))
+
+
+# ------------------------------------------------------------------------------------------
+# One definition of each law: every kernel's contact and friction laws held to `contact`.
+
+LAWS = {
+    "hertz": dict(viscous=False, springs=False, preload=True, friction=False),
+    "hertz_and_sensor_spring": dict(viscous=False, springs=True, preload=True, friction=False),
+    "kuwabara_kono_clipped": dict(viscous=True, springs=False, preload=True, friction=False),
+    "track_friction": dict(viscous=False, springs=False, preload=True, friction=True),
+    "all_together": dict(viscous=True, springs=True, preload=True, friction=True),
+}
+
+
+def _kernels():
+    from hertzchain import native
+
+    built = native.available()
+    reason = "no C++ compiler or kernel: JAX kernel only"
+    return ["jax"] + [pytest.param(k, marks=pytest.mark.skipif(not built, reason=reason))
+                      for k in ("native_conservative", "native_full")]
+
+
+@pytest.mark.parametrize("kernel", _kernels())
+@pytest.mark.parametrize("law", list(LAWS))
+def test_every_kernel_applies_the_laws_of_contact(law, kernel):
+    """Bodies of infinite mass (inverse mass 0) move at the velocities friction leaves them,
+    whatever the forces, so the overlap and its rate at every sample are known from a few
+    lines of arithmetic here; each kernel's recorded forces must then be `contact`'s laws
+    (`hertz_force`, `spring_force`, `contact_force`, `track_friction_kick`) at those
+    overlaps and rates, over approach, separation (the viscous force clipped at zero), stick
+    and slip. Chains: approaching fast and slowly, and a preloaded contact separating."""
+    from hertzchain import batched, contact
+    from hertzchain.timegrid import TimeGrid
+
+    flags = batched.KernelFlags(**LAWS[law], ledger=False)
+    if kernel == "native_conservative" and flags.full_state:
+        pytest.skip("the conservative C++ kernel has no damping or friction (the full one does)")
+    v0 = np.array([0.8, 0.05, -0.3])  # m/s: striker speeds (the last one moving away)
+    batch = v0.size
+    ones = np.ones((2, batch))
+    p = {
+        "mass": ones, "inv_mass": np.zeros((3, batch)),
+        "kappa": np.array([[1.2e10] * batch, [3.4e10] * batch]),
+        "spring": np.array([[2e8] * batch, [0.0] * batch]) if flags.springs else 0.0 * ones,
+        # contact 0: closing from touch, closing from a gap it never closes, preloaded and opening
+        "overlap0": np.array([[0.0, -0.3e-6, 2.5e-6], [2e-7] * batch]),
+        "eta": np.full(batch, 2e-6 if flags.viscous else 0.0),
+        "friction": np.full(batch, 0.19 * 9.81 * 5e3 if flags.friction else 0.0),  # strong: stops the slow one
+        "external": np.zeros((3, batch)), "first_force": np.zeros(batch), "last_force": np.zeros(batch),
+        "v0": v0,
+    }
+    p = {k: jnp.asarray(v) for k, v in p.items()}
+    grid = TimeGrid(dt_s=1e-7, steps_per_sample=3, n_samples=40)
+    if kernel == "jax":
+        traces, _, _ = batched._kernel(p, flags=flags, grid=grid, rows=(0,), block_steps=6)
+    else:
+        which = "conservative" if kernel == "native_conservative" else "full"
+        traces, _, _ = batched._native_kernel(p, flags=flags, grid=grid, rows=(0,), which=which)
+
+    # The same motion, written out: x += dt kick(v), v = kick(kick(v)) (the forces move nothing).
+    h = 0.5 * grid.dt_s
+    kick = (lambda w: np.asarray(contact.track_friction_kick(w, p["friction"], h))) if flags.friction else (
+        lambda w: w)
+    x, v = np.zeros((3, batch)), np.zeros((3, batch))
+    v[0] = v0
+    expected, elastic, damped = [], [], []
+    for _ in range(grid.n_samples):
+        for _ in range(grid.steps_per_sample):
+            w = kick(v)
+            x = x + grid.dt_s * w
+            v = kick(w)
+        overlap = x[:-1] - x[1:] + np.asarray(p["overlap0"])
+        rate = v[:-1] - v[1:]
+        if flags.viscous:
+            force = contact.contact_force(overlap, rate, p["kappa"], p["eta"])[1]
+            damped.append(np.asarray(force))
+        else:
+            force = contact.hertz_force(overlap, p["kappa"])
+        if flags.springs:
+            force = force + contact.spring_force(overlap, p["spring"])
+        expected.append(np.asarray(force))
+        elastic.append(np.asarray(contact.hertz_force(overlap, p["kappa"])))
+    # (contacts, B, n_samples)
+    expected, elastic, damped = (np.stack(a, axis=-1) if a else None for a in (expected, elastic, damped))
+    scale = np.max(np.abs(expected))
+    assert scale > 1.0 and np.any(elastic[0] == 0.0)  # loaded contacts, and an open one
+    if flags.viscous:  # the clip at zero acts: an opening contact with elastic force left
+        assert np.any((elastic[0] > 0) & (damped[0] == 0.0))
+    if flags.friction:  # the slow striker sticks
+        assert v[0, 1] == 0.0 and v[0, 0] > 0.0
+    for c, trace in enumerate(traces):
+        np.testing.assert_allclose(np.asarray(trace), expected[c], rtol=0, atol=1e-12 * scale)

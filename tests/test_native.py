@@ -67,6 +67,21 @@ def test_chains_do_not_depend_on_their_neighbours_in_a_block():
         np.testing.assert_array_equal(together.max_force_n[i], one.max_force_n[0])
 
 
+def test_full_kernel_chains_do_not_depend_on_their_neighbours():
+    """The full kernel on 75 damped, frictional chains: a block of 64, one of 8 and a
+    partial block of 3 (its idle lanes repeat the last chain): each chain's trace is the
+    one it gets alone (a single lane), bit for bit."""
+    speeds = np.linspace(0.2, 1.2, 75)
+    setup, _ = hc.batch_setup(hc.ChainSetup(10, eta_s=2e-6, mu=0.19), striker_velocity_m_s=speeds)
+    grid = hc.choose_time_grid(setup, t_end_s=0.5e-3, sample_interval_s=2e-6)
+    together = solve_batched(setup, grid, Recording((4,)), books=False)
+    for i in (0, 63, 64, 71, 72, 74):
+        alone = jax.tree_util.tree_map(lambda leaf, i=i: leaf[i : i + 1], setup)
+        one = solve_batched(alone, grid, Recording((4,)), books=False)
+        for name in together.channel_names:
+            np.testing.assert_array_equal(together.forces_n[name][i], one.forces_n[name][0])
+
+
 _SHARDED = r"""
 import json, numpy as np, jax, hertzchain as hc
 from hertzchain import native
@@ -96,13 +111,83 @@ def test_split_over_devices_gives_the_one_device_numbers():
     assert result["diff"] == 0.0 and result["max_diff"] == 0.0 and result["energy_diff"] == 0.0
 
 
-def test_damping_and_friction_run_the_jax_kernel():
-    """The C++ kernel has no damping or friction: such setups run the JAX kernel, so
+FULL_CASES = {
+    "viscous_friction": {"eta_s": 2e-6, "mu": 0.19},
+    "viscous": {"eta_s": 2e-6},
+    "friction": {"mu": 0.19},
+    "sensors_preload_viscous_friction": {"eta_s": 2e-6, "mu": 0.19, "sensor_beads": (3, 7), "precompression_n": 3.0},
+    "free_end_preload": {"eta_s": 1e-6, "mu": 0.1, "end": "free", "precompression_n": 2.0},
+}
+
+
+@pytest.mark.parametrize("case", list(FULL_CASES))
+def test_damped_and_frictional_forces_agree_with_the_jax_kernel(case):
+    """The full C++ kernel (damping, friction; recorded forces only) against the JAX
+    kernel: round-off (the sensors' stiff springs amplify it a little)."""
+    setup, grid = _batch(**FULL_CASES[case])
+    recording = Recording((2, 6))
+    fused = solve_batched(setup, grid, recording, books=False)
+    reference = solve_batched(setup, grid, recording, books=False, kernel="jax")
+    for name in fused.channel_names:
+        scale = float(np.max(np.abs(reference.forces_n[name])))
+        assert scale > 1.0 or (name == "wall" and setup.end == "free")
+        np.testing.assert_allclose(fused.forces_n[name], reference.forces_n[name], rtol=0, atol=2e-12 * scale)
+
+
+def test_damping_and_friction_with_books_run_the_jax_kernel():
+    """The books (maxima, energies) of a damped chain come from the JAX kernel alone, so
     "auto" and "jax" give the same numbers to the bit."""
     setup, grid = _batch(eta_s=1e-6, mu=0.1)
     auto = solve_batched(setup, grid, Recording((4,)))
     reference = solve_batched(setup, grid, Recording((4,)), kernel="jax")
     np.testing.assert_array_equal(auto.forces_n["wall"], reference.forces_n["wall"])
+    np.testing.assert_array_equal(auto.max_force_n, reference.max_force_n)
+
+
+def _traced(base, grid, q, kernel):
+    """`record_batched` at parameter values q = (eta s, mu, striker-speed factor, preload N,
+    bead Young's modulus factor): the recorded forces (channels, B, n_samples)."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    from hertzchain.batched import kernel_flags, record_batched
+
+    flags = kernel_flags(base, switched_on=("viscous", "friction", "preload"))._replace(ledger=False)
+    ones = jnp.ones(base.eta_s.shape)
+    setup = eqx.tree_at(
+        lambda s: (s.eta_s, s.mu, s.striker_velocity_m_s, s.precompression_n, s.bead_youngs_pa), base,
+        (q[0] * ones, q[1] * ones, q[2] * base.striker_velocity_m_s, q[3] * ones, q[4] * base.bead_youngs_pa),
+    )
+    out = record_batched(setup, grid, Recording((2, 6)), flags, kernel=kernel)
+    return jnp.stack([out.forces_n[name] for name in out.channel_names])
+
+
+@pytest.mark.parametrize("case", ["viscous_friction",
+                                  pytest.param("sensors_preload_viscous_friction", marks=pytest.mark.slow)])
+def test_forward_mode_derivatives_equal_jacfwd_through_the_jax_kernel(case):
+    """`jax.jacfwd` through `record_batched` on the C++ kernel (its own tangents, five
+    directions in one run: damping, friction, impact speed, preload, bead modulus) equals
+    `jax.jacfwd` through the JAX kernel to round-off, and `jax.jvp` and `jax.linearize`
+    along one direction equal the Jacobian's column; values equal too."""
+    import jax.numpy as jnp
+
+    q = jnp.asarray([2e-6, 0.19, 1.0, 1.0, 1.0])
+    kwargs = {k: v for k, v in FULL_CASES[case].items() if k not in ("eta_s", "mu", "precompression_n")}
+    base, grid = _batch(speeds=(0.3, 1.0, 0.5), precompression_n=1.0, **kwargs)
+    jac = np.asarray(jax.jit(jax.jacfwd(lambda q: _traced(base, grid, q, "auto")))(q))
+    reference = np.asarray(jax.jit(jax.jacfwd(lambda q: _traced(base, grid, q, "jax")))(q))
+    for i in range(q.size):
+        scale = np.max(np.abs(reference[..., i]))
+        assert scale > 0.0
+        # friction's derivative crosses stick-slip kinks: 1e-10 (1e-11 measured)
+        np.testing.assert_allclose(jac[..., i], reference[..., i], rtol=0, atol=1e-10 * scale)
+    direction = jnp.zeros(q.size).at[1].set(1.0)
+    value, tangent = jax.jvp(lambda q: _traced(base, grid, q, "auto"), (q,), (direction,))
+    np.testing.assert_allclose(np.asarray(tangent), jac[..., 1], rtol=0, atol=1e-12 * np.max(np.abs(jac[..., 1])))
+    _, linear = jax.linearize(lambda q: _traced(base, grid, q, "auto"), q)
+    np.testing.assert_array_equal(np.asarray(linear(direction)), np.asarray(tangent))
+    expected = np.asarray(_traced(base, grid, q, "jax"))
+    np.testing.assert_allclose(np.asarray(value), expected, rtol=0, atol=2e-12 * np.max(np.abs(expected)))
 
 
 def test_unknown_kernel_is_refused():
@@ -146,3 +231,32 @@ def test_failed_build_names_the_compiler_error(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError, match="compiling chain_kernel.cc failed"):
         native._build(target)
     assert not target.exists() and list(target.parent.iterdir()) == []
+
+
+def _fit_problem():
+    from fitting.fit import initial_values, make_problem
+    from fitting.synthetic import paper_setups, synthetic_traces
+
+    files = synthetic_traces(paper_setups([0.2, 0.5], n_beads=12), contacts=(4,), t_end_s=0.6e-3,
+                             sample_interval_s=2e-6, noise_std_n=0.3, seed=3)
+    problem = make_problem(files, ("eta", "mu", "C"))
+    return problem, initial_values(problem)
+
+
+def test_fit_residuals_and_jacobian_equal_the_jax_kernels(monkeypatch):
+    """What a fit iteration computes (`fitting.model.residuals_and_jacobian`: whitened
+    residuals and their Jacobian in eta, mu, C and the nuisances) on the C++ kernel and its
+    tangents equals the same on the JAX kernel to round-off."""
+    from fitting.model import residuals_and_jacobian
+
+    problem, x = _fit_problem()
+    r, jac = residuals_and_jacobian(problem, x)
+    monkeypatch.setattr(native, "kernel_for", lambda flags, devices: None)
+    problem_jax, _ = _fit_problem()
+    r_jax, jac_jax = residuals_and_jacobian(problem_jax, x)
+    assert r.shape == r_jax.shape and np.linalg.norm(r) > 10.0  # the start is off the data
+    np.testing.assert_allclose(r, r_jax, rtol=0, atol=1e-10 * np.max(np.abs(r_jax)))
+    for column, label in enumerate(problem.labels):
+        scale = np.max(np.abs(jac_jax[:, column]))
+        np.testing.assert_allclose(jac[:, column], jac_jax[:, column], rtol=0, atol=1e-9 * scale + 1e-300,
+                                   err_msg=label)
