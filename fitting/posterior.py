@@ -166,8 +166,8 @@ class PosteriorResult:
 def _laplace_whitening(instances, constants, x_hat, covariance):
     """(z_hat, L) with L L^T the Laplace covariance of the transformed coordinates.
 
-    From the fit's covariance of the physical values, $\Sigma_z = D^{-1}\Sigma_x D^{-1}$
-    with $D = \mathrm{diag}(dx/dz)$. Directions the data and priors do not determine (the
+    From the fit's covariance of the physical values, $\\Sigma_z = D^{-1}\\Sigma_x D^{-1}$
+    with $D = \\mathrm{diag}(dx/dz)$. Directions the data and priors do not determine (the
     fit's pseudo-inverse leaves them out) get the width of the bounds: the precision is
     regularised by diag(1/h^2), h the half-width of each coordinate's bounded range.
     """
