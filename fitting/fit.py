@@ -152,45 +152,29 @@ def initial_values(problem: Problem, start=None) -> np.ndarray:
 
 # --- the optimisation ---------------------------------------------------------------------------
 class _IterationReport:
-    """Host-side progress of the optimiser: one line per iteration (at most every 0.5 s)."""
+    """Host-side progress of the optimiser: one line per iteration (at most every 0.5 s; none
+    when `quiet`), and the times of the first and the last iteration (`first`, `latest`:
+    `time.perf_counter()`) for the fit's timings. Called with the iteration and the chi^2 of
+    every row of the batch at its last accepted point."""
 
-    def __init__(self, label: str, stream=None, min_interval_s: float = 0.5):
+    def __init__(self, label: str, stream=None, min_interval_s: float = 0.5, quiet: bool = False):
         self.label = label
         self.stream = sys.stderr if stream is None else stream
-        self.min_interval_s = min_interval_s
+        self.min_interval_s = math.inf if quiet else min_interval_s
         self.start = time.perf_counter()
         self.last = -math.inf
-        self.best = math.inf
-        self.step = 0
+        self.first = self.latest = None
 
-    def __call__(self, step, loss):
-        step = int(np.max(step))
-        if step > self.step:  # a new iteration: forget the last one's losses
-            self.best = math.inf
-        self.step = max(self.step, step)
-        if step > 0:
-            self.best = min(self.best, float(np.min(loss)))
-        now = time.perf_counter()
-        if now - self.last < self.min_interval_s:
+    def __call__(self, step: int, chi2):
+        self.latest = time.perf_counter()
+        self.first = self.first or self.latest
+        finite = np.asarray(chi2)[np.isfinite(chi2)]
+        if self.latest - self.last < self.min_interval_s or not finite.size:
             return
-        self.last = now
-        if not math.isfinite(self.best):
-            return
-        self.stream.write(
-            f"{self.label}: iteration {self.step}, best chi^2 = {2 * self.best:.6g}, "
-            f"{now - self.start:.1f} s\n"
-        )
+        self.last = self.latest
+        self.stream.write(f"{self.label}: iteration {step}, best chi^2 = {float(np.min(finite)):.6g}, "
+                          f"{self.latest - self.start:.1f} s\n")
         self.stream.flush()
-
-
-def _make_verbose(report):
-    if report is None:
-        return False
-
-    def verbose(**values):
-        jax.debug.callback(report, values["num_steps"][1], values["loss_last_accepted_step"][1])
-
-    return verbose
 
 
 # --- the test of an optimum (one rule for every fit: `fit`, `fit_datasets`, profiles, `least_squares`)
@@ -248,134 +232,184 @@ def _at_optimum(chi2, decrement, chi2_line, proposal, threshold):
     return jnp.isfinite(chi2) & ((decrement < threshold) | kink)
 
 
-def _make_solver(report=None):
+def _make_solver():
     """Levenberg-Marquardt; its own (Cauchy) termination is not used: every fit ends by
     `_worth_testing` and `_at_optimum` (or `max_steps`)."""
-    return optx.LevenbergMarquardt(rtol=0.0, atol=0.0, norm=optx.rms_norm, verbose=_make_verbose(report))
+    return optx.LevenbergMarquardt(rtol=0.0, atol=0.0, norm=optx.rms_norm)
 
 
 def _run_least_squares(problem: Problem, constants, templates, masks, starts, *, max_steps: int,
-                       solver, tolerance: float, data=None, batched_data: bool = False):
+                       solver, tolerance: float, data=None, batched_data: bool = False, report=None):
     """Batch of LM solves over the rows of `starts` (B, p) in transformed coordinates.
 
     Coordinates where `masks` (B, p) is False are held at `templates` (their Jacobian
     columns are zero, so the damped steps leave them alone): this fixes a parameter for a
     profile without recompiling. Each row ends at an optimum (`_at_optimum`, `tolerance`
-    as `fit`'s) or after `max_steps`. Returns (z (B, p), success (B,), steps (B,), chi2 (B,),
-    index of the kept start, its residuals (n,) and Jacobian (n, p) with respect to the
-    physical values). `data`: measured samples in `Problem.data_vector` layout, one set for
-    all rows or (with `batched_data`) one per row; then the Jacobians of all rows (B, n, p)
-    are returned.
+    as `fit`'s) or after `max_steps`. The host drives the loop, one compiled optimiser step
+    of every row per call (`_advance_batch`), the test of an optimum compiled apart
+    (`_test_batch`) and run when a row asks for it: no host callback inside a compiled
+    program, so JAX's persistent compilation cache can keep them (`fitting.compilation_cache`),
+    and `report` (`_IterationReport`) sees every iteration. Returns (z (B, p), success (B,),
+    steps (B,), chi2 (B,), index of the kept start, its residuals (n,) and Jacobian (n, p)
+    with respect to the physical values). `data`: measured samples in `Problem.data_vector`
+    layout, one set for all rows or (with `batched_data`) one per row; then the Jacobians of
+    all rows (B, n, p) are returned.
     """
     data = jnp.asarray(problem.data_vector() if data is None else data)
-    return _solve_batch(problem, constants, solver, max_steps, bool(batched_data),
-                        jnp.asarray(float(tolerance)), jnp.asarray(templates), jnp.asarray(masks, dtype=bool),
-                        jnp.asarray(starts), data)
+    common = (problem, constants, solver, int(max_steps), bool(batched_data), jnp.asarray(float(tolerance)),
+              jnp.asarray(templates), jnp.asarray(masks, dtype=bool), data)
+    carry = _init_batch(*common, jnp.asarray(starts))
+    while True:
+        carry = _advance_batch(*common, carry)
+        worth, done = np.asarray(carry.worth), np.asarray(carry.done)
+        if report is not None:
+            report(int(np.max(np.asarray(carry.steps))), np.asarray(carry.chi2))
+        if np.any(worth & ~done):
+            carry = _test_batch(*common, carry)
+            done = np.asarray(carry.done)
+        if np.all(done):
+            break
+    z, ok, steps, r, jac = (np.asarray(a) for a in (carry.z, carry.ok, carry.steps, carry.r, carry.jac))
+    z = np.where(np.asarray(masks, dtype=bool), z, np.asarray(templates))
+    chi2 = np.sum(r**2, axis=1)
+    # the kept row: the best converged one (the best finite one if none converged)
+    finite = np.where(np.isfinite(chi2), chi2, np.inf)
+    best = int(np.argmin(np.where(ok, finite, np.inf) if np.any(ok) else finite))
+    if batched_data:  # one Jacobian per data set
+        return z, ok, steps, chi2, best, r[best], jac
+    return z, ok, steps, chi2, best, r[best], jac[best]
 
 
 _OPTIONS = {"jac": "fwd"}
 _NO_TAGS = frozenset()
 
 
-@eqx.filter_jit
-def _solve_batch(problem, constants, solver, max_steps, batched_data, tolerance, templates, masks,
-                 starts, data):
-    n_fitted = problem.n_fitted
+class _Row(eqx.Module):
+    """One row's optimisation between compiled calls: the point `z` (transformed
+    coordinates), the optimiser's `state` (its arrays), `steps` taken, `chi2` of the last
+    accepted point, whether it is `worth` testing, `done`,
+    `ok` (at an optimum), and the residuals `r` and Jacobian `jac` (with respect to the
+    physical values) where it was last tested."""
+
+    z: jax.Array
+    state: object
+    steps: jax.Array
+    chi2: jax.Array
+    worth: jax.Array
+    done: jax.Array
+    ok: jax.Array
+    r: jax.Array
+    jac: jax.Array
+
+
+def _row_functions(problem, constants, solver, template, mask, y):
+    """The residuals in the optimiser's coordinates, the physical values and the solver's
+    state of one row (`template`, `mask`: held coordinates; `y`: its data)."""
+    args = (template, mask, y)
+    f_struct = jax.ShapeDtypeStruct((problem.n_residuals,), jnp.float64)
 
     def residual_fn(z, args):
         template, mask, y = args
         return problem.residuals(from_unbounded(constants, jnp.where(mask, z, template)), y), None
 
-    def one(template, mask, z0, y):
-        args = (template, mask, y)
-        dof = n_fitted - jnp.sum(mask)
-        z_init = jnp.where(mask, z0, template)
-        f_struct = jax.ShapeDtypeStruct((problem.n_residuals,), z_init.dtype)
-        # the loops carry the solver state's arrays; its static part (the Jacobian's linear
-        # function) is the same at every step
-        def fresh_state(z):
-            return eqx.partition(solver.init(residual_fn, z, args, _OPTIONS, f_struct, None, _NO_TAGS),
-                                 eqx.is_array)
+    def physical(z):
+        return from_unbounded(constants, jnp.where(mask, z, template))
 
-        state, static = fresh_state(z_init)
+    def fresh_state(z):
+        """The solver's state at `z`: its arrays and its static part (the Jacobian's linear
+        function, the same at every step)."""
+        return eqx.partition(solver.init(residual_fn, z, args, _OPTIONS, f_struct, None, _NO_TAGS), eqx.is_array)
 
-        def physical(z):
-            return from_unbounded(constants, jnp.where(mask, z, template))
+    return args, residual_fn, physical, fresh_state
 
-        def linearize(z):
+
+def _batched(function, batched_data):
+    def run(templates, masks, data, *rows):
+        if templates.shape[0] == 1 and not batched_data:
+            # one start: no vmap, whose batching of the optimiser's while loop costs seconds of tracing
+            out = function(templates[0], masks[0], data, *(jax.tree_util.tree_map(lambda a: a[0], r) for r in rows))
+            return jax.tree_util.tree_map(lambda a: a[None], out)
+        return jax.vmap(function, in_axes=(0, 0, 0 if batched_data else None) + (0,) * len(rows))(
+            templates, masks, data, *rows)
+    return run
+
+
+@eqx.filter_jit
+def _init_batch(problem, constants, solver, max_steps, batched_data, tolerance, templates, masks, data, starts):
+    def one(template, mask, y, z0):
+        _, _, _, fresh_state = _row_functions(problem, constants, solver, template, mask, y)
+        z = jnp.where(mask, z0, template)
+        state, _ = fresh_state(z)
+        n, p = problem.n_residuals, z.size
+        false = jnp.asarray(False)
+        return _Row(z, state, jnp.asarray(0), jnp.asarray(jnp.inf), false, false, false,
+                    jnp.zeros(n), jnp.zeros((n, p)))
+
+    return _batched(one, batched_data)(templates, masks, data, starts)
+
+
+@eqx.filter_jit
+def _advance_batch(problem, constants, solver, max_steps, batched_data, tolerance, templates, masks, data, rows):
+    """One optimiser step of every row that is not done and not waiting for its test."""
+    def one(template, mask, y, row):
+        args, residual_fn, _, fresh_state = _row_functions(problem, constants, solver, template, mask, y)
+        dof = problem.n_fitted - jnp.sum(mask)
+        _, static = fresh_state(row.z)
+
+        def step(row):
+            z, state, _ = solver.step(residual_fn, row.z, args, _OPTIONS, eqx.combine(row.state, static), _NO_TAGS)
+            state = eqx.filter(state, eqx.is_array)
+            chi2 = jnp.sum(state.f_info.residual**2)
+            since = state.num_steps_since_acceptance
+            steps = row.steps + 1
+            worth = (_worth_testing(row.chi2, chi2, since, _chi2_threshold(chi2, dof, tolerance))
+                     | ~jnp.all(jnp.isfinite(z)) | (steps >= max_steps))
+            accepted = since == 0
+            return dataclasses.replace(row, z=z, state=state, steps=steps, chi2=jnp.where(accepted, chi2, row.chi2),
+                                       worth=worth)
+
+        return jax.lax.cond(row.done | row.worth, lambda row: row, step, row)
+
+    return _batched(one, batched_data)(templates, masks, data, rows)
+
+
+@eqx.filter_jit
+def _test_batch(problem, constants, solver, max_steps, batched_data, tolerance, templates, masks, data, rows):
+    """The test of an optimum (`_at_optimum`) of every row that asks for it (`worth`)."""
+    def one(template, mask, y, row):
+        _, _, physical, fresh_state = _row_functions(problem, constants, solver, template, mask, y)
+        dof = problem.n_fitted - jnp.sum(mask)
+
+        def test(row):
+            z = row.z
             x = physical(z)
-            return problem.residuals(x, y), jax.jacfwd(problem.residuals)(x, y)  # J w.r.t. the values
-
-        def verdict(z, r, jac, proposed):
-            """(at an optimum, the best point of the line test, whether it lowers chi^2 by
-            more than the threshold); the Gauss-Newton step in the optimiser's coordinates;
-            `proposed`: the optimiser's next point."""
+            r = problem.residuals(x, y)
+            jac = jax.jacfwd(problem.residuals)(x, y)  # with respect to the physical values
             chi2 = jnp.sum(r**2)
             threshold = _chi2_threshold(chi2, dof, tolerance)
             jac_z = jnp.where(mask[None, :], jac @ jax.jacfwd(physical)(z), 0.0)
             step, decrement = _gauss_newton_decrement(r, jac_z, mask)
-            proposal = jnp.sum((jac_z @ (proposed - z)) ** 2)
+            # the chi^2 change of the optimiser's next step in the linear model
+            proposal = jnp.sum((jac_z @ (row.state.y_eval - z)) ** 2)
             chi2_line = jax.lax.cond(
                 decrement < threshold, lambda: jnp.full(_LINE_FRACTIONS.shape, chi2),
                 lambda: jax.vmap(lambda t: jnp.sum(problem.residuals(physical(z - t * step), y) ** 2))(
                     _LINE_FRACTIONS))
-            finite = jnp.where(jnp.isfinite(chi2_line), chi2_line, jnp.inf)
-            better = z - _LINE_FRACTIONS[jnp.argmin(finite)] * step
-            return (_at_optimum(chi2, decrement, chi2_line, proposal, threshold), better,
-                    (chi2 - jnp.min(finite) >= threshold) & (proposal < threshold))
-
-        r0, jac0 = jnp.zeros(f_struct.shape), jnp.zeros((problem.n_residuals, z_init.size))
-        # carry: z, state, steps, chi^2 of the last accepted point, done, ok, r and J where tested
-        carry = (z_init, state, jnp.asarray(0), jnp.asarray(jnp.inf), jnp.asarray(False), jnp.asarray(False),
-                 r0, jac0)
-
-        def step_until_worth_testing(c):
-            def go_on(c):
-                z, state, steps, previous, done, _, _, _ = c
-                return ~done & (steps < max_steps)
-
-            def body(c):
-                z, state, steps, previous, done, ok, r, jac = c
-                z, state, _ = solver.step(residual_fn, z, args, _OPTIONS, eqx.combine(state, static), _NO_TAGS)
-                state = eqx.filter(state, eqx.is_array)
-                chi2 = jnp.sum(state.f_info.residual**2)
-                since = state.num_steps_since_acceptance
-                stop = (_worth_testing(previous, chi2, since, _chi2_threshold(chi2, dof, tolerance))
-                        | ~jnp.all(jnp.isfinite(z)))
-                previous = jnp.where(since == 0, chi2, previous)
-                return z, state, steps + 1, previous, stop, ok, r, jac
-
-            z, state, steps, previous, _, ok, r, jac = jax.lax.while_loop(go_on, body, c)
-            r, jac = linearize(z)
-            ok, better, improves = verdict(z, r, jac, state.y_eval)
-            done = ok | (steps >= max_steps) | ~jnp.all(jnp.isfinite(z))
+            ok = _at_optimum(chi2, decrement, chi2_line, proposal, threshold)
+            done = ok | (row.steps >= max_steps) | ~jnp.all(jnp.isfinite(z))
             # the optimiser only proposes moves too small to count, and a step of the test lowers
             # chi^2 by more (a kink): go on from there, the optimiser restarted
-            restart = ~done & improves
-            state = jax.tree_util.tree_map(lambda a, b: jnp.where(restart, a, b), fresh_state(better)[0], state)
-            z = jnp.where(restart, better, z)
-            previous = jnp.where(restart, jnp.inf, previous)
-            return z, state, steps, previous, done, ok, r, jac
+            finite = jnp.where(jnp.isfinite(chi2_line), chi2_line, jnp.inf)
+            better = z - _LINE_FRACTIONS[jnp.argmin(finite)] * step
+            restart = ~done & (chi2 - jnp.min(finite) >= threshold) & (proposal < threshold)
+            state = jax.tree_util.tree_map(lambda a, b: jnp.where(restart, a, b), fresh_state(better)[0], row.state)
+            return dataclasses.replace(
+                row, z=jnp.where(restart, better, z), state=state, worth=jnp.asarray(False), done=done, ok=ok,
+                chi2=jnp.where(restart, jnp.inf, row.chi2), r=r, jac=jac)
 
-        z, _, steps, _, _, ok, r, jac = jax.lax.while_loop(
-            lambda c: ~c[4], step_until_worth_testing, carry)
-        z = jnp.where(mask, z, template)
-        return z, ok, steps, jnp.sum(r**2), r, jac
+        return jax.lax.cond(row.worth & ~row.done, test, lambda row: row, row)
 
-    if starts.shape[0] == 1 and not batched_data:
-        # one start: no vmap, whose batching of the optimiser's while loop costs seconds of tracing
-        single = one(templates[0], masks[0], starts[0], data)
-        z, ok, steps, chi2, r, jac = (a[None] for a in single)
-    else:
-        z, ok, steps, chi2, r, jac = jax.vmap(one, in_axes=(0, 0, 0, 0 if batched_data else None))(
-            templates, masks, starts, data
-        )
-    # the kept row: the best converged one (the best finite one if none converged)
-    finite = jnp.where(jnp.isfinite(chi2), chi2, jnp.inf)
-    best = jnp.argmin(jnp.where(jnp.any(ok), jnp.where(ok, finite, jnp.inf), finite))
-    if batched_data:  # one Jacobian per data set
-        return z, ok, steps, chi2, best, r[best], jac
-    return z, ok, steps, chi2, best, r[best], jac[best]
+    return _batched(one, batched_data)(templates, masks, data, rows)
 
 
 # --- fits evaluated outside the compiled loop ---------------------------------------------------
@@ -606,6 +640,9 @@ class FitResult:
     - `warnings`: identifiability, bounds, multistart disagreement, resolution.
     - `profiles`: label -> profile likelihood (when asked for).
     - `problem`, `x`: the problem and the fitted vector (for predictions and plots).
+    - `elapsed_s`, `timings`: wall time in all and by phase (set-up; compilation with the
+      start's evaluation, until the first iteration; iterations; the final Jacobian and test
+      of an optimum; covariance and profiles), s.
     """
 
     labels: tuple
@@ -632,6 +669,7 @@ class FitResult:
     problem: Problem
     x: np.ndarray
     elapsed_s: float
+    timings: dict = dataclasses.field(default_factory=dict)
 
     def predictions(self) -> list[dict]:
         """Fitted model of every channel on the data's time axis, per file."""
@@ -702,6 +740,7 @@ class FitResult:
             },
             "files": [e.trace.path or e.label for e in self.problem.experiments],
             "elapsed_s": json_ready(self.elapsed_s),
+            "timings_s": {k: json_ready(v) for k, v in self.timings.items()},
         }
 
 
@@ -786,13 +825,14 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
     z0 = to_unbounded(problem.instances, x0)
     points = _multistart_points(problem, z0, multistart, seed)
     p = len(problem.instances)
-    report = _IterationReport("fit") if progress else None
-    solver = _make_solver(report)
+    report = _IterationReport("fit", quiet=not progress)
+    solver = _make_solver()
+    set_up = time.perf_counter()
 
     for attempt in range(2):
         z, ok, steps, chi2, best, residuals, jacobian = (np.asarray(a) for a in _run_least_squares(
             problem, constants, points, np.ones(points.shape, bool), points,
-            max_steps=max_steps, solver=solver, tolerance=tolerance,
+            max_steps=max_steps, solver=solver, tolerance=tolerance, report=report,
         ))
         best = int(best)
         x = np.asarray(from_unbounded(constants, jnp.asarray(z[best])))
@@ -803,6 +843,7 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
         problem = problem.with_setups([problem.setup_at(x, e) for e in range(len(problem.experiments))])
         points = np.vstack([z[best][None], points[1:]])
 
+    solved = time.perf_counter()
     converged = bool(ok[best])
     chi2_best = float(residuals @ residuals)
     dof = problem.n_fitted - p
@@ -894,6 +935,14 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
         problem=problem,
         x=x,
         elapsed_s=time.perf_counter() - began,
+        timings={
+            "set_up_s": set_up - began,
+            # the optimiser's first step comes after the compilation and the start's evaluation
+            "to_first_iteration_s": (report.first or solved) - set_up,
+            "iterations_s": (report.latest or solved) - (report.first or solved),
+            "final_jacobian_and_test_s": solved - (report.latest or solved),
+            "covariance_and_profiles_s": time.perf_counter() - solved,
+        },
     )
     if not converged and throw:
         raise FitError(message)

@@ -158,8 +158,7 @@ def _summary_figure(result, predictions, out: Path) -> Path:
             axes[row, 0].plot(t, m, "-", lw=0.8, color=f"C{k}", label=channel)
             t, w = _thinned(time_us, (data - model) / sigma)
             axes[row, 1].plot(t, w, "-", lw=0.5, color=f"C{k}")
-        axes[row, 0].set_ylabel(f"{experiment.label}
-force (N)", fontsize=7)
+        axes[row, 0].set_ylabel(f"{experiment.label}\nforce (N)", fontsize=7)
         axes[row, 0].legend(fontsize=6, loc="upper right")
         axes[row, 1].axhspan(-2, 2, color="0.8", alpha=0.5)
         axes[row, 1].set_ylabel("residual (sigma)", fontsize=7)

@@ -28,15 +28,17 @@ def kinked_files():
 
 
 class _Recorder:
-    """Stands in for the fit's progress report: chi^2 of the last accepted point, every step."""
+    """Stands in for the fit's progress report: chi^2 of the last accepted point after every
+    optimiser step."""
 
     chi2: list = []
 
-    def __init__(self, label, stream=None, min_interval_s=0.5):
+    def __init__(self, label, stream=None, min_interval_s=0.5, quiet=False):
         type(self).chi2 = []
+        self.first = self.latest = None
 
-    def __call__(self, step, loss):
-        type(self).chi2.append(2.0 * float(np.min(loss)))
+    def __call__(self, step, chi2):
+        type(self).chi2.append(float(np.min(chi2)))
 
 
 @pytest.fixture(scope="module")
@@ -54,10 +56,10 @@ def test_stops_soon_after_chi2_is_final_at_the_tight_fits_values(kinked_files, d
     result, history = default_fit
     assert result.converged, result.message
     threshold = fit_module.OPTIMUM_TOLERANCE * max(1.0, result.reduced_chi2)
-    # the report sees chi^2 after step k at step k + 1 (at step 1, the optimiser's empty state,
-    # chi^2 = 0); the step after which it was final
-    final_from = next(k for k, c in enumerate(history) if k > 0 and c - result.chi2 < threshold)
-    assert len(history) - final_from <= 8, (len(history), final_from, history)
+    # history[k]: chi^2 after step k + 1; the first step after which it was final
+    final_after = 1 + next(k for k, c in enumerate(history) if c - result.chi2 < threshold)
+    assert len(history) == result.n_steps
+    assert result.n_steps - final_after <= 8, (result.n_steps, final_after, history)
     tight = fitting.fit(kinked_files, PARAMS, tolerance=1e-6, max_steps=200, progress=False, throw=False)
     assert tight.converged and tight.chi2 <= result.chi2 + 1e-9
     for name in PARAMS:
