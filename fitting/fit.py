@@ -4,8 +4,11 @@
 residuals (`fitting.model`) with Levenberg-Marquardt (`optimistix.LevenbergMarquardt`,
 Jacobian by forward-mode differentiation of the solver), in the bounded transformed
 coordinates of `fitting.parameters`. Several starts run as one `vmap`ped batch; the best
-is kept and disagreement between starts is reported. Standard errors, correlations and
-identifiability warnings come from `fitting.uncertainty`; profile likelihoods on request.
+is kept and disagreement between starts is reported. Every fit -- `fit`, `fit_datasets`,
+profiles and the host-driven `least_squares` of the diagnosis -- ends by one test of an
+optimum (`_worth_testing`, `_at_optimum`, `OPTIMUM_TOLERANCE`): no step moves chi^2 by a
+statistically meaningful amount. Standard errors, correlations, identifiability warnings and
+the choice of covariance come from `fitting.uncertainty`; profile likelihoods on request.
 """
 
 from __future__ import annotations
