@@ -3,6 +3,8 @@
     python benchmarks/fit_bench.py [--out benchmarks/results/fit_bench.json] [--traces 10]
                                    [--cases paper,brass] [--label TEXT]
 
+writes the JSON and a Markdown table beside it (`--table-from JSON` rewrites the table alone).
+
 Cases (10 trace files each, 0.5 % noise of each file's largest force, written as
 hertzchain-trace CSV files and fitted for eta, mu, C from the data-derived start):
 
@@ -129,6 +131,29 @@ def benchmark_case(name: str, n_traces: int = 10) -> dict:
             "z_scores": dict(zip(("eta", "mu", "C"), ((values - truth) / stderr).tolist()))}
 
 
+PHASES = (("start_up_and_imports_s", "start-up, imports"), ("reading_s", "reading"), ("fit_set_up_s", "set-up"),
+          ("fit_to_first_iteration_s", "to the first iteration (compilation)"), ("fit_iterations_s", "iterations"),
+          ("fit_final_jacobian_and_test_s", "final Jacobian and test"), ("writing_s", "writing"))
+
+
+def markdown_table(result: dict) -> str:
+    """The result's wall times by phase as a Markdown table (s, one decimal)."""
+    lines = [f"fit_bench: {result['label']} (load average {result['load_average_1min_before']:.1f} before, "
+             f"{result['machine']['load_average_1min']:.1f} after; {result['machine']['cpus']} cores)", "",
+             "| case | run | wall | " + " | ".join(name for _, name in PHASES) + " |",
+             "|---|---|---|" + "---|" * len(PHASES)]
+    for name, case in result["cases"].items():
+        for run in ("cold", "warm"):
+            r = case[run]
+            cells = [f"{r['phases_s'][key]:.1f}" for key, _ in PHASES]
+            cells[4] += f" ({r['iterations']})"
+            lines.append(f"| {name} | {run} | {r['wall_s']:.1f} s | " + " | ".join(cells) + " |")
+    lines += ["", "z-scores of the cold fit against the truth: " + "; ".join(
+        f"{name}: " + ", ".join(f"{k} {v:.3f}" for k, v in case["z_scores"].items())
+        for name, case in result["cases"].items())]
+    return "\n".join(lines) + "\n"
+
+
 def machine_info() -> dict:
     """The cores, the processor and the 1-minute load average when a benchmark ends."""
     return {"cpus": os.cpu_count(), "processor": platform.processor() or platform.machine(),
@@ -142,15 +167,23 @@ def main(argv=None) -> int:
     parser.add_argument("--traces", type=int, default=10, help="trace files per case [10]")
     parser.add_argument("--cases", default="paper,brass", help="cases to run [paper,brass]")
     parser.add_argument("--label", default="", help="what the machine was doing (e.g. 'quiet', 'loaded')")
+    parser.add_argument("--table-from", metavar="JSON",
+                        help="only write the Markdown table (beside the JSON) of a stored result")
     args = parser.parse_args(argv)
-    from hertzchain.atomic import write_json
+    from hertzchain.atomic import write_json, write_text
+
+    if args.table_from:
+        path = Path(args.table_from)
+        write_text(path.with_suffix(".md"), markdown_table(json.loads(path.read_text())))
+        return 0
 
     load_before = os.getloadavg()[0]
     result = {"label": args.label, "load_average_1min_before": load_before,
               "cases": {name: benchmark_case(name, args.traces) for name in args.cases.split(",")},
               "machine": machine_info()}
     write_json(args.out, result)
-    print(json.dumps(result, indent=2))
+    write_text(Path(args.out).with_suffix(".md"), markdown_table(result))
+    print(markdown_table(result))
     return 0
 
 
