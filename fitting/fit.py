@@ -163,7 +163,8 @@ class _IterationReport:
     def __init__(self, label: str, stream=None, min_interval_s: float = 0.5, quiet: bool = False):
         self.label = label
         self.stream = sys.stderr if stream is None else stream
-        self.min_interval_s = math.inf if quiet else min_interval_s
+        self.min_interval_s = min_interval_s
+        self.quiet = quiet
         self.start = time.perf_counter()
         self.last = -math.inf
         self.first = self.latest = None
@@ -172,7 +173,7 @@ class _IterationReport:
         self.latest = time.perf_counter()
         self.first = self.first or self.latest
         finite = np.asarray(chi2)[np.isfinite(chi2)]
-        if self.latest - self.last < self.min_interval_s or not finite.size:
+        if self.quiet or self.latest - self.last < self.min_interval_s or not finite.size:
             return
         self.last = self.latest
         self.stream.write(f"{self.label}: iteration {step}, best chi^2 = {float(np.min(finite)):.6g}, "
