@@ -52,7 +52,7 @@ from hertzchain.progress import Progress
 from hertzchain.tracefile import TraceFile, setup_header
 
 from .data import Experiment, as_experiments, make_experiment
-from .fit import fit_datasets, make_problem
+from .fit import OPTIMUM_TOLERANCE, fit_datasets, make_problem
 from .model import ForwardModel, Problem, residuals_and_jacobian
 from .parameters import get_spec, parse_parameter_list
 from .synthetic import simulate_clean
@@ -648,7 +648,7 @@ class FitScatter:
 
 
 def fit_scatter(plan, params=("eta", "mu", "C"), *, values=None, nuisances=(), n_seeds: int = 50,
-                seed: int = 0, chunk_size: int = 25, max_steps: int = 100, tolerance: float = 0.1,
+                seed: int = 0, chunk_size: int = 25, max_steps: int = 100, tolerance: float = OPTIMUM_TOLERANCE,
                 forward: ForwardModel | None = None, progress: bool = True) -> FitScatter:
     """Fit `n_seeds` noisy copies of a plan's data and compare the scatter with `design`.
 

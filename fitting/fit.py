@@ -4,8 +4,11 @@
 residuals (`fitting.model`) with Levenberg-Marquardt (`optimistix.LevenbergMarquardt`,
 Jacobian by forward-mode differentiation of the solver), in the bounded transformed
 coordinates of `fitting.parameters`. Several starts run as one `vmap`ped batch; the best
-is kept and disagreement between starts is reported. Standard errors, correlations and
-identifiability warnings come from `fitting.uncertainty`; profile likelihoods on request.
+is kept and disagreement between starts is reported. Every fit -- `fit`, `fit_datasets`,
+profiles and the host-driven `least_squares` of the diagnosis -- ends by one test of an
+optimum (`_worth_testing`, `_at_optimum`, `OPTIMUM_TOLERANCE`): no step moves chi^2 by a
+statistically meaningful amount. Standard errors, correlations, identifiability warnings and
+the choice of covariance come from `fitting.uncertainty`; profile likelihoods on request.
 """
 
 from __future__ import annotations
@@ -42,8 +45,10 @@ from .parameters import (
 from .priors import apply_priors, parse_priors, prior_names
 from .uncertainty import (
     Covariance,
+    covariance_choice,
     covariance_from_jacobian,
     identifiability_warnings,
+    noise_band,
     profile_interval,
 )
 
@@ -150,63 +155,64 @@ def initial_values(problem: Problem, start=None) -> np.ndarray:
 
 # --- the optimisation ---------------------------------------------------------------------------
 class _IterationReport:
-    """Host-side progress of the optimiser: one line per iteration (at most every 0.5 s)."""
+    """Host-side progress of the optimiser: one line per iteration (at most every 0.5 s; none
+    when `quiet`), and the times of the first and the last iteration (`first`, `latest`:
+    `time.perf_counter()`) for the fit's timings. Called with the iteration and the chi^2 of
+    every row of the batch at its last accepted point."""
 
-    def __init__(self, label: str, stream=None, min_interval_s: float = 0.5):
+    def __init__(self, label: str, stream=None, min_interval_s: float = 0.5, quiet: bool = False):
         self.label = label
         self.stream = sys.stderr if stream is None else stream
         self.min_interval_s = min_interval_s
+        self.quiet = quiet
         self.start = time.perf_counter()
         self.last = -math.inf
-        self.best = math.inf
-        self.step = 0
+        self.first = self.latest = None
 
-    def __call__(self, step, loss):
-        step = int(np.max(step))
-        if step > self.step:  # a new iteration: forget the last one's losses
-            self.best = math.inf
-        self.step = max(self.step, step)
-        if step > 0:
-            self.best = min(self.best, float(np.min(loss)))
-        now = time.perf_counter()
-        if now - self.last < self.min_interval_s:
+    def __call__(self, step: int, chi2):
+        self.latest = time.perf_counter()
+        self.first = self.first or self.latest
+        finite = np.asarray(chi2)[np.isfinite(chi2)]
+        if self.quiet or self.latest - self.last < self.min_interval_s or not finite.size:
             return
-        self.last = now
-        if not math.isfinite(self.best):
-            return
-        self.stream.write(
-            f"{self.label}: iteration {self.step}, best chi^2 = {2 * self.best:.6g}, "
-            f"{now - self.start:.1f} s\n"
-        )
+        self.last = self.latest
+        self.stream.write(f"{self.label}: iteration {step}, best chi^2 = {float(np.min(finite)):.6g}, "
+                          f"{self.latest - self.start:.1f} s\n")
         self.stream.flush()
 
 
-def _make_verbose(report):
-    if report is None:
-        return False
-
-    def verbose(**values):
-        jax.debug.callback(report, values["num_steps"][1], values["loss_last_accepted_step"][1])
-
-    return verbose
-
-
-# Fractions of the Gauss-Newton step tried at the end of a fit (see `_solve_batch`).
+# --- the test of an optimum (one rule for every fit: `fit`, `fit_datasets`, profiles, `least_squares`)
+# A fit with known noise is done when no step can move chi^2 by a statistically meaningful amount.
+# At an optimum, moving the parameters by d standard errors (in the covariance's metric) raises
+# chi^2 by d^2; so a change of chi^2 below OPTIMUM_TOLERANCE = 0.01 is a move of at most 0.1
+# standard error of any parameter or combination, and a hundredth of the chi^2 distribution's own
+# width for one degree of freedom (sqrt 2) -- nothing a standard error, an interval or a model
+# comparison can see. Where the residuals are larger than the noise (chi^2/dof = s^2 > 1) the
+# meaningful unit is s^2 (`_chi2_threshold`).
+OPTIMUM_TOLERANCE = 0.01
+# Fractions of the Gauss-Newton step tried by the test (`_at_optimum`): where the loss is only
+# piecewise smooth (stick-slip friction) the step's prediction can promise a decrease no step delivers.
 _LINE_FRACTIONS = jnp.asarray([1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125])
 
 
-def _make_solver(tolerance: float, n_residuals: int, report=None):
-    """Levenberg-Marquardt that stops when a step moves the whitened residuals little.
+def _chi2_threshold(chi2, dof, tolerance):
+    """The change of chi^2 (dimensionless) that counts: `tolerance` s^2, with s^2 =
+    max(1, chi^2/dof) the variance factor the residuals ask for when they exceed the noise."""
+    return tolerance * jnp.maximum(1.0, chi2 / jnp.maximum(dof, 1))
 
-    With `rtol = 0`, `atol = tolerance/sqrt(n)` and the RMS norm, optimistix's Cauchy
-    criterion reads: the last accepted step changed the residual vector by less than
-    `tolerance` in 2-norm (so chi^2 by about 2 tolerance |r|/sqrt(n)) and the transformed
-    coordinates by less than tolerance/sqrt(n) RMS. The tolerances are arrays, not constants
-    of the compiled solver: fits to other tolerances reuse it.
-    """
-    atol = jnp.asarray(tolerance / math.sqrt(max(n_residuals, 1)))
-    return optx.LevenbergMarquardt(rtol=jnp.asarray(0.0), atol=atol, norm=optx.rms_norm,
-                                   verbose=_make_verbose(report))
+
+def _worth_testing(previous, chi2, since_acceptance, threshold):
+    """Whether to test for an optimum after an optimiser step: the step was accepted and
+    lowered chi^2 from `previous` to `chi2` by less than `threshold`, or the last
+    `_REJECTIONS` (2 x, ...) steps were rejected (at a kink of the loss every nearby step
+    can be, while the trust region shrinks)."""
+    accepted_small = (since_acceptance == 0) & (previous - chi2 < threshold)
+    return accepted_small | ((since_acceptance > 0) & (since_acceptance % _REJECTIONS == 0))
+
+
+# Rejected steps in a row after which `_worth_testing` asks for a test: each shrinks the
+# optimiser's trust region by a factor 4 or more, so after 6 its steps are 4^-6 ~ 2e-4 as long.
+_REJECTIONS = 6
 
 
 def _gauss_newton_decrement(r, jac, mask):
@@ -217,79 +223,197 @@ def _gauss_newton_decrement(r, jac, mask):
     return step, jnp.sum((free_jac @ step) ** 2)
 
 
-def _optimum_test(chi2_of, x, r, jac, mask, stopped, tolerance):
-    """Whether `x` is an optimum of the free (`mask`) columns, to `tolerance` in chi^2.
+def _at_optimum(chi2, decrement, chi2_line, proposal, threshold):
+    """The test of an optimum: chi^2 is finite and no step moves it by `threshold`. Either the
+    Gauss-Newton step predicts less (`decrement`); or, on a loss with kinks where that
+    prediction can promise what no step delivers, none of the fractions `_LINE_FRACTIONS` of
+    that step lowers chi^2 by `threshold` (their chi^2: `chi2_line`) and the optimiser itself
+    only proposes moves smaller than that (`proposal`: the chi^2 change its next step makes in
+    the linear model, |J dz|^2; its trust region has shrunk to below a meaningful move, where
+    far from an optimum a rugged loss can defeat the line of the Gauss-Newton step alone)."""
+    best = jnp.min(jnp.where(jnp.isfinite(chi2_line), chi2_line, jnp.inf))
+    kink = (chi2 - best < threshold) & (proposal < threshold)
+    return jnp.isfinite(chi2) & ((decrement < threshold) | kink)
 
-    Gauss-Newton's predicted remaining decrease of chi^2 at `x` (residuals `r`, Jacobian
-    `jac` with respect to `x`) is below `tolerance`; or, where the loss is only piecewise
-    smooth (stick-slip friction) and the prediction can promise a decrease no step
-    delivers: the optimiser `stopped` by its own test and no fraction of the Gauss-Newton
-    step (1, 1/2, ... 1/32) lowers `chi2_of` by `tolerance` either (evaluated only then).
-    """
-    step, decrement = _gauss_newton_decrement(r, jac, mask)
-    near = decrement < tolerance
 
-    def at_kink():
-        chi2_at = jax.vmap(lambda t: chi2_of(x - t * step))(_LINE_FRACTIONS)
-        realised = jnp.sum(r**2) - jnp.min(jnp.where(jnp.isfinite(chi2_at), chi2_at, jnp.inf))
-        return realised < tolerance
-
-    kink = jax.lax.cond(near | ~stopped, lambda: jnp.asarray(False), at_kink)
-    return jnp.all(jnp.isfinite(r)) & (near | kink)
+def _make_solver():
+    """Levenberg-Marquardt; its own (Cauchy) termination is not used: every fit ends by
+    `_worth_testing` and `_at_optimum` (or `max_steps`)."""
+    return optx.LevenbergMarquardt(rtol=0.0, atol=0.0, norm=optx.rms_norm)
 
 
 def _run_least_squares(problem: Problem, constants, templates, masks, starts, *, max_steps: int,
-                       solver, tolerance: float, data=None, batched_data: bool = False):
+                       solver, tolerance: float, data=None, batched_data: bool = False, report=None):
     """Batch of LM solves over the rows of `starts` (B, p) in transformed coordinates.
 
     Coordinates where `masks` (B, p) is False are held at `templates` (their Jacobian
     columns are zero, so the damped steps leave them alone): this fixes a parameter for a
-    profile without recompiling. Returns (z (B, p), success (B,), steps (B,), chi2 (B,),
-    index of the kept start, its residuals (n,) and Jacobian (n, p) with respect to the
-    physical values). `data`: measured samples in `Problem.data_vector` layout, one set for
-    all rows or (with `batched_data`) one per row; then the Jacobians of all rows (B, n, p)
-    are returned.
+    profile without recompiling. Each row ends at an optimum (`_at_optimum`, `tolerance`
+    as `fit`'s) or after `max_steps`. The host drives the loop, one compiled optimiser step
+    of every row per call (`_advance_batch`), the test of an optimum compiled apart
+    (`_test_batch`) and run when a row asks for it: no host callback inside a compiled
+    program, so JAX's persistent compilation cache can keep them (`fitting.compilation_cache`),
+    and `report` (`_IterationReport`) sees every iteration. Returns (z (B, p), success (B,),
+    steps (B,), chi2 (B,), index of the kept start, its residuals (n,) and Jacobian (n, p)
+    with respect to the physical values). `data`: measured samples in `Problem.data_vector`
+    layout, one set for all rows or (with `batched_data`) one per row; then the Jacobians of
+    all rows (B, n, p) are returned.
     """
     data = jnp.asarray(problem.data_vector() if data is None else data)
-    return _solve_batch(problem, constants, solver, max_steps, float(tolerance), bool(batched_data),
-                        jnp.asarray(templates), jnp.asarray(masks, dtype=bool),
-                        jnp.asarray(starts), data)
-
-
-@eqx.filter_jit
-def _solve_batch(problem, constants, solver, max_steps, tolerance, batched_data, templates, masks,
-                 starts, data):
-    def residual_fn(z, args):
-        template, mask, y = args
-        return problem.residuals(from_unbounded(constants, jnp.where(mask, z, template)), y)
-
-    def one(template, mask, z0, y):
-        solution = optx.least_squares(
-            residual_fn, solver, jnp.where(mask, z0, template), args=(template, mask, y),
-            max_steps=max_steps, throw=False, options={"jac": "fwd"},
-        )
-        z = jnp.where(mask, solution.value, template)
-        x = from_unbounded(constants, z)
-        r = problem.residuals(x, y)
-        jac = jax.jacfwd(problem.residuals)(x, y)  # with respect to the physical values
-        ok = _optimum_test(lambda xx: jnp.sum(problem.residuals(xx, y) ** 2), x, r, jac, mask,
-                           solution.result == optx.RESULTS.successful, tolerance)
-        return z, ok, solution.stats["num_steps"], jnp.sum(r**2), r, jac
-
-    if starts.shape[0] == 1 and not batched_data:
-        # one start: no vmap, whose batching of the optimiser's while loop costs seconds of tracing
-        single = one(templates[0], masks[0], starts[0], data)
-        z, ok, steps, chi2, r, jac = (a[None] for a in single)
-    else:
-        z, ok, steps, chi2, r, jac = jax.vmap(one, in_axes=(0, 0, 0, 0 if batched_data else None))(
-            templates, masks, starts, data
-        )
+    common = (problem, constants, solver, int(max_steps), bool(batched_data), jnp.asarray(float(tolerance)),
+              jnp.asarray(templates), jnp.asarray(masks, dtype=bool), data)
+    carry = _init_batch(*common, jnp.asarray(starts))
+    while True:
+        carry = _advance_batch(*common, carry)
+        worth, done = np.asarray(carry.worth), np.asarray(carry.done)
+        if report is not None:
+            report(int(np.max(np.asarray(carry.steps))), np.asarray(carry.chi2))
+        if np.any(worth & ~done):
+            carry = _test_batch(*common, carry)
+            done = np.asarray(carry.done)
+        if np.all(done):
+            break
+    z, ok, steps, r, jac = (np.asarray(a) for a in (carry.z, carry.ok, carry.steps, carry.r, carry.jac))
+    z = np.where(np.asarray(masks, dtype=bool), z, np.asarray(templates))
+    chi2 = np.sum(r**2, axis=1)
     # the kept row: the best converged one (the best finite one if none converged)
-    finite = jnp.where(jnp.isfinite(chi2), chi2, jnp.inf)
-    best = jnp.argmin(jnp.where(jnp.any(ok), jnp.where(ok, finite, jnp.inf), finite))
+    finite = np.where(np.isfinite(chi2), chi2, np.inf)
+    best = int(np.argmin(np.where(ok, finite, np.inf) if np.any(ok) else finite))
     if batched_data:  # one Jacobian per data set
         return z, ok, steps, chi2, best, r[best], jac
     return z, ok, steps, chi2, best, r[best], jac[best]
+
+
+_OPTIONS = {"jac": "fwd"}
+_NO_TAGS = frozenset()
+
+
+class _Row(eqx.Module):
+    """One row's optimisation between compiled calls: the point `z` (transformed
+    coordinates), the optimiser's `state` (its arrays), `steps` taken, `chi2` of the last
+    accepted point, whether it is `worth` testing, `done`,
+    `ok` (at an optimum), and the residuals `r` and Jacobian `jac` (with respect to the
+    physical values) where it was last tested."""
+
+    z: jax.Array
+    state: object
+    steps: jax.Array
+    chi2: jax.Array
+    worth: jax.Array
+    done: jax.Array
+    ok: jax.Array
+    r: jax.Array
+    jac: jax.Array
+
+
+def _row_functions(problem, constants, solver, template, mask, y):
+    """The residuals in the optimiser's coordinates, the physical values and the solver's
+    state of one row (`template`, `mask`: held coordinates; `y`: its data)."""
+    args = (template, mask, y)
+    f_struct = jax.ShapeDtypeStruct((problem.n_residuals,), jnp.float64)
+
+    def residual_fn(z, args):
+        template, mask, y = args
+        return problem.residuals(from_unbounded(constants, jnp.where(mask, z, template)), y), None
+
+    def physical(z):
+        return from_unbounded(constants, jnp.where(mask, z, template))
+
+    def fresh_state(z):
+        """The solver's state at `z`: its arrays and its static part (the Jacobian's linear
+        function, the same at every step)."""
+        return eqx.partition(solver.init(residual_fn, z, args, _OPTIONS, f_struct, None, _NO_TAGS), eqx.is_array)
+
+    return args, residual_fn, physical, fresh_state
+
+
+def _batched(function, batched_data):
+    def run(templates, masks, data, *rows):
+        if templates.shape[0] == 1 and not batched_data:
+            # one start: no vmap, whose batching of the optimiser's while loop costs seconds of tracing
+            out = function(templates[0], masks[0], data, *(jax.tree_util.tree_map(lambda a: a[0], r) for r in rows))
+            return jax.tree_util.tree_map(lambda a: a[None], out)
+        return jax.vmap(function, in_axes=(0, 0, 0 if batched_data else None) + (0,) * len(rows))(
+            templates, masks, data, *rows)
+    return run
+
+
+@eqx.filter_jit
+def _init_batch(problem, constants, solver, max_steps, batched_data, tolerance, templates, masks, data, starts):
+    def one(template, mask, y, z0):
+        _, _, _, fresh_state = _row_functions(problem, constants, solver, template, mask, y)
+        z = jnp.where(mask, z0, template)
+        state, _ = fresh_state(z)
+        n, p = problem.n_residuals, z.size
+        false = jnp.asarray(False)
+        return _Row(z, state, jnp.asarray(0), jnp.asarray(jnp.inf), false, false, false,
+                    jnp.zeros(n), jnp.zeros((n, p)))
+
+    return _batched(one, batched_data)(templates, masks, data, starts)
+
+
+@eqx.filter_jit
+def _advance_batch(problem, constants, solver, max_steps, batched_data, tolerance, templates, masks, data, rows):
+    """One optimiser step of every row that is not done and not waiting for its test."""
+    def one(template, mask, y, row):
+        args, residual_fn, _, fresh_state = _row_functions(problem, constants, solver, template, mask, y)
+        dof = problem.n_fitted - jnp.sum(mask)
+        _, static = fresh_state(row.z)
+
+        def step(row):
+            z, state, _ = solver.step(residual_fn, row.z, args, _OPTIONS, eqx.combine(row.state, static), _NO_TAGS)
+            state = eqx.filter(state, eqx.is_array)
+            chi2 = jnp.sum(state.f_info.residual**2)
+            since = state.num_steps_since_acceptance
+            steps = row.steps + 1
+            worth = (_worth_testing(row.chi2, chi2, since, _chi2_threshold(chi2, dof, tolerance))
+                     | ~jnp.all(jnp.isfinite(z)) | (steps >= max_steps))
+            accepted = since == 0
+            return dataclasses.replace(row, z=z, state=state, steps=steps, chi2=jnp.where(accepted, chi2, row.chi2),
+                                       worth=worth)
+
+        return jax.lax.cond(row.done | row.worth, lambda row: row, step, row)
+
+    return _batched(one, batched_data)(templates, masks, data, rows)
+
+
+@eqx.filter_jit
+def _test_batch(problem, constants, solver, max_steps, batched_data, tolerance, templates, masks, data, rows):
+    """The test of an optimum (`_at_optimum`) of every row that asks for it (`worth`)."""
+    def one(template, mask, y, row):
+        _, _, physical, fresh_state = _row_functions(problem, constants, solver, template, mask, y)
+        dof = problem.n_fitted - jnp.sum(mask)
+
+        def test(row):
+            z = row.z
+            x = physical(z)
+            r = problem.residuals(x, y)
+            jac = jax.jacfwd(problem.residuals)(x, y)  # with respect to the physical values
+            chi2 = jnp.sum(r**2)
+            threshold = _chi2_threshold(chi2, dof, tolerance)
+            jac_z = jnp.where(mask[None, :], jac @ jax.jacfwd(physical)(z), 0.0)
+            step, decrement = _gauss_newton_decrement(r, jac_z, mask)
+            # the chi^2 change of the optimiser's next step in the linear model
+            proposal = jnp.sum((jac_z @ (row.state.y_eval - z)) ** 2)
+            chi2_line = jax.lax.cond(
+                decrement < threshold, lambda: jnp.full(_LINE_FRACTIONS.shape, chi2),
+                lambda: jax.vmap(lambda t: jnp.sum(problem.residuals(physical(z - t * step), y) ** 2))(
+                    _LINE_FRACTIONS))
+            ok = _at_optimum(chi2, decrement, chi2_line, proposal, threshold)
+            done = ok | (row.steps >= max_steps) | ~jnp.all(jnp.isfinite(z))
+            # the optimiser only proposes moves too small to count, and a step of the test lowers
+            # chi^2 by more (a kink): go on from there, the optimiser restarted
+            finite = jnp.where(jnp.isfinite(chi2_line), chi2_line, jnp.inf)
+            better = z - _LINE_FRACTIONS[jnp.argmin(finite)] * step
+            restart = ~done & (chi2 - jnp.min(finite) >= threshold) & (proposal < threshold)
+            state = jax.tree_util.tree_map(lambda a, b: jnp.where(restart, a, b), fresh_state(better)[0], row.state)
+            return dataclasses.replace(
+                row, z=jnp.where(restart, better, z), state=state, worth=jnp.asarray(False), done=done, ok=ok,
+                chi2=jnp.where(restart, jnp.inf, row.chi2), r=r, jac=jac)
+
+        return jax.lax.cond(row.worth & ~row.done, test, lambda row: row, row)
+
+    return _batched(one, batched_data)(templates, masks, data, rows)
 
 
 # --- fits evaluated outside the compiled loop ---------------------------------------------------
@@ -322,7 +446,6 @@ class LeastSquares:
 # family (Levenberg-Marquardt included) evaluates its function and Jacobian at one point only,
 # `state.y_eval`, known before the step: the host evaluates the model there and the step sees
 # the model's linearisation at that point (`_linearised`), exact where it is evaluated.
-_OPTIONS = {"jac": "fwd"}
 
 
 def _linearised(v, args):
@@ -333,14 +456,13 @@ def _linearised(v, args):
 @eqx.filter_jit
 def _lm_init(solver, v0, args):
     f_struct = jax.ShapeDtypeStruct(args[0].shape, args[0].dtype)
-    return solver.init(_linearised, v0, args, _OPTIONS, f_struct, None, frozenset())
+    return solver.init(_linearised, v0, args, _OPTIONS, f_struct, None, _NO_TAGS)
 
 
 @eqx.filter_jit
 def _lm_step(solver, v, state, args):
-    v, state, _ = solver.step(_linearised, v, args, _OPTIONS, state, frozenset())
-    done, result = solver.terminate(_linearised, v, args, _OPTIONS, state, frozenset())
-    return v, state, done, result
+    v, state, _ = solver.step(_linearised, v, args, _OPTIONS, state, _NO_TAGS)
+    return v, state, jnp.sum(state.f_info.residual**2), state.num_steps_since_acceptance
 
 
 _decrement = jax.jit(_gauss_newton_decrement)
@@ -376,7 +498,7 @@ class _Scaled:
 
 
 def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
-                  tolerance: float = 0.1) -> LeastSquares:
+                  tolerance: float = OPTIMUM_TOLERANCE) -> LeastSquares:
     """Fit the parameters `free` (indices) from the values `x_start` (SI), the others held
     there, with `fit`'s solver and test of an optimum, on residuals a caller evaluates
     between the optimiser's compiled steps (one optimistix Levenberg-Marquardt step per
@@ -412,36 +534,59 @@ def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
     r, jac = scaled.linearize(scaled.values0)
     scale = np.linalg.norm(jac, axis=0) * math.sqrt(_START_DAMPING)
     scaled.scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
-    solver = _make_solver(tolerance, weights.size)
+    solver = _make_solver()
+    dof = int(np.count_nonzero(weights)) - len(free)
     v = jnp.zeros(width)
-    at = v
-    state = _lm_init(solver, v, (jnp.asarray(r), jnp.asarray(jac / scaled.scale), at))
-    steps, done, result = 0, False, optx.RESULTS.successful
-    while steps < max_steps:
+    state = _lm_init(solver, v, (jnp.asarray(r), jnp.asarray(jac / scaled.scale), v))
+    steps, previous, ok = 0, math.inf, False
+    while steps < max_steps and not ok:
         at = np.asarray(state.y_eval)
         if steps:  # the start's evaluation is the one above
             r, jac = scaled.linearize(scaled.values(at))
-        v, state, done, result = _lm_step(solver, v, state,
-                                          (jnp.asarray(r), jnp.asarray(jac / scaled.scale), jnp.asarray(at)))
+        v, state, chi2, since = _lm_step(solver, v, state,
+                                         (jnp.asarray(r), jnp.asarray(jac / scaled.scale), jnp.asarray(at)))
         steps += 1
+        chi2, since = float(chi2), int(since)
         if not bool(np.all(np.isfinite(np.asarray(v)))):
-            result = optx.RESULTS.nonfinite
-        if bool(done) or not bool(result == optx.RESULTS.successful):
             break
-    stopped = bool(done) and bool(result == optx.RESULTS.successful)
+        worth = bool(_worth_testing(previous, chi2, since, float(_chi2_threshold(chi2, dof, tolerance))))
+        if since == 0:
+            previous = chi2
+        if worth:
+            ok, better = _host_optimum_test(scaled, scaled.values(v), scaled.values(state.y_eval), mask, dof,
+                                            tolerance)
+            if better is not None and steps < max_steps:
+                # the optimiser only proposes moves too small to count, and a step of the test
+                # lowers chi^2 by more (a kink): go on from there, the optimiser restarted
+                v = jnp.asarray((better - scaled.values0) * scaled.scale)
+                r, jac = scaled.linearize(better)
+                state = _lm_init(solver, v, (jnp.asarray(r), jnp.asarray(jac / scaled.scale), v))
+                previous = math.inf
     values = scaled.values(v)
-    # `fit`'s test of an optimum (`_optimum_test`), the line evaluations on the host
+    if not ok and steps >= max_steps and np.all(np.isfinite(values)):
+        ok, _ = _host_optimum_test(scaled, values, scaled.values(state.y_eval), mask, dof, tolerance)
+    r = scaled.residuals(values)
+    return LeastSquares(scaled.point(values), float(r @ r), steps, bool(ok and np.all(np.isfinite(r))))
+
+
+def _host_optimum_test(scaled, values, proposed, mask, dof, tolerance):
+    """`_at_optimum` at `values`, the model evaluated on the host (`least_squares`): (at an
+    optimum, the best point of the line test where it lowers chi^2 by the threshold, else None);
+    `proposed`: the optimiser's next point."""
     r, jac = scaled.linearize(values)
-    step, decrement = (np.asarray(a) for a in _decrement(jnp.asarray(r), jnp.asarray(jac), jnp.asarray(mask)))
     chi2 = float(r @ r)
-    near = float(decrement) < tolerance
-    kink = False
-    if not near and stopped:
-        chi2_at = [float(np.sum(scaled.residuals(values - t * step) ** 2)) for t in np.asarray(_LINE_FRACTIONS)]
-        finite = [c for c in chi2_at if math.isfinite(c)]
-        kink = chi2 - (min(finite) if finite else math.inf) < tolerance
-    ok = bool(np.all(np.isfinite(r))) and (near or kink)
-    return LeastSquares(scaled.point(values), chi2, steps, ok)
+    threshold = float(_chi2_threshold(chi2, dof, tolerance))
+    step, decrement = (np.asarray(a) for a in _decrement(jnp.asarray(r), jnp.asarray(jac), jnp.asarray(mask)))
+    if float(decrement) < threshold:
+        chi2_line = np.full(_LINE_FRACTIONS.shape, chi2)
+    else:
+        chi2_line = np.array([float(np.sum(scaled.residuals(values - t * step) ** 2))
+                              for t in np.asarray(_LINE_FRACTIONS)])
+    finite = np.where(np.isfinite(chi2_line), chi2_line, np.inf)
+    better = values - np.asarray(_LINE_FRACTIONS)[int(np.argmin(finite))] * step
+    proposal = float(np.sum((jac @ (np.asarray(proposed) - values)) ** 2))
+    return (bool(_at_optimum(chi2, float(decrement), chi2_line, proposal, threshold)),
+            better if chi2 - float(np.min(finite)) >= threshold and proposal < threshold else None)
 
 
 def _multistart_points(problem: Problem, z0: np.ndarray, k: int, seed: int) -> np.ndarray:
@@ -486,7 +631,9 @@ class FitResult:
       data cannot determine it).
     - `units`: label -> SI unit.
     - `correlation`: (p, p) correlation matrix in `labels` order; `covariance` likewise.
-    - `covariance_scale`: "noise" (sigma known) or "residual" (scaled by chi^2/dof).
+    - `covariance_scale`: "noise" (sigma known) or "residual" (scaled by chi^2/dof);
+      `covariance_reason`: why, and whether chi^2/dof agrees with the noise estimate
+      (`fitting.uncertainty.covariance_choice`).
     - `chi2`, `dof`, `reduced_chi2`: of the whitened residuals.
     - `residual_rms`: file label -> channel -> RMS residual in N; `residual_rms_whitened`
       likewise in units of the channel's sigma.
@@ -497,6 +644,9 @@ class FitResult:
     - `warnings`: identifiability, bounds, multistart disagreement, resolution.
     - `profiles`: label -> profile likelihood (when asked for).
     - `problem`, `x`: the problem and the fitted vector (for predictions and plots).
+    - `elapsed_s`, `timings`: wall time in all and by phase (set-up; compilation with the
+      start's evaluation, until the first iteration; iterations; the final Jacobian and test
+      of an optimum; covariance and profiles), s.
     """
 
     labels: tuple
@@ -506,6 +656,7 @@ class FitResult:
     correlation: np.ndarray
     covariance: np.ndarray
     covariance_scale: str
+    covariance_reason: str
     chi2: float
     dof: int
     reduced_chi2: float
@@ -522,6 +673,7 @@ class FitResult:
     problem: Problem
     x: np.ndarray
     elapsed_s: float
+    timings: dict = dataclasses.field(default_factory=dict)
 
     def predictions(self) -> list[dict]:
         """Fitted model of every channel on the data's time axis, per file."""
@@ -546,6 +698,8 @@ class FitResult:
                 "matrix": [[json_ready(c) for c in row] for row in np.asarray(self.correlation)],
             },
             "covariance_scale": self.covariance_scale,
+            "covariance_reason": self.covariance_reason,
+            "noise_band_reduced_chi2": list(noise_band(self.dof)),
             "chi2": json_ready(self.chi2),
             "dof": int(self.dof),
             "reduced_chi2": json_ready(self.reduced_chi2),
@@ -577,6 +731,8 @@ class FitResult:
                 label: {
                     "values": [json_ready(v) for v in p["values"]],
                     "delta_chi2": [json_ready(v) for v in p["delta_chi2"]],
+                    "converged": [bool(v) for v in p["converged"]],
+                    "all_converged": bool(np.all(p["converged"])),
                     "interval_68": [json_ready(v) for v in p["interval_68"]],
                     "interval_95": [json_ready(v) for v in p["interval_95"]],
                 }
@@ -588,6 +744,7 @@ class FitResult:
             },
             "files": [e.trace.path or e.label for e in self.problem.experiments],
             "elapsed_s": json_ready(self.elapsed_s),
+            "timings_s": {k: json_ready(v) for k, v in self.timings.items()},
         }
 
 
@@ -624,16 +781,8 @@ def _residual_rms(problem: Problem, residuals) -> tuple[dict, dict]:
     return rms, whitened
 
 
-def _covariance_scale(problem: Problem, scale: str) -> str:
-    if scale == "auto":
-        return "noise" if all(e.noise_source == "header" for e in problem.experiments) else "residual"
-    if scale not in ("noise", "residual"):
-        raise ValueError(f"covariance must be 'auto', 'noise' or 'residual', got {scale!r}.")
-    return scale
-
-
 def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multistart: int = 1,
-        seed: int = 0, max_steps: int = 100, tolerance: float = 0.1,
+        seed: int = 0, max_steps: int = 100, tolerance: float = OPTIMUM_TOLERANCE,
         covariance: str = "auto", profile=(), profile_points: int = 13,
         forward: ForwardModel | None = None, progress: bool = True, throw: bool = True,
         priors=()) -> FitResult:
@@ -649,12 +798,12 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
     - `multistart`: number of starts run as one batch (the first is the data-derived one).
     - `seed`: random seed of the spread starts.
     - `max_steps`: optimiser iterations per start.
-    - `tolerance`: a start has converged when Gauss-Newton predicts less than `tolerance`
-      further decrease of chi^2 from where it stopped (0.1: a third of a standard error
-      at most), or, once the optimiser has stopped by its own test, when no fraction of
-      that step delivers the decrease (a kink of the stick-slip loss); the optimiser stops
-      when a step moves the whitened residuals by less than
-      `tolerance` (2-norm).
+    - `tolerance`: the change of chi^2, in units of max(1, chi^2/dof), that counts (default
+      `OPTIMUM_TOLERANCE`, 0.01: a move of 0.1 standard error). The optimiser tests for an
+      optimum whenever an accepted step lowered chi^2 by less than that (or steps keep
+      being rejected); a start has converged, and stops, when neither the Gauss-Newton step's
+      prediction nor any fraction of that step (a kink of the stick-slip loss) lowers chi^2
+      by as much (`_at_optimum`).
     - `covariance`: "auto", "noise" or "residual" (see `fitting.uncertainty`).
     - `profile`: labels to compute profile-likelihood intervals for.
     - `forward`: a `ForwardModel` (custom simulator, model switches, time step).
@@ -670,7 +819,8 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
     if multistart < 1:
         raise ValueError(f"multistart must be >= 1, got {multistart}.")
     problem = make_problem(experiments, params, fixed=fixed, forward=forward, priors=priors)
-    scale = _covariance_scale(problem, covariance)
+    if covariance not in ("auto", "noise", "residual"):
+        raise ValueError(f"covariance must be 'auto', 'noise' or 'residual', got {covariance!r}.")
     for label in profile:
         if label not in problem.labels:
             raise ValueError(f"profile: {label!r} is not fitted; fitted: {', '.join(problem.labels)}.")
@@ -679,13 +829,14 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
     z0 = to_unbounded(problem.instances, x0)
     points = _multistart_points(problem, z0, multistart, seed)
     p = len(problem.instances)
-    report = _IterationReport("fit") if progress else None
-    solver = _make_solver(tolerance, problem.n_residuals, report)
+    report = _IterationReport("fit", quiet=not progress)
+    solver = _make_solver()
+    set_up = time.perf_counter()
 
     for attempt in range(2):
         z, ok, steps, chi2, best, residuals, jacobian = (np.asarray(a) for a in _run_least_squares(
             problem, constants, points, np.ones(points.shape, bool), points,
-            max_steps=max_steps, solver=solver, tolerance=tolerance,
+            max_steps=max_steps, solver=solver, tolerance=tolerance, report=report,
         ))
         best = int(best)
         x = np.asarray(from_unbounded(constants, jnp.asarray(z[best])))
@@ -696,9 +847,11 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
         problem = problem.with_setups([problem.setup_at(x, e) for e in range(len(problem.experiments))])
         points = np.vstack([z[best][None], points[1:]])
 
+    solved = time.perf_counter()
     converged = bool(ok[best])
     chi2_best = float(residuals @ residuals)
     dof = problem.n_fitted - p
+    scale, covariance_reason = covariance_choice(covariance, chi2_best, dof)
     cov = covariance_from_jacobian(jacobian, problem.labels, chi2=chi2_best, dof=dof, scale=scale)
     messages = identifiability_warnings(problem.instances, x, cov, problem.experiments)
     if coarse:
@@ -706,12 +859,11 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
             f"the fitted setups of {', '.join(coarse)} are resolved by fewer than half the asked "
             "steps per contact; results may carry time-step bias."
         )
-    if scale == "noise" and dof > 0 and chi2_best / dof > 1.5:
-        messages.append(
-            f"reduced chi^2 = {chi2_best / dof:.3g} with the stated noise: the model does not explain "
-            "the data to noise level; standard errors from the stated noise are too small "
-            "(use covariance='residual', or look for a missing effect)."
-        )
+    low, high = noise_band(dof)
+    if dof > 0 and not low <= chi2_best / dof <= high:
+        messages.append(covariance_reason + (
+            " Look for a missing effect (hertzchain diagnose) or a wrong noise estimate."
+            if chi2_best / dof > high else " Check the noise estimate (noise_std_n in the header)."))
 
     starts = []
     x_all = np.asarray(jax.vmap(lambda zz: from_unbounded(constants, zz))(jnp.asarray(z)))
@@ -743,8 +895,8 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
 
     message = "converged" if converged else (
         f"no start reached an optimum within {max_steps} steps (best chi^2 = {chi2[best]:.6g} "
-        f"after {int(steps[best])} steps, and Gauss-Newton still predicts a decrease of more than "
-        f"{tolerance:g}); raise max_steps, give better start values, or fit fewer parameters."
+        f"after {int(steps[best])} steps, and a step still lowers it by more than "
+        f"{tolerance:g} max(1, chi^2/dof)); raise max_steps, give better start values, or fit fewer parameters."
     )
     rms, whitened = _residual_rms(problem, residuals)
     profiles = {}
@@ -753,6 +905,10 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
             problem, x, label, cov, points=profile_points, max_steps=max_steps,
             chi2_min=chi2_best, batch=len(points), solver=solver, tolerance=tolerance,
         )
+        failed_points = int(np.sum(~np.asarray(profiles[label]["converged"])))
+        if failed_points:
+            messages.append(f"profile of {label}: {failed_points} of {profile_points} re-fits did not reach "
+                            "an optimum within max_steps; its intervals may be too wide there.")
     result = FitResult(
         labels=problem.labels,
         values=dict(zip(problem.labels, map(float, x))),
@@ -761,6 +917,7 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
         correlation=cov.correlation,
         covariance=cov.covariance,
         covariance_scale=scale,
+        covariance_reason=covariance_reason,
         chi2=chi2_best,
         dof=dof,
         reduced_chi2=chi2_best / dof if dof > 0 else math.nan,
@@ -782,6 +939,14 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
         problem=problem,
         x=x,
         elapsed_s=time.perf_counter() - began,
+        timings={
+            "set_up_s": set_up - began,
+            # the optimiser's first step comes after the compilation and the start's evaluation
+            "to_first_iteration_s": (report.first or solved) - set_up,
+            "iterations_s": (report.latest or solved) - (report.first or solved),
+            "final_jacobian_and_test_s": solved - (report.latest or solved),
+            "covariance_and_profiles_s": time.perf_counter() - solved,
+        },
     )
     if not converged and throw:
         raise FitError(message)
@@ -791,7 +956,7 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
 
 
 def profile_likelihood(problem: Problem, x, label: str, cov: Covariance, *, points: int = 13,
-                       span_sigma: float = 4.0, max_steps: int = 100, tolerance: float = 0.1,
+                       span_sigma: float = 4.0, max_steps: int = 100, tolerance: float = OPTIMUM_TOLERANCE,
                        chi2_min: float | None = None, batch: int | None = None,
                        solver=None) -> dict:
     """Profile of chi^2 over one parameter, all others re-fitted at each value (one batch).
@@ -827,7 +992,7 @@ def profile_likelihood(problem: Problem, x, label: str, cov: Covariance, *, poin
         rows = np.arange(first, first + batch) % points
         _, ok_k, _, chi2_k, _, _, _ = (np.asarray(a) for a in _run_least_squares(
             problem, constants, templates[rows], masks[rows], templates[rows], max_steps=max_steps,
-            solver=solver or _make_solver(tolerance, problem.n_residuals), tolerance=tolerance,
+            solver=solver or _make_solver(), tolerance=tolerance,
         ))
         count = min(batch, points - first)
         chi2[first:first + count], ok[first:first + count] = chi2_k[:count], ok_k[:count]
@@ -843,7 +1008,7 @@ def profile_likelihood(problem: Problem, x, label: str, cov: Covariance, *, poin
 
 
 def fit_datasets(problem: Problem, datasets, *, start=None, max_steps: int = 100,
-                 tolerance: float = 0.1, covariance: str = "noise") -> dict:
+                 tolerance: float = OPTIMUM_TOLERANCE, covariance: str = "noise") -> dict:
     """Fit the same problem to many data sets in one vmapped, once-compiled batch.
 
     For coverage studies (many noise seeds of one synthetic experiment) and for
@@ -863,7 +1028,7 @@ def fit_datasets(problem: Problem, datasets, *, start=None, max_steps: int = 100
     z0 = np.repeat(to_unbounded(problem.instances, x0)[None], len(datasets), axis=0)
     z, ok, _, chi2, _, _, jacobians = (np.asarray(a) for a in _run_least_squares(
         problem, constants, z0, np.ones(z0.shape, bool), z0, max_steps=max_steps,
-        solver=_make_solver(tolerance, problem.n_residuals), tolerance=tolerance, data=datasets,
+        solver=_make_solver(), tolerance=tolerance, data=datasets,
         batched_data=True,
     ))
     values = np.asarray(jax.vmap(lambda zz: from_unbounded(constants, zz))(jnp.asarray(z)))

@@ -168,7 +168,7 @@ class Problem:
     experiment, channel -> model on the data's time axis, numpy), `jacobian(x)`.
 
     `priors`: normal priors (`fitting.priors.NormalRow`), each appended to the residuals
-    as $(x_i - \mathrm{centre})/\mathrm{sd}$ after the data's samples.
+    as $(x_i - \\mathrm{centre})/\\mathrm{sd}$ after the data's samples.
 
     A plain class, hashed by identity where it is a static argument of a compiled function
     (`_residuals_jit`, the optimiser), not an `eqx.Module` whose arrays would be traced: what

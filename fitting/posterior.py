@@ -83,7 +83,8 @@ class PosteriorResult:
     - `sample_stats`: (chains, draws) arrays `diverging`, `num_steps`, `accept_prob`,
       `potential_energy`.
     - `divergences`, `step_size`, `elapsed_s` (fit, warmup and sampling, total),
-      `gradient_evaluations`, `seconds_per_effective_sample` (sampling time over the
+      `gradient_evaluations`, `ess_per_second_total` (bulk ESS per second of the whole run),
+      `seconds_per_effective_sample` (sampling time over the
       smallest ESS).
     - `priors`: label -> the prior each parameter carries.
     - `warnings`: failed diagnostics and Laplace flags, in words.
@@ -153,11 +154,16 @@ class PosteriorResult:
             "gradient_evaluations": int(self.gradient_evaluations),
             "timing_s": {k: json_ready(v) for k, v in self.elapsed_s.items()},
             "seconds_per_effective_sample": json_ready(self.seconds_per_effective_sample),
+            # bulk effective samples per second of the whole run (fit, compilation, warmup, sampling)
+            "ess_per_second_total": {label: json_ready(row["ess"] / self.elapsed_s["total"])
+                                     for label, row in self.summary.items()},
             "diagnostics_passed": self.passed,
             "failed_diagnostics": self.failed_diagnostics(),
             "warnings": list(self.warnings),
             "map": {label: json_ready(v) for label, v in self.fit.values.items()},
             "map_reduced_chi2": json_ready(self.fit.reduced_chi2),
+            "map_converged": bool(self.fit.converged),
+            "map_steps": int(self.fit.n_steps),
             "settings": self.settings,
             "files": [e.trace.path or e.label for e in self.problem.experiments],
         }
@@ -166,8 +172,8 @@ class PosteriorResult:
 def _laplace_whitening(instances, constants, x_hat, covariance):
     """(z_hat, L) with L L^T the Laplace covariance of the transformed coordinates.
 
-    From the fit's covariance of the physical values, $\Sigma_z = D^{-1}\Sigma_x D^{-1}$
-    with $D = \mathrm{diag}(dx/dz)$. Directions the data and priors do not determine (the
+    From the fit's covariance of the physical values, $\\Sigma_z = D^{-1}\\Sigma_x D^{-1}$
+    with $D = \\mathrm{diag}(dx/dz)$. Directions the data and priors do not determine (the
     fit's pseudo-inverse leaves them out) get the width of the bounds: the precision is
     regularised by diag(1/h^2), h the half-width of each coordinate's bounded range.
     """

@@ -8,7 +8,10 @@
 - `rms.csv`: residual RMS per file and channel (N and in units of the noise sigma).
 - `starts.csv`: every start of the multistart batch: chi^2, converged, steps, values.
 - `residuals_<file>.csv`: time, data, model and residual of every channel.
-- `overlay_<file>.png` (fitted model over the data) and `residuals_<file>.png`.
+- `fit_summary.png`: every file's channels, data and fitted model, and the whitened residuals
+  (one figure, drawn from at most `SUMMARY_POINTS` points per curve: about a second).
+- with `per_trace=True`: `overlay_<file>.png` (fitted model over the data) and
+  `residuals_<file>.png` at full resolution (about 1.5 s per file).
 - `profile_<parameter>.png` and `profile_<parameter>.csv` for each profile.
 """
 
@@ -26,6 +29,9 @@ import numpy as np  # noqa: E402
 
 from hertzchain.atomic import save_figure, write_csv, write_json  # noqa: E402
 
+# Points per curve of the summary figure (min-max thinned, so peaks stay).
+SUMMARY_POINTS = 1500
+
 
 def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_")
@@ -42,8 +48,10 @@ def _cell(value) -> str:
     return repr(value) if math.isfinite(value) else ("inf" if value > 0 else "nan" if math.isnan(value) else "-inf")
 
 
-def write_report(result, out_dir, *, plots: bool = True) -> list[Path]:
-    """Write the fit's JSON, CSV and PNG files into `out_dir`; returns the paths written."""
+def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False) -> list[Path]:
+    """Write the fit's JSON, CSV and PNG files into `out_dir`; returns the paths written.
+    `plots`: the summary, correlation and profile figures; `per_trace`: also two figures per
+    file at full resolution."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = []
@@ -113,13 +121,61 @@ def write_report(result, out_dir, *, plots: bool = True) -> list[Path]:
             zip(profile["values"], profile["delta_chi2"], profile["converged"]),
         )
     if plots:
-        written += _plots(result, predictions, out)
+        written += _plots(result, predictions, out, per_trace)
     return written
 
 
-def _plots(result, predictions, out: Path) -> list[Path]:
-    written = []
-    for experiment, predicted in zip(result.problem.experiments, predictions):
+def _thinned(time, *curves, points: int = SUMMARY_POINTS):
+    """`time` and `curves` cut to about `points` samples: each block's minimum and maximum of
+    the first curve (the data), so that peaks survive the thinning."""
+    n = len(time)
+    if n <= points:
+        return (time,) + curves
+    block = int(math.ceil(2 * n / points))
+    starts = np.arange(0, n, block)
+    first = curves[0]
+    picks = []
+    for k in starts:
+        segment = first[k:k + block]
+        picks += sorted({k + int(np.argmin(segment)), k + int(np.argmax(segment))})
+    picks = np.asarray(picks)
+    return (time[picks],) + tuple(c[picks] for c in curves)
+
+
+def _summary_figure(result, predictions, out: Path) -> Path:
+    """One figure of the whole fit: per file, data and model of every channel (left) and the
+    residuals in units of each channel's sigma (right)."""
+    experiments = result.problem.experiments
+    figure, axes = plt.subplots(len(experiments), 2, figsize=(11, 1.6 * len(experiments) + 0.8),
+                                sharex=True, squeeze=False)
+    for row, (experiment, predicted) in enumerate(zip(experiments, predictions)):
+        time_us = experiment.time_s * 1e6
+        for k, channel in enumerate(experiment.channels):
+            data, model = experiment.data(channel), predicted[channel]
+            sigma = experiment.noise_std_n[channel]
+            t, d, m = _thinned(time_us, data, model)
+            axes[row, 0].plot(t, d, ".", ms=1.0, color=f"C{k}", alpha=0.5)
+            axes[row, 0].plot(t, m, "-", lw=0.8, color=f"C{k}", label=channel)
+            t, w = _thinned(time_us, (data - model) / sigma)
+            axes[row, 1].plot(t, w, "-", lw=0.5, color=f"C{k}")
+        axes[row, 0].set_ylabel(f"{experiment.label}\nforce (N)", fontsize=7)
+        axes[row, 0].legend(fontsize=6, loc="upper right")
+        axes[row, 1].axhspan(-2, 2, color="0.8", alpha=0.5)
+        axes[row, 1].set_ylabel("residual (sigma)", fontsize=7)
+    axes[-1, 0].set_xlabel("time after impact (us)")
+    axes[-1, 1].set_xlabel("time after impact (us)")
+    figure.suptitle(f"fit: chi^2/dof = {result.reduced_chi2:.4g}; data (dots) and model (lines); "
+                    "residuals with the +-2 sigma band", fontsize=9)
+    figure.tight_layout()
+    path = out / "fit_summary.png"
+    save_figure(figure, path, dpi=100)
+    plt.close(figure)
+    return path
+
+
+def _plots(result, predictions, out: Path, per_trace: bool) -> list[Path]:
+    written = [_summary_figure(result, predictions, out)]
+    for experiment, predicted in zip(result.problem.experiments, predictions if per_trace else ()):
         time_us = experiment.time_s * 1e6
         n = len(experiment.channels)
         for kind in ("overlay", "residuals"):

@@ -11,8 +11,17 @@ covariance is $s^2 (J^T J)^{-1}$. Two choices of $s^2$:
   the fit's residuals (the usual least-squares choice when sigma is not known, and a
   guard against underestimated noise or a model that misses something).
 
-`"auto"` (default) uses `"noise"` when every file states its noise in the header and
-`"residual"` otherwise.
+`"auto"` (default) uses `"noise"` unless the residuals contradict the noise estimate:
+`noise_band(dof)` is the range of $\\chi^2/\\mathrm{dof}$ they allow, the $\\chi^2$
+distribution's own width, 3 $\\sqrt{2/\\mathrm{dof}}$ on each side, around
+[1/(1 + `MODEL_ERROR_ALLOWANCE`), 1 + `MODEL_ERROR_ALLOWANCE`]. The allowance (0.25:
+the residual RMS within about 12 % of the stated sigma) covers what a noise estimate
+from a few hundred pre-trigger samples (its variance is uncertain by sqrt(2/m), 6-9 % for
+m = 250-500), a calibration or the model's conventions (time step, friction law) can
+err by without the model being wrong. Outside the band the covariance is scaled by
+$\\chi^2/\\mathrm{dof}$, both ways (a noise estimate 1.5 times too large in sigma gives
+$\\chi^2/\\mathrm{dof}$ = 0.45 and standard errors 1.5 times too wide), and
+`covariance_choice` says why.
 
 Identifiability. The columns of $J$ are normalised to unit length and decomposed by SVD;
 a singular value below `DEGENERATE_RATIO` times the largest marks a combination of
@@ -37,6 +46,44 @@ CORRELATION_LIMIT = 0.99
 RELATIVE_ERROR_LIMIT = 0.5
 # Participation (component of a normalised singular vector) that names a parameter.
 _PARTICIPATION = 0.1
+# Share by which chi^2/dof may differ from 1 (either way) before the residuals are taken to
+# contradict the noise estimate (module docstring); and the width of the chi^2 distribution
+# added on each side, in its standard deviations sqrt(2/dof).
+MODEL_ERROR_ALLOWANCE = 0.25
+NOISE_BAND_SIGMA = 3.0
+
+
+def noise_band(dof: int) -> tuple[float, float]:
+    """The range of chi^2/dof consistent with the noise estimate (module docstring)."""
+    width = NOISE_BAND_SIGMA * math.sqrt(2.0 / max(dof, 1))
+    return 1.0 / (1.0 + MODEL_ERROR_ALLOWANCE) - width, 1.0 + MODEL_ERROR_ALLOWANCE + width
+
+
+def covariance_choice(requested: str, chi2: float, dof: int) -> tuple[str, str]:
+    """(scale, reason): the covariance scale ("noise" or "residual") for `requested`
+    ("auto", "noise" or "residual") at a fit's chi^2 and dof, and a sentence on why (and on
+    whether the residuals contradict the noise estimate, whatever was requested)."""
+    if requested not in ("auto", "noise", "residual"):
+        raise ValueError(f"covariance must be 'auto', 'noise' or 'residual', got {requested!r}.")
+    low, high = noise_band(dof)
+    reduced = chi2 / dof if dof > 0 else math.nan
+    inside = math.isfinite(reduced) and low <= reduced <= high
+    if inside:
+        verdict = f"chi^2/dof = {reduced:.4g} is within [{low:.3g}, {high:.3g}], consistent with the noise estimate"
+    elif not math.isfinite(reduced):
+        verdict = "chi^2/dof is not defined (no degrees of freedom)"
+    else:
+        side = "larger" if reduced > high else "smaller"
+        verdict = (f"chi^2/dof = {reduced:.4g} is outside [{low:.3g}, {high:.3g}]: the residuals are "
+                   f"{side} than the noise estimate says (sigma off by a factor {math.sqrt(reduced):.3g}"
+                   + (", or the model misses something" if reduced > high else "") + ")")
+    if requested == "auto":
+        scale = "noise" if inside or not math.isfinite(reduced) else "residual"
+    else:
+        scale = requested
+    how = ("standard errors from the stated noise" if scale == "noise" else
+           "standard errors scaled by sqrt(chi^2/dof), the noise re-estimated from the residuals")
+    return scale, f"{verdict}; {how} ({'chosen automatically' if requested == 'auto' else 'as asked'})."
 
 
 @dataclasses.dataclass(frozen=True)

@@ -18,7 +18,8 @@ Columns of the table: `run` (index), the swept fields, then for each recorded ch
 `peak_<channel>_n` (largest force over every step for contacts and the wall, over the
 samples for sensors); for each recorded contact `arrival_<channel>_s` (time of the first
 pulse's parabolic peak, `pulses.first_peak`) and `duration_<channel>_s` (the cos^6 duration
-$2\\tau$ of its main pulse, `pulses.fit_cos6`); `speed_m_s` (distance between the first and
+$2\\tau$ of its main pulse, `pulses.fit_cos6`; NaN where that fit did not converge, which
+`duration_<channel>_converged` says); `speed_m_s` (distance between the first and
 last recorded contact over the difference of their arrival times); `incident_peak_n` (first
 pulse at the last recorded contact); `force_ratio` (wall peak / incident peak);
 `energy_error_rel`, `dissipated_fraction`, `final_energy_fraction` (the energy balance at
@@ -233,7 +234,10 @@ def summarize(setup: ChainSetup, contacts, out: BatchedTraces) -> dict[str, np.n
             peak_times[name] = (np.asarray(arrival), np.asarray(first))
             columns[f"arrival_{name}_s"] = np.asarray(arrival)
             fit = pulses.fit_cos6(time, trace)
-            columns[f"duration_{name}_s"] = np.asarray(fit.duration_s)
+            converged = np.asarray(fit.converged, dtype=bool)
+            # a duration whose fit did not converge is not a measurement: NaN, and flagged
+            columns[f"duration_{name}_s"] = np.where(converged, np.asarray(fit.duration_s), np.nan)
+            columns[f"duration_{name}_converged"] = converged
     names = [f"contact_{k}" for k in contacts]
     if len(names) >= 2:
         positions = _contact_positions_m(setup, contacts)

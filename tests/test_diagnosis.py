@@ -258,6 +258,11 @@ def test_report_files(viscous_short, tmp_path):
     step = payload["steps"][0]
     assert step["effect"] == "viscous_damping" and step["gap_after"] < step["gap_before"]
     assert step["fitted"]["eta_s"]["value"] > 0
+    # every fit says how it ended: the named model's refit, the base and final fits, candidates
+    assert step["converged"] is True and step["steps"] > 0
+    assert payload["base_fit"]["converged"] is True and payload["final"]["converged"] is True
+    refitted = [c for c in step["candidates"] if c["chi2"] is not None]
+    assert refitted and all(isinstance(c["converged"], bool) and c["steps"] > 0 for c in refitted)
     assert "viscous_damping" in paths["markdown"].read_text()
     for key in ("gap_png", "overlay_1"):
         assert paths[key].stat().st_size > 1000
@@ -386,3 +391,22 @@ def test_command_line_writes_the_report(tmp_path):
     assert payload["missing_effects"] == ["track_friction"]
     assert payload["steps"][0]["gap_after"] < payload["steps"][0]["gap_before"]
     assert main(["diagnose", *paths, "--model", "base+nonsense", "--out", str(out)]) == 2
+
+
+def test_local_band_sees_a_pulse_window_excess_that_a_low_global_chi2_hides():
+    """`LOCAL_BAND_SIGMA` on the cells of `fitting.locate`: white noise in 15 channel x window
+    cells (400 records) never reaches it, while residuals 0.67 sigma overall (a noise estimate
+    1.5 x too large: chi^2/dof = 0.45) with a 3-sigma excess over a 100-sample pulse window do."""
+    from fitting.diagnosis import LOCAL_BAND_SIGMA, NOISE_BAND_SIGMA
+    from fitting.locate import cell
+
+    rng = np.random.default_rng(4)
+    sizes = [100, 300, 100, 300, 2000] * 3  # before, edges, peak, tail of three channels
+    largest = max(max(cell(rng.standard_normal(n))["excess_sigma"] for n in sizes) for _ in range(400))
+    assert largest < LOCAL_BAND_SIGMA
+    cells = [cell(0.67 * rng.standard_normal(n)) for n in sizes]
+    cells[2] = cell(0.67 * rng.standard_normal(100) + 3.0)  # the first channel's peak window
+    n = sum(sizes)
+    chi2 = sum(c["chi2"] for c in cells)
+    assert chi2 / n < 0.6 and chi2 - n <= NOISE_BAND_SIGMA * math.sqrt(2 * n)  # hidden globally
+    assert max(c["excess_sigma"] for c in cells) > LOCAL_BAND_SIGMA  # seen locally

@@ -34,7 +34,7 @@ def test_fit_command_writes_the_report(trace_files, tmp_path, capsys):
     paths, c_true = trace_files
     out = tmp_path / "fit"
     code = main(["fit", *paths, "--params", "eta,mu,C", "--out", str(out), "--multistart", "2",
-                 "--profile", "eta", "--quiet"])
+                 "--profile", "eta", "--quiet", "--per-trace-plots"])
     assert code == 0
     report = json.loads((out / "fit.json").read_text())
     params = report["params"]
@@ -45,6 +45,11 @@ def test_fit_command_writes_the_report(trace_files, tmp_path, capsys):
     assert len(report["correlation"]["matrix"]) == 3
     assert set(report["residual_rms_n"]) == {"shot0", "shot1"}
     assert report["converged"] is True
+    # which covariance, and why: chi^2/dof of right noise and model lies in the band
+    assert report["covariance_scale"] == "noise" and "within" in report["covariance_reason"]
+    low_band, high_band = report["noise_band_reduced_chi2"]
+    assert low_band < report["reduced_chi2"] < high_band
+    assert report["profiles"]["eta"]["all_converged"] is True
     assert len(report["starts"]) == 2
     # the speed constant: discrete value and the continuum one, C_t (1+mu*)^(1/3)
     speed = report["speed_constant"]
@@ -58,7 +63,8 @@ def test_fit_command_writes_the_report(trace_files, tmp_path, capsys):
     low, high = report["profiles"]["eta"]["interval_95"]
     assert low < TRUTH["eta"] < high
     for name in ("params.csv", "correlation.csv", "rms.csv", "starts.csv", "residuals_shot0.csv",
-                 "overlay_shot0.png", "residuals_shot1.png", "correlation.png", "profile_eta.png"):
+                 "overlay_shot0.png", "residuals_shot1.png", "correlation.png", "profile_eta.png",
+                 "fit_summary.png"):
         assert (out / name).is_file(), name
     printed = capsys.readouterr().out
     assert "eta" in printed and "converged" in printed
@@ -69,3 +75,11 @@ def test_fit_command_rejects_unknown_parameters(trace_files, capsys):
     assert main(["fit", paths[0], "--params", "eta,viscosity"]) == 2
     error = capsys.readouterr().err
     assert "Unknown parameter 'viscosity'" in error and "wall_youngs" in error
+
+
+def test_fit_help_lists_the_parameters_not_the_effect_strengths(capsys):
+    with pytest.raises(SystemExit):
+        main(["fit", "--help"])
+    text = capsys.readouterr().out
+    assert "wall_youngs" in text and "striker_velocity" in text
+    assert "dx_" not in text

@@ -130,6 +130,8 @@ def test_dissipation_and_the_papers_conversions(quick):
     top = max(broadening, key=lambda key: float(key.rstrip("N")))
     assert broadening[top] == pytest.approx(1.097, abs=0.003)  # paper: about 10 %
     assert n["duration_over_theory"] == pytest.approx(0.962, abs=0.003)
+    # every duration and fitted amplitude comes from a converged cos^6 fit
+    assert n["cos6_fits_converged"]["converged"] == n["cos6_fits_converged"]["of"] > 0
     assert n["C_apparent_eta2us"] > n["C_numeric"] + 3.0
 
 

@@ -1,4 +1,4 @@
-"""`hertzchain diagnose FILE... [--model base] [--out DIR]`: find, name and add the effects a
+"""`hertzchain diagnose FILE... [--model base] [--out DIR (default out/diagnose)]`: find, name and add the effects a
 chain model is missing (see `fitting.diagnosis`).
 
 Writes `DIR/diagnosis.json` (`missing_effects` in the order found, `steps` with
@@ -11,6 +11,7 @@ import argparse
 import sys
 
 from fitting.effects import EFFECT_NAMES
+from fitting.model import STEPS_PER_CONTACT
 
 
 def _names(text: str) -> list[str]:
@@ -23,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", default="base",
                         help="starting model: 'base' (header's chain, no dissipation, ideal force sensors) "
                         f"or 'base+EFFECT+...'; effects: {', '.join(EFFECT_NAMES)}")
-    parser.add_argument("--out", default="diagnosis", metavar="DIR", help="output folder (default: diagnosis)")
+    parser.add_argument("--out", default="out/diagnose", metavar="DIR", help="output folder (default: out/diagnose)")
     parser.add_argument("--free", default="", help="further parameters fitted throughout, e.g. C or eta,mu")
     parser.add_argument("--nuisances", default="striker_velocity,time_offset",
                         help="per-file/per-channel nuisances (default striker_velocity,time_offset; add gain "
@@ -33,17 +34,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-effects", type=int, default=3, help="most effects to add (default 3)")
     parser.add_argument("--min-share", type=float, default=0.2,
                         help="share of the remaining excess misfit a named effect must remove (default 0.2)")
-    parser.add_argument("--steps-per-contact", type=int, default=200,
-                        help="Verlet steps per shortest contact time of the model (default 200)")
+    parser.add_argument("--steps-per-contact", type=int, default=STEPS_PER_CONTACT,
+                        help=f"Verlet steps per shortest contact time of the model (default {STEPS_PER_CONTACT}, "
+                        "as for fit: see fitting.model)")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
     parser.add_argument("--data-dir", help="driven experiments (kind = \"driven\"): the folder their sweep files "
                         "are relative to")
+    parser.add_argument("--no-compile-cache", action="store_true",
+                        help="do not keep compiled code between runs (default: kept in $HERTZCHAIN_CACHE/jax, "
+                        "~/.cache/hertzchain/jax; also off with HERTZCHAIN_NO_COMPILE_CACHE=1)")
 
 
 def run(args) -> int:
-    # driven experiment files (lock-in sweeps of a driven chain) have their own diagnosis
+    from fitting.compilation_cache import enable_compilation_cache
     from fitting.driven_cli import is_driven_run, run_diagnose as run_driven_diagnose
 
+    enable_compilation_cache(not args.no_compile_cache)
+    # driven experiment files (lock-in sweeps of a driven chain) have their own diagnosis
     if is_driven_run(args.files, args.data_dir):
         return run_driven_diagnose(args)
     from fitting.data import load_experiments

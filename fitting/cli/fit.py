@@ -9,20 +9,31 @@ writes `posterior.json`, `posterior.nc`, `draws.csv`, `posterior_summary.md` and
 (`fitting.posterior_report`) beside the fit's files. Exit status: 0 converged, 3 not
 converged (the report is still written, marked `"converged": false`), 4 the posterior's
 diagnostics fail and `--strict` was given, 2 bad input.
+
+Plots: one summary figure (`fit_summary.png`) by default, an overlay and a residual figure per
+file with `--per-trace-plots`. Wall time: `timings.json` gives the seconds spent reading,
+fitting (compilation and iterations) and writing. Compiled code is kept between runs
+(`fitting.compilation_cache`: `$HERTZCHAIN_CACHE/jax`, default `~/.cache/hertzchain/jax`), so
+a second fit of files of the same shapes skips most of the compilation; `--no-compile-cache`
+or `HERTZCHAIN_NO_COMPILE_CACHE=1` turns that off.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import time
 import warnings
 from pathlib import Path
 
+from hertzchain.atomic import write_json
 from hertzchain.units import parse_quantity
 
 from hertzchain.importer import experiment_priors
 
+from ..compilation_cache import enable_compilation_cache, jax_cache_on
 from ..data import load_experiments
+from ..effects import PREFIX as EFFECT_PREFIX
 from ..fit import FitWarning, fit
 from ..model import STEPS_PER_CONTACT, ForwardModel
 from ..parameters import REGISTRY, get_spec, parse_parameter_list
@@ -55,7 +66,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="trace files (hertzchain-trace/1) or experiment files (.toml)")
     parser.add_argument(
         "--params", default="eta,mu,C",
-        help="comma-separated parameters to fit [eta,mu,C]; valid: " + ", ".join(REGISTRY),
+        help="comma-separated parameters to fit [eta,mu,C]; valid: "
+        + ", ".join(name for name in REGISTRY if not name.startswith(EFFECT_PREFIX)),
     )
     parser.add_argument("--out", default="out/fit", help="output folder [out/fit]")
     parser.add_argument("--multistart", type=int, default=1, help="starts run as one batch [1]")
@@ -89,12 +101,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--strict", action="store_true",
                         help="posterior: exit with status 4 when R-hat, ESS or divergences fail")
     parser.add_argument("--no-plots", action="store_true", help="write JSON and CSV only")
+    parser.add_argument("--per-trace-plots", action="store_true",
+                        help="also an overlay and a residual figure per file (about 1.5 s each) besides the "
+                        "summary figure fit_summary.png")
+    parser.add_argument("--no-compile-cache", action="store_true",
+                        help="do not keep compiled code between runs (default: kept in $HERTZCHAIN_CACHE/jax, "
+                        "~/.cache/hertzchain/jax; also off with HERTZCHAIN_NO_COMPILE_CACHE=1)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     parser.add_argument("--data-dir", help="driven experiments (kind = \"driven\"): the folder their sweep files "
                         "are relative to")
 
 
 def run(args: argparse.Namespace) -> int:
+    began = time.perf_counter()
+    enable_compilation_cache(not args.no_compile_cache)
     missing = [f for f in args.files if not Path(f).is_file()]
     if missing:
         raise FileNotFoundError(f"no such trace file: {', '.join(missing)}")
@@ -107,6 +127,7 @@ def run(args: argparse.Namespace) -> int:
     channels = tuple(c.strip() for c in args.channels.split(",") if c.strip()) if args.channels else None
     noise = parse_quantity(args.noise_std, "N", name="--noise-std") if args.noise_std else None
     experiments = load_experiments(args.files, channels=channels, noise_std_n=noise)
+    read = time.perf_counter()
     profile = tuple(p.strip() for p in args.profile.split(",") if p.strip())
     priors = parse_priors(list(experiment_priors(args.files)) + list(args.prior))
     if args.posterior and args.covariance == "residual":
@@ -121,7 +142,13 @@ def run(args: argparse.Namespace) -> int:
             profile=profile, forward=ForwardModel(steps_per_contact=args.steps_per_contact),
             progress=not args.quiet, throw=False, priors=priors,
         )
-    written = write_report(result, args.out, plots=not args.no_plots)
+    fitted = time.perf_counter()
+    written = write_report(result, args.out, plots=not args.no_plots, per_trace=args.per_trace_plots)
+    timings = {"reading_s": read - began, "fit_s": fitted - read, "writing_s": time.perf_counter() - fitted,
+               "since_start_s": time.perf_counter() - began, "fit_iterations": result.n_steps,
+               "compile_cache": bool(jax_cache_on())}
+    write_json(Path(args.out) / "timings.json", timings)
+    written.append(Path(args.out) / "timings.json")
     print(summary_text(result))
     print(f"wrote {len(written)} files to {args.out} (fit.json, params.csv, plots)")
     if not result.converged:

@@ -424,7 +424,8 @@ class Fig2:
 
     Arrays have leading axes (n_velocities, 2, 2) for (velocity, eta index, mu index).
     `speed_m_s`, `amplitude_n`: incident wave over contacts 8-15; `duration_s`: 2 tau at
-    contact 10 and `duration_amplitude_n` the parabolic peak there; `peak_forces_n`
+    contact 10 (NaN where its cos^6 fit did not converge: `duration_converged`) and
+    `duration_amplitude_n` the parabolic peak there; `peak_forces_n`
     (..., n_restitution_contacts) the peaks at contacts 6-17; `restitution` the normalised
     epsilon (..., n - 1).
     """
@@ -445,6 +446,9 @@ class Fig2:
     c_numeric_fit_amplitude: float
     c_apparent_damped: float
     duration_over_theory: float
+    duration_converged: np.ndarray  # (n_velocities, 2, 2) whether each duration's cos^6 fit converged
+    cos6_fits_converged: int  # of `cos6_fits`, durations and fitted amplitudes together
+    cos6_fits: int
     broadening: np.ndarray  # (n_velocities,) 2tau(eta)/2tau(0) at the same amplitude
     viscous_fit: pulses.RestitutionFit
     friction_fit: pulses.RestitutionFit
@@ -484,14 +488,18 @@ def measure_fig2(sweep: Sweep) -> Fig2:
     ])
     fits = _fit_first_pulses(time, traces, centers, half_widths)
     n_runs = first_time.size
-    duration = _np(fits.duration_s)[:n_runs].reshape(first_time.shape)
-    fit_amplitudes = _np(fits.peak_force_n)[n_runs:].reshape(len(velocities), len(SPEED_CONTACTS))
+    duration_converged = _np(fits.converged)[:n_runs].reshape(first_time.shape).astype(bool)
+    # a duration whose cos^6 fit did not converge is left out (NaN), not plotted or averaged
+    duration = np.where(duration_converged, _np(fits.duration_s)[:n_runs].reshape(first_time.shape), np.nan)
+    amplitude_converged = _np(fits.converged)[n_runs:].reshape(len(velocities), len(SPEED_CONTACTS)).astype(bool)
+    fit_amplitudes = np.where(amplitude_converged,
+                              _np(fits.peak_force_n)[n_runs:].reshape(len(velocities), len(SPEED_CONTACTS)), np.nan)
 
     elastic = (slice(None), 0, 0)
     law = pulses.fit_velocity_law(amplitude[elastic], speed[elastic])
     damped = pulses.fit_velocity_law(amplitude[:, 1, 0], speed[:, 1, 0])
     # C with the cos^6-fit amplitude instead of the peak (the other common definition).
-    fit_amplitudes = np.mean(fit_amplitudes, axis=-1)
+    fit_amplitudes = np.nanmean(fit_amplitudes, axis=-1)
     law_fit_amplitude = pulses.fit_velocity_law(np.asarray(fit_amplitudes), speed[elastic])
     c_theory = float(theory.long_wave_velocity_constant(
         radius, float(setup.bead_density_kg_m3[0]), float(setup.bead_youngs_pa[0]),
@@ -499,7 +507,7 @@ def measure_fig2(sweep: Sweep) -> Fig2:
     ))
     ratio = duration[elastic] / _np(theory.solitary_duration_s(radius, speed[elastic]))
     # 2 tau of the dissipationless chain scales exactly as F^(-1/6): compare at equal force.
-    elastic_scale = np.mean(duration[elastic] * first_force[elastic] ** (1.0 / 6.0))
+    elastic_scale = np.nanmean(duration[elastic] * first_force[elastic] ** (1.0 / 6.0))
     broadening = duration[:, 1, 0] / (elastic_scale * first_force[:, 1, 0] ** (-1.0 / 6.0))
 
     viscous = pulses.fit_restitution_law(
@@ -529,7 +537,10 @@ def measure_fig2(sweep: Sweep) -> Fig2:
         c_numeric_exponent=law.exponent,
         c_numeric_fit_amplitude=law_fit_amplitude.velocity_constant,
         c_apparent_damped=damped.velocity_constant,
-        duration_over_theory=float(np.mean(ratio)),
+        duration_over_theory=float(np.nanmean(ratio)),
+        duration_converged=duration_converged,
+        cos6_fits_converged=int(np.sum(duration_converged) + np.sum(amplitude_converged)),
+        cos6_fits=int(duration_converged.size + amplitude_converged.size),
         broadening=broadening,
         viscous_fit=viscous,
         friction_fit=friction,

@@ -219,6 +219,7 @@ def build_numbers(
         "yield_force_N": yield_force,
         "yield_overlap_um": yield_overlap * 1e6,
         "duration_over_theory": fig2.duration_over_theory,
+        "cos6_fits_converged": {"converged": fig2.cos6_fits_converged, "of": fig2.cos6_fits},
         "duration_broadening_eta2us": {
             f"{f:.1f}N": float(b) for b, f in broadening
         },

@@ -1,0 +1,75 @@
+"""The fits' test of an optimum (`fitting.fit._at_optimum`) on a loss with kinks.
+
+Data: a 10-bead steel chain with little track friction (mu = 0.02: beads stick and slip, so
+chi^2 is only piecewise smooth in mu), two impacts, sensor in bead 4, contact 7 and the wall,
+1 us sampling, 0.5 % noise. The same rule ends every fit (`fit`, `fit_datasets`, profiles,
+`least_squares`): it must stop soon after chi^2 stops changing, at the values of a fit run to
+a tolerance 10^4 times tighter, and a fit started at its optimum must say it is there.
+"""
+
+import importlib
+
+import numpy as np
+import pytest
+
+import fitting
+from fitting.synthetic import paper_setups, synthetic_traces
+
+fit_module = importlib.import_module("fitting.fit")
+PARAMS = ("eta", "mu", "C")
+
+
+@pytest.fixture(scope="module")
+def kinked_files():
+    setups = paper_setups((0.1, 0.4), eta_s=2e-6, mu=0.02, mu_star=0.02, n_beads=10, sensor_beads=(4,))
+    clean = synthetic_traces(setups, contacts=(7,), t_end_s=1.0e-3)
+    sigma = [0.005 * max(np.max(v) for v in f.channels.values()) for f in clean]
+    return synthetic_traces(setups, contacts=(7,), t_end_s=1.0e-3, noise_std_n=sigma, seed=3)
+
+
+class _Recorder:
+    """Stands in for the fit's progress report: chi^2 of the last accepted point after every
+    optimiser step."""
+
+    chi2: list = []
+
+    def __init__(self, label, stream=None, min_interval_s=0.5, quiet=False):
+        type(self).chi2 = []
+        self.first = self.latest = None
+
+    def __call__(self, step, chi2):
+        type(self).chi2.append(float(np.min(chi2)))
+
+
+@pytest.fixture(scope="module")
+def default_fit(kinked_files):
+    patch = pytest.MonkeyPatch()
+    patch.setattr(fit_module, "_IterationReport", _Recorder)
+    try:
+        result = fitting.fit(kinked_files, PARAMS, progress=True, throw=False)
+    finally:
+        patch.undo()
+    return result, list(_Recorder.chi2)
+
+
+def test_stops_soon_after_chi2_is_final_at_the_tight_fits_values(kinked_files, default_fit):
+    result, history = default_fit
+    assert result.converged, result.message
+    threshold = fit_module.OPTIMUM_TOLERANCE * max(1.0, result.reduced_chi2)
+    # history[k]: chi^2 after step k + 1; the first step after which it was final
+    final_after = 1 + next(k for k, c in enumerate(history) if c - result.chi2 < threshold)
+    assert len(history) == result.n_steps
+    assert result.n_steps - final_after <= 8, (result.n_steps, final_after, history)
+    tight = fitting.fit(kinked_files, PARAMS, tolerance=1e-6, max_steps=200, progress=False, throw=False)
+    assert tight.converged and tight.chi2 <= result.chi2 + 1e-9
+    for name in PARAMS:
+        moved = abs(result.values[name] - tight.values[name]) / tight.stderr[name]
+        assert moved < 0.01, (name, moved)
+
+
+def test_a_fit_at_its_optimum_says_so_at_once(kinked_files, default_fit):
+    result, _ = default_fit
+    again = fitting.fit(kinked_files, PARAMS, start=result.values, progress=False, throw=False)
+    assert again.converged, again.message
+    assert again.n_steps <= 3
+    assert abs(again.chi2 - result.chi2) < fit_module.OPTIMUM_TOLERANCE
