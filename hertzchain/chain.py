@@ -73,7 +73,7 @@ class ChainSetup(eqx.Module):
     - `plastic_law`: the elastic-plastic law with `plasticity`: `"thornton"` (Thornton 1997,
       `contact.thornton_contact`, yield at `contact_yield_force_n`) or `"jackson_green"`
       (`contact.jackson_green_contact`: first yield from the von Mises criterion, hardness
-      2.84 $\sigma_Y$ when fully plastic, unloading from the flattened contact; it matches
+      2.84 $\\sigma_Y$ when fully plastic, unloading from the flattened contact; it matches
       measured sphere-sphere curves, the other does not). Give the dynamic yield stress for
       impacts (`contact.rate_hardened_yield_stress`).
     - `contact_exponent`, `exponent_reference_overlap_m`: every contact (wall included)

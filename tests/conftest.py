@@ -1,9 +1,16 @@
+import os
+
 import jax
 import pytest
 
 import hertzchain
 
 jax.config.update("jax_enable_x64", True)
+
+# The fitting commands keep compiled programs in the user's cache (fitting.compilation_cache);
+# commands called in-process here would switch that on for the rest of the session and write
+# hundreds of the suite's programs there. tests/test_compilation_cache.py tests the switch.
+os.environ.setdefault("HERTZCHAIN_NO_COMPILE_CACHE", "1")
 
 
 @pytest.fixture(scope="session")

@@ -142,11 +142,6 @@ def test_import_conditions_every_shot(lab):
         assert trace.ac_channels == ("wall", "sensor_6")
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "with the pre-trigger noise no longer 1.2-1.5x too large, chi^2 at the optimum is about twice "
-    "what it was, and fitting's optimum test (Gauss-Newton's predicted decrease < 0.1, or a kink "
-    "check once the optimiser stops) is never met: 'best chi^2 = 11013.1 after 14 steps' and exit 3 "
-    "even at 300 steps; the termination rule of issue 29 (fitting) is what fixes it"))
 def test_fit_from_scope_files_recovers_the_truth_at_the_information_limit(lab, tmp_path):
     folder, experiment = lab
     out = tmp_path / "fit"
