@@ -8,7 +8,16 @@ damping 1800 /s; 341 frequencies 3.0-4.7 kHz × 36 drive amplitudes 0.68-6.66 nm
 35, window 4 periods (60 periods a run). Times (median of `--repeats` after compilation): the
 grid (`lockin_grid`, RMS and phase at f and f/2) and its Jacobian with respect to four
 parameters (precompression, contact-stiffness scale, damping rate, drive scale) by
-`jax.jacfwd`. The JSON records the machine (CPU count, load average) with the numbers.
+`jax.jacfwd`, as wall time and as this process's CPU time. The JSON records the machine (CPU count, load average) with the numbers.
+
+Physics checks are stored with them (`checks`): for the single bead as the research notes
+fitted it (delta_0 = 22.6 nm at F0 = 0.133 N, zeta = 0.036, drive scale 1.12), the resonance
+shift from the lowest to the highest drive and the fall of the peak velocity per nm of drive
+(their independent model: -6.5 % and 0.87) and the period-doubling threshold at 7.9 kHz from
+the Floquet multipliers (their model: 12 nm); and the largest
+difference between the ramped runs of `lockin_grid` and a phase-continuous upward frequency
+sweep (`lockin_schedule`) at 6.66 nm over 0.86-1.06 of the linear resonance, relative to
+the peak (both held until transients decay to 1e-6, `settle_periods`).
 """
 
 from __future__ import annotations
@@ -27,20 +36,64 @@ import numpy as np
 
 import hertzchain  # noqa: F401  (float64)
 from hertzchain.atomic import write_json
-from hertzchain.driven import DrivenChain, lockin_grid
+from hertzchain.driven import (
+    DrivenChain,
+    HarmonicSchedule,
+    lockin_grid,
+    lockin_schedule,
+    period_doubling_threshold,
+    settle_periods,
+)
 
 
-def timed(function, repeats: int) -> tuple[float, float]:
-    """(first call incl. compilation, median of `repeats` later calls), s."""
+def timed(function, repeats: int) -> tuple[float, float, float]:
+    """(first call incl. compilation, median wall time and median CPU time of this process
+    over `repeats` later calls), s. On a shared machine the CPU time is the steadier figure."""
     start = time.perf_counter()
     jax.block_until_ready(function())
     first = time.perf_counter() - start
-    times = []
+    wall, cpu = [], []
     for _ in range(repeats):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         jax.block_until_ready(function())
-        times.append(time.perf_counter() - start)
-    return first, statistics.median(times)
+        wall.append(time.perf_counter() - start)
+        cpu.append(time.process_time() - start_cpu)
+    return first, statistics.median(wall), statistics.median(cpu)
+
+
+def physics_checks() -> dict:
+    """The tongue tip and the ramp-vs-sweep agreement (see the module docstring)."""
+    kappa = 0.133 / (22.6e-9) ** 1.5
+    fitted = DrivenChain(bead_mass_kg=[0.028], contact_kappa_n_m1p5=[kappa, kappa], precompression_n=0.133,
+                         damping_rate_per_s=2 * 0.036 * 2 * np.pi * 3993.0)
+    threshold = period_doubling_threshold(fitted, 7900.0, np.linspace(2e-9, 40e-9, 20))
+    bending_hz = np.arange(3000.0, 4700.1, 5.0)
+    drives = 1.12 * np.array([0.683e-9, 6.66e-9])
+    rms = np.asarray(lockin_grid(fitted, bending_hz, drives, harmonics=(1.0,)).rms[0])
+    peak_hz = bending_hz[np.argmax(rms, axis=0)]
+    gain = rms.max(axis=0) / drives
+    chain = DrivenChain.from_materials(
+        n_beads=1, bead_radius_m=9.525e-3, bead_mass_kg=0.028, bead_youngs_pa=193e9, bead_poisson=0.3,
+        driver_youngs_pa=193e9, driver_poisson=0.3, wall_youngs_pa=193e9, wall_poisson=0.3,
+        precompression_n=0.133, damping_rate_per_s=1280.0,
+    )
+    linear_hz = float(np.sqrt(float(jnp.sum(chain.contact_stiffness_n_m())) / 0.028) / (2 * np.pi))
+    frequencies = linear_hz * np.linspace(0.86, 1.06, 21)
+    hold = settle_periods(chain, frequencies.max(), tolerance=1e-6)
+    up = lockin_schedule(chain, HarmonicSchedule.levels(frequencies, 6.66e-9, periods_per_level=hold),
+                         harmonics=(1.0,)).complex_amplitude[0, :, 0]
+    ramped = lockin_grid(chain, frequencies, [6.66e-9], harmonics=(1.0,), hold_periods=hold).complex_amplitude[0, :, 0]
+    return {
+        "fitted_bead_resonance_shift": float(peak_hz[1] / peak_hz[0] - 1),
+        "fitted_bead_resonance_shift_independent_model": -0.065,
+        "fitted_bead_peak_per_nm_top_over_lowest": float(gain[1] / gain[0]),
+        "fitted_bead_peak_per_nm_top_over_lowest_independent_model": 0.87,
+        "tongue_tip_threshold_at_7900_hz_m": threshold,
+        "tongue_tip_independent_model_m": 12e-9,
+        "ramp_vs_upward_sweep_max_difference_over_peak": float(jnp.max(jnp.abs(ramped - up)) / jnp.max(jnp.abs(up))),
+        "ramp_vs_upward_sweep_linear_resonance_hz": linear_hz,
+        "ramp_vs_upward_sweep_peak_at_hz": float(frequencies[int(jnp.argmax(jnp.abs(up)))]),
+    }
 
 
 def main() -> None:
@@ -51,6 +104,7 @@ def main() -> None:
     parser.add_argument("--amplitudes", type=int, default=36)
     parser.add_argument("--steps-per-period", type=int, default=64)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--no-checks", action="store_true", help="timings only")
     args = parser.parse_args()
 
     chain = DrivenChain.from_materials(
@@ -60,7 +114,7 @@ def main() -> None:
     )
     frequencies = jnp.linspace(3000.0, 4700.0, args.frequencies)
     amplitudes = jnp.linspace(0.683e-9, 6.66e-9, args.amplitudes)
-    options = dict(steps_per_period=args.steps_per_period)
+    options = {"steps_per_period": args.steps_per_period}
 
     def grid():
         return lockin_grid(chain, frequencies, amplitudes, **options).rms
@@ -73,8 +127,8 @@ def main() -> None:
 
     jacobian = jax.jit(jax.jacfwd(model))
     theta = jnp.array([0.133, 1.0, 1.0, 1.0])
-    grid_first, grid_time = timed(grid, args.repeats)
-    jac_first, jac_time = timed(lambda: jacobian(theta), args.repeats)
+    grid_first, grid_time, grid_cpu = timed(grid, args.repeats)
+    jac_first, jac_time, jac_cpu = timed(lambda: jacobian(theta), args.repeats)
     runs = args.frequencies * args.amplitudes
     steps = 60 * args.steps_per_period
     result = {
@@ -84,13 +138,17 @@ def main() -> None:
         "grid": {"frequencies": args.frequencies, "amplitudes": args.amplitudes, "runs": runs,
                  "steps_per_run": steps, "bead_steps": runs * steps},
         "grid_s": grid_time,
+        "grid_cpu_s": grid_cpu,
         "grid_first_call_s": grid_first,
         "jacobian_4_params_s": jac_time,
+        "jacobian_4_params_cpu_s": jac_cpu,
         "jacobian_first_call_s": jac_first,
         "jacobian_over_grid": jac_time / grid_time,
         "bead_steps_per_s": runs * steps / grid_time,
         "check_peak_rms_m_s": float(np.max(np.asarray(grid()[0]))),
     }
+    if not args.no_checks:
+        result["checks"] = physics_checks()
     write_json(args.out, result)
     print(json.dumps(result, indent=1))
 

@@ -14,10 +14,47 @@ displacement at harmonics of the drive, differentiable in forward mode:
 """
 
 from .chain import DrivenChain as DrivenChain
+from .floquet import Floquet as Floquet
+from .floquet import floquet_multipliers as floquet_multipliers
+from .floquet import period_doubling_threshold as period_doubling_threshold
 from .grid import LockinGrid as LockinGrid
 from .grid import lockin_grid as lockin_grid
 from .grid import settle_periods as settle_periods
+from .grid_sweep import LockinSweepResult as LockinSweepResult
+from .grid_sweep import read_lockin_sweep as read_lockin_sweep
+from .grid_sweep import run_lockin_sweep as run_lockin_sweep
 from .lockin import LockIn as LockIn
 from .lockin import lockin as lockin
+from .schedule import DrivenTraces as DrivenTraces
+from .schedule import HarmonicSchedule as HarmonicSchedule
+from .schedule import ScheduleLockin as ScheduleLockin
+from .schedule import chirp as chirp
+from .schedule import lockin_schedule as lockin_schedule
+from .schedule import record_sampled as record_sampled
+from .schedule import record_schedule as record_schedule
+from .steady import SteadyLockin as SteadyLockin
+from .steady import lockin_until_steady as lockin_until_steady
 
-__all__ = ["DrivenChain", "LockIn", "LockinGrid", "lockin", "lockin_grid", "settle_periods"]
+__all__ = [
+    "DrivenChain",
+    "DrivenTraces",
+    "Floquet",
+    "HarmonicSchedule",
+    "LockIn",
+    "LockinGrid",
+    "LockinSweepResult",
+    "ScheduleLockin",
+    "SteadyLockin",
+    "chirp",
+    "floquet_multipliers",
+    "lockin",
+    "lockin_grid",
+    "lockin_schedule",
+    "lockin_until_steady",
+    "period_doubling_threshold",
+    "read_lockin_sweep",
+    "record_sampled",
+    "record_schedule",
+    "run_lockin_sweep",
+    "settle_periods",
+]

@@ -21,7 +21,8 @@ the scheme stays symmetric, second order and stable for any damping. The contact
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -40,7 +41,7 @@ class KernelParams(NamedTuple):
     damping_rate_per_s: jax.Array  # (n, 1)
     kappa_n_m1p5: jax.Array  # (n + 1, 1)
     static_overlap_m: jax.Array  # (n + 1, 1)
-    eta_s: jax.Array  # ()
+    eta_s: jax.Array | None  # (); None: no contact damping (compiled without it)
 
 
 class State(NamedTuple):
@@ -69,9 +70,11 @@ def contact_forces(p: KernelParams, x, v, drive_m, drive_m_s) -> jax.Array:
     zero = jnp.zeros_like(x[:1])
     front = jnp.concatenate([drive_m[None] + zero, x])
     back = jnp.concatenate([x, zero])
+    overlap = p.static_overlap_m + front - back
+    if p.eta_s is None:
+        return contact.hertz_force(overlap, p.kappa_n_m1p5)
     rate = jnp.concatenate([drive_m_s[None] + zero, v]) - jnp.concatenate([v, zero])
-    _, total = contact.contact_force(p.static_overlap_m + front - back, rate, p.kappa_n_m1p5, p.eta_s)
-    return total
+    return contact.contact_force(overlap, rate, p.kappa_n_m1p5, p.eta_s)[1]
 
 
 def contact_accel(p: KernelParams, force_n) -> jax.Array:
@@ -79,11 +82,13 @@ def contact_accel(p: KernelParams, force_n) -> jax.Array:
     return (force_n[:-1] - force_n[1:]) * p.inv_mass_per_kg
 
 
-def static_state(p: KernelParams, batch: int) -> State:
-    """B runs at rest in the static equilibrium, the driver at 0."""
+def static_state(p: KernelParams, runs: jax.Array) -> State:
+    """B runs at rest in the static equilibrium, the driver at 0. `runs`: any (B,) per-run
+    array (e.g. the frequencies): the state takes its length, and under `shard_map` its
+    sharding (zeros built from it vary along the batch as the runs do)."""
     n = p.inv_mass_per_kg.shape[0]
-    zeros = jnp.zeros((n, batch), dtype=jnp.float64)
-    rest = jnp.zeros((batch,), dtype=jnp.float64)
+    rest = 0.0 * jnp.asarray(runs, dtype=jnp.float64)
+    zeros = jnp.zeros((n, 1), dtype=jnp.float64) + rest
     return State(zeros, zeros, contact_accel(p, contact_forces(p, zeros, zeros, rest, rest)))
 
 
@@ -132,3 +137,28 @@ def advance(
         return state, (None if record is None else record(state, u, u_dot))
 
     return jax.lax.scan(body, state, steps, unroll=max(1, min(int(unroll), int(steps.shape[0]) or 1)))
+
+
+def advance_sampled(
+    p: KernelParams,
+    state: State,
+    dt_s,
+    drive: DriveFn,
+    first_step: int,
+    n_samples: int,
+    every_steps: int,
+    record: RecordFn,
+    *,
+    unroll: int = DEFAULT_UNROLL,
+):
+    """`advance` through steps `first_step` .. `first_step` + `n_samples` × `every_steps` - 1,
+    recording after every `every_steps`-th step only. **Returns:** (final state, records
+    stacked along a new leading axis of length `n_samples`)."""
+
+    def sample(state, start):
+        steps = start + jnp.arange(every_steps)
+        state, _ = advance(p, state, dt_s, drive, steps, unroll=unroll)
+        u, u_dot = drive(steps[-1])
+        return state, record(state, u, u_dot)
+
+    return jax.lax.scan(sample, state, first_step + every_steps * jnp.arange(n_samples))

@@ -21,11 +21,11 @@ import jax.numpy as jnp
 import numpy as np
 
 
-class LockIn(eqx.Module):
-    """A lock-in reading. `complex_amplitude`: $c = Ae^{i\\varphi}$ (the signal's unit);
-    `rms` = $|c|/\\sqrt2$; `phase_rad` = $\\varphi$ against $\\cos(2\\pi f t)$, rad."""
+class AbstractReading(eqx.Module):
+    """Lock-in readings held as complex amplitudes $c = Ae^{i\\varphi}$ (the signal's unit),
+    with the lab's RMS $|c|/\\sqrt2$ and phase $\\varphi$ (rad, against the reference's cos)."""
 
-    complex_amplitude: jax.Array
+    complex_amplitude: eqx.AbstractVar[jax.Array]
 
     @property
     def rms(self) -> jax.Array:
@@ -34,6 +34,13 @@ class LockIn(eqx.Module):
     @property
     def phase_rad(self) -> jax.Array:
         return jnp.angle(self.complex_amplitude)
+
+
+class LockIn(AbstractReading):
+    """A lock-in reading: `complex_amplitude` $c = Ae^{i\\varphi}$, `.rms`, `.phase_rad`
+    (against $\\cos(2\\pi f t)$)."""
+
+    complex_amplitude: jax.Array
 
 
 def lockin(signal, sample_interval_s, frequency_hz, *, start_time_s=0.0, axis: int = -1,

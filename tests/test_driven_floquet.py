@@ -1,0 +1,85 @@
+"""Floquet multipliers: closed forms for linear oscillators, finite differences for a Hertz
+orbit, and the period-doubling threshold against the research notes' independent model."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.linalg import expm
+from test_driven import linear_mode_frequencies_hz, lydon_bead, lydon_fitted_bead, uneven_chain
+
+from hertzchain.driven.floquet import floquet_multipliers, period_doubling_threshold, period_map
+
+
+def test_multipliers_of_a_damped_linear_oscillator_in_closed_form():
+    chain = lydon_bead(damping_rate_per_s=1800.0)
+    gamma = 1800.0
+    omega0 = 2 * np.pi * linear_mode_frequencies_hz(chain)[0]
+    omega_d = np.sqrt(omega0**2 - gamma**2 / 4)
+    frequencies = np.array([3000.0, 5000.0, 9000.0])
+    # amplitude 0: the orbit is the static state, the map the linearised chain's
+    floquet = floquet_multipliers(chain, frequencies, 0.0, steps_per_period=1000, ramp_periods=0, hold_periods=1,
+                                  newton_steps=0)
+    period = 1 / frequencies
+    exact = np.exp((-gamma / 2 + 1j * omega_d) * period)
+    got = floquet.multipliers
+    np.testing.assert_allclose(np.abs(got), np.broadcast_to(np.abs(exact)[:, None], got.shape), rtol=1e-5)
+    np.testing.assert_allclose(np.sort(np.angle(got), axis=1), np.sort(np.stack([-np.angle(exact), np.angle(exact)], 1), axis=1),
+                               atol=1e-4)  # Verlet's phase error per period: 2 pi (omega0 dt)^2 / 24 < 3e-5 here
+
+
+def test_multipliers_of_a_linearised_chain_match_the_matrix_exponential():
+    chain = uneven_chain()
+    k = np.asarray(chain.contact_stiffness_n_m())
+    m = np.asarray(chain.bead_mass_kg)
+    gamma = np.asarray(chain.damping_rate_per_s)
+    stiffness = np.diag(k[:-1] + k[1:]) - np.diag(k[1:-1], 1) - np.diag(k[1:-1], -1)
+    system = np.block([[np.zeros((3, 3)), np.eye(3)], [-stiffness / m[:, None], -np.diag(gamma)]])
+    frequency = 2100.0
+    exact = np.linalg.eigvals(expm(system / frequency))
+    ratio = linear_mode_frequencies_hz(chain)[-1] / frequency
+    steps = int(np.ceil(1000 * ratio))
+    # Verlet's phase error per drive period for the highest mode: 2 pi ratio (2 pi / 1000)^2 / 24
+    bound = 2 * np.pi * ratio * (2 * np.pi / 1000) ** 2 / 24
+    floquet = floquet_multipliers(chain, [frequency], [0.0], steps_per_period=steps, ramp_periods=0, hold_periods=1,
+                                  newton_steps=0)
+    got = floquet.multipliers[0]
+    for value in exact:
+        assert np.min(np.abs(got - value)) < 2 * bound * np.abs(value)
+
+
+def test_monodromy_matches_finite_differences_on_a_hertz_orbit():
+    chain = lydon_fitted_bead()
+    floquet = floquet_multipliers(chain, [7900.0], [20e-9], steps_per_period=64)
+    assert floquet.orbit_residual[0] < 1e-10
+    advance = jax.jit(period_map(chain, jnp.asarray([7900.0]), jnp.asarray([20e-9]), 64))
+    z = floquet.orbit_state[0]
+    scale = np.array([1e-12, 1e-7])  # m, m/s
+    columns = []
+    for i in range(2):
+        step = np.zeros(2)
+        step[i] = scale[i]
+        up = np.asarray(advance(jnp.asarray(z + step)[:, None]))[:, 0]
+        down = np.asarray(advance(jnp.asarray(z - step)[:, None]))[:, 0]
+        columns.append((up - down) / (2 * scale[i]))
+    np.testing.assert_allclose(floquet.monodromy[0], np.stack(columns, 1), rtol=1e-6, atol=1e-9)
+    # the orbit is a fixed point of the map
+    np.testing.assert_allclose(np.asarray(advance(jnp.asarray(z)[:, None]))[:, 0], z, rtol=1e-9,
+                               atol=1e-9 * np.abs(z).max())
+    # past the threshold: a real multiplier below -1 (period doubling)
+    assert floquet.most_negative_real[0] < -1.0
+
+
+def test_period_doubling_tongue_tip_matches_the_independent_model():
+    # research notes (real-data.md): the fitted single-bead model's tongue tip is 12 nm at 7.9 kHz
+    chain = lydon_fitted_bead()
+    amplitudes = np.linspace(2e-9, 40e-9, 20)
+    at_tip = period_doubling_threshold(chain, 7900.0, amplitudes)
+    assert at_tip == pytest.approx(12e-9, abs=0.5e-9)  # the notes quote two digits
+    # and the tongue's edge rises away from the tip
+    for frequency in (7000.0, 8300.0):
+        assert period_doubling_threshold(chain, frequency, amplitudes) > 1.3 * at_tip
+    # below every threshold the orbit is stable, with no multiplier beyond -1
+    below = floquet_multipliers(chain, [7900.0], [0.8 * at_tip])
+    assert below.largest_modulus[0] < 1.0
+
