@@ -326,13 +326,19 @@ def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "pr
     if progress:
         print(f"fitting {', '.join(layout.labels[c] for c in columns)} to {model.measured.size} points ...",
               file=sys.stderr, flush=True)
-    steps = 0
+    steps, tolerance = 0, 0.1
     if model.levels.size >= 2 * COARSE_LEVEL_STRIDE:  # first on a coarse grid: a twentieth of the cost
         coarse = DrivenModel(experiment, rows=model.rows[::COARSE_ROW_STRIDE], levels=model.levels[::COARSE_LEVEL_STRIDE],
                              progress=progress)
         first = least_squares(coarse, x, columns, max_steps=max_steps)
         x, steps = coarse.clip(first.x), first.steps
-    result = least_squares(model, x, columns, max_steps=max_steps)
+        # on every point, the optimiser stops when Gauss-Newton promises less than a third of a
+        # standard error: 0.1 in chi^2 of independent points is 0.1 (1 + rho)/(1 - rho) in chi^2
+        # of these correlated ones (rho: lag-1 correlation of the residuals where the coarse fit
+        # ended; far from an optimum the residuals are all correlated, so not from the start)
+        rho = min(max(lag1_autocorrelation(model.residuals(x).reshape(model.measured.shape)), 0.0), 0.999)
+        tolerance = 0.1 * (1 + rho) / (1 - rho)
+    result = least_squares(model, x, columns, max_steps=max_steps, tolerance=tolerance)
     return finish_fit(model, result.x, columns, result.converged, steps + result.steps, began)
 
 

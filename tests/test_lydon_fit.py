@@ -55,7 +55,6 @@ def _experiment(mass_kg, frequencies, drives, velocity, *, drive_m_per_v=1e-7, n
     )
 
 
-@pytest.mark.slow  # a scipy integration of 120 runs and a fit: about a minute on a loaded 2-core machine
 def test_fit_recovers_constants_of_a_scipy_simulated_bead():
     """A 15 g bead (not the paper's), 2.6 kHz linear resonance, F0 = 0.1 N (static overlap 75
     nm), gamma = 1200/s, true drive 1.15 x nominal, three drives (the bead swinging by up to
