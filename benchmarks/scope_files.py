@@ -139,13 +139,16 @@ def channel_toml(source, measures) -> str:
 
 
 def hertzchain(*args, cwd) -> dict:
-    """Run `python -m hertzchain ARGS` as a user would: exit status, wall time, output tail."""
+    """Run `python -m hertzchain ARGS` as a user would: exit status, wall time, the warnings
+    it printed, output tail."""
     start = time.perf_counter()
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     done = subprocess.run([sys.executable, "-m", "hertzchain", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, check=False)
+    warned = [line.strip() for line in done.stderr.splitlines() if "Warning: " in line]
     return {"command": "hertzchain " + " ".join(args), "exit_status": done.returncode,
-            "wall_s": time.perf_counter() - start, "output_tail": (done.stdout + done.stderr)[-1500:]}
+            "wall_s": time.perf_counter() - start, "warnings": warned,
+            "output_tail": (done.stdout + done.stderr)[-1500:]}
 
 
 # --- --noise --------------------------------------------------------------------------------

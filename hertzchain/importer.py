@@ -70,6 +70,7 @@ impact: it is listed in `ac_channels`, and the model compares it with that chang
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 import tomllib
 import warnings
@@ -86,6 +87,11 @@ from .units import parse_quantity
 SENSITIVITY_RANGE_V_PER_N = (1e-4, 10.0)
 MEASURES = ("wall", "contact_K", "sensor_K")
 COUPLINGS = ("ac", "dc")
+# Analogue noise (in converter steps) below which a channel's header notes that its
+# quantisation error is correlated (benchmarks/results/scope_noise_tek8bit_*.json: at 0.25
+# step the white-noise standard errors were 0.58-0.81 of the spread over seeds, at 1 step
+# 0.85-1.13).
+DITHER_STEPS = 0.5
 
 _MEASUREMENT_KEYS = ("format", "striker_velocity_m_s", "noise_std_n", "ac_channels", "sensor_beta",
                      "sensor_f0_hz")
@@ -420,6 +426,13 @@ def condition_shot(description: ExperimentDescription, shot: Shot) -> TraceFile:
                 header["sensor_beta"] = channel.sensor_beta
                 header["sensor_f0_hz"] = channel.sensor_f0_hz
             prefix = f"{name}_"
+            if base is not None and base.quantisation_floor > 0 and channel.noise_std_n is None:
+                analogue = math.sqrt(max(base.noise_std**2 - base.quantisation_floor**2, 0.0)) / step_v
+                if analogue < DITHER_STEPS:
+                    info[prefix + "noise_note"] = (
+                        f"analogue noise {analogue:.2f} of a converter step: the converter's error of a slowly "
+                        "changing signal is correlated from sample to sample, so standard errors from this "
+                        "white-noise sigma come out too small (0.6-0.8x the seed-to-seed spread for 0.25 step)")
             info |= {
                 prefix + "source": channel.source,
                 prefix + "sensitivity_v_per_n": repr(channel.sensitivity_v_per_n),

@@ -139,6 +139,8 @@ def test_import_conditions_every_shot(lab):
             peak = float(np.max(trace.channels[name]))
             expected = math.sqrt((0.003 * peak) ** 2 + (step / SENSITIVITY[source]) ** 2 / 12)
             assert 0.83 < float(trace.header[f"noise_std_n_{name}"]) / expected < 1.17
+            # a quarter-step noise dithers the converter too little: the header says so
+            assert "is correlated from sample to sample" in trace.header[f"x_import_{name}_noise_note"]
         assert trace.ac_channels == ("wall", "sensor_6")
 
 

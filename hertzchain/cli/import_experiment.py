@@ -78,6 +78,10 @@ def run(args: argparse.Namespace) -> int:
             if clipped:
                 print(f"warning: shot {label}, channel {name}: {clipped} samples at the scope's range "
                       "limit (clipped); fits leave them out.", file=sys.stderr)
+            note = trace.header.get(f"x_import_{name}_noise_note")
+            if note:
+                channels[name]["noise_note"] = note
+                print(f"note: shot {label}, channel {name}: {note}.", file=sys.stderr)
         listing.append({
             "shot": label, "file": path.name, "samples": int(len(trace.time_s)),
             "pre_trigger_samples": int(np.sum(trace.time_s < 0)),
