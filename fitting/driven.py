@@ -326,20 +326,29 @@ def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "pr
     if progress:
         print(f"fitting {', '.join(layout.labels[c] for c in columns)} to {model.measured.size} points ...",
               file=sys.stderr, flush=True)
-    steps, tolerance = 0, 0.1
+    steps = 0
     if model.levels.size >= 2 * COARSE_LEVEL_STRIDE:  # first on a coarse grid: a twentieth of the cost
         coarse = DrivenModel(experiment, rows=model.rows[::COARSE_ROW_STRIDE], levels=model.levels[::COARSE_LEVEL_STRIDE],
                              progress=progress)
         first = least_squares(coarse, x, columns, max_steps=max_steps)
         x, steps = coarse.clip(first.x), first.steps
-        # on every point, the optimiser stops when Gauss-Newton promises less than a third of a
-        # standard error: 0.1 in chi^2 of independent points is 0.1 (1 + rho)/(1 - rho) in chi^2
-        # of these correlated ones (rho: lag-1 correlation of the residuals where the coarse fit
-        # ended; far from an optimum the residuals are all correlated, so not from the start)
-        rho = min(max(lag1_autocorrelation(model.residuals(x).reshape(model.measured.shape)), 0.0), 0.999)
-        tolerance = 0.1 * (1 + rho) / (1 - rho)
-    result = least_squares(model, x, columns, max_steps=max_steps, tolerance=tolerance)
-    return finish_fit(model, result.x, columns, result.converged, steps + result.steps, began)
+    # on every point, the optimiser stops when no step gains a third of a standard error: 0.1 in
+    # chi^2 of independent points of unit variance is 0.1 s^2 (1 + rho)/(1 - rho) in chi^2 of these
+    # residuals, which are fractions of each curve's peak (variance s^2: no noise level is known)
+    # correlated along frequency (lag-1 correlation rho). Both are read where the last pass ended
+    # (far from an optimum the residuals are all correlated and s^2 too large), so the fit runs
+    # again from there while s^2 still fell by more than half (3 passes at most).
+    variance = np.inf
+    for _ in range(3):
+        residuals = model.residuals(x)
+        rho = min(max(lag1_autocorrelation(residuals.reshape(model.measured.shape)), 0.0), 0.999)
+        previous, variance = variance, float(residuals @ residuals) / max(residuals.size - len(columns), 1)
+        if variance > 0.5 * previous:
+            break
+        result = least_squares(model, x, columns, max_steps=max_steps,
+                               tolerance=0.1 * variance * (1 + rho) / (1 - rho))
+        x, steps = model.clip(result.x), steps + result.steps
+    return finish_fit(model, x, columns, result.converged, steps, began)
 
 
 def scan_precompression(experiment, x, grid=None, *, progress=False) -> np.ndarray:
