@@ -218,12 +218,14 @@ def _full_call(config):
     @forward.defjvp
     def forward_jvp(primals, tangents):
         batch = primals[0].shape[-1]
-        # every tangent at its primal's rows and the full batch width, one direction
-        # (a jacfwd's basis adds its directions in front: one kernel run for all of them)
+        # every tangent at its primal's rows and the full batch width, one direction. Under
+        # vmap (a jacfwd's basis, or a batch of fits whose primals are batched too) the kernel
+        # runs once per batch element ("sequential"): the handler takes primals of one chain
+        # layout, and batched primals with an expanded direction axis are not that layout.
         directions = tuple(
             jax.numpy.broadcast_to(t, primal.shape[:-1] + (batch,))[None] for primal, t in zip(primals, tangents)
         )
-        call = jax.ffi.ffi_call(TANGENT_TARGET, shapes(primals[0], (1,)), vmap_method="expand_dims")
+        call = jax.ffi.ffi_call(TANGENT_TARGET, shapes(primals[0], (1,)), vmap_method="sequential")
         out = call(*primals, *directions, index, **attrs)
         return forward(*primals), tuple(t[0] for t in out)
 

@@ -24,6 +24,7 @@ def setup_dict(setup: ChainSetup) -> dict:
         "end": setup.end,
         "sensor_beads": list(setup.sensor_beads),
         "plasticity": setup.plasticity,
+        "plastic_law": setup.plastic_law,
     }
     for name in ChainSetup.__dataclass_fields__:
         if name not in values:
