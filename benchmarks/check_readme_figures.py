@@ -50,7 +50,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCUMENTS = ("README.md", "benchmarks/README.md")
-RESULT_DIRS = ("benchmarks/results",)
+RESULT_DIRS = ("benchmarks/results", "examples/lydon2015/results")
 TIMING_WORDS = ("took", "takes", "take ", "taking", "ran ", "runs in", "run in", "median", "wall", "per chain",
                 "per step", "per draw", "per iteration", "per fit", "per call", "per evaluation", "faster",
                 "slower", "speed-up", "speedup", "throughput", "compil", "overhead", "timing", "timed")
@@ -85,7 +85,7 @@ def _kind_of_name(name: str) -> tuple[str, float] | None:
         return "time", 1.0
     if name.endswith(("_x", "×")) or any(w in name for w in ("ratio", "speedup", "speed-up", "factor", "over", "×")):
         return "ratio", 1.0
-    if any(w in name for w in ("fraction", "share", "percent", "rate", "efficiency")):
+    if any(w in name for w in ("fraction", "share", "percent", "rate", "efficiency", "misfit")):
         return "fraction", 1.0
     return None
 
