@@ -219,7 +219,9 @@ JG_HARDNESS_RATIO = 2.84
 # Strain rate of the rate-hardening law's reference, 1/s (Burgoyne & Daraio 2014).
 REFERENCE_STRAIN_RATE_S = 1e-3
 # Gauss-Legendre rule for the loading work of the elastic-plastic branch (in log overlap).
-_WORK_NODES, _WORK_WEIGHTS = (jnp.asarray(a) for a in np.polynomial.legendre.leggauss(32))
+# NumPy arrays (float64): a JAX array made at import would start JAX's backend before a
+# command can set up its devices (jax.distributed.initialize must come first)
+_WORK_NODES, _WORK_WEIGHTS = np.polynomial.legendre.leggauss(32)
 
 
 def rate_hardened_yield_stress(yield_stress_pa, rate_constant, strain_rate_s,
