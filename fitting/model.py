@@ -44,6 +44,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from hertzchain import native
 from hertzchain.batched import fast_path_reason, kernel_flags, record_batched
 from hertzchain.chain import ChainSetup
 from hertzchain.integrate import Recording, solve, stack_setups
@@ -301,6 +302,13 @@ class Problem:
         # a fit reads the recorded forces only: no running maxima, no energy books
         return kernel_flags(group.setups, switched_on=switched_on)._replace(ledger=False)
 
+    def simulates_natively(self) -> bool:
+        """Whether every group's simulation runs the C++ kernel (`hertzchain.native`) in a fit."""
+        return all(
+            flags is not None and native.kernel_for(flags, None) is not None
+            for flags in map(self.fast_path_flags, self.groups)
+        )
+
     def _group_simulator(self, group: _Group):
         global_specs = [self.instances[i].spec for i in group.global_index]
         local_specs = (
@@ -530,7 +538,7 @@ class Problem:
 
     def predictions(self, x) -> list[dict]:
         """Model of every fitted channel on the data's time axis (numpy), per experiment."""
-        model = np.asarray(self.model_vector(x))
+        model = np.asarray(jax.jit(self.model_vector)(x))
         return [{name: model[part] for name, part in parts.items()} for parts in self.residual_slices()]
 
     def residual_slices(self) -> list[dict]:

@@ -111,8 +111,8 @@ def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False
             columns += [data, predicted[channel], data - predicted[channel]]
             header += [f"data_{channel}", f"model_{channel}", f"residual_{channel}"]
         path = out / f"residuals_{_safe(experiment.label)}.csv"
-        rows = np.column_stack(columns).tolist()
-        write_csv(path, header, ([f"{x:.9g}" for x in row] for row in rows))
+        line = ",".join(["%.9g"] * len(columns))
+        write_csv(path, header, ((line % tuple(row)).split(",") for row in np.column_stack(columns).tolist()))
         written.append(path)
     for label, profile in result.profiles.items():
         table(
@@ -127,18 +127,19 @@ def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False
 
 def _thinned(time, *curves, points: int = SUMMARY_POINTS):
     """`time` and `curves` cut to about `points` samples: each block's minimum and maximum of
-    the first curve (the data), so that peaks survive the thinning."""
+    the first curve (the data), in time order, so that peaks survive the thinning."""
     n = len(time)
     if n <= points:
         return (time,) + curves
     block = int(math.ceil(2 * n / points))
-    starts = np.arange(0, n, block)
-    first = curves[0]
-    picks = []
-    for k in starts:
-        segment = first[k:k + block]
-        picks += sorted({k + int(np.argmin(segment)), k + int(np.argmax(segment))})
-    picks = np.asarray(picks)
+    first = np.asarray(curves[0], dtype=float)
+    rows = -(-n // block)
+    # the last block is padded with its own last sample, which never displaces a true extreme
+    padded = np.concatenate([first, np.full(rows * block - n, first[-1])]).reshape(rows, block)
+    base = np.arange(rows) * block
+    low = np.minimum(base + np.argmin(padded, axis=1), n - 1)
+    high = np.minimum(base + np.argmax(padded, axis=1), n - 1)
+    picks = np.unique(np.concatenate([low, high]))
     return (time[picks],) + tuple(c[picks] for c in curves)
 
 
@@ -166,7 +167,9 @@ def _summary_figure(result, predictions, out: Path) -> Path:
     axes[-1, 1].set_xlabel("time after impact (us)")
     figure.suptitle(f"fit: chi^2/dof = {result.reduced_chi2:.4g}; data (dots) and model (lines); "
                     "residuals with the +-2 sigma band", fontsize=9)
-    figure.tight_layout()
+    # fixed margins: `tight_layout` would draw the 2 x files panels once more only to measure them
+    figure.subplots_adjust(left=0.08, right=0.99, bottom=0.45 / figure.get_figheight(),
+                           top=1.0 - 0.6 / figure.get_figheight(), wspace=0.18, hspace=0.12)
     path = out / "fit_summary.png"
     save_figure(figure, path, dpi=100)
     plt.close(figure)

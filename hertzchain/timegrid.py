@@ -84,7 +84,8 @@ def shortest_contact_time_s(setup: ChainSetup) -> float:
     times = _contact_times
     for _ in range(batch_ndim):
         times = jax.vmap(times)
-    return float(np.min(np.asarray(times(setup))))
+    # one compiled program: run op by op, the estimate compiles each of its ~30 operations apart
+    return float(np.min(np.asarray(jax.jit(times)(setup))))
 
 
 def _check_resolution(dt_s: float, t_contact_s: float) -> None:

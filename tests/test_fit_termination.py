@@ -73,3 +73,20 @@ def test_a_fit_at_its_optimum_says_so_at_once(kinked_files, default_fit):
     assert again.converged, again.message
     assert again.n_steps <= 3
     assert abs(again.chi2 - result.chi2) < fit_module.OPTIMUM_TOLERANCE
+
+
+def test_the_steps_compiled_without_xla_passes_give_the_same_fit(kinked_files, default_fit):
+    # The fit of `default_fit` ran with the steps `problem.simulates_natively()` chose; the
+    # other compilation must reach the same optimum by the same steps (only XLA's
+    # optimisation passes differ between them, not the arithmetic's order in the kernel).
+    result, _ = default_fit
+    light = result.problem.simulates_natively()
+    patch = pytest.MonkeyPatch()
+    patch.setattr(type(result.problem), "simulates_natively", lambda self: not light)
+    try:
+        other = fitting.fit(kinked_files, PARAMS, progress=False, throw=False)
+    finally:
+        patch.undo()
+    assert other.converged and other.n_steps == result.n_steps
+    for name in PARAMS:
+        assert abs(other.values[name] - result.values[name]) < 1e-6 * result.stderr[name], name
