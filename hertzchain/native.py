@@ -122,6 +122,11 @@ def unavailable_reason() -> str | None:
     return _load()
 
 
+def library_path() -> Path:
+    """Where this machine's build of the kernel is (or will be) kept."""
+    return _library_path()
+
+
 def kernel_for(flags, devices) -> str | None:
     """Which C++ kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
     devices: "conservative" (no damping or friction, books or not), "full" (damping or

@@ -25,6 +25,7 @@ COMMANDS = {
     "sensitivity": ("hertzchain.cli.sensitivity", "exact sensitivities of observables to parameters"),
     "design": ("fitting.cli.design", "predicted uncertainties and optimal experiment plans"),
     "contact": ("fitting.cli.contact", "calibrate the elastic-plastic contact law on force-approach curves"),
+    "kernel": ("hertzchain.cli.kernel", "build the fused C++ kernel for this machine (once) and check it"),
 }
 
 
