@@ -189,7 +189,8 @@ def noise_check(seeds: int, out: Path, noise_steps: float = 0.25) -> dict:
         if fit:
             row |= {"reduced_chi2": fit.get("reduced_chi2"), "covariance": fit.get("covariance_scale"),
                     "values": {p: fit["params"][p]["value"] for p in ("eta", "mu", "C")},
-                    "stderr": {p: fit["params"][p]["stderr"] for p in ("eta", "mu", "C")}}
+                    "stderr": {p: fit["params"][p]["stderr"] for p in ("eta", "mu", "C")},
+                    "stderr_stated_noise": {p: fit["params"][p].get("stderr_stated_noise") for p in ("eta", "mu", "C")}}
         rows.append(row)
         print(f"seed {seed}: exit {run['exit_status']}, chi2/dof {row.get('reduced_chi2')}, "
               f"{run['wall_s']:.0f} s", flush=True)
@@ -211,6 +212,10 @@ def _noise_summary(rows) -> dict:
             spread = float(np.std(values, ddof=1))
             summary[p] = {"mean": float(values.mean()), "spread": spread, "mean_stderr": float(errors.mean()),
                           "stderr_over_spread": float(errors.mean() / spread) if spread > 0 else None}
+            stated = [r.get("stderr_stated_noise", {}).get(p) for r in fitted]
+            if spread > 0 and all(v is not None for v in stated):  # the white-noise errors, for comparison
+                summary[p]["stated_noise_stderr_over_spread"] = float(np.mean(stated) / spread)
+            summary[p]["covariances"] = sorted({r.get("covariance") for r in fitted})
     return summary
 
 

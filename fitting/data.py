@@ -89,6 +89,13 @@ class Experiment:
         """(n_samples,) bool: the channel's samples that enter the fit."""
         return ~np.asarray(self.excluded.get(channel, np.zeros(len(self.time_s), bool)))
 
+    def analogue_noise_steps(self, channel: str) -> float | None:
+        """The channel's analogue noise in converter steps, as the importer measured it on the
+        pre-trigger segment (`x_import_<channel>_analogue_noise_steps`), or None (unquantised,
+        or noise stated in the file)."""
+        value = self.trace.header.get(f"x_import_{channel}_analogue_noise_steps")
+        return None if value is None else float(value)
+
     @property
     def ac_channels(self) -> tuple[str, ...]:
         """Fitted channels that read changes of force only (see `TraceFile.ac_channels`)."""

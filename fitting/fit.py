@@ -26,7 +26,9 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from hertzchain import contact
 from hertzchain.atomic import json_ready
+from hertzchain.importer import DITHER_STEPS
 
 from . import start as start_values
 from .data import FitInputError, as_experiments
@@ -46,6 +48,8 @@ from .parameters import (
 from .priors import apply_priors, parse_priors, prior_names
 from .uncertainty import (
     Covariance,
+    COVARIANCES,
+    correlated_score_covariance,
     covariance_choice,
     covariance_from_jacobian,
     identifiability_warnings,
@@ -652,7 +656,10 @@ class FitResult:
       data cannot determine it).
     - `units`: label -> SI unit.
     - `correlation`: (p, p) correlation matrix in `labels` order; `covariance` likewise.
-    - `covariance_scale`: "noise" (sigma known) or "residual" (scaled by chi^2/dof);
+    - `covariance_scale`: "noise" (sigma known), "residual" (scaled by chi^2/dof) or
+      "correlated" (the residuals' own sample-to-sample covariance, Newey-West);
+      `stderr_stated_noise`: label -> the standard error the stated noise alone gives (the
+      "noise" scale), beside `stderr` for comparison;
       `covariance_reason`: why, and whether chi^2/dof agrees with the noise estimate
       (`fitting.uncertainty.covariance_choice`).
     - `chi2`, `dof`, `reduced_chi2`: of the whitened residuals.
@@ -695,6 +702,7 @@ class FitResult:
     x: np.ndarray
     elapsed_s: float
     timings: dict = dataclasses.field(default_factory=dict)
+    stderr_stated_noise: dict = dataclasses.field(default_factory=dict)
 
     def predictions(self) -> list[dict]:
         """Fitted model of every channel on the data's time axis, per file."""
@@ -704,6 +712,7 @@ class FitResult:
         """A JSON-ready dict (SI units; non-finite numbers as null)."""
         params = {
             label: {"value": json_ready(self.values[label]), "stderr": json_ready(self.stderr[label]),
+                    "stderr_stated_noise": json_ready(self.stderr_stated_noise.get(label, self.stderr[label])),
                     "unit": self.units[label]}
             for label in self.labels
         }
@@ -802,6 +811,32 @@ def _residual_rms(problem: Problem, residuals) -> tuple[dict, dict]:
     return rms, whitened
 
 
+def _correlated_series(problem: Problem) -> tuple[list, str | None]:
+    """Each fitted channel's residual rows with the lag over which its residuals may be
+    correlated: the striker's Hertz collision time with bead 1 in samples (the duration of
+    the impact, over which the model's pulse shape, and with it a converter's error of the
+    moving signal, changes); and why the residuals are expected to be correlated (the
+    channels recorded with less than `DITHER_STEPS` of analogue noise), or None."""
+    series, coarse = [], []
+    for experiment, slices in zip(problem.experiments, problem.residual_slices()):
+        setup = experiment.trace.setup()
+        striker, bead = float(setup.striker_mass_kg), float(setup.bead_mass_kg[0])
+        duration = float(contact.collision_time(striker * bead / (striker + bead), float(setup.contact_kappa()[0]),
+                                                float(setup.striker_velocity_m_s)))
+        lags = max(1, round(duration / float(experiment.time_s[1] - experiment.time_s[0])))
+        for channel, rows in slices.items():
+            used = np.arange(rows.start, rows.stop)[experiment.used(channel)]
+            series.append((used, lags))
+            steps = experiment.analogue_noise_steps(channel)
+            if steps is not None and steps < DITHER_STEPS:
+                coarse.append(f"{experiment.label}:{channel} ({steps:.2f} step)")
+    if not coarse:
+        return series, None
+    shown = ", ".join(coarse[:4]) + (f" and {len(coarse) - 4} more" if len(coarse) > 4 else "")
+    return series, (f"{shown} recorded with analogue noise below {DITHER_STEPS:g} of a converter step, "
+                    "where the converter's error of a moving signal is correlated from sample to sample")
+
+
 def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multistart: int = 1,
         seed: int = 0, max_steps: int = 100, tolerance: float = OPTIMUM_TOLERANCE,
         covariance: str = "auto", profile=(), profile_points: int = 13,
@@ -825,7 +860,7 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
       being rejected); a start has converged, and stops, when neither the Gauss-Newton step's
       prediction nor any fraction of that step (a kink of the stick-slip loss) lowers chi^2
       by as much (`_at_optimum`).
-    - `covariance`: "auto", "noise" or "residual" (see `fitting.uncertainty`).
+    - `covariance`: "auto", "noise", "residual" or "correlated" (see `fitting.uncertainty`).
     - `profile`: labels to compute profile-likelihood intervals for.
     - `forward`: a `ForwardModel` (custom simulator, model switches, time step).
     - `progress`: report iterations on stderr.
@@ -840,8 +875,8 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
     if multistart < 1:
         raise ValueError(f"multistart must be >= 1, got {multistart}.")
     problem = make_problem(experiments, params, fixed=fixed, forward=forward, priors=priors)
-    if covariance not in ("auto", "noise", "residual"):
-        raise ValueError(f"covariance must be 'auto', 'noise' or 'residual', got {covariance!r}.")
+    if covariance not in COVARIANCES:
+        raise ValueError(f"covariance must be one of {', '.join(COVARIANCES)}; got {covariance!r}.")
     for label in profile:
         if label not in problem.labels:
             raise ValueError(f"profile: {label!r} is not fitted; fitted: {', '.join(problem.labels)}.")
@@ -872,8 +907,11 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
     converged = bool(ok[best])
     chi2_best = float(residuals @ residuals)
     dof = problem.n_fitted - p
-    scale, covariance_reason = covariance_choice(covariance, chi2_best, dof)
-    cov = covariance_from_jacobian(jacobian, problem.labels, chi2=chi2_best, dof=dof, scale=scale)
+    series, correlated = _correlated_series(problem)
+    scale, covariance_reason = covariance_choice(covariance, chi2_best, dof, correlated)
+    cov = covariance_from_jacobian(
+        jacobian, problem.labels, chi2=chi2_best, dof=dof, scale=scale,
+        score_covariance=correlated_score_covariance(jacobian, residuals, series) if scale == "correlated" else None)
     messages = identifiability_warnings(problem.instances, x, cov, problem.experiments)
     if coarse:
         messages.append(
@@ -960,6 +998,8 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
         problem=problem,
         x=x,
         elapsed_s=time.perf_counter() - began,
+        stderr_stated_noise=dict(zip(problem.labels, map(float, (cov if scale == "noise" else covariance_from_jacobian(
+            jacobian, problem.labels, chi2=chi2_best, dof=dof, scale="noise")).stderr))),
         timings={
             "set_up_s": set_up - began,
             # the optimiser's first step comes after the compilation and the start's evaluation

@@ -11,7 +11,17 @@ covariance is $s^2 (J^T J)^{-1}$. Two choices of $s^2$:
   the fit's residuals (the usual least-squares choice when sigma is not known, and a
   guard against underestimated noise or a model that misses something).
 
-`"auto"` (default) uses `"noise"` unless the residuals contradict the noise estimate:
+- `"correlated"`: the sandwich $(J^T J)^{-1} B (J^T J)^{-1}$ with $B$ the Newey-West
+  (Bartlett-weighted) estimate of the covariance of the score $J^T r$ from the residuals
+  themselves, summed over each channel's series up to a lag of the impact's duration in
+  samples (`correlated_score_covariance`). It holds where the residuals are correlated
+  from sample to sample, as a converter's error is for a slowly moving signal when the
+  analogue noise is below half a step (`hertzchain.importer.DITHER_STEPS`); for white
+  residuals it equals `"residual"` up to its own sampling noise.
+
+`"auto"` (default) uses `"correlated"` where a fitted channel was recorded with analogue
+noise below half a converter step (the importer measures it), else `"noise"` unless the
+residuals contradict the noise estimate:
 `noise_band(dof)` is the range of $\\chi^2/\\mathrm{dof}$ they allow, the $\\chi^2$
 distribution's own width, 3 $\\sqrt{2/\\mathrm{dof}}$ on each side, around
 [1/(1 + `MODEL_ERROR_ALLOWANCE`), 1 + `MODEL_ERROR_ALLOWANCE`]. The allowance (0.25:
@@ -59,12 +69,17 @@ def noise_band(dof: int) -> tuple[float, float]:
     return 1.0 / (1.0 + MODEL_ERROR_ALLOWANCE) - width, 1.0 + MODEL_ERROR_ALLOWANCE + width
 
 
-def covariance_choice(requested: str, chi2: float, dof: int) -> tuple[str, str]:
-    """(scale, reason): the covariance scale ("noise" or "residual") for `requested`
-    ("auto", "noise" or "residual") at a fit's chi^2 and dof, and a sentence on why (and on
-    whether the residuals contradict the noise estimate, whatever was requested)."""
-    if requested not in ("auto", "noise", "residual"):
-        raise ValueError(f"covariance must be 'auto', 'noise' or 'residual', got {requested!r}.")
+COVARIANCES = ("auto", "noise", "residual", "correlated")
+
+
+def covariance_choice(requested: str, chi2: float, dof: int, correlated: str | None = None) -> tuple[str, str]:
+    """(scale, reason): the covariance scale ("noise", "residual" or "correlated") for
+    `requested` (one of `COVARIANCES`) at a fit's chi^2 and dof, and a sentence on why (and
+    on whether the residuals contradict the noise estimate, whatever was requested).
+    `correlated`: why the residuals are expected to be correlated (e.g. the channels recorded
+    below half a converter step of noise), or None; "auto" then chooses "correlated"."""
+    if requested not in COVARIANCES:
+        raise ValueError(f"covariance must be one of {', '.join(COVARIANCES)}; got {requested!r}.")
     low, high = noise_band(dof)
     reduced = chi2 / dof if dof > 0 else math.nan
     inside = math.isfinite(reduced) and low <= reduced <= high
@@ -78,12 +93,33 @@ def covariance_choice(requested: str, chi2: float, dof: int) -> tuple[str, str]:
                    f"{side} than the noise estimate says (sigma off by a factor {math.sqrt(reduced):.3g}"
                    + (", or the model misses something" if reduced > high else "") + ")")
     if requested == "auto":
-        scale = "noise" if inside or not math.isfinite(reduced) else "residual"
+        scale = "correlated" if correlated else "noise" if inside or not math.isfinite(reduced) else "residual"
     else:
         scale = requested
-    how = ("standard errors from the stated noise" if scale == "noise" else
-           "standard errors scaled by sqrt(chi^2/dof), the noise re-estimated from the residuals")
+    how = {"noise": "standard errors from the stated noise",
+           "residual": "standard errors scaled by sqrt(chi^2/dof), the noise re-estimated from the residuals",
+           "correlated": "standard errors from the residuals' own sample-to-sample covariance (Newey-West)"
+           + (f", because {correlated}" if correlated else "")}[scale]
     return scale, f"{verdict}; {how} ({'chosen automatically' if requested == 'auto' else 'as asked'})."
+
+
+def correlated_score_covariance(jacobian, residuals, series) -> np.ndarray:
+    """Newey-West estimate of the covariance of the score $J^T r$, (p, p).
+
+    $B = \sum_s \sum_{|l| \le L_s} (1 - |l|/(L_s+1)) \sum_t g_t g_{t+l}^T$ with
+    $g_t = r_t J_t$ over each series $s$ (one channel of one file: residuals correlated within
+    it, independent between them). `series`: (indices into the residual vector in time order,
+    lag L_s) pairs. For white residuals of unit variance $B \to J^T J$."""
+    jac = np.asarray(jacobian, dtype=float)
+    r = np.asarray(residuals, dtype=float)
+    meat = np.zeros((jac.shape[1], jac.shape[1]))
+    for rows, lags in series:
+        g = r[rows, None] * jac[rows]
+        meat += g.T @ g
+        for lag in range(1, min(int(lags), len(rows) - 1) + 1):
+            cross = g[lag:].T @ g[:-lag]
+            meat += (1.0 - lag / (lags + 1.0)) * (cross + cross.T)
+    return meat
 
 
 @dataclasses.dataclass(frozen=True)
@@ -105,10 +141,14 @@ class Covariance:
     weak_directions: list
 
 
-def covariance_from_jacobian(jacobian, labels, *, chi2: float, dof: int, scale: str) -> Covariance:
-    """Gauss-Newton covariance from the whitened Jacobian (see the module docstring)."""
-    if scale not in ("noise", "residual"):
-        raise ValueError(f"covariance scale must be 'noise', 'residual' or 'auto', got {scale!r}.")
+def covariance_from_jacobian(jacobian, labels, *, chi2: float, dof: int, scale: str,
+                             score_covariance=None) -> Covariance:
+    """Gauss-Newton covariance from the whitened Jacobian (see the module docstring);
+    `scale` "correlated" needs `score_covariance` (`correlated_score_covariance`)."""
+    if scale not in ("noise", "residual", "correlated"):
+        raise ValueError(f"covariance scale must be 'noise', 'residual' or 'correlated', got {scale!r}.")
+    if scale == "correlated" and score_covariance is None:
+        raise ValueError("the 'correlated' covariance needs the score's covariance (correlated_score_covariance).")
     jac = np.asarray(jacobian, dtype=float)
     p = jac.shape[1]
     norms = np.linalg.norm(jac, axis=0)
@@ -120,7 +160,12 @@ def covariance_from_jacobian(jacobian, labels, *, chi2: float, dof: int, scale: 
     inverse = np.where(good, 1.0 / np.where(good, singular, 1.0) ** 2, 0.0)
     normalised_cov = (vt.T * inverse) @ vt
     factor = 1.0 if scale == "noise" else (chi2 / dof if dof > 0 else math.nan)
-    cov = factor * normalised_cov / np.outer(safe, safe)
+    if scale == "correlated":  # the sandwich, in the normalised columns
+        meat = np.asarray(score_covariance, dtype=float) / np.outer(safe, safe)
+        cov = normalised_cov @ meat @ normalised_cov / np.outer(safe, safe)
+        factor = max(factor, 1.0) if math.isfinite(factor) else 1.0
+    else:
+        cov = factor * normalised_cov / np.outer(safe, safe)
     weak = []
     for k in np.nonzero(~good)[0]:
         components = {labels[j]: float(vt[k, j]) for j in range(p) if abs(vt[k, j]) > _PARTICIPATION}

@@ -87,10 +87,13 @@ from .units import parse_quantity
 SENSITIVITY_RANGE_V_PER_N = (1e-4, 10.0)
 MEASURES = ("wall", "contact_K", "sensor_K")
 COUPLINGS = ("ac", "dc")
-# Analogue noise (in converter steps) below which a channel's header notes that its
-# quantisation error is correlated (benchmarks/results/scope_noise_tek8bit_*.json: at 0.25
-# step the white-noise standard errors were 0.58-0.81 of the spread over seeds, at 1 step
-# 0.85-1.13).
+# Analogue noise (in converter steps) below which a channel's quantisation error is taken as
+# correlated and signal-dependent: the quantisation theorem's white, uniform error model holds
+# for a normal input once its sigma reaches about half a step (Widrow & Kollar, Quantization
+# Noise, 2008, ch. 11), not below. Measured on 8-bit AC-coupled files of a second generator
+# (benchmarks/results/scope_noise_tek8bit_*.json): at 0.25 step the white-noise standard
+# errors were 0.58-0.81 of the spread over seeds, at 1 step 0.85-1.13; the value is the
+# theorem's, not fitted between the two.
 DITHER_STEPS = 0.5
 
 _MEASUREMENT_KEYS = ("format", "striker_velocity_m_s", "noise_std_n", "ac_channels", "sensor_beta",
@@ -428,11 +431,13 @@ def condition_shot(description: ExperimentDescription, shot: Shot) -> TraceFile:
             prefix = f"{name}_"
             if base is not None and base.quantisation_floor > 0 and channel.noise_std_n is None:
                 analogue = math.sqrt(max(base.noise_std**2 - base.quantisation_floor**2, 0.0)) / step_v
+                info[prefix + "analogue_noise_steps"] = repr(analogue)
                 if analogue < DITHER_STEPS:
                     info[prefix + "noise_note"] = (
                         f"analogue noise {analogue:.2f} of a converter step: the converter's error of a slowly "
                         "changing signal is correlated from sample to sample, so standard errors from this "
-                        "white-noise sigma come out too small (0.6-0.8x the seed-to-seed spread for 0.25 step)")
+                        "white-noise sigma come out too small (0.6-0.8x the seed-to-seed spread for 0.25 step); "
+                        "hertzchain fit uses the covariance for correlated residuals then")
             info |= {
                 prefix + "source": channel.source,
                 prefix + "sensitivity_v_per_n": repr(channel.sensitivity_v_per_n),

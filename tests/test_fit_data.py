@@ -5,8 +5,10 @@ import dataclasses
 import numpy as np
 import pytest
 
+import fitting
 import hertzchain as hc
 from fitting.data import FitInputError, estimate_noise_std, make_experiment
+from fitting.synthetic import paper_setups, synthetic_traces
 from hertzchain.tracefile import TraceFile, setup_header
 
 
@@ -67,3 +69,29 @@ def test_sampling_too_coarse_for_the_pulse():
 def test_unknown_channel():
     with pytest.raises(FitInputError, match="no channel 'contact_9'"):
         make_experiment(_trace(), channels=("contact_9",))
+
+
+def test_sub_dither_channels_make_the_fit_expect_correlated_residuals():
+    # the importer writes x_import_<channel>_analogue_noise_steps; below half a converter step
+    # the fit's covariance accounts for sample-to-sample correlation, with lags of the
+    # striker's collision time in samples
+    import importlib
+
+    from hertzchain import contact
+
+    fit_module = importlib.import_module("fitting.fit")
+    setups = paper_setups([0.2], eta_s=2e-6, mu=0.19, mu_star=0.02, n_beads=8)
+    trace = synthetic_traces(setups, contacts=(3,), t_end_s=4e-4, noise_std_n=0.05, seed=2)[0]
+    quiet, coarse = dataclasses.replace(trace, header=dict(trace.header)), dataclasses.replace(
+        trace, header={**trace.header, "x_import_wall_analogue_noise_steps": "0.25",
+                       "x_import_contact_3_analogue_noise_steps": "1.1"})
+    problem = fitting.make_problem([make_experiment(quiet, label="a"), make_experiment(coarse, label="b")],
+                                   ("eta", "mu", "C"))
+    series, reason = fit_module._correlated_series(problem)
+    setup = quiet.setup()
+    striker, bead = float(setup.striker_mass_kg), float(setup.bead_mass_kg[0])
+    duration = float(contact.collision_time(striker * bead / (striker + bead), float(setup.contact_kappa()[0]), 0.2))
+    assert {lags for _, lags in series} == {round(duration / float(quiet.time_s[1] - quiet.time_s[0]))}
+    assert len(series) == 4 and sum(len(rows) for rows, _ in series) == problem.n_fitted
+    assert reason is not None and "b:wall (0.25 step)" in reason and "contact_3" not in reason
+    assert fit_module._correlated_series(fitting.make_problem([make_experiment(quiet)], ("eta",)))[1] is None

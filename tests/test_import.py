@@ -157,13 +157,18 @@ def test_fit_from_scope_files_recovers_the_truth_at_the_information_limit(lab, t
     assert values["eta"] == pytest.approx(TRUTH["eta"], rel=0.05)
     assert values["mu"] == pytest.approx(TRUTH["mu"], rel=0.10)
     assert values["C"] == pytest.approx(c_true, rel=0.003)
-    # standard errors as the Cramer-Rao bound of the same plan predicts
+    # the stated noise's standard errors as the Cramer-Rao bound of the same plan predicts;
+    # a quarter-step noise leaves the converter's error correlated, so the reported ones come
+    # from the residuals' own covariance and are wider (1.4x on average over 20 noise seeds
+    # of a second generator, benchmarks/results/scope_noise_tek8bit_*)
+    assert fit["covariance_scale"] == "correlated" and "below 0.5 of a converter step" in fit["covariance_reason"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", fitting.FitWarning)
         bound = design(fitting.load_experiments([experiment]), ("eta", "mu", "C"),
                                values={"eta": TRUTH["eta"], "mu": TRUTH["mu"], "C": c_true})
     for name in ("eta", "mu", "C"):
-        assert stderr[name] == pytest.approx(bound.stderr[name], rel=0.3), name
+        assert fit["params"][name]["stderr_stated_noise"] == pytest.approx(bound.stderr[name], rel=0.3), name
+        assert 1.0 <= stderr[name] / fit["params"][name]["stderr_stated_noise"] < 2.5, name
 
     # the same data through `hertzchain import` and the trace files give the same numbers
     imported = tmp_path / "imported"

@@ -41,6 +41,7 @@ from ..posterior import PosteriorWarning, sample_posterior
 from ..posterior_report import write_posterior_report
 from ..priors import parse_priors
 from ..report import summary_text, write_report
+from ..uncertainty import COVARIANCES
 
 
 def _assignments(text: str | None, option: str) -> dict:
@@ -78,8 +79,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--channels", help="channels to fit, e.g. contact_6,wall [all]")
     parser.add_argument("--noise-std", help="noise sigma of every channel (N) [header, else estimated]")
     parser.add_argument(
-        "--covariance", choices=("auto", "noise", "residual"), default="auto",
-        help="standard errors from the stated noise or scaled by chi^2/dof [auto]",
+        "--covariance", choices=COVARIANCES, default="auto",
+        help="standard errors from the stated noise, scaled by chi^2/dof, or from the residuals' own "
+        "sample-to-sample covariance (correlated); auto chooses (fitting.uncertainty) [auto]",
     )
     parser.add_argument("--max-steps", type=int, default=100, help="optimiser iterations per start [100]")
     parser.add_argument(
