@@ -57,7 +57,7 @@ import numpy as np
 from hertzchain.contact import kappa_sphere_flat, kappa_sphere_sphere
 from hertzchain.driven.sweeper_files import LockinSweep, SweeperFileError, lockin_sweep, read_sweeper_table
 from hertzchain.importer import ExperimentFileError
-from hertzchain.importer import _quantity as quantity_of_key
+from hertzchain.importer import quantity_of_key
 
 KIND = "driven"
 TOP_KEYS = ("kind", "label", "chain", "drive", "sensor", "sweep", "model")

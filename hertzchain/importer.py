@@ -174,8 +174,9 @@ def _check_keys(table: dict, valid, where: str) -> None:
             _fail(where, f"unknown key {key!r}; valid keys: {', '.join(valid)} (prefix your own with 'x_').")
 
 
-def _quantity(value, key: str, where: str) -> float:
-    """A number, or a string with a unit matching the key's suffix ("13mm" for *_m)."""
+def quantity_of_key(value, key: str, where: str) -> float:
+    """The value of an experiment-file key in SI: a number, or a string with a unit matching
+    the key's suffix ("13mm" for *_m); `where` names the place in errors."""
     if isinstance(value, bool):
         _fail(where, f"{key} must be a number, got {value!r}.")
     if isinstance(value, (int, float)):
@@ -199,7 +200,7 @@ def _chain_values(table: dict, where: str) -> dict:
                 _fail(where, f"{key} must be an integer, got {value!r}.")
             values[key] = value
         else:
-            values[key] = _quantity(value, key, where)
+            values[key] = quantity_of_key(value, key, where)
     return values
 
 
@@ -230,7 +231,7 @@ def _time_zero(value, where: str):
                          "gate), '+DELAY' for the time from the crossing to the impact: "
                          "'channel:CH3>2.5V+40us'.")
     try:
-        return _quantity(value, "time_zero_s", where)
+        return quantity_of_key(value, "time_zero_s", where)
     except ExperimentFileError:
         _fail(where, f"time_zero = {value!r}: use 'trigger', a delay such as '12us', or "
                      "'channel:NAME>LEVEL' (optionally '+DELAY', e.g. 'channel:CH3>2.5V+40us').")
@@ -245,7 +246,7 @@ def _channel(table: dict, where: str) -> Channel:
     kind, _, index = measures.partition("_")
     if not (measures == "wall" or (kind in ("contact", "sensor") and index.isdigit())):
         _fail(where, f"measures = {measures!r}; use one of {', '.join(MEASURES)} (K a number).")
-    sensitivity = _quantity(table["sensitivity_v_per_n"], "sensitivity_v_per_n", where)
+    sensitivity = quantity_of_key(table["sensitivity_v_per_n"], "sensitivity_v_per_n", where)
     low, high = SENSITIVITY_RANGE_V_PER_N
     if not sensitivity > 0:
         _fail(where, f"sensitivity_v_per_n = {sensitivity!r} must be positive (V/N); a sensor "
@@ -264,7 +265,7 @@ def _channel(table: dict, where: str) -> Channel:
     optional = {}
     for key in ("noise_std_n", "offset_v", "sensor_beta", "sensor_f0_hz"):
         if key in table:
-            optional[key] = _quantity(table[key], key, where)
+            optional[key] = quantity_of_key(table[key], key, where)
     if "noise_std_n" in optional and not optional["noise_std_n"] > 0:
         _fail(where, f"noise_std_n = {optional['noise_std_n']!r} must be positive (N).")
     if kind == "sensor":
@@ -298,7 +299,7 @@ def load_experiment(path) -> ExperimentDescription:
         _fail(f"{where} [scope]", f"format = {file_format!r} is not supported; formats: auto, "
                                   + ", ".join(f"{k} ({v})" for k, v in FORMATS.items()) + ".")
     time_zero = _time_zero(scope.get("time_zero", "trigger"), f"{where} [scope]")
-    baseline_end = _quantity(scope.get("baseline_end_s", 0.0), "baseline_end_s", f"{where} [scope]")
+    baseline_end = quantity_of_key(scope.get("baseline_end_s", 0.0), "baseline_end_s", f"{where} [scope]")
 
     channels = tuple(_channel(t, f"{where} [[channel]] #{k + 1}") for k, t in enumerate(document["channel"]))
     for attribute in ("source", "measures"):
@@ -343,8 +344,8 @@ def load_experiment(path) -> ExperimentDescription:
         nominal = table.get("nominal_velocity_m_s")
         shots.append(Shot(
             files=resolved, label=label,
-            striker_velocity_m_s=None if velocity is None else _quantity(velocity, "striker_velocity_m_s", at),
-            nominal_velocity_m_s=None if nominal is None else _quantity(nominal, "nominal_velocity_m_s", at),
+            striker_velocity_m_s=None if velocity is None else quantity_of_key(velocity, "striker_velocity_m_s", at),
+            nominal_velocity_m_s=None if nominal is None else quantity_of_key(nominal, "nominal_velocity_m_s", at),
             time_zero=None if "time_zero" not in table else _time_zero(table["time_zero"], at),
             chain=overrides,
         ))
