@@ -197,7 +197,7 @@ class _IterationReport:
 OPTIMUM_TOLERANCE = 0.01
 # Fractions of the Gauss-Newton step tried by the test (`_at_optimum`): where the loss is only
 # piecewise smooth (stick-slip friction) the step's prediction can promise a decrease no step delivers.
-_LINE_FRACTIONS = jnp.asarray([1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125])
+_LINE_FRACTIONS = np.asarray([1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125])
 
 
 def _chi2_threshold(chi2, dof, tolerance):
@@ -412,7 +412,7 @@ def _test_batch(problem, constants, solver, max_steps, batched_data, tolerance, 
             # the optimiser only proposes moves too small to count, and a step of the test lowers
             # chi^2 by more (a kink): go on from there, the optimiser restarted
             finite = jnp.where(jnp.isfinite(chi2_line), chi2_line, jnp.inf)
-            better = z - _LINE_FRACTIONS[jnp.argmin(finite)] * step
+            better = z - jnp.asarray(_LINE_FRACTIONS)[jnp.argmin(finite)] * step
             restart = ~done & (chi2 - jnp.min(finite) >= threshold) & (proposal < threshold)
             state = jax.tree_util.tree_map(lambda a, b: jnp.where(restart, a, b), fresh_state(better)[0], row.state)
             return dataclasses.replace(
@@ -606,9 +606,9 @@ def _host_optimum_test(scaled, values, proposed, mask, dof, tolerance):
         chi2_line = np.full(_LINE_FRACTIONS.shape, chi2)
     else:
         chi2_line = np.array([float(np.sum(scaled.residuals(values - t * step) ** 2))
-                              for t in np.asarray(_LINE_FRACTIONS)])
+                              for t in _LINE_FRACTIONS])
     finite = np.where(np.isfinite(chi2_line), chi2_line, np.inf)
-    better = values - np.asarray(_LINE_FRACTIONS)[int(np.argmin(finite))] * step
+    better = values - _LINE_FRACTIONS[int(np.argmin(finite))] * step
     proposal = float(np.sum((jac @ (np.asarray(proposed) - values)) ** 2))
     return (bool(_at_optimum(chi2, float(decrement), chi2_line, proposal, threshold)),
             better if chi2 - float(np.min(finite)) >= threshold and proposal < threshold else None)
