@@ -38,6 +38,9 @@ namespace {
 // single chain in an 8-lane block ran at half the speed of the JAX kernel).
 constexpr int64_t kWideLanes = 64;
 constexpr int64_t kNarrowLanes = 8;
+// The full kernel's last 2-4 chains: one AVX2 vector (an AVX-512 core that splits 512-bit
+// operations in two runs it in half the time of a partial 8-lane block).
+constexpr int64_t kQuarterLanes = 4;
 constexpr int64_t kSampleBuffer = 64;   // samples kept per chain before they are written out
 
 struct Param {
@@ -178,7 +181,8 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
 // the derivative rules JAX applies to the JAX kernel (`jax.jvp` of it), so that the two
 // agree to round-off.
 //   state0 (3 (bodies + 1), B): x, v, a; parameters (rows, 1 or B); eta, friction (1, 1 or B).
-//   Tangents: every input with a leading direction axis, (D, rows, B); results (D, B, n_samples).
+//   Tangents: every input with a leading direction axis, (D, rows, B) or (1, rows, B); results:
+//   the traces (B, n_samples), then their tangents (D, B, n_samples), from one run.
 
 struct FullParams {
   Param inv_mass, kappa, overlap0, spring, external, eta, friction;
@@ -209,7 +213,17 @@ void LoadTangent(Tangent t, int64_t directions, int64_t rows, int64_t batch, int
 }
 
 // d max(s, 0) / ds as JAX's max rule gives it (1/2 at the tie).
-inline double MaxSlope(double s) { return s > 0.0 ? 1.0 : (s == 0.0 ? 0.5 : 0.0); }
+inline double MaxSlope(double s) {
+  double tie = s == 0.0 ? 0.5 : 0.0;
+  return s > 0.0 ? 1.0 : tie;
+}
+
+// sign(w) as JAX's sign gives it (0 at 0), in two selects (no branches: the lane loops
+// vectorise whatever their length)
+inline double Sign(double w) {
+  double negative = w < 0.0 ? -1.0 : 0.0;
+  return w > 0.0 ? 1.0 : negative;
+}
 
 template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras>
 void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
@@ -256,15 +270,16 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     LoadTangent<kLanes>(tin.eta, D, 1, batch, lo, teta.data(), valid);
     LoadTangent<kLanes>(tin.friction, D, 1, batch, lo, tfr.data(), valid);
   }
-  const std::vector<double*>& outs = kTangent ? ttraces : traces;
-  const int64_t out_sets = kTangent ? D : 1;
+  // recorded sets: the forces, then (kTangent) their tangent along every direction
+  const int64_t out_sets = 1 + D;
   std::vector<double> record(out_sets * n_channels * kLanes * kSampleBuffer);
   int64_t buffered = 0, written = 0;
   auto flush = [&]() {
     for (int64_t d = 0; d < out_sets; ++d)
       for (int64_t c = 0; c < n_channels; ++c)
         for (int64_t j = 0; j < valid; ++j) {
-          double* out = outs[c] + (d * batch + lo + j) * n_samples + written;
+          double* out = d == 0 ? traces[c] + (lo + j) * n_samples + written
+                               : ttraces[c] + ((d - 1) * batch + lo + j) * n_samples + written;
           const double* in = &record[((d * n_channels + c) * kLanes + j) * kSampleBuffer];
           std::copy(in, in + buffered, out);
         }
@@ -287,26 +302,27 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     double speed = std::fabs(w);
     *s = speed - loss_j;
     double kept = *s > 0.0 ? *s : 0.0;
-    double sign = w > 0.0 ? 1.0 : (w < 0.0 ? -1.0 : 0.0);
-    return sign * kept;
+    return Sign(w) * kept;
   };
   auto tkick = [](double w, double s, double tw, double tloss) {
     double tspeed = w >= 0.0 ? tw : -tw;
-    double sign = w > 0.0 ? 1.0 : (w < 0.0 ? -1.0 : 0.0);
-    return sign * ((tspeed - tloss) * MaxSlope(s));
+    return Sign(w) * ((tspeed - tloss) * MaxSlope(s));
   };
   // contact.contact_force (the total) at overlap delta and rate; root, sum kept.
   // (kv = 1.5 eta kappa, computed once per block as JAX rounds it: (1.5 eta) kappa)
   auto total_force = [](double dl, double rate, double k, double kv, double sp, double* r, double* sm) {
+    // branch-free (selects only, so that every lane count vectorises): sqrt(0) = 0 is the
+    // root out of contact, as `contact` has it
     double positive = dl > 0.0 ? dl : 0.0;
-    double rt = dl > 0.0 ? std::sqrt(dl) : 0.0;
+    double rt = std::sqrt(positive);
     double elastic = k * positive * rt;
     double f;
     if (kViscous) {
       double viscous = (kv * rt) * rate;  // (+ a dashpot of 0 in `contact`: adds nothing)
       double s = elastic + viscous;
       *sm = s;
-      f = dl > 0.0 ? (s > 0.0 ? s : 0.0) : 0.0;
+      // out of contact elastic = viscous = 0, so the clipped sum is 0 there too
+      f = s > 0.0 ? s : 0.0;
     } else {
       *sm = elastic;
       f = elastic;
@@ -463,17 +479,15 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         double rt, sm;
         double f = total_force(dl, rate, kap[ri + j], kvis[ri + j], spr[ri + j], &rt, &sm);
         double hr = dl > 0.0 ? 0.5 / rt : 0.0;
-        if (!kTangent) {
-          record[(c * kLanes + j) * kSampleBuffer + buffered] = f;
-          continue;
-        }
+        record[(c * kLanes + j) * kSampleBuffer + buffered] = f;
+        if (!kTangent) continue;
         for (int64_t d = 0; d < D; ++d) {
           const int64_t q = d * kLanes + j;
           const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
           const int64_t tc = (d * contacts + i) * kLanes;
           double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
           double trate = tv[ti + j] - tv[tn + j];
-          record[((d * n_channels + c) * kLanes + j) * kSampleBuffer + buffered] =
+          record[(((d + 1) * n_channels + c) * kLanes + j) * kSampleBuffer + buffered] =
               ttotal_force(dl, rate, kap[ri + j], eta[j], spr[ri + j], rt, hr, sm, tdl, trate, tkap[tc + j],
                            teta[q], tspr[tc + j]);
         }
@@ -560,17 +574,23 @@ ffi::Error RunFull(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
     return ffi::Error::InvalidArgument("state0 must be (3 (bodies + 1), B) for one primal");
   std::vector<int64_t> rows(channels.typed_data(),
                             channels.typed_data() + channels.element_count());
-  std::vector<double*> outs;
+  // results: one (B, n_samples) trace per channel, then (tangents) one (D, B, n_samples)
+  std::vector<double*> outs, touts;
   int64_t n_samples = 0, directions = 0;
-  for (size_t c = 0; c < rows.size(); ++c) {
+  const size_t n_channels = rows.size();
+  for (size_t c = 0; c < (tangents ? 2 : 1) * n_channels; ++c) {
     auto out = results.get<ffi::Buffer<ffi::F64>>(c);
     if (out.has_error()) return out.error();
     auto out_dims = (*out)->dimensions();
     n_samples = out_dims[out_dims.size() - 1];
-    directions = static_cast<int64_t>((*out)->element_count()) / (batch * n_samples);
-    outs.push_back((*out)->typed_data());
-    if (rows[c] < 0 || rows[c] >= bodies)
-      return ffi::Error::InvalidArgument("a recorded channel is not a contact");
+    if (c < n_channels) {
+      outs.push_back((*out)->typed_data());
+      if (rows[c] < 0 || rows[c] >= bodies)
+        return ffi::Error::InvalidArgument("a recorded channel is not a contact");
+    } else {
+      directions = static_cast<int64_t>((*out)->element_count()) / (batch * n_samples);
+      touts.push_back((*out)->typed_data());
+    }
   }
   FullParams p{AsParam(inv_mass), AsParam(kappa), AsParam(overlap0), AsParam(spring),
                AsParam(external), AsParam(eta), AsParam(friction)};
@@ -580,18 +600,20 @@ ffi::Error RunFull(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
     constexpr bool kV = decltype(viscous_tag)::value, kF = decltype(friction_tag)::value,
                    kT = decltype(tangent_tag)::value, kE = decltype(extras_tag)::value;
     int64_t lo = 0;
-    std::vector<double*> none_out;
     auto advance = [&](auto lanes) {
       constexpr int64_t kL = decltype(lanes)::value;
-      RunFullBlock<kL, kV, kF, kT, kE>(bodies, lo, batch, n_samples, steps_per_sample, dt,
-                                   state0.typed_data(), p, rows, kT ? none_out : outs, directions,
-                                   tin, kT ? outs : none_out);
+      // blocks of 8 and 4 with the extras' terms (zeros: the same numbers): without them
+      // GCC 12 leaves the damped 8-lane loop scalar ("control flow in loop"), 2.5x slower
+      constexpr bool kENarrow = kE || kL == kNarrowLanes || kL == kQuarterLanes;
+      RunFullBlock<kL, kV, kF, kT, kENarrow>(bodies, lo, batch, n_samples, steps_per_sample, dt,
+                                             state0.typed_data(), p, rows, outs, directions, tin, touts);
       lo += kL;
     };
-    // blocks of 64, then of 8, the last one partial (a vector of 8 lanes costs about what
-    // one chain alone does), a last single chain alone
+    // blocks of 64, then of 8 (the last one may be partial), the last 2-4 chains in a block
+    // of 4 (a vector costs about what one chain alone does), a last single chain alone
     while (lo + kWideLanes <= batch) advance(std::integral_constant<int64_t, kWideLanes>{});
-    while (batch - lo >= 2) advance(std::integral_constant<int64_t, kNarrowLanes>{});
+    while (batch - lo > kQuarterLanes) advance(std::integral_constant<int64_t, kNarrowLanes>{});
+    if (batch - lo >= 2) advance(std::integral_constant<int64_t, kQuarterLanes>{});
     if (lo < batch) advance(std::integral_constant<int64_t, 1>{});
   };
   using T = std::true_type;
@@ -711,4 +733,4 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullTangent, FullTangent,
                                   .Attr<int64_t>("viscous")
                                   .Attr<int64_t>("friction")
                                   .Attr<int64_t>("extras")      // preload or springs
-                                  .RemainingRets());             // tangent traces
+                                  .RemainingRets());             // traces, then their tangents
