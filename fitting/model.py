@@ -172,7 +172,7 @@ class Problem:
     as $(x_i - \\mathrm{centre})/\\mathrm{sd}$ after the data's samples.
 
     A plain class, hashed by identity where it is a static argument of a compiled function
-    (`_residuals_jit`, the optimiser), not an `eqx.Module` whose arrays would be traced: what
+    (`_residuals_and_jacobian_jit`, the optimiser), not an `eqx.Module` whose arrays would be traced: what
     it holds is the structure of one compiled model (time grids and recordings chosen from
     the data, the sample layout, the group simulators jitted at construction), so every
     Problem is one compilation by design, and building it twice from the same files gives
@@ -594,7 +594,8 @@ def residuals_and_jacobian(problem: Problem, x, columns=None):
     """
     x = jnp.asarray(x, dtype=jnp.float64)
     if columns is None:
-        return np.asarray(_residuals_jit(problem, x)), np.asarray(_jacobian_jit(problem, x))
+        r, jac = _residuals_and_jacobian_jit(problem, x)
+        return np.asarray(r), np.asarray(jac)
     columns = [int(c) for c in columns]
     through = [c for c in columns if problem.reaches_simulator(c)]
     after = [c for c in columns if not problem.reaches_simulator(c)]
@@ -612,13 +613,16 @@ def residuals_and_jacobian(problem: Problem, x, columns=None):
 
 
 @eqx.filter_jit
-def _residuals_jit(problem, x):
-    return problem.residuals(x)
+def _residuals_and_jacobian_jit(problem, x):
+    """r and dr/dx from one simulation: the residuals are the primal of the Jacobian's
+    forward-mode run (the C++ kernel returns the forces with their tangents)."""
 
+    def both(x):
+        r = problem.residuals(x)
+        return r, r
 
-@eqx.filter_jit
-def _jacobian_jit(problem, x):
-    return jax.jacfwd(problem.residuals)(x)
+    jac, r = jax.jacfwd(both, has_aux=True)(x)
+    return r, jac
 
 
 @eqx.filter_jit

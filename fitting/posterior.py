@@ -194,13 +194,16 @@ def _laplace_whitening(instances, constants, x_hat, covariance):
 def _potential(problem: Problem, constants, z_hat, chol):
     """U(u) = chi^2/2 - sum log|dx/dz| at z = z_hat + L u (+inf where not finite).
 
-    Its gradient, J^T r - d/du sum log|dx/dz|, is taken in forward mode: `jax.jacfwd` of
-    the residuals pushes one tangent per parameter through the time-stepping loop together
-    with the run itself, as `fitting.fit` does for its Jacobian. Reverse mode (what
-    `jax.grad` of the plain function would do) integrates forward, stores checkpoints and
-    integrates the adjoint back: 6-13x a forward run for one trace loss
-    (`benchmarks/README.md`, gradient table) against 2-4x for forward mode with the few
-    parameters a posterior has.
+    Its gradient, J^T r - d/du sum log|dx/dz|: the simulation is differentiated in forward
+    mode (`Problem`'s custom JVP: one tangent per simulator parameter pushed through the
+    time-stepping loop together with the run itself, as `fitting.fit` does for its
+    Jacobian; on the CPU the C++ kernel's tangents, every chain and direction in one
+    kernel run), and that Jacobian is transposed by `jax.grad`, which takes the cheap rest
+    (interpolation, offsets, gains, the transforms) in reverse mode: one backward pass over
+    the residuals instead of one forward pass per sampled parameter. Reverse mode through
+    the integrator itself (forward run, checkpoints, adjoint back) would cost 6-13x a
+    forward run for one trace loss (`benchmarks/README.md`, gradient table) against 2-4x for
+    forward mode with the few parameters a posterior has.
 
     Chains: NumPyro's vectorised chains evaluate the gradient under `jax.vmap`. Its batching
     rule (`jax.custom_batching.custom_vmap`) evaluates the C chains' parameter vectors in
@@ -221,15 +224,15 @@ def _potential(problem: Problem, constants, z_hat, chol):
         return jnp.where(jnp.isfinite(total), total, jnp.inf)
 
     def value_and_gradient_many(u):
-        # The chains are independent: one tangent that moves parameter j of every chain
-        # gives each chain its own derivative.
-        def shifted(d):
-            out = parts(u + d)
-            return out, out
+        # The chains are independent: the gradient of the sum of their potentials is each
+        # chain's own gradient. Reverse mode over the residuals' post-processing; the
+        # simulation inside is differentiated by its custom JVP (the simulator's Jacobian
+        # in forward mode, transposed).
+        def summed(u):
+            totals = value(*parts(u))
+            return jnp.sum(totals), totals
 
-        (jac_r, jac_log), (r, log_jac) = jax.jacfwd(shifted, has_aux=True)(jnp.zeros(u.shape[1]))
-        total = value(r, log_jac)
-        gradient = jnp.einsum("cnp,cn->cp", jac_r, r) - jac_log
+        gradient, total = jax.grad(summed, has_aux=True)(u)
         return total, jnp.where(jnp.isfinite(total)[:, None], gradient, 0.0)
 
     # One chain's value and gradient as a jaxpr whose constants (the data, the sample

@@ -681,8 +681,9 @@ def record_batched(
       will pass (damping, friction and preload that are off in `flags` are not simulated).
     - `kernel`: "auto" (default): with `flags.ledger` off, on the CPU, the fused C++ kernel
       with its forward-mode tangents (`native.run_full`: `jax.jvp`, `jax.jacfwd`,
-      `jax.linearize` and `jax.vmap` work, a jacfwd's directions one kernel run each;
-      reverse mode is not available there); "jax": the JAX kernel (every transformation).
+      `jax.linearize` and `jax.vmap` work; a jacfwd's directions, the forces and a vmapped
+      batch of setups in one kernel run; reverse mode is not available there); "jax": the
+      JAX kernel (every transformation).
 
     **Returns:** `BatchedTraces`; with `flags.ledger` off, its maxima and energies are NaN
     (not computed). The two kernels agree to round-off, values and derivatives.

@@ -38,6 +38,9 @@ namespace {
 // single chain in an 8-lane block ran at half the speed of the JAX kernel).
 constexpr int64_t kWideLanes = 64;
 constexpr int64_t kNarrowLanes = 8;
+// The full kernel's last 2-4 chains: one AVX2 vector (an AVX-512 core that splits 512-bit
+// operations in two runs it in half the time of a partial 8-lane block).
+constexpr int64_t kQuarterLanes = 4;
 constexpr int64_t kSampleBuffer = 64;   // samples kept per chain before they are written out
 
 struct Param {
@@ -178,7 +181,8 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
 // the derivative rules JAX applies to the JAX kernel (`jax.jvp` of it), so that the two
 // agree to round-off.
 //   state0 (3 (bodies + 1), B): x, v, a; parameters (rows, 1 or B); eta, friction (1, 1 or B).
-//   Tangents: every input with a leading direction axis, (D, rows, B); results (D, B, n_samples).
+//   Tangents: every input with a leading direction axis, (D, rows, B) or (1, rows, B); results:
+//   the traces (B, n_samples), then their tangents (D, B, n_samples), from one run.
 
 struct FullParams {
   Param inv_mass, kappa, overlap0, spring, external, eta, friction;
@@ -209,7 +213,46 @@ void LoadTangent(Tangent t, int64_t directions, int64_t rows, int64_t batch, int
 }
 
 // d max(s, 0) / ds as JAX's max rule gives it (1/2 at the tie).
-inline double MaxSlope(double s) { return s > 0.0 ? 1.0 : (s == 0.0 ? 0.5 : 0.0); }
+inline double MaxSlope(double s) {
+  double tie = s == 0.0 ? 0.5 : 0.0;
+  return s > 0.0 ? 1.0 : tie;
+}
+
+// sign(w) as JAX's sign gives it (0 at 0), in two selects (no branches: the lane loops
+// vectorise whatever their length)
+inline double Sign(double w) {
+  double negative = w < 0.0 ? -1.0 : 0.0;
+  return w > 0.0 ? 1.0 : negative;
+}
+
+// d kick(w) = sign(w) max'(|w| - loss) (d|w| - d loss) as JAX's rules give it: with
+// pm = +-1 (the slope of |w|, +1 at 0) and g = sign(w) max'(s), d kick = (pm t_w - t_loss) g
+// (g is 0, +-1/2 or +-1: the product is the rules' to the bit).
+inline void KickSlope(double w, double s, double* pm, double* g) {
+  *pm = w >= 0.0 ? 1.0 : -1.0;
+  *g = Sign(w) * MaxSlope(s);
+}
+
+// The tangent of `contact.contact_force` (the total, clipped at 0 in contact) along one
+// direction, from the contact's linearisation at overlap `delta` and rate: in = [delta > 0],
+// positive = delta_+, root = sqrt(delta_+), half_inv_root = 0.5 / root in contact (JAX's
+// sqrt rule) else 0, kp = kappa delta_+, c3 = 1.5 eta kappa root, slope = max'(total) in
+// contact else 0; c1 = 1.5 eta, c2 = c1 kappa, t15e = 1.5 t_eta, tsp the spring's tangent.
+template <bool kViscous>
+inline double TangentForce(double delta, double rate, double in, double positive, double root,
+                           double half_inv_root, double kp, double c3, double slope, double k,
+                           double c1, double c2, double sp, double tdl, double trate, double tk,
+                           double t15e, double tsp) {
+  double tpositive = tdl * in;
+  double troot = tdl * half_inv_root;
+  double telastic = (tk * positive + k * tpositive) * root + kp * troot;
+  double tf = telastic;
+  if (kViscous) {
+    double tc3 = (t15e * k + c1 * tk) * root + c2 * troot;
+    tf = (telastic + (tc3 * rate + c3 * trate)) * slope;
+  }
+  return tf + (tsp * delta + sp * tdl);
+}
 
 template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras>
 void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
@@ -256,15 +299,16 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     LoadTangent<kLanes>(tin.eta, D, 1, batch, lo, teta.data(), valid);
     LoadTangent<kLanes>(tin.friction, D, 1, batch, lo, tfr.data(), valid);
   }
-  const std::vector<double*>& outs = kTangent ? ttraces : traces;
-  const int64_t out_sets = kTangent ? D : 1;
+  // recorded sets: the forces, then (kTangent) their tangent along every direction
+  const int64_t out_sets = 1 + D;
   std::vector<double> record(out_sets * n_channels * kLanes * kSampleBuffer);
   int64_t buffered = 0, written = 0;
   auto flush = [&]() {
     for (int64_t d = 0; d < out_sets; ++d)
       for (int64_t c = 0; c < n_channels; ++c)
         for (int64_t j = 0; j < valid; ++j) {
-          double* out = outs[c] + (d * batch + lo + j) * n_samples + written;
+          double* out = d == 0 ? traces[c] + (lo + j) * n_samples + written
+                               : ttraces[c] + ((d - 1) * batch + lo + j) * n_samples + written;
           const double* in = &record[((d * n_channels + c) * kLanes + j) * kSampleBuffer];
           std::copy(in, in + buffered, out);
         }
@@ -272,41 +316,52 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     buffered = 0;
   };
 
-  // Per-lane values of the step kept for the tangent pass.
+  // Per-lane values of the step kept for the tangent pass: what does not depend on the
+  // direction is computed once per contact and step, not once per direction.
   double loss[kLanes];              // mu g dt/2
   double w_prev[kLanes], p_prev[kLanes], f_prev[kLanes];  // body i: kicked half-step and predicted velocity; force before
-  double raw1[kLanes], s1[kLanes];  // body i + 1: half-step velocity before friction, |.| - loss
-  double delta[kLanes], rate[kLanes], root[kLanes], half_inv_root[kLanes], sum[kLanes];
-  double body[kLanes], raw2[kLanes], s2[kLanes];
-  // tangents of w_prev, p_prev, f_prev (D, kLanes)
+  double c1[kLanes];                // 1.5 eta
+  // the two friction kicks' derivatives: d kick = (pm t - t_loss) g (`KickSlope`)
+  double pm1[kLanes], g1[kLanes], pm2[kLanes], g2[kLanes];
+  double body[kLanes];              // the force on body i
+  struct Linear {                   // a contact's linearisation, per lane (`TangentForce`)
+    double delta[kLanes], rate[kLanes], in[kLanes], positive[kLanes], root[kLanes], half_inv_root[kLanes],
+        kp[kLanes], c3[kLanes], slope[kLanes];
+  } lin;
+  // tangents of w_prev, p_prev, f_prev and per-direction constants (D, kLanes)
   std::vector<double> tw_prev(D * kLanes), tp_prev(D * kLanes), tf_prev(D * kLanes);
-  for (int64_t j = 0; j < kLanes; ++j) loss[j] = fr[j] * h;
+  std::vector<double> tloss(D * kLanes), t15eta(D * kLanes);
+  for (int64_t j = 0; j < kLanes; ++j) {
+    loss[j] = fr[j] * h;
+    c1[j] = 1.5 * eta[j];
+  }
+  for (int64_t q = 0; q < D * kLanes; ++q) {
+    tloss[q] = tfr[q] * h;
+    t15eta[q] = 1.5 * teta[q];
+  }
 
   // contact.track_friction_kick: sign(w) max(|w| - loss, 0), with its speed-minus-loss s.
   auto kick = [](double w, double loss_j, double* s) {
     double speed = std::fabs(w);
     *s = speed - loss_j;
     double kept = *s > 0.0 ? *s : 0.0;
-    double sign = w > 0.0 ? 1.0 : (w < 0.0 ? -1.0 : 0.0);
-    return sign * kept;
-  };
-  auto tkick = [](double w, double s, double tw, double tloss) {
-    double tspeed = w >= 0.0 ? tw : -tw;
-    double sign = w > 0.0 ? 1.0 : (w < 0.0 ? -1.0 : 0.0);
-    return sign * ((tspeed - tloss) * MaxSlope(s));
+    return Sign(w) * kept;
   };
   // contact.contact_force (the total) at overlap delta and rate; root, sum kept.
   // (kv = 1.5 eta kappa, computed once per block as JAX rounds it: (1.5 eta) kappa)
   auto total_force = [](double dl, double rate, double k, double kv, double sp, double* r, double* sm) {
+    // branch-free (selects only, so that every lane count vectorises): sqrt(0) = 0 is the
+    // root out of contact, as `contact` has it
     double positive = dl > 0.0 ? dl : 0.0;
-    double rt = dl > 0.0 ? std::sqrt(dl) : 0.0;
+    double rt = std::sqrt(positive);
     double elastic = k * positive * rt;
     double f;
     if (kViscous) {
       double viscous = (kv * rt) * rate;  // (+ a dashpot of 0 in `contact`: adds nothing)
       double s = elastic + viscous;
       *sm = s;
-      f = dl > 0.0 ? (s > 0.0 ? s : 0.0) : 0.0;
+      // out of contact elastic = viscous = 0, so the clipped sum is 0 there too
+      f = s > 0.0 ? s : 0.0;
     } else {
       *sm = elastic;
       f = elastic;
@@ -315,25 +370,23 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     if constexpr (kExtras) f = f + sp * dl;  // (a spring of 0 adds nothing)
     return f;
   };
-  // its tangent
-  // (hr = 0.5 / root where in contact: JAX's sqrt rule, g * (0.5 / sqrt))
-  auto ttotal_force = [](double dl, double rate, double k, double e, double sp, double rt, double hr,
-                         double sm, double tdl, double trate, double tk, double te, double tsp) {
-    double positive = dl > 0.0 ? dl : 0.0;
-    double tpositive = dl > 0.0 ? tdl : 0.0;
-    double troot = dl > 0.0 ? tdl * hr : 0.0;
-    double kp = k * positive;
-    double telastic = (tk * positive + k * tpositive) * rt + kp * troot;
-    double tf;
-    if (kViscous) {
-      double c1 = 1.5 * e, c2 = c1 * k, c3 = c2 * rt;
-      double tc3 = ((1.5 * te) * k + c1 * tk) * rt + c2 * troot;
-      double tsum = telastic + (tc3 * rate + c3 * trate);
-      tf = dl > 0.0 ? tsum * MaxSlope(sm) : 0.0;
-    } else {
-      tf = telastic;
-    }
-    return tf + (tsp * dl + sp * tdl);
+  // the linearisation of contact i at lane j (kept for every direction of the step)
+  auto linearise = [&](Linear& l, int64_t j, double dl, double rate, double k, double kv, double rt, double sm) {
+    l.delta[j] = dl;
+    l.rate[j] = rate;
+    l.in[j] = dl > 0.0 ? 1.0 : 0.0;
+    l.positive[j] = dl > 0.0 ? dl : 0.0;
+    l.root[j] = rt;
+    l.half_inv_root[j] = dl > 0.0 ? 0.5 / rt : 0.0;
+    l.kp[j] = k * l.positive[j];
+    l.c3[j] = kv * rt;
+    l.slope[j] = dl > 0.0 ? MaxSlope(sm) : 0.0;
+  };
+  // its tangent along one direction (`TangentForce`): c2 = 1.5 eta kappa = kv
+  auto tforce = [](const Linear& l, int64_t j, double k, double c1j, double c2, double sp, double tdl,
+                   double trate, double tk, double t15e, double tsp) {
+    return TangentForce<kViscous>(l.delta[j], l.rate[j], l.in[j], l.positive[j], l.root[j], l.half_inv_root[j],
+                                  l.kp[j], l.c3[j], l.slope[j], k, c1j, c2, sp, tdl, trate, tk, t15e, tsp);
   };
 
   for (int64_t n = 0; n < n_samples; ++n) {
@@ -341,8 +394,12 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
       // body 0: half kick, friction, drift, predicted velocity
       for (int64_t j = 0; j < kLanes; ++j) {
         double w = v[j] + h * a[j];
-        raw1[j] = w;
-        if (kFriction) w = kick(w, loss[j], &s1[j]);
+        if (kFriction) {
+          double s_first;
+          double raw = w;
+          w = kick(w, loss[j], &s_first);
+          if constexpr (kTangent) KickSlope(raw, s_first, &pm1[j], &g1[j]);
+        }
         x[j] = x[j] + dt * w;
         w_prev[j] = w;
         p_prev[j] = w + h * a[j];
@@ -354,7 +411,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           for (int64_t j = 0; j < kLanes; ++j) {
             const int64_t q = d * kLanes + j;
             double tw = tv[d * rows_x * kLanes + j] + h * ta[d * rows_x * kLanes + j];
-            if (kFriction) tw = tkick(raw1[j], s1[j], tw, tfr[q] * h);
+            if (kFriction) tw = (pm1[j] * tw - tloss[q]) * g1[j];
             tx[d * rows_x * kLanes + j] = tx[d * rows_x * kLanes + j] + dt * tw;
             tw_prev[q] = tw;
             tp_prev[q] = tw + h * ta[d * rows_x * kLanes + j];
@@ -385,16 +442,12 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           a[ri + j] = acc;
           v[ri + j] = vn;
           if constexpr (kTangent) {  // what the tangent pass needs of this step
-            raw1[j] = w_raw;
-            s1[j] = s_first;
-            rate[j] = rt_rate;
-            root[j] = rt;
-            half_inv_root[j] = dl > 0.0 ? 0.5 / rt : 0.0;
-            sum[j] = sm;
-            delta[j] = dl;
+            if (kFriction) {
+              KickSlope(w_raw, s_first, &pm1[j], &g1[j]);
+              KickSlope(vn_raw, s_second, &pm2[j], &g2[j]);
+            }
+            linearise(lin, j, dl, rt_rate, kap[ri + j], kvis[ri + j], rt, sm);
             body[j] = b;
-            raw2[j] = vn_raw;
-            s2[j] = s_second;
           }
           f_prev[j] = f;
           w_prev[j] = w;
@@ -408,17 +461,16 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
             for (int64_t j = 0; j < kLanes; ++j) {
               const int64_t q = d * kLanes + j;
               double tw = tv[tn + j] + h * ta[tn + j];
-              if (kFriction) tw = tkick(raw1[j], s1[j], tw, tfr[q] * h);
+              if (kFriction) tw = (pm1[j] * tw - tloss[q]) * g1[j];
               tx[tn + j] = tx[tn + j] + dt * tw;
               double tpred = tw + h * ta[tn + j];
               double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
-              double tf = ttotal_force(delta[j], rate[j], kap[ri + j], eta[j], spr[ri + j], root[j],
-                                       half_inv_root[j], sum[j], tdl, tp_prev[q] - tpred, tkap[tc + j],
-                                       teta[q], tspr[tc + j]);
+              double tf = tforce(lin, j, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, tp_prev[q] - tpred,
+                                 tkap[tc + j], t15eta[q], tspr[tc + j]);
               double tb = tf_prev[q] - tf + text[ti + j];
               double tacc = tb * inv[ri + j] + body[j] * tinv[ti + j];
               double tvn = tw_prev[q] + h * tacc;
-              if (kFriction) tvn = tkick(raw2[j], s2[j], tvn, tfr[q] * h);
+              if (kFriction) tvn = (pm2[j] * tvn - tloss[q]) * g2[j];
               ta[ti + j] = tacc;
               tv[ti + j] = tvn;
               tf_prev[q] = tf;
@@ -434,8 +486,12 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         if constexpr (kExtras) b = b + ext[rw + j];
         double acc = b * inv[rw + j];
         double vn = w_prev[j] + h * acc;
-        raw2[j] = vn;
-        if (kFriction) vn = kick(vn, loss[j], &s2[j]);
+        if (kFriction) {
+          double s_second;
+          double raw = vn;
+          vn = kick(vn, loss[j], &s_second);
+          if constexpr (kTangent) KickSlope(raw, s_second, &pm2[j], &g2[j]);
+        }
         body[j] = b;
         a[rw + j] = acc;
         v[rw + j] = vn;
@@ -448,7 +504,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
             double tb = tf_prev[q] + text[tw_row + j];
             double tacc = tb * inv[rw + j] + body[j] * tinv[tw_row + j];
             double tvn = tw_prev[q] + h * tacc;
-            if (kFriction) tvn = tkick(raw2[j], s2[j], tvn, tfr[q] * h);
+            if (kFriction) tvn = (pm2[j] * tvn - tloss[q]) * g2[j];
             ta[tw_row + j] = tacc;
             tv[tw_row + j] = tvn;
           }
@@ -462,20 +518,19 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         double rate = v[ri + j] - v[rn + j];
         double rt, sm;
         double f = total_force(dl, rate, kap[ri + j], kvis[ri + j], spr[ri + j], &rt, &sm);
-        double hr = dl > 0.0 ? 0.5 / rt : 0.0;
-        if (!kTangent) {
-          record[(c * kLanes + j) * kSampleBuffer + buffered] = f;
-          continue;
-        }
+        record[(c * kLanes + j) * kSampleBuffer + buffered] = f;
+        if (!kTangent) continue;
+        Linear here;
+        linearise(here, j, dl, rate, kap[ri + j], kvis[ri + j], rt, sm);
         for (int64_t d = 0; d < D; ++d) {
           const int64_t q = d * kLanes + j;
           const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
           const int64_t tc = (d * contacts + i) * kLanes;
           double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
           double trate = tv[ti + j] - tv[tn + j];
-          record[((d * n_channels + c) * kLanes + j) * kSampleBuffer + buffered] =
-              ttotal_force(dl, rate, kap[ri + j], eta[j], spr[ri + j], rt, hr, sm, tdl, trate, tkap[tc + j],
-                           teta[q], tspr[tc + j]);
+          record[(((d + 1) * n_channels + c) * kLanes + j) * kSampleBuffer + buffered] =
+              tforce(here, j, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, trate, tkap[tc + j], t15eta[q],
+                     tspr[tc + j]);
         }
       }
     }
@@ -560,17 +615,23 @@ ffi::Error RunFull(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
     return ffi::Error::InvalidArgument("state0 must be (3 (bodies + 1), B) for one primal");
   std::vector<int64_t> rows(channels.typed_data(),
                             channels.typed_data() + channels.element_count());
-  std::vector<double*> outs;
+  // results: one (B, n_samples) trace per channel, then (tangents) one (D, B, n_samples)
+  std::vector<double*> outs, touts;
   int64_t n_samples = 0, directions = 0;
-  for (size_t c = 0; c < rows.size(); ++c) {
+  const size_t n_channels = rows.size();
+  for (size_t c = 0; c < (tangents ? 2 : 1) * n_channels; ++c) {
     auto out = results.get<ffi::Buffer<ffi::F64>>(c);
     if (out.has_error()) return out.error();
     auto out_dims = (*out)->dimensions();
     n_samples = out_dims[out_dims.size() - 1];
-    directions = static_cast<int64_t>((*out)->element_count()) / (batch * n_samples);
-    outs.push_back((*out)->typed_data());
-    if (rows[c] < 0 || rows[c] >= bodies)
-      return ffi::Error::InvalidArgument("a recorded channel is not a contact");
+    if (c < n_channels) {
+      outs.push_back((*out)->typed_data());
+      if (rows[c] < 0 || rows[c] >= bodies)
+        return ffi::Error::InvalidArgument("a recorded channel is not a contact");
+    } else {
+      directions = static_cast<int64_t>((*out)->element_count()) / (batch * n_samples);
+      touts.push_back((*out)->typed_data());
+    }
   }
   FullParams p{AsParam(inv_mass), AsParam(kappa), AsParam(overlap0), AsParam(spring),
                AsParam(external), AsParam(eta), AsParam(friction)};
@@ -580,18 +641,20 @@ ffi::Error RunFull(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
     constexpr bool kV = decltype(viscous_tag)::value, kF = decltype(friction_tag)::value,
                    kT = decltype(tangent_tag)::value, kE = decltype(extras_tag)::value;
     int64_t lo = 0;
-    std::vector<double*> none_out;
     auto advance = [&](auto lanes) {
       constexpr int64_t kL = decltype(lanes)::value;
-      RunFullBlock<kL, kV, kF, kT, kE>(bodies, lo, batch, n_samples, steps_per_sample, dt,
-                                   state0.typed_data(), p, rows, kT ? none_out : outs, directions,
-                                   tin, kT ? outs : none_out);
+      // blocks of 8 and 4 with the extras' terms (zeros: the same numbers): without them
+      // GCC 12 leaves the damped 8-lane loop scalar ("control flow in loop"), 2.5x slower
+      constexpr bool kENarrow = kE || kL == kNarrowLanes || kL == kQuarterLanes;
+      RunFullBlock<kL, kV, kF, kT, kENarrow>(bodies, lo, batch, n_samples, steps_per_sample, dt,
+                                             state0.typed_data(), p, rows, outs, directions, tin, touts);
       lo += kL;
     };
-    // blocks of 64, then of 8, the last one partial (a vector of 8 lanes costs about what
-    // one chain alone does), a last single chain alone
+    // blocks of 64, then of 8 (the last one may be partial), the last 2-4 chains in a block
+    // of 4 (a vector costs about what one chain alone does), a last single chain alone
     while (lo + kWideLanes <= batch) advance(std::integral_constant<int64_t, kWideLanes>{});
-    while (batch - lo >= 2) advance(std::integral_constant<int64_t, kNarrowLanes>{});
+    while (batch - lo > kQuarterLanes) advance(std::integral_constant<int64_t, kNarrowLanes>{});
+    if (batch - lo >= 2) advance(std::integral_constant<int64_t, kQuarterLanes>{});
     if (lo < batch) advance(std::integral_constant<int64_t, 1>{});
   };
   using T = std::true_type;
@@ -711,4 +774,4 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullTangent, FullTangent,
                                   .Attr<int64_t>("viscous")
                                   .Attr<int64_t>("friction")
                                   .Attr<int64_t>("extras")      // preload or springs
-                                  .RemainingRets());             // tangent traces
+                                  .RemainingRets());             // traces, then their tangents

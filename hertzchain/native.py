@@ -11,8 +11,12 @@ physics it runs, so that the conservative case pays nothing for the rest:
   ends, with or without the books (running maxima, energies);
 - the full one (`run_full`): the same plus Kuwabara-Kono damping (the total force clipped
   at 0) and track friction, the recorded forces only, and forward-mode tangents carried
-  through the same loop (`jax.custom_jvp`: `jax.jvp`, `jax.jacfwd`, `jax.linearize`; all
-  the directions of a Jacobian in one run).
+  through the same loop (`jax.custom_jvp`: `jax.jvp`, `jax.jacfwd`, `jax.linearize`; the
+  forces and all the directions of a Jacobian in one run).
+
+Under `jax.vmap` (`jax.custom_batching.custom_vmap`) a mapped batch of inputs joins the
+kernel's chain axis and mapped tangents its direction axis, so a batch of fits, `jacfwd`
+of `vmap` and `vmap` of `jacfwd` are one kernel run each.
 
 Everything else (the books of a damped chain, GPUs, reverse mode) runs the JAX kernel,
 which stays the reference: they agree to round-off, values and derivatives
@@ -42,6 +46,7 @@ from pathlib import Path
 
 import jax
 import numpy as np
+from jax.interpreters import partial_eval
 
 SOURCE = Path(__file__).with_name("chain_kernel.cc")
 TARGET = "hertzchain_chain_forward"
@@ -142,11 +147,11 @@ def run(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
         channels: tuple[int, ...], preload: bool, springs: bool, books: bool):
     """Advance the packed state `state0` (rows, B) of `batched._Layout` through
     `n_samples` samples of `steps_per_sample` steps of `dt_s` seconds: returns the final
-    state (rows, B) and one (B, n_samples) force trace per channel, N."""
+    state (rows, B) and one (B, n_samples) force trace per channel, N. Under `jax.vmap`
+    the mapped chains join the kernel's batch: one run for all of them."""
     reason = _load()
     if reason is not None:
         raise RuntimeError(f"the fused chain kernel is unavailable: {reason}")
-    batch = state0.shape[-1]
     zeros = np.zeros((p["kappa"].shape[0], 1))
     args = (
         state0,
@@ -155,21 +160,81 @@ def run(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
         p["overlap0"] if preload else zeros,
         p["spring"] if springs else zeros,
         p["external"] if preload else np.zeros((p["inv_mass"].shape[0], 1)),
-        np.asarray(channels, dtype=np.int64),
     )
-    shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + tuple(
-        jax.ShapeDtypeStruct((batch, n_samples), state0.dtype) for _ in channels
-    )
-    call = jax.ffi.ffi_call(TARGET, shapes, vmap_method="sequential")
-    state, *traces = call(
-        *args,
-        dt=np.float64(dt_s),
-        steps_per_sample=np.int64(steps_per_sample),
-        preload=np.int64(preload),
-        springs=np.int64(springs),
-        books=np.int64(books),
-    )
+    config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
+              bool(preload), bool(springs), bool(books))
+    state, *traces = _conservative_call(config)(*args)
     return tuple(traces), state
+
+
+@functools.cache
+def _conservative_call(config):
+    """The conservative kernel for one configuration as a function of its arrays."""
+    dt_s, steps_per_sample, n_samples, channels, preload, springs, books = config
+    attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample), preload=np.int64(preload),
+                 springs=np.int64(springs), books=np.int64(books))
+    index = np.asarray(channels, dtype=np.int64)
+
+    @jax.custom_batching.custom_vmap
+    def call(*args):
+        state0 = args[0]
+        shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + tuple(
+            jax.ShapeDtypeStruct((state0.shape[-1], n_samples), state0.dtype) for _ in channels
+        )
+        return tuple(jax.ffi.ffi_call(TARGET, shapes)(*args, index, **attrs))
+
+    @call.def_vmap
+    def _(size, batched, *args):
+        state, *traces = call(*_fold_chains(size, batched, args))
+        out = (_unfold_chains(size, state, axis=1),) + tuple(_unfold_chains(size, leaf) for leaf in traces)
+        return out, (True,) * len(out)
+
+    return call
+
+
+def _fold_chains(size: int, batched, args, width: int | None = None):
+    """The arrays of `size` vmapped kernel runs as the arrays of one run of `size` x B
+    chains: every array (..., rows, 1 or B), mapped ones with a leading axis of `size`,
+    becomes (..., rows, size B), chain (l, b) at column l B + b; an unmapped one of width 1
+    stays (..., rows, 1) (shared by every chain) unless `width` (B) is given: then every
+    array is spread to size B chains (the tangents, which the kernel reads per chain)."""
+    chains = args[0].shape[-1] if width is None else width
+
+    def fold(leaf, mapped):
+        if width is None and not mapped and leaf.shape[-1] == 1:
+            return leaf
+        if not mapped:
+            leaf = jax.numpy.broadcast_to(leaf, (size,) + leaf.shape)
+        leaf = jax.numpy.broadcast_to(leaf, leaf.shape[:-1] + (chains,))
+        leaf = jax.numpy.moveaxis(leaf, 0, -2)  # (..., rows, size, B)
+        return leaf.reshape(leaf.shape[:-2] + (size * chains,))
+
+    return tuple(fold(leaf, mapped) for leaf, mapped in zip(args, batched))
+
+
+def _unfold_chains(size: int, leaf, axis: int = 0):
+    """A result of a folded run, its chains (size B) on `axis`, back to `size` results
+    (size, ...) with B chains each."""
+    chains = leaf.shape[axis]
+    leaf = leaf.reshape(leaf.shape[:axis] + (size, chains // size) + leaf.shape[axis + 1:])
+    return jax.numpy.moveaxis(leaf, axis, 0)
+
+
+def _fold_directions(size: int, batched, tangents):
+    """Tangents (D or 1, rows, B) of `size` vmapped directional derivatives (a `jacfwd`'s
+    basis) as the tangents of one run of size x D directions: mapped ones (size, D or 1,
+    rows, B) become (size D, rows, B); unmapped ones of one direction stay shared (1, rows, B)."""
+    directions = max(leaf.shape[1] if mapped else leaf.shape[0] for leaf, mapped in zip(tangents, batched))
+
+    def fold(leaf, mapped):
+        if not mapped and leaf.shape[0] == 1:
+            return leaf
+        if not mapped:
+            leaf = jax.numpy.broadcast_to(leaf, (size,) + leaf.shape)
+        leaf = jax.numpy.broadcast_to(leaf, (size, directions) + leaf.shape[2:])
+        return leaf.reshape((size * directions,) + leaf.shape[2:])
+
+    return tuple(fold(leaf, mapped) for leaf, mapped in zip(tangents, batched))
 
 
 def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples: int,
@@ -181,8 +246,11 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
 
     Differentiable in forward mode (`jax.jvp`, `jax.jacfwd`, `jax.linearize`) in every array
     of `p` and in the initial state: the tangents are carried through the same loop
-    (`chain_kernel.cc`), all the directions of a `jacfwd` in one run. Reverse mode is not
-    available (use the JAX kernel, `kernel="jax"`)."""
+    (`chain_kernel.cc`), the forces and all the directions of a `jacfwd` in one run. Under
+    `jax.vmap` the mapped chains join the kernel's batch (one run for all of them, with or
+    without tangents): a vmapped batch of fits, `jacfwd` of `vmap` and `vmap` of `jacfwd`
+    are one kernel run each. Reverse mode is not available (use the JAX kernel,
+    `kernel="jax"`)."""
     reason = _load()
     if reason is not None:
         raise RuntimeError(f"the fused chain kernel is unavailable: {reason}")
@@ -210,28 +278,64 @@ def _full_call(config):
     attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample),
                  viscous=np.int64(viscous), friction=np.int64(friction), extras=np.int64(extras))
     index = np.asarray(channels, dtype=np.int64)
+    n_args = 8  # the state and the seven parameter arrays
 
     def shapes(state0, leading=()):
-        batch = state0.shape[-1]
-        return tuple(jax.ShapeDtypeStruct(leading + (batch, n_samples), state0.dtype) for _ in channels)
+        return tuple(jax.ShapeDtypeStruct(leading + (state0.shape[-1], n_samples), state0.dtype) for _ in channels)
+
+    @jax.custom_batching.custom_vmap
+    def traces(*args):
+        return tuple(jax.ffi.ffi_call(FULL_TARGET, shapes(args[0]))(*args, index, **attrs))
+
+    @traces.def_vmap
+    def _(size, batched, *args):
+        out = traces(*_fold_chains(size, batched, args))
+        return tuple(_unfold_chains(size, leaf) for leaf in out), (True,) * len(out)
+
+    @jax.custom_batching.custom_vmap
+    def traces_and_tangents(*args):
+        """(the arrays, their tangents (D or 1, rows, B)) -> the traces (B, n), then their
+        tangents (D, B, n)."""
+        primals, tangents = args[:n_args], args[n_args:]
+        directions = max(t.shape[0] for t in tangents)
+        out_shapes = shapes(primals[0]) + shapes(primals[0], (directions,))
+        return tuple(jax.ffi.ffi_call(TANGENT_TARGET, out_shapes)(*primals, *tangents, index, **attrs))
+
+    @traces_and_tangents.def_vmap
+    def _(size, batched, *args):
+        n = len(channels)
+        primals, tangents = args[:n_args], args[n_args:]
+        if any(batched[:n_args]):
+            # mapped primals (a batch of fits, or of chains): their chains join the batch
+            # axis; the tangents' direction axis stays where it is
+            folded = _fold_chains(size, batched[:n_args], primals)
+            folded_t = _fold_chains(size, batched[n_args:], tangents, width=primals[0].shape[-1])
+            out = traces_and_tangents(*folded, *folded_t)
+            return (tuple(_unfold_chains(size, leaf) for leaf in out[:n])
+                    + tuple(_unfold_chains(size, leaf, axis=1) for leaf in out[n:])), (True,) * (2 * n)
+        # mapped tangents only (a jacfwd's basis): their directions join the direction axis
+        out = traces_and_tangents(*primals, *_fold_directions(size, batched[n_args:], tangents))
+        unfolded = tuple(leaf.reshape((size, leaf.shape[0] // size) + leaf.shape[1:]) for leaf in out[n:])
+        return tuple(out[:n]) + unfolded, (False,) * n + (True,) * n
 
     @jax.custom_jvp
     def forward(*args):
-        call = jax.ffi.ffi_call(FULL_TARGET, shapes(args[0]), vmap_method="sequential")
-        return tuple(call(*args, index, **attrs))
+        return traces(*args)
 
     @forward.defjvp
     def forward_jvp(primals, tangents):
         batch = primals[0].shape[-1]
-        # every tangent at its primal's rows and the full batch width, one direction. Under
-        # vmap (a jacfwd's basis, or a batch of fits whose primals are batched too) the kernel
-        # runs once per batch element ("sequential"): the handler takes primals of one chain
-        # layout, and batched primals with an expanded direction axis are not that layout.
+        # every tangent at its primal's rows and the full batch width, one direction (a
+        # jacfwd's basis or a vmap adds the rest through `traces_and_tangents`' batching rule)
         directions = tuple(
             jax.numpy.broadcast_to(t, primal.shape[:-1] + (batch,))[None] for primal, t in zip(primals, tangents)
         )
-        call = jax.ffi.ffi_call(TANGENT_TARGET, shapes(primals[0], (1,)), vmap_method="sequential")
-        out = call(*primals, *directions, index, **attrs)
-        return forward(*primals), tuple(t[0] for t in out)
+        out = traces_and_tangents(*primals, *directions)
+        primal = tuple(out[: len(channels)])
+        if any(isinstance(t, partial_eval.JaxprTracer) for t in tangents):
+            # `jax.linearize` needs forces that do not depend on the (unknown) tangents:
+            # the forward run's; elsewhere the tangent run's own (the same numbers)
+            primal = traces(*primals)
+        return primal, tuple(t[0] for t in out[len(channels):])
 
     return forward

@@ -69,8 +69,8 @@ def test_chains_do_not_depend_on_their_neighbours_in_a_block():
 
 def test_full_kernel_chains_do_not_depend_on_their_neighbours():
     """The full kernel on 75 damped, frictional chains: a block of 64, one of 8 and a
-    partial block of 3 (its idle lanes repeat the last chain): each chain's trace is the
-    one it gets alone (a single lane), bit for bit."""
+    block of 4 with 3 chains (its idle lane repeats the last chain): each chain's trace is
+    the one it gets alone (a single lane), bit for bit."""
     speeds = np.linspace(0.2, 1.2, 75)
     setup, _ = hc.batch_setup(hc.ChainSetup(10, eta_s=2e-6, mu=0.19), striker_velocity_m_s=speeds)
     grid = hc.choose_time_grid(setup, t_end_s=0.5e-3, sample_interval_s=2e-6)
@@ -188,6 +188,73 @@ def test_forward_mode_derivatives_equal_jacfwd_through_the_jax_kernel(case):
     np.testing.assert_array_equal(np.asarray(linear(direction)), np.asarray(tangent))
     expected = np.asarray(_traced(base, grid, q, "jax"))
     np.testing.assert_allclose(np.asarray(value), expected, rtol=0, atol=2e-12 * np.max(np.abs(expected)))
+
+
+_TRANSFORMS = {
+    # a batch of fits: every parameter vector its own chains
+    "vmap": lambda f, q, qs: jax.vmap(f)(qs),
+    "jacfwd": lambda f, q, qs: jax.jacfwd(f)(q),
+    "vmap_of_jacfwd": lambda f, q, qs: jax.vmap(jax.jacfwd(f))(qs),
+    "jacfwd_of_vmap": lambda f, q, qs: jax.jacfwd(lambda s: jax.vmap(f)(qs * s))(np.ones(q.size)),
+    "vmap_of_vmap_of_jacfwd": lambda f, q, qs: jax.vmap(jax.vmap(jax.jacfwd(f)))(jax.numpy.stack([qs, qs[::-1]])),
+}
+
+
+@pytest.mark.parametrize("transform", list(_TRANSFORMS))
+def test_vmap_and_jacfwd_are_one_kernel_run_equal_to_the_jax_kernel(transform):
+    """A vmapped batch of parameter vectors (the case of a batch of fits), `jacfwd`, and
+    their compositions: one run of the C++ kernel each (the mapped chains join its batch,
+    the directions its direction axis: one custom call, no loop around it), and the values
+    and derivatives of the JAX kernel under the same transformation to round-off."""
+    import jax.numpy as jnp
+
+    base, _ = _batch(speeds=(0.3, 1.0, 0.5), precompression_n=1.0)
+    grid = hc.choose_time_grid(base, t_end_s=0.3e-3, sample_interval_s=2e-6)
+    q = jnp.asarray([2e-6, 0.19, 1.0, 1.0, 1.0])
+    qs = q * jnp.asarray([[1.0] * 5, [1.3, 0.7, 1.1, 0.5, 1.02], [0.6, 1.2, 0.9, 1.5, 0.98]])
+    run = lambda kernel: jax.jit(lambda q, qs: _TRANSFORMS[transform](  # noqa: E731
+        lambda p: _traced(base, grid, p, kernel), q, qs))
+    hlo = run("auto").lower(q, qs).as_text()
+    target = "hertzchain_chain_full_forward" if transform == "vmap" else "hertzchain_chain_full_tangent"
+    assert hlo.count(target) == 1 and "while" not in hlo
+    fused, reference = np.asarray(run("auto")(q, qs)), np.asarray(run("jax")(q, qs))
+    assert fused.shape == reference.shape
+    scale = np.max(np.abs(reference), axis=tuple(range(reference.ndim - 1)) if "jacfwd" in transform else None)
+    assert np.all(scale > 0.0)
+    # friction's derivative crosses stick-slip kinks: 1e-10 of each column's largest value
+    np.testing.assert_allclose(fused, reference, rtol=0, atol=1e-10 * np.max(scale))
+    if "jacfwd" in transform:
+        np.testing.assert_array_less(np.max(np.abs(fused - reference), axis=tuple(range(fused.ndim - 1))),
+                                     1e-10 * scale)
+
+
+def test_conservative_kernel_under_vmap_is_one_run_bit_for_bit():
+    """The conservative kernel (`native.run`) mapped over two initial states (the second
+    with halved velocities): one kernel run of both sets' chains, each set's final state
+    and traces those of its own run, bit for bit (the lanes never mix)."""
+    import jax.numpy as jnp
+
+    from hertzchain.batched import _initial, _Layout, kernel_flags, kernel_params
+
+    setup, grid = _batch(speeds=(0.3, 0.6, 1.0))
+    flags = kernel_flags(setup)._replace(ledger=True)
+    p = kernel_params(setup)
+    layout = _Layout(p["mass"].shape[0])
+    state, _, _ = _initial(p, flags, layout, grid.dt_s)
+    rows = layout.bodies + 1  # x, then u = v + (dt/2) a, then the books
+    states = jnp.stack([state, state.at[rows : 2 * rows].multiply(0.5)])
+    kwargs = dict(dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
+                  channels=(2, 6), preload=False, springs=False, books=True)
+    mapped = jax.jit(jax.vmap(lambda s: native.run(p, s, **kwargs)))
+    hlo = mapped.lower(states).as_text()
+    assert hlo.count("hertzchain_chain_forward") == 1 and "while" not in hlo
+    traces, final = mapped(states)
+    for k in range(2):
+        one_traces, one_final = jax.jit(lambda s: native.run(p, s, **kwargs))(states[k])
+        np.testing.assert_array_equal(final[k], one_final)
+        for trace, one in zip(traces, one_traces):
+            np.testing.assert_array_equal(trace[k], one)
+    assert not np.array_equal(traces[0][0], traces[0][1])
 
 
 def test_unknown_kernel_is_refused():

@@ -104,25 +104,34 @@ def test_tolerance_priors_widen_as_linear_propagation_predicts(brass_traces):
     assert widened >= 1  # the tolerances matter: at least one of eta, C is much wider
 
 
-def test_potential_gradient_matches_reverse_mode_and_central_differences(noise_only):
-    """The sampler's forward-mode gradient against jax.grad of the same potential written
-    without the custom rule (reverse mode through the integrator), and against central
-    differences, at a point one Laplace sd off the optimum in every whitened direction."""
+def _potentials(fit_result):
+    """The sampler's potential at a MAP fit (`fitting.posterior._potential`), and a
+    function that writes the same potential plainly from a residual function of x."""
     from fitting.parameters import from_unbounded, transform_arrays
     from fitting.posterior import _laplace_whitening, _potential
 
-    fit_result = noise_only.fit
     problem = fit_result.problem
     constants = tuple(jnp.asarray(a) for a in transform_arrays(problem.instances))
     z_hat, chol = _laplace_whitening(problem.instances, constants, np.asarray(fit_result.x),
                                      fit_result.covariance)
-    potential = _potential(problem, constants, z_hat, chol)
 
-    def plain(u):
-        z = z_hat + chol @ u
-        x, dx_dz = jax.jvp(lambda zz: from_unbounded(constants, zz), (z,), (jnp.ones_like(z),))
-        return 0.5 * jnp.sum(problem.residuals(x) ** 2) - jnp.sum(jnp.log(jnp.abs(dx_dz)))
+    def plain_with(residuals):
+        def plain(u):
+            z = z_hat + chol @ u
+            x, dx_dz = jax.jvp(lambda zz: from_unbounded(constants, zz), (z,), (jnp.ones_like(z),))
+            return 0.5 * jnp.sum(residuals(x) ** 2) - jnp.sum(jnp.log(jnp.abs(dx_dz)))
 
+        return plain
+
+    return problem, _potential(problem, constants, z_hat, chol), plain_with
+
+
+def test_potential_gradient_matches_reverse_mode_and_central_differences(noise_only):
+    """The sampler's forward-mode gradient against jax.grad of the same potential written
+    without the sampler's custom rule (reverse mode through the residuals), and against
+    central differences, at a point one Laplace sd off the optimum in every whitened direction."""
+    problem, potential, plain_with = _potentials(noise_only.fit)
+    plain = plain_with(problem.residuals)
     u = jnp.array([1.0, -0.7])
     value, gradient = jax.value_and_grad(potential)(u)
     assert float(value) == pytest.approx(float(plain(u)), rel=1e-12)
@@ -140,6 +149,36 @@ def test_potential_gradient_matches_reverse_mode_and_central_differences(noise_o
     for k in range(3):
         assert float(values[k]) == pytest.approx(float(plain(batch[k])), rel=1e-12)
         np.testing.assert_allclose(np.asarray(gradients[k]), np.asarray(jax.grad(plain)(batch[k])), rtol=1e-8)
+
+
+def test_sampler_gradient_on_the_cpp_kernel_equals_reverse_mode_through_the_jax_kernel(noise_only, monkeypatch):
+    """The gradient NUTS takes (forward mode: the C++ kernel's tangents, all the chains and
+    directions in one kernel run) against `jax.grad` of the same potential through the JAX
+    kernel's own reverse mode (another code path: the scan integrated forward, its adjoint
+    backward), to 1e-8 relative, one chain alone and three chains under `vmap`."""
+    from hertzchain import native
+
+    if not native.available():
+        pytest.skip(f"no native kernel: {native.unavailable_reason()}")
+    problem, potential, plain_with = _potentials(noise_only.fit)
+    u = jnp.array([1.0, -0.7])
+    batch = jnp.stack([u, -u, 0.5 * u])
+    sampler = jax.jit(jax.vmap(jax.value_and_grad(potential)))
+    hlo = sampler.lower(batch).as_text()
+    assert hlo.count("hertzchain_chain_full_tangent") == 1 and "while" not in hlo  # one kernel run
+    values, gradients = sampler(batch)
+
+    # the reference: a new problem (its own compiled functions) on the JAX kernel
+    monkeypatch.setattr(native, "kernel_for", lambda flags, devices: None)
+    reference = problem.with_setups(problem.base_setups)
+    # JAX's own differentiation of the kernel (not the model's custom JVP)
+    plain = plain_with(lambda x: reference.residuals(x, directional=True))
+    reverse = jax.jit(jax.value_and_grad(plain))
+    assert "hertzchain_chain" not in reverse.lower(u).as_text()
+    for k in range(3):
+        value, gradient = reverse(batch[k])
+        assert float(values[k]) == pytest.approx(float(value), rel=1e-12)
+        np.testing.assert_allclose(np.asarray(gradients[k]), np.asarray(gradient), rtol=1e-8)
 
 
 def test_laplace_comparison_flags_a_skewed_marginal():
