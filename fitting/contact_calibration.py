@@ -32,7 +32,7 @@ no rate-independent law follows (both off by default):
   a nuisance of split-Hopkinson-bar processing (the two records come from gauges at different
   distances from the sample, moved to its faces with the bar's wave speed and a dispersion
   correction): the law is driven with the approach at $t + \tau$, $\tau$ fitted per curve
-  within $\pm$`max_shift_s` (positive: the force leads the approach). Its standard error is the
+  within $\pm$`max_shift_s` (`bounded_shift_s`; positive: the force leads the approach). Its standard error is the
   Gauss-Newton one inflated for the residuals' correlation along time (lag-1 autocorrelation
   $\rho$ of the curve's residuals: factor $\sqrt{(1+\rho)/(1-\rho)}$, an AR(1) noise).
 """
@@ -66,6 +66,8 @@ SECANT_FRACTIONS = (0.9, 0.5)
 # bar's incident gauge (25.375 in at 4865.5 m/s); a shift at this bound is no alignment error
 # of the processing but a misfit of the law.
 MAX_TIME_SHIFT_S = 13e-6
+# A fitted shift beyond this fraction of its bound is reported without a standard error.
+SHIFT_AT_BOUND = 0.99
 # Parameters of the fit, in this order; per-curve time shifts follow them.
 PARAMETERS = ("ln_yield_stress", "rate_constant", "eta_s")
 
@@ -244,6 +246,13 @@ def approach_rate_m_s(curve: ContactCurve, approach_m) -> np.ndarray:
     return np.gradient(smooth, step)
 
 
+def bounded_shift_s(value, max_shift_s):
+    """The time shift of the fitted coordinate `value`, s: $\tau_{max}\tanh(x/\tau_{max})$, equal to
+    it near 0 and within $\pm\tau_{max}$; smooth, so that a fit that overshoots the bound can
+    come back (a clip would leave it on a flat stretch)."""
+    return max_shift_s * jnp.tanh(value / max_shift_s)
+
+
 def model_force(approach_m, rate_m_s, time_step_s, kappa, geometry: ContactGeometry, yield_stress_pa, poisson,
                 eta_s=0.0, shift_s=0.0):
     """The law along a measured history with the optional terms, N: the approach (and its rate)
@@ -278,7 +287,7 @@ def unloading_secant_n_m(approach_m, force_n) -> float | None:
 
 class _Residuals:
     """The whitened residuals of one material's curves in x = (ln sigma_Y, C, eta_s, shift_1 ..
-    shift_n), for `fitting.fit.least_squares`; shifts beyond +-`max_shift_s` are clipped there."""
+    shift_n), for `fitting.fit.least_squares`; the shifts enter through `bounded_shift_s`."""
 
     def __init__(self, pieces, kappa, geometry, poisson, max_shift_s):
         self.pieces = [(jnp.asarray(a), jnp.asarray(v), dt, jnp.asarray(f), p, r) for a, v, dt, f, p, r in pieces]
@@ -288,7 +297,7 @@ class _Residuals:
             out = []
             for k, (approach, speed, step, force, peak, rate) in enumerate(self.pieces):
                 stress = contact.rate_hardened_yield_stress(jnp.exp(x[0]), x[1], rate)
-                shift = jnp.clip(x[first + k], -max_shift_s, max_shift_s)
+                shift = bounded_shift_s(x[first + k], max_shift_s)
                 model = model_force(approach, speed, step, kappa, geometry, stress, poisson, x[2], shift)
                 out.append((model - force) / (peak * math.sqrt(force.size)))
             return jnp.concatenate(out)
@@ -321,7 +330,6 @@ def _fit_material(pieces, material, kappa, geometry, options):
 
     problem, result, free = solve(range(n))
     x = result.x.copy()
-    x[first:] = np.clip(x[first:], -options["max_shift_s"], options["max_shift_s"])
     r, jac = problem.linearize(x, free)
     labels = [PARAMETERS[c] if c < first else f"shift_{c - first}" for c in free]
     cov = covariance_from_jacobian(jac, labels, chi2=float(r @ r), dof=max(r.size - len(free), 1), scale="residual")
@@ -335,7 +343,8 @@ def _fit_material(pieces, material, kappa, geometry, options):
               "yield_stress_pa": float(np.nanmax([gauss_newton, scatter])),
               "rate_constant": float(stderr[1]) if 1 in stderr else None,
               "eta_s": float(stderr[2]) if 2 in stderr else None}
-    shifts, shift_errors = x[first:], [None] * n
+    bound = options["max_shift_s"]
+    shifts, shift_errors = [float(bounded_shift_s(v, bound)) for v in x[first:]], [None] * n
     if options["fit_time_shift"]:
         # the Gauss-Newton error of a shift from its own curve's residuals (whitened per curve:
         # the sample count cancels), inflated for their correlation along time
@@ -345,10 +354,12 @@ def _fit_material(pieces, material, kappa, geometry, options):
             rho = min(max(lag1_autocorrelation(r[rows]), 0.0), 0.999)
             column = jac[rows, free.index(first + k)]
             variance = float(r[rows] @ r[rows]) / max(sizes[k + 1] - sizes[k] - 1, 1)
-            at_bound = abs(abs(shifts[k]) - options["max_shift_s"]) < 1e-12
-            shift_errors[k] = None if at_bound or not column.any() else math.sqrt(
+            # the column is d r / d x; d shift / d x = 1 - (shift / bound)^2
+            slope = 1.0 - (shifts[k] / bound) ** 2
+            at_bound = abs(shifts[k]) > SHIFT_AT_BOUND * bound
+            shift_errors[k] = None if at_bound or not column.any() else slope * math.sqrt(
                 variance * (1 + rho) / (1 - rho) / float(column @ column))
-    return values, errors, bool(result.converged), singles, [float(v) for v in shifts], shift_errors
+    return values, errors, bool(result.converged), singles, shifts, shift_errors
 
 
 def _piece(curve, approach, peak, rate, damping_or_shift):

@@ -73,7 +73,7 @@ def test_time_shift_is_recovered_with_an_honest_sigma(tmp_path):
     assert curve["time_shift_stderr_s"] is not None and 0 < curve["time_shift_stderr_s"] < 1e-8
     # a bound below the true shift stops the fit there and reports no sigma
     report = _run(tmp_path, "--time-shift", "--max-shift", "1us")
-    assert report["curves"][0]["time_shift_s"] == pytest.approx(1e-6, rel=1e-9)
+    assert 0.99e-6 < report["curves"][0]["time_shift_s"] <= 1e-6
     assert report["curves"][0]["time_shift_stderr_s"] is None
 
 
@@ -102,7 +102,7 @@ def test_residual_gradients_in_damping_and_shift_equal_finite_differences():
     geometry = ContactGeometry("sphere-flat", RADIUS_M)
     problem = _Residuals([(approach, speed, step, force, float(force.max()), 1e-3)], kappa, geometry, NU, 13e-6)
     # off the sample grid (a shift of 0.3 steps), with the damping on, sigma_Y in the plastic range
-    x = np.array([math.log(600e6), 0.0, 1.5e-6, 0.3 * step])
+    x = np.array([math.log(600e6), 0.0, 1.5e-6, 0.3 * step])  # a shift of 0.3 steps (tanh: 3e-4 % less)
     r, jac = problem.linearize(x, [0, 2, 3])
     assert np.all(np.isfinite(jac)) and np.abs(jac).max() > 0
     for column, h in zip(range(3), (1e-6, 1e-9, 1e-10)):
