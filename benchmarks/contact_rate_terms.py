@@ -31,17 +31,15 @@ Writes `rate_terms.json` and `rate_terms.md` into --out.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-from benchmarks.contact_burgoyne import CALTECH, DATA, GEOMETRY
-from fitting.contact_calibration import _kappa, _smoothed, calibrate, read_curve, shifted_approach, write_outputs
+from benchmarks.contact_burgoyne import GEOMETRY, caltech_arguments
+from fitting.contact_calibration import _kappa, _smoothed, calibrate, shifted_approach, write_outputs
 from hertzchain import atomic
 
 # Travel time from the incident gauge minus that from the transmission gauge to the sample, s
@@ -67,27 +65,19 @@ def _loading_slope(approach, force, peak_index):
     return float(np.polyfit(approach[chosen], force[chosen], 1)[0])
 
 
-def _span(values, digits=1, scale=1.0):
-    values = [scale * v for v in values if v is not None]
+def _span(values, digits=1):
+    values = [v for v in values if v is not None]
     return f"{min(values):.{digits}f} … {max(values):.{digits}f}" if values else "-"
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", default=str(DATA))
-    parser.add_argument("--out", default="benchmarks/results/contact_burgoyne")
-    parser.add_argument("--reuse", action="store_true", help="read runs whose contact.json exists instead of rerunning")
-    args = parser.parse_args(argv)
-    data_dir, out = Path(args.data), Path(args.out)
-    if not (data_dir / "ExperimentalData").is_dir():
-        print(f"no data at {data_dir}: nothing to do", file=sys.stderr)
+    args, _, out, curves = caltech_arguments(argv, __doc__.splitlines()[0])
+    if curves is None:
         return 1
     base_file = out / "published" / "contact.json"
     if not base_file.is_file():
         print(f"{base_file} missing: run benchmarks/contact_burgoyne.py first", file=sys.stderr)
         return 1
-    curves = [read_curve(data_dir / "ExperimentalData" / f"{name}.mat", m)
-              for m, names in CALTECH.items() for name in names]
     runs = {"law_alone": json.loads(base_file.read_text())}
     elapsed = {}
     for label, options in RUNS.items():
