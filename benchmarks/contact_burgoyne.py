@@ -200,6 +200,9 @@ def _markdown(summary) -> str:
         peaks = ", ".join(f"{p:.1f}" for p in entry["peak_force_measured_kn"])
         lines.append(f"| {label} | {peaks} | {_pct(entry['peak_force_error_published'])} | "
                      f"{entry['fitted_yield_stress_mpa']:.0f} | {_pct(entry['rms_over_peak_fitted'])} |")
+    lines += ["", "The same curves with a Kuwabara-Kono damping time per material (`--damping`) or a time shift "
+              "of the records per curve (`--time-shift`): [`rate_terms.md`](rate_terms.md) "
+              "(`python benchmarks/contact_rate_terms.py`)."]
     return "\n".join(lines) + "\n"
 
 

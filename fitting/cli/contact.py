@@ -114,6 +114,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {entry['file']}: peak force {entry['peak_force_measured_n'] / 1e3:.3g} kN, error at given "
               f"constants {100 * entry['peak_force_error_model']:+.1f} %, RMS/peak fitted "
               f"{100 * entry['rms_over_peak_fitted']:.1f} %"
-              + (f", time shift {entry['time_shift_s'] * 1e6:+.2f} us" if args.time_shift else ""))
+              + (f", time shift {entry['time_shift_s'] * 1e6:+.2f} us "
+                 + (f"+- {entry['time_shift_stderr_s'] * 1e6:.2f} us" if entry['time_shift_stderr_s'] is not None
+                    else "(at its bound)") if args.time_shift else ""))
     print(f"wrote contact.json, contact.png, residuals.png and {len(curves)} CSV files to {args.out}")
     return 0
