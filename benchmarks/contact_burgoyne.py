@@ -67,8 +67,10 @@ def _shift(base, other, material):
     return [min(changes), max(changes)]
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def caltech_arguments(argv, description):
+    """(arguments, data folder, output folder, the 15 Caltech curves) of a benchmark on these
+    data (`--data`, `--out`, `--reuse`); the curves are None where the data are missing."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--data", default=str(DATA))
     parser.add_argument("--out", default="benchmarks/results/contact_burgoyne")
     parser.add_argument("--reuse", action="store_true", help="read runs whose contact.json exists instead of rerunning")
@@ -76,9 +78,15 @@ def main(argv=None) -> int:
     data_dir, out = Path(args.data), Path(args.out)
     if not (data_dir / "ExperimentalData").is_dir():
         print(f"no data at {data_dir}: nothing to do", file=sys.stderr)
+        return args, data_dir, out, None
+    return args, data_dir, out, [read_curve(data_dir / "ExperimentalData" / f"{name}.mat", m)
+                                 for m, names in CALTECH.items() for name in names]
+
+
+def main(argv=None) -> int:
+    args, data_dir, out, caltech = caltech_arguments(argv, __doc__.splitlines()[0])
+    if caltech is None:
         return 1
-    caltech = [read_curve(data_dir / "ExperimentalData" / f"{name}.mat", m)
-               for m, names in CALTECH.items() for name in names]
     runs = {}
     for label, title, options in (
         ("published", "published constants, offset shifted out", {}),
@@ -192,6 +200,9 @@ def _markdown(summary) -> str:
         peaks = ", ".join(f"{p:.1f}" for p in entry["peak_force_measured_kn"])
         lines.append(f"| {label} | {peaks} | {_pct(entry['peak_force_error_published'])} | "
                      f"{entry['fitted_yield_stress_mpa']:.0f} | {_pct(entry['rms_over_peak_fitted'])} |")
+    lines += ["", "The same curves with a Kuwabara-Kono damping time per material (`--damping`) or a time shift "
+              "of the records per curve (`--time-shift`): [`rate_terms.md`](rate_terms.md) "
+              "(`python benchmarks/contact_rate_terms.py`)."]
     return "\n".join(lines) + "\n"
 
 

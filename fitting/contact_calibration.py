@@ -19,6 +19,22 @@ Standard errors: the Gauss-Newton one from the residual variance, which treats t
 strongly correlated samples as independent and is far too small, and the scatter of the
 yield stresses fitted to each curve alone (standard deviation / sqrt(curves)); the larger
 is reported as `stderr`.
+
+Two optional terms account for a measured force that peaks before the approach does, which
+no rate-independent law follows (both off by default):
+
+- `fit_damping`: a Kuwabara-Kono viscous force on top of the law, the project's one damping
+  law (`hertzchain.contact.contact_force`): $F = \max(F_{JG} + \tfrac32\eta\kappa
+  \delta^{1/2}\dot\delta, 0)$ with one damping time $\eta$ (s) per material, fitted with
+  $\sigma_Y$; $\dot\delta$ from the approach averaged over `PEAK_WINDOW_S`. Physical,
+  differentiable and usable in a chain (`eta_s` of a chain's contacts).
+- `fit_time_shift`: a time alignment between the force and the approach records of each curve,
+  a nuisance of split-Hopkinson-bar processing (the two records come from gauges at different
+  distances from the sample, moved to its faces with the bar's wave speed and a dispersion
+  correction): the law is driven with the approach at $t + \tau$, $\tau$ fitted per curve
+  within $\pm$`max_shift_s` (`bounded_shift_s`; positive: the force leads the approach). Its standard error is the
+  Gauss-Newton one inflated for the residuals' correlation along time (lag-1 autocorrelation
+  $\rho$ of the curve's residuals: factor $\sqrt{(1+\rho)/(1-\rho)}$, an AR(1) noise).
 """
 
 from __future__ import annotations
@@ -35,6 +51,7 @@ import numpy as np
 from hertzchain import contact
 from hertzchain.materials import Material
 
+from .driven import lag1_autocorrelation
 from .fit import least_squares
 from .uncertainty import covariance_from_jacobian
 
@@ -44,6 +61,15 @@ OFFSETS = ("first-sample", "none")
 PEAK_WINDOW_S = 1e-6
 # Unloading secant stiffness between these fractions of the peak force.
 SECANT_FRACTIONS = (0.9, 0.5)
+# Default bound of the fitted time alignment of the force and approach records, s: ten times
+# what a 1 % error in the bar's wave speed moves the 132 us wave travel time of the Caltech
+# bar's incident gauge (25.375 in at 4865.5 m/s); a shift at this bound is no alignment error
+# of the processing but a misfit of the law.
+MAX_TIME_SHIFT_S = 13e-6
+# A fitted shift beyond this fraction of its bound is reported without a standard error.
+SHIFT_AT_BOUND = 0.99
+# Parameters of the fit, in this order; per-curve time shifts follow them.
+PARAMETERS = ("ln_yield_stress", "rate_constant", "eta_s")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -197,6 +223,46 @@ def law_force(approach_m, kappa, geometry: ContactGeometry, yield_stress_pa, poi
                                          poisson)[0]
 
 
+def time_shifted(values, time_step_s, shift_s):
+    """A uniformly sampled history read at $t + $ `shift_s`, linearly interpolated,
+    differentiable in the shift: constant before the first sample (no contact yet), continued
+    along its last slope after the end."""
+    values = jnp.asarray(values)
+    n = values.shape[0]
+    position = jnp.arange(n) + shift_s / time_step_s
+    left = jnp.clip(jnp.floor(position), 0, n - 2).astype(int)
+    fraction = jnp.maximum(position - left, 0.0)
+    return values[left] + fraction * (values[left + 1] - values[left])
+
+
+def approach_rate_m_s(curve: ContactCurve, approach_m) -> np.ndarray:
+    """Approach speed, m/s: the gradient of the approach averaged over `PEAK_WINDOW_S`."""
+    if curve.time_s is None:
+        raise ValueError(f"{curve.name}: the file has no time column; contact damping and a time shift need one.")
+    step = float(np.median(np.diff(curve.time_s)))
+    width = max(1, int(round(PEAK_WINDOW_S / step)))
+    padded = np.pad(np.asarray(approach_m, float), width // 2, mode="edge")
+    smooth = np.convolve(padded, np.ones(width) / width, mode="valid")[: np.size(approach_m)]
+    return np.gradient(smooth, step)
+
+
+def bounded_shift_s(value, max_shift_s):
+    """The time shift of the fitted coordinate `value`, s: $\tau_{max}\tanh(x/\tau_{max})$, equal to
+    it near 0 and within $\pm\tau_{max}$; smooth, so that a fit that overshoots the bound can
+    come back (a clip would leave it on a flat stretch)."""
+    return max_shift_s * jnp.tanh(value / max_shift_s)
+
+
+def model_force(approach_m, rate_m_s, time_step_s, kappa, geometry: ContactGeometry, yield_stress_pa, poisson,
+                eta_s=0.0, shift_s=0.0):
+    """The law along a measured history with the optional terms, N: the approach (and its rate)
+    read `shift_s` later (s; 0: none), the Kuwabara-Kono damping time `eta_s` (s; 0: none)."""
+    approach = time_shifted(approach_m, time_step_s, shift_s)
+    rate = time_shifted(rate_m_s, time_step_s, shift_s)
+    elastic = law_force(approach, kappa, geometry, yield_stress_pa, poisson)
+    return contact.contact_force(approach, rate, kappa, eta_s, elastic_n=elastic)[1]
+
+
 def thornton_force(approach_m, material: Material, geometry: ContactGeometry, yield_stress_pa):
     """The earlier law, `thornton_contact` with `yield_force`, along an approach history, N."""
     theta = contact.theta(material.youngs_pa, material.poisson)
@@ -220,17 +286,19 @@ def unloading_secant_n_m(approach_m, force_n) -> float | None:
 
 
 class _Residuals:
-    """The whitened residuals of one material's curves in x = (ln sigma_Y, C), for
-    `fitting.fit.least_squares`."""
+    """The whitened residuals of one material's curves in x = (ln sigma_Y, C, eta_s, shift_1 ..
+    shift_n), for `fitting.fit.least_squares`; the shifts enter through `bounded_shift_s`."""
 
-    def __init__(self, approaches, forces, peaks, rates, kappa, geometry, poisson):
-        self.pieces = [(jnp.asarray(a), jnp.asarray(f), p, r) for a, f, p, r in zip(approaches, forces, peaks, rates)]
+    def __init__(self, pieces, kappa, geometry, poisson, max_shift_s):
+        self.pieces = [(jnp.asarray(a), jnp.asarray(v), dt, jnp.asarray(f), p, r) for a, v, dt, f, p, r in pieces]
+        first = len(PARAMETERS)
 
         def residuals(x):
             out = []
-            for approach, force, peak, rate in self.pieces:
+            for k, (approach, speed, step, force, peak, rate) in enumerate(self.pieces):
                 stress = contact.rate_hardened_yield_stress(jnp.exp(x[0]), x[1], rate)
-                model = law_force(approach, kappa, geometry, stress, poisson)
+                shift = bounded_shift_s(x[first + k], max_shift_s)
+                model = model_force(approach, speed, step, kappa, geometry, stress, poisson, x[2], shift)
                 out.append((model - force) / (peak * math.sqrt(force.size)))
             return jnp.concatenate(out)
 
@@ -245,55 +313,88 @@ class _Residuals:
         return np.asarray(self._residuals(x)), np.asarray(self._jacobian(x))[:, list(columns)]
 
 
-def _fit_material(curves, approaches, rates, geometry, material, fit_rate_constant):
-    """(values {yield_stress_pa, rate_constant}, stderr {...}, converged, per-curve sigma_Y)."""
-    kappa = _kappa(material, geometry)
-    forces = [c.force_n for c in curves]
-    start = np.array([math.log(material.yield_stress_pa), material.yield_rate_constant or 0.0])
-    free = [0, 1] if fit_rate_constant else [0]
+def _fit_material(pieces, material, kappa, geometry, options):
+    """(values {yield_stress_pa, rate_constant, eta_s}, stderr {...}, converged, per-curve sigma_Y,
+    per-curve shifts (s) with their standard errors (s))."""
+    n = len(pieces)
+    first = len(PARAMETERS)
+    start = np.concatenate([[math.log(material.yield_stress_pa), material.yield_rate_constant or 0.0, 0.0],
+                            np.zeros(n)])
+    base = [0] + ([1] if options["fit_rate_constant"] else []) + ([2] if options["fit_damping"] else [])
 
     def solve(indices):
-        problem = _Residuals([approaches[i] for i in indices], [forces[i] for i in indices],
-                             [float(np.max(_smoothed(curves[i]))) for i in indices], [rates[i] for i in indices],
-                             kappa, geometry, material.poisson)
-        result = least_squares(problem, start, free, max_steps=60, tolerance=1e-8)
-        return problem, result
+        problem = _Residuals([pieces[i] for i in indices], kappa, geometry, material.poisson, options["max_shift_s"])
+        free = base + ([first + k for k in range(len(indices))] if options["fit_time_shift"] else [])
+        x0 = np.concatenate([start[:first], start[first:][list(indices)]])
+        return problem, least_squares(problem, x0, free, max_steps=60, tolerance=1e-8), free
 
-    problem, result = solve(range(len(curves)))
-    r, jac = problem.linearize(result.x, free)
-    labels = ["ln_yield_stress", "rate_constant"][: len(free)]
+    problem, result, free = solve(range(n))
+    x = result.x.copy()
+    r, jac = problem.linearize(x, free)
+    labels = [PARAMETERS[c] if c < first else f"shift_{c - first}" for c in free]
     cov = covariance_from_jacobian(jac, labels, chi2=float(r @ r), dof=max(r.size - len(free), 1), scale="residual")
-    stress = math.exp(result.x[0])
-    singles = [math.exp(solve([i])[1].x[0]) for i in range(len(curves))] if not fit_rate_constant else []
+    stderr = dict(zip(free, cov.stderr))
+    stress = math.exp(x[0])
+    singles = [] if options["fit_rate_constant"] else [math.exp(solve([i])[1].x[0]) for i in range(n)]
     scatter = float(np.std(singles, ddof=1) / math.sqrt(len(singles))) if len(singles) > 1 else math.nan
-    gauss_newton = stress * float(cov.stderr[0])
-    values = {"yield_stress_pa": stress, "rate_constant": float(result.x[1])}
+    gauss_newton = stress * float(stderr[0])
+    values = {"yield_stress_pa": stress, "rate_constant": float(x[1]), "eta_s": float(x[2])}
     errors = {"yield_stress_gauss_newton_pa": gauss_newton, "yield_stress_curve_scatter_pa": scatter,
               "yield_stress_pa": float(np.nanmax([gauss_newton, scatter])),
-              "rate_constant": float(cov.stderr[1]) if fit_rate_constant else None}
-    return values, errors, bool(result.converged), singles
+              "rate_constant": float(stderr[1]) if 1 in stderr else None,
+              "eta_s": float(stderr[2]) if 2 in stderr else None}
+    bound = options["max_shift_s"]
+    shifts, shift_errors = [float(bounded_shift_s(v, bound)) for v in x[first:]], [None] * n
+    if options["fit_time_shift"]:
+        # the Gauss-Newton error of a shift from its own curve's residuals (whitened per curve:
+        # the sample count cancels), inflated for their correlation along time
+        sizes = np.cumsum([0] + [np.size(p[3]) for p in pieces])
+        for k in range(n):
+            rows = slice(sizes[k], sizes[k + 1])
+            rho = min(max(lag1_autocorrelation(r[rows]), 0.0), 0.999)
+            column = jac[rows, free.index(first + k)]
+            variance = float(r[rows] @ r[rows]) / max(sizes[k + 1] - sizes[k] - 1, 1)
+            # the column is d r / d x; d shift / d x = 1 - (shift / bound)^2
+            slope = 1.0 - (shifts[k] / bound) ** 2
+            at_bound = abs(shifts[k]) > SHIFT_AT_BOUND * bound
+            shift_errors[k] = None if at_bound or not column.any() else slope * math.sqrt(
+                variance * (1 + rho) / (1 - rho) / float(column @ column))
+    return values, errors, bool(result.converged), singles, shifts, shift_errors
 
 
-def _curve_report(curve, approach, rate, kappa, geometry, given, fitted, own_stress_pa=None):
-    """Numbers of one curve at the given and the fitted constants."""
+def _piece(curve, approach, peak, rate, damping_or_shift):
+    """(approach m, approach speed m/s, time step s, force N, peak N, strain rate 1/s) of a curve
+    for the fit; files without time have no speed (zeros) and a unit step (neither is used)."""
+    if damping_or_shift:
+        speed, step = approach_rate_m_s(curve, approach), float(np.median(np.diff(curve.time_s)))
+    else:
+        speed, step = np.zeros_like(approach), 1.0
+    return approach, speed, step, curve.force_n, peak, rate
+
+
+def _curve_report(curve, piece, kappa, geometry, given, fitted, own_stress_pa=None, shift_s=0.0,
+                  shift_stderr_s=None):
+    """Numbers of one curve at the given and the fitted constants (with the fitted damping time
+    and time shift, where fitted)."""
+    approach, speed, step, _, _, rate = piece
     smooth = _smoothed(curve)
     peak = float(np.max(smooth))
-    model = np.asarray(law_force(jnp.asarray(approach), kappa, geometry,
-                                 contact.rate_hardened_yield_stress(given["yield_stress_pa"],
-                                                                    given["rate_constant"], rate),
-                                 curve.material.poisson))
-    fit = np.asarray(law_force(jnp.asarray(approach), kappa, geometry,
-                               contact.rate_hardened_yield_stress(fitted["yield_stress_pa"],
-                                                                  fitted["rate_constant"], rate),
-                               curve.material.poisson))
+
+    def force(stress_pa, rate_constant, eta_s=0.0, shift=0.0):
+        stress = contact.rate_hardened_yield_stress(stress_pa, rate_constant, rate)
+        return np.asarray(model_force(jnp.asarray(approach), jnp.asarray(speed), step, kappa, geometry, stress,
+                                      curve.material.poisson, eta_s, shift))
+
+    model = force(given["yield_stress_pa"], given["rate_constant"])
+    fit = force(fitted["yield_stress_pa"], fitted["rate_constant"], fitted["eta_s"], shift_s)
     old = np.asarray(thornton_force(approach, curve.material, geometry, given["yield_stress_pa"]))
-    data_secant = unloading_secant_n_m(approach, smooth)
-    secants = {label: unloading_secant_n_m(approach, f) for label, f in (("model", model), ("fitted", fit))}
+    # the measured force against the approach it is aligned with (the fitted shift; none: as stored)
+    aligned = np.asarray(time_shifted(approach, step, shift_s)) if shift_s else approach
+    data_secant = unloading_secant_n_m(aligned, smooth)
+    secants = {"model": unloading_secant_n_m(approach, model), "fitted": unloading_secant_n_m(aligned, fit)}
     i_peak = int(np.argmax(smooth))
     loading, unloading = slice(0, i_peak + 1), slice(i_peak + 1, None)
-    own = None if own_stress_pa is None else np.asarray(law_force(
-        jnp.asarray(approach), kappa, geometry,
-        contact.rate_hardened_yield_stress(own_stress_pa, fitted["rate_constant"], rate), curve.material.poisson))
+    own = None if own_stress_pa is None else force(own_stress_pa, fitted["rate_constant"], fitted["eta_s"], shift_s)
     modulus = 0.75 * kappa / math.sqrt(geometry.reduced_radius_m)
     fitted_stress = contact.rate_hardened_yield_stress(fitted["yield_stress_pa"], fitted["rate_constant"], rate)
     radius = float(contact.jackson_green_contact_radius(float(np.max(approach)), kappa, geometry.reduced_radius_m,
@@ -304,6 +405,8 @@ def _curve_report(curve, approach, rate, kappa, geometry, given, fitted, own_str
         "samples": int(curve.force_n.size),
         "approach_offset_m": float(curve.approach_m[0]),
         "strain_rate_s": rate,
+        "time_shift_s": float(shift_s),
+        "time_shift_stderr_s": shift_stderr_s,
         "peak_force_measured_n": peak,
         "approach_at_peak_m": float(approach[i_peak]),
         "mean_pressure_truncated_area_over_yield_stress": peak / (
@@ -334,37 +437,49 @@ def _curve_report(curve, approach, rate, kappa, geometry, given, fitted, own_str
 
 
 def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample", fit_rate_constant: bool = False,
+              fit_damping: bool = False, fit_time_shift: bool = False, max_shift_s: float = MAX_TIME_SHIFT_S,
               strain_rate_s_given: float | None = None, progress=None) -> dict:
     """Predict and calibrate the contact law on `curves` (`ContactCurve`, grouped by material).
 
+    `fit_damping`: fit a Kuwabara-Kono damping time per material; `fit_time_shift`: fit a
+    time alignment of the force and approach records per curve within +-`max_shift_s` (s)
+    (module docstring; both need a time column).
+
     **Returns:** a dict: `materials` (per material: given and fitted constants with standard
     errors, converged flag, per-curve yield stresses) and `curves` (per curve: strain rate,
-    measured peak, peak-force errors at the given constants, the fitted ones and with the
-    earlier Thornton law, RMS misfit over the peak, unloading secant stiffness 90 -> 50 % of
-    the peak, measured and as ratios). `_series` entries hold the model forces for the
-    per-file CSV and the figure.
+    fitted time shift and its standard error, measured peak, peak-force errors at the given
+    constants, the fitted ones and with the earlier Thornton law, RMS misfit over the peak,
+    unloading secant stiffness 90 -> 50 % of the peak, measured and as ratios). `_series`
+    entries hold the model forces for the per-file CSV and the figure.
     """
     if not curves:
         raise ValueError("no force-approach curves given.")
+    if not (math.isfinite(max_shift_s) and max_shift_s > 0):
+        raise ValueError(f"max_shift_s must be positive and finite (s), got {max_shift_s}.")
     groups: dict[str, list[int]] = {}
     for i, curve in enumerate(curves):
         if curve.material.yield_stress_pa is None:
             raise ValueError(f"{curve.name}: material {curve.material.name!r} has no yield stress; "
                              "give one (--yield-stress, Pa).")
         groups.setdefault(curve.material.name, []).append(i)
+    options = {"fit_rate_constant": fit_rate_constant, "fit_damping": fit_damping, "fit_time_shift": fit_time_shift,
+               "max_shift_s": max_shift_s}
     approaches = [shifted_approach(c, offset) for c in curves]
     rates = [strain_rate_s(c, geometry, strain_rate_s_given) if (c.material.yield_rate_constant or
              fit_rate_constant) else 1e-3 for c in curves]
+    pieces = [_piece(c, a, float(np.max(_smoothed(c))), r, fit_damping or fit_time_shift)
+              for c, a, r in zip(curves, approaches, rates)]
     report = {"geometry": dataclasses.asdict(geometry), "reduced_radius_m": geometry.reduced_radius_m,
-              "offset": offset, "fit_rate_constant": fit_rate_constant, "materials": {}, "curves": []}
+              "offset": offset, **options, "materials": {}, "curves": []}
     for name, members in groups.items():
         material = curves[members[0]].material
+        kappa = _kappa(material, geometry)
         if progress:
             progress(f"fitting {name} on {len(members)} curve(s)")
-        values, errors, converged, singles = _fit_material(
-            [curves[i] for i in members], [approaches[i] for i in members], [rates[i] for i in members],
-            geometry, material, fit_rate_constant)
-        given = {"yield_stress_pa": material.yield_stress_pa, "rate_constant": material.yield_rate_constant or 0.0}
+        values, errors, converged, singles, shifts, shift_errors = _fit_material(
+            [pieces[i] for i in members], material, kappa, geometry, options)
+        given = {"yield_stress_pa": material.yield_stress_pa, "rate_constant": material.yield_rate_constant or 0.0,
+                 "eta_s": 0.0}
         report["materials"][name] = {
             "youngs_pa": material.youngs_pa, "poisson": material.poisson, "given": given, "fitted": values,
             "stderr": errors, "converged": converged,
@@ -372,10 +487,9 @@ def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample"
             "yield_stress_per_curve_pa": dict(zip([curves[i].name for i in members], singles)),
             "files": [curves[i].name for i in members],
         }
-        kappa = _kappa(material, geometry)
         for k, i in enumerate(members):
-            report["curves"].append(_curve_report(curves[i], approaches[i], rates[i], kappa, geometry, given, values,
-                                                  singles[k] if singles else None))
+            report["curves"].append(_curve_report(curves[i], pieces[i], kappa, geometry, given, values,
+                                                  singles[k] if singles else None, shifts[k], shift_errors[k]))
     return report
 
 

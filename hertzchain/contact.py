@@ -296,7 +296,11 @@ def jackson_green_contact(overlap_m, max_overlap_m, kappa_n_m1p5, reduced_radius
 
     **Validity:** overlaps up to $a/R^* \\approx 1$ (JG fitted $\\delta^* \\le 110$ and checked
     beyond; the measured curves reach $\\delta^* \\approx 850$, $a/R \\approx 0.7$); rates: the
-    quasi-static law with a dynamic yield stress, checked at 300-750 /s.
+    quasi-static law with a dynamic yield stress, checked at 300-750 /s. Measured forces lead
+    the approach by 3-54 us, which no rate-independent law follows; a Kuwabara-Kono damping on
+    top (`contact_force` with this force as `elastic_n`, damping times 2.5-5.7 us fitted on
+    those curves) makes a time shift of the records unneeded on the 302 and Al curves, and leads
+    by more than the data do (`benchmarks/results/contact_burgoyne/rate_terms.md`).
 
     **Arguments:** overlap and largest overlap so far (m, `max_overlap_m >= overlap_m`), Hertz
     stiffness $\\kappa$ (N/m^{3/2}), reduced radius $R^*$ (m; the bead's radius for a flat),

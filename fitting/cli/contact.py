@@ -9,6 +9,13 @@ Each file is read as it is (`.mat` with `Fexternal` [s, m, N] or `fdK` [m, N]; C
 once per file, a materials-table name; `--youngs`, `--poisson`, `--yield-stress`,
 `--rate-constant` replace its constants (or stand for it). Writes `contact.json`, one
 `<stem>.csv` per file, `contact.png` and `residuals.png` into `--out`.
+
+By default the law is rate-independent apart from its dynamic yield stress. `--damping` adds
+a Kuwabara-Kono damping force with one damping time per material, fitted with sigma_Y (on
+Burgoyne & Daraio's curves it follows the force's lead over the approach and their
+unloading: `benchmarks/results/contact_burgoyne/rate_terms.md`); `--time-shift` fits a time
+alignment of the force and approach records per curve instead (a processing nuisance,
+bounded by `--max-shift`), reported per curve with its sigma.
 """
 
 from __future__ import annotations
@@ -20,7 +27,7 @@ import sys
 from hertzchain.materials import Material, material
 from hertzchain.units import parse_quantity
 
-from ..contact_calibration import GEOMETRIES, OFFSETS, ContactGeometry, calibrate, read_curve, write_outputs
+from ..contact_calibration import GEOMETRIES, MAX_TIME_SHIFT_S, OFFSETS, ContactGeometry, calibrate, read_curve, write_outputs
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -41,6 +48,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--strain-rate", type=float,
                         help="strain rate (1/s) for files without a time column (rate hardening needs one)")
     parser.add_argument("--fit-rate-constant", action="store_true", help="fit the rate constant as well")
+    parser.add_argument("--damping", action="store_true",
+                        help="fit a Kuwabara-Kono damping time per material on top of the law [off]")
+    parser.add_argument("--time-shift", action="store_true",
+                        help="fit a time shift of the approach against the force per curve [off]")
+    parser.add_argument("--max-shift", default=f"{MAX_TIME_SHIFT_S * 1e6:g}us",
+                        help=f"bound of --time-shift (s, or 13us) [{MAX_TIME_SHIFT_S * 1e6:g}us]")
     parser.add_argument("--out", default="out/contact", help="output folder [out/contact]")
 
 
@@ -83,17 +96,26 @@ def run(args: argparse.Namespace) -> int:
     names = [c.name for c in curves]
     if len(set(names)) != len(names):
         raise ValueError("two input files have the same stem; their <stem>.csv outputs would collide: rename one.")
+    try:
+        max_shift_s = parse_quantity(args.max_shift, "s")
+    except ValueError as error:
+        raise ValueError(f"--max-shift: {error}") from None
     report = calibrate(curves, geometry, offset=args.offset, fit_rate_constant=args.fit_rate_constant,
+                       fit_damping=args.damping, fit_time_shift=args.time_shift, max_shift_s=max_shift_s,
                        strain_rate_s_given=args.strain_rate,
                        progress=lambda text: print(text, file=sys.stderr, flush=True))
     data = write_outputs(report, curves, args.out)
     for name, entry in data["materials"].items():
         fitted, given, errors = entry["fitted"], entry["given"], entry["stderr"]
         print(f"{name}: sigma_Y fitted {fitted['yield_stress_pa'] / 1e6:.0f} +- {errors['yield_stress_pa'] / 1e6:.0f} MPa "
-              f"(given {given['yield_stress_pa'] / 1e6:.0f} MPa), rate constant {fitted['rate_constant']:.4g}")
+              f"(given {given['yield_stress_pa'] / 1e6:.0f} MPa), rate constant {fitted['rate_constant']:.4g}"
+              + (f", damping time {fitted['eta_s'] * 1e6:.3g} us" if args.damping else ""))
     for entry in data["curves"]:
         print(f"  {entry['file']}: peak force {entry['peak_force_measured_n'] / 1e3:.3g} kN, error at given "
               f"constants {100 * entry['peak_force_error_model']:+.1f} %, RMS/peak fitted "
-              f"{100 * entry['rms_over_peak_fitted']:.1f} %")
+              f"{100 * entry['rms_over_peak_fitted']:.1f} %"
+              + (f", time shift {entry['time_shift_s'] * 1e6:+.2f} us "
+                 + (f"+- {entry['time_shift_stderr_s'] * 1e6:.2f} us" if entry['time_shift_stderr_s'] is not None
+                    else "(at its bound)") if args.time_shift else ""))
     print(f"wrote contact.json, contact.png, residuals.png and {len(curves)} CSV files to {args.out}")
     return 0
