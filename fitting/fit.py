@@ -659,7 +659,8 @@ class FitResult:
     - `covariance_scale`: "noise" (sigma known), "residual" (scaled by chi^2/dof) or
       "correlated" (the residuals' own sample-to-sample covariance, Newey-West);
       `stderr_stated_noise`: label -> the standard error the stated noise alone gives (the
-      "noise" scale), beside `stderr` for comparison;
+      "noise" scale), beside `stderr` for comparison; `residuals`: the whitened residual
+      vector at the optimum (`Problem.residuals` layout);
       `covariance_reason`: why, and whether chi^2/dof agrees with the noise estimate
       (`fitting.uncertainty.covariance_choice`).
     - `chi2`, `dof`, `reduced_chi2`: of the whitened residuals.
@@ -703,10 +704,20 @@ class FitResult:
     elapsed_s: float
     timings: dict = dataclasses.field(default_factory=dict)
     stderr_stated_noise: dict = dataclasses.field(default_factory=dict)
+    residuals: np.ndarray | None = None
 
     def predictions(self) -> list[dict]:
-        """Fitted model of every channel on the data's time axis, per file."""
-        return self.problem.predictions(self.x)
+        """Fitted model of every channel on the data's time axis, per file (N).
+
+        Where every sample entered the fit, it is the data plus sigma times the whitened
+        residuals at the optimum (`residuals`: the model the fit last evaluated there, to
+        round-off, without a further simulation); otherwise the model is evaluated again."""
+        problem = self.problem
+        sigma = problem.sigma_vector()
+        if self.residuals is None or not np.all(np.isfinite(sigma)):
+            return problem.predictions(self.x)
+        model = problem.data_vector() + sigma * np.asarray(self.residuals)[:sigma.size]
+        return [{name: model[part] for name, part in parts.items()} for parts in problem.residual_slices()]
 
     def to_json(self) -> dict:
         """A JSON-ready dict (SI units; non-finite numbers as null)."""
@@ -997,6 +1008,7 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
         profiles=profiles,
         problem=problem,
         x=x,
+        residuals=np.asarray(residuals),
         elapsed_s=time.perf_counter() - began,
         stderr_stated_noise=dict(zip(problem.labels, map(float, (cov if scale == "noise" else covariance_from_jacobian(
             jacobian, problem.labels, chi2=chi2_best, dof=dof, scale="noise")).stderr))),

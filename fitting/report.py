@@ -4,14 +4,14 @@
 
 - `fit.json`: everything in `FitResult.to_json()` (SI units).
 - `params.csv`: label, value, standard error, relative error, unit.
-- `correlation.csv` and `correlation.png`: the correlation matrix.
+- `correlation.csv`: the correlation matrix (and `correlation.png` with `per_trace=True`).
 - `rms.csv`: residual RMS per file and channel (N and in units of the noise sigma).
 - `starts.csv`: every start of the multistart batch: chi^2, converged, steps, values.
 - `residuals_<file>.csv`: time, data, model and residual of every channel.
 - `fit_summary.png`: every file's channels, data and fitted model, and the whitened residuals
   (one figure, drawn from at most `SUMMARY_POINTS` points per curve: about a second).
 - with `per_trace=True`: `overlay_<file>.png` (fitted model over the data) and
-  `residuals_<file>.png` at full resolution (about 1.5 s per file).
+  `residuals_<file>.png` at full resolution (about 1.5 s per file), and `correlation.png`.
 - `profile_<parameter>.png` and `profile_<parameter>.csv` for each profile.
 """
 
@@ -50,8 +50,8 @@ def _cell(value) -> str:
 
 def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False) -> list[Path]:
     """Write the fit's JSON, CSV and PNG files into `out_dir`; returns the paths written.
-    `plots`: the summary, correlation and profile figures; `per_trace`: also two figures per
-    file at full resolution."""
+    `plots`: the summary and profile figures; `per_trace`: also two figures per file at full
+    resolution and the correlation matrix's."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = []
@@ -176,6 +176,22 @@ def _summary_figure(result, predictions, out: Path) -> Path:
     return path
 
 
+def _correlation_figure(result, out: Path) -> Path:
+    """The fitted parameters' correlation matrix as an image."""
+    p = len(result.labels)
+    figure, ax = plt.subplots(figsize=(1.2 + 0.5 * p, 1.0 + 0.5 * p))
+    image = ax.imshow(np.asarray(result.correlation, dtype=float), vmin=-1, vmax=1, cmap="RdBu_r")
+    ax.set_xticks(range(p), result.labels, rotation=90, fontsize=7)
+    ax.set_yticks(range(p), result.labels, fontsize=7)
+    figure.colorbar(image, ax=ax, label="correlation (1)")
+    ax.set_title("parameter correlation")
+    figure.tight_layout()
+    path = out / "correlation.png"
+    save_figure(figure, path, dpi=110)
+    plt.close(figure)
+    return path
+
+
 def _plots(result, predictions, out: Path, per_trace: bool) -> list[Path]:
     written = [_summary_figure(result, predictions, out)]
     for experiment, predicted in zip(result.problem.experiments, predictions if per_trace else ()):
@@ -204,17 +220,8 @@ def _plots(result, predictions, out: Path, per_trace: bool) -> list[Path]:
             save_figure(figure, path, dpi=110)
             plt.close(figure)
             written.append(path)
-    p = len(result.labels)
-    figure, ax = plt.subplots(figsize=(1.2 + 0.5 * p, 1.0 + 0.5 * p))
-    image = ax.imshow(np.asarray(result.correlation, dtype=float), vmin=-1, vmax=1, cmap="RdBu_r")
-    ax.set_xticks(range(p), result.labels, rotation=90, fontsize=7)
-    ax.set_yticks(range(p), result.labels, fontsize=7)
-    figure.colorbar(image, ax=ax, label="correlation (1)")
-    ax.set_title("parameter correlation")
-    figure.tight_layout()
-    save_figure(figure, out / "correlation.png", dpi=110)
-    plt.close(figure)
-    written.append(out / "correlation.png")
+    if per_trace:
+        written.append(_correlation_figure(result, out))
     for label, profile in result.profiles.items():
         figure, ax = plt.subplots(figsize=(5, 3.5))
         scale = result.problem.instances[result.labels.index(label)].spec.unit

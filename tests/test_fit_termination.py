@@ -90,3 +90,13 @@ def test_the_steps_compiled_without_xla_passes_give_the_same_fit(kinked_files, d
     assert other.converged and other.n_steps == result.n_steps
     for name in PARAMS:
         assert abs(other.values[name] - result.values[name]) < 1e-6 * result.stderr[name], name
+
+
+def test_predictions_from_the_residuals_equal_the_model_evaluated_again(default_fit):
+    result, _ = default_fit
+    assert result.residuals is not None
+    shortcut, evaluated = result.predictions(), result.problem.predictions(result.x)
+    for mine, theirs in zip(shortcut, evaluated):
+        for channel in theirs:
+            scale = np.max(np.abs(theirs[channel]))
+            np.testing.assert_allclose(mine[channel], theirs[channel], rtol=0, atol=1e-12 * scale)
