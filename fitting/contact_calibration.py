@@ -24,17 +24,17 @@ Two optional terms account for a measured force that peaks before the approach d
 no rate-independent law follows (both off by default):
 
 - `fit_damping`: a Kuwabara-Kono viscous force on top of the law, the project's one damping
-  law (`hertzchain.contact.contact_force`): $F = \max(F_{JG} + \tfrac32\eta\kappa
-  \delta^{1/2}\dot\delta, 0)$ with one damping time $\eta$ (s) per material, fitted with
-  $\sigma_Y$; $\dot\delta$ from the approach averaged over `PEAK_WINDOW_S`. Physical,
+  law (`hertzchain.contact.contact_force`): $F = \\max(F_{JG} + \\tfrac32\\eta\\kappa
+  \\delta^{1/2}\\dot\\delta, 0)$ with one damping time $\\eta$ (s) per material, fitted with
+  $\\sigma_Y$; $\\dot\\delta$ from the approach averaged over `PEAK_WINDOW_S`. Physical,
   differentiable and usable in a chain (`eta_s` of a chain's contacts).
 - `fit_time_shift`: a time alignment between the force and the approach records of each curve,
   a nuisance of split-Hopkinson-bar processing (the two records come from gauges at different
   distances from the sample, moved to its faces with the bar's wave speed and a dispersion
-  correction): the law is driven with the approach at $t + \tau$, $\tau$ fitted per curve
-  within $\pm$`max_shift_s` (`bounded_shift_s`; positive: the force leads the approach). Its standard error is the
+  correction): the law is driven with the approach at $t + \\tau$, $\\tau$ fitted per curve
+  within $\\pm$`max_shift_s` (`bounded_shift_s`; positive: the force leads the approach). Its standard error is the
   Gauss-Newton one inflated for the residuals' correlation along time (lag-1 autocorrelation
-  $\rho$ of the curve's residuals: factor $\sqrt{(1+\rho)/(1-\rho)}$, an AR(1) noise).
+  $\\rho$ of the curve's residuals: factor $\\sqrt{(1+\\rho)/(1-\\rho)}$, an AR(1) noise).
 """
 
 from __future__ import annotations
@@ -247,8 +247,8 @@ def approach_rate_m_s(curve: ContactCurve, approach_m) -> np.ndarray:
 
 
 def bounded_shift_s(value, max_shift_s):
-    """The time shift of the fitted coordinate `value`, s: $\tau_{max}\tanh(x/\tau_{max})$, equal to
-    it near 0 and within $\pm\tau_{max}$; smooth, so that a fit that overshoots the bound can
+    """The time shift of the fitted coordinate `value`, s: $\\tau_{max}\\tanh(x/\\tau_{max})$, equal to
+    it near 0 and within $\\pm\\tau_{max}$; smooth, so that a fit that overshoots the bound can
     come back (a clip would leave it on a flat stretch)."""
     return max_shift_s * jnp.tanh(value / max_shift_s)
 

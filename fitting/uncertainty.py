@@ -106,10 +106,10 @@ def covariance_choice(requested: str, chi2: float, dof: int, correlated: str | N
 def correlated_score_covariance(jacobian, residuals, series) -> np.ndarray:
     """Newey-West estimate of the covariance of the score $J^T r$, (p, p).
 
-    $B = \sum_s \sum_{|l| \le L_s} (1 - |l|/(L_s+1)) \sum_t g_t g_{t+l}^T$ with
+    $B = \\sum_s \\sum_{|l| \\le L_s} (1 - |l|/(L_s+1)) \\sum_t g_t g_{t+l}^T$ with
     $g_t = r_t J_t$ over each series $s$ (one channel of one file: residuals correlated within
     it, independent between them). `series`: (indices into the residual vector in time order,
-    lag L_s) pairs. For white residuals of unit variance $B \to J^T J$."""
+    lag L_s) pairs. For white residuals of unit variance $B \\to J^T J$."""
     jac = np.asarray(jacobian, dtype=float)
     r = np.asarray(residuals, dtype=float)
     meat = np.zeros((jac.shape[1], jac.shape[1]))
