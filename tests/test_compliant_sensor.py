@@ -34,6 +34,7 @@ def test_matches_the_split_bead_model(changes):
     assert float(jnp.max(jnp.abs(compliant.energy_error_j))) < 1e-6 * float(compliant.initial_energy_j)
 
 
+@pytest.mark.slow  # keeps the default suite under 10 min on 2 cores; the split-bead comparison of this file stays in the default suite
 def test_rigid_sensors_are_the_base_chain_and_differentiable_there():
     setup = ChainSetup(N, striker_velocity_m_s=0.2)
     grid = TimeGrid(dt_s=2e-7, steps_per_sample=5, n_samples=400)

@@ -110,6 +110,7 @@ def test_batched_kernel_and_solve_give_the_same_model_and_jacobian():
 
 
 
+@pytest.mark.slow  # keeps the default suite under 10 min on 2 cores; vmapped batches on the kernel are tested by test_native in the default suite
 def test_many_parameter_sets_in_one_simulation_equal_each_set_alone():
     """`Problem.residuals_many` (the posterior's chains): 8 parameter sets x 4 files run as
     one batch of 32 chains; each set's residuals and Jacobian equal its own `residuals` and

@@ -154,6 +154,7 @@ def test_vmapped_batch_equals_runs_one_by_one():
 FIELDS = ("eta_s", "mu", "wall_youngs_pa")
 
 
+@pytest.mark.slow  # keeps the default suite under 10 min on 2 cores; gradients against finite differences stay in the default suite in test_sensitivity and test_native
 def test_gradients_match_central_differences_through_contact_opening():
     """d(loss)/d(eta, mu, Y_w), reverse and forward mode, against central differences.
 

@@ -212,6 +212,7 @@ def test_report_files_are_whole_and_agree(noise_only, tmp_path):
     assert not list(tmp_path.glob(".*.tmp"))
 
 
+@pytest.mark.slow  # keeps the default suite under 10 min on 2 cores; the strict exit of the CLI; the posterior's own diagnostics are tested in the default suite
 def test_command_line_posterior_is_strict_about_too_few_draws(brass_traces, tmp_path):
     from hertzchain.cli import main
     from hertzchain.tracefile import write_trace

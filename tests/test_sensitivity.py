@@ -235,6 +235,7 @@ def test_pulse_that_never_arrives_is_an_error():
                       steps_per_contact=40)
 
 
+@pytest.mark.slow  # keeps the default suite under 10 min on 2 cores; the sensitivities themselves stay in the default suite
 def test_command_line_writes_json_csv_and_plots(tmp_path):
     from hertzchain.cli import main
 

@@ -92,6 +92,7 @@ print(len(jax.devices()))
 """
 
 
+@pytest.mark.slow  # keeps the default suite under 10 min on 2 cores; the resumed sweep's equality stays in the default suite
 def test_sharded_sweep_matches_unsharded(tmp_path):
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
     proc = subprocess.run(
@@ -122,6 +123,7 @@ def _free_port() -> int:
         return sock.getsockname()[1]
 
 
+@pytest.mark.slow  # keeps the default suite under 10 min on 2 cores; the one-process sweep stays in it
 def test_two_process_distributed_sweep_matches_one_process(tmp_path):
     """`--distributed` over two processes (jax.distributed, CPU collectives) on one machine:
     each computes every other chunk, process 0 writes the table, identical to one process."""
