@@ -6,17 +6,24 @@ Every item is timed on its own and fails on its own (its error is written in its
 the run goes on); the JSON is rewritten after each item, so an interrupted run keeps what
 it measured. Items:
 
-1. `jax_conservative`, `jax_damped`: `solve_batched(..., kernel="jax", books=False)` (the
-   JAX kernel; on a GPU the C++ kernels do not run) on the paper's chain, N = 21, f64,
-   dt = 1 us, 2500 steps, three forces every step, B chains (impact velocities 0.1-1 m/s ×
-   wall moduli 3-400 GPa); damped: eta = 2 us, mu = 0.19.
-2. `cuda_conservative`, `cuda_damped`: a plain CUDA kernel of the same physics (CuPy
-   `RawKernel`): one thread per chain, the chain's state in registers (N fixed at compile
-   time), the whole trajectory in one launch, the three forces of every step written to a
-   (steps, 3, B) buffer (neighbouring threads write neighbouring addresses). Its wall peaks
-   are checked against the JAX kernel's.
-3. `fit`: `fitting.fit` of eta, mu, C on 10 synthetic traces of the paper's chain (as
-   `benchmarks/run.py`'s fit), wall time of the whole call, cold (with compilation) and warm.
+1. `cuda_build`: building (or loading from the cache) the one-thread-per-chain CUDA kernel
+   of `hertzchain.native` for the bench chain (nvcc, once per machine and chain length).
+2. `jax_*`: `solve_batched(..., kernel="jax", books=False)` (the JAX kernel) on the paper's
+   chain, N = 21, f64, dt = 1 us, 2500 steps, three forces every step, B chains (impact
+   velocities 0.1-1 m/s x wall moduli 3-400 GPa); `damped`: eta = 2 us, mu = 0.19.
+3. `hertzchain_*`: the same with `kernel="auto"`: on a GPU the one-thread-per-chain CUDA
+   kernel (`chain_kernel_thread.cu`); its forces are compared with the JAX kernel's.
+   `kernel_*`: that kernel jitted alone on arrays already on the device (`native.run`,
+   `native.run_full`, traces transposed to (B, samples)), and the set-up time before it.
+4. `cuda_*`: a plain CUDA kernel of the same physics (CuPy `RawKernel`): one thread per
+   chain, the chain's state in registers (N fixed at compile time), the whole trajectory in
+   one launch, the three forces of every step written to a (steps, 3, B) buffer
+   (neighbouring threads write neighbouring addresses). Its wall peaks are checked against
+   the JAX kernel's.
+5. `fit`: `fitting.fit` of eta, mu, C on 10 synthetic traces of the paper's chain (as
+   `benchmarks/run.py`'s fit), wall time of the whole call, cold (with compilation) and
+   warm, on the default device; `fit_cpu_2cores` (GPU machines): the same fit in a child
+   process on 2 of the machine's CPU cores (`taskset`, JAX on the CPU, the host kernel).
 
 Without a GPU (JAX on the CPU, no CuPy) the JAX items run with small B and the CUDA items
 report why they cannot run. Prints progress; the default budget keeps the run under 6 min.
@@ -25,6 +32,7 @@ report why they cannot run. Prints progress; the default budget keeps the run un
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import platform
 import sys
@@ -121,27 +129,87 @@ def _case(batch: int, damped: bool):
     return setup, grid
 
 
-def item_jax(batch: int, damped: bool, repeats: int) -> dict:
+def item_hertzchain(batch: int, damped: bool, repeats: int, kernel: str, reference: dict | None = None) -> dict:
+    """`solve_batched` with `kernel` ("auto": the fused kernel `native.kernel_for` picks, on a
+    GPU the one-thread-per-chain CUDA kernel; "jax": the JAX kernel)."""
     import jax
     import numpy as np
 
-    from hertzchain.batched import batch_size, solve_batched
+    from hertzchain import native
+    from hertzchain.batched import batch_size, kernel_flags, solve_batched
     from hertzchain.integrate import Recording
 
     setup, grid = _case(batch, damped)
     chains = batch_size(setup)
     recording = Recording((N_BEADS // 2 - 1, N_BEADS // 2))
+    fused = native.kernel_for(kernel_flags(setup)._replace(ledger=False), None) if kernel == "auto" else None
 
     def run():
-        out = solve_batched(setup, grid, recording, books=False, kernel="jax")
+        out = solve_batched(setup, grid, recording, books=False, kernel=kernel)
         return jax.block_until_ready(out.forces_n)
 
     first, median, _, _, forces = _time(run, repeats)
-    return {
-        "batch": chains, "steps": grid.n_steps, "run_s": median, "compile_s": max(first - median, 0.0),
+    row = {
+        "kernel": f"{fused.physics} on {fused.backend}" if fused else "jax", "batch": chains, "steps": grid.n_steps,
+        "run_s": median, "compile_s": max(first - median, 0.0),
         "bead_steps_per_s": N_BEADS * chains * grid.n_steps / median,
         "wall_peak_n": np.max(np.asarray(forces["wall"]), axis=1)[:8].tolist(),
     }
+    if reference and "wall_peak_n" in reference:  # the largest relative difference of all forces
+        other = solve_batched(setup, grid, recording, books=False, kernel="jax")
+        row["force_relative_difference_to_jax"] = max(
+            float(np.max(np.abs(np.asarray(forces[k]) - np.asarray(other.forces_n[k]))))
+            / float(np.max(np.abs(np.asarray(other.forces_n[k])))) for k in forces)
+    return row
+
+
+def item_kernel_alone(batch: int, damped: bool, repeats: int) -> dict:
+    """The fused kernel `native.kernel_for` picks, jitted alone on the chains' arrays already
+    on the device (the traces transposed to (B, samples) included), and the time
+    `solve_batched` spends before it (the chains' arrays from the setups)."""
+    import jax
+
+    from hertzchain import native
+    from hertzchain.batched import _initial, _Layout, _start, kernel_flags, kernel_params, share_uniform
+
+    setup, grid = _case(batch, damped)
+    flags = kernel_flags(setup)._replace(ledger=False)
+    fused = native.kernel_for(flags, None)
+    if fused is None:
+        return {"error": "no fused kernel for this device"}
+    start = time.perf_counter()
+    p = jax.block_until_ready(share_uniform(kernel_params(setup)))
+    prepare_s = time.perf_counter() - start
+    layout = _Layout(p["mass"].shape[0])
+    options = dict(dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
+                   channels=(N_BEADS // 2 - 1, N_BEADS // 2, layout.bodies - 1), preload=False, springs=False,
+                   backend=fused.backend)
+    if fused.physics == "full":
+        x, v, a, _, _ = _start(p, flags)
+        kernel = jax.jit(lambda p, x, v, a: native.run_full(p, x, v, a, viscous=flags.viscous, friction=flags.friction,
+                                                            **options))
+        arguments = (p, x, v, a)
+    else:
+        state, _, _ = _initial(p, flags, layout, grid.dt_s)
+        kernel = jax.jit(lambda p, s: native.run(p, s, books=False, **options)[0])
+        arguments = (p, state)
+    first, median, _, _, _ = _time(lambda: jax.block_until_ready(kernel(*arguments)), repeats)
+    chains = int(p["v0"].shape[-1])
+    return {"kernel": f"{fused.physics} on {fused.backend}", "batch": chains, "steps": grid.n_steps,
+            "prepare_s": prepare_s, "run_s": median, "compile_s": max(first - median, 0.0),
+            "bead_steps_per_s": N_BEADS * chains * grid.n_steps / median}
+
+
+def item_cuda_build() -> dict:
+    """The one-thread-per-chain CUDA kernel built for the bench chain (once per machine)."""
+    from hertzchain import native
+
+    reason = native.thread_unavailable_reason("cuda")
+    if reason is not None:
+        return {"error": reason}
+    start = time.perf_counter()
+    target = native._thread_target("cuda", N_BEADS + 2, "forward")
+    return {"build_or_load_s": time.perf_counter() - start, "target": target}
 
 
 def item_cuda(batch: int, damped: bool, repeats: int, reference: dict | None) -> dict:
@@ -186,6 +254,35 @@ def item_cuda(batch: int, damped: bool, repeats: int, reference: dict | None) ->
         row["wall_peak_relative_difference_to_jax"] = float(
             np.max(np.abs(np.subtract(peaks, reference["wall_peak_n"])) / np.abs(reference["wall_peak_n"])))
     return row
+
+
+_CPU_FIT = r"""
+import json, sys
+sys.path.insert(0, "benchmarks")
+from gpu_kernel import item_fit
+print("RESULT " + json.dumps(item_fit()))
+"""
+
+
+def item_fit_cpu(cores: int) -> dict:
+    """The same fit on `cores` cores of this machine's CPU (JAX on the CPU, the host C++
+    kernel, built first and timed apart), in a child process pinned with `taskset`."""
+    import os
+    import subprocess
+
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    pin = ["taskset", "-c", ",".join(str(c) for c in range(cores))]
+    root = Path(__file__).resolve().parent.parent
+    start = time.perf_counter()
+    build = subprocess.run([*pin, sys.executable, "-m", "hertzchain", "kernel"], capture_output=True, text=True,
+                           env=env, cwd=root, timeout=300)
+    row = {"cores": cores, "kernel_build_s": time.perf_counter() - start, "kernel": build.stdout.strip()[-300:]}
+    proc = subprocess.run([*pin, sys.executable, "-c", _CPU_FIT], capture_output=True, text=True, env=env,
+                          cwd=root, timeout=600)
+    lines = [line for line in proc.stdout.splitlines() if line.startswith("RESULT ")]
+    if proc.returncode != 0 or not lines:
+        return {**row, "error": proc.stderr[-2000:]}
+    return {**row, **json.loads(lines[-1][len("RESULT "):])}
 
 
 def item_fit() -> dict:
@@ -236,15 +333,20 @@ def main(argv=None) -> int:
     except ImportError as error:
         result["cupy"] = f"unavailable: {error}"
 
-    items = []
+    items = [("cuda_build", item_cuda_build)] if gpu else []
     for size in sizes:
         for damped in (False, True):
             tag = f"{'damped' if damped else 'conservative'}_{size}"
-            items.append((f"jax_{tag}", lambda s=size, d=damped: item_jax(s, d, args.repeats)))
+            items.append((f"jax_{tag}", lambda s=size, d=damped: item_hertzchain(s, d, args.repeats, "jax")))
+            items.append((f"hertzchain_{tag}", lambda s=size, d=damped, t=tag: item_hertzchain(
+                s, d, args.repeats, "auto", result["items"].get(f"jax_{t}"))))
+            items.append((f"kernel_{tag}", lambda s=size, d=damped: item_kernel_alone(s, d, args.repeats)))
             items.append((f"cuda_{tag}", lambda s=size, d=damped, t=tag: item_cuda(
                 s, d, args.repeats, result["items"].get(f"jax_{t}"))))
     if not args.skip_fit:
         items.append(("fit", item_fit))
+        if gpu:
+            items.append(("fit_cpu_2cores", lambda: item_fit_cpu(2)))
     for k, (name, fn) in enumerate(items):
         elapsed = time.perf_counter() - start
         if elapsed > args.budget_s:
@@ -262,10 +364,12 @@ def main(argv=None) -> int:
         print(f"    {name}: {summary}", flush=True)
         for size in sizes:  # ratios as soon as both sides are there
             for kind in ("conservative", "damped"):
-                ours, plain = (result["items"].get(f"{impl}_{kind}_{size}", {}) for impl in ("jax", "cuda"))
-                if "bead_steps_per_s" in ours and "bead_steps_per_s" in plain:
-                    result.setdefault("jax_over_cuda", {})[f"{kind}_{size}"] = (
-                        ours["bead_steps_per_s"] / plain["bead_steps_per_s"])
+                plain = result["items"].get(f"cuda_{kind}_{size}", {})
+                for impl in ("jax", "hertzchain", "kernel"):
+                    ours = result["items"].get(f"{impl}_{kind}_{size}", {})
+                    if "bead_steps_per_s" in ours and "bead_steps_per_s" in plain:
+                        result.setdefault(f"{impl}_over_cuda", {})[f"{kind}_{size}"] = (
+                            ours["bead_steps_per_s"] / plain["bead_steps_per_s"])
         result["wall_s"] = time.perf_counter() - start
         write_json(Path(args.out), result)
     print(f"wrote {args.out} ({time.perf_counter() - start:.0f} s)", flush=True)

@@ -463,24 +463,25 @@ def _kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ...], blo
     return traces, state, layout
 
 
-def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ...], which: str):
-    """`_kernel`'s results from a fused C++ kernel (`native`): the conservative one (`which`
-    "conservative"; the packed state of `_Layout` in and out) or the full one ("full":
-    damping and friction, forward-mode derivatives, no books; the final state is not kept)."""
+def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ...], which: native.FusedKernel):
+    """`_kernel`'s results from a fused kernel (`native`, on the backend `which` names): the
+    conservative one (physics "conservative"; the packed state of `_Layout` in and out) or
+    the full one ("full": damping and friction, forward-mode derivatives, no books; the
+    final state is not kept)."""
     layout = _Layout(p["mass"].shape[0])
     channels = rows + (layout.bodies - 1,)
-    if which == "full":
+    if which.physics == "full":
         x, v, a, _, _ = _start(p, flags)
         traces = native.run_full(
             p, x, v, a, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
             channels=channels, viscous=flags.viscous, friction=flags.friction, preload=flags.preload,
-            springs=flags.springs,
+            springs=flags.springs, backend=which.backend,
         )
         return traces, None, layout
     state, _, _ = _initial(p, flags, layout, grid.dt_s)
     traces, state = native.run(
         p, state, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
-        channels=channels, preload=flags.preload, springs=flags.springs, books=flags.ledger,
+        channels=channels, preload=flags.preload, springs=flags.springs, books=flags.ledger, backend=which.backend,
     )
     return traces, state, layout
 
@@ -695,7 +696,9 @@ def record_batched(
                          "(elastic-plastic or power-law contacts); use solve.")
     names, rows, user = _plan(setup, recording)
     batch = batch_size(setup)
-    fused = "full" if kernel == "auto" and not flags.ledger and native.kernel_for(flags, None) else None
+    fused = native.kernel_for(flags, None) if kernel == "auto" and not flags.ledger else None
+    if fused is not None:  # the full kernel carries the tangents, whatever the physics
+        fused = fused._replace(physics="full")
     return _assemble(_params(setup, None), batch, flags, grid, rows, names, user, int(block_steps), None, fused)
 
 

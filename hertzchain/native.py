@@ -43,6 +43,7 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import NamedTuple
 
 import jax
 import numpy as np
@@ -82,19 +83,29 @@ def _library_path() -> Path:
     return _cache_dir() / f"chain_kernel-{digest.hexdigest()[:16]}.so"
 
 
-def _build(path: Path) -> None:
-    """Compile the kernel into `path`, written whole or not at all."""
-    compiler = os.environ.get("CXX") or shutil.which("c++") or shutil.which("g++") or shutil.which("clang++")
-    if compiler is None:
-        raise RuntimeError("no C++ compiler found (set CXX, or install g++)")
+def _cxx() -> str | None:
+    return os.environ.get("CXX") or shutil.which("c++") or shutil.which("g++") or shutil.which("clang++")
+
+
+def _compile(command_for, path: Path, name: str) -> None:
+    """Run the compiler command `command_for(partial_path)` and move its output to `path`:
+    written whole or not at all."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=path.parent) as scratch:
         partial = Path(scratch) / path.name
-        command = [compiler, *FLAGS, f"-I{jax.ffi.include_dir()}", str(SOURCE), "-o", str(partial)]
-        proc = subprocess.run(command, capture_output=True, text=True, check=False)
+        proc = subprocess.run(command_for(partial), capture_output=True, text=True, check=False)
         if proc.returncode != 0:
-            raise RuntimeError(f"compiling {SOURCE.name} failed:\n{proc.stderr[-2000:]}")
+            raise RuntimeError(f"compiling {name} failed:\n{proc.stderr[-2000:]}")
         os.replace(partial, path)
+
+
+def _build(path: Path) -> None:
+    """Compile the host kernel into `path`."""
+    compiler = _cxx()
+    if compiler is None:
+        raise RuntimeError("no C++ compiler found (set CXX, or install g++)")
+    _compile(lambda partial: [compiler, *FLAGS, f"-I{jax.ffi.include_dir()}", str(SOURCE), "-o", str(partial)],
+             path, SOURCE.name)
 
 
 @functools.cache
@@ -132,26 +143,147 @@ def library_path() -> Path:
     return _library_path()
 
 
-def kernel_for(flags, devices) -> str | None:
-    """Which C++ kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
-    devices: "conservative" (no damping or friction, books or not), "full" (damping or
-    friction, the recorded forces only: no books), or None (the JAX kernel: books with
-    damping or friction, a device other than the CPU, no compiler)."""
+class FusedKernel(NamedTuple):
+    """A fused kernel: its physics, "conservative" (no damping or friction, books or not) or
+    "full" (damping, friction, forward-mode tangents, the recorded forces only), and where
+    it runs, "host" (`chain_kernel.cc`), "cuda" (`chain_kernel_thread.cu` on a GPU) or
+    "emulated" (the CUDA kernel's source on the host, one thread after another: tests)."""
+
+    physics: str
+    backend: str
+
+
+def kernel_for(flags, devices) -> FusedKernel | None:
+    """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
+    devices, or None (the JAX kernel: books with damping or friction, devices of another
+    kind, no compiler)."""
     platforms = {d.platform for d in devices} if devices else {jax.default_backend()}
-    if platforms != {"cpu"} or (flags.full_state and flags.ledger) or not available():
+    if flags.full_state and flags.ledger:
         return None
-    return "full" if flags.full_state else "conservative"
+    physics = "full" if flags.full_state else "conservative"
+    if platforms == {"cpu"} and available():
+        return FusedKernel(physics, "host")
+    if platforms == {"gpu"} and thread_unavailable_reason("cuda") is None:
+        return FusedKernel(physics, "cuda")
+    return None
+
+
+# ---------------------------------------------------------------------------------------
+# The one-thread-per-chain kernels (`chain_kernel_thread.cu`): one library per chain
+# length (its loops unrolled, its state in registers), built on first use with nvcc for
+# this machine's GPU ("cuda") or with the C++ compiler for the host ("emulated").
+
+THREAD_SOURCE = Path(__file__).with_name("chain_kernel_thread.cu")
+LAWS = Path(__file__).with_name("chain_laws.h")
+# IEEE division and square roots (nvcc's defaults) and no contraction into fused
+# multiply-adds: the JAX kernel's arithmetic, as on the host.
+NVCC_FLAGS = ("-O3", "-arch=native", "--fmad=false", "-std=c++17", "-shared", "-Xcompiler", "-fPIC")
+# The host build checks numbers, not speed: optimised lightly, it compiles in a few seconds.
+EMULATION_FLAGS = ("-O1", "-ffp-contract=off", "-fno-math-errno", "-std=c++17", "-shared", "-fPIC")
+_THREAD_SYMBOLS = {"forward": "HertzChainThreadForward", "full": "HertzChainThreadFullForward",
+                   "tangent": "HertzChainThreadFullTangent"}
+_HOST_TARGETS = {"forward": TARGET, "full": FULL_TARGET, "tangent": TANGENT_TARGET}
+
+
+def _nvcc() -> str | None:
+    found = shutil.which("nvcc")
+    if found is None:
+        home = os.environ.get("CUDA_HOME") or os.environ.get("CUDA_PATH") or "/usr/local/cuda"
+        candidate = Path(home) / "bin" / "nvcc"
+        found = str(candidate) if candidate.exists() else None
+    return found
+
+
+def thread_unavailable_reason(backend: str) -> str | None:
+    """Why the one-thread-per-chain kernel cannot be built for `backend` ("cuda" or
+    "emulated"), or None when it can."""
+    if os.environ.get("HERTZCHAIN_NATIVE", "1") == "0":
+        return "switched off (HERTZCHAIN_NATIVE=0)"
+    if backend == "cuda":
+        return None if _nvcc() else "no CUDA compiler (nvcc) found (set CUDA_HOME, or install the CUDA toolkit)"
+    if backend == "emulated":
+        return None if _cxx() else "no C++ compiler found (set CXX, or install g++)"
+    raise ValueError(f'backend must be "cuda" or "emulated", got {backend!r}')
+
+
+def _thread_build_command(backend: str, rows: int, output: Path) -> list[str]:
+    define = [f"-DHC_ROWS={rows}", f"-I{jax.ffi.include_dir()}", f"-I{SOURCE.parent}"]
+    if backend == "cuda":
+        return [_nvcc(), *NVCC_FLAGS, *define, str(THREAD_SOURCE), "-o", str(output)]
+    return [_cxx(), "-x", "c++", "-DHC_HOST_EMULATION", *EMULATION_FLAGS, *define, str(THREAD_SOURCE), "-o", str(output)]
+
+
+@functools.cache
+def _thread_target(backend: str, rows: int, kind: str) -> str:
+    """The registered FFI target of `kind` ("forward", "full", "tangent") of the thread
+    kernel for chains of `rows` - 1 bodies (built and registered on first use)."""
+    _thread_library(backend, rows)
+    return f"hertzchain_thread_{backend}_r{rows}_{kind}"
+
+
+@functools.cache
+def _thread_library(backend: str, rows: int) -> None:
+    reason = thread_unavailable_reason(backend)
+    if reason is not None:
+        raise RuntimeError(f"the {backend} chain kernel is unavailable: {reason}")
+    digest = hashlib.sha256()
+    toolchain = subprocess.run([_nvcc(), "--version"], capture_output=True, text=True).stdout if backend == "cuda" else _cpu_key()
+    for part in (THREAD_SOURCE.read_bytes(), LAWS.read_bytes(), jax.__version__.encode(),
+                 " ".join(_thread_build_command(backend, rows, Path("-"))).encode(), toolchain.encode()):
+        digest.update(part)
+    path = _cache_dir() / f"chain_thread-{backend}-r{rows}-{digest.hexdigest()[:16]}.so"
+    if not path.exists():
+        print(f"hertzchain: compiling the {backend} chain kernel for {rows - 1} bodies into {path} (once)",
+              file=sys.stderr, flush=True)
+        _compile(lambda partial: _thread_build_command(backend, rows, partial), path, THREAD_SOURCE.name)
+    library = ctypes.cdll.LoadLibrary(str(path))
+    platform_name = "CUDA" if backend == "cuda" else "cpu"
+    for kind, symbol in _THREAD_SYMBOLS.items():
+        jax.ffi.register_ffi_target(f"hertzchain_thread_{backend}_r{rows}_{kind}",
+                                    jax.ffi.pycapsule(getattr(library, symbol)), platform=platform_name)
+
+
+def _require(backend: str) -> None:
+    reason = _load() if backend == "host" else thread_unavailable_reason(backend)
+    if reason is not None:
+        raise RuntimeError(f"the fused chain kernel ({backend}) is unavailable: {reason}")
+
+
+class _Ffi(NamedTuple):
+    """One kernel call on one backend: its target, and the layout of its traces (host: (B,
+    n_samples); thread kernels: (n_samples, B), so that neighbouring threads write
+    neighbouring addresses, transposed here)."""
+
+    backend: str
+    rows: int
+    n_samples: int
+
+    def trace_shapes(self, state0, count: int, leading: tuple = ()) -> tuple:
+        batch = state0.shape[-1]
+        shape = (batch, self.n_samples) if self.backend == "host" else (self.n_samples, batch)
+        return tuple(jax.ShapeDtypeStruct(leading + shape, state0.dtype) for _ in range(count))
+
+    def call(self, kind: str, shapes, args, index, attrs) -> tuple:
+        if self.backend == "host":
+            return tuple(jax.ffi.ffi_call(_HOST_TARGETS[kind], shapes)(*args, index, **attrs))
+        target = _thread_target(self.backend, int(self.rows), kind)
+        return tuple(jax.ffi.ffi_call(target, shapes)(*args, channels=index, **attrs))
+
+    def traces(self, traces) -> tuple:
+        if self.backend == "host":
+            return tuple(traces)
+        return tuple(jax.numpy.swapaxes(trace, -1, -2) for trace in traces)
 
 
 def run(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
-        channels: tuple[int, ...], preload: bool, springs: bool, books: bool):
+        channels: tuple[int, ...], preload: bool, springs: bool, books: bool, backend: str = "host"):
     """Advance the packed state `state0` (rows, B) of `batched._Layout` through
     `n_samples` samples of `steps_per_sample` steps of `dt_s` seconds: returns the final
     state (rows, B) and one (B, n_samples) force trace per channel, N. Under `jax.vmap`
-    the mapped chains join the kernel's batch: one run for all of them."""
-    reason = _load()
-    if reason is not None:
-        raise RuntimeError(f"the fused chain kernel is unavailable: {reason}")
+    the mapped chains join the kernel's batch: one run for all of them. `backend`: "host"
+    (the vectorised C++ kernel), "cuda" (one thread per chain on a GPU) or "emulated" (the
+    CUDA kernel's source run on the host, one thread after another: for tests)."""
+    _require(backend)
     zeros = np.zeros((p["kappa"].shape[0], 1))
     args = (
         state0,
@@ -162,7 +294,7 @@ def run(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
         p["external"] if preload else np.zeros((p["inv_mass"].shape[0], 1)),
     )
     config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
-              bool(preload), bool(springs), bool(books))
+              bool(preload), bool(springs), bool(books), backend)
     state, *traces = _conservative_call(config)(*args)
     return tuple(traces), state
 
@@ -170,7 +302,7 @@ def run(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
 @functools.cache
 def _conservative_call(config):
     """The conservative kernel for one configuration as a function of its arrays."""
-    dt_s, steps_per_sample, n_samples, channels, preload, springs, books = config
+    dt_s, steps_per_sample, n_samples, channels, preload, springs, books, backend = config
     attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample), preload=np.int64(preload),
                  springs=np.int64(springs), books=np.int64(books))
     index = np.asarray(channels, dtype=np.int64)
@@ -178,10 +310,10 @@ def _conservative_call(config):
     @jax.custom_batching.custom_vmap
     def call(*args):
         state0 = args[0]
-        shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + tuple(
-            jax.ShapeDtypeStruct((state0.shape[-1], n_samples), state0.dtype) for _ in channels
-        )
-        return tuple(jax.ffi.ffi_call(TARGET, shapes)(*args, index, **attrs))
+        ffi = _Ffi(backend, args[1].shape[-2], n_samples)
+        shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + ffi.trace_shapes(state0, len(channels))
+        state, *traces = ffi.call("forward", shapes, args, index, attrs)
+        return (state,) + ffi.traces(traces)
 
     @call.def_vmap
     def _(size, batched, *args):
@@ -238,7 +370,8 @@ def _fold_directions(size: int, batched, tangents):
 
 
 def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples: int,
-             channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool):
+             channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
+             backend: str = "host"):
     """The full step (`batched._step` with velocities and accelerations apart: damping,
     friction) from displacements `x`, velocities `v` and accelerations `a` (bodies + 1, B)
     at the impact, through `n_samples` samples of `steps_per_sample` steps of `dt_s`
@@ -250,10 +383,8 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     `jax.vmap` the mapped chains join the kernel's batch (one run for all of them, with or
     without tangents): a vmapped batch of fits, `jacfwd` of `vmap` and `vmap` of `jacfwd`
     are one kernel run each. Reverse mode is not available (use the JAX kernel,
-    `kernel="jax"`)."""
-    reason = _load()
-    if reason is not None:
-        raise RuntimeError(f"the fused chain kernel is unavailable: {reason}")
+    `kernel="jax"`). `backend` as for `run`."""
+    _require(backend)
     width = lambda leaf: leaf.shape[-1]  # noqa: E731
     zeros = lambda leaf: jax.numpy.zeros_like(leaf)  # noqa: E731
     args = (
@@ -267,25 +398,27 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
         jax.numpy.reshape(p["friction"], (1, width(p["friction"]))),
     )
     config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
-              bool(viscous), bool(friction), bool(preload or springs))
+              bool(viscous), bool(friction), bool(preload or springs), backend)
     return _full_call(config)(*args)
 
 
 @functools.cache
 def _full_call(config):
     """The full kernel for one configuration as a function of its arrays, with its JVP."""
-    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras = config
+    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, backend = config
     attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample),
                  viscous=np.int64(viscous), friction=np.int64(friction), extras=np.int64(extras))
     index = np.asarray(channels, dtype=np.int64)
     n_args = 8  # the state and the seven parameter arrays
 
-    def shapes(state0, leading=()):
-        return tuple(jax.ShapeDtypeStruct(leading + (state0.shape[-1], n_samples), state0.dtype) for _ in channels)
+    def ffi(args):
+        return _Ffi(backend, args[1].shape[-2], n_samples)
 
     @jax.custom_batching.custom_vmap
     def traces(*args):
-        return tuple(jax.ffi.ffi_call(FULL_TARGET, shapes(args[0]))(*args, index, **attrs))
+        call = ffi(args)
+        shapes = call.trace_shapes(args[0], len(channels))
+        return call.traces(call.call("full", shapes, args, index, attrs))
 
     @traces.def_vmap
     def _(size, batched, *args):
@@ -298,8 +431,11 @@ def _full_call(config):
         tangents (D, B, n)."""
         primals, tangents = args[:n_args], args[n_args:]
         directions = max(t.shape[0] for t in tangents)
-        out_shapes = shapes(primals[0]) + shapes(primals[0], (directions,))
-        return tuple(jax.ffi.ffi_call(TANGENT_TARGET, out_shapes)(*primals, *tangents, index, **attrs))
+        call = ffi(primals)
+        n = len(channels)
+        out_shapes = call.trace_shapes(primals[0], n) + call.trace_shapes(primals[0], n, (directions,))
+        out = call.call("tangent", out_shapes, primals + tangents, index, attrs)
+        return call.traces(out[:n]) + call.traces(out[n:])
 
     @traces_and_tangents.def_vmap
     def _(size, batched, *args):

@@ -239,8 +239,11 @@ def _kernels():
 
     built = native.available()
     reason = "no C++ compiler or kernel: JAX kernel only"
+    emulated = native.thread_unavailable_reason("emulated")
     return ["jax"] + [pytest.param(k, marks=pytest.mark.skipif(not built, reason=reason))
-                      for k in ("native_conservative", "native_full")]
+                      for k in ("native_conservative", "native_full")] + [
+        pytest.param(k, marks=pytest.mark.skipif(emulated is not None, reason=str(emulated)))
+        for k in ("thread_conservative", "thread_full")]
 
 
 @pytest.mark.parametrize("kernel", _kernels())
@@ -256,8 +259,8 @@ def test_every_kernel_applies_the_laws_of_contact(law, kernel):
     from hertzchain.timegrid import TimeGrid
 
     flags = batched.KernelFlags(**LAWS[law], ledger=False)
-    if kernel == "native_conservative" and flags.full_state:
-        pytest.skip("the conservative C++ kernel has no damping or friction (the full one does)")
+    if kernel.endswith("_conservative") and flags.full_state:
+        pytest.skip("the conservative kernels have no damping or friction (the full ones do)")
     v0 = np.array([0.8, 0.05, -0.3])  # m/s: striker speeds (the last one moving away)
     batch = v0.size
     ones = np.ones((2, batch))
@@ -277,7 +280,10 @@ def test_every_kernel_applies_the_laws_of_contact(law, kernel):
     if kernel == "jax":
         traces, _, _ = batched._kernel(p, flags=flags, grid=grid, rows=(0,), block_steps=6)
     else:
-        which = "conservative" if kernel == "native_conservative" else "full"
+        from hertzchain import native
+
+        backend, physics = kernel.split("_")
+        which = native.FusedKernel(physics, "host" if backend == "native" else "emulated")
         traces, _, _ = batched._native_kernel(p, flags=flags, grid=grid, rows=(0,), which=which)
 
     # The same motion, written out: x += dt kick(v), v = kick(kick(v)) (the forces move nothing).

@@ -1,0 +1,622 @@
+// One thread per chain: the fused kernels of `chain_kernel.cc` for a GPU (CUDA), the whole
+// trajectory of a chain in one launch with its state in registers. The chain's length is a
+// compile-time constant (HC_ROWS = bodies + 1, the wall's row last), so that the loops over
+// its contacts unroll and x, u (or x, v, a) and the tangents stay in registers; `native`
+// builds one library per chain length and keeps it in its cache.
+//
+// The same source compiles for the host with HC_HOST_EMULATION (one loop over the threads,
+// XLA's CPU platform): `tests/test_native.py` holds its numbers to the JAX kernel's where no
+// GPU is present, and the GPU build to them where one is.
+//
+// The arithmetic is that of the JAX kernel and of `chain_kernel.cc`, operation for operation
+// and in the same order (built without contraction into fused multiply-adds), and the laws
+// are `chain_laws.h`'s, shared with `chain_kernel.cc`. Layouts (row-major, B chains on the
+// fast axis, as in `batched`):
+//   conservative: state0, state (R, B): x (HC_ROWS), u = v + (dt/2) a (HC_ROWS), and with
+//     the books the largest overlap of every contact so far (HC_ROWS - 1 rows);
+//   full: state0 (3 HC_ROWS, B): x, v, a; eta, friction (mu g) (1, 1 or B);
+//   parameters (rows, 1 or B), tangents (D or 1, rows, B) (1: shared by every direction);
+//   traces: one (n_samples, B) per channel, sample-major so that neighbouring threads write
+//     neighbouring addresses (`native` transposes them), then (tangents) one
+//     (D, n_samples, B) per channel. Thread t runs chain t % B along direction t / B; the
+//     direction-0 threads write the forces.
+#include <cstdint>
+
+#ifdef HC_HOST_EMULATION
+#define HC_HD
+#define HC_GLOBAL
+#else
+#include <cuda_runtime_api.h>
+#define HC_HD __host__ __device__
+#define HC_GLOBAL __global__
+#endif
+
+#include "xla/ffi/api/ffi.h"
+
+#include "chain_laws.h"
+
+namespace ffi = xla::ffi;
+
+#ifndef HC_ROWS
+#error "HC_ROWS (bodies + 1) must be defined"
+#endif
+
+namespace {
+
+constexpr int kRows = HC_ROWS;
+constexpr int kContacts = kRows - 1;
+constexpr int kMaskWords = (kContacts + 63) / 64;
+constexpr int kMaxChannels = 16;
+constexpr int kThreadsPerBlock = 128;
+
+struct Param {
+  const double* data;
+  int64_t width;  // 1 (shared by the batch) or B
+  HC_HD double at(int row, int64_t chain) const {
+    return width == 1 ? data[row] : data[row * width + chain];
+  }
+};
+
+struct Tangent {
+  const double* data;
+  bool shared;  // one direction for all
+  HC_HD double at(int64_t direction, int row, int64_t rows, int64_t batch, int64_t chain) const {
+    return data[(shared ? 0 : direction * rows * batch) + row * batch + chain];
+  }
+};
+
+// The recorded contacts: a bit per contact, and which outputs each feeds.
+struct Channels {
+  uint64_t mask[kMaskWords];
+  int64_t contact[kMaxChannels];
+  int count;
+  HC_HD bool recorded(int i) const { return (mask[i / 64] >> (i % 64)) & 1u; }
+};
+
+struct Outputs {
+  double* trace[kMaxChannels];
+  double* tangent[kMaxChannels];
+};
+
+struct ForwardArgs {
+  int64_t batch, n_samples, steps_per_sample;
+  double dt;
+  const double* state0;
+  Param inv_mass, kappa, overlap0, spring, external;
+  Channels channels;
+  double* state;
+  Outputs out;
+};
+
+template <bool kPreload, bool kSprings, bool kBooks>
+HC_HD void ForwardChain(const ForwardArgs& A, int64_t b) {
+  const int64_t B = A.batch;
+  const double dt = A.dt, h = 0.5 * dt;
+  double x[kRows], u[kRows], mx[kBooks ? kContacts : 1];
+#pragma unroll
+  for (int r = 0; r < kRows; ++r) {
+    x[r] = A.state0[r * B + b];
+    u[r] = A.state0[(kRows + r) * B + b];
+  }
+  if (kBooks) {
+#pragma unroll
+    for (int i = 0; i < kContacts; ++i) mx[i] = A.state0[(2 * kRows + i) * B + b];
+  }
+  // the stiffnesses and inverse masses, read once (a sweep over walls gives every chain its
+  // own stiffnesses; read at every step, the sweep of `benchmarks/gpu_kernel.py` ran 10 %
+  // slower on an H100)
+  double kappa[kContacts], inv_mass[kRows];
+#pragma unroll
+  for (int i = 0; i < kContacts; ++i) kappa[i] = A.kappa.at(i, b);
+#pragma unroll
+  for (int r = 0; r < kRows; ++r) inv_mass[r] = A.inv_mass.at(r, b);
+  for (int64_t n = 0; n < A.n_samples; ++n) {
+    for (int64_t s = 0; s < A.steps_per_sample; ++s) {
+      // the striker's drift, then body by body the next body's drift, the force of the
+      // contact between them and this body's full kick (v = u + h a, u = v + h a)
+      x[0] = x[0] + dt * u[0];
+      double force_before = 0.0;
+#pragma unroll
+      for (int i = 0; i < kContacts; ++i) {
+        x[i + 1] = x[i + 1] + dt * u[i + 1];
+        double overlap = kPreload ? (x[i] - x[i + 1]) + A.overlap0.at(i, b) : x[i] - x[i + 1];
+        double force = hertzchain::ElasticForce<kSprings>(overlap, kappa[i], kSprings ? A.spring.at(i, b) : 0.0);
+        if (kBooks) mx[i] = overlap > mx[i] ? overlap : mx[i];
+        double body = force_before - force;
+        if (kPreload) body = body + A.external.at(i, b);
+        double a = body * inv_mass[i];
+        double v = u[i] + h * a;
+        u[i] = v + h * a;
+        force_before = force;
+      }
+      // the wall's row (inverse mass 0: at rest)
+      double body = force_before;
+      if (kPreload) body = body + A.external.at(kContacts, b);
+      double a = body * inv_mass[kContacts];
+      double v = u[kContacts] + h * a;
+      u[kContacts] = v + h * a;
+    }
+#pragma unroll
+    for (int i = 0; i < kContacts; ++i) {
+      if (!A.channels.recorded(i)) continue;
+      double overlap = x[i] - x[i + 1];
+      if (kPreload) overlap = overlap + A.overlap0.at(i, b);
+      double force = hertzchain::ElasticForce<kSprings>(overlap, kappa[i], kSprings ? A.spring.at(i, b) : 0.0);
+      for (int c = 0; c < A.channels.count; ++c)
+        if (A.channels.contact[c] == i) A.out.trace[c][n * B + b] = force;
+    }
+  }
+#pragma unroll
+  for (int r = 0; r < kRows; ++r) {
+    A.state[r * B + b] = x[r];
+    A.state[(kRows + r) * B + b] = u[r];
+  }
+  if (kBooks) {
+#pragma unroll
+    for (int i = 0; i < kContacts; ++i) A.state[(2 * kRows + i) * B + b] = mx[i];
+  }
+}
+
+struct FullArgs {
+  int64_t batch, n_samples, steps_per_sample, directions;
+  double dt;
+  const double* state0;
+  Param inv_mass, kappa, overlap0, spring, external, eta, friction;
+  Tangent t_state0, t_inv_mass, t_kappa, t_overlap0, t_spring, t_external, t_eta, t_friction;
+  Channels channels;
+  Outputs out;
+};
+
+// The full step of `chain_kernel.cc`'s RunFullBlock for one chain and (kTangent) one
+// tangent direction `d`: Kuwabara-Kono damping (the total force clipped at 0), track
+// friction before the drift and after the second half kick, the preload's and springs'
+// terms (kExtras), and the derivatives JAX's rules give (`hertzchain::TangentForce`).
+template <bool kViscous, bool kFriction, bool kTangent, bool kExtras>
+HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
+  using namespace hertzchain;
+  const int64_t B = A.batch;
+  const double dt = A.dt, h = 0.5 * dt;
+  double x[kRows], v[kRows], a[kRows];
+  double tx[kTangent ? kRows : 1], tv[kTangent ? kRows : 1], ta[kTangent ? kRows : 1];
+#pragma unroll
+  for (int r = 0; r < kRows; ++r) {
+    x[r] = A.state0[r * B + b];
+    v[r] = A.state0[(kRows + r) * B + b];
+    a[r] = A.state0[(2 * kRows + r) * B + b];
+    if (kTangent) {
+      tx[r] = A.t_state0.at(d, r, 3 * kRows, B, b);
+      tv[r] = A.t_state0.at(d, kRows + r, 3 * kRows, B, b);
+      ta[r] = A.t_state0.at(d, 2 * kRows + r, 3 * kRows, B, b);
+    }
+  }
+  const double eta = A.eta.at(0, b), loss = A.friction.at(0, b) * h, c1 = 1.5 * eta;
+  double tloss = 0.0, t15eta = 0.0;
+  if (kTangent) {
+    tloss = A.t_friction.at(d, 0, 1, B, b) * h;
+    t15eta = 1.5 * A.t_eta.at(d, 0, 1, B, b);
+  }
+  auto tangent_param = [&](const Tangent& t, int row, int rows) { return t.at(d, row, rows, B, b); };
+
+  for (int64_t n = 0; n < A.n_samples; ++n) {
+    for (int64_t s = 0; s < A.steps_per_sample; ++s) {
+      double pm1 = 0.0, g1 = 0.0, pm2 = 0.0, g2 = 0.0;
+      // body 0: half kick, friction, drift, predicted velocity
+      double w = v[0] + h * a[0];
+      if (kFriction) {
+        double s_first, raw = w;
+        w = Kick(w, loss, &s_first);
+        if (kTangent) KickSlope(raw, s_first, &pm1, &g1);
+      }
+      x[0] = x[0] + dt * w;
+      double w_prev = w, p_prev = w + h * a[0], f_prev = 0.0;
+      double tw_prev = 0.0, tp_prev = 0.0, tf_prev = 0.0;
+      if (kTangent) {
+        double tw = tv[0] + h * ta[0];
+        if (kFriction) tw = (pm1 * tw - tloss) * g1;
+        tx[0] = tx[0] + dt * tw;
+        tw_prev = tw;
+        tp_prev = tw + h * ta[0];
+      }
+#pragma unroll
+      for (int i = 0; i < kContacts; ++i) {
+        const int nx = i + 1;
+        // body i + 1: half kick, friction, drift, predicted velocity
+        double wn = v[nx] + h * a[nx];
+        double w_raw = wn, s_first = 0.0, s_second = 0.0;
+        if (kFriction) wn = Kick(wn, loss, &s_first);
+        x[nx] = x[nx] + dt * wn;
+        double pred = wn + h * a[nx];
+        // contact i
+        double dl = x[i] - x[nx];
+        if (kExtras) dl = dl + A.overlap0.at(i, b);
+        const double rate = p_prev - pred;
+        const double k = A.kappa.at(i, b), kv = c1 * k, sp = kExtras ? A.spring.at(i, b) : 0.0;
+        double root, sum;
+        double f = TotalForce<kViscous, kExtras>(dl, rate, k, kv, sp, &root, &sum);
+        // body i: second half kick, friction
+        double body = f_prev - f;
+        if (kExtras) body = body + A.external.at(i, b);
+        const double inv = A.inv_mass.at(i, b);
+        double acc = body * inv;
+        double vn = w_prev + h * acc;
+        double vn_raw = vn;
+        if (kFriction) vn = Kick(vn, loss, &s_second);
+        a[i] = acc;
+        v[i] = vn;
+        if (kTangent) {
+          if (kFriction) {
+            KickSlope(w_raw, s_first, &pm1, &g1);
+            KickSlope(vn_raw, s_second, &pm2, &g2);
+          }
+          const Linearisation l = Linearise(dl, rate, k, kv, root, sum);
+          double tw = tv[nx] + h * ta[nx];
+          if (kFriction) tw = (pm1 * tw - tloss) * g1;
+          tx[nx] = tx[nx] + dt * tw;
+          double tpred = tw + h * ta[nx];
+          double tdl = tx[i] - tx[nx] + tangent_param(A.t_overlap0, i, kContacts);
+          double tf = TangentForce<kViscous>(l, k, c1, kv, sp, tdl, tp_prev - tpred,
+                                             tangent_param(A.t_kappa, i, kContacts), t15eta,
+                                             tangent_param(A.t_spring, i, kContacts));
+          double tb = tf_prev - tf + tangent_param(A.t_external, i, kRows);
+          double tacc = tb * inv + body * tangent_param(A.t_inv_mass, i, kRows);
+          double tvn = tw_prev + h * tacc;
+          if (kFriction) tvn = (pm2 * tvn - tloss) * g2;
+          ta[i] = tacc;
+          tv[i] = tvn;
+          tf_prev = tf;
+          tw_prev = tw;
+          tp_prev = tpred;
+        }
+        f_prev = f;
+        w_prev = wn;
+        p_prev = pred;
+      }
+      // the wall's row (inverse mass 0: at rest)
+      double body = f_prev;
+      if (kExtras) body = body + A.external.at(kContacts, b);
+      const double inv = A.inv_mass.at(kContacts, b);
+      double acc = body * inv;
+      double vn = w_prev + h * acc;
+      if (kFriction) {
+        double s_second, raw = vn;
+        vn = Kick(vn, loss, &s_second);
+        if (kTangent) KickSlope(raw, s_second, &pm2, &g2);
+      }
+      a[kContacts] = acc;
+      v[kContacts] = vn;
+      if (kTangent) {
+        double tb = tf_prev + tangent_param(A.t_external, kContacts, kRows);
+        double tacc = tb * inv + body * tangent_param(A.t_inv_mass, kContacts, kRows);
+        double tvn = tw_prev + h * tacc;
+        if (kFriction) tvn = (pm2 * tvn - tloss) * g2;
+        ta[kContacts] = tacc;
+        tv[kContacts] = tvn;
+      }
+    }
+    // the recorded channels from the new displacements and velocities
+#pragma unroll
+    for (int i = 0; i < kContacts; ++i) {
+      if (!A.channels.recorded(i)) continue;
+      double dl = x[i] - x[i + 1];
+      if (kExtras) dl = dl + A.overlap0.at(i, b);
+      const double rate = v[i] - v[i + 1];
+      const double k = A.kappa.at(i, b), kv = c1 * k, sp = kExtras ? A.spring.at(i, b) : 0.0;
+      double root, sum;
+      const double f = TotalForce<kViscous, kExtras>(dl, rate, k, kv, sp, &root, &sum);
+      double tf = 0.0;
+      if (kTangent) {
+        const Linearisation l = Linearise(dl, rate, k, kv, root, sum);
+        double tdl = tx[i] - tx[i + 1] + tangent_param(A.t_overlap0, i, kContacts);
+        double trate = tv[i] - tv[i + 1];
+        tf = TangentForce<kViscous>(l, k, c1, kv, sp, tdl, trate, tangent_param(A.t_kappa, i, kContacts), t15eta,
+                                    tangent_param(A.t_spring, i, kContacts));
+      }
+      for (int c = 0; c < A.channels.count; ++c) {
+        if (A.channels.contact[c] != i) continue;
+        if (d == 0) A.out.trace[c][n * B + b] = f;
+        if (kTangent) A.out.tangent[c][(d * A.n_samples + n) * B + b] = tf;
+      }
+    }
+  }
+}
+
+template <bool kP, bool kS, bool kB>
+struct ForwardThread {
+  ForwardArgs args;
+  HC_HD void operator()(int64_t t) const { ForwardChain<kP, kS, kB>(args, t); }
+};
+
+template <bool kV, bool kF, bool kT, bool kE>
+struct FullThread {
+  FullArgs args;
+  HC_HD void operator()(int64_t t) const { FullChain<kV, kF, kT, kE>(args, t % args.batch, t / args.batch); }
+};
+
+#ifdef HC_HOST_EMULATION
+using Stream = int;  // no stream: the threads run one after another on the host
+template <class Thread>
+ffi::Error Launch(Stream, int64_t threads, const Thread& thread) {
+  for (int64_t t = 0; t < threads; ++t) thread(t);
+  return ffi::Error::Success();
+}
+#else
+using Stream = cudaStream_t;
+template <class Thread>
+__global__ void __launch_bounds__(kThreadsPerBlock) Each(int64_t threads, Thread thread) {
+  const int64_t t = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (t < threads) thread(t);
+}
+template <class Thread>
+ffi::Error Launch(Stream stream, int64_t threads, const Thread& thread) {
+  if (threads == 0) return ffi::Error::Success();
+  const int64_t blocks = (threads + kThreadsPerBlock - 1) / kThreadsPerBlock;
+  Each<<<static_cast<unsigned>(blocks), kThreadsPerBlock, 0, stream>>>(threads, thread);
+  cudaError_t error = cudaGetLastError();
+  if (error != cudaSuccess) return ffi::Error::Internal(cudaGetErrorString(error));
+  return ffi::Error::Success();
+}
+#endif
+
+Param AsParam(const ffi::Buffer<ffi::F64>& buffer) {
+  auto dims = buffer.dimensions();
+  return {buffer.typed_data(), dims.size() > 1 ? dims[dims.size() - 1] : 1};
+}
+
+// The recorded contacts, from the channel list (`contacts`, host memory: an attribute).
+ffi::Error MakeChannels(ffi::Span<const int64_t> contacts, Channels* channels) {
+  if (contacts.size() > static_cast<size_t>(kMaxChannels))
+    return ffi::Error::InvalidArgument("at most 16 recorded channels per kernel run");
+  *channels = Channels{};
+  channels->count = static_cast<int>(contacts.size());
+  for (int c = 0; c < channels->count; ++c) {
+    const int64_t i = contacts[c];
+    if (i < 0 || i >= kContacts) return ffi::Error::InvalidArgument("a recorded channel is not a contact");
+    channels->contact[c] = i;
+    channels->mask[i / 64] |= uint64_t{1} << (i % 64);
+  }
+  return ffi::Error::Success();
+}
+
+ffi::Error Forward(Stream stream, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
+                   ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0, ffi::Buffer<ffi::F64> spring,
+                   ffi::Buffer<ffi::F64> external, ffi::Span<const int64_t> contacts, double dt,
+                   int64_t steps_per_sample, int64_t preload, int64_t springs, int64_t books,
+                   ffi::ResultBuffer<ffi::F64> state, ffi::RemainingRets traces) {
+  auto dims = state0.dimensions();
+  if (dims.size() != 2) return ffi::Error::InvalidArgument("state0 must be (rows, B)");
+  if (inv_mass.dimensions()[0] != kRows)
+    return ffi::Error::InvalidArgument("the chain's length is not the one this kernel was built for");
+  if (dims[0] != 2 * kRows + (books ? kContacts : 0))
+    return ffi::Error::InvalidArgument("state0 rows do not match the bodies and books");
+  ForwardArgs A{};
+  if (auto error = MakeChannels(contacts, &A.channels); error.failure()) return error;
+  A.batch = dims[1];
+  A.steps_per_sample = steps_per_sample;
+  A.dt = dt;
+  A.state0 = state0.typed_data();
+  A.inv_mass = AsParam(inv_mass);
+  A.kappa = AsParam(kappa);
+  A.overlap0 = AsParam(overlap0);
+  A.spring = AsParam(spring);
+  A.external = AsParam(external);
+  A.state = state->typed_data();
+  for (int c = 0; c < A.channels.count; ++c) {
+    auto out = traces.get<ffi::Buffer<ffi::F64>>(c);
+    if (out.has_error()) return out.error();
+    A.n_samples = (*out)->dimensions()[0];
+    A.out.trace[c] = (*out)->typed_data();
+  }
+  auto run = [&](auto p, auto s, auto k) {
+    return Launch(stream, A.batch, ForwardThread<decltype(p)::value, decltype(s)::value, decltype(k)::value>{A});
+  };
+  using T = std::true_type;
+  using F = std::false_type;
+  auto with_books = [&](auto p, auto s) { return books ? run(p, s, T{}) : run(p, s, F{}); };
+  auto with_springs = [&](auto p) { return springs ? with_books(p, T{}) : with_books(p, F{}); };
+  return preload ? with_springs(T{}) : with_springs(F{});
+}
+
+int64_t Directions(const ffi::Buffer<ffi::F64>& buffer, int64_t rows, int64_t batch) {
+  return static_cast<int64_t>(buffer.element_count()) / (rows * batch);
+}
+
+ffi::Error RunFull(Stream stream, FullArgs A, ffi::Buffer<ffi::F64> state0, ffi::Span<const int64_t> contacts,
+                   bool tangent, int64_t viscous, int64_t friction_on, int64_t extras, ffi::RemainingRets results) {
+  auto dims = state0.dimensions();
+  A.batch = dims[dims.size() - 1];
+  if (static_cast<int64_t>(state0.element_count()) != 3 * kRows * A.batch)
+    return ffi::Error::InvalidArgument("state0 must be (3 rows, B) for this chain length");
+  if (auto error = MakeChannels(contacts, &A.channels); error.failure()) return error;
+  A.state0 = state0.typed_data();
+  for (int c = 0; c < (tangent ? 2 : 1) * A.channels.count; ++c) {
+    auto out = results.get<ffi::Buffer<ffi::F64>>(c);
+    if (out.has_error()) return out.error();
+    auto out_dims = (*out)->dimensions();
+    A.n_samples = out_dims[out_dims.size() - 2];
+    if (c < A.channels.count) A.out.trace[c] = (*out)->typed_data();
+    else A.out.tangent[c - A.channels.count] = (*out)->typed_data();
+  }
+  const int64_t threads = A.batch * (tangent ? A.directions : 1);
+  auto run = [&](auto v, auto f, auto t, auto e) {
+    return Launch(stream, threads,
+                  FullThread<decltype(v)::value, decltype(f)::value, decltype(t)::value, decltype(e)::value>{A});
+  };
+  using T = std::true_type;
+  using F = std::false_type;
+  // the tangents always with the preload's and springs' terms (zeros where there are none)
+  auto with_tangent = [&](auto v, auto f) {
+    if (tangent) return run(v, f, T{}, T{});
+    return extras ? run(v, f, F{}, T{}) : run(v, f, F{}, F{});
+  };
+  auto with_friction = [&](auto v) { return friction_on ? with_tangent(v, T{}) : with_tangent(v, F{}); };
+  return viscous ? with_friction(T{}) : with_friction(F{});
+}
+
+FullArgs FullParameters(double dt, int64_t steps_per_sample, ffi::Buffer<ffi::F64> inv_mass,
+                        ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0, ffi::Buffer<ffi::F64> spring,
+                        ffi::Buffer<ffi::F64> external, ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction) {
+  FullArgs A{};
+  A.dt = dt;
+  A.steps_per_sample = steps_per_sample;
+  A.directions = 1;
+  A.inv_mass = AsParam(inv_mass);
+  A.kappa = AsParam(kappa);
+  A.overlap0 = AsParam(overlap0);
+  A.spring = AsParam(spring);
+  A.external = AsParam(external);
+  A.eta = AsParam(eta);
+  A.friction = AsParam(friction);
+  return A;
+}
+
+ffi::Error FullForward(Stream stream, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
+                       ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0, ffi::Buffer<ffi::F64> spring,
+                       ffi::Buffer<ffi::F64> external, ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
+                       ffi::Span<const int64_t> contacts, double dt, int64_t steps_per_sample, int64_t viscous,
+                       int64_t friction_on, int64_t extras, ffi::RemainingRets traces) {
+  if (inv_mass.dimensions()[inv_mass.dimensions().size() - 2] != kRows)
+    return ffi::Error::InvalidArgument("the chain's length is not the one this kernel was built for");
+  FullArgs A = FullParameters(dt, steps_per_sample, inv_mass, kappa, overlap0, spring, external, eta, friction);
+  return RunFull(stream, A, state0, contacts, false, viscous, friction_on, extras, traces);
+}
+
+ffi::Error FullTangent(Stream stream, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
+                       ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0, ffi::Buffer<ffi::F64> spring,
+                       ffi::Buffer<ffi::F64> external, ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
+                       ffi::Buffer<ffi::F64> t_state0, ffi::Buffer<ffi::F64> t_inv_mass,
+                       ffi::Buffer<ffi::F64> t_kappa, ffi::Buffer<ffi::F64> t_overlap0,
+                       ffi::Buffer<ffi::F64> t_spring, ffi::Buffer<ffi::F64> t_external,
+                       ffi::Buffer<ffi::F64> t_eta, ffi::Buffer<ffi::F64> t_friction,
+                       ffi::Span<const int64_t> contacts, double dt, int64_t steps_per_sample, int64_t viscous,
+                       int64_t friction_on, int64_t extras, ffi::RemainingRets tangent_traces) {
+  if (inv_mass.dimensions()[inv_mass.dimensions().size() - 2] != kRows)
+    return ffi::Error::InvalidArgument("the chain's length is not the one this kernel was built for");
+  auto dims = state0.dimensions();
+  const int64_t batch = dims[dims.size() - 1];
+  const int64_t counts[8] = {
+      Directions(t_state0, 3 * kRows, batch), Directions(t_inv_mass, kRows, batch),
+      Directions(t_kappa, kContacts, batch),  Directions(t_overlap0, kContacts, batch),
+      Directions(t_spring, kContacts, batch), Directions(t_external, kRows, batch),
+      Directions(t_eta, 1, batch),            Directions(t_friction, 1, batch)};
+  int64_t directions = 1;
+  for (int64_t count : counts) directions = count > directions ? count : directions;
+  for (int64_t count : counts)
+    if (count != 1 && count != directions)
+      return ffi::Error::InvalidArgument("tangents must be (directions or 1, rows, B)");
+  FullArgs A = FullParameters(dt, steps_per_sample, inv_mass, kappa, overlap0, spring, external, eta, friction);
+  A.directions = directions;
+  auto tangent = [&](const ffi::Buffer<ffi::F64>& buffer, int64_t count) {
+    return Tangent{buffer.typed_data(), count == 1};
+  };
+  A.t_state0 = tangent(t_state0, counts[0]);
+  A.t_inv_mass = tangent(t_inv_mass, counts[1]);
+  A.t_kappa = tangent(t_kappa, counts[2]);
+  A.t_overlap0 = tangent(t_overlap0, counts[3]);
+  A.t_spring = tangent(t_spring, counts[4]);
+  A.t_external = tangent(t_external, counts[5]);
+  A.t_eta = tangent(t_eta, counts[6]);
+  A.t_friction = tangent(t_friction, counts[7]);
+  return RunFull(stream, A, state0, contacts, true, viscous, friction_on, extras, tangent_traces);
+}
+
+#ifdef HC_HOST_EMULATION
+// No stream on the host: the handlers' first argument is a dummy.
+ffi::Error ForwardHost(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass, ffi::Buffer<ffi::F64> kappa,
+                       ffi::Buffer<ffi::F64> overlap0, ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
+                       ffi::Span<const int64_t> contacts, double dt, int64_t steps_per_sample, int64_t preload,
+                       int64_t springs, int64_t books, ffi::ResultBuffer<ffi::F64> state,
+                       ffi::RemainingRets traces) {
+  return Forward(0, state0, inv_mass, kappa, overlap0, spring, external, contacts, dt, steps_per_sample, preload,
+                 springs, books, state, traces);
+}
+#define HC_FORWARD ForwardHost
+#define HC_BIND ffi::Ffi::Bind()
+#else
+#define HC_FORWARD Forward
+#define HC_BIND ffi::Ffi::Bind().Ctx<ffi::PlatformStream<cudaStream_t>>()
+#endif
+
+}  // namespace
+
+#ifdef HC_HOST_EMULATION
+namespace {
+ffi::Error FullForwardHost(ffi::Buffer<ffi::F64> s, ffi::Buffer<ffi::F64> m, ffi::Buffer<ffi::F64> k,
+                           ffi::Buffer<ffi::F64> o, ffi::Buffer<ffi::F64> sp, ffi::Buffer<ffi::F64> e,
+                           ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> fr, ffi::Span<const int64_t> c,
+                           double dt, int64_t n, int64_t v, int64_t f, int64_t x, ffi::RemainingRets r) {
+  return FullForward(0, s, m, k, o, sp, e, eta, fr, c, dt, n, v, f, x, r);
+}
+ffi::Error FullTangentHost(ffi::Buffer<ffi::F64> s, ffi::Buffer<ffi::F64> m, ffi::Buffer<ffi::F64> k,
+                           ffi::Buffer<ffi::F64> o, ffi::Buffer<ffi::F64> sp, ffi::Buffer<ffi::F64> e,
+                           ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> fr, ffi::Buffer<ffi::F64> ts,
+                           ffi::Buffer<ffi::F64> tm, ffi::Buffer<ffi::F64> tk, ffi::Buffer<ffi::F64> to,
+                           ffi::Buffer<ffi::F64> tsp, ffi::Buffer<ffi::F64> te, ffi::Buffer<ffi::F64> teta,
+                           ffi::Buffer<ffi::F64> tfr, ffi::Span<const int64_t> c, double dt, int64_t n, int64_t v,
+                           int64_t f, int64_t x, ffi::RemainingRets r) {
+  return FullTangent(0, s, m, k, o, sp, e, eta, fr, ts, tm, tk, to, tsp, te, teta, tfr, c, dt, n, v, f, x, r);
+}
+}  // namespace
+#define HC_FULL_FORWARD FullForwardHost
+#define HC_FULL_TANGENT FullTangentHost
+#else
+#define HC_FULL_FORWARD FullForward
+#define HC_FULL_TANGENT FullTangent
+#endif
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainThreadForward, HC_FORWARD,
+                              HC_BIND.Arg<ffi::Buffer<ffi::F64>>()  // state0
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // inv_mass
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // kappa
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // overlap0
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // spring
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // external
+                                  .Attr<ffi::Span<const int64_t>>("channels")
+                                  .Attr<double>("dt")
+                                  .Attr<int64_t>("steps_per_sample")
+                                  .Attr<int64_t>("preload")
+                                  .Attr<int64_t>("springs")
+                                  .Attr<int64_t>("books")
+                                  .Ret<ffi::Buffer<ffi::F64>>()  // state
+                                  .RemainingRets());             // traces (n_samples, B)
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainThreadFullForward, HC_FULL_FORWARD,
+                              HC_BIND.Arg<ffi::Buffer<ffi::F64>>()  // state0: x, v, a
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // inv_mass
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // kappa
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // overlap0
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // spring
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // external
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // eta
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // friction (mu g)
+                                  .Attr<ffi::Span<const int64_t>>("channels")
+                                  .Attr<double>("dt")
+                                  .Attr<int64_t>("steps_per_sample")
+                                  .Attr<int64_t>("viscous")
+                                  .Attr<int64_t>("friction")
+                                  .Attr<int64_t>("extras")
+                                  .RemainingRets());  // traces (n_samples, B)
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainThreadFullTangent, HC_FULL_TANGENT,
+                              HC_BIND.Arg<ffi::Buffer<ffi::F64>>()  // state0: x, v, a
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // inv_mass
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // kappa
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // overlap0
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // spring
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // external
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // eta
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // friction (mu g)
+                                  .Arg<ffi::Buffer<ffi::F64>>()     // tangents of the eight above
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Attr<ffi::Span<const int64_t>>("channels")
+                                  .Attr<double>("dt")
+                                  .Attr<int64_t>("steps_per_sample")
+                                  .Attr<int64_t>("viscous")
+                                  .Attr<int64_t>("friction")
+                                  .Attr<int64_t>("extras")
+                                  .RemainingRets());  // traces (n_samples, B), then (D, n_samples, B)

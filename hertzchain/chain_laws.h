@@ -1,0 +1,116 @@
+// The contact laws of `hertzchain.contact` as the fused kernels apply them, and the
+// derivative rules JAX gives them (for the kernels' forward-mode tangents): one definition
+// for the host kernels (`chain_kernel.cc`) and the one-thread-per-chain kernels
+// (`chain_kernel_thread.cu`, host or CUDA). Operation for operation and in the order of the
+// JAX kernel, so that every kernel agrees with it to round-off
+// (`tests/test_batched.py::test_every_kernel_applies_the_laws_of_contact`).
+#pragma once
+
+#include <cmath>
+
+#ifndef HC_HD
+#define HC_HD
+#endif
+
+namespace hertzchain {
+
+// contact.hertz_force: kappa delta_+ sqrt(delta_+), then (kSprings) + spring delta, N
+template <bool kSprings>
+HC_HD inline double ElasticForce(double overlap, double kappa, double spring) {
+  double positive = overlap > 0.0 ? overlap : 0.0;
+  double force = kappa * positive * std::sqrt(positive);
+  if (kSprings) force = force + spring * overlap;
+  return force;
+}
+
+// d max(s, 0) / ds as JAX's max rule gives it (1/2 at the tie)
+HC_HD inline double MaxSlope(double s) {
+  double tie = s == 0.0 ? 0.5 : 0.0;
+  return s > 0.0 ? 1.0 : tie;
+}
+
+// sign(w) as JAX's sign gives it (0 at 0), in two selects (no branches: loops over lanes
+// vectorise whatever their length)
+HC_HD inline double Sign(double w) {
+  double negative = w < 0.0 ? -1.0 : 0.0;
+  return w > 0.0 ? 1.0 : negative;
+}
+
+// contact.track_friction_kick: sign(w) max(|w| - loss, 0), m/s, with its speed minus loss s
+HC_HD inline double Kick(double w, double loss, double* s) {
+  double speed = std::fabs(w);
+  *s = speed - loss;
+  double kept = *s > 0.0 ? *s : 0.0;
+  return Sign(w) * kept;
+}
+
+// d kick = sign(w) max'(|w| - loss) (d|w| - d loss) as JAX's rules give it: with pm = +-1
+// (the slope of |w|, +1 at 0) and g = sign(w) max'(s), d kick = (pm t_w - t_loss) g (g is 0,
+// +-1/2 or +-1: the product is the rules' to the bit).
+HC_HD inline void KickSlope(double w, double s, double* pm, double* g) {
+  *pm = w >= 0.0 ? 1.0 : -1.0;
+  *g = Sign(w) * MaxSlope(s);
+}
+
+// contact.contact_force (the total, clipped at 0 in contact: Kuwabara-Kono damping with
+// kv = 1.5 eta kappa) at overlap dl (m) and rate (m/s), N; the root sqrt(dl_+) and the
+// unclipped sum kept for the linearisation. Branch-free (selects only): sqrt(0) = 0 is the
+// root out of contact, as `contact` has it, where elastic = viscous = 0.
+template <bool kViscous, bool kExtras>
+HC_HD inline double TotalForce(double dl, double rate, double k, double kv, double sp, double* root, double* sum) {
+  double positive = dl > 0.0 ? dl : 0.0;
+  double rt = std::sqrt(positive);
+  double elastic = k * positive * rt;
+  double f;
+  if (kViscous) {
+    double viscous = (kv * rt) * rate;  // (+ a dashpot of 0 in `contact`: adds nothing)
+    double s = elastic + viscous;
+    *sum = s;
+    f = s > 0.0 ? s : 0.0;
+  } else {
+    *sum = elastic;
+    f = elastic;
+  }
+  *root = rt;
+  if (kExtras) f = f + sp * dl;  // (a spring of 0 adds nothing)
+  return f;
+}
+
+// A contact's linearisation at overlap delta and rate: in = [delta > 0], positive =
+// delta_+, root = sqrt(delta_+), half_inv_root = 0.5 / root in contact (JAX's sqrt rule)
+// else 0, kp = kappa delta_+, c3 = 1.5 eta kappa root, slope = max'(total) in contact else 0.
+struct Linearisation {
+  double delta, rate, in, positive, root, half_inv_root, kp, c3, slope;
+};
+
+HC_HD inline Linearisation Linearise(double dl, double rate, double k, double kv, double root, double sum) {
+  Linearisation l;
+  l.delta = dl;
+  l.rate = rate;
+  l.in = dl > 0.0 ? 1.0 : 0.0;
+  l.positive = dl > 0.0 ? dl : 0.0;
+  l.root = root;
+  l.half_inv_root = dl > 0.0 ? 0.5 / root : 0.0;
+  l.kp = k * l.positive;
+  l.c3 = kv * root;
+  l.slope = dl > 0.0 ? MaxSlope(sum) : 0.0;
+  return l;
+}
+
+// The tangent of `TotalForce` (kExtras) along one direction: c1 = 1.5 eta, c2 = c1 kappa,
+// sp the spring, tdl / trate / tk / t15e (= 1.5 t_eta) / tsp the inputs' tangents.
+template <bool kViscous>
+HC_HD inline double TangentForce(const Linearisation& l, double k, double c1, double c2, double sp, double tdl,
+                                 double trate, double tk, double t15e, double tsp) {
+  double tpositive = tdl * l.in;
+  double troot = tdl * l.half_inv_root;
+  double telastic = (tk * l.positive + k * tpositive) * l.root + l.kp * troot;
+  double tf = telastic;
+  if (kViscous) {
+    double tc3 = (t15e * k + c1 * tk) * l.root + c2 * troot;
+    tf = (telastic + (tc3 * l.rate + l.c3 * trate)) * l.slope;
+  }
+  return tf + (tsp * l.delta + sp * tdl);
+}
+
+}  // namespace hertzchain

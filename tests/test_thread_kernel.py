@@ -1,0 +1,131 @@
+"""The one-thread-per-chain kernel (`chain_kernel_thread.cu`) against the JAX kernel: its
+host build ("emulated", the same source with one loop over the threads) wherever a C++
+compiler is, its CUDA build where JAX runs on a GPU."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import hertzchain as hc
+from hertzchain import native
+from hertzchain.batched import solve_batched
+from hertzchain.integrate import Recording
+from test_native import _TRANSFORMS, _batch, _fit_problem, _traced
+
+
+def _backends():
+    on_gpu = jax.default_backend() == "gpu"
+    emulated = native.thread_unavailable_reason("emulated")
+    cuda = native.thread_unavailable_reason("cuda")
+    return [
+        pytest.param("emulated", marks=pytest.mark.skipif(
+            on_gpu or emulated is not None, reason=emulated or "JAX runs on a GPU here: the CUDA build is tested")),
+        pytest.param("cuda", marks=pytest.mark.skipif(
+            not on_gpu or cuda is not None, reason=cuda or "no GPU")),
+    ]
+
+
+@pytest.fixture(params=_backends())
+def backend(request, monkeypatch):
+    """Every fused kernel call of this test on the thread kernel of `request.param`."""
+
+    def kernel_for(flags, devices):
+        if flags.full_state and flags.ledger:
+            return None
+        return native.FusedKernel("full" if flags.full_state else "conservative", request.param)
+
+    monkeypatch.setattr(native, "kernel_for", kernel_for)
+    return request.param
+
+
+CASES = {
+    "rigid_and_soft_walls": ({}, True),
+    "sensors_preload": ({"sensor_beads": (3, 7), "precompression_n": 3.0}, True),
+    "free_end_preload": ({"end": "free", "precompression_n": 2.0}, True),
+    "viscous_friction": ({"eta_s": 2e-6, "mu": 0.19}, False),
+    "sensors_preload_viscous_friction": (
+        {"eta_s": 2e-6, "mu": 0.19, "sensor_beads": (3, 7), "precompression_n": 3.0}, False),
+}
+
+
+# the slow-marked cases' physics is also in the default ones (free end and damping alone:
+# in "sensors_preload_viscous_friction"; the other transformations compose the kept two)
+_SLOW_CASES = ("free_end_preload", "viscous_friction")
+_SLOW_TRANSFORMS = ("vmap", "jacfwd_of_vmap", "vmap_of_vmap_of_jacfwd")
+
+
+def _marked(names, slow):
+    return [pytest.param(name, marks=pytest.mark.slow) if name in slow else name for name in names]
+
+
+@pytest.mark.parametrize("case", _marked(CASES, _SLOW_CASES))
+def test_forces_and_maxima_agree_with_the_jax_kernel(case, backend):
+    """Recorded forces (and, conservative, the largest force of every contact) of the
+    thread kernel equal the JAX kernel's to round-off: the same operations in the same
+    order, no fused multiply-adds (the sensors' stiff springs amplify round-off a little)."""
+    kwargs, books = CASES[case]
+    setup, grid = _batch(**kwargs)
+    recording = Recording((2, 6))
+    ours = solve_batched(setup, grid, recording, books=books)
+    reference = solve_batched(setup, grid, recording, books=books, kernel="jax")
+    for name in ours.channel_names:
+        scale = float(np.max(np.abs(reference.forces_n[name])))
+        assert scale > 1.0 or (name == "wall" and setup.end == "free")
+        np.testing.assert_allclose(ours.forces_n[name], reference.forces_n[name], rtol=0, atol=2e-12 * scale)
+    if books:
+        np.testing.assert_allclose(ours.max_force_n, reference.max_force_n, rtol=1e-12)
+        np.testing.assert_allclose(ours.energy_error_j, reference.energy_error_j, rtol=0,
+                                   atol=1e-11 * float(np.max(reference.initial_energy_j)))
+
+
+@pytest.mark.parametrize("transform", _marked(_TRANSFORMS, _SLOW_TRANSFORMS))
+def test_derivatives_under_vmap_and_jacfwd_are_one_call_equal_to_the_jax_kernel(transform, backend):
+    """jacfwd (five directions: damping, friction, impact speed, preload, bead modulus),
+    vmap and their compositions through `record_batched` on the thread kernel: one custom
+    call each (directions and mapped chains become threads), values and derivatives those
+    of the JAX kernel under the same transformation to round-off."""
+    base, _ = _batch(speeds=(0.3, 1.0, 0.5), precompression_n=1.0)
+    grid = hc.choose_time_grid(base, t_end_s=0.3e-3, sample_interval_s=2e-6)
+    q = jnp.asarray([2e-6, 0.19, 1.0, 1.0, 1.0])
+    qs = q * jnp.asarray([[1.0] * 5, [1.3, 0.7, 1.1, 0.5, 1.02], [0.6, 1.2, 0.9, 1.5, 0.98]])
+    run = lambda kernel: jax.jit(lambda q, qs: _TRANSFORMS[transform](  # noqa: E731
+        lambda p: _traced(base, grid, p, kernel), q, qs))
+    hlo = run("auto").lower(q, qs).as_text()
+    kind = "full" if transform == "vmap" else "tangent"
+    assert hlo.count(f"hertzchain_thread_{backend}_r") == 1 and f"_{kind}" in hlo and "while" not in hlo
+    ours, reference = np.asarray(run("auto")(q, qs)), np.asarray(run("jax")(q, qs))
+    assert ours.shape == reference.shape
+    columns = tuple(range(reference.ndim - 1))
+    scale = np.max(np.abs(reference), axis=columns) if "jacfwd" in transform else np.max(np.abs(reference))
+    assert np.all(scale > 0.0)
+    # friction's derivative crosses stick-slip kinks: 1e-10 of each column's largest value
+    np.testing.assert_array_less(np.max(np.abs(ours - reference), axis=columns if "jacfwd" in transform else None),
+                                 1e-10 * scale)
+
+
+def test_fit_iteration_equals_the_jax_kernels(backend, monkeypatch):
+    """What a fit iteration computes (whitened residuals and their Jacobian in eta, mu, C
+    and the nuisances) on the thread kernel equals the same on the JAX kernel."""
+    from fitting.model import residuals_and_jacobian
+
+    problem, x = _fit_problem()
+    assert problem.simulates_natively()
+    r, jac = residuals_and_jacobian(problem, x)
+    monkeypatch.setattr(native, "kernel_for", lambda flags, devices: None)
+    problem_jax, _ = _fit_problem()
+    r_jax, jac_jax = residuals_and_jacobian(problem_jax, x)
+    assert np.linalg.norm(r) > 10.0  # the start is off the data
+    np.testing.assert_allclose(r, r_jax, rtol=0, atol=1e-10 * np.max(np.abs(r_jax)))
+    for column, label in enumerate(problem.labels):
+        scale = np.max(np.abs(jac_jax[:, column]))
+        np.testing.assert_allclose(jac[:, column], jac_jax[:, column], rtol=0, atol=1e-9 * scale + 1e-300,
+                                   err_msg=label)
+
+
+def test_too_many_channels_are_refused_with_the_limit(backend):
+    """A kernel run records at most 16 contacts: more is refused with the limit named."""
+    setup, _ = hc.batch_setup(hc.ChainSetup(20), striker_velocity_m_s=[0.5])
+    grid = hc.choose_time_grid(setup, t_end_s=0.1e-3, sample_interval_s=2e-6)
+    with pytest.raises(Exception, match="at most 16 recorded channels"):
+        solve_batched(setup, grid, Recording(tuple(range(17))), books=False)
