@@ -312,6 +312,7 @@ def main(argv=None) -> int:
                         help="skip the items still to come once this much time has passed [330]")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--skip-fit", action="store_true")
+    parser.add_argument("--kinds", default="conservative,damped", help="sweeps to run [conservative,damped]")
     args = parser.parse_args(argv)
 
     import jax
@@ -335,7 +336,7 @@ def main(argv=None) -> int:
 
     items = [("cuda_build", item_cuda_build)] if gpu else []
     for size in sizes:
-        for damped in (False, True):
+        for damped in [kind == "damped" for kind in args.kinds.split(",")]:
             tag = f"{'damped' if damped else 'conservative'}_{size}"
             items.append((f"jax_{tag}", lambda s=size, d=damped: item_hertzchain(s, d, args.repeats, "jax")))
             items.append((f"hertzchain_{tag}", lambda s=size, d=damped, t=tag: item_hertzchain(

@@ -21,6 +21,7 @@
 //     (D, n_samples, B) per channel. Thread t runs chain t % B along direction t / B; the
 //     direction-0 threads write the forces.
 #include <cstdint>
+#include <type_traits>
 
 #ifdef HC_HOST_EMULATION
 #define HC_HD
@@ -45,7 +46,6 @@ namespace {
 
 constexpr int kRows = HC_ROWS;
 constexpr int kContacts = kRows - 1;
-constexpr int kMaskWords = (kContacts + 63) / 64;
 constexpr int kMaxChannels = 16;
 constexpr int kThreadsPerBlock = 128;
 
@@ -65,13 +65,29 @@ struct Tangent {
   }
 };
 
-// The recorded contacts: a bit per contact, and which outputs each feeds.
+// The recorded contacts, one per output, and a bit per contact (set: recorded).
 struct Channels {
-  uint64_t mask[kMaskWords];
-  int64_t contact[kMaxChannels];
+  uint64_t mask[(kContacts + 63) / 64];
+  int contact[kMaxChannels];
   int count;
   HC_HD bool recorded(int i) const { return (mask[i / 64] >> (i % 64)) & 1u; }
 };
+
+// f(std::integral_constant<int, k>) at the contact k == i (0 <= i < kContacts), found by a
+// binary search over compile-time indices: the chain's state stays in registers (no index
+// known only at run time), and a recorded channel costs log2(contacts) branches, the same
+// in every thread.
+template <int kLo, int kHi, class F>
+HC_HD inline auto AtContact(int i, const F& f) {
+  if constexpr (kHi - kLo == 1) {
+    return f(std::integral_constant<int, kLo>{});
+  } else {
+    constexpr int kMid = (kLo + kHi) / 2;
+    if (i < kMid) return AtContact<kLo, kMid>(i, f);
+    return AtContact<kMid, kHi>(i, f);
+  }
+}
+
 
 struct Outputs {
   double* trace[kMaxChannels];
@@ -136,14 +152,13 @@ HC_HD void ForwardChain(const ForwardArgs& A, int64_t b) {
       double v = u[kContacts] + h * a;
       u[kContacts] = v + h * a;
     }
-#pragma unroll
-    for (int i = 0; i < kContacts; ++i) {
-      if (!A.channels.recorded(i)) continue;
-      double overlap = x[i] - x[i + 1];
-      if (kPreload) overlap = overlap + A.overlap0.at(i, b);
-      double force = hertzchain::ElasticForce<kSprings>(overlap, kappa[i], kSprings ? A.spring.at(i, b) : 0.0);
-      for (int c = 0; c < A.channels.count; ++c)
-        if (A.channels.contact[c] == i) A.out.trace[c][n * B + b] = force;
+    for (int c = 0; c < A.channels.count; ++c) {
+      A.out.trace[c][n * B + b] = AtContact<0, kContacts>(A.channels.contact[c], [&](auto contact) {
+        constexpr int i = decltype(contact)::value;
+        double overlap = x[i] - x[i + 1];
+        if (kPreload) overlap = overlap + A.overlap0.at(i, b);
+        return hertzchain::ElasticForce<kSprings>(overlap, kappa[i], kSprings ? A.spring.at(i, b) : 0.0);
+      });
     }
   }
 #pragma unroll
@@ -294,6 +309,8 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
       }
     }
     // the recorded channels from the new displacements and velocities
+    // (every contact tested in turn: a search as the conservative kernel's costs the
+    // tangent runs their registers)
 #pragma unroll
     for (int i = 0; i < kContacts; ++i) {
       if (!A.channels.recorded(i)) continue;
@@ -371,7 +388,7 @@ ffi::Error MakeChannels(ffi::Span<const int64_t> contacts, Channels* channels) {
   for (int c = 0; c < channels->count; ++c) {
     const int64_t i = contacts[c];
     if (i < 0 || i >= kContacts) return ffi::Error::InvalidArgument("a recorded channel is not a contact");
-    channels->contact[c] = i;
+    channels->contact[c] = static_cast<int>(i);
     channels->mask[i / 64] |= uint64_t{1} << (i % 64);
   }
   return ffi::Error::Success();
