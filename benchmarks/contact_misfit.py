@@ -50,15 +50,13 @@ against time and against approach per curve, coloured by phase) into --out.
 
 from __future__ import annotations
 
-import json
 import math
 import sys
-import time
 
 import numpy as np
 
-from benchmarks.contact_burgoyne import GEOMETRY, caltech_arguments
-from fitting.contact_calibration import ContactCurve, _smoothed, calibrate, shifted_approach, write_outputs
+from benchmarks.contact_burgoyne import caltech_arguments, run_calibration, stored_report
+from fitting.contact_calibration import ContactCurve, _smoothed, shifted_approach
 from hertzchain import atomic
 
 PHASES = ("toe", "rise", "top", "fall", "tail")
@@ -216,11 +214,9 @@ def main(argv=None) -> int:
     args, _, out, curves = caltech_arguments(argv, __doc__.splitlines()[0])
     if curves is None:
         return 1
-    base_file = out / "damping" / "contact.json"
-    if not base_file.is_file():
-        print(f"{base_file} missing: run benchmarks/contact_rate_terms.py first", file=sys.stderr)
+    damping = stored_report(out, "damping", "contact_rate_terms.py")
+    if damping is None:
         return 1
-    damping = json.loads(base_file.read_text())
     rows = []
     for curve, entry in zip(curves, damping["curves"]):
         stored = np.genfromtxt(out / "damping" / f"{curve.name}.csv", delimiter=",", names=True)
@@ -228,21 +224,14 @@ def main(argv=None) -> int:
                                   damping["materials"][curve.material.name]))
     _figures(curves, rows, out)
 
-    runs, elapsed = {}, {}
+    runs = {}
     for label, options in RUNS.items():
         chosen = [c for c in curves if label != "damping_without_outliers" or c.name not in OUTLIERS]
         if label == "damping_end_trimmed":
             chosen = [trimmed(c, END_WINDOW_US * 1e-6) for c in curves]
-        if args.reuse and (out / label / "contact.json").is_file():
-            runs[label] = json.loads((out / label / "contact.json").read_text())
-            elapsed[label] = runs[label].get("elapsed_s")
-            continue
         print(f"{label} ...", file=sys.stderr, flush=True)
-        began = time.perf_counter()
-        report = calibrate(chosen, GEOMETRY, progress=lambda text: print(f"  {text}", file=sys.stderr), **options)
-        runs[label] = write_outputs(report, chosen, out / label, title=label.replace("_", " "))
-        elapsed[label] = runs[label]["elapsed_s"] = time.perf_counter() - began
-        atomic.write_json(out / label / "contact.json", atomic.json_ready(runs[label]))
+        runs[label] = run_calibration(chosen, out / label, label.replace("_", " "), args.reuse, **options)
+    elapsed = {label: run.get("elapsed_s") for label, run in runs.items()}
     for row in rows:
         for label, run in runs.items():
             match = [c for c in run["curves"] if c["file"] == row["file"]]
