@@ -16,7 +16,8 @@ first). Per curve, from its stored model forces:
   go below it);
 - the monotone floor: on the samples where the approach is at its largest so far, a
   rate-independent law (whatever its shape) gives a force that never falls; the RMS of the
-  data about their best non-decreasing fit in time (pool-adjacent-violators) over all samples;
+  data about their best non-decreasing fit in time (`scipy.optimize.isotonic_regression`)
+  over all samples;
 - residual overlap: the approach at which the unloading force first falls below 10 % of the
   peak, over the largest approach (None: not within the record); the force at the end of the
   record (last 1 us), data and model, % of the peak;
@@ -54,6 +55,7 @@ import math
 import sys
 
 import numpy as np
+from scipy.optimize import isotonic_regression
 
 from benchmarks.contact_burgoyne import caltech_arguments, run_calibration, stored_report
 from fitting.contact_calibration import ContactCurve, _smoothed, shifted_approach
@@ -91,25 +93,12 @@ def phases(force_n, smooth_n):
     return labels
 
 
-def monotone_fit(values):
-    """Least-squares non-decreasing fit of a sequence (pool-adjacent-violators)."""
-    means, sizes = [], []
-    for value in values:
-        means.append(float(value))
-        sizes.append(1)
-        while len(means) > 1 and means[-2] > means[-1]:
-            size = sizes[-2] + sizes[-1]
-            means[-2:] = [(means[-2] * sizes[-2] + means[-1] * sizes[-1]) / size]
-            sizes[-2:] = [size]
-    return np.repeat(means, sizes)
-
-
 def monotone_floor(approach_m, force_n, peak_n):
     """RMS / peak over all samples of the best a rate-independent law can do where the approach
     is at its largest so far (force non-decreasing in time there); other samples count as 0."""
     at_max = approach_m >= np.maximum.accumulate(approach_m)
     chosen = force_n[at_max]
-    squared = np.sum((chosen - monotone_fit(chosen)) ** 2)
+    squared = np.sum((chosen - isotonic_regression(chosen).x) ** 2)
     return float(math.sqrt(squared / force_n.size) / peak_n)
 
 
