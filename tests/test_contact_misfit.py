@@ -1,13 +1,17 @@
 """The measures of `benchmarks/contact_misfit.py` and `benchmarks/contact_processing.py` on
-sequences whose answers are known in closed form."""
+sequences whose answers are known in closed form, and the record matching on one measured
+curve when the data are present."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from benchmarks.contact_misfit import monotone_floor, phases, quartic_floor, residual_overlap_fraction
 from benchmarks.contact_processing import best_alignment
+from fitting.contact_calibration import read_curve
+from hertzchain.materials import STEEL_440C
 
 
 def test_monotone_floor_is_the_misfit_of_the_best_non_decreasing_force():
@@ -44,3 +48,22 @@ def test_best_alignment_recovers_a_shift_and_a_scale():
     curve = 0.5 * record[40:540]
     deviation, scale, lag = best_alignment(curve, record)
     assert lag == 40 and scale == pytest.approx(0.5, rel=1e-12) and deviation < 1e-12
+
+
+DATA = Path(__file__).resolve().parents[2] / "shared/data/real/burgoyne-2014"
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="Burgoyne & Daraio data folder absent")
+def test_force15_is_the_july_reprocessing_halved_in_force_and_approach():
+    """The paper's `force15` against the stored July reprocessing of the same shot (5-22,
+    sample 3): one factor 0.5 on both axes (benchmarks/results/contact_burgoyne/processing.md)."""
+    curve = read_curve(DATA / "ExperimentalData" / "force15.mat", STEEL_440C)
+    record = read_curve(DATA / "hopkinson_tests_5-22" / "fd_s440-3.mat", STEEL_440C)
+    deviation, scale, lag = best_alignment(curve.force_n, record.force_n)
+    assert deviation < 0.01 and scale == pytest.approx(0.5, abs=0.002)
+    start, other = max(0, -lag), max(0, lag)
+    size = min(curve.force_n.size - start, record.force_n.size - other)
+    slope, intercept = np.polyfit(record.approach_m[other:other + size], curve.approach_m[start:start + size], 1)
+    assert slope == pytest.approx(0.5, abs=0.005)
+    residual = curve.approach_m[start:start + size] - slope * record.approach_m[other:other + size] - intercept
+    assert np.sqrt(np.mean(residual**2)) < 3e-6  # m: 1.9 um; the 50-ns curves, whose records are not stored, leave 20-25 um
