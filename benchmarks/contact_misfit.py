@@ -5,7 +5,7 @@ each record the misfit sits, what bounds it, and what fitting more of the law's 
 
 Starts from `damping/` of `contact_rate_terms.py` (sigma_Y and a Kuwabara-Kono damping time
 fitted once per material, published rate constants, approach offset shifted out; run it
-first). Per curve, from its stored model forces:
+first). Per curve, with the model forces at that run's fitted constants:
 
 - RMS / peak and the share of the squared misfit in five phases: `toe` (loading below 20 %
   of the peak force), `rise` (loading, 20-90 %), `top` (above 90 %, either side of the
@@ -54,12 +54,14 @@ from __future__ import annotations
 import math
 import sys
 
+import jax.numpy as jnp
 import numpy as np
 from scipy.optimize import isotonic_regression
 
-from benchmarks.contact_burgoyne import caltech_arguments, run_calibration, stored_report
-from fitting.contact_calibration import ContactCurve, _smoothed, shifted_approach
-from hertzchain import atomic
+from benchmarks.contact_burgoyne import GEOMETRY, caltech_arguments, run_calibration, stored_report
+from fitting.contact_calibration import (ContactCurve, _kappa, _smoothed, approach_rate_m_s, model_force,
+                                         shifted_approach)
+from hertzchain import atomic, contact
 
 PHASES = ("toe", "rise", "top", "fall", "tail")
 PHASE_COLOURS = {"toe": "tab:gray", "rise": "tab:blue", "top": "tab:red", "fall": "tab:orange", "tail": "tab:green"}
@@ -123,6 +125,18 @@ def trimmed(curve: ContactCurve, duration_s: float) -> ContactCurve:
     """The curve without its last `duration_s` of samples."""
     keep = curve.time_s <= curve.time_s[-1] - duration_s
     return ContactCurve(curve.name, curve.time_s[keep], curve.approach_m[keep], curve.force_n[keep], curve.material)
+
+
+def fitted_force(curve: ContactCurve, entry, material_entry):
+    """The law with the damping along a curve at a run's fitted constants (its `contact.json`
+    entries of the curve and its material), N."""
+    approach = shifted_approach(curve, "first-sample")
+    fitted = material_entry["fitted"]
+    stress = contact.rate_hardened_yield_stress(fitted["yield_stress_pa"], fitted["rate_constant"],
+                                                entry["strain_rate_s"])
+    return np.asarray(model_force(jnp.asarray(approach), jnp.asarray(approach_rate_m_s(curve, approach)),
+                                  float(np.median(np.diff(curve.time_s))), _kappa(curve.material, GEOMETRY),
+                                  GEOMETRY, stress, curve.material.poisson, fitted["eta_s"]))
 
 
 def analyse_curve(curve, entry, material_entry):
@@ -208,9 +222,9 @@ def main(argv=None) -> int:
         return 1
     rows = []
     for curve, entry in zip(curves, damping["curves"]):
-        stored = np.genfromtxt(out / "damping" / f"{curve.name}.csv", delimiter=",", names=True)
-        rows.append(analyse_curve(curve, {**entry, "force_fitted_n": stored["force_fitted_n"]},
-                                  damping["materials"][curve.material.name]))
+        material = damping["materials"][curve.material.name]
+        rows.append(analyse_curve(curve, {**entry, "force_fitted_n": fitted_force(curve, entry, material)},
+                                  material))
     _figures(curves, rows, out)
 
     runs = {}
