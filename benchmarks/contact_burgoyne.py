@@ -44,7 +44,9 @@ CALTECH = {
 GEOMETRY = ContactGeometry("sphere-sphere", 3.175e-3)  # two hemispheres of 1/8 in
 
 
-def _run(curves, out, title, reuse=False, **options):
+def run_calibration(curves, out, title, reuse=False, **options):
+    """`calibrate` on `curves` with `options`, written into `out` (its `contact.json` with the
+    elapsed time); `reuse`: read an existing `contact.json` instead."""
     if reuse and (out / "contact.json").is_file():
         return json.loads((out / "contact.json").read_text())
     start = time.perf_counter()
@@ -65,6 +67,16 @@ def _shift(base, other, material):
     changes = [o["peak_force_error_model"] - b["peak_force_error_model"]
                for b, o in zip(base["curves"], other["curves"]) if b["material"] == material]
     return [min(changes), max(changes)]
+
+
+def stored_report(out, label, script):
+    """The `contact.json` of the run `label` under `out`, or None (with a message naming the
+    `script` that writes it) where it is missing."""
+    path = out / label / "contact.json"
+    if not path.is_file():
+        print(f"{path} missing: run benchmarks/{script} first", file=sys.stderr)
+        return None
+    return json.loads(path.read_text())
 
 
 def caltech_arguments(argv, description):
@@ -94,7 +106,7 @@ def main(argv=None) -> int:
         ("rate_fitted", "sigma_Y and rate constant fitted", {"fit_rate_constant": True}),
     ):
         print(f"{label} ...", file=sys.stderr)
-        runs[label] = _run(caltech, out / label, title, args.reuse, **options)
+        runs[label] = run_calibration(caltech, out / label, title, args.reuse, **options)
     rate_440c = float(np.median([c["strain_rate_s"] for c in runs["published"]["curves"]
                                  if c["material"] == STEEL_440C.name]))
     processings = {
@@ -108,7 +120,7 @@ def main(argv=None) -> int:
         curves = [read_curve(p, STEEL_440C) for p in paths]
         curves = [c.__class__(f"{p.parent.name[-4:]}_{c.name}", c.time_s, c.approach_m, c.force_n, c.material)
                   for c, p in zip(curves, paths)]
-        runs[label] = _run(curves, out / label, f"440C, {label.replace('_', ' ')}", args.reuse,
+        runs[label] = run_calibration(curves, out / label, f"440C, {label.replace('_', ' ')}", args.reuse,
                            strain_rate_s_given=rate_440c)
 
     published = runs["published"]
@@ -202,7 +214,9 @@ def _markdown(summary) -> str:
                      f"{entry['fitted_yield_stress_mpa']:.0f} | {_pct(entry['rms_over_peak_fitted'])} |")
     lines += ["", "The same curves with a Kuwabara-Kono damping time per material (`--damping`) or a time shift "
               "of the records per curve (`--time-shift`): [`rate_terms.md`](rate_terms.md) "
-              "(`python benchmarks/contact_rate_terms.py`)."]
+              "(`python benchmarks/contact_rate_terms.py`). What the damped law still misses, curve by curve: "
+              "[`misfit.md`](misfit.md) (`python benchmarks/contact_misfit.py`); which stored record and "
+              "processing each curve is: [`processing.md`](processing.md) (`python benchmarks/contact_processing.py`)."]
     return "\n".join(lines) + "\n"
 
 

@@ -38,7 +38,7 @@ import time
 
 import numpy as np
 
-from benchmarks.contact_burgoyne import GEOMETRY, caltech_arguments
+from benchmarks.contact_burgoyne import GEOMETRY, caltech_arguments, stored_report
 from fitting.contact_calibration import _kappa, _smoothed, calibrate, shifted_approach, write_outputs
 from hertzchain import atomic
 
@@ -74,11 +74,10 @@ def main(argv=None) -> int:
     args, _, out, curves = caltech_arguments(argv, __doc__.splitlines()[0])
     if curves is None:
         return 1
-    base_file = out / "published" / "contact.json"
-    if not base_file.is_file():
-        print(f"{base_file} missing: run benchmarks/contact_burgoyne.py first", file=sys.stderr)
+    base = stored_report(out, "published", "contact_burgoyne.py")
+    if base is None:
         return 1
-    runs = {"law_alone": json.loads(base_file.read_text())}
+    runs = {"law_alone": base}
     elapsed = {}
     for label, options in RUNS.items():
         if args.reuse and (out / label / "contact.json").is_file():

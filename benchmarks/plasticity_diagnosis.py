@@ -6,7 +6,7 @@ same shots: the fitted yield stress, its z-score (fitted - true) / sigma, and th
     python benchmarks/plasticity_diagnosis.py [--draws 0 1 2 3] [--add] [--out benchmarks/results/plasticity_diagnosis]
 
 Writes `diagnosis.json` (per draw: named effects, fitted yield stress with its standard
-error, z-score, time; the mean z-score and its standard error over the draws: a bias shows as
+error, z-score, time and the machine's 1-minute load average over it: min, mean, max; the mean z-score and its standard error over the draws: a bias shows as
 a mean z several of its standard errors from 0). The file is rewritten after every draw;
 `--add` keeps the draws an earlier run stored there (and their times) and adds these.
 """
@@ -17,7 +17,9 @@ import argparse
 import importlib.util
 import json
 import math
+import os
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -27,6 +29,28 @@ from fitting.diagnosis import diagnose
 from hertzchain import atomic
 
 TEST = Path(__file__).resolve().parents[1] / "tests" / "test_contact_plasticity_diagnosis.py"
+# Interval of the load-average samples stored with each draw's time, s.
+LOAD_INTERVAL_S = 10.0
+
+
+class _LoadSampler:
+    """The machine's 1-minute load average every `LOAD_INTERVAL_S` while a draw runs."""
+
+    def __init__(self):
+        self.samples, self._done = [os.getloadavg()[0]], threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self):
+        while not self._done.wait(LOAD_INTERVAL_S):
+            self.samples.append(os.getloadavg()[0])
+
+    def stop(self) -> dict:
+        self._done.set()
+        self._thread.join()
+        self.samples.append(os.getloadavg()[0])
+        return {"load_average_1min_min": min(self.samples), "load_average_1min_mean": float(np.mean(self.samples)),
+                "load_average_1min_max": max(self.samples), "load_average_samples": len(self.samples)}
 
 
 def main(argv=None) -> int:
@@ -50,10 +74,10 @@ def main(argv=None) -> int:
         result["draws"] = [d for d in json.loads(stored.read_text()).get("draws", []) if d["draw"] not in args.draws]
     for draw in args.draws:
         print(f"draw {draw} ...", file=sys.stderr, flush=True)
-        began = time.perf_counter()
+        began, load = time.perf_counter(), _LoadSampler()
         diagnosis = diagnose(held_out.held_out_records(draw, runs), progress=True)
         entry = {"draw": draw, "missing_effects": diagnosis.missing_effects, "conclusion": diagnosis.conclusion,
-                 "diagnosis_s": time.perf_counter() - began}
+                 "diagnosis_s": time.perf_counter() - began, "cpu_count": os.cpu_count(), **load.stop()}
         if diagnosis.steps and diagnosis.steps[0].effect == "plasticity":
             step = diagnosis.steps[0]
             y, dy = step.values["yield_softening"], step.stderr["yield_softening"]

@@ -10,14 +10,16 @@ divided by the sum of the bodies' radii (the convention of Burgoyne & Daraio, PR
 032203, 2014).
 
 `calibrate` reports, per curve, the prediction at the given constants and at constants
-fitted per material across its curves (the yield stress, optionally the rate constant),
+fitted per material across its curves (the yield stress, optionally the rate constant and
+the law's hardness ratio $h = H/\\sigma_Y$ of its fully plastic branch, 2.84 by default),
 through the project's least squares (`fitting.fit.least_squares`, optimistix
 Levenberg-Marquardt). Each curve weighs the same in the fit: residuals are
 $(F_{model} - F_{measured})/F_{peak}$ divided by the square root of the curve's sample count,
 so the fit minimises the sum over curves of the squared RMS misfit relative to each peak.
 Standard errors: the Gauss-Newton one from the residual variance, which treats thousands of
 strongly correlated samples as independent and is far too small, and the scatter of the
-yield stresses fitted to each curve alone (standard deviation / sqrt(curves)); the larger
+yield stresses fitted to each curve alone (standard deviation / sqrt(curves); not where the
+rate constant or the hardness ratio is fitted with it); the larger
 is reported as `stderr`.
 
 Two optional terms account for a measured force that peaks before the approach does, which
@@ -69,7 +71,7 @@ MAX_TIME_SHIFT_S = 13e-6
 # A fitted shift beyond this fraction of its bound is reported without a standard error.
 SHIFT_AT_BOUND = 0.99
 # Parameters of the fit, in this order; per-curve time shifts follow them.
-PARAMETERS = ("ln_yield_stress", "rate_constant", "eta_s")
+PARAMETERS = ("ln_yield_stress", "rate_constant", "eta_s", "ln_hardness_ratio")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -216,11 +218,12 @@ def _kappa(material: Material, geometry: ContactGeometry) -> float:
     return float(1.0 / (2 * theta * math.sqrt(1.0 / geometry.radius_m + 1.0 / geometry.other_radius_m)))
 
 
-def law_force(approach_m, kappa, geometry: ContactGeometry, yield_stress_pa, poisson):
-    """`jackson_green_contact` along an approach history, N."""
+def law_force(approach_m, kappa, geometry: ContactGeometry, yield_stress_pa, poisson,
+              hardness_ratio=contact.JG_HARDNESS_RATIO):
+    """`jackson_green_contact` along an approach history, N (`hardness_ratio`: its $H/\\sigma_Y$)."""
     peak = jax.lax.cummax(approach_m)
     return contact.jackson_green_contact(approach_m, peak, kappa, geometry.reduced_radius_m, yield_stress_pa,
-                                         poisson)[0]
+                                         poisson, hardness_ratio=hardness_ratio)[0]
 
 
 def time_shifted(values, time_step_s, shift_s):
@@ -254,12 +257,13 @@ def bounded_shift_s(value, max_shift_s):
 
 
 def model_force(approach_m, rate_m_s, time_step_s, kappa, geometry: ContactGeometry, yield_stress_pa, poisson,
-                eta_s=0.0, shift_s=0.0):
+                eta_s=0.0, shift_s=0.0, hardness_ratio=contact.JG_HARDNESS_RATIO):
     """The law along a measured history with the optional terms, N: the approach (and its rate)
-    read `shift_s` later (s; 0: none), the Kuwabara-Kono damping time `eta_s` (s; 0: none)."""
+    read `shift_s` later (s; 0: none), the Kuwabara-Kono damping time `eta_s` (s; 0: none), the
+    law's hardness ratio $H/\\sigma_Y$."""
     approach = time_shifted(approach_m, time_step_s, shift_s)
     rate = time_shifted(rate_m_s, time_step_s, shift_s)
-    elastic = law_force(approach, kappa, geometry, yield_stress_pa, poisson)
+    elastic = law_force(approach, kappa, geometry, yield_stress_pa, poisson, hardness_ratio)
     return contact.contact_force(approach, rate, kappa, eta_s, elastic_n=elastic)[1]
 
 
@@ -286,7 +290,7 @@ def unloading_secant_n_m(approach_m, force_n) -> float | None:
 
 
 class _Residuals:
-    """The whitened residuals of one material's curves in x = (ln sigma_Y, C, eta_s, shift_1 ..
+    """The whitened residuals of one material's curves in x = (ln sigma_Y, C, eta_s, ln h, shift_1 ..
     shift_n), for `fitting.fit.least_squares`; the shifts enter through `bounded_shift_s`."""
 
     def __init__(self, pieces, kappa, geometry, poisson, max_shift_s):
@@ -298,7 +302,8 @@ class _Residuals:
             for k, (approach, speed, step, force, peak, rate) in enumerate(self.pieces):
                 stress = contact.rate_hardened_yield_stress(jnp.exp(x[0]), x[1], rate)
                 shift = bounded_shift_s(x[first + k], max_shift_s)
-                model = model_force(approach, speed, step, kappa, geometry, stress, poisson, x[2], shift)
+                model = model_force(approach, speed, step, kappa, geometry, stress, poisson, x[2], shift,
+                                    jnp.exp(x[3]))
                 out.append((model - force) / (peak * math.sqrt(force.size)))
             return jnp.concatenate(out)
 
@@ -318,9 +323,10 @@ def _fit_material(pieces, material, kappa, geometry, options):
     per-curve shifts (s) with their standard errors (s))."""
     n = len(pieces)
     first = len(PARAMETERS)
-    start = np.concatenate([[math.log(material.yield_stress_pa), material.yield_rate_constant or 0.0, 0.0],
-                            np.zeros(n)])
-    base = [0] + ([1] if options["fit_rate_constant"] else []) + ([2] if options["fit_damping"] else [])
+    start = np.concatenate([[math.log(material.yield_stress_pa), material.yield_rate_constant or 0.0, 0.0,
+                             math.log(contact.JG_HARDNESS_RATIO)], np.zeros(n)])
+    base = [0] + ([1] if options["fit_rate_constant"] else []) + ([2] if options["fit_damping"] else []) \
+        + ([3] if options["fit_hardness_ratio"] else [])
 
     def solve(indices):
         problem = _Residuals([pieces[i] for i in indices], kappa, geometry, material.poisson, options["max_shift_s"])
@@ -335,14 +341,18 @@ def _fit_material(pieces, material, kappa, geometry, options):
     cov = covariance_from_jacobian(jac, labels, chi2=float(r @ r), dof=max(r.size - len(free), 1), scale="residual")
     stderr = dict(zip(free, cov.stderr))
     stress = math.exp(x[0])
-    singles = [] if options["fit_rate_constant"] else [math.exp(solve([i])[1].x[0]) for i in range(n)]
+    # sigma_Y alone per curve; not where it trades off against another constant fitted with it
+    traded = options["fit_rate_constant"] or options["fit_hardness_ratio"]
+    singles = [] if traded else [math.exp(solve([i])[1].x[0]) for i in range(n)]
     scatter = float(np.std(singles, ddof=1) / math.sqrt(len(singles))) if len(singles) > 1 else math.nan
     gauss_newton = stress * float(stderr[0])
-    values = {"yield_stress_pa": stress, "rate_constant": float(x[1]), "eta_s": float(x[2])}
+    values = {"yield_stress_pa": stress, "rate_constant": float(x[1]), "eta_s": float(x[2]),
+              "hardness_ratio": math.exp(x[3])}
     errors = {"yield_stress_gauss_newton_pa": gauss_newton, "yield_stress_curve_scatter_pa": scatter,
               "yield_stress_pa": float(np.nanmax([gauss_newton, scatter])),
               "rate_constant": float(stderr[1]) if 1 in stderr else None,
-              "eta_s": float(stderr[2]) if 2 in stderr else None}
+              "eta_s": float(stderr[2]) if 2 in stderr else None,
+              "hardness_ratio": math.exp(x[3]) * float(stderr[3]) if 3 in stderr else None}
     bound = options["max_shift_s"]
     shifts, shift_errors = [float(bounded_shift_s(v, bound)) for v in x[first:]], [None] * n
     if options["fit_time_shift"]:
@@ -380,13 +390,13 @@ def _curve_report(curve, piece, kappa, geometry, given, fitted, own_stress_pa=No
     smooth = _smoothed(curve)
     peak = float(np.max(smooth))
 
-    def force(stress_pa, rate_constant, eta_s=0.0, shift=0.0):
+    def force(stress_pa, rate_constant, eta_s=0.0, shift=0.0, hardness_ratio=contact.JG_HARDNESS_RATIO):
         stress = contact.rate_hardened_yield_stress(stress_pa, rate_constant, rate)
         return np.asarray(model_force(jnp.asarray(approach), jnp.asarray(speed), step, kappa, geometry, stress,
-                                      curve.material.poisson, eta_s, shift))
+                                      curve.material.poisson, eta_s, shift, hardness_ratio))
 
     model = force(given["yield_stress_pa"], given["rate_constant"])
-    fit = force(fitted["yield_stress_pa"], fitted["rate_constant"], fitted["eta_s"], shift_s)
+    fit = force(fitted["yield_stress_pa"], fitted["rate_constant"], fitted["eta_s"], shift_s, fitted["hardness_ratio"])
     old = np.asarray(thornton_force(approach, curve.material, geometry, given["yield_stress_pa"]))
     # the measured force against the approach it is aligned with (the fitted shift; none: as stored)
     aligned = np.asarray(time_shifted(approach, step, shift_s)) if shift_s else approach
@@ -394,7 +404,8 @@ def _curve_report(curve, piece, kappa, geometry, given, fitted, own_stress_pa=No
     secants = {"model": unloading_secant_n_m(approach, model), "fitted": unloading_secant_n_m(aligned, fit)}
     i_peak = int(np.argmax(smooth))
     loading, unloading = slice(0, i_peak + 1), slice(i_peak + 1, None)
-    own = None if own_stress_pa is None else force(own_stress_pa, fitted["rate_constant"], fitted["eta_s"], shift_s)
+    own = None if own_stress_pa is None else force(own_stress_pa, fitted["rate_constant"], fitted["eta_s"], shift_s,
+                                                   fitted["hardness_ratio"])
     modulus = 0.75 * kappa / math.sqrt(geometry.reduced_radius_m)
     fitted_stress = contact.rate_hardened_yield_stress(fitted["yield_stress_pa"], fitted["rate_constant"], rate)
     radius = float(contact.jackson_green_contact_radius(float(np.max(approach)), kappa, geometry.reduced_radius_m,
@@ -437,13 +448,15 @@ def _curve_report(curve, piece, kappa, geometry, given, fitted, own_stress_pa=No
 
 
 def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample", fit_rate_constant: bool = False,
-              fit_damping: bool = False, fit_time_shift: bool = False, max_shift_s: float = MAX_TIME_SHIFT_S,
+              fit_damping: bool = False, fit_time_shift: bool = False, fit_hardness_ratio: bool = False,
+              max_shift_s: float = MAX_TIME_SHIFT_S,
               strain_rate_s_given: float | None = None, progress=None) -> dict:
     """Predict and calibrate the contact law on `curves` (`ContactCurve`, grouped by material).
 
     `fit_damping`: fit a Kuwabara-Kono damping time per material; `fit_time_shift`: fit a
     time alignment of the force and approach records per curve within +-`max_shift_s` (s)
-    (module docstring; both need a time column).
+    (module docstring; both need a time column); `fit_rate_constant`, `fit_hardness_ratio`:
+    fit the rate constant C, the hardness ratio h (fitted as ln h) per material with sigma_Y.
 
     **Returns:** a dict: `materials` (per material: given and fitted constants with standard
     errors, converged flag, per-curve yield stresses) and `curves` (per curve: strain rate,
@@ -463,7 +476,7 @@ def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample"
                              "give one (--yield-stress, Pa).")
         groups.setdefault(curve.material.name, []).append(i)
     options = {"fit_rate_constant": fit_rate_constant, "fit_damping": fit_damping, "fit_time_shift": fit_time_shift,
-               "max_shift_s": max_shift_s}
+               "fit_hardness_ratio": fit_hardness_ratio, "max_shift_s": max_shift_s}
     approaches = [shifted_approach(c, offset) for c in curves]
     rates = [strain_rate_s(c, geometry, strain_rate_s_given) if (c.material.yield_rate_constant or
              fit_rate_constant) else 1e-3 for c in curves]
@@ -479,7 +492,7 @@ def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample"
         values, errors, converged, singles, shifts, shift_errors = _fit_material(
             [pieces[i] for i in members], material, kappa, geometry, options)
         given = {"yield_stress_pa": material.yield_stress_pa, "rate_constant": material.yield_rate_constant or 0.0,
-                 "eta_s": 0.0}
+                 "eta_s": 0.0, "hardness_ratio": contact.JG_HARDNESS_RATIO}
         report["materials"][name] = {
             "youngs_pa": material.youngs_pa, "poisson": material.poisson, "given": given, "fitted": values,
             "stderr": errors, "converged": converged,

@@ -285,7 +285,9 @@ def jackson_green_contact(overlap_m, max_overlap_m, kappa_n_m1p5, reduced_radius
     Al 2017 hemispheres at 300-750 /s) keep $F/(2\\pi R^*\\delta) \\approx 2.7$-$4.0\\,\\sigma_Y$ up to
     $a/R \\approx 0.7$ (work hardening), and JG's falling hardness puts their peaks 4-38 %
     low; with $h$ = 2.84 held, the peaks of all 440C and 302 curves fall within 15 %
-    (`benchmarks/results/contact_burgoyne/`). Use the dynamic $\\sigma_Y$
+    (`benchmarks/results/contact_burgoyne/`). Fitted with $\\sigma_Y$ on those curves, $h$ runs
+    to 67 ($\\sigma_Y$ = 40 MPa, 440C) or 0.07-0.17 (302, Al: $\\sigma_Y$ 2.4-2.6x the
+    published), no hardness a material has (`misfit.md` there). Use the dynamic $\\sigma_Y$
     (`rate_hardened_yield_stress`) for impacts.
 
     **Unloading** and reloading below $\\delta_m$: Hertz about the residual overlap with the

@@ -92,7 +92,7 @@ def test_time_shifted_reads_between_samples_and_beyond_the_ends():
     np.testing.assert_allclose(np.asarray(time_shifted(values, 0.5, -0.75)), [1.0, 1.0, 1.5, 3.0])
 
 
-def test_residual_gradients_in_damping_and_shift_equal_finite_differences():
+def test_residual_gradients_in_damping_shift_and_hardness_ratio_equal_finite_differences():
     time = np.linspace(0.0, 80e-6, 401)
     step = float(time[1] - time[0])
     approach = _approach(time)
@@ -101,12 +101,14 @@ def test_residual_gradients_in_damping_and_shift_equal_finite_differences():
     force = 1e3 * np.sin(np.pi * time / PERIOD_S) ** 2  # any measured force: the residuals' gradients do not use it
     geometry = ContactGeometry("sphere-flat", RADIUS_M)
     problem = _Residuals([(approach, speed, step, force, float(force.max()), 1e-3)], kappa, geometry, NU, 13e-6)
-    # off the sample grid (a shift of 0.3 steps), with the damping on, sigma_Y in the plastic range
-    x = np.array([math.log(600e6), 0.0, 1.5e-6, 0.3 * step])  # a shift of 0.3 steps (tanh: 3e-4 % less)
-    r, jac = problem.linearize(x, [0, 2, 3])
-    assert np.all(np.isfinite(jac)) and np.abs(jac).max() > 0
-    for column, h in zip(range(3), (1e-6, 1e-9, 1e-10)):
-        index = [0, 2, 3][column]
+    # off the sample grid (a shift of 0.3 steps), with the damping on, sigma_Y in the plastic range,
+    # the hardness ratio away from its default
+    x = np.array([math.log(600e6), 0.0, 1.5e-6, math.log(3.3), 0.3 * step])  # shift: tanh 3e-4 % less
+    columns = [0, 2, 3, 4]
+    r, jac = problem.linearize(x, columns)
+    assert np.all(np.isfinite(jac)) and np.all(np.abs(jac).max(axis=0) > 0)
+    for column, h in enumerate((1e-6, 1e-9, 1e-6, 1e-10)):
+        index = columns[column]
         up, down = x.copy(), x.copy()
         up[index] += h
         down[index] -= h

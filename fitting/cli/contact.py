@@ -10,7 +10,9 @@ once per file, a materials-table name; `--youngs`, `--poisson`, `--yield-stress`
 `--rate-constant` replace its constants (or stand for it). Writes `contact.json`, one
 `<stem>.csv` per file, `contact.png` and `residuals.png` into `--out`.
 
-By default the law is rate-independent apart from its dynamic yield stress. `--damping` adds
+By default the law is rate-independent apart from its dynamic yield stress, with the
+hardness of its fully plastic branch at 2.84 sigma_Y; `--fit-rate-constant` and
+`--fit-hardness-ratio` fit the rate constant and that ratio per material with sigma_Y. `--damping` adds
 a Kuwabara-Kono damping force with one damping time per material, fitted with sigma_Y (on
 Burgoyne & Daraio's curves it follows the force's lead over the approach and their
 unloading: `benchmarks/results/contact_burgoyne/rate_terms.md`); `--time-shift` fits a time
@@ -48,6 +50,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--strain-rate", type=float,
                         help="strain rate (1/s) for files without a time column (rate hardening needs one)")
     parser.add_argument("--fit-rate-constant", action="store_true", help="fit the rate constant as well")
+    parser.add_argument("--fit-hardness-ratio", action="store_true",
+                        help="fit the hardness ratio H/sigma_Y of the law's fully plastic branch as well [2.84]")
     parser.add_argument("--damping", action="store_true",
                         help="fit a Kuwabara-Kono damping time per material on top of the law [off]")
     parser.add_argument("--time-shift", action="store_true",
@@ -101,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as error:
         raise ValueError(f"--max-shift: {error}") from None
     report = calibrate(curves, geometry, offset=args.offset, fit_rate_constant=args.fit_rate_constant,
-                       fit_damping=args.damping, fit_time_shift=args.time_shift, max_shift_s=max_shift_s,
+                       fit_damping=args.damping, fit_time_shift=args.time_shift,
+                       fit_hardness_ratio=args.fit_hardness_ratio, max_shift_s=max_shift_s,
                        strain_rate_s_given=args.strain_rate,
                        progress=lambda text: print(text, file=sys.stderr, flush=True))
     data = write_outputs(report, curves, args.out)
@@ -109,7 +114,9 @@ def run(args: argparse.Namespace) -> int:
         fitted, given, errors = entry["fitted"], entry["given"], entry["stderr"]
         print(f"{name}: sigma_Y fitted {fitted['yield_stress_pa'] / 1e6:.0f} +- {errors['yield_stress_pa'] / 1e6:.0f} MPa "
               f"(given {given['yield_stress_pa'] / 1e6:.0f} MPa), rate constant {fitted['rate_constant']:.4g}"
-              + (f", damping time {fitted['eta_s'] * 1e6:.3g} us" if args.damping else ""))
+              + (f", damping time {fitted['eta_s'] * 1e6:.3g} us" if args.damping else "")
+              + (f", hardness ratio {fitted['hardness_ratio']:.3g} +- {errors['hardness_ratio']:.2g}"
+                 if args.fit_hardness_ratio else ""))
     for entry in data["curves"]:
         print(f"  {entry['file']}: peak force {entry['peak_force_measured_n'] / 1e3:.3g} kN, error at given "
               f"constants {100 * entry['peak_force_error_model']:+.1f} %, RMS/peak fitted "
