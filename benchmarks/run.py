@@ -451,19 +451,26 @@ def worker_pairs(damped: bool, pairs: int, repeats: int) -> dict:
         out = solve_batched(setup, grid, recording, devices=use, books=False)
         return jax.block_until_ready(out.forces_n)
 
+    def ours_one_device():  # the default call: one device, the kernel's blocks over the cores
+        out = solve_batched(setup, grid, recording, books=False)
+        return jax.block_until_ready(out.forces_n)
+
     def numba():
         if damped:
             return baselines.numba_damped_batch(*args, eta_s=eta, friction_decel_m_s2=arrays["friction_decel_m_s2"])
         return baselines.numba_batch(*args)
 
     ours_first, _, _, _, forces = _time(ours, 1)
+    one_first, _, _, _, forces_one = _time(ours_one_device, 1)
     numba_first, _, _, _, reference = _time(numba, 1)
     runs = []
     for _ in range(pairs):
         a = _time(ours, repeats)[1]
+        d = _time(ours_one_device, repeats)[1]
         c = _time(numba, repeats)[1]
         work = n * b * STANDARD_STEPS
-        runs.append({"hertzchain": work / a, "numba": work / c, "ratio": c / a})
+        runs.append({"hertzchain": work / a, "hertzchain_one_device": work / d, "numba": work / c,
+                     "ratio": c / a, "ratio_one_device": c / d})
     wall = np.asarray(forces["wall"])  # (B, n)
     ratios = [r["ratio"] for r in runs]
     return {
@@ -473,10 +480,14 @@ def worker_pairs(damped: bool, pairs: int, repeats: int) -> dict:
         "native_kernel": native.kernel_for(kernel_flags(setup)._replace(ledger=False), use) or "none (JAX kernel)",
         "host_devices": len(devices),
         "numba_threads": numba_threads(),
+        "kernel_march": os.environ.get(native.ARCH_VARIABLE, "native"),
+        "numba_cpu_name": os.environ.get("NUMBA_CPU_NAME", "host"),
         "hertzchain_over_numba": float(np.median(ratios)),
+        "hertzchain_one_device_over_numba": float(np.median([r["ratio_one_device"] for r in runs])),
         "runs": runs,
-        "first_call_s": {"hertzchain": ours_first, "numba": numba_first},
+        "first_call_s": {"hertzchain": ours_first, "hertzchain_one_device": one_first, "numba": numba_first},
         "wall_force_max_difference_n": float(np.max(np.abs(wall.T - reference[:, 2, :]))),
+        "one_device_equals_sharded": bool(np.array_equal(np.asarray(forces_one["wall"]), wall)),
         "wall_force_max_n": float(np.max(wall)),
     }
 
@@ -677,6 +688,8 @@ def _quick_table(summary) -> str:
     machine = summary["machine"]
     lines = [f"Machine: {machine.get('cpu')}, {machine.get('cores')} cores, {machine.get('vector')}; "
              f"load average {machine.get('load_average_before')} before, {machine.get('load_average_after')} after.",
+             f"Kernel built for -march={summary['conservative'].get('kernel_march', 'native')}, Numba for "
+             f"{summary['conservative'].get('numba_cpu_name', 'host')}.",
              "", "| case | hertzchain bead-steps/s | Numba bead-steps/s | ratio (median) |", "|---|---|---|---|"]
     for key in ("conservative", "damped_frictional"):
         part = summary[key]
@@ -684,9 +697,13 @@ def _quick_table(summary) -> str:
             lines.append(f"| {key} | unavailable: {part.get('reason', '')[-200:]} | | |")
             continue
         runs = part["runs"]
-        cells = " / ".join(f"{r['hertzchain']:.3g}" for r in runs), " / ".join(f"{r['numba']:.3g}" for r in runs)
-        ratio = part["hertzchain_over_numba"]
-        lines.append(f"| {key} | {cells[0]} | {cells[1]} | {ratio:.2f} |" if ratio else f"| {key} | | | |")
+        numba = " / ".join(f"{r['numba']:.3g}" for r in runs)
+        for label, field, ratio in (("host devices", "hertzchain", "hertzchain_over_numba"),
+                                    ("one device", "hertzchain_one_device", "hertzchain_one_device_over_numba")):
+            if field not in runs[0]:
+                continue
+            cells = " / ".join(f"{r[field]:.3g}" for r in runs)
+            lines.append(f"| {key}, {label} | {cells} | {numba} | {part[ratio]:.2f} |")
     fit = summary["fit_iteration"]
     if fit.get("available"):
         lines += ["", f"Fit iteration (residuals + Jacobian, {fit['n_traces']} traces, eta, mu, C): "
