@@ -25,6 +25,9 @@
 //   channels (n_channels,): the contacts whose force is recorded after every sample.
 //   traces: n_channels results of (B, n_samples), N.
 #include <sched.h>
+#ifdef __AVX512F__
+#include <immintrin.h>
+#endif
 
 #include <algorithm>
 #include <atomic>
@@ -173,6 +176,32 @@ std::vector<char> UniformRows(const double* block, int64_t rows) {
   return uniform;
 }
 
+#ifdef __AVX512F__
+// Rows in[s * stride + 0..7], s = 0..7, written as columns: dst[j][s] = in[s * stride + j]
+// (in registers: the scalar copy of a buffer's flush cost an eighth of the conservative run).
+inline void Transpose8x8(const double* in, int64_t stride, double* const* dst) {
+  __m512d r[8], t[8], u[8];
+  for (int s = 0; s < 8; ++s) r[s] = _mm512_loadu_pd(in + s * stride);
+  for (int s = 0; s < 8; s += 2) {
+    t[s] = _mm512_unpacklo_pd(r[s], r[s + 1]);      // columns 0 2 4 6 of rows s, s + 1
+    t[s + 1] = _mm512_unpackhi_pd(r[s], r[s + 1]);  // columns 1 3 5 7
+  }
+  const __m512i even = _mm512_set_epi64(13, 12, 5, 4, 9, 8, 1, 0);
+  const __m512i odd = _mm512_set_epi64(15, 14, 7, 6, 11, 10, 3, 2);
+  for (int h = 0; h < 8; h += 4)
+    for (int k = 0; k < 2; ++k) {
+      u[h + k] = _mm512_permutex2var_pd(t[h + k], even, t[h + k + 2]);      // columns k, k + 4 of 4 rows
+      u[h + k + 2] = _mm512_permutex2var_pd(t[h + k], odd, t[h + k + 2]);  // columns k + 2, k + 6
+    }
+  const __m512i low = _mm512_set_epi64(11, 10, 9, 8, 3, 2, 1, 0);
+  const __m512i high = _mm512_set_epi64(15, 14, 13, 12, 7, 6, 5, 4);
+  for (int k = 0; k < 4; ++k) {  // u[k]: columns k and k + 4 of rows 0-3; u[k + 4]: of rows 4-7
+    _mm512_storeu_pd(dst[k], _mm512_permutex2var_pd(u[k], low, u[k + 4]));
+    _mm512_storeu_pd(dst[k + 4], _mm512_permutex2var_pd(u[k], high, u[k + 4]));
+  }
+}
+#endif
+
 // The samples of a block's recorded channels, (sets, n_channels, kSampleBuffer, kLanes):
 // a sample's lanes side by side (contiguous stores in the step), written out every
 // kSampleBuffer samples as one cache line per chain and channel.
@@ -195,6 +224,16 @@ struct SampleBuffer {
     for (int64_t set = 0; set < sets; ++set)
       for (int64_t c = 0; c < n_channels; ++c) {
         const double* in = &data[(set * n_channels + c) * kSampleBuffer * kLanes];
+#ifdef __AVX512F__
+        if (kLanes % 8 == 0 && buffered == 8 && valid == kLanes) {  // whole: 8 x 8 transposes
+          for (int64_t j0 = 0; j0 < kLanes; j0 += 8) {
+            double* dst[8];
+            for (int64_t j = 0; j < 8; ++j) dst[j] = out(set, c, j0 + j) + written;
+            Transpose8x8(in + j0, kLanes, dst);
+          }
+          continue;
+        }
+#endif
         for (int64_t j = 0; j < valid; ++j) {
           double* dst = out(set, c, j) + written;
           for (int64_t s = 0; s < buffered; ++s) dst[s] = in[s * kLanes + j];
