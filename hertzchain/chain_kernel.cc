@@ -25,6 +25,7 @@
 //   channels (n_channels,): the contacts whose force is recorded after every sample.
 //   traces: n_channels results of (B, n_samples), N.
 #include <sched.h>
+#include <sys/mman.h>
 #ifdef __AVX512F__
 #include <immintrin.h>
 #endif
@@ -100,6 +101,19 @@ void Load(Param p, int64_t rows, int64_t lo, double* block, int64_t valid = kLan
 struct Block {
   int64_t lo, lanes;
 };
+
+// Asks the kernel to back a large result buffer, written once from end to end, with huge
+// pages (a 2 MB page faulted in at once instead of 512 small ones; Linux's transparent huge
+// pages in "madvise" mode): the whole 2 MB pages inside [data, data + bytes) only; a hint
+// (nothing changes where it is not taken). The page faults of the fresh 61 MB of traces of
+// the standard run cost about as much as a fifth of its arithmetic.
+void AdviseHugePages(void* data, size_t bytes) {
+  constexpr uintptr_t kHuge = uintptr_t{1} << 21;
+  if (bytes < 2 * kHuge) return;
+  const uintptr_t begin = (reinterpret_cast<uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);
+  const uintptr_t end = (reinterpret_cast<uintptr_t>(data) + bytes) & ~(kHuge - 1);
+  if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
+}
 
 int CpuLimit() {
   cpu_set_t set;
@@ -763,6 +777,7 @@ ffi::Error Forward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buff
     auto out_dims = (*out)->dimensions();
     n_samples = out_dims[out_dims.size() - 1];
     outs.push_back((*out)->typed_data());
+    AdviseHugePages(outs.back(), (*out)->size_bytes());
     if (rows[c] < 0 || rows[c] >= bodies)
       return ffi::Error::InvalidArgument("a recorded channel is not a contact");
   }
@@ -829,11 +844,13 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
     n_samples = out_dims[out_dims.size() - 1];
     if (c < n_channels) {
       outs.push_back((*out)->typed_data());
+      AdviseHugePages(outs.back(), (*out)->size_bytes());
       if (rows[c] < 0 || rows[c] >= bodies)
         return ffi::Error::InvalidArgument("a recorded channel is not a contact");
     } else {
       directions = static_cast<int64_t>((*out)->element_count()) / (batch * n_samples);
       touts.push_back((*out)->typed_data());
+      AdviseHugePages(touts.back(), (*out)->size_bytes());
     }
   }
   FullParams p{AsParam(inv_mass), AsParam(kappa), AsParam(overlap0), AsParam(spring),
