@@ -221,14 +221,13 @@ inline void Transpose8x8(const double* in, int64_t stride, double* const* dst) {
 // kSampleBuffer samples as one cache line per chain and channel.
 template <int64_t kLanes>
 struct SampleBuffer {
-  int64_t n_channels, sets, n_samples, lo, valid, buffered = 0, written = 0;
+  int64_t n_channels, sets, valid, buffered = 0, written = 0;  // valid: the block's real chains
   std::vector<double> data;
-  SampleBuffer(int64_t n_channels_, int64_t sets_, int64_t n_samples_, int64_t lo_, int64_t valid_)
-      : n_channels(n_channels_), sets(sets_), n_samples(n_samples_), lo(lo_), valid(valid_),
-        data(sets_ * n_channels_ * kSampleBuffer * kLanes) {}
+  SampleBuffer(int64_t n_channels_, int64_t sets_, int64_t valid_)
+      : n_channels(n_channels_), sets(sets_), valid(valid_), data(sets_ * n_channels_ * kSampleBuffer * kLanes) {}
   // the lanes of set `set`, channel c at the current sample
   double* slot(int64_t set, int64_t c) { return &data[((set * n_channels + c) * kSampleBuffer + buffered) * kLanes]; }
-  // `out(set, c, j)`: where chain lo + j's trace of channel c (set `set`) starts
+  // `out(set, c, j)`: where the trace of lane j's chain, channel c (set `set`), starts
   template <class Out>
   void advance(Out out) {
     if (++buffered == kSampleBuffer) flush(out);
@@ -311,7 +310,7 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   for (int64_t c = n_channels - 1; c >= 0; --c) channel_of[channels[c]] = c;
 
   double force_before[kLanes];
-  SampleBuffer<kLanes> record(n_channels, 1, n_samples, lo, kLanes);
+  SampleBuffer<kLanes> record(n_channels, 1, kLanes);
   auto out = [&](int64_t, int64_t c, int64_t j) { return traces[c] + (lo + j) * n_samples; };
 
   for (int64_t n = 0; n < n_samples; ++n) {
@@ -507,7 +506,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   }
   // recorded sets: the forces, then (kTangent) their tangent along every direction
   const int64_t out_sets = 1 + D;
-  SampleBuffer<kLanes> record(n_channels, out_sets, n_samples, lo, valid);
+  SampleBuffer<kLanes> record(n_channels, out_sets, valid);
   auto out = [&](int64_t set, int64_t c, int64_t j) {
     return set == 0 ? traces[c] + (lo + j) * n_samples : ttraces[c] + ((set - 1) * batch + lo + j) * n_samples;
   };
