@@ -8,14 +8,14 @@
 //    accelerations apart) with Kuwabara-Kono damping and track friction, and its
 //    forward-mode tangents (below, `RunFullBlock`).
 //
-// The conservative kernel's arithmetic is that of the JAX kernel, operation for operation
-// and in the same order (compiled without contraction into fused multiply-adds); the full
-// kernel's forward step writes its drifts, kicks and the viscous sum as explicit fused
-// multiply-adds (`std::fma`: one rounding less each, the same in every lane count), 9 % of
-// its time on an AVX-512 core. Both agree with the JAX kernel to round-off
-// (`tests/test_native.py`: 1e-12 of the peak force), and `tests/test_batched.py` holds
-// every kernel's laws to `contact`'s. A run's blocks of chains are spread over threads
-// (`RunBlocks`). Layouts of the conservative kernel (row-major, the chain on
+// The arithmetic is that of the JAX kernel, operation for operation and in the same
+// order (compiled without contraction into fused multiply-adds), so that the two agree to
+// round-off and fits and posteriors keep their numbers (fused multiply-adds in the full
+// kernel's drifts and kicks were 9 % faster on an AVX-512 core, but they moved a fit's
+// values by 1e-14 and, through the gradients, the NUTS chains' paths: posterior means by
+// up to 7e-6 of themselves; not kept); `tests/test_native.py`
+// checks it, and `tests/test_batched.py` holds every kernel's laws to `contact`'s. A run's
+// blocks of chains are spread over threads (`RunBlocks`). Layouts of the conservative kernel (row-major, the chain on
 // the fast axis, as in `batched`):
 //   state0, state  (R, B): x (bodies + 1 rows, the wall last, at rest), u = v + (dt/2) a
 //                          (bodies + 1), and with books the largest overlap of every
@@ -557,7 +557,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     double elastic = k * positive * rt;
     double f;
     if (kViscous) {
-      double s = std::fma(kv * rt, rate, elastic);
+      double viscous = (kv * rt) * rate;  // (+ a dashpot of 0 in `contact`: adds nothing)
+      double s = elastic + viscous;
       *sm = s;
       // out of contact elastic = viscous = 0, so the clipped sum is 0 there too
       f = s > 0.0 ? s : 0.0;
@@ -592,16 +593,16 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     for (int64_t s = 0; s < steps_per_sample; ++s) {
       // body 0: half kick, friction, drift, predicted velocity
       for (int64_t j = 0; j < kLanes; ++j) {
-        double w = std::fma(h, a[j], v[j]);
+        double w = v[j] + h * a[j];
         if (kFriction) {
           double s_first;
           double raw = w;
           w = kick(w, loss[j], &s_first);
           if constexpr (kTangent) KickSlope(raw, s_first, &pm1[j], &g1[j]);
         }
-        x[j] = std::fma(dt, w, x[j]);
+        x[j] = x[j] + dt * w;
         w_prev[j] = w;
-        p_prev[j] = std::fma(h, a[j], w);
+        p_prev[j] = w + h * a[j];
         f_prev[j] = 0.0;
       }
       if (kTangent)
@@ -625,11 +626,11 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         ForLanes<kLanes>([&](int64_t j) {
           const double kj = kUK ? k0 : kap[ri + j], kvj = kUK ? kv0 : kvis[ri + j];
           // body i + 1: half kick, friction, drift, predicted velocity
-          double w = std::fma(h, a[rn + j], v[rn + j]);
+          double w = v[rn + j] + h * a[rn + j];
           double w_raw = w, s_first = 0.0, s_second = 0.0, rt, sm;
           if (kFriction) w = kick(w, loss[j], &s_first);
-          x[rn + j] = std::fma(dt, w, x[rn + j]);
-          double pred = std::fma(h, a[rn + j], w);
+          x[rn + j] = x[rn + j] + dt * w;
+          double pred = w + h * a[rn + j];
           // contact i
           double dl = x[ri + j] - x[rn + j];
           if constexpr (kExtras) dl = dl + ov0[ri + j];
@@ -639,7 +640,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double b = f_prev[j] - f;
           if constexpr (kExtras) b = b + ext[ri + j];
           double acc = b * (kUM ? m0 : inv[ri + j]);
-          double vn = std::fma(h, acc, w_prev[j]);
+          double vn = w_prev[j] + h * acc;
           double vn_raw = vn;
           if (kFriction) vn = kick(vn, loss[j], &s_second);
           a[ri + j] = acc;
@@ -695,7 +696,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         double b = f_prev[j];
         if constexpr (kExtras) b = b + ext[rw + j];
         double acc = b * inv[rw + j];
-        double vn = std::fma(h, acc, w_prev[j]);
+        double vn = w_prev[j] + h * acc;
         if (kFriction) {
           double s_second;
           double raw = vn;
