@@ -1,6 +1,9 @@
 """Benchmarks: hertzchain against NumPy, Numba and plain-JAX velocity-Verlet solvers, in one run.
 
-    python benchmarks/run.py [--quick] [--gpu-sweep] --out DIR
+    python benchmarks/run.py [--quick] [--avx2] [--gpu-sweep] --out DIR
+
+`--avx2` builds the C++ kernel (`HERTZCHAIN_NATIVE_ARCH=haswell`) and compiles Numba for
+AVX2 + FMA without AVX-512, to measure that code path on an AVX-512 machine.
 
 `--quick` (under 3 minutes on 2 cores) measures the headline ratios alone: the standard
 case conservative and damped + frictional (eta = 2 us, mu = 0.19), hertzchain against a
@@ -65,6 +68,14 @@ WORK_PER_RUN = 2e8
 # track friction coefficient (deceleration mu g).
 DAMPED_ETA_S = 2e-6
 DAMPED_MU = 0.19
+# --avx2: both codes built for Haswell's instruction set (AVX2, FMA; no AVX-512). Numba
+# takes the host's features unless they are named.
+AVX2_ENVIRONMENT = {
+    "HERTZCHAIN_NATIVE_ARCH": "haswell",
+    "NUMBA_CPU_NAME": "haswell",
+    "NUMBA_CPU_FEATURES": "+64bit,+avx,+avx2,+bmi,+bmi2,+cmov,+cx16,+f16c,+fma,+lzcnt,+mmx,+movbe,+pclmul,"
+                          "+popcnt,+sse,+sse2,+sse3,+sse4.1,+sse4.2,+ssse3,+xsave,-avx512f",
+}
 
 
 def _rss_mb() -> float:
@@ -451,19 +462,29 @@ def worker_pairs(damped: bool, pairs: int, repeats: int) -> dict:
         out = solve_batched(setup, grid, recording, devices=use, books=False)
         return jax.block_until_ready(out.forces_n)
 
+    def ours_one_device():  # the default call: one device, the kernel's blocks over the cores
+        out = solve_batched(setup, grid, recording, books=False)
+        return jax.block_until_ready(out.forces_n)
+
     def numba():
         if damped:
             return baselines.numba_damped_batch(*args, eta_s=eta, friction_decel_m_s2=arrays["friction_decel_m_s2"])
         return baselines.numba_batch(*args)
 
+    # with several host devices, the default call (one device) is timed too
+    one_device = use is not None
     ours_first, _, _, _, forces = _time(ours, 1)
+    one_first, _, _, _, forces_one = _time(ours_one_device, 1) if one_device else (None, 0, 0, 0, forces)
     numba_first, _, _, _, reference = _time(numba, 1)
     runs = []
+    work = n * b * STANDARD_STEPS
     for _ in range(pairs):
         a = _time(ours, repeats)[1]
+        d = _time(ours_one_device, repeats)[1] if one_device else None
         c = _time(numba, repeats)[1]
-        work = n * b * STANDARD_STEPS
         runs.append({"hertzchain": work / a, "numba": work / c, "ratio": c / a})
+        if one_device:
+            runs[-1].update(hertzchain_one_device=work / d, ratio_one_device=c / d)
     wall = np.asarray(forces["wall"])  # (B, n)
     ratios = [r["ratio"] for r in runs]
     return {
@@ -473,10 +494,16 @@ def worker_pairs(damped: bool, pairs: int, repeats: int) -> dict:
         "native_kernel": native.kernel_for(kernel_flags(setup)._replace(ledger=False), use) or "none (JAX kernel)",
         "host_devices": len(devices),
         "numba_threads": numba_threads(),
+        "kernel_march": os.environ.get(native.ARCH_VARIABLE, "native"),
+        "numba_cpu_name": os.environ.get("NUMBA_CPU_NAME", "host"),
+        "numba_cpu_features": os.environ.get("NUMBA_CPU_FEATURES", "host"),
         "hertzchain_over_numba": float(np.median(ratios)),
+        "hertzchain_one_device_over_numba": float(np.median([r["ratio_one_device"] for r in runs]))
+        if one_device else None,
         "runs": runs,
-        "first_call_s": {"hertzchain": ours_first, "numba": numba_first},
+        "first_call_s": {"hertzchain": ours_first, "hertzchain_one_device": one_first, "numba": numba_first},
         "wall_force_max_difference_n": float(np.max(np.abs(wall.T - reference[:, 2, :]))),
+        "one_device_equals_sharded": bool(np.array_equal(np.asarray(forces_one["wall"]), wall)),
         "wall_force_max_n": float(np.max(wall)),
     }
 
@@ -563,7 +590,16 @@ WORKERS = {
 }
 
 
-def _spawn(kind: str, host_devices: int = 1, env_extra=None, **kwargs) -> dict:
+def _one_cpu() -> None:
+    """Pin a worker (before it starts any thread) to the first CPU this process may use."""
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+
+
+def _spawn(kind: str, host_devices: int = 1, env_extra=None, one_cpu: bool = False, **kwargs) -> dict:
+    """Run worker `kind` in its own process with `host_devices` JAX CPU devices, on one CPU
+    with `one_cpu` (Linux)."""
+    if one_cpu and not hasattr(os, "sched_setaffinity"):
+        return {"available": False, "reason": "no CPU affinity on this system"}
     env = dict(os.environ, **(env_extra or {}))
     env["XLA_FLAGS"] = (
         env.get("XLA_FLAGS", "") + f" --xla_force_host_platform_device_count={host_devices}"
@@ -572,7 +608,7 @@ def _spawn(kind: str, host_devices: int = 1, env_extra=None, **kwargs) -> dict:
     payload = json.dumps({"kind": kind, "kwargs": kwargs})
     proc = subprocess.run(
         [sys.executable, str(Path(__file__).resolve()), "--worker", payload],
-        capture_output=True, text=True, env=env, check=False,
+        capture_output=True, text=True, env=env, check=False, preexec_fn=_one_cpu if one_cpu else None,
     )
     if proc.returncode != 0:
         return {"available": False, "reason": (proc.stderr or proc.stdout)[-1500:]}
@@ -648,7 +684,7 @@ def quick(out: Path) -> dict:
     cores = os.cpu_count() or 1
     start = time.perf_counter()
     load_before = _load()
-    progress = Progress(5, "quick benchmark")
+    progress = Progress(7, "quick benchmark")
     machine = _spawn("machine")
     progress.advance()
     build = _spawn("build")  # the kernel's one-time compilation, not in any timing
@@ -657,6 +693,12 @@ def quick(out: Path) -> dict:
     progress.advance()
     damped = _spawn("pairs", host_devices=cores, damped=True, pairs=QUICK_PAIRS, repeats=QUICK_REPEATS)
     progress.advance()
+    # one core each (one thread each): the per-core ratio, which other jobs on the machine
+    # bias less than the two codes' ways of sharing the cores
+    one_core = {}
+    for key, damped_case in (("conservative", False), ("damped_frictional", True)):
+        one_core[key] = _spawn("pairs", one_cpu=True, damped=damped_case, pairs=QUICK_PAIRS, repeats=QUICK_REPEATS)
+        progress.advance()
     fit = _spawn("fit_iteration")
     progress.advance()
     summary = {
@@ -665,6 +707,7 @@ def quick(out: Path) -> dict:
         "kernel_build": build,
         "conservative": conservative,
         "damped_frictional": damped,
+        "one_core": one_core,
         "fit_iteration": fit,
         "wall_s": time.perf_counter() - start,
     }
@@ -677,6 +720,8 @@ def _quick_table(summary) -> str:
     machine = summary["machine"]
     lines = [f"Machine: {machine.get('cpu')}, {machine.get('cores')} cores, {machine.get('vector')}; "
              f"load average {machine.get('load_average_before')} before, {machine.get('load_average_after')} after.",
+             f"Kernel built for -march={summary['conservative'].get('kernel_march', 'native')}, Numba for "
+             f"{summary['conservative'].get('numba_cpu_name', 'host')}.",
              "", "| case | hertzchain bead-steps/s | Numba bead-steps/s | ratio (median) |", "|---|---|---|---|"]
     for key in ("conservative", "damped_frictional"):
         part = summary[key]
@@ -684,9 +729,18 @@ def _quick_table(summary) -> str:
             lines.append(f"| {key} | unavailable: {part.get('reason', '')[-200:]} | | |")
             continue
         runs = part["runs"]
-        cells = " / ".join(f"{r['hertzchain']:.3g}" for r in runs), " / ".join(f"{r['numba']:.3g}" for r in runs)
-        ratio = part["hertzchain_over_numba"]
-        lines.append(f"| {key} | {cells[0]} | {cells[1]} | {ratio:.2f} |" if ratio else f"| {key} | | | |")
+        numba = " / ".join(f"{r['numba']:.3g}" for r in runs)
+        for label, field, ratio in (("host devices", "hertzchain", "hertzchain_over_numba"),
+                                    ("one device", "hertzchain_one_device", "hertzchain_one_device_over_numba")):
+            if field not in runs[0]:
+                continue
+            cells = " / ".join(f"{r[field]:.3g}" for r in runs)
+            lines.append(f"| {key}, {label} | {cells} | {numba} | {part[ratio]:.2f} |")
+    for key, part in summary.get("one_core", {}).items():
+        if part.get("available", True):
+            ours = " / ".join(f"{r['hertzchain']:.3g}" for r in part["runs"])
+            numba = " / ".join(f"{r['numba']:.3g}" for r in part["runs"])
+            lines.append(f"| {key}, one core | {ours} | {numba} | {part['hertzchain_over_numba']:.2f} |")
     fit = summary["fit_iteration"]
     if fit.get("available"):
         lines += ["", f"Fit iteration (residuals + Jacobian, {fit['n_traces']} traces, eta, mu, C): "
@@ -703,6 +757,9 @@ def main(argv=None) -> int:
     parser.add_argument("--out", help="output folder")
     parser.add_argument("--gpu-sweep", action="store_true", help="also run benchmarks/gpu_sweep.py")
     parser.add_argument("--skip-fit", action="store_true", help="do not run the fit benchmark")
+    parser.add_argument("--avx2", action="store_true",
+                        help="build the C++ kernel and compile Numba for AVX2 + FMA (no AVX-512): the AVX2 "
+                             "code path of both, measured on this machine")
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
@@ -711,6 +768,8 @@ def main(argv=None) -> int:
         return 0
     if not args.out:
         parser.error("--out DIR is required")
+    if args.avx2:
+        os.environ.update(AVX2_ENVIRONMENT)  # inherited by every worker
     if args.quick:
         summary = quick(Path(args.out))
         print(_quick_table(summary))

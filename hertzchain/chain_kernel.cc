@@ -10,8 +10,12 @@
 //
 // The arithmetic is that of the JAX kernel, operation for operation and in the same
 // order (compiled without contraction into fused multiply-adds), so that the two agree to
-// round-off; `tests/test_native.py` checks it, and `tests/test_batched.py` holds every
-// kernel's laws to `contact`'s. Layouts of the conservative kernel (row-major, the chain on
+// round-off and fits and posteriors keep their numbers (fused multiply-adds in the full
+// kernel's drifts and kicks were 9 % faster on an AVX-512 core, but they moved a fit's
+// values by 1e-14 and, through the gradients, the NUTS chains' paths: posterior means by
+// up to 7e-6 of themselves; not kept); `tests/test_native.py`
+// checks it, and `tests/test_batched.py` holds every kernel's laws to `contact`'s. A run's
+// blocks of chains are spread over threads (`RunBlocks`). Layouts of the conservative kernel (row-major, the chain on
 // the fast axis, as in `batched`):
 //   state0, state  (R, B): x (bodies + 1 rows, the wall last, at rest), u = v + (dt/2) a
 //                          (bodies + 1), and with books the largest overlap of every
@@ -20,9 +24,21 @@
 //   external (bodies + 1, 1 or B): a width of 1 is one value shared by every chain.
 //   channels (n_channels,): the contacts whose force is recorded after every sample.
 //   traces: n_channels results of (B, n_samples), N.
+#include <sched.h>
+#include <sys/mman.h>
+#ifdef __AVX512F__
+#include <immintrin.h>
+#endif
+
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <condition_variable>
 #include <cstdint>
+#include <cstring>
+#include <memory>
+#include <mutex>
+#include <thread>
 #include <type_traits>
 #include <vector>
 
@@ -36,12 +52,30 @@ namespace {
 // AVX-512 EPYC against 16, 32 and 128: the block's state stays in L1/L2), the remainder of
 // the batch in blocks of 8 (one AVX-512 vector) and the last few chains one at a time (a
 // single chain in an 8-lane block ran at half the speed of the JAX kernel).
+// The lane loops carry `#pragma GCC unroll 8` (a 64-lane block is eight AVX-512 vectors,
+// sixteen AVX2 ones): GCC 12 left the full kernel's sweep rolled, one vector at a time,
+// which cost it 30 % (one core: 5.4e8 against 7.7e8 bead-steps/s, N = 21, eta and mu on).
 constexpr int64_t kWideLanes = 64;
 constexpr int64_t kNarrowLanes = 8;
 // The full kernel's last 2-4 chains: one AVX2 vector (an AVX-512 core that splits 512-bit
 // operations in two runs it in half the time of a partial 8-lane block).
 constexpr int64_t kQuarterLanes = 4;
-constexpr int64_t kSampleBuffer = 64;   // samples kept per chain before they are written out
+// `body(j)` for every lane j of a block of kLanes chains, vectorised (the lanes are
+// independent), and for a 64-lane block unrolled in full (see above); narrower blocks are
+// one or a few vectors already (unrolled before vectorisation, the tangent run of an
+// 8-lane block was 4x slower).
+template <int64_t kLanes, class Body>
+inline void ForLanes(const Body& body) {
+  if constexpr (kLanes == 64) {
+#pragma GCC ivdep
+#pragma GCC unroll 8
+    for (int64_t j = 0; j < kLanes; ++j) body(j);
+  } else {
+#pragma GCC ivdep
+    for (int64_t j = 0; j < kLanes; ++j) body(j);
+  }
+}
+constexpr int64_t kSampleBuffer = 8;    // samples kept per chain before they are written out (a cache line)
 
 struct Param {
   const double* data;
@@ -57,6 +91,81 @@ void Load(Param p, int64_t rows, int64_t lo, double* block, int64_t valid = kLan
       block[r * kLanes + j] = p.width == 1 ? p.data[r] : p.data[r * p.width + lo + std::min(j, valid - 1)];
 }
 
+// ---------------------------------------------------------------------------------------
+// Threads. A run's blocks of chains are independent: the calling thread and helpers on
+// XLA's intra-op thread pool take them one at a time (the first free thread the next block,
+// as a `prange` does), each block's numbers the same whichever thread runs it. All the runs
+// of the process together use at most as many threads as it may use CPUs: a batch split
+// over host devices (a thread per device already) gets no helpers while both run.
+
+struct Block {
+  int64_t lo, lanes;
+};
+
+// Asks the kernel to back a large result buffer, written once from end to end, with huge
+// pages (a 2 MB page faulted in at once instead of 512 small ones; Linux's transparent huge
+// pages in "madvise" mode): the whole 2 MB pages inside [data, data + bytes) only; a hint
+// (nothing changes where it is not taken). The page faults of the fresh 61 MB of traces of
+// the standard run cost about as much as a fifth of its arithmetic.
+void AdviseHugePages(void* data, size_t bytes) {
+  constexpr uintptr_t kHuge = uintptr_t{1} << 21;
+  if (bytes < 2 * kHuge) return;
+  const uintptr_t begin = (reinterpret_cast<uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);
+  const uintptr_t end = (reinterpret_cast<uintptr_t>(data) + bytes) & ~(kHuge - 1);
+  if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
+}
+
+int CpuLimit() {
+  cpu_set_t set;
+  if (sched_getaffinity(0, sizeof(set), &set) == 0) return std::max(1, CPU_COUNT(&set));
+  return std::max(1u, std::thread::hardware_concurrency());
+}
+
+std::atomic<int> active_threads{0};  // threads running blocks, every run of the process
+
+// The state a run shares with its helpers; a helper that starts after the last block was
+// taken only reads it (kept alive by its shared_ptr), never the run's buffers.
+struct BlockQueue {
+  explicit BlockQueue(int64_t n) : n_blocks(n) {}
+  const int64_t n_blocks;
+  std::atomic<int64_t> next{0};
+  int64_t finished = 0;  // guarded by `mutex`
+  std::mutex mutex;
+  std::condition_variable all_done;
+};
+
+// Takes blocks until none is left; `run(b)` runs block b.
+template <class Run>
+void TakeBlocks(BlockQueue& queue, const Run& run) {
+  for (int64_t b = queue.next.fetch_add(1); b < queue.n_blocks; b = queue.next.fetch_add(1)) {
+    run(b);
+    std::lock_guard<std::mutex> lock(queue.mutex);
+    if (++queue.finished == queue.n_blocks) queue.all_done.notify_all();
+  }
+}
+
+template <class Run>
+void RunBlocks(ffi::ThreadPool& pool, const std::vector<Block>& blocks, const Run& run) {
+  auto queue = std::make_shared<BlockQueue>(static_cast<int64_t>(blocks.size()));
+  const int limit = CpuLimit();
+  const int64_t helpers = std::min<int64_t>({pool.num_threads(), limit - 1, queue->n_blocks - 1});
+  active_threads.fetch_add(1);
+  for (int64_t t = 0; t < helpers; ++t)
+    pool.Schedule([queue, &run, limit]() {
+      if (queue->next.load() >= queue->n_blocks) return;  // nothing left: `run` may be gone
+      if (active_threads.fetch_add(1) >= limit) {           // every CPU busy already
+        active_threads.fetch_sub(1);
+        return;
+      }
+      TakeBlocks(*queue, run);
+      active_threads.fetch_sub(1);
+    });
+  TakeBlocks(*queue, run);
+  active_threads.fetch_sub(1);
+  std::unique_lock<std::mutex> lock(queue->mutex);
+  queue->all_done.wait(lock, [&] { return queue->finished == queue->n_blocks; });
+}
+
 template <bool kSprings>
 inline double ContactForce(double overlap, double kappa, double spring) {
   // contact.hertz_force: kappa * delta_+ * sqrt(delta_+), then + spring * delta
@@ -64,6 +173,114 @@ inline double ContactForce(double overlap, double kappa, double spring) {
   double force = kappa * positive * std::sqrt(positive);
   if (kSprings) force = force + spring * overlap;
   return force;
+}
+
+// Whether every lane of row r of a (rows, kLanes) block holds the same bits: the row is
+// then read as one broadcast value (the same numbers, one load less per lane and step, and
+// a block small enough for L1).
+template <int64_t kLanes>
+std::vector<char> UniformRows(const double* block, int64_t rows) {
+  std::vector<char> uniform(rows);
+  for (int64_t r = 0; r < rows; ++r) {
+    bool same = true;
+    for (int64_t j = 1; j < kLanes; ++j)
+      same = same && std::memcmp(&block[r * kLanes + j], &block[r * kLanes], sizeof(double)) == 0;
+    uniform[r] = same;
+  }
+  return uniform;
+}
+
+#ifdef __AVX512F__
+// Rows in[s * stride + 0..7], s = 0..7, written as columns: dst[j][s] = in[s * stride + j]
+// (in registers: the scalar copy of a buffer's flush cost an eighth of the conservative run).
+inline void Transpose8x8(const double* in, int64_t stride, double* const* dst) {
+  __m512d r[8], t[8], u[8];
+  for (int s = 0; s < 8; ++s) r[s] = _mm512_loadu_pd(in + s * stride);
+  for (int s = 0; s < 8; s += 2) {
+    t[s] = _mm512_unpacklo_pd(r[s], r[s + 1]);      // columns 0 2 4 6 of rows s, s + 1
+    t[s + 1] = _mm512_unpackhi_pd(r[s], r[s + 1]);  // columns 1 3 5 7
+  }
+  const __m512i even = _mm512_set_epi64(13, 12, 5, 4, 9, 8, 1, 0);
+  const __m512i odd = _mm512_set_epi64(15, 14, 7, 6, 11, 10, 3, 2);
+  for (int h = 0; h < 8; h += 4)
+    for (int k = 0; k < 2; ++k) {
+      u[h + k] = _mm512_permutex2var_pd(t[h + k], even, t[h + k + 2]);      // columns k, k + 4 of 4 rows
+      u[h + k + 2] = _mm512_permutex2var_pd(t[h + k], odd, t[h + k + 2]);  // columns k + 2, k + 6
+    }
+  const __m512i low = _mm512_set_epi64(11, 10, 9, 8, 3, 2, 1, 0);
+  const __m512i high = _mm512_set_epi64(15, 14, 13, 12, 7, 6, 5, 4);
+  for (int k = 0; k < 4; ++k) {  // u[k]: columns k and k + 4 of rows 0-3; u[k + 4]: of rows 4-7
+    _mm512_storeu_pd(dst[k], _mm512_permutex2var_pd(u[k], low, u[k + 4]));
+    _mm512_storeu_pd(dst[k + 4], _mm512_permutex2var_pd(u[k], high, u[k + 4]));
+  }
+}
+#endif
+
+// The samples of a block's recorded channels, (sets, n_channels, kSampleBuffer, kLanes):
+// a sample's lanes side by side (contiguous stores in the step), written out every
+// kSampleBuffer samples as one cache line per chain and channel.
+template <int64_t kLanes>
+struct SampleBuffer {
+  int64_t n_channels, sets, valid, buffered = 0, written = 0;  // valid: the block's real chains
+  std::vector<double> data;
+  SampleBuffer(int64_t n_channels_, int64_t sets_, int64_t valid_)
+      : n_channels(n_channels_), sets(sets_), valid(valid_), data(sets_ * n_channels_ * kSampleBuffer * kLanes) {}
+  // the lanes of set `set`, channel c at the current sample
+  double* slot(int64_t set, int64_t c) { return &data[((set * n_channels + c) * kSampleBuffer + buffered) * kLanes]; }
+  // `out(set, c, j)`: where the trace of lane j's chain, channel c (set `set`), starts
+  template <class Out>
+  void advance(Out out) {
+    if (++buffered == kSampleBuffer) flush(out);
+  }
+  template <class Out>
+  void flush(Out out) {
+    for (int64_t set = 0; set < sets; ++set)
+      for (int64_t c = 0; c < n_channels; ++c) {
+        const double* in = &data[(set * n_channels + c) * kSampleBuffer * kLanes];
+#ifdef __AVX512F__
+        if (kLanes % 8 == 0 && buffered == 8 && valid == kLanes) {  // whole: 8 x 8 transposes
+          for (int64_t j0 = 0; j0 < kLanes; j0 += 8) {
+            double* dst[8];
+            for (int64_t j = 0; j < 8; ++j) dst[j] = out(set, c, j0 + j) + written;
+            Transpose8x8(in + j0, kLanes, dst);
+          }
+          continue;
+        }
+#endif
+        for (int64_t j = 0; j < valid; ++j) {
+          double* dst = out(set, c, j) + written;
+          for (int64_t s = 0; s < buffered; ++s) dst[s] = in[s * kLanes + j];
+        }
+      }
+    written += buffered;
+    buffered = 0;
+  }
+};
+
+// One contact of the conservative sweep over a block's lanes: the drift of body i + 1, the
+// force of contact i (stored in `record` when given), the full kick of body i. kUniformK /
+// kUniformM: kappa / the inverse mass of the row is one value for every lane.
+template <int64_t kLanes, bool kPreload, bool kSprings, bool kBooks, bool kUniformK, bool kUniformM, bool kRecord>
+inline void ConservativeContact(double dt, double h, double* __restrict xi, double* __restrict xn,
+                                const double* __restrict un, double* __restrict ui,
+                                const double* __restrict k, const double* __restrict o,
+                                const double* __restrict sp, const double* __restrict m,
+                                const double* __restrict e, double* __restrict top,
+                                double* __restrict force_before, double* __restrict record) {
+  const double k0 = k[0], m0 = m[0];
+  ForLanes<kLanes>([&](int64_t j) {
+    xn[j] = xn[j] + dt * un[j];
+    double overlap = kPreload ? (xi[j] - xn[j]) + o[j] : xi[j] - xn[j];
+    double force = ContactForce<kSprings>(overlap, kUniformK ? k0 : k[j], sp[j]);
+    if (kBooks) top[j] = std::max(top[j], overlap);
+    if (kRecord) record[j] = force;
+    double body = force_before[j] - force;
+    if (kPreload) body = body + e[j];
+    double a = body * (kUniformM ? m0 : m[j]);
+    double v = ui[j] + h * a;
+    ui[j] = v + h * a;
+    force_before[j] = force;
+  });
 }
 
 template <int64_t kLanes, bool kPreload, bool kSprings, bool kBooks>
@@ -78,7 +295,6 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   std::vector<double> x(rows_x * kLanes), u(rows_x * kLanes), mx(contacts * kLanes);
   std::vector<double> inv(rows_x * kLanes), kap(contacts * kLanes), ov0(contacts * kLanes);
   std::vector<double> spr(contacts * kLanes), ext(rows_x * kLanes);
-  std::vector<double> record(n_channels * kLanes * kSampleBuffer);
   Load<kLanes>({state0, batch}, rows_x, lo, x.data());
   Load<kLanes>({state0 + rows_x * batch, batch}, rows_x, lo, u.data());
   if (kBooks) Load<kLanes>({state0 + 2 * rows_x * batch, batch}, contacts, lo, mx.data());
@@ -87,52 +303,48 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   Load<kLanes>(overlap0, contacts, lo, ov0.data());
   Load<kLanes>(spring, contacts, lo, spr.data());
   Load<kLanes>(external, rows_x, lo, ext.data());
+  const std::vector<char> uniform_k = UniformRows<kLanes>(kap.data(), contacts);
+  const std::vector<char> uniform_m = UniformRows<kLanes>(inv.data(), rows_x);
+  // the channel recording each contact (-1: none); a contact recorded twice is copied
+  std::vector<int64_t> channel_of(contacts, -1);
+  for (int64_t c = n_channels - 1; c >= 0; --c) channel_of[channels[c]] = c;
 
   double force_before[kLanes];
-  int64_t buffered = 0, written = 0;
-  auto flush = [&]() {
-    for (int64_t c = 0; c < n_channels; ++c)
-      for (int64_t j = 0; j < kLanes; ++j) {
-        double* out = traces[c] + (lo + j) * n_samples + written;
-        const double* in = &record[(c * kLanes + j) * kSampleBuffer];
-        std::copy(in, in + buffered, out);
-      }
-    written += buffered;
-    buffered = 0;
-  };
+  SampleBuffer<kLanes> record(n_channels, 1, kLanes);
+  auto out = [&](int64_t, int64_t c, int64_t j) { return traces[c] + (lo + j) * n_samples; };
 
   for (int64_t n = 0; n < n_samples; ++n) {
     for (int64_t s = 0; s < steps_per_sample; ++s) {
       // Drift of the striker, then, body by body, the drift of the next body, the force
       // of the contact between them and the full kick of this body (v = u + h a, then
-      // u = v + h a, as the JAX kernel rounds them).
+      // u = v + h a, as the JAX kernel rounds them). The forces of the sample's last step
+      // are the recorded ones (of the new displacements, as the JAX kernel records them).
+      const bool last = s == steps_per_sample - 1;
       for (int64_t j = 0; j < kLanes; ++j) {
         x[j] = x[j] + dt * u[j];
         force_before[j] = 0.0;
       }
       for (int64_t i = 0; i < contacts; ++i) {
-        double* xi = &x[i * kLanes];
-        double* xn = &x[(i + 1) * kLanes];
-        const double* un = &u[(i + 1) * kLanes];
-        double* ui = &u[i * kLanes];
-        const double* k = &kap[i * kLanes];
-        const double* o = &ov0[i * kLanes];
-        const double* sp = &spr[i * kLanes];
-        const double* m = &inv[i * kLanes];
-        const double* e = &ext[i * kLanes];
-        double* top = &mx[i * kLanes];
-#pragma GCC ivdep
-        for (int64_t j = 0; j < kLanes; ++j) {
-          xn[j] = xn[j] + dt * un[j];
-          double overlap = kPreload ? (xi[j] - xn[j]) + o[j] : xi[j] - xn[j];
-          double force = ContactForce<kSprings>(overlap, k[j], sp[j]);
-          if (kBooks) top[j] = std::max(top[j], overlap);
-          double body = force_before[j] - force;
-          if (kPreload) body = body + e[j];
-          double a = body * m[j];
-          double v = ui[j] + h * a;
-          ui[j] = v + h * a;
-          force_before[j] = force;
+        double* dst = last && channel_of[i] >= 0 ? record.slot(0, channel_of[i]) : nullptr;
+        auto sweep = [&](auto uk, auto um, auto rec) {
+          ConservativeContact<kLanes, kPreload, kSprings, kBooks, decltype(uk)::value, decltype(um)::value,
+                              decltype(rec)::value>(
+              dt, h, &x[i * kLanes], &x[(i + 1) * kLanes], &u[(i + 1) * kLanes], &u[i * kLanes], &kap[i * kLanes],
+              &ov0[i * kLanes], &spr[i * kLanes], &inv[i * kLanes], &ext[i * kLanes], &mx[i * kLanes],
+              force_before, dst);
+        };
+        using T = std::true_type;
+        using F = std::false_type;
+        const int which = (uniform_k[i] ? 4 : 0) + (uniform_m[i] ? 2 : 0) + (dst ? 1 : 0);
+        switch (which) {
+          case 0: sweep(F{}, F{}, F{}); break;
+          case 1: sweep(F{}, F{}, T{}); break;
+          case 2: sweep(F{}, T{}, F{}); break;
+          case 3: sweep(F{}, T{}, T{}); break;
+          case 4: sweep(T{}, F{}, F{}); break;
+          case 5: sweep(T{}, F{}, T{}); break;
+          case 6: sweep(T{}, T{}, F{}); break;
+          default: sweep(T{}, T{}, T{}); break;
         }
       }
       // The wall's row (inverse mass 0: it stays at rest, as in the JAX kernel).
@@ -147,19 +359,12 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         uw[j] = v + h * a;
       }
     }
-    // The recorded channels from the new displacements (as the JAX kernel records them).
-    for (int64_t c = 0; c < n_channels; ++c) {
-      int64_t i = channels[c];
-      for (int64_t j = 0; j < kLanes; ++j) {
-        double overlap = x[i * kLanes + j] - x[(i + 1) * kLanes + j];
-        if (kPreload) overlap = overlap + ov0[i * kLanes + j];
-        record[(c * kLanes + j) * kSampleBuffer + buffered] =
-            ContactForce<kSprings>(overlap, kap[i * kLanes + j], spr[i * kLanes + j]);
-      }
-    }
-    if (++buffered == kSampleBuffer) flush();
+    // a contact recorded by two channels: the second a copy of the first
+    for (int64_t c = 0; c < n_channels; ++c)
+      if (channel_of[channels[c]] != c) std::copy_n(record.slot(0, channel_of[channels[c]]), kLanes, record.slot(0, c));
+    record.advance(out);
   }
-  if (buffered) flush();
+  if (record.buffered) record.flush(out);
 
   auto store = [&](const std::vector<double>& block, int64_t rows, double* dst) {
     for (int64_t r = 0; r < rows; ++r)
@@ -301,20 +506,15 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   }
   // recorded sets: the forces, then (kTangent) their tangent along every direction
   const int64_t out_sets = 1 + D;
-  std::vector<double> record(out_sets * n_channels * kLanes * kSampleBuffer);
-  int64_t buffered = 0, written = 0;
-  auto flush = [&]() {
-    for (int64_t d = 0; d < out_sets; ++d)
-      for (int64_t c = 0; c < n_channels; ++c)
-        for (int64_t j = 0; j < valid; ++j) {
-          double* out = d == 0 ? traces[c] + (lo + j) * n_samples + written
-                               : ttraces[c] + ((d - 1) * batch + lo + j) * n_samples + written;
-          const double* in = &record[((d * n_channels + c) * kLanes + j) * kSampleBuffer];
-          std::copy(in, in + buffered, out);
-        }
-    written += buffered;
-    buffered = 0;
+  SampleBuffer<kLanes> record(n_channels, out_sets, valid);
+  auto out = [&](int64_t set, int64_t c, int64_t j) {
+    return set == 0 ? traces[c] + (lo + j) * n_samples : ttraces[c] + ((set - 1) * batch + lo + j) * n_samples;
   };
+  // rows whose kappa and 1.5 eta kappa, or inverse mass, are one value for every lane
+  std::vector<char> uniform_k = UniformRows<kLanes>(kap.data(), contacts);
+  const std::vector<char> uniform_kv = UniformRows<kLanes>(kvis.data(), contacts);
+  const std::vector<char> uniform_m = UniformRows<kLanes>(inv.data(), rows_x);
+  for (int64_t i = 0; i < contacts; ++i) uniform_k[i] = uniform_k[i] && uniform_kv[i];
 
   // Per-lane values of the step kept for the tangent pass: what does not depend on the
   // direction is computed once per contact and step, not once per direction.
@@ -345,7 +545,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     double speed = std::fabs(w);
     *s = speed - loss_j;
     double kept = *s > 0.0 ? *s : 0.0;
-    return Sign(w) * kept;
+    return std::copysign(kept, w);  // sign(w) kept, one instruction (a zero keeps w's sign)
   };
   // contact.contact_force (the total) at overlap delta and rate; root, sum kept.
   // (kv = 1.5 eta kappa, computed once per block as JAX rounds it: (1.5 eta) kappa)
@@ -407,8 +607,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
       }
       if (kTangent)
         for (int64_t d = 0; d < D; ++d)
-#pragma GCC ivdep
-          for (int64_t j = 0; j < kLanes; ++j) {
+          ForLanes<kLanes>([&](int64_t j) {
             const int64_t q = d * kLanes + j;
             double tw = tv[d * rows_x * kLanes + j] + h * ta[d * rows_x * kLanes + j];
             if (kFriction) tw = (pm1[j] * tw - tloss[q]) * g1[j];
@@ -416,11 +615,16 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
             tw_prev[q] = tw;
             tp_prev[q] = tw + h * ta[d * rows_x * kLanes + j];
             tf_prev[q] = 0.0;
-          }
+          });
       for (int64_t i = 0; i < contacts; ++i) {
         const int64_t ri = i * kLanes, rn = (i + 1) * kLanes;
-#pragma GCC ivdep
-        for (int64_t j = 0; j < kLanes; ++j) {
+        // kUK / kUM: kappa and 1.5 eta kappa / the inverse mass of body i are one value
+        // for every lane of the row (read once: the same numbers)
+        auto sweep = [&](auto uniform_k_tag, auto uniform_m_tag) {
+        constexpr bool kUK = decltype(uniform_k_tag)::value, kUM = decltype(uniform_m_tag)::value;
+        const double k0 = kap[ri], kv0 = kvis[ri], m0 = inv[ri];
+        ForLanes<kLanes>([&](int64_t j) {
+          const double kj = kUK ? k0 : kap[ri + j], kvj = kUK ? kv0 : kvis[ri + j];
           // body i + 1: half kick, friction, drift, predicted velocity
           double w = v[rn + j] + h * a[rn + j];
           double w_raw = w, s_first = 0.0, s_second = 0.0, rt, sm;
@@ -431,11 +635,11 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double dl = x[ri + j] - x[rn + j];
           if constexpr (kExtras) dl = dl + ov0[ri + j];
           double rt_rate = p_prev[j] - pred;
-          double f = total_force(dl, rt_rate, kap[ri + j], kvis[ri + j], spr[ri + j], &rt, &sm);
+          double f = total_force(dl, rt_rate, kj, kvj, spr[ri + j], &rt, &sm);
           // body i: second half kick, friction
           double b = f_prev[j] - f;
           if constexpr (kExtras) b = b + ext[ri + j];
-          double acc = b * inv[ri + j];
+          double acc = b * (kUM ? m0 : inv[ri + j]);
           double vn = w_prev[j] + h * acc;
           double vn_raw = vn;
           if (kFriction) vn = kick(vn, loss[j], &s_second);
@@ -446,19 +650,26 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               KickSlope(w_raw, s_first, &pm1[j], &g1[j]);
               KickSlope(vn_raw, s_second, &pm2[j], &g2[j]);
             }
-            linearise(lin, j, dl, rt_rate, kap[ri + j], kvis[ri + j], rt, sm);
+            linearise(lin, j, dl, rt_rate, kj, kvj, rt, sm);
             body[j] = b;
           }
           f_prev[j] = f;
           w_prev[j] = w;
           p_prev[j] = pred;
+        });
+        };
+        using T = std::true_type;
+        using F = std::false_type;
+        if (uniform_k[i]) {
+          uniform_m[i] ? sweep(T{}, T{}) : sweep(T{}, F{});
+        } else {
+          uniform_m[i] ? sweep(F{}, T{}) : sweep(F{}, F{});
         }
         if (kTangent)
           for (int64_t d = 0; d < D; ++d) {
             const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
             const int64_t tc = (d * contacts + i) * kLanes;
-#pragma GCC ivdep
-            for (int64_t j = 0; j < kLanes; ++j) {
+            ForLanes<kLanes>([&](int64_t j) {
               const int64_t q = d * kLanes + j;
               double tw = tv[tn + j] + h * ta[tn + j];
               if (kFriction) tw = (pm1[j] * tw - tloss[q]) * g1[j];
@@ -476,7 +687,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               tf_prev[q] = tf;
               tw_prev[q] = tw;
               tp_prev[q] = tpred;
-            }
+            });
           }
       }
       // the wall's row (inverse mass 0: it stays at rest, as in the JAX kernel)
@@ -498,8 +709,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
       }
       if (kTangent)
         for (int64_t d = 0; d < D; ++d)
-#pragma GCC ivdep
-          for (int64_t j = 0; j < kLanes; ++j) {
+          ForLanes<kLanes>([&](int64_t j) {
             const int64_t q = d * kLanes + j, tw_row = (d * rows_x + contacts) * kLanes;
             double tb = tf_prev[q] + text[tw_row + j];
             double tacc = tb * inv[rw + j] + body[j] * tinv[tw_row + j];
@@ -507,7 +717,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
             if (kFriction) tvn = (pm2[j] * tvn - tloss[q]) * g2[j];
             ta[tw_row + j] = tacc;
             tv[tw_row + j] = tvn;
-          }
+          });
     }
     // The recorded channels from the new displacements and velocities.
     for (int64_t c = 0; c < n_channels; ++c) {
@@ -518,7 +728,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         double rate = v[ri + j] - v[rn + j];
         double rt, sm;
         double f = total_force(dl, rate, kap[ri + j], kvis[ri + j], spr[ri + j], &rt, &sm);
-        record[(c * kLanes + j) * kSampleBuffer + buffered] = f;
+        record.slot(0, c)[j] = f;
         if (!kTangent) continue;
         Linear here;
         linearise(here, j, dl, rate, kap[ri + j], kvis[ri + j], rt, sm);
@@ -528,15 +738,15 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           const int64_t tc = (d * contacts + i) * kLanes;
           double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
           double trate = tv[ti + j] - tv[tn + j];
-          record[(((d + 1) * n_channels + c) * kLanes + j) * kSampleBuffer + buffered] =
+          record.slot(d + 1, c)[j] =
               tforce(here, j, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, trate, tkap[tc + j], t15eta[q],
                      tspr[tc + j]);
         }
       }
     }
-    if (++buffered == kSampleBuffer) flush();
+    record.advance(out);
   }
-  if (buffered) flush();
+  if (record.buffered) record.flush(out);
 }
 
 Param AsParam(const ffi::Buffer<ffi::F64>& buffer) {
@@ -544,7 +754,7 @@ Param AsParam(const ffi::Buffer<ffi::F64>& buffer) {
   return {buffer.typed_data(), dims.size() > 1 ? dims[dims.size() - 1] : 1};
 }
 
-ffi::Error Forward(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
+ffi::Error Forward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                    ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                    ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                    ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
@@ -567,24 +777,32 @@ ffi::Error Forward(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
     auto out_dims = (*out)->dimensions();
     n_samples = out_dims[out_dims.size() - 1];
     outs.push_back((*out)->typed_data());
+    AdviseHugePages(outs.back(), (*out)->size_bytes());
     if (rows[c] < 0 || rows[c] >= bodies)
       return ffi::Error::InvalidArgument("a recorded channel is not a contact");
   }
+  // blocks of 64 chains, then of 8, the last few chains one at a time
+  std::vector<Block> blocks;
+  int64_t lo = 0;
+  for (; lo + kWideLanes <= batch; lo += kWideLanes) blocks.push_back({lo, kWideLanes});
+  for (; lo + kNarrowLanes <= batch; lo += kNarrowLanes) blocks.push_back({lo, kNarrowLanes});
+  for (; lo < batch; ++lo) blocks.push_back({lo, 1});
   auto run = [&](auto preload_tag, auto springs_tag, auto books_tag) {
     constexpr bool kP = decltype(preload_tag)::value, kS = decltype(springs_tag)::value,
                    kB = decltype(books_tag)::value;
-    int64_t lo = 0;
-    auto advance = [&](auto lanes) {
+    auto advance = [&](auto lanes, int64_t first) {
       constexpr int64_t kL = decltype(lanes)::value;
-      RunBlock<kL, kP, kS, kB>(bodies, lo, batch, n_samples, steps_per_sample, dt,
+      RunBlock<kL, kP, kS, kB>(bodies, first, batch, n_samples, steps_per_sample, dt,
                                state0.typed_data(), AsParam(inv_mass), AsParam(kappa),
                                AsParam(overlap0), AsParam(spring), AsParam(external), rows,
                                state->typed_data(), outs);
-      lo += kL;
     };
-    while (lo + kWideLanes <= batch) advance(std::integral_constant<int64_t, kWideLanes>{});
-    while (lo + kNarrowLanes <= batch) advance(std::integral_constant<int64_t, kNarrowLanes>{});
-    while (lo < batch) advance(std::integral_constant<int64_t, 1>{});
+    RunBlocks(pool, blocks, [&](int64_t b) {
+      const Block& block = blocks[b];
+      if (block.lanes == kWideLanes) return advance(std::integral_constant<int64_t, kWideLanes>{}, block.lo);
+      if (block.lanes == kNarrowLanes) return advance(std::integral_constant<int64_t, kNarrowLanes>{}, block.lo);
+      advance(std::integral_constant<int64_t, 1>{}, block.lo);
+    });
   };
   using T = std::true_type;
   using F = std::false_type;
@@ -601,7 +819,7 @@ int64_t Directions(const ffi::Buffer<ffi::F64>& buffer, int64_t rows, int64_t ba
 }
 
 // state0 and parameters as for the full kernel; `tangents` null for the forward run.
-ffi::Error RunFull(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
+ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                    ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                    ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                    ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
@@ -626,36 +844,48 @@ ffi::Error RunFull(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
     n_samples = out_dims[out_dims.size() - 1];
     if (c < n_channels) {
       outs.push_back((*out)->typed_data());
+      AdviseHugePages(outs.back(), (*out)->size_bytes());
       if (rows[c] < 0 || rows[c] >= bodies)
         return ffi::Error::InvalidArgument("a recorded channel is not a contact");
     } else {
       directions = static_cast<int64_t>((*out)->element_count()) / (batch * n_samples);
       touts.push_back((*out)->typed_data());
+      AdviseHugePages(touts.back(), (*out)->size_bytes());
     }
   }
   FullParams p{AsParam(inv_mass), AsParam(kappa), AsParam(overlap0), AsParam(spring),
                AsParam(external), AsParam(eta), AsParam(friction)};
   TangentInputs none{};
   const TangentInputs& tin = tangents ? *tangents : none;
+  // blocks of 64, then of 8 (the last one may be partial), the last 2-4 chains in a block
+  // of 4 (a vector costs about what one chain alone does), a last single chain alone
+  std::vector<Block> blocks;
+  int64_t lo = 0;
+  for (; lo + kWideLanes <= batch; lo += kWideLanes) blocks.push_back({lo, kWideLanes});
+  for (; batch - lo > kQuarterLanes; lo += kNarrowLanes) blocks.push_back({lo, kNarrowLanes});
+  if (batch - lo >= 2) {
+    blocks.push_back({lo, kQuarterLanes});
+    lo += kQuarterLanes;
+  }
+  if (lo < batch) blocks.push_back({lo, 1});
   auto run = [&](auto viscous_tag, auto friction_tag, auto tangent_tag, auto extras_tag) {
     constexpr bool kV = decltype(viscous_tag)::value, kF = decltype(friction_tag)::value,
                    kT = decltype(tangent_tag)::value, kE = decltype(extras_tag)::value;
-    int64_t lo = 0;
-    auto advance = [&](auto lanes) {
+    auto advance = [&](auto lanes, int64_t first) {
       constexpr int64_t kL = decltype(lanes)::value;
       // blocks of 8 and 4 with the extras' terms (zeros: the same numbers): without them
       // GCC 12 leaves the damped 8-lane loop scalar ("control flow in loop"), 2.5x slower
       constexpr bool kENarrow = kE || kL == kNarrowLanes || kL == kQuarterLanes;
-      RunFullBlock<kL, kV, kF, kT, kENarrow>(bodies, lo, batch, n_samples, steps_per_sample, dt,
+      RunFullBlock<kL, kV, kF, kT, kENarrow>(bodies, first, batch, n_samples, steps_per_sample, dt,
                                              state0.typed_data(), p, rows, outs, directions, tin, touts);
-      lo += kL;
     };
-    // blocks of 64, then of 8 (the last one may be partial), the last 2-4 chains in a block
-    // of 4 (a vector costs about what one chain alone does), a last single chain alone
-    while (lo + kWideLanes <= batch) advance(std::integral_constant<int64_t, kWideLanes>{});
-    while (batch - lo > kQuarterLanes) advance(std::integral_constant<int64_t, kNarrowLanes>{});
-    if (batch - lo >= 2) advance(std::integral_constant<int64_t, kQuarterLanes>{});
-    if (lo < batch) advance(std::integral_constant<int64_t, 1>{});
+    RunBlocks(pool, blocks, [&](int64_t b) {
+      const Block& block = blocks[b];
+      if (block.lanes == kWideLanes) return advance(std::integral_constant<int64_t, kWideLanes>{}, block.lo);
+      if (block.lanes == kNarrowLanes) return advance(std::integral_constant<int64_t, kNarrowLanes>{}, block.lo);
+      if (block.lanes == kQuarterLanes) return advance(std::integral_constant<int64_t, kQuarterLanes>{}, block.lo);
+      advance(std::integral_constant<int64_t, 1>{}, block.lo);
+    });
   };
   using T = std::true_type;
   using F = std::false_type;
@@ -669,17 +899,17 @@ ffi::Error RunFull(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
   return ffi::Error::Success();
 }
 
-ffi::Error FullForward(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
+ffi::Error FullForward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                        ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                        ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                        ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
                        ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
                        int64_t viscous, int64_t friction_on, int64_t extras, ffi::RemainingRets traces) {
-  return RunFull(state0, inv_mass, kappa, overlap0, spring, external, eta, friction, channels, dt,
+  return RunFull(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, channels, dt,
                  steps_per_sample, viscous, friction_on, extras, nullptr, traces);
 }
 
-ffi::Error FullTangent(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
+ffi::Error FullTangent(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                        ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                        ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                        ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
@@ -709,7 +939,7 @@ ffi::Error FullTangent(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_m
                     tangent(t_kappa, counts[2]),     tangent(t_overlap0, counts[3]),
                     tangent(t_spring, counts[4]),    tangent(t_external, counts[5]),
                     tangent(t_eta, counts[6]),       tangent(t_friction, counts[7])};
-  return RunFull(state0, inv_mass, kappa, overlap0, spring, external, eta, friction, channels, dt,
+  return RunFull(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, channels, dt,
                  steps_per_sample, viscous, friction_on, extras, &tin, tangent_traces);
 }
 
@@ -717,6 +947,7 @@ ffi::Error FullTangent(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_m
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
                               ffi::Ffi::Bind()
+                                  .Ctx<ffi::ThreadPool>()        // helpers for the blocks
                                   .Arg<ffi::Buffer<ffi::F64>>()  // state0
                                   .Arg<ffi::Buffer<ffi::F64>>()  // inv_mass
                                   .Arg<ffi::Buffer<ffi::F64>>()  // kappa
@@ -734,6 +965,7 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullForward, FullForward,
                               ffi::Ffi::Bind()
+                                  .Ctx<ffi::ThreadPool>()        // helpers for the blocks
                                   .Arg<ffi::Buffer<ffi::F64>>()  // state0: x, v, a
                                   .Arg<ffi::Buffer<ffi::F64>>()  // inv_mass
                                   .Arg<ffi::Buffer<ffi::F64>>()  // kappa
@@ -752,6 +984,7 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullForward, FullForward,
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullTangent, FullTangent,
                               ffi::Ffi::Bind()
+                                  .Ctx<ffi::ThreadPool>()        // helpers for the blocks
                                   .Arg<ffi::Buffer<ffi::F64>>()  // state0: x, v, a
                                   .Arg<ffi::Buffer<ffi::F64>>()  // inv_mass
                                   .Arg<ffi::Buffer<ffi::F64>>()  // kappa

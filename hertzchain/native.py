@@ -14,6 +14,11 @@ physics it runs, so that the conservative case pays nothing for the rest:
   through the same loop (`jax.custom_jvp`: `jax.jvp`, `jax.jacfwd`, `jax.linearize`; the
   forces and all the directions of a Jacobian in one run).
 
+A run's blocks of chains are spread over the CPU's cores (XLA's intra-op thread pool, the
+first free thread taking the next block; the runs of a process together use at most one
+thread per core, so a batch already split over host devices gets no more), with the same
+numbers whichever thread runs a block.
+
 Under `jax.vmap` (`jax.custom_batching.custom_vmap`) a mapped batch of inputs joins the
 kernel's chain axis and mapped tangents its direction axis, so a batch of fits, `jacfwd`
 of `vmap` and `vmap` of `jacfwd` are one kernel run each.
@@ -24,7 +29,8 @@ which stays the reference: they agree to round-off, values and derivatives
 (`tests/test_batched.py::test_every_kernel_applies_the_laws_of_contact`).
 
 The kernel is compiled on first use with the system's C++ compiler against the XLA FFI
-headers that `jax.ffi.include_dir()` gives, for this machine's instruction set, and kept
+headers that `jax.ffi.include_dir()` gives, for this machine's instruction set (or the one
+`$HERTZCHAIN_NATIVE_ARCH` names), and kept
 in a cache directory (`$HERTZCHAIN_CACHE`, else `$XDG_CACHE_HOME/hertzchain`, else
 `~/.cache/hertzchain`) keyed by the source, JAX's version and the CPU. Without a compiler
 (or with `HERTZCHAIN_NATIVE=0`), `available()` is False, says why in `unavailable_reason()`,
@@ -53,10 +59,22 @@ SOURCE = Path(__file__).with_name("chain_kernel.cc")
 TARGET = "hertzchain_chain_forward"
 FULL_TARGET = "hertzchain_chain_full_forward"
 TANGENT_TARGET = "hertzchain_chain_full_tangent"
-# IEEE arithmetic as the JAX kernel rounds it: no contraction into fused multiply-adds,
-# no fast math; -fno-math-errno lets the square roots vectorise.
-FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-fno-math-errno", "-std=c++17",
-         "-shared", "-fPIC")
+# IEEE arithmetic as the JAX kernel rounds it: no contraction into fused multiply-adds
+# other than the source's own `std::fma`, no fast math; -fno-math-errno lets the square
+# roots vectorise; -pthread for the threads the blocks of chains run on.
+FLAGS = ("-O3", "-ffp-contract=off", "-fno-math-errno", "-std=c++17", "-pthread", "-shared", "-fPIC")
+# The instruction set the kernel is built for: this CPU's ("native"), or the name of an
+# older one in `HERTZCHAIN_NATIVE_ARCH` (e.g. "haswell": AVX2 and FMA, no AVX-512; GCC's
+# `-march` names) to measure that code path on a newer machine.
+ARCH_VARIABLE = "HERTZCHAIN_NATIVE_ARCH"
+
+
+def _flags() -> tuple[str, ...]:
+    """The compiler flags of this build: FLAGS and `-march` (see ARCH_VARIABLE)."""
+    arch = os.environ.get(ARCH_VARIABLE, "native").strip() or "native"
+    if not all(c.isalnum() or c in "-_." for c in arch):
+        raise RuntimeError(f"{ARCH_VARIABLE}={arch!r} is not a -march name (e.g. native, haswell, x86-64-v3)")
+    return (f"-march={arch}",) + FLAGS
 
 
 def _cache_dir() -> Path:
@@ -78,7 +96,7 @@ def _cpu_key() -> str:
 
 def _library_path() -> Path:
     digest = hashlib.sha256()
-    for part in (SOURCE.read_bytes(), jax.__version__.encode(), " ".join(FLAGS).encode(), _cpu_key().encode()):
+    for part in (SOURCE.read_bytes(), jax.__version__.encode(), " ".join(_flags()).encode(), _cpu_key().encode()):
         digest.update(part)
     return _cache_dir() / f"chain_kernel-{digest.hexdigest()[:16]}.so"
 
@@ -104,7 +122,7 @@ def _build(path: Path) -> None:
     compiler = _cxx()
     if compiler is None:
         raise RuntimeError("no C++ compiler found (set CXX, or install g++)")
-    _compile(lambda partial: [compiler, *FLAGS, f"-I{jax.ffi.include_dir()}", str(SOURCE), "-o", str(partial)],
+    _compile(lambda partial: [compiler, *_flags(), f"-I{jax.ffi.include_dir()}", str(SOURCE), "-o", str(partial)],
              path, SOURCE.name)
 
 

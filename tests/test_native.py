@@ -111,6 +111,45 @@ def test_split_over_devices_gives_the_one_device_numbers():
     assert result["diff"] == 0.0 and result["max_diff"] == 0.0 and result["energy_diff"] == 0.0
 
 
+_THREADS = r"""
+import json, os, sys
+if sys.argv[1] == "one":
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # before JAX starts its threads
+import numpy as np, hertzchain as hc
+from hertzchain import native
+from hertzchain.batched import solve_batched
+from hertzchain.integrate import Recording
+out = {"native": native.available(), "cpus": len(os.sched_getaffinity(0))}
+speeds = list(np.linspace(0.2, 1.0, 15))
+for name, kwargs in (("conservative", {}), ("full", {"eta_s": 2e-6, "mu": 0.19})):
+    setup, _ = hc.batch_setup(hc.ChainSetup(8, **kwargs), striker_velocity_m_s=speeds,
+                              wall_youngs_pa=list(np.geomspace(3e9, 4e11, 10)))
+    grid = hc.choose_time_grid(setup, t_end_s=0.4e-3, sample_interval_s=2e-6)
+    run = solve_batched(setup, grid, Recording((3,)), books=False)
+    out[name] = {k: np.asarray(v).tolist() for k, v in run.forces_n.items()}
+print(json.dumps(out))
+"""
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: the blocks run on one thread anyway")
+def test_threads_give_the_one_thread_numbers():
+    """150 chains (blocks of 64, 8 and single chains) run with the blocks spread over every
+    CPU and on one CPU: the same forces bit for bit, conservative and full kernel."""
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    results = {}
+    for mode in ("all", "one"):
+        proc = subprocess.run([sys.executable, "-c", _THREADS, mode], capture_output=True, text=True, env=env,
+                              timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        results[mode] = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert results["all"]["native"] and results["all"]["cpus"] >= 2 and results["one"]["cpus"] == 1
+    for kernel in ("conservative", "full"):
+        assert results["all"][kernel].keys() == results["one"][kernel].keys()
+        for name, trace in results["all"][kernel].items():
+            assert np.max(np.abs(trace)) > 1.0
+            np.testing.assert_array_equal(np.asarray(trace), np.asarray(results["one"][kernel][name]))
+
+
 FULL_CASES = {
     "viscous_friction": {"eta_s": 2e-6, "mu": 0.19},
     "viscous": {"eta_s": 2e-6},
