@@ -44,6 +44,8 @@
 
 #include "xla/ffi/api/ffi.h"
 
+#include "chain_laws.h"
+
 namespace ffi = xla::ffi;
 
 namespace {
@@ -166,14 +168,6 @@ void RunBlocks(ffi::ThreadPool& pool, const std::vector<Block>& blocks, const Ru
   queue->all_done.wait(lock, [&] { return queue->finished == queue->n_blocks; });
 }
 
-template <bool kSprings>
-inline double ContactForce(double overlap, double kappa, double spring) {
-  // contact.hertz_force: kappa * delta_+ * sqrt(delta_+), then + spring * delta
-  double positive = overlap > 0.0 ? overlap : 0.0;
-  double force = kappa * positive * std::sqrt(positive);
-  if (kSprings) force = force + spring * overlap;
-  return force;
-}
 
 // Whether every lane of row r of a (rows, kLanes) block holds the same bits: the row is
 // then read as one broadcast value (the same numbers, one load less per lane and step, and
@@ -271,7 +265,7 @@ inline void ConservativeContact(double dt, double h, double* __restrict xi, doub
   ForLanes<kLanes>([&](int64_t j) {
     xn[j] = xn[j] + dt * un[j];
     double overlap = kPreload ? (xi[j] - xn[j]) + o[j] : xi[j] - xn[j];
-    double force = ContactForce<kSprings>(overlap, kUniformK ? k0 : k[j], sp[j]);
+    double force = hertzchain::ElasticForce<kSprings>(overlap, kUniformK ? k0 : k[j], sp[j]);
     if (kBooks) top[j] = std::max(top[j], overlap);
     if (kRecord) record[j] = force;
     double body = force_before[j] - force;
@@ -417,47 +411,7 @@ void LoadTangent(Tangent t, int64_t directions, int64_t rows, int64_t batch, int
   }
 }
 
-// d max(s, 0) / ds as JAX's max rule gives it (1/2 at the tie).
-inline double MaxSlope(double s) {
-  double tie = s == 0.0 ? 0.5 : 0.0;
-  return s > 0.0 ? 1.0 : tie;
-}
-
-// sign(w) as JAX's sign gives it (0 at 0), in two selects (no branches: the lane loops
-// vectorise whatever their length)
-inline double Sign(double w) {
-  double negative = w < 0.0 ? -1.0 : 0.0;
-  return w > 0.0 ? 1.0 : negative;
-}
-
-// d kick(w) = sign(w) max'(|w| - loss) (d|w| - d loss) as JAX's rules give it: with
-// pm = +-1 (the slope of |w|, +1 at 0) and g = sign(w) max'(s), d kick = (pm t_w - t_loss) g
-// (g is 0, +-1/2 or +-1: the product is the rules' to the bit).
-inline void KickSlope(double w, double s, double* pm, double* g) {
-  *pm = w >= 0.0 ? 1.0 : -1.0;
-  *g = Sign(w) * MaxSlope(s);
-}
-
-// The tangent of `contact.contact_force` (the total, clipped at 0 in contact) along one
-// direction, from the contact's linearisation at overlap `delta` and rate: in = [delta > 0],
-// positive = delta_+, root = sqrt(delta_+), half_inv_root = 0.5 / root in contact (JAX's
-// sqrt rule) else 0, kp = kappa delta_+, c3 = 1.5 eta kappa root, slope = max'(total) in
-// contact else 0; c1 = 1.5 eta, c2 = c1 kappa, t15e = 1.5 t_eta, tsp the spring's tangent.
-template <bool kViscous>
-inline double TangentForce(double delta, double rate, double in, double positive, double root,
-                           double half_inv_root, double kp, double c3, double slope, double k,
-                           double c1, double c2, double sp, double tdl, double trate, double tk,
-                           double t15e, double tsp) {
-  double tpositive = tdl * in;
-  double troot = tdl * half_inv_root;
-  double telastic = (tk * positive + k * tpositive) * root + kp * troot;
-  double tf = telastic;
-  if (kViscous) {
-    double tc3 = (t15e * k + c1 * tk) * root + c2 * troot;
-    tf = (telastic + (tc3 * rate + c3 * trate)) * slope;
-  }
-  return tf + (tsp * delta + sp * tdl);
-}
+using hertzchain::KickSlope;
 
 template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras>
 void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
@@ -540,53 +494,32 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     t15eta[q] = 1.5 * teta[q];
   }
 
-  // contact.track_friction_kick: sign(w) max(|w| - loss, 0), with its speed-minus-loss s.
-  auto kick = [](double w, double loss_j, double* s) {
-    double speed = std::fabs(w);
-    *s = speed - loss_j;
-    double kept = *s > 0.0 ? *s : 0.0;
-    return std::copysign(kept, w);  // sign(w) kept, one instruction (a zero keeps w's sign)
-  };
-  // contact.contact_force (the total) at overlap delta and rate; root, sum kept.
-  // (kv = 1.5 eta kappa, computed once per block as JAX rounds it: (1.5 eta) kappa)
-  auto total_force = [](double dl, double rate, double k, double kv, double sp, double* r, double* sm) {
-    // branch-free (selects only, so that every lane count vectorises): sqrt(0) = 0 is the
-    // root out of contact, as `contact` has it
-    double positive = dl > 0.0 ? dl : 0.0;
-    double rt = std::sqrt(positive);
-    double elastic = k * positive * rt;
-    double f;
-    if (kViscous) {
-      double viscous = (kv * rt) * rate;  // (+ a dashpot of 0 in `contact`: adds nothing)
-      double s = elastic + viscous;
-      *sm = s;
-      // out of contact elastic = viscous = 0, so the clipped sum is 0 there too
-      f = s > 0.0 ? s : 0.0;
-    } else {
-      *sm = elastic;
-      f = elastic;
-    }
-    *r = rt;
-    if constexpr (kExtras) f = f + sp * dl;  // (a spring of 0 adds nothing)
-    return f;
+  // contact.track_friction_kick (`kick`) and contact.contact_force (`total_force`) as
+  // `chain_laws.h` has them (kv = 1.5 eta kappa, computed once per block as JAX rounds it:
+  // (1.5 eta) kappa)
+  const auto kick = [](double w, double loss_j, double* s) { return hertzchain::Kick(w, loss_j, s); };
+  const auto total_force = [](double dl, double rate, double k, double kv, double sp, double* r, double* sm) {
+    return hertzchain::TotalForce<kViscous, kExtras>(dl, rate, k, kv, sp, r, sm);
   };
   // the linearisation of contact i at lane j (kept for every direction of the step)
   auto linearise = [&](Linear& l, int64_t j, double dl, double rate, double k, double kv, double rt, double sm) {
-    l.delta[j] = dl;
-    l.rate[j] = rate;
-    l.in[j] = dl > 0.0 ? 1.0 : 0.0;
-    l.positive[j] = dl > 0.0 ? dl : 0.0;
-    l.root[j] = rt;
-    l.half_inv_root[j] = dl > 0.0 ? 0.5 / rt : 0.0;
-    l.kp[j] = k * l.positive[j];
-    l.c3[j] = kv * rt;
-    l.slope[j] = dl > 0.0 ? MaxSlope(sm) : 0.0;
+    const hertzchain::Linearisation one = hertzchain::Linearise(dl, rate, k, kv, rt, sm);
+    l.delta[j] = one.delta;
+    l.rate[j] = one.rate;
+    l.in[j] = one.in;
+    l.positive[j] = one.positive;
+    l.root[j] = one.root;
+    l.half_inv_root[j] = one.half_inv_root;
+    l.kp[j] = one.kp;
+    l.c3[j] = one.c3;
+    l.slope[j] = one.slope;
   };
-  // its tangent along one direction (`TangentForce`): c2 = 1.5 eta kappa = kv
+  // its tangent along one direction (`hertzchain::TangentForce`): c2 = 1.5 eta kappa = kv
   auto tforce = [](const Linear& l, int64_t j, double k, double c1j, double c2, double sp, double tdl,
                    double trate, double tk, double t15e, double tsp) {
-    return TangentForce<kViscous>(l.delta[j], l.rate[j], l.in[j], l.positive[j], l.root[j], l.half_inv_root[j],
-                                  l.kp[j], l.c3[j], l.slope[j], k, c1j, c2, sp, tdl, trate, tk, t15e, tsp);
+    const hertzchain::Linearisation one{l.delta[j], l.rate[j],       l.in[j], l.positive[j], l.root[j],
+                                        l.half_inv_root[j], l.kp[j], l.c3[j], l.slope[j]};
+    return hertzchain::TangentForce<kViscous>(one, k, c1j, c2, sp, tdl, trate, tk, t15e, tsp);
   };
 
   for (int64_t n = 0; n < n_samples; ++n) {

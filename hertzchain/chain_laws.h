@@ -37,11 +37,12 @@ HC_HD inline double Sign(double w) {
 }
 
 // contact.track_friction_kick: sign(w) max(|w| - loss, 0), m/s, with its speed minus loss s
+// (as copysign: one instruction; at w = 0 the kept speed is 0, of w's sign)
 HC_HD inline double Kick(double w, double loss, double* s) {
   double speed = std::fabs(w);
   *s = speed - loss;
   double kept = *s > 0.0 ? *s : 0.0;
-  return Sign(w) * kept;
+  return std::copysign(kept, w);
 }
 
 // d kick = sign(w) max'(|w| - loss) (d|w| - d loss) as JAX's rules give it: with pm = +-1

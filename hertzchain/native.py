@@ -56,6 +56,7 @@ import numpy as np
 from jax.interpreters import partial_eval
 
 SOURCE = Path(__file__).with_name("chain_kernel.cc")
+LAWS = Path(__file__).with_name("chain_laws.h")  # the laws both kernels include
 TARGET = "hertzchain_chain_forward"
 FULL_TARGET = "hertzchain_chain_full_forward"
 TANGENT_TARGET = "hertzchain_chain_full_tangent"
@@ -96,7 +97,8 @@ def _cpu_key() -> str:
 
 def _library_path() -> Path:
     digest = hashlib.sha256()
-    for part in (SOURCE.read_bytes(), jax.__version__.encode(), " ".join(_flags()).encode(), _cpu_key().encode()):
+    for part in (SOURCE.read_bytes(), LAWS.read_bytes(), jax.__version__.encode(), " ".join(_flags()).encode(),
+                 _cpu_key().encode()):
         digest.update(part)
     return _cache_dir() / f"chain_kernel-{digest.hexdigest()[:16]}.so"
 
@@ -192,7 +194,6 @@ def kernel_for(flags, devices) -> FusedKernel | None:
 # this machine's GPU ("cuda") or with the C++ compiler for the host ("emulated").
 
 THREAD_SOURCE = Path(__file__).with_name("chain_kernel_thread.cu")
-LAWS = Path(__file__).with_name("chain_laws.h")
 # IEEE division and square roots (nvcc's defaults) and no contraction into fused
 # multiply-adds: the JAX kernel's arithmetic, as on the host.
 NVCC_FLAGS = ("-O3", "-arch=native", "--fmad=false", "-std=c++17", "-shared", "-Xcompiler", "-fPIC")
