@@ -141,9 +141,10 @@ def _table_values(text: str, out) -> None:
             continue
         for name, cell in zip(header, cells):
             kind = _kind_of_name(name)
-            number = re.fullmatch(r"\**(-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?)\**", cell.replace("×", "").strip())
-            if kind and number:
-                out.append((kind[0], float(number.group(1)) * kind[1]))
+            for part in cell.split(" / "):  # a cell may list the runs of one case: "a / b / c"
+                number = re.fullmatch(r"\**(-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?)\**", part.replace("×", "").strip())
+                if kind and number:
+                    out.append((kind[0], float(number.group(1)) * kind[1]))
 
 
 def stored_values(root: Path = ROOT) -> list[tuple[str, float]]:

@@ -57,3 +57,15 @@ def test_allowed_and_unstored_entries_must_still_be_in_the_text(tmp_path):
     (root / "README.md").write_text("Every diagnosis within 120 s.\n")
     problems, _ = check.missing(root, allowed=allowed, unstored=unstored)
     assert problems == ["README.md: 17 µs is listed in ALLOWED or UNSTORED but no longer in the text; delete the entry"]
+
+
+def test_a_table_cell_listing_several_runs_stores_each(tmp_path):
+    """A stored table cell "a / b / c" (the runs of one case) stores each of its numbers, of
+    its column's kind; a number in none of them still fails."""
+    root = _tree(tmp_path, "Numba ran at 1.28e9 bead-steps/s.\n")
+    (root / "benchmarks" / "results" / "quick.md").write_text(
+        "| case | Numba bead-steps/s |\n|---|---|\n| damped | 1.23e+09 / 1.276e+09 / 1.25e+09 |\n")
+    assert check.missing(root, allowed=(), unstored=()) == ([], [])
+    (root / "README.md").write_text("Numba ran at 1.29e9 bead-steps/s.\n")
+    assert check.missing(root, allowed=(), unstored=())[0] == [
+        "README.md:1: 1.29e9 bead-steps/s (throughput) is in no stored result"]
