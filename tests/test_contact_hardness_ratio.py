@@ -35,7 +35,9 @@ def _write(path, geometry, radius_m, youngs_pa, nu, sigma_pa, hardness, depth_m)
         writer.writerows(zip(time, approach, force))
 
 
-@pytest.mark.parametrize("setup", SETUPS)
+# (the steel case, 9 s on 2 cores, is marked slow: the aluminium one makes the same claim)
+@pytest.mark.parametrize("setup", [pytest.param("steel sphere on a flat", marks=pytest.mark.slow),
+                                   "aluminium spheres"])
 def test_hardness_ratio_and_yield_stress_are_recovered(tmp_path, setup):
     geometry, radius, youngs, nu, sigma, hardness, depth = SETUPS[setup]
     _write(tmp_path / "curve.csv", geometry, radius, youngs, nu, sigma, hardness, depth)

@@ -48,10 +48,11 @@ CASES = {
 }
 
 
-# the slow-marked cases' physics is also in the default ones (free end and damping alone:
-# in "sensors_preload_viscous_friction"; the other transformations compose the kept two)
-_SLOW_CASES = ("free_end_preload", "viscous_friction")
-_SLOW_TRANSFORMS = ("vmap", "jacfwd_of_vmap", "vmap_of_vmap_of_jacfwd")
+# the slow-marked cases' physics is also in the default ones (books: in "sensors_preload";
+# free end and damping alone: in "sensors_preload_viscous_friction"; the transformations'
+# folding of chains and directions is the host kernel's Python, tested in test_native.py)
+_SLOW_CASES = ("rigid_and_soft_walls", "free_end_preload", "viscous_friction")
+_SLOW_TRANSFORMS = ("vmap", "jacfwd_of_vmap", "vmap_of_jacfwd", "vmap_of_vmap_of_jacfwd")
 
 
 def _marked(names, slow):
