@@ -136,7 +136,7 @@ def _load() -> str | None:
     try:
         path = _library_path()
         if not path.exists():
-            print(f"hertzchain: compiling the fused chain kernel into {path} (once; 30-60 s)",
+            print(f"hertzchain: compiling the fused chain kernel into {path} (once; under a minute)",
                   file=sys.stderr, flush=True)
             _build(path)
         library = ctypes.cdll.LoadLibrary(str(path))

@@ -1,7 +1,7 @@
 """`hertzchain kernel`: build the fused C++ kernel for this machine now, and say whether it runs.
 
 The kernel (`hertzchain.native`) is compiled on its first use, once per machine, source and
-JAX version (about 20 s on two cores). Run this after installing, so that the first fit or
+JAX version (under a minute on two cores). Run this after installing, so that the first fit or
 sweep does not wait for it; it also says why the kernel cannot be used where it cannot
 (no compiler, `HERTZCHAIN_NATIVE=0`), in which case every command runs the JAX kernel (exit
 status 0 either way: the README's install command goes on).
