@@ -63,6 +63,7 @@ def test_damping_time_and_yield_stress_are_recovered(tmp_path):
     assert plain["curves"][0]["rms_over_peak_fitted"] > 10 * report["curves"][0]["rms_over_peak_fitted"]
 
 
+@pytest.mark.slow  # 7 s; the shift's gradient is checked by default in the finite-difference test
 def test_time_shift_is_recovered_with_an_honest_sigma(tmp_path):
     _write(tmp_path / "curve.csv", 700e6, shift_s=2.37e-6)
     report = _run(tmp_path, "--time-shift")

@@ -50,9 +50,10 @@ CASES = {
 
 # the slow-marked cases' physics is also in the default ones (books: in "sensors_preload";
 # free end and damping alone: in "sensors_preload_viscous_friction"; the transformations'
-# folding of chains and directions is the host kernel's Python, tested in test_native.py)
+# folding of chains and directions is the host kernel's Python, tested in test_native.py;
+# the tangents by default in `test_fit_iteration_equals_the_jax_kernels`)
 _SLOW_CASES = ("rigid_and_soft_walls", "free_end_preload", "viscous_friction")
-_SLOW_TRANSFORMS = ("vmap", "jacfwd_of_vmap", "vmap_of_jacfwd", "vmap_of_vmap_of_jacfwd")
+_SLOW_TRANSFORMS = tuple(_TRANSFORMS)
 
 
 def _marked(names, slow):
