@@ -354,13 +354,14 @@ def _fit_problem():
     return problem, initial_values(problem)
 
 
-def test_fit_residuals_and_jacobian_equal_the_jax_kernels(monkeypatch):
+def assert_fit_iteration_equals_the_jax_kernels(monkeypatch) -> None:
     """What a fit iteration computes (`fitting.model.residuals_and_jacobian`: whitened
-    residuals and their Jacobian in eta, mu, C and the nuisances) on the C++ kernel and its
-    tangents equals the same on the JAX kernel to round-off."""
+    residuals and their Jacobian in eta, mu, C and the nuisances) on the fused kernel that
+    `native.kernel_for` picks equals the same on the JAX kernel to round-off."""
     from fitting.model import residuals_and_jacobian
 
     problem, x = _fit_problem()
+    assert problem.simulates_natively()
     r, jac = residuals_and_jacobian(problem, x)
     monkeypatch.setattr(native, "kernel_for", lambda flags, devices: None)
     problem_jax, _ = _fit_problem()
@@ -371,3 +372,8 @@ def test_fit_residuals_and_jacobian_equal_the_jax_kernels(monkeypatch):
         scale = np.max(np.abs(jac_jax[:, column]))
         np.testing.assert_allclose(jac[:, column], jac_jax[:, column], rtol=0, atol=1e-9 * scale + 1e-300,
                                    err_msg=label)
+
+
+def test_fit_residuals_and_jacobian_equal_the_jax_kernels(monkeypatch):
+    """A fit iteration on the C++ kernel and its tangents equals the JAX kernel's."""
+    assert_fit_iteration_equals_the_jax_kernels(monkeypatch)

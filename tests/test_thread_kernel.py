@@ -10,7 +10,8 @@ import hertzchain as hc
 from hertzchain import native
 from hertzchain.batched import solve_batched
 from hertzchain.integrate import Recording
-from test_native import _TRANSFORMS, _batch, _fit_problem, assert_transform_is_one_call_equal_to_the_jax_kernel
+from test_native import (_TRANSFORMS, _batch, assert_fit_iteration_equals_the_jax_kernels,
+                         assert_transform_is_one_call_equal_to_the_jax_kernel)
 
 
 def _backends():
@@ -94,20 +95,7 @@ def test_derivatives_under_vmap_and_jacfwd_are_one_call_equal_to_the_jax_kernel(
 def test_fit_iteration_equals_the_jax_kernels(backend, monkeypatch):
     """What a fit iteration computes (whitened residuals and their Jacobian in eta, mu, C
     and the nuisances) on the thread kernel equals the same on the JAX kernel."""
-    from fitting.model import residuals_and_jacobian
-
-    problem, x = _fit_problem()
-    assert problem.simulates_natively()
-    r, jac = residuals_and_jacobian(problem, x)
-    monkeypatch.setattr(native, "kernel_for", lambda flags, devices: None)
-    problem_jax, _ = _fit_problem()
-    r_jax, jac_jax = residuals_and_jacobian(problem_jax, x)
-    assert np.linalg.norm(r) > 10.0  # the start is off the data
-    np.testing.assert_allclose(r, r_jax, rtol=0, atol=1e-10 * np.max(np.abs(r_jax)))
-    for column, label in enumerate(problem.labels):
-        scale = np.max(np.abs(jac_jax[:, column]))
-        np.testing.assert_allclose(jac[:, column], jac_jax[:, column], rtol=0, atol=1e-9 * scale + 1e-300,
-                                   err_msg=label)
+    assert_fit_iteration_equals_the_jax_kernels(monkeypatch)
 
 
 def test_too_many_channels_are_refused_with_the_limit(backend):
