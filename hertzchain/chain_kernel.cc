@@ -107,11 +107,15 @@ struct Block {
 // Asks the kernel to back a large result buffer, written once from end to end, with huge
 // pages (a 2 MB page faulted in at once instead of 512 small ones; Linux's transparent huge
 // pages in "madvise" mode): the whole 2 MB pages inside [data, data + bytes) only; a hint
-// (nothing changes where it is not taken). The page faults of the fresh 61 MB of traces of
-// the standard run cost about as much as a fifth of its arithmetic.
+// (nothing changes where it is not taken). Only for buffers above the 32 MiB that malloc
+// serves from its heaps (`native._keep_freed_buffers`): those are mapped afresh for every
+// run, where the page faults of fresh traces cost about a fifth of the arithmetic; smaller
+// ones are memory that earlier runs freed, already mapped (advised, they were measured
+// less steady).
 void AdviseHugePages(void* data, size_t bytes) {
   constexpr uintptr_t kHuge = uintptr_t{1} << 21;
-  if (bytes < 2 * kHuge) return;
+  constexpr size_t kReusedBytes = size_t{32} << 20;
+  if (bytes <= kReusedBytes) return;
   const uintptr_t begin = (reinterpret_cast<uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);
   const uintptr_t end = (reinterpret_cast<uintptr_t>(data) + bytes) & ~(kHuge - 1);
   if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);

@@ -19,6 +19,10 @@ first free thread taking the next block; the runs of a process together use at m
 thread per core, so a batch already split over host devices gets no more), with the same
 numbers whichever thread runs a block.
 
+Loading the host kernel on Linux also asks glibc's malloc to reuse freed result buffers
+(`_keep_freed_buffers`): XLA allocates every run's traces afresh, and without it each run
+faults them in again page by page.
+
 Under `jax.vmap` (`jax.custom_batching.custom_vmap`) a mapped batch of inputs joins the
 kernel's chain axis and mapped tangents its direction axis, so a batch of fits, `jacfwd`
 of `vmap` and `vmap` of `jacfwd` are one kernel run each.
@@ -128,11 +132,45 @@ def _build(path: Path) -> None:
              path, SOURCE.name)
 
 
+# glibc's malloc options (mallopt): the size from which a request is served by its own
+# mmap (here the largest glibc accepts, 32 MiB), and the free memory at the top of a heap
+# that it keeps rather than hands back to the system.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+REUSED_BUFFER_BYTES = 32 << 20
+KEPT_FREE_BYTES = 512 << 20
+MALLOC_VARIABLE = "HERTZCHAIN_MALLOC_TUNING"
+
+
+def _keep_freed_buffers() -> bool:
+    """Ask glibc's malloc to serve result buffers up to `REUSED_BUFFER_BYTES` from its heaps
+    and to keep up to `KEPT_FREE_BYTES` of freed memory: True where it was done.
+
+    XLA allocates every result of a run afresh (a sweep's traces: tens of MB per channel).
+    By default glibc maps each such buffer anew and unmaps it when freed, and its own
+    adaptive threshold settles only after some runs: every page of the traces is then
+    faulted in and zeroed again at each run. Measured on the standard damped case (N = 21,
+    B = 1024, 2500 steps, 2 cores): 10-15 thousand page faults per run and 0.6-1.1e9
+    bead-steps/s, against a few faults and 1.2-1.25e9 once freed buffers are reused
+    (`benchmarks/README.md`). Process-wide (malloc has no per-caller setting), the memory
+    kept is at most `KEPT_FREE_BYTES`; `HERTZCHAIN_MALLOC_TUNING=0` leaves malloc as it is.
+    """
+    if os.environ.get(MALLOC_VARIABLE, "1") == "0" or platform.system() != "Linux":
+        return False
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        return bool(libc.mallopt(_M_MMAP_THRESHOLD, REUSED_BUFFER_BYTES)
+                    and libc.mallopt(_M_TRIM_THRESHOLD, KEPT_FREE_BYTES))
+    except (OSError, AttributeError):  # not glibc (musl has no mallopt)
+        return False
+
+
 @functools.cache
 def _load() -> str | None:
-    """Build (if needed), load and register the kernel: None on success, else why not."""
+    """Build (if needed), load and register the kernel (and tune malloc for its results,
+    `_keep_freed_buffers`): None on success, else why not."""
     if os.environ.get("HERTZCHAIN_NATIVE", "1") == "0":
         return "switched off (HERTZCHAIN_NATIVE=0)"
+    _keep_freed_buffers()
     try:
         path = _library_path()
         if not path.exists():

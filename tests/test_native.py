@@ -332,6 +332,42 @@ def test_switched_off_runs_the_jax_kernel(tmp_path):
     np.testing.assert_array_equal(np.asarray(result["wall"]), reference.forces_n["wall"])
 
 
+_REUSE = r"""
+import ctypes, json, resource
+from hertzchain import native
+tuned = native._keep_freed_buffers()
+libc = ctypes.CDLL("libc.so.6")
+libc.malloc.restype = ctypes.c_void_p
+libc.free.argtypes = [ctypes.c_void_p]
+faults = []
+for _ in range(2):  # a 20 MB result buffer, written whole and freed, twice
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    buffer = libc.malloc(20 << 20)
+    ctypes.memset(buffer, 1, 20 << 20)
+    libc.free(buffer)
+    faults.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
+print(json.dumps({"tuned": tuned, "faults": faults}))
+"""
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="glibc's malloc options")
+@pytest.mark.parametrize("setting", ["1", "0"])
+def test_freed_result_buffers_are_reused_not_faulted_in_again(setting):
+    """With the malloc tuning a second 20 MB buffer reuses the first one's pages (a few page
+    faults, against 5120 pages of 4 kB), and without it (HERTZCHAIN_MALLOC_TUNING=0) glibc
+    maps it afresh: the tuning is what makes the difference."""
+    env = dict(os.environ, HERTZCHAIN_MALLOC_TUNING=setting)
+    proc = subprocess.run([sys.executable, "-c", _REUSE], capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert result["tuned"] is (setting == "1")
+    assert result["faults"][0] > 2000  # the first buffer is new memory either way
+    if setting == "1":
+        assert result["faults"][1] < 100
+    else:
+        assert result["faults"][1] > 2000
+
+
 def test_failed_build_names_the_compiler_error(tmp_path, monkeypatch):
     """A source that does not compile: the build raises with the compiler's message and
     leaves no library behind (written whole or not at all)."""
