@@ -332,6 +332,19 @@ def test_switched_off_runs_the_jax_kernel(tmp_path):
     np.testing.assert_array_equal(np.asarray(result["wall"]), reference.forces_n["wall"])
 
 
+@pytest.mark.skipif(native._cxx() is None, reason="no C++ compiler")
+def test_builds_without_vector_masks_may_speculate_floating_point_operations(monkeypatch):
+    """AVX2 builds get -fno-trapping-math (their tangent loops stay vectorised), AVX-512
+    builds do not; both keep IEEE arithmetic without contraction."""
+    monkeypatch.setenv(native.ARCH_VARIABLE, "haswell")
+    assert "-fno-trapping-math" in native._flags()
+    monkeypatch.setenv(native.ARCH_VARIABLE, "skylake-avx512")
+    assert "-fno-trapping-math" not in native._flags()
+    for arch in ("haswell", "skylake-avx512"):
+        monkeypatch.setenv(native.ARCH_VARIABLE, arch)
+        assert "-ffp-contract=off" in native._flags() and not any("fast-math" in f for f in native._flags())
+
+
 _REUSE = r"""
 import ctypes, json, resource
 from hertzchain import native
