@@ -171,10 +171,13 @@ def _keep_freed_buffers() -> bool:
     By default glibc maps each such buffer anew and unmaps it when freed, and its own
     adaptive threshold settles only after some runs: every page of the traces is then
     faulted in and zeroed again at each run. Measured on the standard damped case (N = 21,
-    B = 1024, 2500 steps, 2 cores): 10-15 thousand page faults per run and 0.6-1.1e9
-    bead-steps/s, against a few faults and 1.2-1.25e9 once freed buffers are reused
-    (`benchmarks/README.md`). Process-wide (malloc has no per-caller setting), the memory
-    kept is at most `KEPT_FREE_BYTES`; `HERTZCHAIN_MALLOC_TUNING=0` leaves malloc as it is.
+    B = 1024, 2500 steps, 2 cores; `benchmarks/results/allocation_2cores/`): about 15
+    thousand page faults per run and 0.90-0.98e9 bead-steps/s, against 3 faults and
+    1.27-1.32e9 once freed buffers are reused. Process-wide (malloc has no per-caller
+    setting), the memory kept is at most `KEPT_FREE_BYTES`; `HERTZCHAIN_MALLOC_TUNING=0`
+    leaves malloc as it is. Not reached: the extra heaps of glibc's per-thread arenas,
+    unmapped whenever they are empty (`MALLOC_ARENA_MAX=1` in the environment gives every
+    thread the main heap; `benchmarks/README.md`, "Reused result memory").
     """
     if os.environ.get(MALLOC_VARIABLE, "1") == "0" or platform.system() != "Linux":
         return False
