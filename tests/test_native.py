@@ -164,13 +164,21 @@ def test_damped_and_frictional_forces_agree_with_the_jax_kernel(case):
     """The full C++ kernel (damping, friction; recorded forces only) against the JAX
     kernel: round-off (the sensors' stiff springs amplify it a little)."""
     setup, grid = _batch(**FULL_CASES[case])
+    assert_forces_equal_the_jax_kernels(setup, grid, books=False)
+
+
+def assert_forces_equal_the_jax_kernels(setup, grid, *, books: bool):
+    """`solve_batched`'s default kernel against the JAX kernel (contacts 2 and 6 and the
+    wall): every recorded force within 2e-12 of its channel's largest force. Returns both
+    results (the default kernel's first)."""
     recording = Recording((2, 6))
-    fused = solve_batched(setup, grid, recording, books=False)
-    reference = solve_batched(setup, grid, recording, books=False, kernel="jax")
-    for name in fused.channel_names:
+    ours = solve_batched(setup, grid, recording, books=books)
+    reference = solve_batched(setup, grid, recording, books=books, kernel="jax")
+    for name in ours.channel_names:
         scale = float(np.max(np.abs(reference.forces_n[name])))
         assert scale > 1.0 or (name == "wall" and setup.end == "free")
-        np.testing.assert_allclose(fused.forces_n[name], reference.forces_n[name], rtol=0, atol=2e-12 * scale)
+        np.testing.assert_allclose(ours.forces_n[name], reference.forces_n[name], rtol=0, atol=2e-12 * scale)
+    return ours, reference
 
 
 def test_damping_and_friction_with_books_run_the_jax_kernel():
