@@ -44,6 +44,7 @@
 
 #include "xla/ffi/api/ffi.h"
 
+#include "chain_ffi.h"
 #include "chain_laws.h"
 
 namespace ffi = xla::ffi;
@@ -882,66 +883,22 @@ ffi::Error FullTangent(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::
 
 }  // namespace
 
+// The handlers' argument lists: `chain_ffi.h` (the recorded channels, a buffer here, after
+// the parameters).
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
-                              ffi::Ffi::Bind()
-                                  .Ctx<ffi::ThreadPool>()        // helpers for the blocks
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // state0
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // inv_mass
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // kappa
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // overlap0
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // spring
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // external
-                                  .Arg<ffi::Buffer<ffi::S64>>()  // channels
-                                  .Attr<double>("dt")
-                                  .Attr<int64_t>("steps_per_sample")
-                                  .Attr<int64_t>("preload")
-                                  .Attr<int64_t>("springs")
-                                  .Attr<int64_t>("books")
+                              hertzchain::ForwardAttrs(hertzchain::ChainArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
+                                                           .Arg<ffi::Buffer<ffi::S64>>())  // channels
                                   .Ret<ffi::Buffer<ffi::F64>>()  // state
                                   .RemainingRets());             // traces
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullForward, FullForward,
-                              ffi::Ffi::Bind()
-                                  .Ctx<ffi::ThreadPool>()        // helpers for the blocks
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // state0: x, v, a
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // inv_mass
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // kappa
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // overlap0
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // spring
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // external
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // eta
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // friction (mu g)
-                                  .Arg<ffi::Buffer<ffi::S64>>()  // channels
-                                  .Attr<double>("dt")
-                                  .Attr<int64_t>("steps_per_sample")
-                                  .Attr<int64_t>("viscous")
-                                  .Attr<int64_t>("friction")
-                                  .Attr<int64_t>("extras")      // preload or springs
-                                  .RemainingRets());             // traces
+                              hertzchain::FullAttrs(hertzchain::FullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
+                                                        .Arg<ffi::Buffer<ffi::S64>>())  // channels
+                                  .RemainingRets());                                    // traces
 
-XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullTangent, FullTangent,
-                              ffi::Ffi::Bind()
-                                  .Ctx<ffi::ThreadPool>()        // helpers for the blocks
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // state0: x, v, a
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // inv_mass
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // kappa
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // overlap0
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // spring
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // external
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // eta
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // friction (mu g)
-                                  .Arg<ffi::Buffer<ffi::F64>>()  // tangents of the eight above
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Arg<ffi::Buffer<ffi::S64>>()  // channels
-                                  .Attr<double>("dt")
-                                  .Attr<int64_t>("steps_per_sample")
-                                  .Attr<int64_t>("viscous")
-                                  .Attr<int64_t>("friction")
-                                  .Attr<int64_t>("extras")      // preload or springs
-                                  .RemainingRets());             // traces, then their tangents
+XLA_FFI_DEFINE_HANDLER_SYMBOL(
+    HertzChainFullTangent, FullTangent,
+    hertzchain::FullAttrs(
+        hertzchain::FullArgs(hertzchain::FullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>()))  // values, tangents
+            .Arg<ffi::Buffer<ffi::S64>>())                                                 // channels
+        .RemainingRets());  // traces, then their tangents

@@ -34,6 +34,7 @@
 
 #include "xla/ffi/api/ffi.h"
 
+#include "chain_ffi.h"
 #include "chain_laws.h"
 
 namespace ffi = xla::ffi;
@@ -580,60 +581,20 @@ ffi::Error FullTangentHost(ffi::Buffer<ffi::F64> s, ffi::Buffer<ffi::F64> m, ffi
 #define HC_FULL_TANGENT FullTangent
 #endif
 
+// The handlers' argument lists: `chain_ffi.h` (the recorded channels, an attribute here,
+// before the others). Traces come back (n_samples, B).
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainThreadForward, HC_FORWARD,
-                              HC_BIND.Arg<ffi::Buffer<ffi::F64>>()  // state0
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // inv_mass
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // kappa
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // overlap0
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // spring
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // external
-                                  .Attr<ffi::Span<const int64_t>>("channels")
-                                  .Attr<double>("dt")
-                                  .Attr<int64_t>("steps_per_sample")
-                                  .Attr<int64_t>("preload")
-                                  .Attr<int64_t>("springs")
-                                  .Attr<int64_t>("books")
+                              hertzchain::ForwardAttrs(hertzchain::ChainArgs(HC_BIND)
+                                                           .Attr<ffi::Span<const int64_t>>("channels"))
                                   .Ret<ffi::Buffer<ffi::F64>>()  // state
-                                  .RemainingRets());             // traces (n_samples, B)
+                                  .RemainingRets());             // traces
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainThreadFullForward, HC_FULL_FORWARD,
-                              HC_BIND.Arg<ffi::Buffer<ffi::F64>>()  // state0: x, v, a
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // inv_mass
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // kappa
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // overlap0
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // spring
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // external
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // eta
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // friction (mu g)
-                                  .Attr<ffi::Span<const int64_t>>("channels")
-                                  .Attr<double>("dt")
-                                  .Attr<int64_t>("steps_per_sample")
-                                  .Attr<int64_t>("viscous")
-                                  .Attr<int64_t>("friction")
-                                  .Attr<int64_t>("extras")
-                                  .RemainingRets());  // traces (n_samples, B)
+                              hertzchain::FullAttrs(hertzchain::FullArgs(HC_BIND)
+                                                        .Attr<ffi::Span<const int64_t>>("channels"))
+                                  .RemainingRets());  // traces
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainThreadFullTangent, HC_FULL_TANGENT,
-                              HC_BIND.Arg<ffi::Buffer<ffi::F64>>()  // state0: x, v, a
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // inv_mass
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // kappa
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // overlap0
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // spring
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // external
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // eta
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // friction (mu g)
-                                  .Arg<ffi::Buffer<ffi::F64>>()     // tangents of the eight above
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Arg<ffi::Buffer<ffi::F64>>()
-                                  .Attr<ffi::Span<const int64_t>>("channels")
-                                  .Attr<double>("dt")
-                                  .Attr<int64_t>("steps_per_sample")
-                                  .Attr<int64_t>("viscous")
-                                  .Attr<int64_t>("friction")
-                                  .Attr<int64_t>("extras")
-                                  .RemainingRets());  // traces (n_samples, B), then (D, n_samples, B)
+                              hertzchain::FullAttrs(hertzchain::FullArgs(hertzchain::FullArgs(HC_BIND))  // values, tangents
+                                                        .Attr<ffi::Span<const int64_t>>("channels"))
+                                  .RemainingRets());  // traces, then (D, n_samples, B)

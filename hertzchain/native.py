@@ -61,6 +61,7 @@ from jax.interpreters import partial_eval
 
 SOURCE = Path(__file__).with_name("chain_kernel.cc")
 LAWS = Path(__file__).with_name("chain_laws.h")  # the laws both kernels include
+FFI_ARGS = Path(__file__).with_name("chain_ffi.h")  # their handlers' argument lists
 TARGET = "hertzchain_chain_forward"
 FULL_TARGET = "hertzchain_chain_full_forward"
 TANGENT_TARGET = "hertzchain_chain_full_tangent"
@@ -123,8 +124,8 @@ def _cpu_key() -> str:
 
 def _library_path() -> Path:
     digest = hashlib.sha256()
-    for part in (SOURCE.read_bytes(), LAWS.read_bytes(), jax.__version__.encode(), " ".join(_flags()).encode(),
-                 _cpu_key().encode()):
+    for part in (SOURCE.read_bytes(), LAWS.read_bytes(), FFI_ARGS.read_bytes(), jax.__version__.encode(),
+                 " ".join(_flags()).encode(), _cpu_key().encode()):
         digest.update(part)
     return _cache_dir() / f"chain_kernel-{digest.hexdigest()[:16]}.so"
 
@@ -310,7 +311,7 @@ def _thread_library(backend: str, rows: int) -> None:
         raise RuntimeError(f"the {backend} chain kernel is unavailable: {reason}")
     digest = hashlib.sha256()
     toolchain = subprocess.run([_nvcc(), "--version"], capture_output=True, text=True).stdout if backend == "cuda" else _cpu_key()
-    for part in (THREAD_SOURCE.read_bytes(), LAWS.read_bytes(), jax.__version__.encode(),
+    for part in (THREAD_SOURCE.read_bytes(), LAWS.read_bytes(), FFI_ARGS.read_bytes(), jax.__version__.encode(),
                  " ".join(_thread_build_command(backend, rows, Path("-"))).encode(), toolchain.encode()):
         digest.update(part)
     path = _cache_dir() / f"chain_thread-{backend}-r{rows}-{digest.hexdigest()[:16]}.so"
