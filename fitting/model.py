@@ -16,8 +16,7 @@ Experiments with the same chain structure (number of beads, end, sensor beads) a
 simulated together on a common grid: by `hertzchain.batched.record_batched` (the batch on
 the SIMD axis, several times faster than `solve` per chain) when the default forward model
 runs and every freed parameter is physics that kernel has (`FAST_PATH_PHYSICS`); otherwise
-by `solve` under `vmap` (extra effects of a custom `ForwardModel`, plastic, dashpot or
-power-law contacts). Both integrate the same equations in the same order (they agree to
+by `solve` under `vmap` (extra effects of a custom `ForwardModel`). Both integrate the same equations in the same order (they agree to
 round-off: `tests/test_fit_model.py`).
 
 Jacobian. The residual's derivative is assembled by a custom JVP: the simulator is
@@ -45,7 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from hertzchain import native
-from hertzchain.batched import fast_path_reason, kernel_flags, record_batched
+from hertzchain.batched import kernel_flags, record_batched
 from hertzchain.chain import ChainSetup
 from hertzchain.integrate import Recording, solve, stack_setups
 from hertzchain.theory import discrete_fwhm_s, discrete_velocity_constant
@@ -292,7 +291,7 @@ class Problem:
     def fast_path_flags(self, group: _Group):
         """The batched kernel's flags for `group`, or None where it takes `solve` under
         `vmap` (a custom forward model, a setup or a freed parameter the kernel lacks)."""
-        if self.forward.simulate is not _default_simulate or fast_path_reason(group.setups) is not None:
+        if self.forward.simulate is not _default_simulate:
             return None
         indices = list(group.global_index) + [int(i) for i in np.ravel(group.local_index[:1])]
         specs = [self.instances[i].spec for i in indices]

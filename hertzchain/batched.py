@@ -23,18 +23,19 @@ same contact laws from `contact`, so the results agree to round-off), but
   two cores of a CPU run as two host devices
   (`XLA_FLAGS=--xla_force_host_platform_device_count=2`, set before JAX starts), or GPUs.
 
-It covers Hertz contacts, embedded sensors, rigid/elastic walls and free ends, preload,
-viscoelastic damping and track friction. On the CPU, `solve_batched` runs the same step in
-a fused C++ kernel instead (`hertzchain.native`: blocks of chains kept in cache through all
-their steps; agrees with this module's kernel to round-off): the conservative kernel (with
-or without the books), or the full one for damped and frictional chains without the books;
-`kernel="jax"` keeps this one. `record_batched` (fits) runs the full C++ kernel with its
-forward-mode tangents (`native.run_full`). Parameters that are the same in every chain
-are passed as one column (`share_uniform`). Elastic-plastic contacts, linear dashpots and
-power-law contacts are not in the fast path: `solve_batched` then runs the general solver
-(`solve` under `vmap`), with the same result type. `fast_path_reason(setup)` says which
-path a setup takes. `record_batched` is the same kernel for setups whose values are traced
-(inside `jit`, `jax.jacfwd`): `fitting` runs its model and its Jacobian through it.
+It covers everything `ChainSetup` describes: Hertz, power-law and elastic-plastic contacts
+(Thornton's and Jackson-Green's laws, each contact's largest overlap carried in the state),
+embedded sensors, rigid/elastic walls and free ends, preload, Kuwabara-Kono damping, linear
+dashpots and track friction; the laws are `forces.elastic_parts` and `contact`'s, the
+general solver's. On the CPU, `solve_batched` runs the same step in a fused C++ kernel
+instead where one covers the physics (`hertzchain.native`, Hertz contacts without dashpots:
+blocks of chains kept in cache through all their steps; agrees with this module's kernel to
+round-off): the conservative kernel (with or without the books), or the full one for damped
+and frictional chains without the books; `kernel="jax"` keeps this one. `record_batched`
+(fits) runs the full C++ kernel with its forward-mode tangents (`native.run_full`).
+Parameters that are the same in every chain are passed as one column (`share_uniform`).
+`record_batched` is the same kernel for setups whose values are traced (inside `jit`,
+`jax.jacfwd`): `fitting` runs its model and its Jacobian through it.
 """
 
 from __future__ import annotations
@@ -48,9 +49,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
-from . import contact, native
+from . import contact, forces, native
 from .chain import ChainSetup, build_model, internal_contact_index, internal_sensor_index
-from .integrate import Recording, _channel_names, _layout, solve_stacked, stack_setups  # noqa: F401
+from .integrate import Recording, _channel_names, _layout, stack_setups  # noqa: F401
 from .timegrid import TimeGrid
 
 # Steps advanced per scan iteration (fully unrolled): enough to hide the loop overhead,
@@ -87,6 +88,11 @@ class BatchedTraces(eqx.Module):
     channel_names: tuple[str, ...] = eqx.field(static=True, default=())
 
 
+# The rate-independent contact laws of the kernels (`KernelFlags.law`): `contact.hertz_force`,
+# `contact.power_law_force`, `contact.thornton_contact`, `contact.jackson_green_contact`.
+CONTACT_LAWS = ("hertz", "power_law", "thornton", "jackson_green")
+
+
 class KernelFlags(NamedTuple):
     """The physics a compiled kernel includes (static: each combination is its own kernel)."""
 
@@ -97,12 +103,22 @@ class KernelFlags(NamedTuple):
     # The running maxima of every contact and the energy books (reductions over the chain at
     # every step); callers that read the recorded forces only (fits) switch them off.
     ledger: bool = True
+    # The contacts' elastic law (`CONTACT_LAWS`); plastic laws carry each contact's largest
+    # overlap so far in the state.
+    law: str = "hertz"
+    # A linear dashpot on every contact's overlap rate (with `viscous`, which computes the rates).
+    dashpot: bool = False
 
     @property
     def full_state(self) -> bool:
         """Velocities and accelerations kept apart (damping or friction acts between the
         two half kicks), rather than the next half kick's velocity alone."""
         return self.viscous or self.friction
+
+    @property
+    def plastic(self) -> bool:
+        """Whether the contact law depends on the largest overlap so far."""
+        return self.law in ("thornton", "jackson_green")
 
 
 
@@ -124,31 +140,32 @@ def build_model_contacts(setup: ChainSetup) -> range:
     return range(setup.n_beads + len(setup.sensor_beads))
 
 
-def fast_path_reason(setup: ChainSetup) -> str | None:
-    """None if `solve_batched` can use the fast path for `setup`, else why not."""
+def contact_law(setup: ChainSetup) -> str:
+    """The `CONTACT_LAWS` entry of a setup's contacts (its static fields only)."""
     if setup.plasticity:
-        return "elastic-plastic contacts (plasticity=True)"
-    if np.any(np.asarray(setup.dashpot_n_s_m) != 0.0):
-        return "a linear dashpot (dashpot_n_s_m > 0)"
-    if setup.power_law:
-        return "power-law contacts (contact_exponent)"
-    return None
+        return setup.plastic_law
+    return "power_law" if setup.power_law else "hertz"
 
 
 def kernel_flags(setup: ChainSetup, *, switched_on=()) -> KernelFlags:
-    """The kernel a concrete (possibly batched) setup needs: damping, friction and preload
-    where any chain has them, or where named in `switched_on` ("viscous", "friction",
-    "preload": e.g. parameters a fit frees from 0)."""
+    """The kernel a concrete (possibly batched) setup needs: damping (Kuwabara-Kono or a
+    dashpot), friction and preload where any chain has them, or where named in `switched_on`
+    ("viscous", "dashpot", "friction", "preload": e.g. parameters a fit frees from 0), and the
+    setup's contact law."""
     on = set(switched_on)
-    unknown = on - {"viscous", "friction", "preload"}
+    unknown = on - {"viscous", "dashpot", "friction", "preload"}
     if unknown:
-        raise ValueError(f"switched_on: unknown physics {sorted(unknown)}; use viscous, friction, preload.")
+        raise ValueError(f"switched_on: unknown physics {sorted(unknown)}; use viscous, dashpot, friction, "
+                         "preload.")
     friction = np.asarray(setup.mu) * np.asarray(setup.gravity_m_s2)
+    dashpot = "dashpot" in on or bool(np.any(np.asarray(setup.dashpot_n_s_m) != 0.0))
     return KernelFlags(
-        viscous="viscous" in on or bool(np.any(np.asarray(setup.eta_s) != 0.0)),
+        viscous=dashpot or "viscous" in on or bool(np.any(np.asarray(setup.eta_s) != 0.0)),
         springs=bool(setup.sensor_beads),
         preload="preload" in on or bool(np.any(np.asarray(setup.precompression_n) != 0.0)),
         friction="friction" in on or bool(np.any(friction != 0.0)),
+        law=contact_law(setup),
+        dashpot=dashpot,
     )
 
 
@@ -160,6 +177,7 @@ class _Model(NamedTuple):
     wall_kappa: jax.Array
     wall_overlap0_m: jax.Array
     eta_s: jax.Array
+    dashpot_n_s_m: jax.Array
     friction_decel_m_s2: jax.Array
     first_bead_force_n: jax.Array
     last_body_force_n: jax.Array
@@ -186,6 +204,7 @@ def _vector_model(setup: ChainSetup) -> _Model:
         wall_kappa=wall_kappa,
         wall_overlap0_m=contact.overlap_at_force(preload, setup.wall_kappa()) if has_wall else jnp.zeros(()),
         eta_s=setup.eta_s,
+        dashpot_n_s_m=setup.dashpot_n_s_m,
         friction_decel_m_s2=setup.mu * setup.gravity_m_s2,
         first_bead_force_n=preload,
         last_body_force_n=jnp.zeros(()) if has_wall else -preload,
@@ -197,11 +216,19 @@ def _chain_params(setup: ChainSetup) -> dict:
     """Arrays the kernel needs for one chain (vmapped over the batch), in the kernel's
     layout: n_bodies + 1 rows for bodies (the last one is the wall, at rest, or nothing for
     a free end) and n_bodies rows for contacts (the last one is the wall contact, of zero
-    stiffness for a free end)."""
-    model = build_model(setup) if setup.sensor_beads else _vector_model(setup)
+    stiffness for a free end); the arrays of the setup's contact law (`_law`) and dashpot."""
+    law = contact_law(setup)
+    model = build_model(setup) if setup.sensor_beads or law != "hertz" else _vector_model(setup)
     external = jnp.zeros_like(model.mass_kg).at[1].add(model.first_bead_force_n)
     external = external.at[-1].add(model.last_body_force_n)
-    return {
+    laws = {}
+    if law != "hertz":
+        shape = forces.elastic_law(model)
+        names = {"exponent": "exponent", "reference_overlap_m": "reference_overlap", "yield_force_n": "yield_force",
+                 "reduced_radius_m": "reduced_radius", "poisson": "poisson", "yield_stress_pa": "yield_stress"}
+        laws = {names[field]: value for field, value in shape._asdict().items() if value is not None}
+    return laws | {
+        "dashpot": model.dashpot_n_s_m,
         "mass": model.mass_kg,
         "inv_mass": jnp.concatenate([1.0 / model.mass_kg, jnp.zeros(1)]),
         "kappa": jnp.concatenate([model.kappa, model.wall_kappa[None]]),
@@ -222,10 +249,23 @@ def _chain_params(setup: ChainSetup) -> dict:
 # k: one elementwise expression of row slices. Contact forces have n_bodies rows.
 
 
-def _contact_forces(p, flags: KernelFlags, x, v, contacts=None):
+def _law(p, flags: KernelFlags, rows=lambda a: a) -> forces.ElasticLaw:
+    """The contacts' `forces.ElasticLaw` from the kernel arrays (of the rows `rows` picks)."""
+    if flags.law == "power_law":
+        return forces.ElasticLaw(exponent=p["exponent"], reference_overlap_m=p["reference_overlap"])
+    if flags.law == "thornton":
+        return forces.ElasticLaw(yield_force_n=rows(p["yield_force"]))
+    if flags.law == "jackson_green":
+        return forces.ElasticLaw(yield_force_n=rows(p["yield_force"]), reduced_radius_m=rows(p["reduced_radius"]),
+                                 poisson=rows(p["poisson"]), yield_stress_pa=p["yield_stress"])
+    return forces.ElasticLaw()
+
+
+def _contact_forces(p, flags: KernelFlags, x, v, contacts=None, peak=None):
     """Total and elastic force of every contact, wall last (n_bodies, B), or of the listed
     `contacts` only, N, from displacements x (m) and velocities v (m/s) of the bodies and
-    the wall: the laws of `contact` (the ones `forces.chain_forces` uses), elementwise."""
+    the wall (and, for plastic laws, every contact's largest overlap so far, `peak`, m):
+    the laws of `contact` (the ones `forces.chain_forces` uses), elementwise."""
 
     def rows(a):
         return a if contacts is None else jnp.stack([a[k] for k in contacts])
@@ -239,16 +279,22 @@ def _contact_forces(p, flags: KernelFlags, x, v, contacts=None):
         front_v, back_v = pair(v)
         rate = front_v - back_v
     overlap = front - back + rows(p["overlap0"]) if flags.preload else front - back
-    return _forces_at(p, flags, overlap, rate, rows)
+    return _forces_at(p, flags, overlap, rate, rows, None if peak is None else rows(peak))
 
 
-def _forces_at(p, flags: KernelFlags, overlap, rate, rows=lambda a: a):
-    """Total and elastic contact forces, N, at the given overlaps (m) and overlap rates
-    (m/s; None without damping), of the contacts that `rows` picks from the parameters."""
-    if flags.viscous:
-        elastic, total = contact.contact_force(overlap, rate, rows(p["kappa"]), p["eta"])
+def _forces_at(p, flags: KernelFlags, overlap, rate, rows=lambda a: a, peak=None):
+    """Total and elastic contact forces, N, at the given overlaps (m), overlap rates (m/s;
+    None without damping) and, for plastic laws, largest overlaps so far (m), of the
+    contacts that `rows` picks from the parameters."""
+    if flags.law == "hertz":
+        elastic = contact.hertz_force(overlap, rows(p["kappa"]))
     else:
-        elastic = total = contact.hertz_force(overlap, rows(p["kappa"]))
+        elastic = forces.elastic_parts(_law(p, flags, rows), overlap, peak, rows(p["kappa"]))[0]
+    if flags.viscous:
+        dashpot = p["dashpot"] if flags.dashpot else 0.0
+        elastic, total = contact.contact_force(overlap, rate, rows(p["kappa"]), p["eta"], elastic, dashpot)
+    else:
+        total = elastic
     if flags.springs:
         spring = contact.spring_force(overlap, rows(p["spring"]))
         elastic, total = elastic + spring, total + spring
@@ -269,17 +315,19 @@ def _body_force(force, external=None):
     return body if external is None else body + external
 
 
-def _energy(p, flags: KernelFlags, x, v):
-    """Kinetic and potential (elastic plus preload) energy, J, each (B,)."""
+def _energy(p, flags: KernelFlags, x, v, peak=None):
+    """Kinetic and potential (elastic plus preload) energy, J, each (B,), and the energy
+    plastic contacts have dissipated so far (their largest overlaps `peak`), J, (B,)."""
     n = p["mass"].shape[0]
     kinetic = 0.5 * jnp.sum(p["mass"] * v[:n] ** 2, axis=0)
     overlap = _overlaps(p, flags, x)
-    potential = jnp.sum(contact.hertz_potential(overlap, p["kappa"]), axis=0)
+    _, elastic, plastic = forces.elastic_parts(_law(p, flags), overlap, peak, p["kappa"])
+    potential = jnp.sum(elastic, axis=0)
     if flags.springs:
         potential = potential + jnp.sum(contact.spring_potential(overlap, p["spring"]), axis=0)
     if flags.preload:
         potential = potential - (p["first_force"] * x[1] + p["last_force"] * x[n - 1])
-    return kinetic, potential
+    return kinetic, potential, jnp.sum(plastic, axis=0)
 
 
 class _Layout(NamedTuple):
@@ -290,14 +338,16 @@ class _Layout(NamedTuple):
 
     def fields(self, flags: KernelFlags) -> tuple[tuple[str, int], ...]:
         b, c = self.bodies + 1, self.bodies
+        # plastic contacts: every contact's largest overlap so far
+        peak = (("peak", c),) if flags.plastic else ()
         if flags.full_state:
             # x, v, a at the step; running maxima; viscous body forces; dissipated energy
             viscous = (("viscous", b),) if flags.viscous else ()
             books = (("max", c),) + viscous + (("dissipated", 1),)
-            return (("x", b), ("v", b), ("a", b)) + (books if flags.ledger else ())
+            return (("x", b), ("v", b), ("a", b)) + peak + (books if flags.ledger else ())
         # x, u = v + (dt/2) a (the next half-kick's velocity), largest overlaps so far
         # (the elastic forces grow with the overlap, so their maxima are the forces there)
-        return (("x", b), ("u", b)) + ((("max", c),) if flags.ledger else ())
+        return (("x", b), ("u", b)) + peak + ((("max", c),) if flags.ledger else ())
 
     def unpack(self, flags: KernelFlags, state) -> dict:
         out, row = {}, 0
@@ -315,9 +365,16 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
     h = 0.5 * dt
     s = layout.unpack(flags, state)
     barrier = jax.lax.optimization_barrier
+    new = {}
+
+    def contact_forces(x, v):  # plastic contacts: their largest overlaps, these included
+        if flags.plastic:
+            new["peak"] = jnp.maximum(s["peak"], _overlaps(p, flags, x))
+        return _contact_forces(p, flags, x, v, peak=new.get("peak"))
+
     if not flags.full_state:
         x = s["x"] + dt * s["u"]
-        force = _contact_forces(p, flags, x, None)[0]
+        force = contact_forces(x, None)[0]
         # Displacements and contact forces materialised together (one loop), so that the
         # next loop reads each contact's force instead of evaluating it again for each of
         # the two bodies it pushes (a square root per contact and step less).
@@ -325,7 +382,7 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
         x, force = both[: layout.bodies + 1], both[layout.bodies + 1 :]
         a = _body_force(force, p["external"] if flags.preload else None) * p["inv_mass"]
         v = s["u"] + h * a
-        new = {"x": x, "u": v + h * a}
+        new |= {"x": x, "u": v + h * a}
         if flags.ledger:
             new["max"] = jnp.maximum(s["max"], _overlaps(p, flags, x))
         return barrier(layout.pack(flags, new))
@@ -337,20 +394,21 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
         v_half, lost = _friction_kick(p, flags, v_half, h)
     x = s["x"] + dt * v_half
     if flags.viscous:
-        total, elastic = _contact_forces(p, flags, x, v_half + h * s["a"])
+        total, elastic = contact_forces(x, v_half + h * s["a"])
         both = barrier(jnp.concatenate([total, elastic]))
         total, elastic = both[: layout.bodies], both[layout.bodies :]
     else:
-        total = barrier(_contact_forces(p, flags, x, None)[0])
+        total = barrier(contact_forces(x, None)[0])
     a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
     v = v_half + h * a
-    new = {"x": x, "a": a, "v": v}
+    new |= {"x": x, "a": a, "v": v}
     if flags.viscous and flags.ledger:
         viscous = _body_force(total - elastic)
         work = work + jnp.sum(viscous * h * 0.5 * (v_half + v), axis=0)
         # Chains without damping in a damped batch dissipate nothing, exactly (total - elastic
         # can be an ulp off zero when XLA contracts the force law into fused multiply-adds).
-        work = jnp.where(p["eta"] != 0.0, work, 0.0)
+        damped = (p["eta"] != 0.0) | (p["dashpot"] != 0.0) if flags.dashpot else p["eta"] != 0.0
+        work = jnp.where(damped, work, 0.0)
         new["viscous"] = viscous
     if flags.friction:
         new["v"], lost_end = _friction_kick(p, flags, v, h)
@@ -378,29 +436,37 @@ def _start(p, flags: KernelFlags):
     (bodies + 1, B), and the total and elastic contact forces there (bodies, B)."""
     x = jnp.zeros_like(p["inv_mass"]) + jnp.zeros_like(p["v0"])  # (bodies + 1, B)
     v = x.at[0].set(p["v0"])
-    total, elastic = _contact_forces(p, flags, x, v)
+    total, elastic = _contact_forces(p, flags, x, v, peak=_initial_peak(p, flags, x))
     a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
     return x, v, a, total, elastic
+
+
+def _initial_peak(p, flags: KernelFlags, x):
+    """Largest overlaps before the impact (the preload's, at displacements x = 0), m, for
+    plastic contacts; None for the others."""
+    return _overlaps(p, flags, x) if flags.plastic else None
 
 
 def _initial(p, flags: KernelFlags, layout: _Layout, dt: float):
     """Packed state at the impact and the bodies' (x, v) there."""
     x, v, a, total, elastic = _start(p, flags)
+    peak = {"peak": _initial_peak(p, flags, x)} if flags.plastic else {}
     if flags.full_state:
         parts = {"x": x, "v": v, "a": a, "max": total, "dissipated": jnp.zeros_like(x[:1])}
         if flags.viscous:
             parts["viscous"] = _body_force(total - elastic)
     else:
         parts = {"x": x, "u": v + 0.5 * dt * a, "max": _overlaps(p, flags, x)}
-    return layout.pack(flags, parts), x, v
+    return layout.pack(flags, parts | peak), x, v
 
 
 def _final(p, flags: KernelFlags, layout: _Layout, dt: float, state):
-    """Displacements, velocities and dissipated energy at the end of the run."""
+    """Displacements, velocities and dissipated energy (damping and friction; plastic work
+    is `_energy`'s) at the end of the run."""
     s = layout.unpack(flags, state)
     if flags.full_state:
         return s["x"], s["v"], s["dissipated"][0]
-    total = _contact_forces(p, flags, s["x"], None)[0]
+    total = _contact_forces(p, flags, s["x"], None, peak=s.get("peak"))[0]
     a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
     return s["x"], s["u"] - 0.5 * dt * a, jnp.zeros_like(s["x"][0])
 
@@ -433,7 +499,7 @@ def _kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ...], blo
         # The recorded channels alone, from the new state (with viscous damping, at the
         # step's final velocity, as `solve` records them).
         s = layout.unpack(flags, state)
-        force = _contact_forces(p, flags, s["x"], s.get("v"), channels)[0]
+        force = _contact_forces(p, flags, s["x"], s.get("v"), channels, s.get("peak"))[0]
         return state, jax.lax.optimization_barrier(force)
 
     def iteration(count):
@@ -499,13 +565,14 @@ def _run(params, flags, grid, rows, block_steps, devices, fused=None):
             nan = jnp.full_like(p["inv_mass"], jnp.nan) + jnp.zeros_like(p["v0"])
             return traces, nan[:-1], jnp.stack([nan[0]] * 4)
         _, x0, v0 = _initial(p, flags, layout, grid.dt_s)
-        initial = sum(_energy(p, flags, x0, v0))
+        kinetic0, potential0, _ = _energy(p, flags, x0, v0, _initial_peak(p, flags, x0))
         x, v, dissipated = _final(p, flags, layout, grid.dt_s, state)
-        kinetic, potential = _energy(p, flags, x, v)
-        summary = jnp.stack([initial, kinetic, potential, dissipated])
-        maxima = layout.unpack(flags, state)["max"]
-        if not flags.full_state:
-            maxima = _forces_at(p, flags, maxima, None)[0]
+        s = layout.unpack(flags, state)
+        kinetic, potential, plastic = _energy(p, flags, x, v, s.get("peak"))
+        summary = jnp.stack([kinetic0 + potential0, kinetic, potential, dissipated + plastic])
+        maxima = s["max"]
+        if not flags.full_state:  # largest overlaps: the largest elastic forces are there
+            maxima = _forces_at(p, flags, maxima, None, peak=maxima)[0]
         return traces, maxima, summary
 
     if devices is None or len(devices) == 1:
@@ -638,17 +705,12 @@ def solve_batched(
       without `books`) and is built, else the JAX kernel; "jax" always runs the JAX kernel
       (the reference; they agree to round-off).
 
-    **Returns:** `BatchedTraces`. Setups with plastic contacts, dashpots or power-law
-    contacts run the general solver (same result, slower, books always kept): see
-    `fast_path_reason`.
+    **Returns:** `BatchedTraces`.
     """
     if kernel not in ("auto", "jax"):
         raise ValueError(f'kernel must be "auto" or "jax", got {kernel!r}.')
     batch = batch_size(setup)
     names, rows, user = _plan(setup, recording)
-    if fast_path_reason(setup) is not None:
-        time = grid.sample_interval_s * jnp.arange(1, grid.n_samples + 1, dtype=jnp.float64)
-        return _solve_general(setup, grid, recording, names, time)
     flags = kernel_flags(setup)._replace(ledger=bool(books))
     devices = None if devices is None or len(devices) <= 1 else tuple(devices)
     padded = max(batch, pad_to or 0)
@@ -673,13 +735,12 @@ def record_batched(
 
     **Arguments:**
 
-    - `setup`: a batched `ChainSetup` (leading axis B on every field); its structure (bead
-      count, sensors, end, contact law) must allow the fast path (`fast_path_reason` of a
-      concrete setup of the same structure is None).
+    - `setup`: a batched `ChainSetup` (leading axis B on every field).
     - `grid`, `recording`, `block_steps`: as for `solve_batched`.
     - `flags`: the physics compiled in, `kernel_flags(concrete_setup, switched_on=...)`:
       it must include every effect that is non-zero in any chain at any value the caller
-      will pass (damping, friction and preload that are off in `flags` are not simulated).
+      will pass (damping, dashpots, friction and preload that are off in `flags` are not
+      simulated), and the setup's contact law.
     - `kernel`: "auto" (default): with `flags.ledger` off, on the CPU, the fused C++ kernel
       with its forward-mode tangents (`native.run_full`: `jax.jvp`, `jax.jacfwd`,
       `jax.linearize` and `jax.vmap` work; a jacfwd's directions, the forces and a vmapped
@@ -691,27 +752,12 @@ def record_batched(
     """
     if kernel not in ("auto", "jax"):
         raise ValueError(f'kernel must be "auto" or "jax", got {kernel!r}.')
-    if setup.plasticity or setup.power_law:
-        raise ValueError("record_batched: the setup needs the general solver "
-                         "(elastic-plastic or power-law contacts); use solve.")
+    if flags.law != contact_law(setup):
+        raise ValueError(f"record_batched: flags.law is {flags.law!r} but the setup's contacts follow "
+                         f"{contact_law(setup)!r}; pass kernel_flags(setup, ...).")
     names, rows, user = _plan(setup, recording)
     batch = batch_size(setup)
     fused = native.kernel_for(flags, None) if kernel == "auto" and not flags.ledger else None
     if fused is not None:  # the full kernel carries the tangents, whatever the physics
         fused = fused._replace(physics="full")
     return _assemble(_params(setup, None), batch, flags, grid, rows, names, user, int(block_steps), None, fused)
-
-
-def _solve_general(setup, grid, recording, names, time) -> BatchedTraces:
-    traces = solve_stacked(setup, grid, recording)
-    return BatchedTraces(
-        time_s=time,
-        forces_n={name: traces.forces_n[name] for name in names},
-        max_force_n=traces.max_force_n,
-        initial_energy_j=traces.initial_energy_j,
-        kinetic_j=traces.kinetic_j[:, -1],
-        potential_j=traces.potential_j[:, -1],
-        dissipated_j=traces.dissipated_j[:, -1],
-        energy_error_j=traces.energy_error_j[:, -1],
-        channel_names=names,
-    )

@@ -50,38 +50,69 @@ def initial_max_overlap(model: ChainModel):
     return jnp.concatenate([contacts, wall[None]])
 
 
-def _elastic_parts(model: ChainModel, displacement_m, max_overlap_m, sensor_force_n=None):
-    """Elastic (rate-independent) force, stored energy and plastic dissipation of every
-    contact and of the wall (last), for Hertz, power-law or, if the model is plastic,
-    Thornton or Jackson-Green contacts."""
-    contacts, wall = overlaps(model, displacement_m, sensor_force_n)
-    overlap = jnp.concatenate([contacts, wall[None]])
-    kappa = jnp.concatenate([model.kappa, model.wall_kappa[None]])
+class ElasticLaw(NamedTuple):
+    """The rate-independent law of every contact, contacts then wall (arrays that broadcast
+    with the overlaps): Hertz where every field is None; power law with `exponent`; elastic-
+    plastic with `yield_force_n` (Thornton's law, or Jackson-Green's with `reduced_radius_m`,
+    `poisson` and `yield_stress_pa`; an infinite yield force or a zero stiffness keeps the
+    contact elastic: sensor springs, a free end)."""
+
+    exponent: jax.Array | None = None
+    reference_overlap_m: jax.Array | None = None
+    yield_force_n: jax.Array | None = None
+    reduced_radius_m: jax.Array | None = None
+    poisson: jax.Array | None = None
+    yield_stress_pa: jax.Array | None = None
+
+
+def elastic_law(model: ChainModel) -> ElasticLaw:
+    """The `ElasticLaw` of a chain model, (n_contacts + 1,) arrays (wall last)."""
     if model.contact_exponent is not None:
-        law = (kappa, model.contact_exponent, model.reference_overlap_m)
-        zero = jnp.zeros_like(overlap)
-        return overlap, contact.power_law_force(overlap, *law), contact.power_law_potential(overlap, *law), zero
+        return ElasticLaw(exponent=model.contact_exponent, reference_overlap_m=model.reference_overlap_m)
     if not model.plastic:
-        zero = jnp.zeros_like(overlap)
-        return overlap, contact.hertz_force(overlap, kappa), contact.hertz_potential(overlap, kappa), zero
-    yield_force = jnp.concatenate([model.yield_force_n, model.wall_yield_force_n[None]])
-    plastic = jnp.isfinite(yield_force)
-    if model.reduced_radius_m is None:
-        safe_yield = jnp.where(plastic, yield_force, 1.0)
-        force, energy, dissipated = contact.thornton_contact(overlap, max_overlap_m, kappa, safe_yield)
+        return ElasticLaw()
+    return ElasticLaw(yield_force_n=jnp.concatenate([model.yield_force_n, model.wall_yield_force_n[None]]),
+                      reduced_radius_m=model.reduced_radius_m, poisson=model.contact_poisson,
+                      yield_stress_pa=model.yield_stress_pa)
+
+
+def elastic_parts(law: ElasticLaw, overlap_m, max_overlap_m, kappa_n_m1p5):
+    """Elastic force (N), stored energy (J) and plastic dissipation so far (J) of contacts at
+    `overlap_m` whose largest overlap so far is `max_overlap_m` (m; read by plastic laws
+    only), elementwise: the one place where a contact's law is chosen, for the general
+    solver (`chain_forces`) and the batched kernel alike."""
+    kappa = kappa_n_m1p5
+    if law.exponent is not None:
+        shape = (kappa, law.exponent, law.reference_overlap_m)
+        return (contact.power_law_force(overlap_m, *shape), contact.power_law_potential(overlap_m, *shape),
+                jnp.zeros_like(overlap_m))
+    hertz = contact.hertz_force(overlap_m, kappa), contact.hertz_potential(overlap_m, kappa)
+    if law.yield_force_n is None:
+        return hertz[0], hertz[1], jnp.zeros_like(overlap_m)
+    plastic = jnp.isfinite(law.yield_force_n)
+    if law.reduced_radius_m is None:
+        safe_yield = jnp.where(plastic, law.yield_force_n, 1.0)
+        force, energy, dissipated = contact.thornton_contact(overlap_m, max_overlap_m, kappa, safe_yield)
     else:
         plastic = plastic & (kappa > 0.0)  # a free end has no wall contact
         safe_kappa = jnp.where(plastic, kappa, 1.0)
-        safe_stress = jnp.where(plastic, model.yield_stress_pa, 1.0)
+        safe_stress = jnp.where(plastic, law.yield_stress_pa, 1.0)
         force, energy, dissipated = contact.jackson_green_contact(
-            overlap, max_overlap_m, safe_kappa, model.reduced_radius_m, safe_stress, model.contact_poisson)
-    hertz = contact.hertz_force(overlap, kappa), contact.hertz_potential(overlap, kappa)
+            overlap_m, max_overlap_m, safe_kappa, law.reduced_radius_m, safe_stress, law.poisson)
     return (
-        overlap,
         jnp.where(plastic, force, hertz[0]),
         jnp.where(plastic, energy, hertz[1]),
         jnp.where(plastic, dissipated, 0.0),
     )
+
+
+def _elastic_parts(model: ChainModel, displacement_m, max_overlap_m, sensor_force_n=None):
+    """Overlap (m), elastic force (N), stored energy (J) and plastic dissipation (J) of every
+    contact and of the wall (last)."""
+    contacts, wall = overlaps(model, displacement_m, sensor_force_n)
+    overlap = jnp.concatenate([contacts, wall[None]])
+    kappa = jnp.concatenate([model.kappa, model.wall_kappa[None]])
+    return (overlap, *elastic_parts(elastic_law(model), overlap, max_overlap_m, kappa))
 
 
 def chain_forces(model: ChainModel, displacement_m, velocity_m_s, max_overlap_m=None, sensor_force_n=None,

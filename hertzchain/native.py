@@ -239,10 +239,10 @@ class FusedKernel(NamedTuple):
 
 def kernel_for(flags, devices) -> FusedKernel | None:
     """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
-    devices, or None (the JAX kernel: books with damping or friction, devices of another
-    kind, no compiler)."""
+    devices, or None (the JAX kernel: books with damping or friction, contacts other than
+    Hertz's, dashpots, devices of another kind, no compiler)."""
     platforms = {d.platform for d in devices} if devices else {jax.default_backend()}
-    if flags.full_state and flags.ledger:
+    if (flags.full_state and flags.ledger) or flags.law != "hertz" or flags.dashpot:
         return None
     physics = "full" if flags.full_state else "conservative"
     if platforms == {"cpu"} and available():
