@@ -99,7 +99,8 @@ void Load(Param p, int64_t rows, int64_t lo, double* block, int64_t valid = kLan
 // XLA's intra-op thread pool take them one at a time (the first free thread the next block,
 // as a `prange` does), each block's numbers the same whichever thread runs it. All the runs
 // of the process together use at most as many threads as it may use CPUs: a batch split
-// over host devices (a thread per device already) gets no helpers while both run.
+// over host devices (a thread per device already) gets no helpers while both run, and a
+// helper leaves as soon as another run starts.
 
 struct Block {
   int64_t lo, lanes;
@@ -141,10 +142,17 @@ struct BlockQueue {
   std::condition_variable all_done;
 };
 
-// Takes blocks until none is left; `run(b)` runs block b.
+// Takes blocks until none is left; `run(b)` runs block b. A helper (`limit` > 0) also stops
+// before its next block when more threads than `limit` run blocks: another run of the
+// process (another host device's) has started since, and the two must not share a CPU (a
+// run waits for its last block, and a helper sharing a CPU finishes it late). Helpers that
+// stayed put a batch split over two host devices at 0.73x the Numba baseline's speed
+// (damped), 0.96x once they leave (`benchmarks/README.md`).
 template <class Run>
-void TakeBlocks(BlockQueue& queue, const Run& run) {
-  for (int64_t b = queue.next.fetch_add(1); b < queue.n_blocks; b = queue.next.fetch_add(1)) {
+void TakeBlocks(BlockQueue& queue, const Run& run, int limit = 0) {
+  while (limit == 0 || active_threads.load() <= limit) {
+    const int64_t b = queue.next.fetch_add(1);
+    if (b >= queue.n_blocks) return;
     run(b);
     std::lock_guard<std::mutex> lock(queue.mutex);
     if (++queue.finished == queue.n_blocks) queue.all_done.notify_all();
@@ -164,7 +172,7 @@ void RunBlocks(ffi::ThreadPool& pool, const std::vector<Block>& blocks, const Ru
         active_threads.fetch_sub(1);
         return;
       }
-      TakeBlocks(*queue, run);
+      TakeBlocks(*queue, run, limit);
       active_threads.fetch_sub(1);
     });
   TakeBlocks(*queue, run);
