@@ -331,7 +331,7 @@ def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chain
       warmup (NumPyro's windowed schedule). Off by default: where the Laplace approximation
       holds, the whitening already makes the identity the right metric; an adapted one
       helps only where it does not hold, and needs several hundred warmup draws.
-    - `progress`: NumPyro's progress bar and the fit's progress lines.
+    - `progress`: progress lines of the sampler (the first device's chains) and of the fit.
     - `fit_result`: a MAP fit already made with the same problem (skips step 1).
 
     **Returns:** `PosteriorResult`. Warnings (`PosteriorWarning`) name failed diagnostics
@@ -438,28 +438,53 @@ def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chain
 
 def _run_chains(starts, key, *, potential, warmup, draws, target_accept, max_tree_depth, adapt_metric,
                 progress) -> dict:
-    """NUTS (NumPyro) from `starts` (chains, p), the chains as one vectorised batch: the
+    """NUTS (NumPyro's kernel) from `starts` (chains, p), the chains as one vectorised batch: the
     whitened draws (chains, draws, p), sample statistics, step sizes, the warmup's tree
-    sizes and when the warmup and the sampling ended (`time.perf_counter`)."""
-    from numpyro.infer import MCMC, NUTS
+    sizes and when the warmup and the sampling ended (`time.perf_counter`).
+
+    The iterations are driven here, one compiled NUTS iteration called `warmup + draws` times,
+    rather than by `numpyro.infer.MCMC`, which compiles its loop once for the warmup and
+    again for the draws (a compilation of the whole iteration, gradient included: seconds
+    per device). It is the same kernel (`NUTS.init` with the chains' keys split as MCMC
+    splits them, then `NUTS.sample` on the state, whose iteration count switches the
+    adaptation off after the warmup), so the draws are MCMC's draw for draw
+    (`tests/test_posterior.py`).
+    """
+    from numpyro.infer import NUTS
+
+    from hertzchain.progress import Progress
 
     chains = starts.shape[0]
     kernel = NUTS(potential_fn=potential, target_accept_prob=target_accept,
                   max_tree_depth=max_tree_depth, dense_mass=False, adapt_mass_matrix=adapt_metric,
                   find_heuristic_step_size=True)
-    mcmc = MCMC(kernel, num_warmup=warmup, num_samples=draws, num_chains=chains,
-                chain_method="vectorized", progress_bar=progress)
-    mcmc.warmup(key, init_params=starts if chains > 1 else starts[0], extra_fields=("num_steps",),
-                collect_warmup=True)
-    warmup_steps = int(np.sum(mcmc.get_extra_fields(group_by_chain=True)["num_steps"]))
-    warmed = time.perf_counter()
-    mcmc.run(mcmc.post_warmup_state.rng_key,
-             extra_fields=("diverging", "num_steps", "accept_prob", "potential_energy"))
-    u = np.asarray(mcmc.get_samples(group_by_chain=True)).reshape(chains, draws, -1)
-    stats = {k: np.asarray(v).reshape(chains, draws)
-             for k, v in mcmc.get_extra_fields(group_by_chain=True).items()}
-    step_size = np.asarray(mcmc.last_state.adapt_state.step_size).reshape(-1)
-    return {"u": u, "stats": stats, "step_size": step_size, "warmup_steps": warmup_steps,
+    keys = jax.random.split(key, chains) if chains > 1 else key
+    state = kernel.init(keys, warmup, starts if chains > 1 else starts[0], model_args=(), model_kwargs={})
+    iterate = jax.jit(lambda s: kernel.sample(s, (), {}))
+    report = Progress(warmup + draws, f"NUTS, {chains} chain(s), {warmup} warmup + {draws} draws") \
+        if progress else None
+    fields = ("z", "num_steps", "diverging", "accept_prob", "potential_energy")
+    warmup_steps, records = [], []
+    warmed = None
+    for i in range(warmup + draws):
+        state = iterate(state)
+        if i < warmup:
+            warmup_steps.append(state.num_steps)
+        else:
+            records.append(tuple(getattr(state, name) for name in fields))
+        if i == warmup - 1:
+            jax.block_until_ready(state)
+            warmed = time.perf_counter()
+        if report is not None:
+            report.advance()
+    def by_chain(column):  # one field's values of every draw: (chains, draws, ...)
+        values = np.asarray(jnp.stack(column))
+        return np.swapaxes(values if chains > 1 else values[:, None], 0, 1)
+
+    u, *columns = (by_chain(column) for column in zip(*records))
+    stats = {name: column.reshape(chains, draws) for name, column in zip(fields[1:], columns)}
+    return {"u": u.reshape(chains, draws, -1), "stats": stats, "step_size": np.asarray(state.adapt_state.step_size).reshape(-1),
+            "warmup_steps": int(np.sum(np.asarray(jnp.stack(warmup_steps)))),
             "warmed": warmed, "ended": time.perf_counter()}
 
 

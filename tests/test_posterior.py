@@ -357,3 +357,42 @@ def test_posterior_intervals_are_calibrated_over_data_drawn_from_the_prior():
         assert np.sum((counts - expected) ** 2 / expected) < 16.27, counts
         sigma = math.sqrt(n_sets * 0.9 * 0.1)
         assert abs(covered[i] - 0.9 * n_sets) < 3 * sigma, covered
+
+
+@pytest.mark.parametrize("chains", [1, 3])
+def test_chains_driven_here_are_numpyros_mcmc_draw_for_draw(chains):
+    """`_run_chains` calls NumPyro's NUTS kernel itself (one compiled iteration for warmup
+    and draws); its draws, tree sizes, statistics and step sizes must be those of
+    `numpyro.infer.MCMC` (warmup, then run from the warmed state) to the bit, on a
+    correlated, skewed target."""
+    from numpyro.infer import MCMC, NUTS
+
+    from fitting.posterior import _run_chains
+
+    def potential(u):
+        x = u[0] + 0.3 * u[1] ** 2
+        return 0.5 * (x**2 + (u[1] - 0.5 * u[2]) ** 2 / 0.3 + u[2] ** 2) + 0.1 * jnp.sum(jnp.abs(u) ** 3)
+
+    starts = 0.5 * jax.random.normal(jax.random.PRNGKey(1), (chains, 3))
+    key = jax.random.PRNGKey(7)
+    settings = dict(target_accept=0.8, max_tree_depth=6, adapt_metric=chains == 1)
+    ours = _run_chains(starts, key, potential=potential, warmup=30, draws=40, progress=False, **settings)
+
+    kernel = NUTS(potential_fn=potential, target_accept_prob=0.8, max_tree_depth=6, dense_mass=False,
+                  adapt_mass_matrix=chains == 1, find_heuristic_step_size=True)
+    mcmc = MCMC(kernel, num_warmup=30, num_samples=40, num_chains=chains, chain_method="vectorized",
+                progress_bar=False)
+    mcmc.warmup(key, init_params=starts if chains > 1 else starts[0], extra_fields=("num_steps",),
+                collect_warmup=True)
+    warmup_steps = int(np.sum(mcmc.get_extra_fields(group_by_chain=True)["num_steps"]))
+    mcmc.run(mcmc.post_warmup_state.rng_key,
+             extra_fields=("diverging", "num_steps", "accept_prob", "potential_energy"))
+    theirs = np.asarray(mcmc.get_samples(group_by_chain=True)).reshape(chains, 40, -1)
+    np.testing.assert_array_equal(ours["u"], theirs)
+    for name, values in mcmc.get_extra_fields(group_by_chain=True).items():
+        np.testing.assert_array_equal(ours["stats"][name], np.asarray(values).reshape(chains, 40))
+    assert ours["warmup_steps"] == warmup_steps
+    np.testing.assert_array_equal(ours["step_size"],
+                                  np.asarray(mcmc.last_state.adapt_state.step_size).reshape(-1))
+    assert ours["warmed"] < ours["ended"]
+    assert len(np.unique(theirs[0, :, 0])) > 5  # the chains moved
