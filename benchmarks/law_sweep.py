@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -34,19 +33,6 @@ LAWS = {
     "power_law_1.7": {"contact_exponent": 1.7},
     "dashpot_and_friction": {"dashpot_n_s_m": 20.0, "mu": 0.1},
 }
-
-
-def _timed(run, repeats: int = 3) -> tuple[object, float, float]:
-    """(result, cold seconds, median warm seconds) of `run()`."""
-    began = time.perf_counter()
-    out = run()
-    cold = time.perf_counter() - began
-    warm = []
-    for _ in range(repeats):
-        began = time.perf_counter()
-        run()
-        warm.append(time.perf_counter() - began)
-    return out, cold, float(np.median(warm))
 
 
 def benchmark_law(name: str, speeds: int) -> dict:
@@ -67,8 +53,10 @@ def benchmark_law(name: str, speeds: int) -> dict:
     def general():
         return jax.block_until_ready(solve_stacked(setup, grid, recording))
 
-    fast, fast_cold, fast_warm = _timed(batched)
-    slow, slow_cold, slow_warm = _timed(general)
+    from run import _time  # (first call, median, min, max of the repeats, result)
+
+    fast_cold, fast_warm, _, _, fast = _time(batched, 3)
+    slow_cold, slow_warm, _, _, slow = _time(general, 3)
     scale = max(float(np.max(np.abs(slow.forces_n[c]))) for c in fast.channel_names)
     force_diff = max(float(np.max(np.abs(np.asarray(fast.forces_n[c]) - np.asarray(slow.forces_n[c]))))
                      for c in fast.channel_names)
