@@ -83,15 +83,26 @@ def test_chosen_columns_equal_the_full_jacobian(small_problem):
     assert np.all(np.isnan(some[:, others]))
 
 
-def test_batched_kernel_and_solve_give_the_same_model_and_jacobian():
+# Contact laws of the fits' setups (fixed, not fitted): Hertz (the fused kernel), and laws
+# only the batched JAX kernel has. The yield stresses make the 0.5 m/s shot yield.
+FIT_LAWS = {
+    "hertz": {},
+    "jackson_green": {"plasticity": True, "plastic_law": "jackson_green", "bead_yield_stress_pa": 0.6e9},
+    "power_law_and_dashpot": {"contact_exponent": 1.6, "dashpot_n_s_m": 3.0},
+}
+
+
+@pytest.mark.parametrize("law", list(FIT_LAWS))
+def test_batched_kernel_and_solve_give_the_same_model_and_jacobian(law):
     """Two files (their own striker velocities and offsets): the fit's fast path
     (`record_batched`, the experiments on the SIMD axis, one tangent per local parameter
     for all experiments at once) against `solve` under `vmap` with per-experiment
-    Jacobians, the general path a custom forward model takes."""
+    Jacobians, the general path a custom forward model takes; for Hertz contacts and for
+    elastic-plastic, power-law and dashpot contacts."""
     from fitting.model import ForwardModel
     from hertzchain.integrate import solve
 
-    setups = paper_setups([0.2, 0.5], eta_s=TRUTH["eta"], mu=TRUTH["mu"], mu_star=TRUTH["mu_star"])
+    setups = paper_setups([0.2, 0.5], eta_s=TRUTH["eta"], mu=TRUTH["mu"], mu_star=TRUTH["mu_star"], **FIT_LAWS[law])
     files = synthetic_traces(setups, contacts=(5,), t_end_s=1.4e-3, noise_std_n=0.2, seed=4)
     params = ("eta", "mu", "C", "striker_velocity", "time_offset")
     fast = fitting.make_problem(files, params)
