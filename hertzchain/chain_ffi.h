@@ -27,15 +27,13 @@ auto ChainArgs(Binding&& binding) {
       .template Arg<F64Buffer>();  // external
 }
 
-// The full kernels' state and parameters: `ChainArgs`, then eta, friction (mu g) and the
-// linear dashpot (N s/m), each (1, 1 or B). The tangent kernels take them twice: the values,
-// then their tangents in the same order.
+// The full kernels' state and parameters: `ChainArgs`, then eta and friction (mu g). The
+// tangent kernels take them twice: the values, then their tangents in the same order.
 template <class Binding>
 auto FullArgs(Binding&& binding) {
   return ChainArgs(std::forward<Binding>(binding))
       .template Arg<F64Buffer>()   // eta
-      .template Arg<F64Buffer>()   // friction (mu g)
-      .template Arg<F64Buffer>();  // dashpot
+      .template Arg<F64Buffer>();  // friction (mu g)
 }
 
 // The conservative kernel's attributes

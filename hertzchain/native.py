@@ -9,8 +9,8 @@ physics it runs, so that the conservative case pays nothing for the rest:
 
 - the conservative one (`run`): Hertz contacts, sensor springs, preload, walls and free
   ends, with or without the books (running maxima, energies);
-- the full one (`run_full`): the same plus Kuwabara-Kono damping and a linear dashpot (the
-  total force clipped at 0) and track friction, the recorded forces only, and forward-mode tangents carried
+- the full one (`run_full`): the same plus Kuwabara-Kono damping (the total force clipped
+  at 0) and track friction, the recorded forces only, and forward-mode tangents carried
   through the same loop (`jax.custom_jvp`: `jax.jvp`, `jax.jacfwd`, `jax.linearize`; the
   forces and all the directions of a Jacobian in one run).
 
@@ -240,9 +240,9 @@ class FusedKernel(NamedTuple):
 def kernel_for(flags, devices) -> FusedKernel | None:
     """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
     devices, or None (the JAX kernel: books with damping or friction, contacts other than
-    Hertz's, devices of another kind, no compiler)."""
+    Hertz's, dashpots, devices of another kind, no compiler)."""
     platforms = {d.platform for d in devices} if devices else {jax.default_backend()}
-    if (flags.full_state and flags.ledger) or flags.law != "hertz":
+    if (flags.full_state and flags.ledger) or flags.law != "hertz" or flags.dashpot:
         return None
     physics = "full" if flags.full_state else "conservative"
     if platforms == {"cpu"} and available():
@@ -454,7 +454,7 @@ def _fold_directions(size: int, batched, tangents):
 
 def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples: int,
              channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
-             dashpot: bool = False, backend: str = "host"):
+             backend: str = "host"):
     """The full step (`batched._step` with velocities and accelerations apart: damping,
     friction) from displacements `x`, velocities `v` and accelerations `a` (bodies + 1, B)
     at the impact, through `n_samples` samples of `steps_per_sample` steps of `dt_s`
@@ -479,8 +479,6 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
         p["external"] if preload else zeros(p["external"]),
         jax.numpy.reshape(p["eta"], (1, width(p["eta"]))),
         jax.numpy.reshape(p["friction"], (1, width(p["friction"]))),
-        # the linear dashpot (N s/m, `contact.contact_force`), zeros without one
-        jax.numpy.reshape(p["dashpot"], (1, width(p["dashpot"]))) if dashpot else jax.numpy.zeros((1, 1)),
     )
     config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
               bool(viscous), bool(friction), bool(preload or springs), backend)
@@ -494,7 +492,7 @@ def _full_call(config):
     attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample),
                  viscous=np.int64(viscous), friction=np.int64(friction), extras=np.int64(extras))
     index = np.asarray(channels, dtype=np.int64)
-    n_args = 9  # the state and the eight parameter arrays
+    n_args = 8  # the state and the seven parameter arrays
 
     def ffi(args):
         return _Ffi(backend, args[1].shape[-2], n_samples)
