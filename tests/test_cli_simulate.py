@@ -1,3 +1,4 @@
+import contextlib
 import json
 
 import numpy as np
@@ -27,9 +28,40 @@ def test_simulate_writes_traces_summary_and_plot(tmp_path, capsys):
     assert "peak wall" in capsys.readouterr().out
 
 
+def test_simulate_contact_law_options(tmp_path):
+    """--plasticity, --contact-exponent and --dashpot reach the chain: a fast striker on
+    beads of low yield stress (the elastic model warns) dissipates plastically and loads the
+    wall less; a stiffer
+    exponent and a dashpot change the wall's peak; the energy books still balance."""
+    from hertzchain.integrate import YieldWarning
+
+    def run(name, *options):
+        out = tmp_path / name
+        # elastic contacts past the yield force: the model says it does not describe them
+        elastic = "--plasticity" not in options
+        with pytest.warns(YieldWarning, match="above its yield force") if elastic else contextlib.nullcontext():
+            assert main(["simulate", "--n-beads", "8", "--striker-velocity", "1", "--bead-yield-stress", "0.4GPa",
+                         "--t-end", "0.6ms", "--out", str(out), *options]) == 0
+        return json.loads((out / "summary.json").read_text())
+
+    hertz = run("hertz")
+    plastic = run("plastic", "--plasticity", "jackson_green")
+    assert plastic["setup"]["plasticity"] and plastic["setup"]["plastic_law"] == "jackson_green"
+    assert plastic["energy_balance"]["dissipated_plastic_j"] > 0.05 * plastic["energy_balance"]["initial_energy_j"]
+    assert plastic["peak_force_n"]["wall"] < 0.9 * hertz["peak_force_n"]["wall"]
+    other = run("other", "--contact-exponent", "1.7", "--dashpot", "5Ns/m")
+    assert other["setup"]["contact_exponent"] == pytest.approx(1.7)
+    assert other["setup"]["dashpot_n_s_m"] == pytest.approx(5.0)
+    assert other["energy_balance"]["dissipated_viscous_j"] > 0
+    assert other["peak_force_n"]["wall"] != pytest.approx(hertz["peak_force_n"]["wall"], rel=1e-3)
+    for summary in (plastic, other):
+        assert summary["energy_balance"]["max_relative_error"] < 1e-4
+
+
 @pytest.mark.parametrize(
     "arguments, message",
     [
+        (["--plasticity", "jackson_green", "--contact-exponent", "1.7"], "cannot be combined"),
         (["--bead-radius", "13"], "bead_radius_m = 13.0 is outside the plausible range"),
         (["--striker-velocity", "-1"], "striker_velocity_m_s must be positive"),
         (["--eta", "2 parsecs"], "--eta: unit 'parsecs'"),

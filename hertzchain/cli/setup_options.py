@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..chain import ChainSetup
+from ..chain import PLASTIC_LAWS, ChainSetup
 from ..materials import material
 from ..units import parse_quantity
 
@@ -21,6 +21,9 @@ _QUANTITIES = (
     ("--wall-youngs", "wall_youngs_pa", "Pa", "wall Young's modulus (Pa; inf = rigid) [bead's]"),
     ("--wall-poisson", "wall_poisson", "", "wall Poisson ratio [bead's]"),
     ("--eta", "eta_s", "s", "viscoelastic time eta (s; e.g. 2us) [0]"),
+    ("--dashpot", "dashpot_n_s_m", "Ns/m", "linear dashpot of every contact in compression (N s/m) [0]"),
+    ("--contact-exponent", "contact_exponent", "",
+     "exponent n of every contact's law F = kappa d_r^1.5 (d/d_r)^n, equal to Hertz's at d_r = 10 um [1.5: Hertz]"),
     ("--mu", "mu", "", "track friction coefficient [0]"),
     ("--mu-star", "mu_star", "", "thwarted-rotation friction, kappa* = (1+mu*) kappa [0]"),
     ("--precompression", "precompression_n", "N", "static preload (N) [0]"),
@@ -47,6 +50,9 @@ def add_setup_arguments(parser: argparse.ArgumentParser) -> None:
     )
     for option, _, _, help_text in _QUANTITIES:
         group.add_argument(option, help=help_text)
+    group.add_argument("--plasticity", choices=PLASTIC_LAWS,
+                       help="elastic-plastic contacts beyond the yield force of --bead-yield-stress, by "
+                            "Thornton's law or Jackson & Green's (measured contacts) [off: Hertz]")
 
 
 def setup_from_args(args: argparse.Namespace) -> ChainSetup:
@@ -62,6 +68,8 @@ def setup_from_args(args: argparse.Namespace) -> ChainSetup:
         wall = material(args.wall_material)
         values["wall_youngs_pa"] = wall.youngs_pa
         values.setdefault("wall_poisson", wall.poisson)
+    if args.plasticity:
+        values.update(plasticity=True, plastic_law=args.plasticity)
     return ChainSetup(args.n_beads, end=args.end, sensor_beads=args.sensor_beads, **values)
 
 
