@@ -50,7 +50,7 @@ import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
 from . import contact, forces, native
-from .chain import ChainSetup, build_model, internal_contact_index, internal_sensor_index
+from .chain import PLASTIC_LAWS, ChainSetup, build_model, internal_contact_index, internal_sensor_index
 from .integrate import Recording, _channel_names, _layout, stack_setups  # noqa: F401
 from .timegrid import TimeGrid
 
@@ -88,9 +88,9 @@ class BatchedTraces(eqx.Module):
     channel_names: tuple[str, ...] = eqx.field(static=True, default=())
 
 
-# The rate-independent contact laws of the kernels (`KernelFlags.law`): `contact.hertz_force`,
-# `contact.power_law_force`, `contact.thornton_contact`, `contact.jackson_green_contact`.
-CONTACT_LAWS = ("hertz", "power_law", "thornton", "jackson_green")
+# `forces.ElasticLaw` fields with a value per contact (rows of the kernel's contact arrays);
+# the others have one per chain.
+_PER_CONTACT = ("yield_force_n", "reduced_radius_m", "poisson")
 
 
 class KernelFlags(NamedTuple):
@@ -103,8 +103,8 @@ class KernelFlags(NamedTuple):
     # The running maxima of every contact and the energy books (reductions over the chain at
     # every step); callers that read the recorded forces only (fits) switch them off.
     ledger: bool = True
-    # The contacts' elastic law (`CONTACT_LAWS`); plastic laws carry each contact's largest
-    # overlap so far in the state.
+    # The contacts' elastic law (`contact_law`: "hertz", "power_law" or a `PLASTIC_LAWS` name);
+    # plastic laws carry each contact's largest overlap so far in the state.
     law: str = "hertz"
     # A linear dashpot on every contact's overlap rate (with `viscous`, which computes the rates).
     dashpot: bool = False
@@ -118,7 +118,7 @@ class KernelFlags(NamedTuple):
     @property
     def plastic(self) -> bool:
         """Whether the contact law depends on the largest overlap so far."""
-        return self.law in ("thornton", "jackson_green")
+        return self.law in PLASTIC_LAWS
 
 
 
@@ -141,7 +141,7 @@ def build_model_contacts(setup: ChainSetup) -> range:
 
 
 def contact_law(setup: ChainSetup) -> str:
-    """The `CONTACT_LAWS` entry of a setup's contacts (its static fields only)."""
+    """The law of a setup's contacts, `KernelFlags.law` (its static fields only)."""
     if setup.plasticity:
         return setup.plastic_law
     return "power_law" if setup.power_law else "hertz"
@@ -221,12 +221,8 @@ def _chain_params(setup: ChainSetup) -> dict:
     model = build_model(setup) if setup.sensor_beads or law != "hertz" else _vector_model(setup)
     external = jnp.zeros_like(model.mass_kg).at[1].add(model.first_bead_force_n)
     external = external.at[-1].add(model.last_body_force_n)
-    laws = {}
-    if law != "hertz":
-        shape = forces.elastic_law(model)
-        names = {"exponent": "exponent", "reference_overlap_m": "reference_overlap", "yield_force_n": "yield_force",
-                 "reduced_radius_m": "reduced_radius", "poisson": "poisson", "yield_stress_pa": "yield_stress"}
-        laws = {names[field]: value for field, value in shape._asdict().items() if value is not None}
+    shape = forces.elastic_law(model)._asdict() if law != "hertz" else {}
+    laws = {field: value for field, value in shape.items() if value is not None}  # `_law` reads them
     return laws | {
         "dashpot": model.dashpot_n_s_m,
         "mass": model.mass_kg,
@@ -250,15 +246,12 @@ def _chain_params(setup: ChainSetup) -> dict:
 
 
 def _law(p, flags: KernelFlags, rows=lambda a: a) -> forces.ElasticLaw:
-    """The contacts' `forces.ElasticLaw` from the kernel arrays (of the rows `rows` picks)."""
-    if flags.law == "power_law":
-        return forces.ElasticLaw(exponent=p["exponent"], reference_overlap_m=p["reference_overlap"])
-    if flags.law == "thornton":
-        return forces.ElasticLaw(yield_force_n=rows(p["yield_force"]))
-    if flags.law == "jackson_green":
-        return forces.ElasticLaw(yield_force_n=rows(p["yield_force"]), reduced_radius_m=rows(p["reduced_radius"]),
-                                 poisson=rows(p["poisson"]), yield_stress_pa=p["yield_stress"])
-    return forces.ElasticLaw()
+    """The contacts' `forces.ElasticLaw` from the kernel arrays (of the rows `rows` picks):
+    the fields `_chain_params` stored under their own names (none for Hertz contacts)."""
+    if flags.law == "hertz":
+        return forces.ElasticLaw()
+    return forces.ElasticLaw(**{field: rows(p[field]) if field in _PER_CONTACT else p[field]
+                                for field in forces.ElasticLaw._fields if field in p})
 
 
 def _contact_forces(p, flags: KernelFlags, x, v, contacts=None, peak=None):
