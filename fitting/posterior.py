@@ -459,7 +459,7 @@ def _run_chains(starts, key, *, potential, warmup, draws, target_accept, max_tre
                   max_tree_depth=max_tree_depth, dense_mass=False, adapt_mass_matrix=adapt_metric,
                   find_heuristic_step_size=True)
     keys = jax.random.split(key, chains) if chains > 1 else key
-    state = kernel.init(keys, warmup, starts if chains > 1 else starts[0], model_args=(), model_kwargs={})
+    state = _start(kernel, keys, warmup, starts if chains > 1 else starts[0])
     iterate = jax.jit(lambda s: kernel.sample(s, (), {}))
     report = Progress(warmup + draws, f"NUTS, {chains} chain(s), {warmup} warmup + {draws} draws") \
         if progress else None
@@ -486,6 +486,17 @@ def _run_chains(starts, key, *, potential, warmup, draws, target_accept, max_tre
     return {"u": u.reshape(chains, draws, -1), "stats": stats, "step_size": np.asarray(state.adapt_state.step_size).reshape(-1),
             "warmup_steps": int(np.sum(np.asarray(jnp.stack(warmup_steps)))),
             "warmed": warmed, "ended": time.perf_counter()}
+
+
+def _start(kernel, keys, warmup: int, starts):
+    """`kernel.init` (NumPyro's NUTS: the potential and its gradient at `starts`, the
+    heuristic step size), compiled. Run eagerly, `init` dispatches and compiles each
+    operation of the potential's gradient on its own (11-13 s a device for the benchmark's
+    posterior); compiled, the start's gradient is evaluated as every later step's is (the
+    compiled iteration's), where the eager one differed from it by round-off, 4e-12 of itself
+    (`tests/test_posterior.py::test_compiled_sampler_start_equals_numpyros_eager_start`)."""
+    return jax.jit(lambda keys_, starts_: kernel.init(keys_, warmup, starts_, model_args=(), model_kwargs={}))(
+        keys, starts)
 
 
 def _on_device(device, function, *args, **kwargs):

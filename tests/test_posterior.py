@@ -181,6 +181,33 @@ def test_sampler_gradient_on_the_cpp_kernel_equals_reverse_mode_through_the_jax_
         np.testing.assert_allclose(np.asarray(gradients[k]), np.asarray(gradient), rtol=1e-8)
 
 
+def test_compiled_sampler_start_equals_numpyros_eager_start(noise_only):
+    """`_run_chains` compiles NumPyro's `NUTS.init` (`_start`); on a real potential (C++ kernel's
+    tangents, interpolation, gains, transforms) its starting state must be the eager one's
+    to 1e-9 relative: potential, gradient, energy and the heuristic step size. (Bit for bit
+    is not promised: XLA fuses the compiled evaluation, as it does in every later step.)"""
+    from numpyro.infer import NUTS
+
+    from fitting.posterior import _start
+
+    _, potential, _ = _potentials(noise_only.fit)
+    starts = jnp.array([[1.0, -0.7], [-0.4, 0.3]])
+    keys = jax.random.split(jax.random.PRNGKey(3), 2)
+
+    def kernel():
+        return NUTS(potential_fn=potential, target_accept_prob=0.8, max_tree_depth=8, dense_mass=False,
+                    adapt_mass_matrix=False, find_heuristic_step_size=True)
+
+    eager = kernel().init(keys, 20, starts, model_args=(), model_kwargs={})
+    compiled = _start(kernel(), keys, 20, starts)
+    for name in ("potential_energy", "z_grad", "energy"):
+        np.testing.assert_allclose(np.asarray(getattr(compiled, name)), np.asarray(getattr(eager, name)),
+                                   rtol=1e-9, err_msg=name)
+    np.testing.assert_allclose(np.asarray(compiled.adapt_state.step_size),
+                               np.asarray(eager.adapt_state.step_size), rtol=1e-9)
+    np.testing.assert_array_equal(np.asarray(compiled.z), np.asarray(starts))
+
+
 def test_laplace_comparison_flags_a_skewed_marginal():
     summary = {"a": {"sd": 1.0, "q05": -1.645, "q50": 0.0, "q95": 1.645},
                "b": {"sd": 1.0, "q05": -1.0, "q50": 0.0, "q95": 2.3}}
@@ -361,10 +388,12 @@ def test_posterior_intervals_are_calibrated_over_data_drawn_from_the_prior():
 
 @pytest.mark.parametrize("chains", [1, 3])
 def test_chains_driven_here_are_numpyros_mcmc_draw_for_draw(chains):
-    """`_run_chains` calls NumPyro's NUTS kernel itself (one compiled iteration for warmup
-    and draws); its draws, tree sizes, statistics and step sizes must be those of
-    `numpyro.infer.MCMC` (warmup, then run from the warmed state) to the bit, on a
-    correlated, skewed target."""
+    """`_run_chains` calls NumPyro's NUTS kernel itself (a compiled `init`, one compiled
+    iteration for warmup and draws); its draws, tree sizes, statistics and step sizes must
+    be those of `numpyro.infer.MCMC` (eager `init`, warmup, then run from the warmed state)
+    to the bit, on a correlated, skewed target (whose compiled and eager evaluations round
+    alike; where they do not, the start agrees to 1e-9:
+    `test_compiled_sampler_start_equals_numpyros_eager_start`)."""
     from numpyro.infer import MCMC, NUTS
 
     from fitting.posterior import _run_chains
