@@ -35,6 +35,7 @@ is second order in the step).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import Callable
 
@@ -537,8 +538,13 @@ class Problem:
 
     def predictions(self, x) -> list[dict]:
         """Model of every fitted channel on the data's time axis (numpy), per experiment."""
-        model = np.asarray(jax.jit(self.model_vector)(x))
+        model = np.asarray(self._compiled_model_vector(x))
         return [{name: model[part] for name, part in parts.items()} for parts in self.residual_slices()]
+
+    @functools.cached_property
+    def _compiled_model_vector(self):
+        # one compilation per Problem (a new `jax.jit` wrapper per call would compile again)
+        return jax.jit(self.model_vector)
 
     def residual_slices(self) -> list[dict]:
         """Per experiment, channel -> slice of the residual vector."""
