@@ -28,7 +28,7 @@ It covers everything `ChainSetup` describes: Hertz, power-law and elastic-plasti
 embedded sensors, rigid/elastic walls and free ends, preload, Kuwabara-Kono damping, linear
 dashpots and track friction; the laws are `forces.elastic_parts` and `contact`'s, the
 general solver's. On the CPU, `solve_batched` runs the same step in a fused C++ kernel
-instead where one covers the physics (`hertzchain.native`, Hertz contacts without dashpots:
+instead where one covers the physics (`hertzchain.native`, Hertz contacts:
 blocks of chains kept in cache through all their steps; agrees with this module's kernel to
 round-off): the conservative kernel (with or without the books), or the full one for damped
 and frictional chains without the books; `kernel="jax"` keeps this one. `record_batched`
@@ -534,7 +534,7 @@ def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ..
         traces = native.run_full(
             p, x, v, a, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
             channels=channels, viscous=flags.viscous, friction=flags.friction, preload=flags.preload,
-            springs=flags.springs, backend=which.backend,
+            springs=flags.springs, dashpot=flags.dashpot, backend=which.backend,
         )
         return traces, None, layout
     state, _, _ = _initial(p, flags, layout, grid.dt_s)

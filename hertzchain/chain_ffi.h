@@ -27,13 +27,15 @@ auto ChainArgs(Binding&& binding) {
       .template Arg<F64Buffer>();  // external
 }
 
-// The full kernels' state and parameters: `ChainArgs`, then eta and friction (mu g). The
-// tangent kernels take them twice: the values, then their tangents in the same order.
+// The full kernels' state and parameters: `ChainArgs`, then eta, friction (mu g) and the
+// linear dashpot (N s/m), each (1, 1 or B). The tangent kernels take them twice: the values,
+// then their tangents in the same order.
 template <class Binding>
 auto FullArgs(Binding&& binding) {
   return ChainArgs(std::forward<Binding>(binding))
       .template Arg<F64Buffer>()   // eta
-      .template Arg<F64Buffer>();  // friction (mu g)
+      .template Arg<F64Buffer>()   // friction (mu g)
+      .template Arg<F64Buffer>();  // dashpot
 }
 
 // The conservative kernel's attributes
@@ -47,7 +49,8 @@ auto ForwardAttrs(Binding&& binding) {
       .template Attr<int64_t>("books");
 }
 
-// The full kernels' attributes (extras: preload or springs)
+// The full kernels' attributes (extras: preload or springs; dashpot: compile the linear
+// dashpot's terms in, with viscous only)
 template <class Binding>
 auto FullAttrs(Binding&& binding) {
   return std::forward<Binding>(binding)
@@ -55,7 +58,8 @@ auto FullAttrs(Binding&& binding) {
       .template Attr<int64_t>("steps_per_sample")
       .template Attr<int64_t>("viscous")
       .template Attr<int64_t>("friction")
-      .template Attr<int64_t>("extras");
+      .template Attr<int64_t>("extras")
+      .template Attr<int64_t>("dashpot");
 }
 
 }  // namespace hertzchain

@@ -397,7 +397,7 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
 //   the traces (B, n_samples), then their tangents (D, B, n_samples), from one run.
 
 struct FullParams {
-  Param inv_mass, kappa, overlap0, spring, external, eta, friction;
+  Param inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot;
 };
 
 // A tangent input: (D, rows, B), or (1, rows, B) for one tangent shared by every direction
@@ -409,7 +409,7 @@ struct Tangent {
 
 struct TangentInputs {
   Tangent state0;  // x, v, a: (D, 3 (bodies + 1), B)
-  Tangent inv_mass, kappa, overlap0, spring, external, eta, friction;
+  Tangent inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot;
 };
 
 // Rows of every tangent direction of chains lo.. into (D, rows, kLanes).
@@ -426,7 +426,7 @@ void LoadTangent(Tangent t, int64_t directions, int64_t rows, int64_t batch, int
 
 using hertzchain::KickSlope;
 
-template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras>
+template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras, bool kDashpot>
 void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
                   int64_t steps_per_sample, double dt, const double* state0, FullParams p,
                   const std::vector<int64_t>& channels, const std::vector<double*>& traces,
@@ -438,7 +438,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   const int64_t valid = std::min(kLanes, batch - lo);  // a last, partial block repeats its last chain
   std::vector<double> x(rows_x * kLanes), v(rows_x * kLanes), a(rows_x * kLanes);
   std::vector<double> inv(rows_x * kLanes), kap(contacts * kLanes), ov0(contacts * kLanes);
-  std::vector<double> spr(contacts * kLanes), ext(rows_x * kLanes), eta(kLanes), fr(kLanes);
+  std::vector<double> spr(contacts * kLanes), ext(rows_x * kLanes), eta(kLanes), fr(kLanes), dash(kLanes);
   Load<kLanes>({state0, batch}, rows_x, lo, x.data(), valid);
   Load<kLanes>({state0 + rows_x * batch, batch}, rows_x, lo, v.data(), valid);
   Load<kLanes>({state0 + 2 * rows_x * batch, batch}, rows_x, lo, a.data(), valid);
@@ -449,13 +449,19 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   Load<kLanes>(p.external, rows_x, lo, ext.data(), valid);
   Load<kLanes>(p.eta, 1, lo, eta.data(), valid);
   Load<kLanes>(p.friction, 1, lo, fr.data(), valid);
-  std::vector<double> kvis(contacts * kLanes);  // 1.5 eta kappa of every contact
+  if (kDashpot) Load<kLanes>(p.dashpot, 1, lo, dash.data(), valid);
+  // 1.5 eta kappa and (kDashpot) the dashpot (`hertzchain::ContactDashpot`) of every contact
+  std::vector<double> kvis(contacts * kLanes), dsh(contacts * kLanes);
   for (int64_t i = 0; i < contacts; ++i)
-    for (int64_t j = 0; j < kLanes; ++j) kvis[i * kLanes + j] = 1.5 * eta[j] * kap[i * kLanes + j];
+    for (int64_t j = 0; j < kLanes; ++j) {
+      kvis[i * kLanes + j] = 1.5 * eta[j] * kap[i * kLanes + j];
+      if (kDashpot) dsh[i * kLanes + j] = hertzchain::ContactDashpot(kap[i * kLanes + j], dash[j]);
+    }
   // tangents (D, rows, kLanes)
   std::vector<double> tx(D * rows_x * kLanes), tv(D * rows_x * kLanes), ta(D * rows_x * kLanes);
   std::vector<double> tinv(D * rows_x * kLanes), tkap(D * contacts * kLanes), tov0(D * contacts * kLanes);
   std::vector<double> tspr(D * contacts * kLanes), text(D * rows_x * kLanes), teta(D * kLanes), tfr(D * kLanes);
+  std::vector<double> tdash(D * kLanes);
   if (kTangent) {
     for (int64_t d = 0; d < D; ++d) {
       const double* s0 = tin.state0.data + (tin.state0.shared ? 0 : d * 3 * rows_x * batch);
@@ -470,6 +476,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     LoadTangent<kLanes>(tin.external, D, rows_x, batch, lo, text.data(), valid);
     LoadTangent<kLanes>(tin.eta, D, 1, batch, lo, teta.data(), valid);
     LoadTangent<kLanes>(tin.friction, D, 1, batch, lo, tfr.data(), valid);
+    if (kDashpot) LoadTangent<kLanes>(tin.dashpot, D, 1, batch, lo, tdash.data(), valid);
   }
   // recorded sets: the forces, then (kTangent) their tangent along every direction
   const int64_t out_sets = 1 + D;
@@ -480,8 +487,9 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   // rows whose kappa and 1.5 eta kappa, or inverse mass, are one value for every lane
   std::vector<char> uniform_k = UniformRows<kLanes>(kap.data(), contacts);
   const std::vector<char> uniform_kv = UniformRows<kLanes>(kvis.data(), contacts);
+  const std::vector<char> uniform_d = UniformRows<kLanes>(dsh.data(), contacts);
   const std::vector<char> uniform_m = UniformRows<kLanes>(inv.data(), rows_x);
-  for (int64_t i = 0; i < contacts; ++i) uniform_k[i] = uniform_k[i] && uniform_kv[i];
+  for (int64_t i = 0; i < contacts; ++i) uniform_k[i] = uniform_k[i] && uniform_kv[i] && (!kDashpot || uniform_d[i]);
 
   // Per-lane values of the step kept for the tangent pass: what does not depend on the
   // direction is computed once per contact and step, not once per direction.
@@ -511,12 +519,14 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   // `chain_laws.h` has them (kv = 1.5 eta kappa, computed once per block as JAX rounds it:
   // (1.5 eta) kappa)
   const auto kick = [](double w, double loss_j, double* s) { return hertzchain::Kick(w, loss_j, s); };
-  const auto total_force = [](double dl, double rate, double k, double kv, double sp, double* r, double* sm) {
-    return hertzchain::TotalForce<kViscous, kExtras>(dl, rate, k, kv, sp, r, sm);
+  const auto total_force = [](double dl, double rate, double k, double kv, double d, double sp, double* r,
+                              double* sm) {
+    return hertzchain::TotalForce<kViscous, kExtras, kDashpot>(dl, rate, k, kv, d, sp, r, sm);
   };
   // the linearisation of contact i at lane j (kept for every direction of the step)
-  auto linearise = [&](Linear& l, int64_t j, double dl, double rate, double k, double kv, double rt, double sm) {
-    const hertzchain::Linearisation one = hertzchain::Linearise(dl, rate, k, kv, rt, sm);
+  auto linearise = [&](Linear& l, int64_t j, double dl, double rate, double k, double kv, double d, double rt,
+                       double sm) {
+    const hertzchain::Linearisation one = hertzchain::Linearise<kDashpot>(dl, rate, k, kv, d, rt, sm);
     l.delta[j] = one.delta;
     l.rate[j] = one.rate;
     l.in[j] = one.in;
@@ -529,10 +539,10 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   };
   // its tangent along one direction (`hertzchain::TangentForce`): c2 = 1.5 eta kappa = kv
   auto tforce = [](const Linear& l, int64_t j, double k, double c1j, double c2, double sp, double tdl,
-                   double trate, double tk, double t15e, double tsp) {
+                   double trate, double tk, double t15e, double td, double tsp) {
     const hertzchain::Linearisation one{l.delta[j], l.rate[j],       l.in[j], l.positive[j], l.root[j],
                                         l.half_inv_root[j], l.kp[j], l.c3[j], l.slope[j]};
-    return hertzchain::TangentForce<kViscous>(one, k, c1j, c2, sp, tdl, trate, tk, t15e, tsp);
+    return hertzchain::TangentForce<kViscous, kDashpot>(one, k, c1j, c2, sp, tdl, trate, tk, t15e, td, tsp);
   };
 
   for (int64_t n = 0; n < n_samples; ++n) {
@@ -568,9 +578,10 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         // for every lane of the row (read once: the same numbers)
         auto sweep = [&](auto uniform_k_tag, auto uniform_m_tag) {
         constexpr bool kUK = decltype(uniform_k_tag)::value, kUM = decltype(uniform_m_tag)::value;
-        const double k0 = kap[ri], kv0 = kvis[ri], m0 = inv[ri];
+        const double k0 = kap[ri], kv0 = kvis[ri], d0 = kDashpot ? dsh[ri] : 0.0, m0 = inv[ri];
         ForLanes<kLanes>([&](int64_t j) {
           const double kj = kUK ? k0 : kap[ri + j], kvj = kUK ? kv0 : kvis[ri + j];
+          const double dj = kDashpot ? (kUK ? d0 : dsh[ri + j]) : 0.0;
           // body i + 1: half kick, friction, drift, predicted velocity
           double w = v[rn + j] + h * a[rn + j];
           double w_raw = w, s_first = 0.0, s_second = 0.0, rt, sm;
@@ -581,7 +592,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double dl = x[ri + j] - x[rn + j];
           if constexpr (kExtras) dl = dl + ov0[ri + j];
           double rt_rate = p_prev[j] - pred;
-          double f = total_force(dl, rt_rate, kj, kvj, spr[ri + j], &rt, &sm);
+          double f = total_force(dl, rt_rate, kj, kvj, dj, spr[ri + j], &rt, &sm);
           // body i: second half kick, friction
           double b = f_prev[j] - f;
           if constexpr (kExtras) b = b + ext[ri + j];
@@ -596,7 +607,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               KickSlope(w_raw, s_first, &pm1[j], &g1[j]);
               KickSlope(vn_raw, s_second, &pm2[j], &g2[j]);
             }
-            linearise(lin, j, dl, rt_rate, kj, kvj, rt, sm);
+            linearise(lin, j, dl, rt_rate, kj, kvj, dj, rt, sm);
             body[j] = b;
           }
           f_prev[j] = f;
@@ -623,7 +634,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               double tpred = tw + h * ta[tn + j];
               double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
               double tf = tforce(lin, j, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, tp_prev[q] - tpred,
-                                 tkap[tc + j], t15eta[q], tspr[tc + j]);
+                                 tkap[tc + j], t15eta[q], kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, tspr[tc + j]);
               double tb = tf_prev[q] - tf + text[ti + j];
               double tacc = tb * inv[ri + j] + body[j] * tinv[ti + j];
               double tvn = tw_prev[q] + h * tacc;
@@ -673,11 +684,12 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         if constexpr (kExtras) dl = dl + ov0[ri + j];
         double rate = v[ri + j] - v[rn + j];
         double rt, sm;
-        double f = total_force(dl, rate, kap[ri + j], kvis[ri + j], spr[ri + j], &rt, &sm);
+        const double dj = kDashpot ? dsh[ri + j] : 0.0;
+        double f = total_force(dl, rate, kap[ri + j], kvis[ri + j], dj, spr[ri + j], &rt, &sm);
         record.slot(0, c)[j] = f;
         if (!kTangent) continue;
         Linear here;
-        linearise(here, j, dl, rate, kap[ri + j], kvis[ri + j], rt, sm);
+        linearise(here, j, dl, rate, kap[ri + j], kvis[ri + j], dj, rt, sm);
         for (int64_t d = 0; d < D; ++d) {
           const int64_t q = d * kLanes + j;
           const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
@@ -686,7 +698,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double trate = tv[ti + j] - tv[tn + j];
           record.slot(d + 1, c)[j] =
               tforce(here, j, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, trate, tkap[tc + j], t15eta[q],
-                     tspr[tc + j]);
+                     kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, tspr[tc + j]);
         }
       }
     }
@@ -700,6 +712,7 @@ Param AsParam(const ffi::Buffer<ffi::F64>& buffer) {
   return {buffer.typed_data(), dims.size() > 1 ? dims[dims.size() - 1] : 1};
 }
 
+#ifndef HC_DASHPOT_LIBRARY  // (the conservative kernel: in the main library only)
 ffi::Error Forward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                    ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                    ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
@@ -757,6 +770,7 @@ ffi::Error Forward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buff
   preload ? with_springs(T{}) : with_springs(F{});
   return ffi::Error::Success();
 }
+#endif  // HC_DASHPOT_LIBRARY
 
 
 // The leading size of a tangent input: its element count over rows x B.
@@ -768,9 +782,9 @@ int64_t Directions(const ffi::Buffer<ffi::F64>& buffer, int64_t rows, int64_t ba
 ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                    ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                    ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
-                   ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
+                   ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction, ffi::Buffer<ffi::F64> dashpot,
                    ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
-                   int64_t viscous, int64_t friction_on, int64_t extras,
+                   int64_t viscous, int64_t friction_on, int64_t extras, int64_t dashpot_on,
                    const TangentInputs* tangents, ffi::RemainingRets results) {
   auto dims = state0.dimensions();
   const int64_t batch = dims[dims.size() - 1];
@@ -800,7 +814,7 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
     }
   }
   FullParams p{AsParam(inv_mass), AsParam(kappa), AsParam(overlap0), AsParam(spring),
-               AsParam(external), AsParam(eta), AsParam(friction)};
+               AsParam(external), AsParam(eta), AsParam(friction), AsParam(dashpot)};
   TangentInputs none{};
   const TangentInputs& tin = tangents ? *tangents : none;
   // blocks of 64, then of 8 (the last one may be partial), the last 2-4 chains in a block
@@ -814,15 +828,16 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
     lo += kQuarterLanes;
   }
   if (lo < batch) blocks.push_back({lo, 1});
-  auto run = [&](auto viscous_tag, auto friction_tag, auto tangent_tag, auto extras_tag) {
+  auto run = [&](auto viscous_tag, auto friction_tag, auto tangent_tag, auto extras_tag, auto dashpot_tag) {
     constexpr bool kV = decltype(viscous_tag)::value, kF = decltype(friction_tag)::value,
-                   kT = decltype(tangent_tag)::value, kE = decltype(extras_tag)::value;
+                   kT = decltype(tangent_tag)::value, kE = decltype(extras_tag)::value,
+                   kD = decltype(dashpot_tag)::value;
     auto advance = [&](auto lanes, int64_t first) {
       constexpr int64_t kL = decltype(lanes)::value;
       // blocks of 8 and 4 with the extras' terms (zeros: the same numbers): without them
       // GCC 12 leaves the damped 8-lane loop scalar ("control flow in loop"), 2.5x slower
       constexpr bool kENarrow = kE || kL == kNarrowLanes || kL == kQuarterLanes;
-      RunFullBlock<kL, kV, kF, kT, kENarrow>(bodies, first, batch, n_samples, steps_per_sample, dt,
+      RunFullBlock<kL, kV, kF, kT, kENarrow, kD>(bodies, first, batch, n_samples, steps_per_sample, dt,
                                              state0.typed_data(), p, rows, outs, directions, tin, touts);
     };
     RunBlocks(pool, blocks, [&](int64_t b) {
@@ -835,46 +850,64 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   };
   using T = std::true_type;
   using F = std::false_type;
-  // the tangents always with the preload's and springs' terms (zeros where there are none)
-  auto with_tangent = [&](auto v, auto f) {
-    if (tangents) return run(v, f, T{}, T{});
-    extras ? run(v, f, F{}, T{}) : run(v, f, F{}, F{});
+  // the tangents always with the preload's and springs' terms (zeros where there are none);
+  // a dashpot (damped runs only: the kernels compute rates with the damping) likewise, so
+  // that its few runs add four instantiations per block width, not eight
+  auto with_tangent = [&](auto v, auto f, auto d) {
+    if (tangents) return run(v, f, T{}, T{}, d);
+    if constexpr (decltype(d)::value) {
+      run(v, f, F{}, T{}, d);
+    } else {
+      extras ? run(v, f, F{}, T{}, d) : run(v, f, F{}, F{}, d);
+    }
   };
-  auto with_friction = [&](auto v) { friction_on ? with_tangent(v, T{}) : with_tangent(v, F{}); };
-  viscous ? with_friction(T{}) : with_friction(F{});
+  auto with_friction = [&](auto v, auto d) { friction_on ? with_tangent(v, T{}, d) : with_tangent(v, F{}, d); };
+  // The dashpot's runs are compiled into a library of their own (HC_DASHPOT_LIBRARY, built on
+  // first use by `native`), so that the library every run needs does not wait for them.
+#ifdef HC_DASHPOT_LIBRARY
+  if (!dashpot_on || !viscous)
+    return ffi::Error::InvalidArgument("the dashpot library runs damped chains with a dashpot only");
+  with_friction(T{}, T{});
+#else
+  if (dashpot_on) return ffi::Error::InvalidArgument("a dashpot runs the dashpot library's kernel");
+  viscous ? with_friction(T{}, F{}) : with_friction(F{}, F{});
+#endif
   return ffi::Error::Success();
 }
 
 ffi::Error FullForward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                        ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                        ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
-                       ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
+                       ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction, ffi::Buffer<ffi::F64> dashpot,
                        ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
-                       int64_t viscous, int64_t friction_on, int64_t extras, ffi::RemainingRets traces) {
-  return RunFull(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, channels, dt,
-                 steps_per_sample, viscous, friction_on, extras, nullptr, traces);
+                       int64_t viscous, int64_t friction_on, int64_t extras, int64_t dashpot_on,
+                       ffi::RemainingRets traces) {
+  return RunFull(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot, channels, dt,
+                 steps_per_sample, viscous, friction_on, extras, dashpot_on, nullptr, traces);
 }
 
 ffi::Error FullTangent(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                        ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                        ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
-                       ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
+                       ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction, ffi::Buffer<ffi::F64> dashpot,
                        ffi::Buffer<ffi::F64> t_state0, ffi::Buffer<ffi::F64> t_inv_mass,
                        ffi::Buffer<ffi::F64> t_kappa, ffi::Buffer<ffi::F64> t_overlap0,
                        ffi::Buffer<ffi::F64> t_spring, ffi::Buffer<ffi::F64> t_external,
                        ffi::Buffer<ffi::F64> t_eta, ffi::Buffer<ffi::F64> t_friction,
+                       ffi::Buffer<ffi::F64> t_dashpot,
                        ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
-                       int64_t viscous, int64_t friction_on, int64_t extras,
+                       int64_t viscous, int64_t friction_on, int64_t extras, int64_t dashpot_on,
                        ffi::RemainingRets tangent_traces) {
   auto dims = state0.dimensions();
   const int64_t batch = dims[dims.size() - 1];
   const int64_t rows_x = inv_mass.dimensions()[inv_mass.dimensions().size() - 2];
-  const int64_t counts[8] = {
+  const int64_t counts[9] = {
       Directions(t_state0, 3 * rows_x, batch), Directions(t_inv_mass, rows_x, batch),
       Directions(t_kappa, rows_x - 1, batch),  Directions(t_overlap0, rows_x - 1, batch),
       Directions(t_spring, rows_x - 1, batch), Directions(t_external, rows_x, batch),
-      Directions(t_eta, 1, batch),             Directions(t_friction, 1, batch)};
-  const int64_t directions = *std::max_element(counts, counts + 8);
+      Directions(t_eta, 1, batch),             Directions(t_friction, 1, batch),
+      Directions(t_dashpot, 1, batch)};
+  const int64_t directions = *std::max_element(counts, counts + 9);
   for (int64_t count : counts)
     if (count != 1 && count != directions)
       return ffi::Error::InvalidArgument("tangents must be (directions or 1, rows, B)");
@@ -884,20 +917,23 @@ ffi::Error FullTangent(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::
   TangentInputs tin{tangent(t_state0, counts[0]),    tangent(t_inv_mass, counts[1]),
                     tangent(t_kappa, counts[2]),     tangent(t_overlap0, counts[3]),
                     tangent(t_spring, counts[4]),    tangent(t_external, counts[5]),
-                    tangent(t_eta, counts[6]),       tangent(t_friction, counts[7])};
-  return RunFull(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, channels, dt,
-                 steps_per_sample, viscous, friction_on, extras, &tin, tangent_traces);
+                    tangent(t_eta, counts[6]),       tangent(t_friction, counts[7]),
+                    tangent(t_dashpot, counts[8])};
+  return RunFull(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot, channels, dt,
+                 steps_per_sample, viscous, friction_on, extras, dashpot_on, &tin, tangent_traces);
 }
 
 }  // namespace
 
 // The handlers' argument lists: `chain_ffi.h` (the recorded channels, a buffer here, after
 // the parameters).
+#ifndef HC_DASHPOT_LIBRARY
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
                               hertzchain::ForwardAttrs(hertzchain::ChainArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
                                                            .Arg<ffi::Buffer<ffi::S64>>())  // channels
                                   .Ret<ffi::Buffer<ffi::F64>>()  // state
                                   .RemainingRets());             // traces
+#endif
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullForward, FullForward,
                               hertzchain::FullAttrs(hertzchain::FullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())

@@ -14,7 +14,7 @@
 // fast axis, as in `batched`):
 //   conservative: state0, state (R, B): x (HC_ROWS), u = v + (dt/2) a (HC_ROWS), and with
 //     the books the largest overlap of every contact so far (HC_ROWS - 1 rows);
-//   full: state0 (3 HC_ROWS, B): x, v, a; eta, friction (mu g) (1, 1 or B);
+//   full: state0 (3 HC_ROWS, B): x, v, a; eta, friction (mu g), dashpot (1, 1 or B);
 //   parameters (rows, 1 or B), tangents (D or 1, rows, B) (1: shared by every direction);
 //   traces: one (n_samples, B) per channel, sample-major so that neighbouring threads write
 //     neighbouring addresses (`native` transposes them), then (tangents) one
@@ -177,17 +177,17 @@ struct FullArgs {
   int64_t batch, n_samples, steps_per_sample, directions;
   double dt;
   const double* state0;
-  Param inv_mass, kappa, overlap0, spring, external, eta, friction;
-  Tangent t_state0, t_inv_mass, t_kappa, t_overlap0, t_spring, t_external, t_eta, t_friction;
+  Param inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot;
+  Tangent t_state0, t_inv_mass, t_kappa, t_overlap0, t_spring, t_external, t_eta, t_friction, t_dashpot;
   Channels channels;
   Outputs out;
 };
 
 // The full step of `chain_kernel.cc`'s RunFullBlock for one chain and (kTangent) one
-// tangent direction `d`: Kuwabara-Kono damping (the total force clipped at 0), track
+// tangent direction `d`: Kuwabara-Kono damping and a linear dashpot (the total force clipped at 0), track
 // friction before the drift and after the second half kick, the preload's and springs'
 // terms (kExtras), and the derivatives JAX's rules give (`hertzchain::TangentForce`).
-template <bool kViscous, bool kFriction, bool kTangent, bool kExtras>
+template <bool kViscous, bool kFriction, bool kTangent, bool kExtras, bool kDashpot>
 HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
   using namespace hertzchain;
   const int64_t B = A.batch;
@@ -206,10 +206,12 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
     }
   }
   const double eta = A.eta.at(0, b), loss = A.friction.at(0, b) * h, c1 = 1.5 * eta;
-  double tloss = 0.0, t15eta = 0.0;
+  const double dashpot = kDashpot ? A.dashpot.at(0, b) : 0.0;
+  double tloss = 0.0, t15eta = 0.0, tdashpot = 0.0;
   if (kTangent) {
     tloss = A.t_friction.at(d, 0, 1, B, b) * h;
     t15eta = 1.5 * A.t_eta.at(d, 0, 1, B, b);
+    if (kDashpot) tdashpot = A.t_dashpot.at(d, 0, 1, B, b);
   }
   auto tangent_param = [&](const Tangent& t, int row, int rows) { return t.at(d, row, rows, B, b); };
 
@@ -247,8 +249,9 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
         if (kExtras) dl = dl + A.overlap0.at(i, b);
         const double rate = p_prev - pred;
         const double k = A.kappa.at(i, b), kv = c1 * k, sp = kExtras ? A.spring.at(i, b) : 0.0;
+        const double dash = ContactDashpot(k, dashpot);
         double root, sum;
-        double f = TotalForce<kViscous, kExtras>(dl, rate, k, kv, sp, &root, &sum);
+        double f = TotalForce<kViscous, kExtras, kDashpot>(dl, rate, k, kv, dash, sp, &root, &sum);
         // body i: second half kick, friction
         double body = f_prev - f;
         if (kExtras) body = body + A.external.at(i, b);
@@ -264,15 +267,15 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
             KickSlope(w_raw, s_first, &pm1, &g1);
             KickSlope(vn_raw, s_second, &pm2, &g2);
           }
-          const Linearisation l = Linearise(dl, rate, k, kv, root, sum);
+          const Linearisation l = Linearise<kDashpot>(dl, rate, k, kv, dash, root, sum);
           double tw = tv[nx] + h * ta[nx];
           if (kFriction) tw = (pm1 * tw - tloss) * g1;
           tx[nx] = tx[nx] + dt * tw;
           double tpred = tw + h * ta[nx];
           double tdl = tx[i] - tx[nx] + tangent_param(A.t_overlap0, i, kContacts);
-          double tf = TangentForce<kViscous>(l, k, c1, kv, sp, tdl, tp_prev - tpred,
+          double tf = TangentForce<kViscous, kDashpot>(l, k, c1, kv, sp, tdl, tp_prev - tpred,
                                              tangent_param(A.t_kappa, i, kContacts), t15eta,
-                                             tangent_param(A.t_spring, i, kContacts));
+                                             kDashpot && k > 0.0 ? tdashpot : 0.0, tangent_param(A.t_spring, i, kContacts));
           double tb = tf_prev - tf + tangent_param(A.t_external, i, kRows);
           double tacc = tb * inv + body * tangent_param(A.t_inv_mass, i, kRows);
           double tvn = tw_prev + h * tacc;
@@ -319,15 +322,16 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
       if (kExtras) dl = dl + A.overlap0.at(i, b);
       const double rate = v[i] - v[i + 1];
       const double k = A.kappa.at(i, b), kv = c1 * k, sp = kExtras ? A.spring.at(i, b) : 0.0;
+      const double dash = ContactDashpot(k, dashpot);
       double root, sum;
-      const double f = TotalForce<kViscous, kExtras>(dl, rate, k, kv, sp, &root, &sum);
+      const double f = TotalForce<kViscous, kExtras, kDashpot>(dl, rate, k, kv, dash, sp, &root, &sum);
       double tf = 0.0;
       if (kTangent) {
-        const Linearisation l = Linearise(dl, rate, k, kv, root, sum);
+        const Linearisation l = Linearise<kDashpot>(dl, rate, k, kv, dash, root, sum);
         double tdl = tx[i] - tx[i + 1] + tangent_param(A.t_overlap0, i, kContacts);
         double trate = tv[i] - tv[i + 1];
-        tf = TangentForce<kViscous>(l, k, c1, kv, sp, tdl, trate, tangent_param(A.t_kappa, i, kContacts), t15eta,
-                                    tangent_param(A.t_spring, i, kContacts));
+        tf = TangentForce<kViscous, kDashpot>(l, k, c1, kv, sp, tdl, trate, tangent_param(A.t_kappa, i, kContacts), t15eta,
+                                    kDashpot && k > 0.0 ? tdashpot : 0.0, tangent_param(A.t_spring, i, kContacts));
       }
       for (int c = 0; c < A.channels.count; ++c) {
         if (A.channels.contact[c] != i) continue;
@@ -344,10 +348,10 @@ struct ForwardThread {
   HC_HD void operator()(int64_t t) const { ForwardChain<kP, kS, kB>(args, t); }
 };
 
-template <bool kV, bool kF, bool kT, bool kE>
+template <bool kV, bool kF, bool kT, bool kE, bool kD>
 struct FullThread {
   FullArgs args;
-  HC_HD void operator()(int64_t t) const { FullChain<kV, kF, kT, kE>(args, t % args.batch, t / args.batch); }
+  HC_HD void operator()(int64_t t) const { FullChain<kV, kF, kT, kE, kD>(args, t % args.batch, t / args.batch); }
 };
 
 #ifdef HC_HOST_EMULATION
@@ -439,7 +443,8 @@ int64_t Directions(const ffi::Buffer<ffi::F64>& buffer, int64_t rows, int64_t ba
 }
 
 ffi::Error RunFull(Stream stream, FullArgs A, ffi::Buffer<ffi::F64> state0, ffi::Span<const int64_t> contacts,
-                   bool tangent, int64_t viscous, int64_t friction_on, int64_t extras, ffi::RemainingRets results) {
+                   bool tangent, int64_t viscous, int64_t friction_on, int64_t extras, int64_t dashpot_on,
+                   ffi::RemainingRets results) {
   auto dims = state0.dimensions();
   A.batch = dims[dims.size() - 1];
   if (static_cast<int64_t>(state0.element_count()) != 3 * kRows * A.batch)
@@ -455,24 +460,35 @@ ffi::Error RunFull(Stream stream, FullArgs A, ffi::Buffer<ffi::F64> state0, ffi:
     else A.out.tangent[c - A.channels.count] = (*out)->typed_data();
   }
   const int64_t threads = A.batch * (tangent ? A.directions : 1);
-  auto run = [&](auto v, auto f, auto t, auto e) {
+  auto run = [&](auto v, auto f, auto t, auto e, auto d) {
     return Launch(stream, threads,
-                  FullThread<decltype(v)::value, decltype(f)::value, decltype(t)::value, decltype(e)::value>{A});
+                  FullThread<decltype(v)::value, decltype(f)::value, decltype(t)::value, decltype(e)::value,
+                             decltype(d)::value>{A});
   };
   using T = std::true_type;
   using F = std::false_type;
-  // the tangents always with the preload's and springs' terms (zeros where there are none)
-  auto with_tangent = [&](auto v, auto f) {
-    if (tangent) return run(v, f, T{}, T{});
-    return extras ? run(v, f, F{}, T{}) : run(v, f, F{}, F{});
+  // the tangents always with the preload's and springs' terms (zeros where there are none);
+  // a dashpot (compiled in for its runs only, with the damping) likewise
+  auto with_tangent = [&](auto v, auto f, auto d) {
+    if (tangent) return run(v, f, T{}, T{}, d);
+    if constexpr (decltype(d)::value) {
+      return run(v, f, F{}, T{}, d);
+    } else {
+      return extras ? run(v, f, F{}, T{}, d) : run(v, f, F{}, F{}, d);
+    }
   };
-  auto with_friction = [&](auto v) { return friction_on ? with_tangent(v, T{}) : with_tangent(v, F{}); };
-  return viscous ? with_friction(T{}) : with_friction(F{});
+  auto with_friction = [&](auto v, auto d) {
+    return friction_on ? with_tangent(v, T{}, d) : with_tangent(v, F{}, d);
+  };
+  if (dashpot_on && !viscous) return ffi::Error::InvalidArgument("a dashpot needs the viscous kernel");
+  if (!viscous) return with_friction(F{}, F{});
+  return dashpot_on ? with_friction(T{}, T{}) : with_friction(T{}, F{});
 }
 
 FullArgs FullParameters(double dt, int64_t steps_per_sample, ffi::Buffer<ffi::F64> inv_mass,
                         ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0, ffi::Buffer<ffi::F64> spring,
-                        ffi::Buffer<ffi::F64> external, ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction) {
+                        ffi::Buffer<ffi::F64> external, ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
+                        ffi::Buffer<ffi::F64> dashpot) {
   FullArgs A{};
   A.dt = dt;
   A.steps_per_sample = steps_per_sample;
@@ -484,44 +500,50 @@ FullArgs FullParameters(double dt, int64_t steps_per_sample, ffi::Buffer<ffi::F6
   A.external = AsParam(external);
   A.eta = AsParam(eta);
   A.friction = AsParam(friction);
+  A.dashpot = AsParam(dashpot);
   return A;
 }
 
 ffi::Error FullForward(Stream stream, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                        ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0, ffi::Buffer<ffi::F64> spring,
                        ffi::Buffer<ffi::F64> external, ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
-                       ffi::Span<const int64_t> contacts, double dt, int64_t steps_per_sample, int64_t viscous,
-                       int64_t friction_on, int64_t extras, ffi::RemainingRets traces) {
+                       ffi::Buffer<ffi::F64> dashpot, ffi::Span<const int64_t> contacts, double dt,
+                       int64_t steps_per_sample, int64_t viscous, int64_t friction_on, int64_t extras,
+                       int64_t dashpot_on, ffi::RemainingRets traces) {
   if (inv_mass.dimensions()[inv_mass.dimensions().size() - 2] != kRows)
     return ffi::Error::InvalidArgument("the chain's length is not the one this kernel was built for");
-  FullArgs A = FullParameters(dt, steps_per_sample, inv_mass, kappa, overlap0, spring, external, eta, friction);
-  return RunFull(stream, A, state0, contacts, false, viscous, friction_on, extras, traces);
+  FullArgs A = FullParameters(dt, steps_per_sample, inv_mass, kappa, overlap0, spring, external, eta, friction,
+                              dashpot);
+  return RunFull(stream, A, state0, contacts, false, viscous, friction_on, extras, dashpot_on, traces);
 }
 
 ffi::Error FullTangent(Stream stream, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                        ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0, ffi::Buffer<ffi::F64> spring,
                        ffi::Buffer<ffi::F64> external, ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction,
-                       ffi::Buffer<ffi::F64> t_state0, ffi::Buffer<ffi::F64> t_inv_mass,
-                       ffi::Buffer<ffi::F64> t_kappa, ffi::Buffer<ffi::F64> t_overlap0,
-                       ffi::Buffer<ffi::F64> t_spring, ffi::Buffer<ffi::F64> t_external,
-                       ffi::Buffer<ffi::F64> t_eta, ffi::Buffer<ffi::F64> t_friction,
+                       ffi::Buffer<ffi::F64> dashpot, ffi::Buffer<ffi::F64> t_state0,
+                       ffi::Buffer<ffi::F64> t_inv_mass, ffi::Buffer<ffi::F64> t_kappa,
+                       ffi::Buffer<ffi::F64> t_overlap0, ffi::Buffer<ffi::F64> t_spring,
+                       ffi::Buffer<ffi::F64> t_external, ffi::Buffer<ffi::F64> t_eta,
+                       ffi::Buffer<ffi::F64> t_friction, ffi::Buffer<ffi::F64> t_dashpot,
                        ffi::Span<const int64_t> contacts, double dt, int64_t steps_per_sample, int64_t viscous,
-                       int64_t friction_on, int64_t extras, ffi::RemainingRets tangent_traces) {
+                       int64_t friction_on, int64_t extras, int64_t dashpot_on, ffi::RemainingRets tangent_traces) {
   if (inv_mass.dimensions()[inv_mass.dimensions().size() - 2] != kRows)
     return ffi::Error::InvalidArgument("the chain's length is not the one this kernel was built for");
   auto dims = state0.dimensions();
   const int64_t batch = dims[dims.size() - 1];
-  const int64_t counts[8] = {
+  const int64_t counts[9] = {
       Directions(t_state0, 3 * kRows, batch), Directions(t_inv_mass, kRows, batch),
       Directions(t_kappa, kContacts, batch),  Directions(t_overlap0, kContacts, batch),
       Directions(t_spring, kContacts, batch), Directions(t_external, kRows, batch),
-      Directions(t_eta, 1, batch),            Directions(t_friction, 1, batch)};
+      Directions(t_eta, 1, batch),            Directions(t_friction, 1, batch),
+      Directions(t_dashpot, 1, batch)};
   int64_t directions = 1;
   for (int64_t count : counts) directions = count > directions ? count : directions;
   for (int64_t count : counts)
     if (count != 1 && count != directions)
       return ffi::Error::InvalidArgument("tangents must be (directions or 1, rows, B)");
-  FullArgs A = FullParameters(dt, steps_per_sample, inv_mass, kappa, overlap0, spring, external, eta, friction);
+  FullArgs A = FullParameters(dt, steps_per_sample, inv_mass, kappa, overlap0, spring, external, eta, friction,
+                              dashpot);
   A.directions = directions;
   auto tangent = [&](const ffi::Buffer<ffi::F64>& buffer, int64_t count) {
     return Tangent{buffer.typed_data(), count == 1};
@@ -534,7 +556,8 @@ ffi::Error FullTangent(Stream stream, ffi::Buffer<ffi::F64> state0, ffi::Buffer<
   A.t_external = tangent(t_external, counts[5]);
   A.t_eta = tangent(t_eta, counts[6]);
   A.t_friction = tangent(t_friction, counts[7]);
-  return RunFull(stream, A, state0, contacts, true, viscous, friction_on, extras, tangent_traces);
+  A.t_dashpot = tangent(t_dashpot, counts[8]);
+  return RunFull(stream, A, state0, contacts, true, viscous, friction_on, extras, dashpot_on, tangent_traces);
 }
 
 #ifdef HC_HOST_EMULATION
@@ -560,18 +583,21 @@ ffi::Error ForwardHost(ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_m
 namespace {
 ffi::Error FullForwardHost(ffi::Buffer<ffi::F64> s, ffi::Buffer<ffi::F64> m, ffi::Buffer<ffi::F64> k,
                            ffi::Buffer<ffi::F64> o, ffi::Buffer<ffi::F64> sp, ffi::Buffer<ffi::F64> e,
-                           ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> fr, ffi::Span<const int64_t> c,
-                           double dt, int64_t n, int64_t v, int64_t f, int64_t x, ffi::RemainingRets r) {
-  return FullForward(0, s, m, k, o, sp, e, eta, fr, c, dt, n, v, f, x, r);
+                           ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> fr, ffi::Buffer<ffi::F64> ds,
+                           ffi::Span<const int64_t> c, double dt, int64_t n, int64_t v, int64_t f, int64_t x,
+                           int64_t dp, ffi::RemainingRets r) {
+  return FullForward(0, s, m, k, o, sp, e, eta, fr, ds, c, dt, n, v, f, x, dp, r);
 }
 ffi::Error FullTangentHost(ffi::Buffer<ffi::F64> s, ffi::Buffer<ffi::F64> m, ffi::Buffer<ffi::F64> k,
                            ffi::Buffer<ffi::F64> o, ffi::Buffer<ffi::F64> sp, ffi::Buffer<ffi::F64> e,
-                           ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> fr, ffi::Buffer<ffi::F64> ts,
-                           ffi::Buffer<ffi::F64> tm, ffi::Buffer<ffi::F64> tk, ffi::Buffer<ffi::F64> to,
-                           ffi::Buffer<ffi::F64> tsp, ffi::Buffer<ffi::F64> te, ffi::Buffer<ffi::F64> teta,
-                           ffi::Buffer<ffi::F64> tfr, ffi::Span<const int64_t> c, double dt, int64_t n, int64_t v,
-                           int64_t f, int64_t x, ffi::RemainingRets r) {
-  return FullTangent(0, s, m, k, o, sp, e, eta, fr, ts, tm, tk, to, tsp, te, teta, tfr, c, dt, n, v, f, x, r);
+                           ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> fr, ffi::Buffer<ffi::F64> ds,
+                           ffi::Buffer<ffi::F64> ts, ffi::Buffer<ffi::F64> tm, ffi::Buffer<ffi::F64> tk,
+                           ffi::Buffer<ffi::F64> to, ffi::Buffer<ffi::F64> tsp, ffi::Buffer<ffi::F64> te,
+                           ffi::Buffer<ffi::F64> teta, ffi::Buffer<ffi::F64> tfr, ffi::Buffer<ffi::F64> tds,
+                           ffi::Span<const int64_t> c, double dt, int64_t n, int64_t v, int64_t f, int64_t x,
+                           int64_t dp, ffi::RemainingRets r) {
+  return FullTangent(0, s, m, k, o, sp, e, eta, fr, ds, ts, tm, tk, to, tsp, te, teta, tfr, tds, c, dt, n, v, f, x,
+                     dp, r);
 }
 }  // namespace
 #define HC_FULL_FORWARD FullForwardHost

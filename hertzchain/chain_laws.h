@@ -53,21 +53,33 @@ HC_HD inline void KickSlope(double w, double s, double* pm, double* g) {
   *g = Sign(w) * MaxSlope(s);
 }
 
+// The dashpot a contact applies (`contact.contact_force`): none where there is no contact
+// law (kappa = 0: a free end, a sensor spring), N s/m.
+HC_HD inline double ContactDashpot(double k, double dashpot) { return k > 0.0 ? dashpot : 0.0; }
+
 // contact.contact_force (the total, clipped at 0 in contact: Kuwabara-Kono damping with
-// kv = 1.5 eta kappa) at overlap dl (m) and rate (m/s), N; the root sqrt(dl_+) and the
-// unclipped sum kept for the linearisation. Branch-free (selects only): sqrt(0) = 0 is the
-// root out of contact, as `contact` has it, where elastic = viscous = 0.
-template <bool kViscous, bool kExtras>
-HC_HD inline double TotalForce(double dl, double rate, double k, double kv, double sp, double* root, double* sum) {
+// kv = 1.5 eta kappa, and with kDashpot a linear dashpot `dash` = `ContactDashpot`) at
+// overlap dl (m) and rate (m/s), N; the root sqrt(dl_+) and the unclipped sum kept for the
+// linearisation. Branch-free (selects only): sqrt(0) = 0 is the root out of contact, as
+// `contact` has it, where elastic = viscous = 0; a dashpot would push there, so with one the
+// total is also 0 out of contact. kDashpot is a compile-time switch: its terms cost every
+// damped run about 17 % (`benchmarks/results/dashpot_in_cpp_kernel_not_kept.md`), so only
+// the runs that have a dashpot carry them.
+template <bool kViscous, bool kExtras, bool kDashpot>
+HC_HD inline double TotalForce(double dl, double rate, double k, double kv, double dash, double sp, double* root,
+                               double* sum) {
   double positive = dl > 0.0 ? dl : 0.0;
   double rt = std::sqrt(positive);
   double elastic = k * positive * rt;
   double f;
   if (kViscous) {
-    double viscous = (kv * rt) * rate;  // (+ a dashpot of 0 in `contact`: adds nothing)
+    double viscous = kDashpot ? (kv * rt + dash) * rate : (kv * rt) * rate;
     double s = elastic + viscous;
     *sum = s;
-    f = s > 0.0 ? s : 0.0;
+    if (kDashpot)
+      f = dl > 0.0 && s > 0.0 ? s : 0.0;
+    else
+      f = s > 0.0 ? s : 0.0;
   } else {
     *sum = elastic;
     f = elastic;
@@ -79,12 +91,15 @@ HC_HD inline double TotalForce(double dl, double rate, double k, double kv, doub
 
 // A contact's linearisation at overlap delta and rate: in = [delta > 0], positive =
 // delta_+, root = sqrt(delta_+), half_inv_root = 0.5 / root in contact (JAX's sqrt rule)
-// else 0, kp = kappa delta_+, c3 = 1.5 eta kappa root, slope = max'(total) in contact else 0.
+// else 0, kp = kappa delta_+, c3 = 1.5 eta kappa root (+ the dashpot with kDashpot: the
+// rate's coefficient), slope = max'(total) in contact else 0.
 struct Linearisation {
   double delta, rate, in, positive, root, half_inv_root, kp, c3, slope;
 };
 
-HC_HD inline Linearisation Linearise(double dl, double rate, double k, double kv, double root, double sum) {
+template <bool kDashpot>
+HC_HD inline Linearisation Linearise(double dl, double rate, double k, double kv, double dash, double root,
+                                     double sum) {
   Linearisation l;
   l.delta = dl;
   l.rate = rate;
@@ -93,22 +108,24 @@ HC_HD inline Linearisation Linearise(double dl, double rate, double k, double kv
   l.root = root;
   l.half_inv_root = dl > 0.0 ? 0.5 / root : 0.0;
   l.kp = k * l.positive;
-  l.c3 = kv * root;
+  l.c3 = kDashpot ? kv * root + dash : kv * root;
   l.slope = dl > 0.0 ? MaxSlope(sum) : 0.0;
   return l;
 }
 
 // The tangent of `TotalForce` (kExtras) along one direction: c1 = 1.5 eta, c2 = c1 kappa,
-// sp the spring, tdl / trate / tk / t15e (= 1.5 t_eta) / tsp the inputs' tangents.
-template <bool kViscous>
+// sp the spring, tdl / trate / tk / t15e (= 1.5 t_eta) / tdash (`ContactDashpot`'s, read
+// with kDashpot only) / tsp the inputs' tangents.
+template <bool kViscous, bool kDashpot>
 HC_HD inline double TangentForce(const Linearisation& l, double k, double c1, double c2, double sp, double tdl,
-                                 double trate, double tk, double t15e, double tsp) {
+                                 double trate, double tk, double t15e, double tdash, double tsp) {
   double tpositive = tdl * l.in;
   double troot = tdl * l.half_inv_root;
   double telastic = (tk * l.positive + k * tpositive) * l.root + l.kp * troot;
   double tf = telastic;
   if (kViscous) {
     double tc3 = (t15e * k + c1 * tk) * l.root + c2 * troot;
+    if (kDashpot) tc3 = tc3 + tdash;
     tf = (telastic + (tc3 * l.rate + l.c3 * trate)) * l.slope;
   }
   return tf + (tsp * l.delta + sp * tdl);

@@ -9,8 +9,8 @@ physics it runs, so that the conservative case pays nothing for the rest:
 
 - the conservative one (`run`): Hertz contacts, sensor springs, preload, walls and free
   ends, with or without the books (running maxima, energies);
-- the full one (`run_full`): the same plus Kuwabara-Kono damping (the total force clipped
-  at 0) and track friction, the recorded forces only, and forward-mode tangents carried
+- the full one (`run_full`): the same plus Kuwabara-Kono damping and a linear dashpot (the
+  total force clipped at 0) and track friction, the recorded forces only, and forward-mode tangents carried
   through the same loop (`jax.custom_jvp`: `jax.jvp`, `jax.jacfwd`, `jax.linearize`; the
   forces and all the directions of a Jacobian in one run).
 
@@ -65,6 +65,13 @@ FFI_ARGS = Path(__file__).with_name("chain_ffi.h")  # their handlers' argument l
 TARGET = "hertzchain_chain_forward"
 FULL_TARGET = "hertzchain_chain_full_forward"
 TANGENT_TARGET = "hertzchain_chain_full_tangent"
+# The full kernel with a linear dashpot: its terms compiled in for its runs alone (they cost
+# every damped run ~17 % as a runtime term, `benchmarks/results/dashpot_in_cpp_kernel_not_kept.md`),
+# in a library of their own (`-D` DASHPOT_DEFINE) built on first use, so that the main
+# library every run needs does not wait for them (36 s -> 50 s when built into it, 2 cores).
+DASHPOT_DEFINE = "HC_DASHPOT_LIBRARY"
+DASHPOT_FULL_TARGET = "hertzchain_chain_full_forward_dashpot"
+DASHPOT_TANGENT_TARGET = "hertzchain_chain_full_tangent_dashpot"
 # IEEE arithmetic as the JAX kernel rounds it: no contraction into fused multiply-adds
 # other than the source's own `std::fma`, no fast math; -fno-math-errno lets the square
 # roots vectorise; -pthread for the threads the blocks of chains run on.
@@ -122,12 +129,13 @@ def _cpu_key() -> str:
     return platform.machine() + "|" + "|".join(lines)
 
 
-def _library_path() -> Path:
+def _library_path(defines: tuple[str, ...] = ()) -> Path:
     digest = hashlib.sha256()
     for part in (SOURCE.read_bytes(), LAWS.read_bytes(), FFI_ARGS.read_bytes(), jax.__version__.encode(),
-                 " ".join(_flags()).encode(), _cpu_key().encode()):
+                 " ".join(_flags() + defines).encode(), _cpu_key().encode()):
         digest.update(part)
-    return _cache_dir() / f"chain_kernel-{digest.hexdigest()[:16]}.so"
+    variant = "-dashpot" if defines else ""
+    return _cache_dir() / f"chain_kernel{variant}-{digest.hexdigest()[:16]}.so"
 
 
 def _cxx() -> str | None:
@@ -146,13 +154,13 @@ def _compile(command_for, path: Path, name: str) -> None:
         os.replace(partial, path)
 
 
-def _build(path: Path) -> None:
-    """Compile the host kernel into `path`."""
+def _build(path: Path, defines: tuple[str, ...] = ()) -> None:
+    """Compile the host kernel into `path` (`defines`: `-D` macros)."""
     compiler = _cxx()
     if compiler is None:
         raise RuntimeError("no C++ compiler found (set CXX, or install g++)")
-    _compile(lambda partial: [compiler, *_flags(), f"-I{jax.ffi.include_dir()}", str(SOURCE), "-o", str(partial)],
-             path, SOURCE.name)
+    _compile(lambda partial: [compiler, *_flags(), *defines, f"-I{jax.ffi.include_dir()}", str(SOURCE), "-o",
+                              str(partial)], path, SOURCE.name)
 
 
 # glibc's malloc options (mallopt): the size from which a request is served by its own
@@ -212,6 +220,21 @@ def _load() -> str | None:
     return None
 
 
+@functools.cache
+def _load_dashpot() -> None:
+    """Build (if needed), load and register the dashpot's full kernels (`DASHPOT_DEFINE`)."""
+    defines = (f"-D{DASHPOT_DEFINE}",)
+    path = _library_path(defines)
+    if not path.exists():
+        print(f"hertzchain: compiling the fused chain kernel's dashpot runs into {path} (once; under a minute)",
+              file=sys.stderr, flush=True)
+        _build(path, defines)
+    library = ctypes.cdll.LoadLibrary(str(path))
+    for name, symbol in ((DASHPOT_FULL_TARGET, library.HertzChainFullForward),
+                         (DASHPOT_TANGENT_TARGET, library.HertzChainFullTangent)):
+        jax.ffi.register_ffi_target(name, jax.ffi.pycapsule(symbol), platform="cpu")
+
+
 def available() -> bool:
     """Whether the kernel is built and registered (it builds it on the first call)."""
     return _load() is None
@@ -240,9 +263,9 @@ class FusedKernel(NamedTuple):
 def kernel_for(flags, devices) -> FusedKernel | None:
     """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
     devices, or None (the JAX kernel: books with damping or friction, contacts other than
-    Hertz's, dashpots, devices of another kind, no compiler)."""
+    Hertz's, devices of another kind, no compiler)."""
     platforms = {d.platform for d in devices} if devices else {jax.default_backend()}
-    if (flags.full_state and flags.ledger) or flags.law != "hertz" or flags.dashpot:
+    if (flags.full_state and flags.ledger) or flags.law != "hertz":
         return None
     physics = "full" if flags.full_state else "conservative"
     if platforms == {"cpu"} and available():
@@ -265,7 +288,8 @@ NVCC_FLAGS = ("-O3", "-arch=native", "--fmad=false", "-std=c++17", "-shared", "-
 EMULATION_FLAGS = ("-O1", "-ffp-contract=off", "-fno-math-errno", "-std=c++17", "-shared", "-fPIC")
 _THREAD_SYMBOLS = {"forward": "HertzChainThreadForward", "full": "HertzChainThreadFullForward",
                    "tangent": "HertzChainThreadFullTangent"}
-_HOST_TARGETS = {"forward": TARGET, "full": FULL_TARGET, "tangent": TANGENT_TARGET}
+_HOST_TARGETS = {"forward": TARGET, "full": FULL_TARGET, "tangent": TANGENT_TARGET,
+                 "full_dashpot": DASHPOT_FULL_TARGET, "tangent_dashpot": DASHPOT_TANGENT_TARGET}
 
 
 def _nvcc() -> str | None:
@@ -347,9 +371,13 @@ class _Ffi(NamedTuple):
         return tuple(jax.ShapeDtypeStruct(leading + shape, state0.dtype) for _ in range(count))
 
     def call(self, kind: str, shapes, args, index, attrs) -> tuple:
+        """`kind`: "forward", "full", "tangent", or the last two with a dashpot ("_dashpot":
+        its own host library; the thread kernels compile it into the same one)."""
         if self.backend == "host":
+            if kind.endswith("_dashpot"):
+                _load_dashpot()
             return tuple(jax.ffi.ffi_call(_HOST_TARGETS[kind], shapes)(*args, index, **attrs))
-        target = _thread_target(self.backend, int(self.rows), kind)
+        target = _thread_target(self.backend, int(self.rows), kind.removesuffix("_dashpot"))
         return tuple(jax.ffi.ffi_call(target, shapes)(*args, channels=index, **attrs))
 
     def traces(self, traces) -> tuple:
@@ -454,7 +482,7 @@ def _fold_directions(size: int, batched, tangents):
 
 def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples: int,
              channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
-             backend: str = "host"):
+             dashpot: bool = False, backend: str = "host"):
     """The full step (`batched._step` with velocities and accelerations apart: damping,
     friction) from displacements `x`, velocities `v` and accelerations `a` (bodies + 1, B)
     at the impact, through `n_samples` samples of `steps_per_sample` steps of `dt_s`
@@ -466,7 +494,8 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     `jax.vmap` the mapped chains join the kernel's batch (one run for all of them, with or
     without tangents): a vmapped batch of fits, `jacfwd` of `vmap` and `vmap` of `jacfwd`
     are one kernel run each. Reverse mode is not available (use the JAX kernel,
-    `kernel="jax"`). `backend` as for `run`."""
+    `kernel="jax"`). `dashpot`: a linear dashpot on every contact (`p["dashpot"]`, N s/m;
+    needs `viscous`), its terms compiled into this call's kernel only. `backend` as for `run`."""
     _require(backend)
     width = lambda leaf: leaf.shape[-1]  # noqa: E731
     zeros = lambda leaf: jax.numpy.zeros_like(leaf)  # noqa: E731
@@ -479,20 +508,27 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
         p["external"] if preload else zeros(p["external"]),
         jax.numpy.reshape(p["eta"], (1, width(p["eta"]))),
         jax.numpy.reshape(p["friction"], (1, width(p["friction"]))),
+        # the linear dashpot (N s/m, `contact.contact_force`), zeros without one
+        jax.numpy.reshape(p["dashpot"], (1, width(p["dashpot"]))) if dashpot else jax.numpy.zeros((1, 1)),
     )
     config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
-              bool(viscous), bool(friction), bool(preload or springs), backend)
+              bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), backend)
     return _full_call(config)(*args)
 
 
 @functools.cache
 def _full_call(config):
     """The full kernel for one configuration as a function of its arrays, with its JVP."""
-    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, backend = config
+    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, dashpot, backend = config
+    if dashpot and not viscous:
+        raise ValueError("run_full: a dashpot needs viscous=True (the kernel's rates come with the damping).")
+    # dashpot: the kernel with the dashpot's terms compiled in (`DASHPOT_DEFINE`)
     attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample),
-                 viscous=np.int64(viscous), friction=np.int64(friction), extras=np.int64(extras))
+                 viscous=np.int64(viscous), friction=np.int64(friction), extras=np.int64(extras),
+                 dashpot=np.int64(dashpot))
     index = np.asarray(channels, dtype=np.int64)
-    n_args = 8  # the state and the seven parameter arrays
+    n_args = 9  # the state and the eight parameter arrays
+    kinds = ("full_dashpot", "tangent_dashpot") if dashpot else ("full", "tangent")
 
     def ffi(args):
         return _Ffi(backend, args[1].shape[-2], n_samples)
@@ -501,7 +537,7 @@ def _full_call(config):
     def traces(*args):
         call = ffi(args)
         shapes = call.trace_shapes(args[0], len(channels))
-        return call.traces(call.call("full", shapes, args, index, attrs))
+        return call.traces(call.call(kinds[0], shapes, args, index, attrs))
 
     @traces.def_vmap
     def _(size, batched, *args):
@@ -517,7 +553,7 @@ def _full_call(config):
         call = ffi(primals)
         n = len(channels)
         out_shapes = call.trace_shapes(primals[0], n) + call.trace_shapes(primals[0], n, (directions,))
-        out = call.call("tangent", out_shapes, primals + tangents, index, attrs)
+        out = call.call(kinds[1], out_shapes, primals + tangents, index, attrs)
         return call.traces(out[:n]) + call.traces(out[n:])
 
     @traces_and_tangents.def_vmap

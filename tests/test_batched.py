@@ -252,8 +252,9 @@ LAWS = {
     "hertz": dict(viscous=False, springs=False, preload=True, friction=False),
     "hertz_and_sensor_spring": dict(viscous=False, springs=True, preload=True, friction=False),
     "kuwabara_kono_clipped": dict(viscous=True, springs=False, preload=True, friction=False),
+    "dashpot_and_kuwabara_kono": dict(viscous=True, springs=False, preload=True, friction=False, dashpot=True),
     "track_friction": dict(viscous=False, springs=False, preload=True, friction=True),
-    "all_together": dict(viscous=True, springs=True, preload=True, friction=True),
+    "all_together": dict(viscous=True, springs=True, preload=True, friction=True, dashpot=True),
 }
 
 
@@ -294,6 +295,7 @@ def test_every_kernel_applies_the_laws_of_contact(law, kernel):
         # contact 0: closing from touch, closing from a gap it never closes, preloaded and opening
         "overlap0": np.array([[0.0, -0.3e-6, 2.5e-6], [2e-7] * batch]),
         "eta": np.full(batch, 2e-6 if flags.viscous else 0.0),
+        "dashpot": np.full(batch, 40.0 if flags.dashpot else 0.0),  # N s/m: a tenth of the elastic force
         "friction": np.full(batch, 0.19 * 9.81 * 5e3 if flags.friction else 0.0),  # strong: stops the slow one
         "external": np.zeros((3, batch)), "first_force": np.zeros(batch), "last_force": np.zeros(batch),
         "v0": v0,
@@ -324,7 +326,7 @@ def test_every_kernel_applies_the_laws_of_contact(law, kernel):
         overlap = x[:-1] - x[1:] + np.asarray(p["overlap0"])
         rate = v[:-1] - v[1:]
         if flags.viscous:
-            force = contact.contact_force(overlap, rate, p["kappa"], p["eta"])[1]
+            force = contact.contact_force(overlap, rate, p["kappa"], p["eta"], dashpot_n_s_m=p["dashpot"])[1]
             damped.append(np.asarray(force))
         else:
             force = contact.hertz_force(overlap, p["kappa"])

@@ -156,6 +156,8 @@ FULL_CASES = {
     "friction": {"mu": 0.19},
     "sensors_preload_viscous_friction": {"eta_s": 2e-6, "mu": 0.19, "sensor_beads": (3, 7), "precompression_n": 3.0},
     "free_end_preload": {"eta_s": 1e-6, "mu": 0.1, "end": "free", "precompression_n": 2.0},
+    "dashpot_friction": {"dashpot_n_s_m": 5.0, "mu": 0.1},
+    "dashpot_viscous_sensors": {"dashpot_n_s_m": 5.0, "eta_s": 1e-6, "sensor_beads": (4,), "precompression_n": 1.0},
 }
 
 
@@ -165,6 +167,37 @@ def test_damped_and_frictional_forces_agree_with_the_jax_kernel(case):
     kernel: round-off (the sensors' stiff springs amplify it a little)."""
     setup, grid = _batch(**FULL_CASES[case])
     assert_forces_equal_the_jax_kernels(setup, grid, books=False)
+
+
+@pytest.mark.parametrize("dashpot_n_s_m", [0.0, 5.0])
+def test_the_dashpot_is_compiled_into_the_runs_that_have_one(dashpot_n_s_m):
+    """Damped runs call the full C++ kernel with the dashpot's terms compiled in (FFI
+    attribute `dashpot`, the dashpot library's target) exactly when the setup has a
+    dashpot: the others keep the kernel without them, whose speed they had
+    (`benchmarks/README.md`)."""
+    import re
+
+    from hertzchain.batched import kernel_flags, record_batched
+
+    setup, grid = _batch(eta_s=1e-6, mu=0.1, dashpot_n_s_m=dashpot_n_s_m)
+    flags = kernel_flags(setup)._replace(ledger=False)
+    text = jax.jit(lambda s: record_batched(s, grid, Recording((2, 6)), flags).forces_n["wall"]).lower(setup).as_text()
+    calls = re.findall(r"custom_call @(hertzchain_chain_full_forward\w*)([^\n]*)", text)
+    assert len(calls) == 1
+    target, rest = calls[0]
+    assert target == (native.DASHPOT_FULL_TARGET if dashpot_n_s_m > 0 else native.FULL_TARGET)
+    assert f"dashpot = {int(dashpot_n_s_m > 0)} : i64" in rest
+
+
+def test_a_dashpot_without_the_damped_kernel_is_refused():
+    import jax.numpy as jnp
+
+    p = {name: jnp.zeros((2, 1)) for name in ("inv_mass", "kappa", "overlap0", "spring", "external")}
+    p.update(eta=jnp.zeros(1), friction=jnp.zeros(1), dashpot=jnp.ones(1))
+    x = jnp.zeros((2, 1))
+    with pytest.raises(ValueError, match="dashpot needs viscous=True"):
+        native.run_full(p, x, x, x, dt_s=1e-7, steps_per_sample=1, n_samples=1, channels=(0,), viscous=False,
+                        friction=False, preload=False, springs=False, dashpot=True)
 
 
 def assert_forces_equal_the_jax_kernels(setup, grid, *, books: bool):
@@ -193,32 +226,36 @@ def test_damping_and_friction_with_books_run_the_jax_kernel():
 
 def _traced(base, grid, q, kernel):
     """`record_batched` at parameter values q = (eta s, mu, striker-speed factor, preload N,
-    bead Young's modulus factor): the recorded forces (channels, B, n_samples)."""
+    bead Young's modulus factor[, dashpot N s/m]): the recorded forces (channels, B, n_samples)."""
     import equinox as eqx
     import jax.numpy as jnp
 
     from hertzchain.batched import kernel_flags, record_batched
 
-    flags = kernel_flags(base, switched_on=("viscous", "friction", "preload"))._replace(ledger=False)
+    dashpot = ("dashpot",) if q.shape[0] > 5 else ()
+    flags = kernel_flags(base, switched_on=("viscous", "friction", "preload") + dashpot)._replace(ledger=False)
     ones = jnp.ones(base.eta_s.shape)
     setup = eqx.tree_at(
         lambda s: (s.eta_s, s.mu, s.striker_velocity_m_s, s.precompression_n, s.bead_youngs_pa), base,
         (q[0] * ones, q[1] * ones, q[2] * base.striker_velocity_m_s, q[3] * ones, q[4] * base.bead_youngs_pa),
     )
+    if dashpot:
+        setup = eqx.tree_at(lambda s: s.dashpot_n_s_m, setup, q[5] * ones)
     out = record_batched(setup, grid, Recording((2, 6)), flags, kernel=kernel)
     return jnp.stack([out.forces_n[name] for name in out.channel_names])
 
 
-@pytest.mark.parametrize("case", ["viscous_friction",
+@pytest.mark.parametrize("case", ["viscous_friction", "viscous_friction_dashpot",
                                   pytest.param("sensors_preload_viscous_friction", marks=pytest.mark.slow)])
 def test_forward_mode_derivatives_equal_jacfwd_through_the_jax_kernel(case):
-    """`jax.jacfwd` through `record_batched` on the C++ kernel (its own tangents, five
-    directions in one run: damping, friction, impact speed, preload, bead modulus) equals
-    `jax.jacfwd` through the JAX kernel to round-off, and `jax.jvp` and `jax.linearize`
-    along one direction equal the Jacobian's column; values equal too."""
+    """`jax.jacfwd` through `record_batched` on the C++ kernel (its own tangents, five or six
+    directions in one run: damping, friction, impact speed, preload, bead modulus, dashpot)
+    equals `jax.jacfwd` through the JAX kernel to round-off, and `jax.jvp` and
+    `jax.linearize` along one direction equal the Jacobian's column; values equal too."""
     import jax.numpy as jnp
 
-    q = jnp.asarray([2e-6, 0.19, 1.0, 1.0, 1.0])
+    q = jnp.asarray([2e-6, 0.19, 1.0, 1.0, 1.0] + ([3.0] if case.endswith("_dashpot") else []))
+    case = case.removesuffix("_dashpot")
     kwargs = {k: v for k, v in FULL_CASES[case].items() if k not in ("eta_s", "mu", "precompression_n")}
     base, grid = _batch(speeds=(0.3, 1.0, 0.5), precompression_n=1.0, **kwargs)
     jac = np.asarray(jax.jit(jax.jacfwd(lambda q: _traced(base, grid, q, "auto")))(q))
