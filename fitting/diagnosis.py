@@ -489,6 +489,14 @@ class _Search:
                                weights=weights, max_steps=max_steps, tolerance=tolerance)
         return dataclasses.replace(result, x=np.clip(result.x, self.lower, self.upper))
 
+    def _acts(self, x, strengths) -> bool:
+        """Whether a candidate's `strengths` change the model at `x`: its residuals differ
+        from those with the strengths at 0 (off) by more than round-off (1e-9 of their norm)."""
+        off = np.array(x, dtype=float)
+        off[strengths] = 0.0
+        on_r, off_r = self.evaluate.residuals(x), self.evaluate.residuals(off)
+        return float(np.linalg.norm(on_r - off_r)) > 1e-9 * float(np.linalg.norm(off_r))
+
     def fresh(self, x) -> np.ndarray:
         """`x` with every per-file nuisance back at its start value (header velocity, zero
         trigger offset, unit gain); physical parameters and effect strengths kept."""
@@ -537,8 +545,18 @@ class _Search:
             # strengths alone cost a tangent each; everything free costs one per free parameter
             # (a per-bead effect already named: one per bead), so only the best is continued
             strengths = self.effect_columns[name]
-            starts = [min((self.fit(x, effects, columns=strengths, max_steps=max_steps)
-                           for s in starts for x in (s, self.fresh(s))), key=_rank).x]
+            ends = sorted((self.fit(x, effects, columns=strengths, max_steps=max_steps)
+                           for s in starts for x in (s, self.fresh(s))), key=_rank)
+            starts = [ends[0].x]
+            # A threshold effect's strengths, fitted alone with the nuisances the current fit
+            # bent to mimic it, can walk back to where the effect does nothing (a yield force
+            # above every force: the base model, flat there), and from fresh nuisances end
+            # worse: measured on a 10-bead chain whose fastest shot yields (the base fit lowered
+            # its striker velocity 10 %), the best end had the base's chi^2 to 1e-12 and the
+            # joint refit never moved. Then the best end where the effect acts is continued too.
+            if not self._acts(ends[0].x, strengths):
+                acting = [end for end in ends[1:] if math.isfinite(end.chi2) and self._acts(end.x, strengths)]
+                starts += [acting[0].x] if acting else []
         # per-bead strengths named before stay where they are (`held_for`)
         columns = [c for c in self.columns(effects) if c not in self.held_for(name, effects)]
         # a fit that ended on a non-finite chi^2 never counts as the best

