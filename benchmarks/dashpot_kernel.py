@@ -30,14 +30,15 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 
-def _median_ms(function, argument, calls: int) -> float:
+def _median_ms(function, argument, calls: int, step) -> float:
+    """Median wall time (ms) of `calls` warm calls of `function` at `argument + i step`."""
     import jax
 
     jax.block_until_ready(function(argument))
     times = []
     for i in range(calls):
         began = time.perf_counter()
-        jax.block_until_ready(function(argument + 1e-3 * i))
+        jax.block_until_ready(function(argument + step * i))
         times.append(time.perf_counter() - began)
     return 1e3 * float(np.median(times))
 
@@ -62,7 +63,7 @@ def posterior_gradient_ms(calls: int) -> float:
     z_hat, chol = _laplace_whitening(problem.instances, constants, np.asarray(fit.x), fit.covariance)
     potential = _potential(problem, constants, z_hat, chol)
     gradient = jax.jit(jax.vmap(jax.value_and_grad(potential)))
-    return _median_ms(gradient, 0.1 * jnp.ones((2, len(problem.instances))), calls)
+    return _median_ms(gradient, 0.1 * jnp.ones((2, len(problem.instances))), calls, 1e-3)
 
 
 def dashpot_jacobian(calls: int) -> dict:
@@ -93,16 +94,9 @@ def dashpot_jacobian(calls: int) -> dict:
     default, reference = jacobian("auto"), jacobian("jax")
     a, b = np.asarray(default(q)), np.asarray(reference(q))
     scale = np.max(np.abs(b), axis=tuple(range(b.ndim - 1)))  # per parameter
-    step = jnp.asarray([1e-9, 1e-4, 1e-2])  # the timing loop's moves, in each parameter's scale
-    timed = {}
-    for name, function in (("default", default), ("jax", reference)):
-        function(q)
-        times = []
-        for i in range(calls):
-            began = time.perf_counter()
-            jax.block_until_ready(function(q + step * (i % 3)))
-            times.append(time.perf_counter() - began)
-        timed[name] = 1e3 * float(np.median(times))
+    step = jnp.asarray([1e-10, 1e-5, 1e-3])  # the timing loop's moves, in each parameter's scale
+    timed = {name: _median_ms(function, q, calls, step)
+             for name, function in (("default", default), ("jax", reference))}
     return {"default_kernel_ms": timed["default"], "jax_kernel_ms": timed["jax"],
             "speedup": timed["jax"] / timed["default"],
             "max_jacobian_difference_relative": float(np.max(np.abs(a - b) / scale)),

@@ -206,33 +206,31 @@ def _load() -> str | None:
         return "switched off (HERTZCHAIN_NATIVE=0)"
     _keep_freed_buffers()
     try:
-        path = _library_path()
-        if not path.exists():
-            print(f"hertzchain: compiling the fused chain kernel into {path} (once; under a minute)",
-                  file=sys.stderr, flush=True)
-            _build(path)
-        library = ctypes.cdll.LoadLibrary(str(path))
-        for name, symbol in ((TARGET, library.HertzChainForward), (FULL_TARGET, library.HertzChainFullForward),
-                             (TANGENT_TARGET, library.HertzChainFullTangent)):
-            jax.ffi.register_ffi_target(name, jax.ffi.pycapsule(symbol), platform="cpu")
+        _load_library((), "the fused chain kernel",
+                      ((TARGET, "HertzChainForward"), (FULL_TARGET, "HertzChainFullForward"),
+                       (TANGENT_TARGET, "HertzChainFullTangent")))
     except (OSError, RuntimeError) as error:
         return str(error)
     return None
 
 
+def _load_library(defines: tuple[str, ...], what: str, targets) -> None:
+    """Build (if needed) the host kernel with `defines`, load it and register its handler
+    symbols as FFI targets (`targets`: (target, symbol) pairs)."""
+    path = _library_path(defines)
+    if not path.exists():
+        print(f"hertzchain: compiling {what} into {path} (once; under a minute)", file=sys.stderr, flush=True)
+        _build(path, defines)
+    library = ctypes.cdll.LoadLibrary(str(path))
+    for name, symbol in targets:
+        jax.ffi.register_ffi_target(name, jax.ffi.pycapsule(getattr(library, symbol)), platform="cpu")
+
+
 @functools.cache
 def _load_dashpot() -> None:
     """Build (if needed), load and register the dashpot's full kernels (`DASHPOT_DEFINE`)."""
-    defines = (f"-D{DASHPOT_DEFINE}",)
-    path = _library_path(defines)
-    if not path.exists():
-        print(f"hertzchain: compiling the fused chain kernel's dashpot runs into {path} (once; under a minute)",
-              file=sys.stderr, flush=True)
-        _build(path, defines)
-    library = ctypes.cdll.LoadLibrary(str(path))
-    for name, symbol in ((DASHPOT_FULL_TARGET, library.HertzChainFullForward),
-                         (DASHPOT_TANGENT_TARGET, library.HertzChainFullTangent)):
-        jax.ffi.register_ffi_target(name, jax.ffi.pycapsule(symbol), platform="cpu")
+    _load_library((f"-D{DASHPOT_DEFINE}",), "the fused chain kernel's dashpot runs",
+                  ((DASHPOT_FULL_TARGET, "HertzChainFullForward"), (DASHPOT_TANGENT_TARGET, "HertzChainFullTangent")))
 
 
 def available() -> bool:
