@@ -209,9 +209,8 @@ def _grid_jvp_compiled(settings, n_beads, bead_mass_kg, kappa, scale_index, x, f
         chain = chain_at(layout_experiment, xx)
         return lockin_grid(chain, frequencies, drives * xx[scale_index], **dict(settings)).rms[0]
 
-    value = curves(x)
-    tangents = jax.vmap(lambda d: jax.jvp(curves, (x,), (d,))[1])(directions)
-    return value, tangents
+    # the values once (they do not vary along the directions), the tangents of every direction
+    return jax.vmap(lambda d: jax.jvp(curves, (x,), (d,)), out_axes=(None, 0))(directions)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -62,6 +62,7 @@ from jax.interpreters import partial_eval
 SOURCE = Path(__file__).with_name("chain_kernel.cc")
 LAWS = Path(__file__).with_name("chain_laws.h")  # the laws both kernels include
 FFI_ARGS = Path(__file__).with_name("chain_ffi.h")  # their handlers' argument lists
+BLOCKS = Path(__file__).with_name("chain_blocks.h")  # the host kernels' layouts and threads
 TARGET = "hertzchain_chain_forward"
 FULL_TARGET = "hertzchain_chain_full_forward"
 TANGENT_TARGET = "hertzchain_chain_full_tangent"
@@ -129,13 +130,15 @@ def _cpu_key() -> str:
     return platform.machine() + "|" + "|".join(lines)
 
 
-def _library_path(defines: tuple[str, ...] = ()) -> Path:
+def _library_path(defines: tuple[str, ...] = (), source: Path = SOURCE) -> Path:
+    """Where the host library built from `source` with `defines` is kept, keyed by everything
+    its build reads."""
     digest = hashlib.sha256()
-    for part in (SOURCE.read_bytes(), LAWS.read_bytes(), FFI_ARGS.read_bytes(), jax.__version__.encode(),
-                 " ".join(_flags() + defines).encode(), _cpu_key().encode()):
+    for part in (source.read_bytes(), LAWS.read_bytes(), FFI_ARGS.read_bytes(), BLOCKS.read_bytes(),
+                 jax.__version__.encode(), " ".join(_flags() + defines).encode(), _cpu_key().encode()):
         digest.update(part)
     variant = "-dashpot" if defines else ""
-    return _cache_dir() / f"chain_kernel{variant}-{digest.hexdigest()[:16]}.so"
+    return _cache_dir() / f"{source.stem}{variant}-{digest.hexdigest()[:16]}.so"
 
 
 def _cxx() -> str | None:
@@ -154,13 +157,13 @@ def _compile(command_for, path: Path, name: str) -> None:
         os.replace(partial, path)
 
 
-def _build(path: Path, defines: tuple[str, ...] = ()) -> None:
-    """Compile the host kernel into `path` (`defines`: `-D` macros)."""
+def _build(path: Path, defines: tuple[str, ...] = (), source: Path = SOURCE) -> None:
+    """Compile the host kernel `source` into `path` (`defines`: `-D` macros)."""
     compiler = _cxx()
     if compiler is None:
         raise RuntimeError("no C++ compiler found (set CXX, or install g++)")
-    _compile(lambda partial: [compiler, *_flags(), *defines, f"-I{jax.ffi.include_dir()}", str(SOURCE), "-o",
-                              str(partial)], path, SOURCE.name)
+    _compile(lambda partial: [compiler, *_flags(), *defines, f"-I{jax.ffi.include_dir()}", str(source), "-o",
+                              str(partial)], path, source.name)
 
 
 # glibc's malloc options (mallopt): the size from which a request is served by its own
@@ -214,13 +217,13 @@ def _load() -> str | None:
     return None
 
 
-def _load_library(defines: tuple[str, ...], what: str, targets) -> None:
-    """Build (if needed) the host kernel with `defines`, load it and register its handler
-    symbols as FFI targets (`targets`: (target, symbol) pairs)."""
-    path = _library_path(defines)
+def _load_library(defines: tuple[str, ...], what: str, targets, source: Path = SOURCE) -> None:
+    """Build (if needed) the host kernel `source` with `defines`, load it and register its
+    handler symbols as FFI targets (`targets`: (target, symbol) pairs)."""
+    path = _library_path(defines, source)
     if not path.exists():
         print(f"hertzchain: compiling {what} into {path} (once; under a minute)", file=sys.stderr, flush=True)
-        _build(path, defines)
+        _build(path, defines, source)
     library = ctypes.cdll.LoadLibrary(str(path))
     for name, symbol in targets:
         jax.ffi.register_ffi_target(name, jax.ffi.pycapsule(getattr(library, symbol)), platform="cpu")

@@ -426,15 +426,14 @@ def test_freed_result_buffers_are_reused_not_faulted_in_again(setting):
         assert result["faults"][1] > 2000
 
 
-def test_failed_build_names_the_compiler_error(tmp_path, monkeypatch):
+def test_failed_build_names_the_compiler_error(tmp_path):
     """A source that does not compile: the build raises with the compiler's message and
     leaves no library behind (written whole or not at all)."""
     broken = tmp_path / "chain_kernel.cc"
     broken.write_text("this is not C++\n")
-    monkeypatch.setattr(native, "SOURCE", broken)
     target = tmp_path / "cache" / "kernel.so"
     with pytest.raises(RuntimeError, match="compiling chain_kernel.cc failed"):
-        native._build(target)
+        native._build(target, source=broken)
     assert not target.exists() and list(target.parent.iterdir()) == []
 
 

@@ -40,8 +40,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import kernel
+from . import fused
 from .chain import DrivenChain
+from .kernel import DEFAULT_UNROLL, kernel_params
 from .lockin import AbstractReading
 from .schedule import HarmonicSchedule, check_readout, lockin_levels
 
@@ -82,7 +83,8 @@ def lockin_grid(
     window_periods: int = 4,
     steps_per_period: int = 64,
     contact: int | None = None,
-    unroll: int = kernel.DEFAULT_UNROLL,
+    unroll: int = DEFAULT_UNROLL,
+    kernel: str = "auto",
 ) -> LockinGrid:
     """Lock-in response of `chain` over the grid `frequencies_hz` (F,) × `drive_amplitudes_m`
     (A,) (the driver's displacement amplitude, m, ≥ 0), all F × A runs as one batch.
@@ -103,30 +105,43 @@ def lockin_grid(
       1/(f N)); checked against the chain's highest linear mode (ω dt ≤ 1).
     - `contact`: with `quantity="force"`, the contact whose total force the lock-in reads
       (0 = driver face .. n = wall; N), as a force sensor there would.
-    - `unroll`: steps per scan iteration (speed only).
+    - `unroll`: steps per scan iteration of the JAX kernel (speed only).
+    - `kernel`: "auto" (default) runs the fused host kernel (`hertzchain.driven.fused`:
+      the same numbers to round-off, forward-mode derivatives in the same call) where it
+      can (on the CPU, a bead's velocity or displacement, a C++ compiler at hand), else the
+      JAX kernel; "jax" always the JAX kernel (reverse mode needs it).
 
     **Returns:** `LockinGrid` with `.rms` and `.phase_rad` of shape (n_harmonics, F, A).
     """
     harmonics = tuple(float(h) for h in harmonics)
+    if kernel not in ("auto", "jax"):
+        raise ValueError(f'kernel: expected "auto" or "jax", got {kernel!r}.')
     check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
                          hold_periods, window_periods, steps_per_period, contact)
     contact = None if contact is None else int(contact)
     return _lockin_grid(chain.for_kernel(), jnp.asarray(frequencies_hz, dtype=jnp.float64),
                         jnp.asarray(drive_amplitudes_m, dtype=jnp.float64), int(bead), quantity, harmonics,
                         int(ramp_periods), int(hold_periods), int(window_periods), int(steps_per_period), int(unroll),
-                        contact)
+                        contact, kernel == "auto" and fused.runs(quantity))
 
 
 @eqx.filter_jit
 def _lockin_grid(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
-                 hold_periods, window_periods, steps_per_period, unroll, contact):
+                 hold_periods, window_periods, steps_per_period, unroll, contact, on_fused_kernel):
     n_freq, n_amp = frequencies_hz.shape[0], drive_amplitudes_m.shape[0]
     # one level per run, run index = i_f * A + i_a
-    schedule = HarmonicSchedule(jnp.repeat(frequencies_hz, n_amp)[None], jnp.tile(drive_amplitudes_m, n_freq)[None],
-                                steps_per_period, ramp_periods, hold_periods, 0)
-    readings = lockin_levels(chain, schedule, bead, quantity, harmonics, window_periods, unroll, contact)
+    frequencies, amplitudes = jnp.repeat(frequencies_hz, n_amp), jnp.tile(drive_amplitudes_m, n_freq)
+    if on_fused_kernel:
+        complex_amplitude = fused.lockin_sums(
+            kernel_params(chain), frequencies, amplitudes, steps_per_period=steps_per_period,
+            ramp_periods=ramp_periods, hold_periods=hold_periods, window_periods=window_periods, harmonics=harmonics,
+            bead=bead, quantity=quantity)
+    else:
+        schedule = HarmonicSchedule(frequencies[None], amplitudes[None], steps_per_period, ramp_periods, hold_periods, 0)
+        complex_amplitude = lockin_levels(chain, schedule, bead, quantity, harmonics, window_periods, unroll,
+                                          contact).complex_amplitude
     return LockinGrid(
-        complex_amplitude=readings.complex_amplitude.reshape(len(harmonics), n_freq, n_amp),
+        complex_amplitude=complex_amplitude.reshape(len(harmonics), n_freq, n_amp),
         frequencies_hz=frequencies_hz,
         drive_amplitudes_m=drive_amplitudes_m,
         harmonics=harmonics,

@@ -82,13 +82,21 @@ def lockin_steps(samples, steps_per_period: int, harmonic: float, first_step) ->
     is $\\theta_j = 2\\pi j/N$; K × `harmonic` / N must be a whole number (whole periods of the
     demodulated component; checked by the callers, which know K and N statically)."""
     count = samples.shape[0]
+    reference = jnp.asarray(step_reference(count, steps_per_period, harmonic, first_step))
+    reference = reference.reshape((count,) + (1,) * (samples.ndim - 1))
+    return LockIn(2.0 / count * jnp.sum(samples * reference, axis=0))
+
+
+def step_reference(count: int, steps_per_period: int, harmonic: float, first_step: int) -> np.ndarray:
+    """The lock-in's reference $e^{-i\\,2\\pi h j/N}$ at the steps j = `first_step` ..
+    `first_step` + `count` - 1 of a harmonic drive of N = `steps_per_period` steps a period,
+    (count,) complex: `lockin_steps` sums the samples against it."""
     # Steps reduced modulo a whole number of the component's periods (N × the harmonic's
     # denominator steps), so the phases are exact whatever the run's length.
     period_steps = steps_per_period * Fraction(harmonic).limit_denominator(1000).denominator
     steps = (first_step + np.arange(count)) % period_steps
     phase = (2.0 * np.pi * harmonic / steps_per_period) * steps
-    reference = jnp.asarray(np.exp(-1j * phase)).reshape((count,) + (1,) * (samples.ndim - 1))
-    return LockIn(2.0 / count * jnp.sum(samples * reference, axis=0))
+    return np.exp(-1j * phase)
 
 
 def _concrete(*values) -> bool:
