@@ -8,7 +8,11 @@ damping 1800 /s; 341 frequencies 3.0-4.7 kHz × 36 drive amplitudes 0.68-6.66 nm
 35, window 4 periods (60 periods a run). Times (median of `--repeats` after compilation): the
 grid (`lockin_grid`, RMS and phase at f and f/2) and its Jacobian with respect to four
 parameters (precompression, contact-stiffness scale, damping rate, drive scale) by
-`jax.jacfwd`, as wall time and as this process's CPU time. The JSON records the machine (CPU count, load average) with the numbers.
+`jax.jacfwd`, as wall time and as this process's CPU time, on each kernel in turn in one
+process: the fused host kernel (`kernel="auto"`, `hertzchain.driven.fused`; where it cannot
+run here, "auto" is the JAX kernel and says so) and the JAX kernel (`kernel="jax"`), with
+the largest difference between their grids and Jacobians. The JSON records the machine (CPU
+count, load average) with the numbers.
 
 Physics checks are stored with them (`checks`): for the single bead as the research notes
 fitted it (delta_0 = 22.6 nm at F0 = 0.133 N, zeta = 0.036, drive scale 1.12), the resonance
@@ -23,6 +27,7 @@ the peak (both held until transients decay to 1e-6, `settle_periods`).
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import platform
@@ -44,6 +49,7 @@ from hertzchain.driven import (
     period_doubling_threshold,
     settle_periods,
 )
+from hertzchain.driven import fused
 
 
 def timed(function, repeats: int) -> tuple[float, float, float]:
@@ -116,19 +122,13 @@ def main() -> None:
     amplitudes = jnp.linspace(0.683e-9, 6.66e-9, args.amplitudes)
     options = {"steps_per_period": args.steps_per_period}
 
-    def grid():
-        return lockin_grid(chain, frequencies, amplitudes, **options).rms
-
-    def model(theta):
+    def model(theta, kernel):
         f0, kappa_scale, gamma_scale, drive_scale = theta
         c = eqx.tree_at(lambda c: (c.precompression_n, c.contact_kappa_n_m1p5, c.damping_rate_per_s), chain,
                         (f0, chain.contact_kappa_n_m1p5 * kappa_scale, chain.damping_rate_per_s * gamma_scale))
-        return lockin_grid(c, frequencies, amplitudes * drive_scale, **options).rms[0]
+        return lockin_grid(c, frequencies, amplitudes * drive_scale, kernel=kernel, **options).rms[0]
 
-    jacobian = jax.jit(jax.jacfwd(model))
     theta = jnp.array([0.133, 1.0, 1.0, 1.0])
-    grid_first, grid_time, grid_cpu = timed(grid, args.repeats)
-    jac_first, jac_time, jac_cpu = timed(lambda: jacobian(theta), args.repeats)
     runs = args.frequencies * args.amplitudes
     steps = 60 * args.steps_per_period
     result = {
@@ -137,16 +137,38 @@ def main() -> None:
                     "devices": [str(d) for d in jax.devices()]},
         "grid": {"frequencies": args.frequencies, "amplitudes": args.amplitudes, "runs": runs,
                  "steps_per_run": steps, "bead_steps": runs * steps},
-        "grid_s": grid_time,
-        "grid_cpu_s": grid_cpu,
-        "grid_first_call_s": grid_first,
-        "jacobian_4_params_s": jac_time,
-        "jacobian_4_params_cpu_s": jac_cpu,
-        "jacobian_first_call_s": jac_first,
-        "jacobian_over_grid": jac_time / grid_time,
-        "bead_steps_per_s": runs * steps / grid_time,
-        "check_peak_rms_m_s": float(np.max(np.asarray(grid()[0]))),
+        "fused_kernel_unavailable_reason": fused.unavailable_reason(),
+        "kernels": {},
     }
+    outputs = {}
+    for kernel in ("auto", "jax"):
+        def grid(kernel=kernel):
+            return lockin_grid(chain, frequencies, amplitudes, kernel=kernel, **options).rms
+
+        jacobian = jax.jit(jax.jacfwd(functools.partial(model, kernel=kernel)))
+        grid_first, grid_time, grid_cpu = timed(grid, args.repeats)
+        jac_first, jac_time, jac_cpu = timed(lambda: jacobian(theta), args.repeats)
+        outputs[kernel] = (np.asarray(grid()), np.asarray(jacobian(theta)))
+        result["kernels"]["fused" if kernel == "auto" and fused.runs("velocity") else kernel] = {
+            "grid_s": grid_time,
+            "grid_cpu_s": grid_cpu,
+            "grid_first_call_s": grid_first,
+            "jacobian_4_params_s": jac_time,
+            "jacobian_4_params_cpu_s": jac_cpu,
+            "jacobian_first_call_s": jac_first,
+            "jacobian_over_grid": jac_time / grid_time,
+            "bead_steps_per_s": runs * steps / grid_time,
+            "check_peak_rms_m_s": float(np.max(outputs[kernel][0][0])),
+        }
+    (grid_auto, jac_auto), (grid_jax, jac_jax) = outputs["auto"], outputs["jax"]
+    result["grid_max_difference_over_peak"] = float(np.max(np.abs(grid_auto - grid_jax)) / np.max(np.abs(grid_jax)))
+    result["jacobian_max_difference_over_largest_entry"] = [
+        float(np.max(np.abs(jac_auto[..., i] - jac_jax[..., i])) / np.max(np.abs(jac_jax[..., i])))
+        for i in range(theta.size)]
+    if "fused" in result["kernels"]:
+        fast, slow = result["kernels"]["fused"], result["kernels"]["jax"]
+        result["jax_over_fused"] = {"grid": slow["grid_s"] / fast["grid_s"],
+                                    "jacobian": slow["jacobian_4_params_s"] / fast["jacobian_4_params_s"]}
     if not args.no_checks:
         result["checks"] = physics_checks()
     write_json(args.out, result)

@@ -130,18 +130,13 @@ def _lockin_grid(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harm
                  hold_periods, window_periods, steps_per_period, unroll, contact, on_fused_kernel):
     n_freq, n_amp = frequencies_hz.shape[0], drive_amplitudes_m.shape[0]
     # one level per run, run index = i_f * A + i_a
-    frequencies, amplitudes = jnp.repeat(frequencies_hz, n_amp), jnp.tile(drive_amplitudes_m, n_freq)
-    if on_fused_kernel:
-        complex_amplitude = fused.lockin_sums(
-            kernel_params(chain), frequencies, amplitudes, steps_per_period=steps_per_period,
-            ramp_periods=ramp_periods, hold_periods=hold_periods, window_periods=window_periods, harmonics=harmonics,
-            bead=bead, quantity=quantity)
-    else:
-        schedule = HarmonicSchedule(frequencies[None], amplitudes[None], steps_per_period, ramp_periods, hold_periods, 0)
-        complex_amplitude = lockin_levels(chain, schedule, bead, quantity, harmonics, window_periods, unroll,
-                                          contact).complex_amplitude
+    readings = lockin_runs(chain, jnp.repeat(frequencies_hz, n_amp), jnp.tile(drive_amplitudes_m, n_freq),
+                           bead=bead, quantity=quantity, harmonics=harmonics, ramp_periods=ramp_periods,
+                           hold_periods=hold_periods, window_periods=window_periods,
+                           steps_per_period=steps_per_period, unroll=unroll, contact=contact,
+                           on_fused_kernel=on_fused_kernel)
     return LockinGrid(
-        complex_amplitude=complex_amplitude.reshape(len(harmonics), n_freq, n_amp),
+        complex_amplitude=readings.reshape(len(harmonics), n_freq, n_amp),
         frequencies_hz=frequencies_hz,
         drive_amplitudes_m=drive_amplitudes_m,
         harmonics=harmonics,
@@ -149,6 +144,20 @@ def _lockin_grid(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harm
         bead=bead,
         contact=contact,
     )
+
+
+def lockin_runs(chain, frequency_hz, amplitude_m, *, bead, quantity, harmonics, ramp_periods, hold_periods,
+                window_periods, steps_per_period, unroll, contact, on_fused_kernel) -> jax.Array:
+    """The lock-in's complex amplitudes (n_harmonics, B) of B runs of `lockin_grid`, one per
+    (`frequency_hz`, `amplitude_m`) pair ((B,) each), on the fused kernel (`on_fused_kernel`,
+    where `fused.runs` says it can) or the JAX kernel (traceable; the chain `for_kernel`)."""
+    if on_fused_kernel:
+        return fused.lockin_sums(kernel_params(chain), frequency_hz, amplitude_m, steps_per_period=steps_per_period,
+                                 ramp_periods=ramp_periods, hold_periods=hold_periods, window_periods=window_periods,
+                                 harmonics=harmonics, bead=bead, quantity=quantity)
+    schedule = HarmonicSchedule(frequency_hz[None], amplitude_m[None], steps_per_period, ramp_periods, hold_periods, 0)
+    return lockin_levels(chain, schedule, bead, quantity, harmonics, window_periods, unroll,
+                         contact).complex_amplitude[:, 0]
 
 
 def settle_periods(chain: DrivenChain, frequency_hz: float, tolerance: float = 1e-4) -> int:

@@ -1,7 +1,8 @@
 """Large frequency × amplitude lock-in grids: chunked, streamed to disk, resumable, sharded.
 
 `run_lockin_sweep` evaluates the runs of `lockin_grid` (the amplitude ramp from rest: the
-upward-sweep branch) in chunks of `chunk_size` runs, each chunk one batch on the SIMD axis,
+upward-sweep branch) in chunks of `chunk_size` runs, each chunk one call of the fused host
+kernel on the CPU (`hertzchain.driven.fused`, bead readings) or one batch on the SIMD axis,
 split over the devices given (`jax.shard_map`: GPUs, or a CPU's cores as host devices with
 `XLA_FLAGS=--xla_force_host_platform_device_count=K` set before JAX starts). Each finished
 chunk is written at once, atomically, as its own Parquet file; a sweep restarted into the
@@ -31,10 +32,10 @@ from jax.sharding import Mesh, PartitionSpec
 from ..atomic import save_figure, write_json
 from ..progress import Progress
 from ..sweep import _read_parquet, _write_parquet, _write_table_csv
-from . import kernel
+from . import fused
 from .chain import DrivenChain
-from .grid import LockinGrid, check_grid_arguments
-from .schedule import HarmonicSchedule, lockin_levels
+from .grid import LockinGrid, check_grid_arguments, lockin_runs
+from .kernel import DEFAULT_UNROLL
 
 LOCKIN_SWEEP_FORMAT = "hertzchain-lockin-sweep/1"
 _DEFAULT_CHUNK = 4096
@@ -131,7 +132,8 @@ def run_lockin_sweep(
         todo = todo[: max(0, int(max_chunks))]
     bar = Progress(sum(min((i + 1) * chunk_size, n_runs) - i * chunk_size for i in todo), "lock-in sweep (runs)") \
         if progress and todo else None
-    evaluate = _chunk_function(tuple(devices) if len(devices) > 1 else None)
+    on_fused_kernel = fused.runs(quantity) and all(d.platform == "cpu" for d in devices)
+    evaluate = _chunk_function(tuple(devices) if len(devices) > 1 else None, on_fused_kernel)
     chain = chain.for_kernel()
     settings = tuple((name, tuple(value) if isinstance(value, list) else value) for name, value in options.items())
     for index in todo:
@@ -187,17 +189,18 @@ def _chunk_path(folder: Path, index: int) -> Path:
     return folder / "chunks" / f"chunk_{index:05d}.parquet"
 
 
-def _chunk_function(devices):
+def _chunk_function(devices, on_fused_kernel: bool):
     """(chain, frequencies (B,), amplitudes (B,), settings) -> (n_harmonics, B) complex
-    readings, compiled, the batch split over `devices` when given; `settings`: the manifest's
-    run options as a tuple of (name, value) pairs (static)."""
+    readings, compiled, the batch split over `devices` when given (on the fused kernel where
+    `on_fused_kernel`); `settings`: the manifest's run options as a tuple of (name, value)
+    pairs (static)."""
 
     def local(chain, frequency, amplitude, settings):
         o = dict(settings)
-        schedule = HarmonicSchedule(frequency[None], amplitude[None], o["steps_per_period"], o["ramp_periods"],
-                                    o["hold_periods"], 0)
-        return lockin_levels(chain, schedule, o["bead"], o["quantity"], o["harmonics"], o["window_periods"],
-                             kernel.DEFAULT_UNROLL, o["contact"]).complex_amplitude[:, 0]
+        return lockin_runs(chain, frequency, amplitude, bead=o["bead"], quantity=o["quantity"],
+                           harmonics=o["harmonics"], ramp_periods=o["ramp_periods"], hold_periods=o["hold_periods"],
+                           window_periods=o["window_periods"], steps_per_period=o["steps_per_period"],
+                           unroll=DEFAULT_UNROLL, contact=o["contact"], on_fused_kernel=on_fused_kernel)
 
     if devices is None:
         return eqx.filter_jit(local)
