@@ -28,6 +28,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "xla/ffi/api/ffi.h"
@@ -391,27 +393,27 @@ ffi::Error Tangents(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> inv_mass, ffi::B
                    viscous, sums, &tout);
 }
 
-template <class Binding>
-auto Arrays(Binding&& binding) {  // inv_mass, gamma, kappa, overlap0, eta, amplitude, dt, omega
-  return std::forward<Binding>(binding)
-      .template Arg<ffi::Buffer<ffi::F64>>()
-      .template Arg<ffi::Buffer<ffi::F64>>()
-      .template Arg<ffi::Buffer<ffi::F64>>()
-      .template Arg<ffi::Buffer<ffi::F64>>()
-      .template Arg<ffi::Buffer<ffi::F64>>()
-      .template Arg<ffi::Buffer<ffi::F64>>()
-      .template Arg<ffi::Buffer<ffi::F64>>()
-      .template Arg<ffi::Buffer<ffi::F64>>();
+// kCount (>= 1) more f64 buffer arguments of a handler's binding (a binding cannot be
+// moved: each step returns the new one its `Arg` makes)
+template <int kCount, class Binding>
+auto Buffers(Binding&& binding) {
+  if constexpr (kCount == 1) {
+    return std::forward<Binding>(binding).template Arg<ffi::Buffer<ffi::F64>>();
+  } else {
+    return Buffers<kCount - 1>(std::forward<Binding>(binding).template Arg<ffi::Buffer<ffi::F64>>());
+  }
 }
 
+// inv_mass, gamma, kappa, overlap0, eta, amplitude, dt, omega
 template <class Binding>
-auto TablesAndAttrs(Binding&& binding) {  // cos, sin, shape, slope, reference; attributes
-  return std::forward<Binding>(binding)
-      .template Arg<ffi::Buffer<ffi::F64>>()
-      .template Arg<ffi::Buffer<ffi::F64>>()
-      .template Arg<ffi::Buffer<ffi::F64>>()
-      .template Arg<ffi::Buffer<ffi::F64>>()
-      .template Arg<ffi::Buffer<ffi::F64>>()
+auto Arrays(Binding&& binding) {
+  return Buffers<8>(std::forward<Binding>(binding));
+}
+
+// the tables cos, sin, shape, slope and reference, then the attributes
+template <class Binding>
+auto TablesAndAttrs(Binding&& binding) {
+  return Buffers<5>(std::forward<Binding>(binding))
       .template Attr<int64_t>("steps")
       .template Attr<int64_t>("ramp_steps")
       .template Attr<int64_t>("row")
