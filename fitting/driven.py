@@ -136,8 +136,9 @@ class DrivenModel:
     `fitting.fit.least_squares`), on the fitted frequencies x all drive levels.
 
     `rows`: indices of the frequencies used (default: the file's fit mask), `levels`: the
-    drive levels used (default all). Each evaluation is one batched `lockin_grid` run (one
-    per Jacobian column more, in forward mode).
+    drive levels used (default all). Each evaluation is one batched `lockin_grid` run, and
+    with the Jacobian one more that carries every column in forward mode (on the CPU both are
+    calls of the fused kernel, `hertzchain.driven.fused`).
     """
 
     experiment: DrivenExperiment

@@ -327,7 +327,8 @@ ffi::Error RunDriven(ffi::ThreadPool& pool, const ffi::Buffer<ffi::F64>* arrays,
   const int64_t period = static_cast<int64_t>(cos.element_count());
   if (window < 1 || window > steps || row < 0 || row >= beads || period < 1 ||
       static_cast<int64_t>(sin.element_count()) != period ||
-      static_cast<int64_t>(shape.element_count()) != std::max<int64_t>(ramp_steps, 0) + 1)
+      static_cast<int64_t>(shape.element_count()) != std::max<int64_t>(ramp_steps, 0) + 1 ||
+      slope.element_count() != shape.element_count())
     return ffi::Error::InvalidArgument("inconsistent window, bead, phase or ramp tables");
   Run r{beads, steps, ramp_steps, period, window, harmonics, row, batch, displacement != 0,
         cos.typed_data(), sin.typed_data(), shape.typed_data(), slope.typed_data(), reference.typed_data()};
