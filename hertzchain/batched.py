@@ -525,10 +525,18 @@ def _kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ...], blo
 def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ...], which: native.FusedKernel):
     """`_kernel`'s results from a fused kernel (`native`, on the backend `which` names): the
     conservative one (physics "conservative"; the packed state of `_Layout` in and out) or
-    the full one ("full": damping and friction, forward-mode derivatives, no books; the
-    final state is not kept)."""
+    the full one ("full": damping and friction; with `flags.ledger` the packed state with
+    the books in and out, on the host; without, forward-mode derivatives and no final state)."""
     layout = _Layout(p["mass"].shape[0])
     channels = rows + (layout.bodies - 1,)
+    if which.physics == "full" and flags.ledger:
+        state, _, _ = _initial(p, flags, layout, grid.dt_s)
+        traces, state = native.run_full_books(
+            p, state, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
+            channels=channels, viscous=flags.viscous, friction=flags.friction, preload=flags.preload,
+            springs=flags.springs, dashpot=flags.dashpot,
+        )
+        return traces, state, layout
     if which.physics == "full":
         x, v, a, _, _ = _start(p, flags)
         traces = native.run_full(
@@ -694,8 +702,8 @@ def solve_batched(
       else (the maxima and energies of the result are then NaN); one pass over the
       contacts per step less (`benchmarks/README.md`).
     - `kernel`: "auto" (default) runs a fused C++ kernel (`hertzchain.native`) where one
-      covers the setup (on the CPU: conservative chains, or damped and frictional ones
-      without `books`) and is built, else the JAX kernel; "jax" always runs the JAX kernel
+      covers the setup (on the CPU: Hertz contacts, conservative, damped or frictional,
+      with or without `books`) and is built, else the JAX kernel; "jax" always runs the JAX kernel
       (the reference; they agree to round-off).
 
     **Returns:** `BatchedTraces`.

@@ -331,13 +331,25 @@ struct TangentInputs {
   Tangent inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot;
 };
 
+// The books of a forward run (kBooks), in `batched._Layout`'s rows after x, v, a: the
+// largest total force of every contact so far (bodies rows), with damping the viscous force
+// on every body and the wall (bodies + 1), and the energy dissipated so far (1); `state0`
+// in, `state` out (the whole packed state, x, v, a first), `mass` (bodies, 1 or B) for the
+// energy friction takes.
+struct BooksIO {
+  const double* state0;
+  Param mass;
+  double* state;
+};
+
 using hertzchain::KickSlope;
 
-template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras, bool kDashpot>
+template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras, bool kDashpot, bool kBooks>
 void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
                   int64_t steps_per_sample, double dt, const double* state0, FullParams p,
                   const std::vector<int64_t>& channels, const std::vector<double*>& traces,
-                  int64_t directions, TangentInputs tin, const std::vector<double*>& ttraces) {
+                  int64_t directions, TangentInputs tin, const std::vector<double*>& ttraces, BooksIO books) {
+  static_assert(!(kBooks && kTangent), "the books are kept by forward runs only");
   const int64_t rows_x = bodies + 1, contacts = bodies;
   const double h = 0.5 * dt;
   const int64_t n_channels = static_cast<int64_t>(channels.size());
@@ -364,6 +376,23 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
       kvis[i * kLanes + j] = 1.5 * eta[j] * kap[i * kLanes + j];
       if (kDashpot) dsh[i * kLanes + j] = hertzchain::ContactDashpot(kap[i * kLanes + j], dash[j]);
     }
+  // the books (kBooks): `top` the largest total force of every contact, `vis` the viscous
+  // force on every body (damping), `spent` the energy dissipated, `mass` (friction)
+  const int64_t top_row = 3 * rows_x, vis_row = top_row + contacts, spent_row = vis_row + (kViscous ? rows_x : 0);
+  std::vector<double> top(kBooks ? contacts * kLanes : 0), vis(kBooks && kViscous ? rows_x * kLanes : 0);
+  std::vector<double> mass(kBooks && kFriction ? contacts * kLanes : 0), spent(kBooks ? kLanes : 0);
+  double damped[kLanes];  // 1 where the chain is damped: an undamped one's viscous work is 0, exactly
+  if constexpr (kBooks) {
+    Load<kLanes>({state0 + top_row * batch, batch}, contacts, lo, top.data(), valid);
+    if (kViscous) Load<kLanes>({state0 + vis_row * batch, batch}, rows_x, lo, vis.data(), valid);
+    Load<kLanes>({state0 + spent_row * batch, batch}, 1, lo, spent.data(), valid);
+    if (kFriction) Load<kLanes>(books.mass, contacts, lo, mass.data(), valid);
+    for (int64_t j = 0; j < kLanes; ++j) damped[j] = eta[j] != 0.0 || (kDashpot && dash[j] != 0.0) ? 1.0 : 0.0;
+  }
+  // per step and lane: the viscous work of the two half steps, the kinetic energy the two
+  // friction kicks took (sums over the bodies, in `batched._step`'s order), the unkicked
+  // half-step velocity of body i and the viscous part of the force of contact i - 1
+  double work1[kLanes], work2[kLanes], lost1[kLanes], lost2[kLanes], raw_prev[kLanes], d_prev[kLanes];
   // tangents (D, rows, kLanes)
   std::vector<double> tx(D * rows_x * kLanes), tv(D * rows_x * kLanes), ta(D * rows_x * kLanes);
   std::vector<double> tinv(D * rows_x * kLanes), tkap(D * contacts * kLanes), tov0(D * contacts * kLanes);
@@ -457,6 +486,10 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
       // body 0: half kick, friction, drift, predicted velocity
       for (int64_t j = 0; j < kLanes; ++j) {
         double w = v[j] + h * a[j];
+        if constexpr (kBooks) {
+          raw_prev[j] = w;
+          work1[j] = work2[j] = lost1[j] = lost2[j] = d_prev[j] = 0.0;
+        }
         if (kFriction) {
           double s_first;
           double raw = w;
@@ -507,6 +540,24 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double vn = w_prev[j] + h * acc;
           double vn_raw = vn;
           if (kFriction) vn = kick(vn, loss[j], &s_second);
+          if constexpr (kBooks) {  // body i's energy terms, contact i's largest force
+            if (kViscous) {
+              // total - elastic of contact i (springs in both, as `batched` adds them)
+              double elastic = kj * (dl > 0.0 ? dl : 0.0) * rt;
+              if constexpr (kExtras) elastic = elastic + spr[ri + j] * dl;
+              const double di = f - elastic, viscous = d_prev[j] - di;
+              work1[j] = work1[j] + vis[ri + j] * h * 0.5 * (v[ri + j] + raw_prev[j]);
+              work2[j] = work2[j] + viscous * h * 0.5 * (w_prev[j] + vn_raw);
+              vis[ri + j] = viscous;
+              d_prev[j] = di;
+            }
+            if (kFriction) {
+              lost1[j] = lost1[j] + mass[ri + j] * (raw_prev[j] * raw_prev[j] - w_prev[j] * w_prev[j]);
+              lost2[j] = lost2[j] + mass[ri + j] * (vn_raw * vn_raw - vn * vn);
+            }
+            top[ri + j] = std::max(top[ri + j], f);
+            raw_prev[j] = w_raw;
+          }
           a[ri + j] = acc;
           v[ri + j] = vn;
           if constexpr (kTangent) {  // what the tangent pass needs of this step
@@ -561,11 +612,20 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         if constexpr (kExtras) b = b + ext[rw + j];
         double acc = b * inv[rw + j];
         double vn = w_prev[j] + h * acc;
+        const double vn_raw = vn;
         if (kFriction) {
           double s_second;
-          double raw = vn;
           vn = kick(vn, loss[j], &s_second);
-          if constexpr (kTangent) KickSlope(raw, s_second, &pm2[j], &g2[j]);
+          if constexpr (kTangent) KickSlope(vn_raw, s_second, &pm2[j], &g2[j]);
+        }
+        if constexpr (kBooks) {  // the wall's terms, then the step's dissipation
+          if (kViscous) {
+            work1[j] = work1[j] + vis[rw + j] * h * 0.5 * (v[rw + j] + raw_prev[j]);
+            work2[j] = work2[j] + d_prev[j] * h * 0.5 * (w_prev[j] + vn_raw);
+            vis[rw + j] = d_prev[j];
+          }
+          const double work = damped[j] != 0.0 ? work1[j] + work2[j] : 0.0;
+          spent[j] = (spent[j] - work) + (0.5 * lost1[j] + 0.5 * lost2[j]);
         }
         body[j] = b;
         a[rw + j] = acc;
@@ -612,6 +672,18 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     record.advance(out);
   }
   if (record.buffered) record.flush(out);
+  if constexpr (kBooks) {  // the packed state at the end, the block's own chains
+    auto store = [&](const std::vector<double>& block, int64_t rows, int64_t row) {
+      for (int64_t r = 0; r < rows; ++r)
+        for (int64_t j = 0; j < valid; ++j) books.state[(row + r) * batch + lo + j] = block[r * kLanes + j];
+    };
+    store(x, rows_x, 0);
+    store(v, rows_x, rows_x);
+    store(a, rows_x, 2 * rows_x);
+    store(top, contacts, top_row);
+    if (kViscous) store(vis, rows_x, vis_row);
+    store(spent, 1, spent_row);
+  }
 }
 
 #ifndef HC_DASHPOT_LIBRARY  // (the conservative kernel: in the main library only)
@@ -682,12 +754,14 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
                    ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction, ffi::Buffer<ffi::F64> dashpot,
                    ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
                    int64_t viscous, int64_t friction_on, int64_t extras, int64_t dashpot_on,
-                   const TangentInputs* tangents, ffi::RemainingRets results) {
+                   const TangentInputs* tangents, ffi::RemainingRets results, const BooksIO* books = nullptr) {
   auto dims = state0.dimensions();
   const int64_t batch = dims[dims.size() - 1];
   const int64_t bodies = inv_mass.dimensions()[inv_mass.dimensions().size() - 2] - 1;
-  if (static_cast<int64_t>(state0.element_count()) != 3 * (bodies + 1) * batch)
-    return ffi::Error::InvalidArgument("state0 must be (3 (bodies + 1), B) for one primal");
+  const int64_t state_rows = 3 * (bodies + 1) + (books ? bodies + (viscous ? bodies + 1 : 0) + 1 : 0);
+  if (static_cast<int64_t>(state0.element_count()) != state_rows * batch)
+    return ffi::Error::InvalidArgument(books ? "state0 must be (3 (bodies + 1) + the books' rows, B)"
+                                             : "state0 must be (3 (bodies + 1), B) for one primal");
   std::vector<int64_t> rows(channels.typed_data(),
                             channels.typed_data() + channels.element_count());
   // results: one (B, n_samples) trace per channel, then (tangents) one (D, B, n_samples)
@@ -714,48 +788,56 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
                AsParam(external), AsParam(eta), AsParam(friction), AsParam(dashpot)};
   TangentInputs none{};
   const TangentInputs& tin = tangents ? *tangents : none;
+  const BooksIO no_books{};
+  const BooksIO& kept = books ? *books : no_books;
   // blocks of 64, then of 8 (the last one may be partial), the last 2-4 chains in a block
-  // of 4 (a vector costs about what one chain alone does), a last single chain alone
+  // of 4 (a vector costs about what one chain alone does), a last single chain alone; runs
+  // with the books (sweeps: large batches) in blocks of 64 and 8 only, so that they add two
+  // block widths to the library's build, not four
   std::vector<Block> blocks;
   int64_t lo = 0;
   for (; lo + kWideLanes <= batch; lo += kWideLanes) blocks.push_back({lo, kWideLanes});
-  for (; batch - lo > kQuarterLanes; lo += kNarrowLanes) blocks.push_back({lo, kNarrowLanes});
+  for (; batch - lo > (books ? 0 : kQuarterLanes); lo += kNarrowLanes) blocks.push_back({lo, kNarrowLanes});
   if (batch - lo >= 2) {
     blocks.push_back({lo, kQuarterLanes});
     lo += kQuarterLanes;
   }
   if (lo < batch) blocks.push_back({lo, 1});
-  auto run = [&](auto viscous_tag, auto friction_tag, auto tangent_tag, auto extras_tag, auto dashpot_tag) {
+  auto run = [&](auto viscous_tag, auto friction_tag, auto tangent_tag, auto extras_tag, auto dashpot_tag,
+                 auto books_tag) {
     constexpr bool kV = decltype(viscous_tag)::value, kF = decltype(friction_tag)::value,
                    kT = decltype(tangent_tag)::value, kE = decltype(extras_tag)::value,
-                   kD = decltype(dashpot_tag)::value;
+                   kD = decltype(dashpot_tag)::value, kB = decltype(books_tag)::value;
     auto advance = [&](auto lanes, int64_t first) {
       constexpr int64_t kL = decltype(lanes)::value;
       // blocks of 8 and 4 with the extras' terms (zeros: the same numbers): without them
       // GCC 12 leaves the damped 8-lane loop scalar ("control flow in loop"), 2.5x slower
       constexpr bool kENarrow = kE || kL == kNarrowLanes || kL == kQuarterLanes;
-      RunFullBlock<kL, kV, kF, kT, kENarrow, kD>(bodies, first, batch, n_samples, steps_per_sample, dt,
-                                             state0.typed_data(), p, rows, outs, directions, tin, touts);
+      RunFullBlock<kL, kV, kF, kT, kENarrow, kD, kB>(bodies, first, batch, n_samples, steps_per_sample, dt,
+                                                 state0.typed_data(), p, rows, outs, directions, tin, touts, kept);
     };
     RunBlocks(pool, blocks, [&](int64_t b) {
       const Block& block = blocks[b];
       if (block.lanes == kWideLanes) return advance(std::integral_constant<int64_t, kWideLanes>{}, block.lo);
       if (block.lanes == kNarrowLanes) return advance(std::integral_constant<int64_t, kNarrowLanes>{}, block.lo);
-      if (block.lanes == kQuarterLanes) return advance(std::integral_constant<int64_t, kQuarterLanes>{}, block.lo);
-      advance(std::integral_constant<int64_t, 1>{}, block.lo);
+      if constexpr (!kB) {
+        if (block.lanes == kQuarterLanes) return advance(std::integral_constant<int64_t, kQuarterLanes>{}, block.lo);
+        advance(std::integral_constant<int64_t, 1>{}, block.lo);
+      }
     });
   };
   using T = std::true_type;
   using F = std::false_type;
-  // the tangents always with the preload's and springs' terms (zeros where there are none);
-  // a dashpot (damped runs only: the kernels compute rates with the damping) likewise, so
-  // that its few runs add four instantiations per block width, not eight
+  // the tangents and the books always with the preload's and springs' terms (zeros where
+  // there are none); a dashpot (damped runs only: the kernels compute rates with the
+  // damping) likewise, so that its few runs add four instantiations per block width, not eight
   auto with_tangent = [&](auto v, auto f, auto d) {
-    if (tangents) return run(v, f, T{}, T{}, d);
+    if (tangents) return run(v, f, T{}, T{}, d, F{});
+    if (books) return run(v, f, F{}, T{}, d, T{});
     if constexpr (decltype(d)::value) {
-      run(v, f, F{}, T{}, d);
+      run(v, f, F{}, T{}, d, F{});
     } else {
-      extras ? run(v, f, F{}, T{}, d) : run(v, f, F{}, F{}, d);
+      extras ? run(v, f, F{}, T{}, d, F{}) : run(v, f, F{}, F{}, d, F{});
     }
   };
   auto with_friction = [&](auto v, auto d) { friction_on ? with_tangent(v, T{}, d) : with_tangent(v, F{}, d); };
@@ -781,6 +863,23 @@ ffi::Error FullForward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::
                        ffi::RemainingRets traces) {
   return RunFull(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot, channels, dt,
                  steps_per_sample, viscous, friction_on, extras, dashpot_on, nullptr, traces);
+}
+
+// The full forward run with the books (`BooksIO`): state0 and the result `state` the packed
+// state of `batched._Layout` (x, v, a, the largest forces, with damping the viscous forces,
+// the dissipated energy), `mass` (bodies, 1 or B), kg.
+ffi::Error FullBooks(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
+                     ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
+                     ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
+                     ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction, ffi::Buffer<ffi::F64> dashpot,
+                     ffi::Buffer<ffi::F64> mass, ffi::Buffer<ffi::S64> channels, double dt,
+                     int64_t steps_per_sample, int64_t viscous, int64_t friction_on, int64_t extras,
+                     int64_t dashpot_on, ffi::ResultBuffer<ffi::F64> state, ffi::RemainingRets traces) {
+  if (state->element_count() != state0.element_count())
+    return ffi::Error::InvalidArgument("the books' state must have state0's shape");
+  const BooksIO books{state0.typed_data(), AsParam(mass), state->typed_data()};
+  return RunFull(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot, channels, dt,
+                 steps_per_sample, viscous, friction_on, extras, dashpot_on, nullptr, traces, &books);
 }
 
 ffi::Error FullTangent(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
@@ -836,6 +935,13 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullForward, FullForward,
                               hertzchain::FullAttrs(hertzchain::FullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
                                                         .Arg<ffi::Buffer<ffi::S64>>())  // channels
                                   .RemainingRets());                                    // traces
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullBooks, FullBooks,
+                              hertzchain::FullAttrs(hertzchain::FullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
+                                                        .Arg<ffi::Buffer<ffi::F64>>()   // mass
+                                                        .Arg<ffi::Buffer<ffi::S64>>())  // channels
+                                  .Ret<ffi::Buffer<ffi::F64>>()  // state
+                                  .RemainingRets());             // traces
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(
     HertzChainFullTangent, FullTangent,

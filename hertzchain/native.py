@@ -12,7 +12,9 @@ physics it runs, so that the conservative case pays nothing for the rest:
 - the full one (`run_full`): the same plus Kuwabara-Kono damping and a linear dashpot (the
   total force clipped at 0) and track friction, the recorded forces only, and forward-mode tangents carried
   through the same loop (`jax.custom_jvp`: `jax.jvp`, `jax.jacfwd`, `jax.linearize`; the
-  forces and all the directions of a Jacobian in one run).
+  forces and all the directions of a Jacobian in one run); `run_full_books`, the same
+  forward run with the books (largest forces, viscous work, friction losses, final state:
+  what sweeps read), not differentiable.
 
 A run's blocks of chains are spread over the CPU's cores (XLA's intra-op thread pool, the
 first free thread taking the next block; the runs of a process together use at most one
@@ -27,7 +29,8 @@ Under `jax.vmap` (`jax.custom_batching.custom_vmap`) a mapped batch of inputs jo
 kernel's chain axis and mapped tangents its direction axis, so a batch of fits, `jacfwd`
 of `vmap` and `vmap` of `jacfwd` are one kernel run each.
 
-Everything else (the books of a damped chain, GPUs, reverse mode) runs the JAX kernel,
+Everything else (power-law and elastic-plastic contacts, the books of a damped chain on a
+GPU, reverse mode) runs the JAX kernel,
 which stays the reference: they agree to round-off, values and derivatives
 (`tests/test_native.py`), and every kernel's laws are held to `contact`'s
 (`tests/test_batched.py::test_every_kernel_applies_the_laws_of_contact`).
@@ -66,6 +69,7 @@ BLOCKS = Path(__file__).with_name("chain_blocks.h")  # the host kernels' layouts
 TARGET = "hertzchain_chain_forward"
 FULL_TARGET = "hertzchain_chain_full_forward"
 TANGENT_TARGET = "hertzchain_chain_full_tangent"
+BOOKS_TARGET = "hertzchain_chain_full_books"
 # The full kernel with a linear dashpot: its terms compiled in for its runs alone (they cost
 # every damped run ~17 % as a runtime term, `benchmarks/results/dashpot_in_cpp_kernel_not_kept.md`),
 # in a library of their own (`-D` DASHPOT_DEFINE) built on first use, so that the main
@@ -73,6 +77,7 @@ TANGENT_TARGET = "hertzchain_chain_full_tangent"
 DASHPOT_DEFINE = "HC_DASHPOT_LIBRARY"
 DASHPOT_FULL_TARGET = "hertzchain_chain_full_forward_dashpot"
 DASHPOT_TANGENT_TARGET = "hertzchain_chain_full_tangent_dashpot"
+DASHPOT_BOOKS_TARGET = "hertzchain_chain_full_books_dashpot"
 # IEEE arithmetic as the JAX kernel rounds it: no contraction into fused multiply-adds
 # other than the source's own `std::fma`, no fast math; -fno-math-errno lets the square
 # roots vectorise; -pthread for the threads the blocks of chains run on.
@@ -211,7 +216,7 @@ def _load() -> str | None:
     try:
         _load_library((), "the fused chain kernel",
                       ((TARGET, "HertzChainForward"), (FULL_TARGET, "HertzChainFullForward"),
-                       (TANGENT_TARGET, "HertzChainFullTangent")))
+                       (TANGENT_TARGET, "HertzChainFullTangent"), (BOOKS_TARGET, "HertzChainFullBooks")))
     except (OSError, RuntimeError) as error:
         return str(error)
     return None
@@ -233,7 +238,8 @@ def _load_library(defines: tuple[str, ...], what: str, targets, source: Path = S
 def _load_dashpot() -> None:
     """Build (if needed), load and register the dashpot's full kernels (`DASHPOT_DEFINE`)."""
     _load_library((f"-D{DASHPOT_DEFINE}",), "the fused chain kernel's dashpot runs",
-                  ((DASHPOT_FULL_TARGET, "HertzChainFullForward"), (DASHPOT_TANGENT_TARGET, "HertzChainFullTangent")))
+                  ((DASHPOT_FULL_TARGET, "HertzChainFullForward"), (DASHPOT_TANGENT_TARGET, "HertzChainFullTangent"),
+                   (DASHPOT_BOOKS_TARGET, "HertzChainFullBooks")))
 
 
 def available() -> bool:
@@ -263,14 +269,16 @@ class FusedKernel(NamedTuple):
 
 def kernel_for(flags, devices) -> FusedKernel | None:
     """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
-    devices, or None (the JAX kernel: books with damping or friction, contacts other than
-    Hertz's, devices of another kind, no compiler)."""
+    devices, or None (the JAX kernel: contacts other than Hertz's, the books of damping or
+    friction on a GPU, devices of another kind, no compiler)."""
     platforms = {d.platform for d in devices} if devices else {jax.default_backend()}
-    if (flags.full_state and flags.ledger) or flags.law != "hertz":
+    if flags.law != "hertz":
         return None
     physics = "full" if flags.full_state else "conservative"
     if platforms == {"cpu"} and available():
         return FusedKernel(physics, "host")
+    if flags.full_state and flags.ledger:  # the thread kernels keep no books of the full step
+        return None
     if platforms == {"gpu"} and thread_unavailable_reason("cuda") is None:
         return FusedKernel(physics, "cuda")
     return None
@@ -289,8 +297,9 @@ NVCC_FLAGS = ("-O3", "-arch=native", "--fmad=false", "-std=c++17", "-shared", "-
 EMULATION_FLAGS = ("-O1", "-ffp-contract=off", "-fno-math-errno", "-std=c++17", "-shared", "-fPIC")
 _THREAD_SYMBOLS = {"forward": "HertzChainThreadForward", "full": "HertzChainThreadFullForward",
                    "tangent": "HertzChainThreadFullTangent"}
-_HOST_TARGETS = {"forward": TARGET, "full": FULL_TARGET, "tangent": TANGENT_TARGET,
-                 "full_dashpot": DASHPOT_FULL_TARGET, "tangent_dashpot": DASHPOT_TANGENT_TARGET}
+_HOST_TARGETS = {"forward": TARGET, "full": FULL_TARGET, "tangent": TANGENT_TARGET, "books": BOOKS_TARGET,
+                 "full_dashpot": DASHPOT_FULL_TARGET, "tangent_dashpot": DASHPOT_TANGENT_TARGET,
+                 "books_dashpot": DASHPOT_BOOKS_TARGET}
 
 
 def _nvcc() -> str | None:
@@ -498,10 +507,41 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     `kernel="jax"`). `dashpot`: a linear dashpot on every contact (`p["dashpot"]`, N s/m;
     needs `viscous`), its terms compiled into this call's kernel only. `backend` as for `run`."""
     _require(backend)
+    args = _full_args(p, jax.numpy.concatenate([x, v, a]), preload, springs, dashpot)
+    config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
+              bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), backend)
+    return _full_call(config)(*args)
+
+
+def run_full_books(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
+                   channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
+                   dashpot: bool = False):
+    """`run_full` with the books, on the host: advances the packed state `state0` (rows, B)
+    of `batched._Layout` for the full step with the books (x, v, a; every contact's largest
+    total force; with damping, the viscous force on every body; the energy dissipated by
+    damping and friction so far) and returns (the (B, n_samples) force traces, one per
+    channel, N; the final packed state). The books' sums over the bodies follow
+    `batched._step`'s order; the run is not differentiable (sweeps; fits call `run_full`)."""
+    _require("host")
+    if dashpot and not viscous:
+        raise ValueError("run_full_books: a dashpot needs viscous=True (the kernel's rates come with the damping).")
+    args = _full_args(p, state0, preload, springs, dashpot) + (p["mass"],)
+    attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample), viscous=np.int64(viscous),
+                 friction=np.int64(friction), extras=np.int64(preload or springs), dashpot=np.int64(dashpot))
+    call = _Ffi("host", p["inv_mass"].shape[-2], n_samples)
+    shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + call.trace_shapes(state0, len(channels))
+    index = np.asarray(channels, dtype=np.int64)
+    state, *traces = call.call("books_dashpot" if dashpot else "books", shapes, args, index, attrs)
+    return tuple(traces), state
+
+
+def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool) -> tuple:
+    """The full kernels' arrays: the state, then the eight parameter arrays (zeros for the
+    physics a run does not have)."""
     width = lambda leaf: leaf.shape[-1]  # noqa: E731
     zeros = lambda leaf: jax.numpy.zeros_like(leaf)  # noqa: E731
-    args = (
-        jax.numpy.concatenate([x, v, a]),
+    return (
+        state0,
         p["inv_mass"],
         p["kappa"],
         p["overlap0"] if preload else zeros(p["overlap0"]),
@@ -512,9 +552,6 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
         # the linear dashpot (N s/m, `contact.contact_force`), zeros without one
         jax.numpy.reshape(p["dashpot"], (1, width(p["dashpot"]))) if dashpot else jax.numpy.zeros((1, 1)),
     )
-    config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
-              bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), backend)
-    return _full_call(config)(*args)
 
 
 @functools.cache
