@@ -172,6 +172,44 @@ def _lobe_mask(time_s, force_n, threshold, window_s):
     return (samples >= first) & (samples <= last), peak_index
 
 
+def _lobe_extent(mask, peak_index):
+    """First and last sample of the lobe `mask` with its peak (the peak counted even where it
+    is not in the mask: a trace without a positive maximum)."""
+    samples = jnp.arange(mask.shape[-1])
+    first = jnp.min(jnp.where(mask, samples, mask.shape[-1]))
+    last = jnp.max(jnp.where(mask, samples, -1))
+    return jnp.minimum(first, peak_index), jnp.maximum(last, peak_index)
+
+
+@eqx.filter_jit
+def _lobe_spans(time_s, force_n, threshold, window_s):
+    """Samples from the first to the last of every trace's lobe and peak, (...)."""
+    def span(f):
+        first, last = _lobe_extent(*_lobe_mask(time_s, f, threshold, window_s))
+        return last - first + 1
+
+    for _ in range(force_n.ndim - 1):
+        span = jax.vmap(span)
+    return span(force_n)
+
+
+# Samples kept beyond a lobe on either side when the fit runs on a slice of the trace: the
+# parabola of `refine_peak` reads the peak's neighbours.
+_SLICE_MARGIN = 2
+
+
+def _slice_length(time_s, force_n, threshold, window_s) -> int | None:
+    """The length of the slices a batch of fits can run on (every trace's lobe, its peak and
+    `_SLICE_MARGIN` samples either side in one slice; a power of two, so that batches of
+    similar pulses share a compiled fit), or None for the whole trace (traced values, or
+    lobes as long as the trace)."""
+    if isinstance(force_n, jax.core.Tracer) or force_n.size == 0:
+        return None
+    widest = int(np.max(np.asarray(_lobe_spans(time_s, force_n, threshold, window_s))))
+    length = 1 << max(widest + 2 * _SLICE_MARGIN - 1, 1).bit_length()
+    return length if length < force_n.shape[-1] else None
+
+
 def _inverse3(m):
     """Inverse of a 3x3 matrix by its adjugate (compiles much faster than a LAPACK call)."""
     cof = jnp.stack(
@@ -184,11 +222,19 @@ def _inverse3(m):
     return cof.T / jnp.dot(m[0], cof[0])
 
 
-def _fit_one(time_s, force_n, threshold, window_s, noise_std_n, n_iterations):
+def _fit_one(time_s, force_n, threshold, window_s, noise_std_n, n_iterations, length):
     mask, peak_index = _lobe_mask(time_s, force_n, threshold, window_s)
-    t_guess, f_guess = refine_peak(time_s, force_n, peak_index)
-    f_guess = jnp.where(f_guess > 0.0, f_guess, jnp.max(jnp.abs(force_n)) + 1e-300)
     step = time_s[1] - time_s[0]
+    largest = jnp.max(jnp.abs(force_n))
+    if length is not None:
+        # the fit reads the lobe's samples only (the weights are 0 elsewhere): run it on the
+        # slice of `length` samples that holds the lobe, its peak and their neighbours
+        first, _ = _lobe_extent(mask, peak_index)
+        start = jnp.clip(first - _SLICE_MARGIN, 0, force_n.shape[-1] - length)
+        time_s, force_n, mask = (jax.lax.dynamic_slice(a, (start,), (length,)) for a in (time_s, force_n, mask))
+        peak_index = peak_index - start
+    t_guess, f_guess = refine_peak(time_s, force_n, peak_index)
+    f_guess = jnp.where(f_guess > 0.0, f_guess, largest + 1e-300)
     above_half = jnp.sum(mask & (force_n >= 0.5 * f_guess))
     tau_guess = jnp.maximum(above_half, 2) * step / (2.0 * theory.COS6_HALF_WIDTH)
     weight = mask.astype(force_n.dtype)
@@ -216,7 +262,7 @@ def _fit_one(time_s, force_n, threshold, window_s, noise_std_n, n_iterations):
         return jnp.sum(residuals(p) ** 2)
 
     def lm_step(_, carry):
-        p, lam = carry
+        p, lam, cost_p = carry
         r = residuals(p)
         j = jacobian(p)
         jtj = j.T @ j
@@ -225,11 +271,13 @@ def _fit_one(time_s, force_n, threshold, window_s, noise_std_n, n_iterations):
         delta = -_inverse3(damped) @ g
         trial = p + delta
         trial = trial.at[2].set(jnp.maximum(trial[2], 1e-3))
-        better = cost(trial) < cost(p)
-        return jnp.where(better, trial, p), jnp.where(better, lam * 0.3, lam * 10.0)
+        cost_trial = cost(trial)
+        better = cost_trial < cost_p
+        return (jnp.where(better, trial, p), jnp.where(better, lam * 0.3, lam * 10.0),
+                jnp.where(better, cost_trial, cost_p))
 
     p0 = jnp.array([1.0, 0.0, 1.0], dtype=force_n.dtype)
-    p, _ = jax.lax.fori_loop(0, n_iterations, lm_step, (p0, jnp.asarray(1e-3, force_n.dtype)))
+    p, _, _ = jax.lax.fori_loop(0, n_iterations, lm_step, (p0, jnp.asarray(1e-3, force_n.dtype), cost(p0)))
     r = residuals(p)
     j = jacobian(p)
     n_points = jnp.sum(weight)
@@ -253,8 +301,8 @@ def _fit_one(time_s, force_n, threshold, window_s, noise_std_n, n_iterations):
 
 
 @eqx.filter_jit
-def _fit_batch(time_s, force_n, threshold, window_s, noise_std_n, n_iterations):
-    fit = lambda f, noise: _fit_one(time_s, f, threshold, window_s, noise, n_iterations)  # noqa: E731
+def _fit_batch(time_s, force_n, threshold, window_s, noise_std_n, n_iterations, length):
+    fit = lambda f, noise: _fit_one(time_s, f, threshold, window_s, noise, n_iterations, length)  # noqa: E731
     for _ in range(force_n.ndim - 1):
         fit = jax.vmap(fit)
     return fit(force_n, noise_std_n)
@@ -301,9 +349,9 @@ def fit_cos6(time_s, force_n, *, threshold=0.05, window_s=None, noise_std_n=None
         jnp.asarray(jnp.nan if noise_std_n is None else noise_std_n, dtype=jnp.float64),
         force_n.shape[:-1],
     )
-    return _fit_batch(
-        time_s, force_n, float(threshold), jnp.asarray(window), noise, int(n_iterations)
-    )
+    window = jnp.asarray(window)
+    length = _slice_length(time_s, force_n, float(threshold), window)
+    return _fit_batch(time_s, force_n, float(threshold), window, noise, int(n_iterations), length)
 
 
 # ----------------------------------------------------------------------------------------
