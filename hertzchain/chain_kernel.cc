@@ -50,6 +50,21 @@
 
 namespace ffi = xla::ffi;
 
+// HC_PART (set by `native`'s build): which of the library's handlers this translation unit
+// defines. The build compiles the parts in parallel and links them into one library (on 2
+// cores about half the wall time of one unit): 1, the conservative kernel and the full
+// forward runs; 2, the full kernel's tangent runs and its runs with the books. Undefined: all.
+#if !defined(HC_PART) || HC_PART == 1
+#define HC_PART_FORWARD 1
+#else
+#define HC_PART_FORWARD 0
+#endif
+#if !defined(HC_PART) || HC_PART == 2
+#define HC_PART_TANGENT 1
+#else
+#define HC_PART_TANGENT 0
+#endif
+
 namespace {
 
 using hertzchain::AsParam;
@@ -686,7 +701,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   }
 }
 
-#ifndef HC_DASHPOT_LIBRARY  // (the conservative kernel: in the main library only)
+#if !defined(HC_DASHPOT_LIBRARY) && HC_PART_FORWARD  // (the conservative kernel: in the main library only)
 ffi::Error Forward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                    ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                    ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
@@ -747,7 +762,12 @@ ffi::Error Forward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buff
 #endif  // HC_DASHPOT_LIBRARY
 
 
-// state0 and parameters as for the full kernel; `tangents` null for the forward run.
+// What a run of the full kernel computes: the recorded forces (kForward), with their
+// tangents (kTangent, `tangents` given), or with the books (kBooks, `books` given).
+enum class Pass { kForward, kTangent, kBooks };
+
+// state0 and parameters as for the full kernel.
+template <Pass kPass>
 ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                    ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                    ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
@@ -831,16 +851,18 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   // the tangents and the books always with the preload's and springs' terms (zeros where
   // there are none); a dashpot (damped runs only: the kernels compute rates with the
   // damping) likewise, so that its few runs add four instantiations per block width, not eight
-  auto with_tangent = [&](auto v, auto f, auto d) {
-    if (tangents) return run(v, f, T{}, T{}, d, F{});
-    if (books) return run(v, f, F{}, T{}, d, T{});
-    if constexpr (decltype(d)::value) {
+  auto with_pass = [&](auto v, auto f, auto d) {
+    if constexpr (kPass == Pass::kTangent) {
+      run(v, f, T{}, T{}, d, F{});
+    } else if constexpr (kPass == Pass::kBooks) {
+      run(v, f, F{}, T{}, d, T{});
+    } else if constexpr (decltype(d)::value) {
       run(v, f, F{}, T{}, d, F{});
     } else {
       extras ? run(v, f, F{}, T{}, d, F{}) : run(v, f, F{}, F{}, d, F{});
     }
   };
-  auto with_friction = [&](auto v, auto d) { friction_on ? with_tangent(v, T{}, d) : with_tangent(v, F{}, d); };
+  auto with_friction = [&](auto v, auto d) { friction_on ? with_pass(v, T{}, d) : with_pass(v, F{}, d); };
   // The dashpot's runs are compiled into a library of their own (HC_DASHPOT_LIBRARY, built on
   // first use by `native`), so that the library every run needs does not wait for them.
 #ifdef HC_DASHPOT_LIBRARY
@@ -854,6 +876,7 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   return ffi::Error::Success();
 }
 
+#if HC_PART_FORWARD
 ffi::Error FullForward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                        ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                        ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
@@ -861,10 +884,13 @@ ffi::Error FullForward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::
                        ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
                        int64_t viscous, int64_t friction_on, int64_t extras, int64_t dashpot_on,
                        ffi::RemainingRets traces) {
-  return RunFull(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot, channels, dt,
-                 steps_per_sample, viscous, friction_on, extras, dashpot_on, nullptr, traces);
+  return RunFull<Pass::kForward>(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot,
+                                 channels, dt, steps_per_sample, viscous, friction_on, extras, dashpot_on, nullptr,
+                                 traces);
 }
+#endif  // HC_PART_FORWARD
 
+#if HC_PART_TANGENT
 // The full forward run with the books (`BooksIO`): state0 and the result `state` the packed
 // state of `batched._Layout` (x, v, a, the largest forces, with damping the viscous forces,
 // the dissipated energy), `mass` (bodies, 1 or B), kg.
@@ -878,8 +904,9 @@ ffi::Error FullBooks(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Bu
   if (state->element_count() != state0.element_count())
     return ffi::Error::InvalidArgument("the books' state must have state0's shape");
   const BooksIO books{state0.typed_data(), AsParam(mass), state->typed_data()};
-  return RunFull(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot, channels, dt,
-                 steps_per_sample, viscous, friction_on, extras, dashpot_on, nullptr, traces, &books);
+  return RunFull<Pass::kBooks>(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot,
+                               channels, dt, steps_per_sample, viscous, friction_on, extras, dashpot_on, nullptr,
+                               traces, &books);
 }
 
 ffi::Error FullTangent(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
@@ -915,15 +942,17 @@ ffi::Error FullTangent(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::
                     tangent(t_spring, counts[4]),    tangent(t_external, counts[5]),
                     tangent(t_eta, counts[6]),       tangent(t_friction, counts[7]),
                     tangent(t_dashpot, counts[8])};
-  return RunFull(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot, channels, dt,
-                 steps_per_sample, viscous, friction_on, extras, dashpot_on, &tin, tangent_traces);
+  return RunFull<Pass::kTangent>(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot,
+                                 channels, dt, steps_per_sample, viscous, friction_on, extras, dashpot_on, &tin,
+                                 tangent_traces);
 }
+#endif  // HC_PART_TANGENT
 
 }  // namespace
 
 // The handlers' argument lists: `chain_ffi.h` (the recorded channels, a buffer here, after
 // the parameters).
-#ifndef HC_DASHPOT_LIBRARY
+#if !defined(HC_DASHPOT_LIBRARY) && HC_PART_FORWARD
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
                               hertzchain::ForwardAttrs(hertzchain::ChainArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
                                                            .Arg<ffi::Buffer<ffi::S64>>())  // channels
@@ -931,11 +960,14 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
                                   .RemainingRets());             // traces
 #endif
 
+#if HC_PART_FORWARD
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullForward, FullForward,
                               hertzchain::FullAttrs(hertzchain::FullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
                                                         .Arg<ffi::Buffer<ffi::S64>>())  // channels
                                   .RemainingRets());                                    // traces
+#endif
 
+#if HC_PART_TANGENT
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullBooks, FullBooks,
                               hertzchain::FullAttrs(hertzchain::FullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
                                                         .Arg<ffi::Buffer<ffi::F64>>()   // mass
@@ -949,3 +981,4 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
         hertzchain::FullArgs(hertzchain::FullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>()))  // values, tangents
             .Arg<ffi::Buffer<ffi::S64>>())                                                 // channels
         .RemainingRets());  // traces, then their tangents
+#endif  // HC_PART_TANGENT

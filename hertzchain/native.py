@@ -162,13 +162,33 @@ def _compile(command_for, path: Path, name: str) -> None:
         os.replace(partial, path)
 
 
+# The parts of `chain_kernel.cc` (its `HC_PART` values) that are compiled at once, each by its
+# own compiler process, and linked into one library: the forward runs, and the tangent runs
+# with the books. On 2 cores the main library then builds in about half the time of one unit.
+SOURCE_PARTS = (1, 2)
+
+
 def _build(path: Path, defines: tuple[str, ...] = (), source: Path = SOURCE) -> None:
-    """Compile the host kernel `source` into `path` (`defines`: `-D` macros)."""
+    """Compile the host kernel `source` into `path` (`defines`: `-D` macros): `chain_kernel.cc`
+    as its `SOURCE_PARTS` in parallel, then linked; other sources as one unit."""
     compiler = _cxx()
     if compiler is None:
         raise RuntimeError("no C++ compiler found (set CXX, or install g++)")
-    _compile(lambda partial: [compiler, *_flags(), *defines, f"-I{jax.ffi.include_dir()}", str(source), "-o",
-                              str(partial)], path, source.name)
+    command = [compiler, *_flags(), *defines, f"-I{jax.ffi.include_dir()}", str(source)]
+    if source != SOURCE:
+        _compile(lambda partial: [*command, "-o", str(partial)], path, source.name)
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=path.parent) as scratch:
+        objects = [Path(scratch) / f"part{part}.o" for part in SOURCE_PARTS]
+        compiling = [subprocess.Popen([*command, f"-DHC_PART={part}", "-c", "-o", str(out)], text=True,
+                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                     for part, out in zip(SOURCE_PARTS, objects)]
+        failed = [proc.communicate()[1] for proc in compiling]
+        failed = [err for proc, err in zip(compiling, failed) if proc.returncode != 0]
+        if failed:
+            raise RuntimeError(f"compiling {source.name} failed:\n{failed[0][-2000:]}")
+        _compile(lambda partial: [compiler, *_flags(), *map(str, objects), "-o", str(partial)], path, source.name)
 
 
 # glibc's malloc options (mallopt): the size from which a request is served by its own
