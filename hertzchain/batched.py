@@ -534,7 +534,7 @@ def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ..
         traces, state = native.run_full_books(
             p, state, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
             channels=channels, viscous=flags.viscous, friction=flags.friction, preload=flags.preload,
-            springs=flags.springs, dashpot=flags.dashpot,
+            springs=flags.springs, dashpot=flags.dashpot, power=flags.law == "power_law",
         )
         return traces, state, layout
     if which.physics == "full":
@@ -542,7 +542,7 @@ def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ..
         traces = native.run_full(
             p, x, v, a, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
             channels=channels, viscous=flags.viscous, friction=flags.friction, preload=flags.preload,
-            springs=flags.springs, dashpot=flags.dashpot, backend=which.backend,
+            springs=flags.springs, dashpot=flags.dashpot, power=flags.law == "power_law", backend=which.backend,
         )
         return traces, None, layout
     state, _, _ = _initial(p, flags, layout, grid.dt_s)

@@ -4,9 +4,11 @@
 //  - HertzChainForward: the conservative velocity-Verlet step of `batched._step` (Hertz
 //    contacts, linear sensor springs, static overlaps and external forces of a preload, a
 //    wall or a free end), with or without the books (largest overlaps);
-//  - HertzChainFullForward / HertzChainFullTangent: the full step (velocities and
-//    accelerations apart) with Kuwabara-Kono damping and track friction, and its
-//    forward-mode tangents (below, `RunFullBlock`).
+//  - HertzChainFullForward / HertzChainFullTangent / HertzChainFullBooks: the full step
+//    (velocities and accelerations apart) with Kuwabara-Kono damping and track friction, its
+//    forward-mode tangents, and its run with the books (below, `RunFullBlock`); compiled with
+//    HC_DASHPOT_LIBRARY (a linear dashpot) or HC_POWER_LIBRARY (power-law contacts) into
+//    libraries of their own.
 //
 // The arithmetic is that of the JAX kernel, operation for operation and in the same
 // order (compiled without contraction into fused multiply-adds), so that the two agree to
@@ -339,11 +341,12 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
 
 struct FullParams {
   Param inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot;
+  Param law;  // the power law's exponent and reference overlap (m), (2, 1 or B): read with kPower
 };
 
 struct TangentInputs {
   Tangent state0;  // x, v, a: (D, 3 (bodies + 1), B)
-  Tangent inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot;
+  Tangent inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot, law;
 };
 
 // The books of a forward run (kBooks), in `batched._Layout`'s rows after x, v, a: the
@@ -359,7 +362,8 @@ struct BooksIO {
 
 using hertzchain::KickSlope;
 
-template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras, bool kDashpot, bool kBooks>
+template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras, bool kDashpot, bool kBooks,
+          bool kPower>
 void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
                   int64_t steps_per_sample, double dt, const double* state0, FullParams p,
                   const std::vector<int64_t>& channels, const std::vector<double*>& traces,
@@ -384,6 +388,10 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   Load<kLanes>(p.eta, 1, lo, eta.data(), valid);
   Load<kLanes>(p.friction, 1, lo, fr.data(), valid);
   if (kDashpot) Load<kLanes>(p.dashpot, 1, lo, dash.data(), valid);
+  // kPower: every contact's law is `contact.power_law_force` of the chain's exponent (row 0)
+  // and reference overlap (row 1)
+  std::vector<double> law(kPower ? 2 * kLanes : 0);
+  if (kPower) Load<kLanes>(p.law, 2, lo, law.data(), valid);
   // 1.5 eta kappa and (kDashpot) the dashpot (`hertzchain::ContactDashpot`) of every contact
   std::vector<double> kvis(contacts * kLanes), dsh(contacts * kLanes);
   for (int64_t i = 0; i < contacts; ++i)
@@ -428,6 +436,10 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     LoadTangent<kLanes>(tin.eta, D, 1, batch, lo, teta.data(), valid);
     LoadTangent<kLanes>(tin.friction, D, 1, batch, lo, tfr.data(), valid);
     if (kDashpot) LoadTangent<kLanes>(tin.dashpot, D, 1, batch, lo, tdash.data(), valid);
+  }
+  std::vector<double> tlaw(kPower ? D * 2 * kLanes : 0);  // (D, 2, kLanes)
+  if (kTangent && kPower) {
+    LoadTangent<kLanes>(tin.law, D, 2, batch, lo, tlaw.data(), valid);
   }
   // recorded sets: the forces, then (kTangent) their tangent along every direction
   const int64_t out_sets = 1 + D;
@@ -488,13 +500,42 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     l.c3[j] = one.c3;
     l.slope[j] = one.slope;
   };
-  // its tangent along one direction (`hertzchain::TangentForce`): c2 = 1.5 eta kappa = kv
-  auto tforce = [](const Linear& l, int64_t j, double k, double c1j, double c2, double sp, double tdl,
-                   double trate, double tk, double t15e, double td, double tsp) {
+  // The force of a contact at lane j with the chain's law (Hertz's, `total_force`, or with
+  // kPower the power law): returns the total; `rt`, `sm` as `TotalForce` gives them, `elastic`
+  // the law's force (the books read it) and, with kPower and kTangent, `slopes` its partial
+  // derivatives (computed once per contact and step, for every direction).
+  auto contact_force = [&](double dl, double rate, double k, double kv, double d, double sp, int64_t j, double* rt,
+                           double* sm, double* elastic, hertzchain::PowerLawSlopes* slopes) {
+    if constexpr (kPower) {
+      *rt = std::sqrt(dl > 0.0 ? dl : 0.0);
+      double ratio, rn;
+      *elastic = hertzchain::PowerLawForce(dl, k, law[j], law[kLanes + j], &ratio, &rn);
+      if constexpr (kTangent) *slopes = hertzchain::PowerLawPartials(dl, k, law[j], law[kLanes + j], ratio, rn);
+      return hertzchain::DampedTotal<kViscous, kExtras, kDashpot>(*elastic, *rt, dl, rate, kv, d, sp, sm);
+    } else {
+      const double f = total_force(dl, rate, k, kv, d, sp, rt, sm);
+      *elastic = k * (dl > 0.0 ? dl : 0.0) * *rt;
+      return f;
+    }
+  };
+  // its tangent along direction d (`hertzchain::TangentForce`; with kPower, `TangentTotal` about
+  // the power law's tangent from `slopes`): c2 = 1.5 eta kappa = kv
+  auto tforce = [&](const Linear& l, int64_t j, const hertzchain::PowerLawSlopes& slopes, int64_t d, double k,
+                    double c1j, double c2, double sp, double tdl, double trate, double tk, double t15e, double td,
+                    double tsp) {
     const hertzchain::Linearisation one{l.delta[j], l.rate[j],       l.in[j], l.positive[j], l.root[j],
                                         l.half_inv_root[j], l.kp[j], l.c3[j], l.slope[j]};
-    return hertzchain::TangentForce<kViscous, kDashpot>(one, k, c1j, c2, sp, tdl, trate, tk, t15e, td, tsp);
+    if constexpr (kPower) {
+      const double telastic = slopes.overlap * tdl + slopes.kappa * tk +
+                              slopes.reference * tlaw[(d * 2 + 1) * kLanes + j] +
+                              slopes.exponent * tlaw[d * 2 * kLanes + j];
+      return hertzchain::TangentTotal<kViscous, kDashpot>(one, telastic, k, c1j, c2, sp, tdl, trate, tk, t15e, td,
+                                                          tsp);
+    } else {
+      return hertzchain::TangentForce<kViscous, kDashpot>(one, k, c1j, c2, sp, tdl, trate, tk, t15e, td, tsp);
+    }
   };
+  hertzchain::PowerLawSlopes slopes[kLanes];  // contact i's, lane by lane (kPower and kTangent)
 
   for (int64_t n = 0; n < n_samples; ++n) {
     for (int64_t s = 0; s < steps_per_sample; ++s) {
@@ -547,7 +588,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double dl = x[ri + j] - x[rn + j];
           if constexpr (kExtras) dl = dl + ov0[ri + j];
           double rt_rate = p_prev[j] - pred;
-          double f = total_force(dl, rt_rate, kj, kvj, dj, spr[ri + j], &rt, &sm);
+          double elastic_i;
+          double f = contact_force(dl, rt_rate, kj, kvj, dj, spr[ri + j], j, &rt, &sm, &elastic_i, &slopes[j]);
           // body i: second half kick, friction
           double b = f_prev[j] - f;
           if constexpr (kExtras) b = b + ext[ri + j];
@@ -558,7 +600,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           if constexpr (kBooks) {  // body i's energy terms, contact i's largest force
             if (kViscous) {
               // total - elastic of contact i (springs in both, as `batched` adds them)
-              double elastic = kj * (dl > 0.0 ? dl : 0.0) * rt;
+              double elastic = elastic_i;
               if constexpr (kExtras) elastic = elastic + spr[ri + j] * dl;
               const double di = f - elastic, viscous = d_prev[j] - di;
               work1[j] = work1[j] + vis[ri + j] * h * 0.5 * (v[ri + j] + raw_prev[j]);
@@ -606,8 +648,9 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               tx[tn + j] = tx[tn + j] + dt * tw;
               double tpred = tw + h * ta[tn + j];
               double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
-              double tf = tforce(lin, j, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, tp_prev[q] - tpred,
-                                 tkap[tc + j], t15eta[q], kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, tspr[tc + j]);
+              double tf = tforce(lin, j, slopes[j], d, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl,
+                                 tp_prev[q] - tpred, tkap[tc + j], t15eta[q],
+                                 kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, tspr[tc + j]);
               double tb = tf_prev[q] - tf + text[ti + j];
               double tacc = tb * inv[ri + j] + body[j] * tinv[ti + j];
               double tvn = tw_prev[q] + h * tacc;
@@ -665,9 +708,11 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         double dl = x[ri + j] - x[rn + j];
         if constexpr (kExtras) dl = dl + ov0[ri + j];
         double rate = v[ri + j] - v[rn + j];
-        double rt, sm;
+        double rt, sm, elastic;
         const double dj = kDashpot ? dsh[ri + j] : 0.0;
-        double f = total_force(dl, rate, kap[ri + j], kvis[ri + j], dj, spr[ri + j], &rt, &sm);
+        hertzchain::PowerLawSlopes here_slopes;
+        double f = contact_force(dl, rate, kap[ri + j], kvis[ri + j], dj, spr[ri + j], j, &rt, &sm, &elastic,
+                                 &here_slopes);
         record.slot(0, c)[j] = f;
         if (!kTangent) continue;
         Linear here;
@@ -679,8 +724,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
           double trate = tv[ti + j] - tv[tn + j];
           record.slot(d + 1, c)[j] =
-              tforce(here, j, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, trate, tkap[tc + j], t15eta[q],
-                     kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, tspr[tc + j]);
+              tforce(here, j, here_slopes, d, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, trate, tkap[tc + j],
+                     t15eta[q], kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, tspr[tc + j]);
         }
       }
     }
@@ -701,7 +746,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   }
 }
 
-#if !defined(HC_DASHPOT_LIBRARY) && HC_PART_FORWARD  // (the conservative kernel: in the main library only)
+#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_POWER_LIBRARY) && HC_PART_FORWARD  // (the main library only)
 ffi::Error Forward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                    ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                    ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
@@ -766,13 +811,20 @@ ffi::Error Forward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buff
 // tangents (kTangent, `tangents` given), or with the books (kBooks, `books` given).
 enum class Pass { kForward, kTangent, kBooks };
 
+// Every contact of the power-law library's runs follows `contact.power_law_force`.
+#ifdef HC_POWER_LIBRARY
+constexpr bool kPowerLibrary = true;
+#else
+constexpr bool kPowerLibrary = false;
+#endif
+
 // state0 and parameters as for the full kernel.
 template <Pass kPass>
 ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                    ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                    ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                    ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction, ffi::Buffer<ffi::F64> dashpot,
-                   ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
+                   ffi::Buffer<ffi::F64> law, ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
                    int64_t viscous, int64_t friction_on, int64_t extras, int64_t dashpot_on,
                    const TangentInputs* tangents, ffi::RemainingRets results, const BooksIO* books = nullptr) {
   auto dims = state0.dimensions();
@@ -804,8 +856,10 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
       AdviseHugePages(touts.back(), (*out)->size_bytes());
     }
   }
-  FullParams p{AsParam(inv_mass), AsParam(kappa), AsParam(overlap0), AsParam(spring),
-               AsParam(external), AsParam(eta), AsParam(friction), AsParam(dashpot)};
+  if (law.element_count() != 2 && law.element_count() != 2 * static_cast<size_t>(batch))
+    return ffi::Error::InvalidArgument("law must be (2, 1 or B): the power law's exponent and reference overlap");
+  FullParams p{AsParam(inv_mass), AsParam(kappa), AsParam(overlap0), AsParam(spring), AsParam(external),
+               AsParam(eta),      AsParam(friction), AsParam(dashpot), AsParam(law)};
   TangentInputs none{};
   const TangentInputs& tin = tangents ? *tangents : none;
   const BooksIO no_books{};
@@ -833,8 +887,9 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
       // blocks of 8 and 4 with the extras' terms (zeros: the same numbers): without them
       // GCC 12 leaves the damped 8-lane loop scalar ("control flow in loop"), 2.5x slower
       constexpr bool kENarrow = kE || kL == kNarrowLanes || kL == kQuarterLanes;
-      RunFullBlock<kL, kV, kF, kT, kENarrow, kD, kB>(bodies, first, batch, n_samples, steps_per_sample, dt,
-                                                 state0.typed_data(), p, rows, outs, directions, tin, touts, kept);
+      RunFullBlock<kL, kV, kF, kT, kENarrow, kD, kB, kPowerLibrary>(bodies, first, batch, n_samples,
+                                                                    steps_per_sample, dt, state0.typed_data(), p,
+                                                                    rows, outs, directions, tin, touts, kept);
     };
     RunBlocks(pool, blocks, [&](int64_t b) {
       const Block& block = blocks[b];
@@ -863,9 +918,13 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
     }
   };
   auto with_friction = [&](auto v, auto d) { friction_on ? with_pass(v, T{}, d) : with_pass(v, F{}, d); };
-  // The dashpot's runs are compiled into a library of their own (HC_DASHPOT_LIBRARY, built on
-  // first use by `native`), so that the library every run needs does not wait for them.
-#ifdef HC_DASHPOT_LIBRARY
+  // The dashpot's runs and the power law's are compiled into libraries of their own
+  // (HC_DASHPOT_LIBRARY, HC_POWER_LIBRARY, built on first use by `native`), so that the
+  // library every run needs does not wait for them.
+#if defined(HC_POWER_LIBRARY)
+  if (dashpot_on) return ffi::Error::InvalidArgument("the power-law library has no dashpot");
+  viscous ? with_friction(T{}, F{}) : with_friction(F{}, F{});
+#elif defined(HC_DASHPOT_LIBRARY)
   if (!dashpot_on || !viscous)
     return ffi::Error::InvalidArgument("the dashpot library runs damped chains with a dashpot only");
   with_friction(T{}, T{});
@@ -881,11 +940,11 @@ ffi::Error FullForward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::
                        ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                        ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                        ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction, ffi::Buffer<ffi::F64> dashpot,
-                       ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
+                       ffi::Buffer<ffi::F64> law, ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
                        int64_t viscous, int64_t friction_on, int64_t extras, int64_t dashpot_on,
                        ffi::RemainingRets traces) {
   return RunFull<Pass::kForward>(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot,
-                                 channels, dt, steps_per_sample, viscous, friction_on, extras, dashpot_on, nullptr,
+                                 law, channels, dt, steps_per_sample, viscous, friction_on, extras, dashpot_on, nullptr,
                                  traces);
 }
 #endif  // HC_PART_FORWARD
@@ -898,14 +957,14 @@ ffi::Error FullBooks(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Bu
                      ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                      ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                      ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction, ffi::Buffer<ffi::F64> dashpot,
-                     ffi::Buffer<ffi::F64> mass, ffi::Buffer<ffi::S64> channels, double dt,
+                     ffi::Buffer<ffi::F64> law, ffi::Buffer<ffi::F64> mass, ffi::Buffer<ffi::S64> channels, double dt,
                      int64_t steps_per_sample, int64_t viscous, int64_t friction_on, int64_t extras,
                      int64_t dashpot_on, ffi::ResultBuffer<ffi::F64> state, ffi::RemainingRets traces) {
   if (state->element_count() != state0.element_count())
     return ffi::Error::InvalidArgument("the books' state must have state0's shape");
   const BooksIO books{state0.typed_data(), AsParam(mass), state->typed_data()};
   return RunFull<Pass::kBooks>(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot,
-                               channels, dt, steps_per_sample, viscous, friction_on, extras, dashpot_on, nullptr,
+                               law, channels, dt, steps_per_sample, viscous, friction_on, extras, dashpot_on, nullptr,
                                traces, &books);
 }
 
@@ -913,24 +972,24 @@ ffi::Error FullTangent(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::
                        ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                        ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                        ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction, ffi::Buffer<ffi::F64> dashpot,
-                       ffi::Buffer<ffi::F64> t_state0, ffi::Buffer<ffi::F64> t_inv_mass,
+                       ffi::Buffer<ffi::F64> law, ffi::Buffer<ffi::F64> t_state0, ffi::Buffer<ffi::F64> t_inv_mass,
                        ffi::Buffer<ffi::F64> t_kappa, ffi::Buffer<ffi::F64> t_overlap0,
                        ffi::Buffer<ffi::F64> t_spring, ffi::Buffer<ffi::F64> t_external,
                        ffi::Buffer<ffi::F64> t_eta, ffi::Buffer<ffi::F64> t_friction,
-                       ffi::Buffer<ffi::F64> t_dashpot,
+                       ffi::Buffer<ffi::F64> t_dashpot, ffi::Buffer<ffi::F64> t_law,
                        ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
                        int64_t viscous, int64_t friction_on, int64_t extras, int64_t dashpot_on,
                        ffi::RemainingRets tangent_traces) {
   auto dims = state0.dimensions();
   const int64_t batch = dims[dims.size() - 1];
   const int64_t rows_x = inv_mass.dimensions()[inv_mass.dimensions().size() - 2];
-  const int64_t counts[9] = {
+  const int64_t counts[10] = {
       Directions(t_state0, 3 * rows_x, batch), Directions(t_inv_mass, rows_x, batch),
       Directions(t_kappa, rows_x - 1, batch),  Directions(t_overlap0, rows_x - 1, batch),
       Directions(t_spring, rows_x - 1, batch), Directions(t_external, rows_x, batch),
       Directions(t_eta, 1, batch),             Directions(t_friction, 1, batch),
-      Directions(t_dashpot, 1, batch)};
-  const int64_t directions = *std::max_element(counts, counts + 9);
+      Directions(t_dashpot, 1, batch),         Directions(t_law, 2, batch)};
+  const int64_t directions = *std::max_element(counts, counts + 10);
   for (int64_t count : counts)
     if (count != 1 && count != directions)
       return ffi::Error::InvalidArgument("tangents must be (directions or 1, rows, B)");
@@ -941,9 +1000,9 @@ ffi::Error FullTangent(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::
                     tangent(t_kappa, counts[2]),     tangent(t_overlap0, counts[3]),
                     tangent(t_spring, counts[4]),    tangent(t_external, counts[5]),
                     tangent(t_eta, counts[6]),       tangent(t_friction, counts[7]),
-                    tangent(t_dashpot, counts[8])};
+                    tangent(t_dashpot, counts[8]),    tangent(t_law, counts[9])};
   return RunFull<Pass::kTangent>(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot,
-                                 channels, dt, steps_per_sample, viscous, friction_on, extras, dashpot_on, &tin,
+                                 law, channels, dt, steps_per_sample, viscous, friction_on, extras, dashpot_on, &tin,
                                  tangent_traces);
 }
 #endif  // HC_PART_TANGENT
@@ -951,8 +1010,14 @@ ffi::Error FullTangent(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::
 }  // namespace
 
 // The handlers' argument lists: `chain_ffi.h` (the recorded channels, a buffer here, after
-// the parameters).
-#if !defined(HC_DASHPOT_LIBRARY) && HC_PART_FORWARD
+// the parameters); the host's full kernels also take the power law's parameters (`law`,
+// read by the power-law library: zeros elsewhere) after the full kernels' arguments.
+template <class Binding>
+auto HostFullArgs(Binding&& binding) {
+  return hertzchain::FullArgs(std::forward<Binding>(binding)).template Arg<ffi::Buffer<ffi::F64>>();  // law
+}
+
+#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_POWER_LIBRARY) && HC_PART_FORWARD
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
                               hertzchain::ForwardAttrs(hertzchain::ChainArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
                                                            .Arg<ffi::Buffer<ffi::S64>>())  // channels
@@ -962,14 +1027,14 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
 
 #if HC_PART_FORWARD
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullForward, FullForward,
-                              hertzchain::FullAttrs(hertzchain::FullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
+                              hertzchain::FullAttrs(HostFullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
                                                         .Arg<ffi::Buffer<ffi::S64>>())  // channels
                                   .RemainingRets());                                    // traces
 #endif
 
 #if HC_PART_TANGENT
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullBooks, FullBooks,
-                              hertzchain::FullAttrs(hertzchain::FullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
+                              hertzchain::FullAttrs(HostFullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
                                                         .Arg<ffi::Buffer<ffi::F64>>()   // mass
                                                         .Arg<ffi::Buffer<ffi::S64>>())  // channels
                                   .Ret<ffi::Buffer<ffi::F64>>()  // state
@@ -978,7 +1043,7 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullBooks, FullBooks,
 XLA_FFI_DEFINE_HANDLER_SYMBOL(
     HertzChainFullTangent, FullTangent,
     hertzchain::FullAttrs(
-        hertzchain::FullArgs(hertzchain::FullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>()))  // values, tangents
+        HostFullArgs(HostFullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>()))  // values, tangents
             .Arg<ffi::Buffer<ffi::S64>>())                                                 // channels
         .RemainingRets());  // traces, then their tangents
 #endif  // HC_PART_TANGENT

@@ -23,6 +23,36 @@ HC_HD inline double ElasticForce(double overlap, double kappa, double spring) {
   return force;
 }
 
+// contact.power_law_force: kappa r^1.5 (delta / r)^n in contact (delta > 0), else 0, N
+// (exponent n, reference overlap r, m); `ratio` = delta / r in contact, else 1 (the double
+// `where` of `contact`), `rn` = ratio^n.
+HC_HD inline double PowerLawForce(double overlap, double kappa, double n, double r, double* ratio, double* rn) {
+  const bool in = overlap > 0.0;
+  *ratio = in ? overlap / r : 1.0;
+  *rn = std::pow(*ratio, n);
+  const double force = kappa * std::pow(r, 1.5) * *rn;
+  return in ? force : 0.0;
+}
+
+// The partial derivatives of `PowerLawForce` by overlap, kappa, r and n (as JAX's rules for
+// `/`, `**` and `where` give them: d x^y = y x^(y - 1) dx + log(x) x^y dy), zero out of contact.
+struct PowerLawSlopes {
+  double overlap, kappa, reference, exponent;
+};
+
+HC_HD inline PowerLawSlopes PowerLawPartials(double overlap, double kappa, double n, double r, double ratio,
+                                             double rn) {
+  const double in = overlap > 0.0 ? 1.0 : 0.0;
+  const double rp = std::pow(r, 1.5);
+  const double by_ratio = kappa * rp * (n * std::pow(ratio, n - 1.0));  // d force / d ratio
+  PowerLawSlopes d;
+  d.overlap = in * (by_ratio / r);
+  d.kappa = in * (rp * rn);
+  d.reference = in * (kappa * (1.5 * std::sqrt(r)) * rn - by_ratio * (overlap / (r * r)));
+  d.exponent = in * (kappa * rp * (std::log(ratio) * rn));
+  return d;
+}
+
 // d max(s, 0) / ds as JAX's max rule gives it (1/2 at the tie)
 HC_HD inline double MaxSlope(double s) {
   double tie = s == 0.0 ? 0.5 : 0.0;
@@ -65,12 +95,11 @@ HC_HD inline double ContactDashpot(double k, double dashpot) { return k > 0.0 ? 
 // total is also 0 out of contact. kDashpot is a compile-time switch: its terms cost every
 // damped run about 17 % (`benchmarks/results/dashpot_in_cpp_kernel_not_kept.md`), so only
 // the runs that have a dashpot carry them.
+// `TotalForce` about a given elastic force (`elastic`, N; the root sqrt(dl_+) `rt`): the
+// damped sum, clipped, plus the spring (kExtras).
 template <bool kViscous, bool kExtras, bool kDashpot>
-HC_HD inline double TotalForce(double dl, double rate, double k, double kv, double dash, double sp, double* root,
-                               double* sum) {
-  double positive = dl > 0.0 ? dl : 0.0;
-  double rt = std::sqrt(positive);
-  double elastic = k * positive * rt;
+HC_HD inline double DampedTotal(double elastic, double rt, double dl, double rate, double kv, double dash,
+                                double sp, double* sum) {
   double f;
   if (kViscous) {
     double viscous = kDashpot ? (kv * rt + dash) * rate : (kv * rt) * rate;
@@ -84,9 +113,17 @@ HC_HD inline double TotalForce(double dl, double rate, double k, double kv, doub
     *sum = elastic;
     f = elastic;
   }
-  *root = rt;
   if (kExtras) f = f + sp * dl;  // (a spring of 0 adds nothing)
   return f;
+}
+
+template <bool kViscous, bool kExtras, bool kDashpot>
+HC_HD inline double TotalForce(double dl, double rate, double k, double kv, double dash, double sp, double* root,
+                               double* sum) {
+  double positive = dl > 0.0 ? dl : 0.0;
+  double rt = std::sqrt(positive);
+  *root = rt;
+  return DampedTotal<kViscous, kExtras, kDashpot>(k * positive * rt, rt, dl, rate, kv, dash, sp, sum);
 }
 
 // A contact's linearisation at overlap delta and rate: in = [delta > 0], positive =
@@ -116,12 +153,11 @@ HC_HD inline Linearisation Linearise(double dl, double rate, double k, double kv
 // The tangent of `TotalForce` (kExtras) along one direction: c1 = 1.5 eta, c2 = c1 kappa,
 // sp the spring, tdl / trate / tk / t15e (= 1.5 t_eta) / tdash (`ContactDashpot`'s, read
 // with kDashpot only) / tsp the inputs' tangents.
+// `TangentForce` about the elastic force's tangent `telastic` (any law).
 template <bool kViscous, bool kDashpot>
-HC_HD inline double TangentForce(const Linearisation& l, double k, double c1, double c2, double sp, double tdl,
-                                 double trate, double tk, double t15e, double tdash, double tsp) {
-  double tpositive = tdl * l.in;
+HC_HD inline double TangentTotal(const Linearisation& l, double telastic, double k, double c1, double c2, double sp,
+                                 double tdl, double trate, double tk, double t15e, double tdash, double tsp) {
   double troot = tdl * l.half_inv_root;
-  double telastic = (tk * l.positive + k * tpositive) * l.root + l.kp * troot;
   double tf = telastic;
   if (kViscous) {
     double tc3 = (t15e * k + c1 * tk) * l.root + c2 * troot;
@@ -129,6 +165,15 @@ HC_HD inline double TangentForce(const Linearisation& l, double k, double c1, do
     tf = (telastic + (tc3 * l.rate + l.c3 * trate)) * l.slope;
   }
   return tf + (tsp * l.delta + sp * tdl);
+}
+
+template <bool kViscous, bool kDashpot>
+HC_HD inline double TangentForce(const Linearisation& l, double k, double c1, double c2, double sp, double tdl,
+                                 double trate, double tk, double t15e, double tdash, double tsp) {
+  double tpositive = tdl * l.in;
+  double troot = tdl * l.half_inv_root;
+  double telastic = (tk * l.positive + k * tpositive) * l.root + l.kp * troot;
+  return TangentTotal<kViscous, kDashpot>(l, telastic, k, c1, c2, sp, tdl, trate, tk, t15e, tdash, tsp);
 }
 
 }  // namespace hertzchain

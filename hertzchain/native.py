@@ -14,7 +14,9 @@ physics it runs, so that the conservative case pays nothing for the rest:
   through the same loop (`jax.custom_jvp`: `jax.jvp`, `jax.jacfwd`, `jax.linearize`; the
   forces and all the directions of a Jacobian in one run); `run_full_books`, the same
   forward run with the books (largest forces, viscous work, friction losses, final state:
-  what sweeps read), not differentiable.
+  what sweeps read), not differentiable. Both also run power-law contacts
+  (`contact.power_law_force`, its tangents in the exponent and reference overlap included)
+  from a library of their own, built on first use, as the dashpot's runs are.
 
 A run's blocks of chains are spread over the CPU's cores (XLA's intra-op thread pool, the
 first free thread taking the next block; the runs of a process together use at most one
@@ -29,8 +31,8 @@ Under `jax.vmap` (`jax.custom_batching.custom_vmap`) a mapped batch of inputs jo
 kernel's chain axis and mapped tangents its direction axis, so a batch of fits, `jacfwd`
 of `vmap` and `vmap` of `jacfwd` are one kernel run each.
 
-Everything else (power-law and elastic-plastic contacts, the books of a damped chain on a
-GPU, reverse mode) runs the JAX kernel,
+Everything else (elastic-plastic contacts, the power law with a dashpot or in an undamped run
+with the books, the books of a damped chain on a GPU, reverse mode) runs the JAX kernel,
 which stays the reference: they agree to round-off, values and derivatives
 (`tests/test_native.py`), and every kernel's laws are held to `contact`'s
 (`tests/test_batched.py::test_every_kernel_applies_the_laws_of_contact`).
@@ -46,6 +48,7 @@ and `solve_batched` runs the JAX kernel.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import functools
 import hashlib
@@ -61,6 +64,11 @@ from typing import NamedTuple
 import jax
 import numpy as np
 from jax.interpreters import partial_eval
+
+try:
+    import fcntl
+except ImportError:  # not a POSIX system: builds are not serialised between processes
+    fcntl = None
 
 SOURCE = Path(__file__).with_name("chain_kernel.cc")
 LAWS = Path(__file__).with_name("chain_laws.h")  # the laws both kernels include
@@ -78,6 +86,12 @@ DASHPOT_DEFINE = "HC_DASHPOT_LIBRARY"
 DASHPOT_FULL_TARGET = "hertzchain_chain_full_forward_dashpot"
 DASHPOT_TANGENT_TARGET = "hertzchain_chain_full_tangent_dashpot"
 DASHPOT_BOOKS_TARGET = "hertzchain_chain_full_books_dashpot"
+# The full kernel with every contact on the power law (`contact.power_law_force`), likewise in a
+# library of its own (`-D` POWER_DEFINE), built on first use.
+POWER_DEFINE = "HC_POWER_LIBRARY"
+POWER_FULL_TARGET = "hertzchain_chain_full_forward_power"
+POWER_TANGENT_TARGET = "hertzchain_chain_full_tangent_power"
+POWER_BOOKS_TARGET = "hertzchain_chain_full_books_power"
 # IEEE arithmetic as the JAX kernel rounds it: no contraction into fused multiply-adds
 # other than the source's own `std::fma`, no fast math; -fno-math-errno lets the square
 # roots vectorise; -pthread for the threads the blocks of chains run on.
@@ -142,7 +156,7 @@ def _library_path(defines: tuple[str, ...] = (), source: Path = SOURCE) -> Path:
     for part in (source.read_bytes(), LAWS.read_bytes(), FFI_ARGS.read_bytes(), BLOCKS.read_bytes(),
                  jax.__version__.encode(), " ".join(_flags() + defines).encode(), _cpu_key().encode()):
         digest.update(part)
-    variant = "-dashpot" if defines else ""
+    variant = "".join("-" + d.removeprefix("-DHC_").removesuffix("_LIBRARY").lower() for d in defines)
     return _cache_dir() / f"{source.stem}{variant}-{digest.hexdigest()[:16]}.so"
 
 
@@ -242,13 +256,33 @@ def _load() -> str | None:
     return None
 
 
+@contextlib.contextmanager
+def _build_lock(path: Path):
+    """Hold an exclusive lock on `path`'s build (a lock file beside it), so that processes that
+    need the same library at once (test workers, the processes of a distributed sweep) build
+    it once, the others waiting for it; no lock where the platform has no `fcntl`."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if fcntl is None:
+        yield
+        return
+    with open(path.with_name(path.name + ".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
 def _load_library(defines: tuple[str, ...], what: str, targets, source: Path = SOURCE) -> None:
     """Build (if needed) the host kernel `source` with `defines`, load it and register its
     handler symbols as FFI targets (`targets`: (target, symbol) pairs)."""
     path = _library_path(defines, source)
     if not path.exists():
-        print(f"hertzchain: compiling {what} into {path} (once; under a minute)", file=sys.stderr, flush=True)
-        _build(path, defines, source)
+        with _build_lock(path):
+            if not path.exists():  # (another process may have built it while this one waited)
+                print(f"hertzchain: compiling {what} into {path} (once; under a minute)", file=sys.stderr,
+                      flush=True)
+                _build(path, defines, source)
     library = ctypes.cdll.LoadLibrary(str(path))
     for name, symbol in targets:
         jax.ffi.register_ffi_target(name, jax.ffi.pycapsule(getattr(library, symbol)), platform="cpu")
@@ -260,6 +294,14 @@ def _load_dashpot() -> None:
     _load_library((f"-D{DASHPOT_DEFINE}",), "the fused chain kernel's dashpot runs",
                   ((DASHPOT_FULL_TARGET, "HertzChainFullForward"), (DASHPOT_TANGENT_TARGET, "HertzChainFullTangent"),
                    (DASHPOT_BOOKS_TARGET, "HertzChainFullBooks")))
+
+
+@functools.cache
+def _load_power() -> None:
+    """Build (if needed), load and register the power law's full kernels (`POWER_DEFINE`)."""
+    _load_library((f"-D{POWER_DEFINE}",), "the fused chain kernel's power-law runs",
+                  ((POWER_FULL_TARGET, "HertzChainFullForward"), (POWER_TANGENT_TARGET, "HertzChainFullTangent"),
+                   (POWER_BOOKS_TARGET, "HertzChainFullBooks")))
 
 
 def available() -> bool:
@@ -289,9 +331,14 @@ class FusedKernel(NamedTuple):
 
 def kernel_for(flags, devices) -> FusedKernel | None:
     """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
-    devices, or None (the JAX kernel: contacts other than Hertz's, the books of damping or
-    friction on a GPU, devices of another kind, no compiler)."""
+    devices, or None (the JAX kernel: elastic-plastic contacts, the power law on a GPU, with a
+    dashpot or in an undamped run with the books, the books of damping or friction on a GPU,
+    devices of another kind, no compiler)."""
     platforms = {d.platform for d in devices} if devices else {jax.default_backend()}
+    if flags.law == "power_law":  # the full kernel's power-law library, on the host, no dashpot
+        if flags.dashpot or (flags.ledger and not flags.full_state) or platforms != {"cpu"} or not available():
+            return None
+        return FusedKernel("full", "host")
     if flags.law != "hertz":
         return None
     physics = "full" if flags.full_state else "conservative"
@@ -319,7 +366,8 @@ _THREAD_SYMBOLS = {"forward": "HertzChainThreadForward", "full": "HertzChainThre
                    "tangent": "HertzChainThreadFullTangent"}
 _HOST_TARGETS = {"forward": TARGET, "full": FULL_TARGET, "tangent": TANGENT_TARGET, "books": BOOKS_TARGET,
                  "full_dashpot": DASHPOT_FULL_TARGET, "tangent_dashpot": DASHPOT_TANGENT_TARGET,
-                 "books_dashpot": DASHPOT_BOOKS_TARGET}
+                 "books_dashpot": DASHPOT_BOOKS_TARGET, "full_power": POWER_FULL_TARGET,
+                 "tangent_power": POWER_TANGENT_TARGET, "books_power": POWER_BOOKS_TARGET}
 
 
 def _nvcc() -> str | None:
@@ -401,11 +449,14 @@ class _Ffi(NamedTuple):
         return tuple(jax.ShapeDtypeStruct(leading + shape, state0.dtype) for _ in range(count))
 
     def call(self, kind: str, shapes, args, index, attrs) -> tuple:
-        """`kind`: "forward", "full", "tangent", or the last two with a dashpot ("_dashpot":
-        its own host library; the thread kernels compile it into the same one)."""
+        """`kind`: "forward", "full", "tangent", "books", the last three with a dashpot
+        ("_dashpot": its own host library; the thread kernels compile it into the same one) or
+        on the power law ("_power": its own host library)."""
         if self.backend == "host":
             if kind.endswith("_dashpot"):
                 _load_dashpot()
+            if kind.endswith("_power"):
+                _load_power()
             return tuple(jax.ffi.ffi_call(_HOST_TARGETS[kind], shapes)(*args, index, **attrs))
         target = _thread_target(self.backend, int(self.rows), kind.removesuffix("_dashpot"))
         return tuple(jax.ffi.ffi_call(target, shapes)(*args, channels=index, **attrs))
@@ -512,7 +563,7 @@ def _fold_directions(size: int, batched, tangents):
 
 def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples: int,
              channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
-             dashpot: bool = False, backend: str = "host"):
+             dashpot: bool = False, power: bool = False, backend: str = "host"):
     """The full step (`batched._step` with velocities and accelerations apart: damping,
     friction) from displacements `x`, velocities `v` and accelerations `a` (bodies + 1, B)
     at the impact, through `n_samples` samples of `steps_per_sample` steps of `dt_s`
@@ -525,39 +576,48 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     without tangents): a vmapped batch of fits, `jacfwd` of `vmap` and `vmap` of `jacfwd`
     are one kernel run each. Reverse mode is not available (use the JAX kernel,
     `kernel="jax"`). `dashpot`: a linear dashpot on every contact (`p["dashpot"]`, N s/m;
-    needs `viscous`), its terms compiled into this call's kernel only. `backend` as for `run`."""
+    needs `viscous`), its terms compiled into this call's kernel only. `power`: every contact
+    on `contact.power_law_force` (`p["exponent"]`, `p["reference_overlap_m"]`; host only, no
+    dashpot), in a library of its own. `backend` as for `run`."""
     _require(backend)
-    args = _full_args(p, jax.numpy.concatenate([x, v, a]), preload, springs, dashpot)
+    if power and (backend != "host" or dashpot):
+        raise ValueError("run_full: the power law runs on the host kernel, without a dashpot.")
+    args = _full_args(p, jax.numpy.concatenate([x, v, a]), preload, springs, dashpot, power, backend)
     config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
-              bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), backend)
+              bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), bool(power), backend)
     return _full_call(config)(*args)
 
 
 def run_full_books(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
                    channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
-                   dashpot: bool = False):
+                   dashpot: bool = False, power: bool = False):
     """`run_full` with the books, on the host: advances the packed state `state0` (rows, B)
     of `batched._Layout` for the full step with the books (x, v, a; every contact's largest
     total force; with damping, the viscous force on every body; the energy dissipated by
     damping and friction so far) and returns (the (B, n_samples) force traces, one per
     channel, N; the final packed state). The books' sums over the bodies follow
-    `batched._step`'s order; the run is not differentiable (sweeps; fits call `run_full`)."""
+    `batched._step`'s order; the run is not differentiable (sweeps; fits call `run_full`).
+    `dashpot`, `power` as for `run_full`."""
     _require("host")
     if dashpot and not viscous:
         raise ValueError("run_full_books: a dashpot needs viscous=True (the kernel's rates come with the damping).")
-    args = _full_args(p, state0, preload, springs, dashpot) + (p["mass"],)
+    if power and dashpot:
+        raise ValueError("run_full_books: the power law runs without a dashpot.")
+    args = _full_args(p, state0, preload, springs, dashpot, power, "host") + (p["mass"],)
     attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample), viscous=np.int64(viscous),
                  friction=np.int64(friction), extras=np.int64(preload or springs), dashpot=np.int64(dashpot))
     call = _Ffi("host", p["inv_mass"].shape[-2], n_samples)
     shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + call.trace_shapes(state0, len(channels))
     index = np.asarray(channels, dtype=np.int64)
-    state, *traces = call.call("books_dashpot" if dashpot else "books", shapes, args, index, attrs)
+    kind = "books_dashpot" if dashpot else "books_power" if power else "books"
+    state, *traces = call.call(kind, shapes, args, index, attrs)
     return tuple(traces), state
 
 
-def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool) -> tuple:
+def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool, power: bool, backend: str) -> tuple:
     """The full kernels' arrays: the state, then the eight parameter arrays (zeros for the
-    physics a run does not have)."""
+    physics a run does not have) and, for the host kernels, the power law's exponent and
+    reference overlap (2, 1 or B)."""
     width = lambda leaf: leaf.shape[-1]  # noqa: E731
     zeros = lambda leaf: jax.numpy.zeros_like(leaf)  # noqa: E731
     return (
@@ -571,13 +631,20 @@ def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool) -> 
         jax.numpy.reshape(p["friction"], (1, width(p["friction"]))),
         # the linear dashpot (N s/m, `contact.contact_force`), zeros without one
         jax.numpy.reshape(p["dashpot"], (1, width(p["dashpot"]))) if dashpot else jax.numpy.zeros((1, 1)),
-    )
+    ) + ((_power_law(p) if power else jax.numpy.zeros((2, 1))),) * (backend == "host")
+
+
+def _power_law(p: dict):
+    """The power law's exponent and reference overlap (m) as the kernels' (2, 1 or B) array."""
+    rows = [jax.numpy.reshape(p[name], (1, -1)) for name in ("exponent", "reference_overlap_m")]
+    width = max(row.shape[-1] for row in rows)
+    return jax.numpy.concatenate([jax.numpy.broadcast_to(row, (1, width)) for row in rows])
 
 
 @functools.cache
 def _full_call(config):
     """The full kernel for one configuration as a function of its arrays, with its JVP."""
-    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, dashpot, backend = config
+    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, dashpot, power, backend = config
     if dashpot and not viscous:
         raise ValueError("run_full: a dashpot needs viscous=True (the kernel's rates come with the damping).")
     # dashpot: the kernel with the dashpot's terms compiled in (`DASHPOT_DEFINE`)
@@ -585,8 +652,9 @@ def _full_call(config):
                  viscous=np.int64(viscous), friction=np.int64(friction), extras=np.int64(extras),
                  dashpot=np.int64(dashpot))
     index = np.asarray(channels, dtype=np.int64)
-    n_args = 9  # the state and the eight parameter arrays
-    kinds = ("full_dashpot", "tangent_dashpot") if dashpot else ("full", "tangent")
+    n_args = 10 if backend == "host" else 9  # the state, the eight parameter arrays (host: and the law's)
+    kinds = ("full_dashpot", "tangent_dashpot") if dashpot else ("full_power", "tangent_power") if power else (
+        "full", "tangent")
 
     def ffi(args):
         return _Ffi(backend, args[1].shape[-2], n_samples)

@@ -256,6 +256,8 @@ LAWS = {
     "dashpot_and_kuwabara_kono": dict(viscous=True, springs=False, preload=True, friction=False, dashpot=True),
     "track_friction": dict(viscous=False, springs=False, preload=True, friction=True),
     "all_together": dict(viscous=True, springs=True, preload=True, friction=True, dashpot=True),
+    "power_law": dict(viscous=False, springs=False, preload=True, friction=False, law="power_law"),
+    "power_law_damped_and_friction": dict(viscous=True, springs=True, preload=True, friction=True, law="power_law"),
 }
 
 
@@ -286,6 +288,8 @@ def test_every_kernel_applies_the_laws_of_contact(law, kernel):
     flags = batched.KernelFlags(**LAWS[law], ledger=False)
     if kernel.endswith("_conservative") and flags.full_state:
         pytest.skip("the conservative kernels have no damping or friction (the full ones do)")
+    if flags.law == "power_law" and kernel not in ("jax", "native_full"):
+        pytest.skip("the power law is in the JAX kernel and the host's full kernel only")
     v0 = np.array([0.8, 0.05, -0.3])  # m/s: striker speeds (the last one moving away)
     batch = v0.size
     ones = np.ones((2, batch))
@@ -301,6 +305,8 @@ def test_every_kernel_applies_the_laws_of_contact(law, kernel):
         "external": np.zeros((3, batch)), "first_force": np.zeros(batch), "last_force": np.zeros(batch),
         "v0": v0,
     }
+    if flags.law == "power_law":  # n = 1.7 about a reference overlap of 1 um
+        p |= {"exponent": np.full(batch, 1.7), "reference_overlap_m": np.full(batch, 1e-6)}
     p = {k: jnp.asarray(v) for k, v in p.items()}
     grid = TimeGrid(dt_s=1e-7, steps_per_sample=3, n_samples=40)
     if kernel == "jax":
@@ -326,15 +332,19 @@ def test_every_kernel_applies_the_laws_of_contact(law, kernel):
             v = kick(w)
         overlap = x[:-1] - x[1:] + np.asarray(p["overlap0"])
         rate = v[:-1] - v[1:]
+        if flags.law == "power_law":
+            law = contact.power_law_force(overlap, p["kappa"], p["exponent"], p["reference_overlap_m"])
+        else:
+            law = contact.hertz_force(overlap, p["kappa"])
         if flags.viscous:
-            force = contact.contact_force(overlap, rate, p["kappa"], p["eta"], dashpot_n_s_m=p["dashpot"])[1]
+            force = contact.contact_force(overlap, rate, p["kappa"], p["eta"], law, dashpot_n_s_m=p["dashpot"])[1]
             damped.append(np.asarray(force))
         else:
-            force = contact.hertz_force(overlap, p["kappa"])
+            force = law
         if flags.springs:
             force = force + contact.spring_force(overlap, p["spring"])
         expected.append(np.asarray(force))
-        elastic.append(np.asarray(contact.hertz_force(overlap, p["kappa"])))
+        elastic.append(np.asarray(law))
     # (contacts, B, n_samples)
     expected, elastic, damped = (np.stack(a, axis=-1) if a else None for a in (expected, elastic, damped))
     scale = np.max(np.abs(expected))

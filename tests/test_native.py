@@ -322,6 +322,46 @@ def test_forward_mode_derivatives_equal_jacfwd_through_the_jax_kernel(case):
     np.testing.assert_allclose(np.asarray(value), expected, rtol=0, atol=2e-12 * np.max(np.abs(expected)))
 
 
+def test_power_law_runs_on_the_full_kernel_equal_to_the_jax_kernel():
+    """Power-law contacts (n = 1.6) run the full C++ kernel's power-law library: a damped,
+    frictional sweep with the books and a conservative run without them equal the JAX
+    kernel's to round-off, and `jax.jacfwd` through `record_batched` in damping, friction, the
+    exponent, the reference overlap and the impact speed (the law's own tangents through the
+    loop) equals `jax.jacfwd` through the JAX kernel."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    from hertzchain.batched import record_batched
+
+    base, grid = _batch(speeds=(0.3, 1.0, 0.5), contact_exponent=1.6, eta_s=1e-6, mu=0.1,
+                        sensor_beads=(4,), precompression_n=1.0)
+    flags = kernel_flags(base)
+    assert native.kernel_for(flags, None) == native.FusedKernel("full", "host")
+    ours, reference = assert_forces_equal_the_jax_kernels(base, grid, books=True)
+    assert_books_equal_the_jax_kernels(ours, reference)
+    elastic, _ = _batch(contact_exponent=1.4)
+    assert native.kernel_for(kernel_flags(elastic), None) is None  # undamped books: the JAX kernel
+    assert_forces_equal_the_jax_kernels(elastic, grid, books=False)
+
+    def traced(q, kernel):
+        ones = jnp.ones(base.eta_s.shape)
+        setup = eqx.tree_at(
+            lambda s: (s.eta_s, s.mu, s.contact_exponent, s.exponent_reference_overlap_m, s.striker_velocity_m_s),
+            base, (q[0] * ones, q[1] * ones, q[2] * ones, q[3] * ones, q[4] * base.striker_velocity_m_s))
+        out = record_batched(setup, grid, Recording((2, 6)), flags._replace(ledger=False), kernel=kernel)
+        return jnp.stack([out.forces_n[name] for name in out.channel_names])
+
+    q = jnp.asarray([1e-6, 0.1, 1.6, 2e-6, 1.0])
+    jacobian = jax.jit(jax.jacfwd(lambda q: traced(q, "auto")))
+    assert jacobian.lower(q).as_text().count(f"custom_call @{native.POWER_TANGENT_TARGET}") == 1
+    jac = np.asarray(jacobian(q))
+    expected = np.asarray(jax.jit(jax.jacfwd(lambda q: traced(q, "jax")))(q))
+    for i in range(q.size):
+        scale = np.max(np.abs(expected[..., i]))
+        assert scale > 0.0
+        np.testing.assert_allclose(jac[..., i], expected[..., i], rtol=0, atol=1e-10 * scale)
+
+
 _TRANSFORMS = {
     # a batch of fits: every parameter vector its own chains
     "vmap": lambda f, q, qs: jax.vmap(f)(qs),
