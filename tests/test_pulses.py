@@ -76,7 +76,7 @@ def test_fit_cos6_errors_cover_the_truth():
     np.testing.assert_allclose(known.tau_stderr_s, fit.tau_stderr_s[:5], rtol=0.25)
 
 
-def test_fit_cos6_on_a_slice_equals_the_fit_over_the_whole_trace():
+def test_fit_cos6_on_a_slice_equals_the_fit_over_the_whole_trace(monkeypatch):
     """Concrete traces are fitted on the slice that holds every lobe (`pulses._slice_length`);
     under `jit` (traced values) the fit reads the whole trace. Both give the same fit: lobes at
     either end of the trace, a window, noise, a trace with no positive sample, and a batch
@@ -90,6 +90,7 @@ def test_fit_cos6_on_a_slice_equals_the_fit_over_the_whole_trace():
     traces.append(traces[2] + rng.normal(0.0, 1.0, t.shape))
     traces.append(-np.abs(traces[3]) - 1.0)  # no positive sample
     traces = jnp.asarray(np.stack(traces))
+    monkeypatch.setattr(pulses, "SLICE_MIN_SAMPLES", traces.size)  # this small batch on slices too
     for window in (None, (0.5e-3, 1.5e-3)):
         length = pulses._slice_length(jnp.asarray(t), traces, 0.05, jnp.asarray(window or (-np.inf, np.inf)))
         assert length is not None and length < t.size  # the slice is shorter than the trace
