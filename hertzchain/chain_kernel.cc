@@ -872,18 +872,18 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   std::vector<Block> blocks;
   int64_t lo = 0;
   for (; !kPowerLibrary && lo + kWideLanes <= batch; lo += kWideLanes) blocks.push_back({lo, kWideLanes});
-  for (; batch - lo > (books || kPowerLibrary ? 0 : kQuarterLanes); lo += kNarrowLanes)
+  constexpr bool kB = kPass == Pass::kBooks;
+  for (; batch - lo > (kB || kPowerLibrary ? 0 : kQuarterLanes); lo += kNarrowLanes)
     blocks.push_back({lo, kNarrowLanes});
   if (batch - lo >= 2) {
     blocks.push_back({lo, kQuarterLanes});
     lo += kQuarterLanes;
   }
   if (lo < batch) blocks.push_back({lo, 1});
-  auto run = [&](auto viscous_tag, auto friction_tag, auto tangent_tag, auto extras_tag, auto dashpot_tag,
-                 auto books_tag) {
+  auto run = [&](auto viscous_tag, auto friction_tag, auto extras_tag, auto dashpot_tag) {
     constexpr bool kV = decltype(viscous_tag)::value, kF = decltype(friction_tag)::value,
-                   kT = decltype(tangent_tag)::value, kE = decltype(extras_tag)::value,
-                   kD = decltype(dashpot_tag)::value, kB = decltype(books_tag)::value;
+                   kT = kPass == Pass::kTangent, kE = decltype(extras_tag)::value,
+                   kD = decltype(dashpot_tag)::value;
     auto advance = [&](auto lanes, int64_t first) {
       constexpr int64_t kL = decltype(lanes)::value;
       // blocks of 8 and 4 with the extras' terms (zeros: the same numbers): without them
@@ -912,18 +912,14 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   // the tangents and the books always with the preload's and springs' terms (zeros where
   // there are none); a dashpot (damped runs only: the kernels compute rates with the
   // damping) likewise, so that its few runs add four instantiations per block width, not eight
-  auto with_pass = [&](auto v, auto f, auto d) {
-    if constexpr (kPass == Pass::kTangent) {
-      run(v, f, T{}, T{}, d, F{});
-    } else if constexpr (kPass == Pass::kBooks) {
-      run(v, f, F{}, T{}, d, T{});
-    } else if constexpr (decltype(d)::value) {
-      run(v, f, F{}, T{}, d, F{});
+  auto with_extras = [&](auto v, auto f, auto d) {
+    if constexpr (kPass != Pass::kForward || decltype(d)::value) {
+      run(v, f, T{}, d);
     } else {
-      extras ? run(v, f, F{}, T{}, d, F{}) : run(v, f, F{}, F{}, d, F{});
+      extras ? run(v, f, T{}, d) : run(v, f, F{}, d);
     }
   };
-  auto with_friction = [&](auto v, auto d) { friction_on ? with_pass(v, T{}, d) : with_pass(v, F{}, d); };
+  auto with_friction = [&](auto v, auto d) { friction_on ? with_extras(v, T{}, d) : with_extras(v, F{}, d); };
   // The dashpot's runs and the power law's are compiled into libraries of their own
   // (HC_DASHPOT_LIBRARY, HC_POWER_LIBRARY, built on first use by `native`), so that the
   // library every run needs does not wait for them.
