@@ -7,7 +7,8 @@
 //  - HertzChainFullForward / HertzChainFullTangent / HertzChainFullBooks: the full step
 //    (velocities and accelerations apart) with Kuwabara-Kono damping and track friction, its
 //    forward-mode tangents, and its run with the books (below, `RunFullBlock`); compiled with
-//    HC_DASHPOT_LIBRARY (a linear dashpot) or HC_POWER_LIBRARY (power-law contacts) into
+//    HC_DASHPOT_LIBRARY (a linear dashpot), HC_POWER_LIBRARY (power-law contacts),
+//    HC_THORNTON_LIBRARY or HC_JACKSON_GREEN_LIBRARY (elastic-plastic contacts) into
 //    libraries of their own.
 //
 // The arithmetic is that of the JAX kernel, operation for operation and in the same
@@ -65,6 +66,11 @@ namespace ffi = xla::ffi;
 #define HC_PART_TANGENT 1
 #else
 #define HC_PART_TANGENT 0
+#endif
+
+// A library of a contact law other than Hertz's (the full kernel's runs only).
+#if defined(HC_POWER_LIBRARY) || defined(HC_THORNTON_LIBRARY) || defined(HC_JACKSON_GREEN_LIBRARY)
+#define HC_LAW_LIBRARY 1
 #endif
 
 namespace {
@@ -339,9 +345,23 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
 //   Tangents: every input with a leading direction axis, (D, rows, B) or (1, rows, B); results:
 //   the traces (B, n_samples), then their tangents (D, B, n_samples), from one run.
 
+// The contacts' elastic law of a full run (`batched.KernelFlags.law`): each library runs one
+// (the main and dashpot libraries Hertz's, HC_POWER_LIBRARY the power law, HC_THORNTON_LIBRARY
+// and HC_JACKSON_GREEN_LIBRARY the elastic-plastic laws).
+enum class Law { kHertz, kPower, kThornton, kJacksonGreen };
+
+// Rows of the `law` array (1 or B columns): Hertz's runs read none (2 rows of zeros); the
+// power law its exponent and reference overlap (m); Thornton's law every contact's yield
+// force (N; infinite: elastic); Jackson-Green's every contact's yield force (whether it
+// yields), reduced radius (m) and Poisson ratio, then the chain's yield stress (Pa) and
+// hardness ratio.
+constexpr int64_t LawRows(Law law, int64_t contacts) {
+  return law == Law::kThornton ? contacts : law == Law::kJacksonGreen ? 3 * contacts + 2 : 2;
+}
+
 struct FullParams {
   Param inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot;
-  Param law;  // the power law's exponent and reference overlap (m), (2, 1 or B): read with kPower
+  Param law;  // the law's parameters (`LawRows`)
 };
 
 struct TangentInputs {
@@ -349,8 +369,8 @@ struct TangentInputs {
   Tangent inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot, law;
 };
 
-// The books of a forward run (kBooks), in `batched._Layout`'s rows after x, v, a: the
-// largest total force of every contact so far (bodies rows), with damping the viscous force
+// The books of a forward run (kBooks), in `batched._Layout`'s rows after x, v, a (and, for
+// elastic-plastic contacts, every contact's largest overlap so far): the largest total force of every contact so far (bodies rows), with damping the viscous force
 // on every body and the wall (bodies + 1), and the energy dissipated so far (1); `state0`
 // in, `state` out (the whole packed state, x, v, a first), `mass` (bodies, 1 or B) for the
 // energy friction takes.
@@ -363,13 +383,16 @@ struct BooksIO {
 using hertzchain::KickSlope;
 
 template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras, bool kDashpot, bool kBooks,
-          bool kPower>
+          Law kLaw>
 void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
                   int64_t steps_per_sample, double dt, const double* state0, FullParams p,
                   const std::vector<int64_t>& channels, const std::vector<double*>& traces,
                   int64_t directions, TangentInputs tin, const std::vector<double*>& ttraces, BooksIO books) {
   static_assert(!(kBooks && kTangent), "the books are kept by forward runs only");
+  constexpr bool kPower = kLaw == Law::kPower;
+  constexpr bool kPlastic = kLaw == Law::kThornton || kLaw == Law::kJacksonGreen;
   const int64_t rows_x = bodies + 1, contacts = bodies;
+  const int64_t law_rows = LawRows(kLaw, contacts);
   const double h = 0.5 * dt;
   const int64_t n_channels = static_cast<int64_t>(channels.size());
   const int64_t D = kTangent ? directions : 0;
@@ -389,9 +412,9 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   Load<kLanes>(p.friction, 1, lo, fr.data(), valid);
   if (kDashpot) Load<kLanes>(p.dashpot, 1, lo, dash.data(), valid);
   // kPower: every contact's law is `contact.power_law_force` of the chain's exponent (row 0)
-  // and reference overlap (row 1)
-  std::vector<double> law(kPower ? 2 * kLanes : 0);
-  if (kPower) Load<kLanes>(p.law, 2, lo, law.data(), valid);
+  // and reference overlap (row 1); kPlastic: the rows of `LawRows`
+  std::vector<double> law(kPower || kPlastic ? law_rows * kLanes : 0);
+  if (kPower || kPlastic) Load<kLanes>(p.law, law_rows, lo, law.data(), valid);
   // 1.5 eta kappa and (kDashpot) the dashpot (`hertzchain::ContactDashpot`) of every contact
   std::vector<double> kvis(contacts * kLanes), dsh(contacts * kLanes);
   for (int64_t i = 0; i < contacts; ++i)
@@ -401,7 +424,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     }
   // the books (kBooks): `top` the largest total force of every contact, `vis` the viscous
   // force on every body (damping), `spent` the energy dissipated, `mass` (friction)
-  const int64_t top_row = 3 * rows_x, vis_row = top_row + contacts, spent_row = vis_row + (kViscous ? rows_x : 0);
+  const int64_t peak_row = 3 * rows_x, top_row = peak_row + (kPlastic ? contacts : 0);
+  const int64_t vis_row = top_row + contacts, spent_row = vis_row + (kViscous ? rows_x : 0);
   std::vector<double> top(kBooks ? contacts * kLanes : 0), vis(kBooks && kViscous ? rows_x * kLanes : 0);
   std::vector<double> mass(kBooks && kFriction ? contacts * kLanes : 0), spent(kBooks ? kLanes : 0);
   double damped[kLanes];  // 1 where the chain is damped: an undamped one's viscous work is 0, exactly
@@ -437,9 +461,102 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     LoadTangent<kLanes>(tin.friction, D, 1, batch, lo, tfr.data(), valid);
     if (kDashpot) LoadTangent<kLanes>(tin.dashpot, D, 1, batch, lo, tdash.data(), valid);
   }
-  std::vector<double> tlaw(kPower ? D * 2 * kLanes : 0);  // (D, 2, kLanes)
-  if (kTangent && kPower) {
-    LoadTangent<kLanes>(tin.law, D, 2, batch, lo, tlaw.data(), valid);
+  std::vector<double> tlaw(kPower || kPlastic ? D * law_rows * kLanes : 0);  // (D, law_rows, kLanes)
+  if (kTangent && (kPower || kPlastic)) {
+    LoadTangent<kLanes>(tin.law, D, law_rows, batch, lo, tlaw.data(), valid);
+  }
+  // kPlastic: every contact's largest overlap so far (`peak`, m; the state's with the books,
+  // else the overlaps at the start, as `batched._initial_peak` has them) and the unloading
+  // curve it leaves (`hertzchain::Unloading`: residual overlap `res`, stiffness `kpl`);
+  // `yields` 1 where the contact's law is plastic (a finite yield force; for Jackson-Green's
+  // law, and a contact law: `forces.elastic_parts`), else Hertz's. With kTangent, the partial
+  // derivatives of (res, kpl) by the law's inputs (`kInputs`: the peak, kappa, then the
+  // law's own, `PlasticInputs`) and the peaks' tangents (D, contacts, kLanes).
+  constexpr int kInputs = kLaw == Law::kJacksonGreen ? 6 : 3;
+  const int64_t plastic_size = kPlastic ? contacts * kLanes : 0;
+  std::vector<double> pk(plastic_size), res(plastic_size), kpl(plastic_size), yields(plastic_size);
+  std::vector<double> dres(kTangent ? kInputs * plastic_size : 0), dkpl(kTangent ? kInputs * plastic_size : 0);
+  std::vector<double> tpk(kTangent ? D * plastic_size : 0);
+  // the unloading curve of contact index c = i kLanes + j (and its partials) at its peak
+  auto unload = [&](int64_t i, int64_t j) {
+    const int64_t c = i * kLanes + j;
+    if (yields[c] == 0.0) {
+      res[c] = 0.0;
+      kpl[c] = kap[c];
+      if constexpr (kTangent)
+        for (int k = 0; k < kInputs; ++k) {
+          dres[k * plastic_size + c] = 0.0;
+          dkpl[k * plastic_size + c] = k == 1 ? 1.0 : 0.0;
+        }
+      return;
+    }
+    if constexpr (kLaw == Law::kThornton) {
+      const double fy = law[c];
+      const hertzchain::Unloading<double> u = hertzchain::ThorntonUnloading<double>(pk[c], kap[c], fy);
+      res[c] = u.residual;
+      kpl[c] = u.kappa;
+      if constexpr (kTangent) {
+        using D3 = hertzchain::Dual<3>;
+        const hertzchain::Unloading<D3> t = hertzchain::ThorntonUnloading(
+            hertzchain::Input<3>(pk[c], 0), hertzchain::Input<3>(kap[c], 1), hertzchain::Input<3>(fy, 2));
+        for (int k = 0; k < 3; ++k) {
+          dres[k * plastic_size + c] = t.residual.d[k];
+          dkpl[k * plastic_size + c] = t.kappa.d[k];
+        }
+      }
+    } else if constexpr (kLaw == Law::kJacksonGreen) {
+      const double radius = law[(contacts + i) * kLanes + j], poisson = law[(2 * contacts + i) * kLanes + j];
+      const double stress = law[3 * contacts * kLanes + j], hardness = law[(3 * contacts + 1) * kLanes + j];
+      const hertzchain::Unloading<double> u =
+          hertzchain::JacksonGreenUnloading<double>(pk[c], kap[c], radius, stress, poisson, hardness);
+      res[c] = u.residual;
+      kpl[c] = u.kappa;
+      if constexpr (kTangent) {
+        using D6 = hertzchain::Dual<6>;
+        const hertzchain::Unloading<D6> t = hertzchain::JacksonGreenUnloading(
+            hertzchain::Input<6>(pk[c], 0), hertzchain::Input<6>(kap[c], 1), hertzchain::Input<6>(radius, 2),
+            hertzchain::Input<6>(stress, 3), hertzchain::Input<6>(poisson, 4), hertzchain::Input<6>(hardness, 5));
+        for (int k = 0; k < 6; ++k) {
+          dres[k * plastic_size + c] = t.residual.d[k];
+          dkpl[k * plastic_size + c] = t.kappa.d[k];
+        }
+      }
+    }
+  };
+  // the tangent of input k of contact i, lane j, along direction d (`kInputs`' order)
+  auto plastic_input = [&](int k, int64_t d, int64_t i, int64_t j) {
+    if (k == 0) return tpk[(d * contacts + i) * kLanes + j];
+    if (k == 1) return tkap[(d * contacts + i) * kLanes + j];
+    const double* t = &tlaw[d * law_rows * kLanes];
+    if constexpr (kLaw == Law::kThornton) return t[i * kLanes + j];  // the yield force
+    if (k == 2) return t[(contacts + i) * kLanes + j];                // reduced radius
+    if (k == 3) return t[3 * contacts * kLanes + j];                  // yield stress
+    if (k == 4) return t[(2 * contacts + i) * kLanes + j];            // Poisson ratio
+    return t[(3 * contacts + 1) * kLanes + j];                        // hardness ratio
+  };
+  if constexpr (kPlastic) {
+    if constexpr (kBooks) {
+      Load<kLanes>({state0 + peak_row * batch, batch}, contacts, lo, pk.data(), valid);
+    } else {
+      for (int64_t i = 0; i < contacts; ++i)
+        for (int64_t j = 0; j < kLanes; ++j)
+          pk[i * kLanes + j] = kExtras ? x[i * kLanes + j] - x[(i + 1) * kLanes + j] + ov0[i * kLanes + j]
+                                       : x[i * kLanes + j] - x[(i + 1) * kLanes + j];
+      if constexpr (kTangent)
+        for (int64_t d = 0; d < D; ++d)
+          for (int64_t i = 0; i < contacts; ++i)
+            for (int64_t j = 0; j < kLanes; ++j)
+              tpk[(d * contacts + i) * kLanes + j] = tx[(d * rows_x + i) * kLanes + j] -
+                                                     tx[(d * rows_x + i + 1) * kLanes + j] +
+                                                     tov0[(d * contacts + i) * kLanes + j];
+    }
+    for (int64_t i = 0; i < contacts; ++i)
+      for (int64_t j = 0; j < kLanes; ++j) {
+        const int64_t c = i * kLanes + j;
+        const bool finite = std::isfinite(law[c]);
+        yields[c] = (kLaw == Law::kJacksonGreen ? finite && kap[c] > 0.0 : finite) ? 1.0 : 0.0;
+        unload(i, j);
+      }
   }
   // recorded sets: the forces, then (kTangent) their tangent along every direction
   const int64_t out_sets = 1 + D;
@@ -500,13 +617,34 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     l.c3[j] = one.c3;
     l.slope[j] = one.slope;
   };
-  // The force of a contact at lane j with the chain's law (Hertz's, `total_force`, or with
-  // kPower the power law): returns the total; `rt`, `sm` as `TotalForce` gives them, `elastic`
-  // the law's force (the books read it) and, with kPower and kTangent, `slopes` its partial
-  // derivatives (computed once per contact and step, for every direction).
-  auto contact_force = [&](double dl, double rate, double k, double kv, double d, double sp, int64_t j, double* rt,
-                           double* sm, double* elastic, hertzchain::PowerLawSlopes* slopes) {
-    if constexpr (kPower) {
+  // kPlastic: a contact's linearisation about its unloading curve, per lane: s = overlap -
+  // residual, in = [s > 0], s_+, sqrt(s_+), 0.5 / sqrt(s) in contact (JAX's rules for
+  // `contact.hertz_force`), the curve's stiffness
+  struct PlasticLinear {
+    double in[kLanes], positive[kLanes], root[kLanes], half_inv_root[kLanes], kappa[kLanes];
+  };
+  PlasticLinear plin;
+  // The force of a contact at lane j with the chain's law (Hertz's, `total_force`, with
+  // kPower the power law, with kPlastic Hertz about the unloading curve of contact index c):
+  // returns the total; `rt`, `sm` as `TotalForce` gives them, `elastic` the law's force (the
+  // books read it) and, with kTangent, `slopes` the power law's partial derivatives or `pl`
+  // the plastic law's linearisation (computed once per contact and step, for every direction).
+  auto contact_force = [&](double dl, double rate, double k, double kv, double d, double sp, int64_t c, int64_t j,
+                           double* rt, double* sm, double* elastic, hertzchain::PowerLawSlopes* slopes,
+                           PlasticLinear* pl) {
+    if constexpr (kPlastic) {
+      *rt = std::sqrt(dl > 0.0 ? dl : 0.0);
+      const double s = dl - res[c], positive = s > 0.0 ? s : 0.0, root = std::sqrt(positive);
+      *elastic = kpl[c] * positive * root;
+      if constexpr (kTangent) {
+        pl->in[j] = s > 0.0 ? 1.0 : 0.0;
+        pl->positive[j] = positive;
+        pl->root[j] = root;
+        pl->half_inv_root[j] = s > 0.0 ? 0.5 / root : 0.0;
+        pl->kappa[j] = kpl[c];
+      }
+      return hertzchain::DampedTotal<kViscous, kExtras, kDashpot>(*elastic, *rt, dl, rate, kv, d, sp, sm);
+    } else if constexpr (kPower) {
       *rt = std::sqrt(dl > 0.0 ? dl : 0.0);
       double ratio, rn;
       *elastic = hertzchain::PowerLawForce(dl, k, law[j], law[kLanes + j], &ratio, &rn);
@@ -519,13 +657,27 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     }
   };
   // its tangent along direction d (`hertzchain::TangentForce`; with kPower, `TangentTotal` about
-  // the power law's tangent from `slopes`): c2 = 1.5 eta kappa = kv
-  auto tforce = [&](const Linear& l, int64_t j, const hertzchain::PowerLawSlopes& slopes, int64_t d, double k,
-                    double c1j, double c2, double sp, double tdl, double trate, double tk, double t15e, double td,
-                    double tsp) {
+  // the power law's tangent from `slopes`; with kPlastic, about Hertz's along the unloading
+  // curve of contact i, `pl`, whose residual and stiffness move with the peak and the law's
+  // inputs): c2 = 1.5 eta kappa = kv
+  auto tforce = [&](const Linear& l, int64_t j, const hertzchain::PowerLawSlopes& slopes, const PlasticLinear& pl,
+                    int64_t i, int64_t d, double k, double c1j, double c2, double sp, double tdl, double trate,
+                    double tk, double t15e, double td, double tsp) {
     const hertzchain::Linearisation one{l.delta[j], l.rate[j],       l.in[j], l.positive[j], l.root[j],
                                         l.half_inv_root[j], l.kp[j], l.c3[j], l.slope[j]};
-    if constexpr (kPower) {
+    if constexpr (kPlastic) {
+      double tres = 0.0, tkpl = 0.0;
+      for (int q = 0; q < kInputs; ++q) {
+        const double t = plastic_input(q, d, i, j);
+        tres = tres + dres[q * plastic_size + i * kLanes + j] * t;
+        tkpl = tkpl + dkpl[q * plastic_size + i * kLanes + j] * t;
+      }
+      const double ts = tdl - tres;
+      const double telastic = (tkpl * pl.positive[j] + pl.kappa[j] * (ts * pl.in[j])) * pl.root[j] +
+                              (pl.kappa[j] * pl.positive[j]) * (ts * pl.half_inv_root[j]);
+      return hertzchain::TangentTotal<kViscous, kDashpot>(one, telastic, k, c1j, c2, sp, tdl, trate, tk, t15e, td,
+                                                          tsp);
+    } else if constexpr (kPower) {
       const double telastic = slopes.overlap * tdl + slopes.kappa * tk +
                               slopes.reference * tlaw[(d * 2 + 1) * kLanes + j] +
                               slopes.exponent * tlaw[d * 2 * kLanes + j];
@@ -536,6 +688,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     }
   };
   hertzchain::PowerLawSlopes slopes[kLanes];  // contact i's, lane by lane (kPower and kTangent)
+  double grow[kLanes];  // kPlastic and kTangent: d max(peak, overlap) / d overlap of contact i (1, 1/2 or 0)
 
   for (int64_t n = 0; n < n_samples; ++n) {
     for (int64_t s = 0; s < steps_per_sample; ++s) {
@@ -588,8 +741,17 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double dl = x[ri + j] - x[rn + j];
           if constexpr (kExtras) dl = dl + ov0[ri + j];
           double rt_rate = p_prev[j] - pred;
+          if constexpr (kPlastic) {  // the largest overlap so far, with this one (`batched._step`)
+            const double old = pk[ri + j];
+            if constexpr (kTangent) grow[j] = dl > old ? 1.0 : dl == old ? 0.5 : 0.0;  // JAX's max rule
+            if (dl > old) {
+              pk[ri + j] = dl;
+              if (yields[ri + j] != 0.0) unload(i, j);
+            }
+          }
           double elastic_i;
-          double f = contact_force(dl, rt_rate, kj, kvj, dj, spr[ri + j], j, &rt, &sm, &elastic_i, &slopes[j]);
+          double f = contact_force(dl, rt_rate, kj, kvj, dj, spr[ri + j], ri + j, j, &rt, &sm, &elastic_i, &slopes[j],
+                                   &plin);
           // body i: second half kick, friction
           double b = f_prev[j] - f;
           if constexpr (kExtras) b = b + ext[ri + j];
@@ -648,7 +810,11 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               tx[tn + j] = tx[tn + j] + dt * tw;
               double tpred = tw + h * ta[tn + j];
               double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
-              double tf = tforce(lin, j, slopes[j], d, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl,
+              if constexpr (kPlastic) {  // the peak's tangent: max(peak, overlap)'s
+                const double tp = tpk[tc + j];
+                tpk[tc + j] = grow[j] == 1.0 ? tdl : grow[j] == 0.5 ? 0.5 * tp + 0.5 * tdl : tp;
+              }
+              double tf = tforce(lin, j, slopes[j], plin, i, d, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl,
                                  tp_prev[q] - tpred, tkap[tc + j], t15eta[q],
                                  kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, tspr[tc + j]);
               double tb = tf_prev[q] - tf + text[ti + j];
@@ -711,8 +877,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         double rt, sm, elastic;
         const double dj = kDashpot ? dsh[ri + j] : 0.0;
         hertzchain::PowerLawSlopes here_slopes;
-        double f = contact_force(dl, rate, kap[ri + j], kvis[ri + j], dj, spr[ri + j], j, &rt, &sm, &elastic,
-                                 &here_slopes);
+        double f = contact_force(dl, rate, kap[ri + j], kvis[ri + j], dj, spr[ri + j], ri + j, j, &rt, &sm, &elastic,
+                                 &here_slopes, &plin);
         record.slot(0, c)[j] = f;
         if (!kTangent) continue;
         Linear here;
@@ -724,7 +890,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
           double trate = tv[ti + j] - tv[tn + j];
           record.slot(d + 1, c)[j] =
-              tforce(here, j, here_slopes, d, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, trate, tkap[tc + j],
+              tforce(here, j, here_slopes, plin, i, d, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, trate,
+                     tkap[tc + j],
                      t15eta[q], kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, tspr[tc + j]);
         }
       }
@@ -740,13 +907,14 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     store(x, rows_x, 0);
     store(v, rows_x, rows_x);
     store(a, rows_x, 2 * rows_x);
+    if (kPlastic) store(pk, contacts, peak_row);
     store(top, contacts, top_row);
     if (kViscous) store(vis, rows_x, vis_row);
     store(spent, 1, spent_row);
   }
 }
 
-#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_POWER_LIBRARY) && HC_PART_FORWARD  // (the main library only)
+#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_LAW_LIBRARY) && HC_PART_FORWARD  // (the main library only)
 ffi::Error Forward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                    ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                    ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
@@ -811,12 +979,22 @@ ffi::Error Forward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buff
 // tangents (kTangent, `tangents` given), or with the books (kBooks, `books` given).
 enum class Pass { kForward, kTangent, kBooks };
 
-// Every contact of the power-law library's runs follows `contact.power_law_force`.
-#ifdef HC_POWER_LIBRARY
-constexpr bool kPowerLibrary = true;
+// The law of this library's runs: the power-law library's `contact.power_law_force`, the
+// elastic-plastic libraries' `contact.thornton_contact` and `contact.jackson_green_contact`,
+// the others Hertz's.
+#if defined(HC_POWER_LIBRARY)
+constexpr Law kLibraryLaw = Law::kPower;
+#elif defined(HC_THORNTON_LIBRARY)
+constexpr Law kLibraryLaw = Law::kThornton;
+#elif defined(HC_JACKSON_GREEN_LIBRARY)
+constexpr Law kLibraryLaw = Law::kJacksonGreen;
 #else
-constexpr bool kPowerLibrary = false;
+constexpr Law kLibraryLaw = Law::kHertz;
 #endif
+// The libraries of a law other than Hertz's: their laws' scalar calls (powers, exponentials)
+// leave the loops over the lanes unvectorised, so they run blocks of 8 only (blocks of 64, 8
+// and 4 ran the power law no faster and built in 20 s, not 11 s).
+constexpr bool kLawLibrary = kLibraryLaw != Law::kHertz;
 
 // state0 and parameters as for the full kernel.
 template <Pass kPass>
@@ -830,7 +1008,9 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   auto dims = state0.dimensions();
   const int64_t batch = dims[dims.size() - 1];
   const int64_t bodies = inv_mass.dimensions()[inv_mass.dimensions().size() - 2] - 1;
-  const int64_t state_rows = 3 * (bodies + 1) + (books ? bodies + (viscous ? bodies + 1 : 0) + 1 : 0);
+  constexpr bool kPlasticLibrary = kLibraryLaw == Law::kThornton || kLibraryLaw == Law::kJacksonGreen;
+  const int64_t peak_rows = books && kPlasticLibrary ? bodies : 0;
+  const int64_t state_rows = 3 * (bodies + 1) + (books ? peak_rows + bodies + (viscous ? bodies + 1 : 0) + 1 : 0);
   if (static_cast<int64_t>(state0.element_count()) != state_rows * batch)
     return ffi::Error::InvalidArgument(books ? "state0 must be (3 (bodies + 1) + the books' rows, B)"
                                              : "state0 must be (3 (bodies + 1), B) for one primal");
@@ -856,8 +1036,10 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
       AdviseHugePages(touts.back(), (*out)->size_bytes());
     }
   }
-  if (law.element_count() != 2 && law.element_count() != 2 * static_cast<size_t>(batch))
-    return ffi::Error::InvalidArgument("law must be (2, 1 or B): the power law's exponent and reference overlap");
+  const int64_t law_rows = LawRows(kLibraryLaw, bodies);
+  if (static_cast<int64_t>(law.element_count()) != law_rows &&
+      static_cast<int64_t>(law.element_count()) != law_rows * batch)
+    return ffi::Error::InvalidArgument("law must be (rows, 1 or B): the law's parameters (chain_kernel.cc, LawRows)");
   FullParams p{AsParam(inv_mass), AsParam(kappa), AsParam(overlap0), AsParam(spring), AsParam(external),
                AsParam(eta),      AsParam(friction), AsParam(dashpot), AsParam(law)};
   TangentInputs none{};
@@ -867,13 +1049,13 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   // blocks of 64, then of 8 (the last one may be partial), the last 2-4 chains in a block
   // of 4 (a vector costs about what one chain alone does), a last single chain alone; runs
   // with the books (sweeps: large batches) in blocks of 64 and 8 only, so that they add two
-  // block widths to the library's build, not four; the power law's in blocks of 8 only (its
-  // powers are scalar calls: blocks of 64, 8 and 4 ran no faster and built in 20 s, not 11 s)
+  // block widths to the library's build, not four; the laws other than Hertz's in blocks of 8
+  // only (`kLawLibrary`)
   std::vector<Block> blocks;
   int64_t lo = 0;
-  for (; !kPowerLibrary && lo + kWideLanes <= batch; lo += kWideLanes) blocks.push_back({lo, kWideLanes});
+  for (; !kLawLibrary && lo + kWideLanes <= batch; lo += kWideLanes) blocks.push_back({lo, kWideLanes});
   constexpr bool kB = kPass == Pass::kBooks;
-  for (; batch - lo > (kB || kPowerLibrary ? 0 : kQuarterLanes); lo += kNarrowLanes)
+  for (; batch - lo > (kB || kLawLibrary ? 0 : kQuarterLanes); lo += kNarrowLanes)
     blocks.push_back({lo, kNarrowLanes});
   if (batch - lo >= 2) {
     blocks.push_back({lo, kQuarterLanes});
@@ -889,13 +1071,13 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
       // blocks of 8 and 4 with the extras' terms (zeros: the same numbers): without them
       // GCC 12 leaves the damped 8-lane loop scalar ("control flow in loop"), 2.5x slower
       constexpr bool kENarrow = kE || kL == kNarrowLanes || kL == kQuarterLanes;
-      RunFullBlock<kL, kV, kF, kT, kENarrow, kD, kB, kPowerLibrary>(bodies, first, batch, n_samples,
-                                                                    steps_per_sample, dt, state0.typed_data(), p,
-                                                                    rows, outs, directions, tin, touts, kept);
+      RunFullBlock<kL, kV, kF, kT, kENarrow, kD, kB, kLibraryLaw>(bodies, first, batch, n_samples,
+                                                                  steps_per_sample, dt, state0.typed_data(), p,
+                                                                  rows, outs, directions, tin, touts, kept);
     };
     RunBlocks(pool, blocks, [&](int64_t b) {
       const Block& block = blocks[b];
-      if constexpr (kPowerLibrary) {
+      if constexpr (kLawLibrary) {
         advance(std::integral_constant<int64_t, kNarrowLanes>{}, block.lo);
       } else {
         if (block.lanes == kWideLanes) return advance(std::integral_constant<int64_t, kWideLanes>{}, block.lo);
@@ -920,11 +1102,11 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
     }
   };
   auto with_friction = [&](auto v, auto d) { friction_on ? with_extras(v, T{}, d) : with_extras(v, F{}, d); };
-  // The dashpot's runs and the power law's are compiled into libraries of their own
-  // (HC_DASHPOT_LIBRARY, HC_POWER_LIBRARY, built on first use by `native`), so that the
-  // library every run needs does not wait for them.
-#if defined(HC_POWER_LIBRARY)
-  if (dashpot_on) return ffi::Error::InvalidArgument("the power-law library has no dashpot");
+  // The dashpot's runs and the other laws' are compiled into libraries of their own
+  // (HC_DASHPOT_LIBRARY, HC_POWER_LIBRARY, HC_THORNTON_LIBRARY, HC_JACKSON_GREEN_LIBRARY, built
+  // on first use by `native`), so that the library every run needs does not wait for them.
+#if defined(HC_LAW_LIBRARY)
+  if (dashpot_on) return ffi::Error::InvalidArgument("the libraries of laws other than Hertz's have no dashpot");
   viscous ? with_friction(T{}, F{}) : with_friction(F{}, F{});
 #elif defined(HC_DASHPOT_LIBRARY)
   if (!dashpot_on || !viscous)
@@ -990,7 +1172,7 @@ ffi::Error FullTangent(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::
       Directions(t_kappa, rows_x - 1, batch),  Directions(t_overlap0, rows_x - 1, batch),
       Directions(t_spring, rows_x - 1, batch), Directions(t_external, rows_x, batch),
       Directions(t_eta, 1, batch),             Directions(t_friction, 1, batch),
-      Directions(t_dashpot, 1, batch),         Directions(t_law, 2, batch)};
+      Directions(t_dashpot, 1, batch),         Directions(t_law, LawRows(kLibraryLaw, rows_x - 1), batch)};
   const int64_t directions = *std::max_element(counts, counts + 10);
   for (int64_t count : counts)
     if (count != 1 && count != directions)
@@ -1019,7 +1201,7 @@ auto HostFullArgs(Binding&& binding) {
   return hertzchain::FullArgs(std::forward<Binding>(binding)).template Arg<ffi::Buffer<ffi::F64>>();  // law
 }
 
-#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_POWER_LIBRARY) && HC_PART_FORWARD
+#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_LAW_LIBRARY) && HC_PART_FORWARD
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
                               hertzchain::ForwardAttrs(hertzchain::ChainArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
                                                            .Arg<ffi::Buffer<ffi::S64>>())  // channels

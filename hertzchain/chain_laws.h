@@ -176,4 +176,178 @@ HC_HD inline double TangentForce(const Linearisation& l, double k, double c1, do
   return TangentTotal<kViscous, kDashpot>(l, telastic, k, c1, c2, sp, tdl, trate, tk, t15e, tdash, tsp);
 }
 
+// ---------------------------------------------------------------------------------------
+// Elastic-plastic contacts. Both laws of `contact` unload (and reload below the largest
+// overlap so far, `peak`) along a Hertz curve about a residual overlap: force
+// kp (delta - residual)_+^{3/2}, with (residual, kp) functions of the peak and the contact's
+// constants alone (`Unloading`). Below first yield residual = 0 and kp = kappa: Hertz, to the
+// bit. The kernels compute the pair when the peak grows, and the force every step from it.
+// Written once over the number type T: `double` for the values and `Dual<N>` for their
+// partial derivatives by the N inputs (forward mode, the chain rule applied operation by
+// operation as JAX's jvp applies it).
+
+template <int N>
+struct Dual {
+  double v;
+  double d[N];
+};
+
+template <int N>
+HC_HD inline Dual<N> Constant(double v) {
+  Dual<N> r;
+  r.v = v;
+  for (int k = 0; k < N; ++k) r.d[k] = 0.0;
+  return r;
+}
+// input k of N, at value v
+template <int N>
+HC_HD inline Dual<N> Input(double v, int k) {
+  Dual<N> r = Constant<N>(v);
+  r.d[k] = 1.0;
+  return r;
+}
+// r = f(x) with f'(x) = slope
+template <int N>
+HC_HD inline Dual<N> Chain(double v, double slope, const Dual<N>& x) {
+  Dual<N> r;
+  r.v = v;
+  for (int k = 0; k < N; ++k) r.d[k] = slope * x.d[k];
+  return r;
+}
+template <int N>
+HC_HD inline Dual<N> operator+(const Dual<N>& a, const Dual<N>& b) {
+  Dual<N> r;
+  r.v = a.v + b.v;
+  for (int k = 0; k < N; ++k) r.d[k] = a.d[k] + b.d[k];
+  return r;
+}
+template <int N>
+HC_HD inline Dual<N> operator-(const Dual<N>& a, const Dual<N>& b) {
+  Dual<N> r;
+  r.v = a.v - b.v;
+  for (int k = 0; k < N; ++k) r.d[k] = a.d[k] - b.d[k];
+  return r;
+}
+template <int N>
+HC_HD inline Dual<N> operator*(const Dual<N>& a, const Dual<N>& b) {
+  Dual<N> r;
+  r.v = a.v * b.v;
+  for (int k = 0; k < N; ++k) r.d[k] = a.d[k] * b.v + a.v * b.d[k];
+  return r;
+}
+template <int N>
+HC_HD inline Dual<N> operator/(const Dual<N>& a, const Dual<N>& b) {
+  Dual<N> r;
+  r.v = a.v / b.v;
+  for (int k = 0; k < N; ++k) r.d[k] = (a.d[k] - r.v * b.d[k]) / b.v;
+  return r;
+}
+template <int N>
+HC_HD inline Dual<N> operator+(const Dual<N>& a, double b) { return a + Constant<N>(b); }
+template <int N>
+HC_HD inline Dual<N> operator-(double a, const Dual<N>& b) { return Constant<N>(a) - b; }
+template <int N>
+HC_HD inline Dual<N> operator*(double a, const Dual<N>& b) { return Chain(a * b.v, a, b); }
+template <int N>
+HC_HD inline Dual<N> operator*(const Dual<N>& a, double b) { return Chain(a.v * b, b, a); }
+template <int N>
+HC_HD inline Dual<N> operator/(const Dual<N>& a, double b) { return Chain(a.v / b, 1.0 / b, a); }
+
+// the constant v as a number of x's type
+HC_HD inline double Like(double, double v) { return v; }
+template <int N>
+HC_HD inline Dual<N> Like(const Dual<N>&, double v) { return Constant<N>(v); }
+HC_HD inline double Value(double x) { return x; }
+HC_HD inline double Sqrt(double x) { return std::sqrt(x); }
+HC_HD inline double Exp(double x) { return std::exp(x); }
+HC_HD inline double Pow(double x, double y) { return std::pow(x, y); }
+template <int N>
+HC_HD inline double Value(const Dual<N>& x) { return x.v; }
+template <int N>
+HC_HD inline Dual<N> Sqrt(const Dual<N>& x) {
+  const double r = std::sqrt(x.v);
+  return Chain(r, 0.5 / r, x);
+}
+template <int N>
+HC_HD inline Dual<N> Exp(const Dual<N>& x) {
+  const double e = std::exp(x.v);
+  return Chain(e, e, x);
+}
+// x^y, y a constant: y x^(y - 1) dx
+template <int N>
+HC_HD inline Dual<N> Pow(const Dual<N>& x, double y) {
+  return Chain(std::pow(x.v, y), y * std::pow(x.v, y - 1.0), x);
+}
+// x^y (x > 0): y x^(y - 1) dx + log(x) x^y dy
+template <int N>
+HC_HD inline Dual<N> Pow(const Dual<N>& x, const Dual<N>& y) {
+  Dual<N> r;
+  r.v = std::pow(x.v, y.v);
+  const double by_x = y.v * std::pow(x.v, y.v - 1.0), by_y = std::log(x.v) * r.v;
+  for (int k = 0; k < N; ++k) r.d[k] = by_x * x.d[k] + by_y * y.d[k];
+  return r;
+}
+
+// The unloading curve of an elastic-plastic contact: its residual overlap (m) and stiffness
+// (N/m^{3/2}).
+template <class T>
+struct Unloading {
+  T residual, kappa;
+};
+
+// contact.overlap_at_force: (F / kappa)^{2/3} for F > 0, else 0, m
+template <class T>
+HC_HD inline T HertzOverlap(const T& force, const T& kappa) {
+  return Value(force) > 0.0 ? Pow(force / kappa, 2.0 / 3.0) : 0.0 * force;
+}
+
+// contact.thornton_contact's unloading curve after the largest overlap `peak` (m), with
+// Hertz stiffness `kappa` and yield force `yield_force` (N, finite)
+template <class T>
+HC_HD inline Unloading<T> ThorntonUnloading(const T& peak, const T& kappa, const T& yield_force) {
+  const T yield_overlap = HertzOverlap(yield_force, kappa);
+  if (!(Value(peak) > Value(yield_overlap))) return {0.0 * peak, kappa};  // not yielded: Hertz
+  const T yield_stiffness = 1.5 * yield_force / yield_overlap;
+  const T max_force = yield_force + yield_stiffness * (peak - yield_overlap);
+  const T radius_ratio = Pow((2.0 * max_force + yield_force) / 3.0, 1.5) / (max_force * Sqrt(yield_force));
+  const T plastic_kappa = kappa * Sqrt(radius_ratio);
+  return {peak - HertzOverlap(max_force, plastic_kappa), plastic_kappa};
+}
+
+// contact.jackson_green_contact: the hardness ratio h is the kernels' input (contact's
+// JG_HARDNESS_RATIO in the chain), the transition ratio contact.JG_TRANSITION_RATIO and the
+// constants of JG's fit are these
+constexpr double kJgTransition = 1.9;
+
+// JG's P / P_c at delta / delta_c = `ratio` with the hardness held at h sigma_Y
+// (contact._jg_loading_ratio)
+template <class T>
+HC_HD inline T JgLoadingRatio(const T& ratio, const T& c, const T& hardness) {
+  const T elastic = Exp(-0.25 * Pow(ratio, 5.0 / 12.0)) * Pow(ratio, 1.5);
+  const T plastic = 4.0 * hardness / c * (1.0 - Exp(-1.0 * Pow(ratio, 5.0 / 9.0) / 25.0)) * ratio;
+  return elastic + plastic;
+}
+
+// contact.jackson_green_contact's unloading curve after the largest overlap `peak` (m):
+// Hertz stiffness `kappa`, reduced radius `radius` (m), yield stress `stress` (Pa), Poisson
+// ratio `poisson`, hardness ratio `hardness`
+template <class T>
+HC_HD inline Unloading<T> JacksonGreenUnloading(const T& peak, const T& kappa, const T& radius, const T& stress,
+                                               const T& poisson, const T& hardness) {
+  const T modulus = 0.75 * kappa / Sqrt(radius);
+  const T c = 1.295 * Exp(0.736 * poisson);
+  const T critical = 3.141592653589793 * c * stress / (2.0 * modulus);
+  const T delta_c = critical * critical * radius;
+  const T ratio = peak / delta_c;
+  if (!(Value(ratio) > kJgTransition)) return {0.0 * peak, kappa};  // not yielded: Hertz
+  const T force_c = kappa * Pow(delta_c, 1.5);
+  const T area_exponent = 0.14 * Exp(23.0 * stress / modulus);
+  const T t = Like(peak, kJgTransition);
+  const T loading = JgLoadingRatio(ratio, c, hardness) - JgLoadingRatio(t, c, hardness) + std::pow(kJgTransition, 1.5);
+  const T max_force = force_c * loading;
+  const T radius_sq = radius * peak * Pow(ratio / kJgTransition, area_exponent);
+  const T span = 0.75 * max_force / (modulus * Sqrt(radius_sq));
+  return {peak - span, max_force / Pow(span, 1.5)};
+}
+
 }  // namespace hertzchain

@@ -16,7 +16,10 @@ physics it runs, so that the conservative case pays nothing for the rest:
   forward run with the books (largest forces, viscous work, friction losses, final state:
   what sweeps read), not differentiable. Both also run power-law contacts
   (`contact.power_law_force`, its tangents in the exponent and reference overlap included)
-  from a library of their own, built on first use, as the dashpot's runs are.
+  and elastic-plastic ones (`contact.thornton_contact`, `contact.jackson_green_contact`,
+  every contact's largest overlap so far carried through the steps, tangents in the yield
+  constants included), each law from a library of its own, built on first use, as the
+  dashpot's runs are.
 
 A run's blocks of chains are spread over the CPU's cores (XLA's intra-op thread pool, the
 first free thread taking the next block; the runs of a process together use at most one
@@ -31,8 +34,8 @@ Under `jax.vmap` (`jax.custom_batching.custom_vmap`) a mapped batch of inputs jo
 kernel's chain axis and mapped tangents its direction axis, so a batch of fits, `jacfwd`
 of `vmap` and `vmap` of `jacfwd` are one kernel run each.
 
-Everything else (elastic-plastic contacts, the power law with a dashpot or in an undamped run
-with the books, the books of a damped chain on a GPU, reverse mode) runs the JAX kernel,
+Everything else (laws other than Hertz's with a dashpot or on a GPU, the books of a damped
+chain on a GPU, reverse mode) runs the JAX kernel,
 which stays the reference: they agree to round-off, values and derivatives
 (`tests/test_native.py`), and every kernel's laws are held to `contact`'s
 (`tests/test_batched.py::test_every_kernel_applies_the_laws_of_contact`).
@@ -65,6 +68,8 @@ import jax
 import numpy as np
 from jax.interpreters import partial_eval
 
+from . import contact
+
 try:
     import fcntl
 except ImportError:  # not a POSIX system: builds are not serialised between processes
@@ -86,12 +91,14 @@ DASHPOT_DEFINE = "HC_DASHPOT_LIBRARY"
 DASHPOT_FULL_TARGET = "hertzchain_chain_full_forward_dashpot"
 DASHPOT_TANGENT_TARGET = "hertzchain_chain_full_tangent_dashpot"
 DASHPOT_BOOKS_TARGET = "hertzchain_chain_full_books_dashpot"
-# The full kernel with every contact on the power law (`contact.power_law_force`), likewise in a
-# library of its own (`-D` POWER_DEFINE), built on first use.
-POWER_DEFINE = "HC_POWER_LIBRARY"
-POWER_FULL_TARGET = "hertzchain_chain_full_forward_power"
-POWER_TANGENT_TARGET = "hertzchain_chain_full_tangent_power"
-POWER_BOOKS_TARGET = "hertzchain_chain_full_books_power"
+# The full kernel with every contact on another law than Hertz's (`batched.KernelFlags.law`):
+# the power law (`contact.power_law_force`), Thornton's and Jackson-Green's elastic-plastic
+# laws (`contact.thornton_contact`, `contact.jackson_green_contact`), likewise each in a
+# library of its own (`-D` its define), built on first use; its targets are
+# "hertzchain_chain_full_{forward,tangent,books}_<law>".
+LAW_DEFINES = {"power_law": "HC_POWER_LIBRARY", "thornton": "HC_THORNTON_LIBRARY",
+               "jackson_green": "HC_JACKSON_GREEN_LIBRARY"}
+CONTACT_LAWS = ("hertz",) + tuple(LAW_DEFINES)
 # IEEE arithmetic as the JAX kernel rounds it: no contraction into fused multiply-adds
 # other than the source's own `std::fma`, no fast math; -fno-math-errno lets the square
 # roots vectorise; -pthread for the threads the blocks of chains run on.
@@ -296,12 +303,19 @@ def _load_dashpot() -> None:
                    (DASHPOT_BOOKS_TARGET, "HertzChainFullBooks")))
 
 
+def _law_target(kind: str, law: str) -> str:
+    """The FFI target of a full run (`kind`: "full", "tangent" or "books") on `law`'s library."""
+    return f"hertzchain_chain_full_{'forward' if kind == 'full' else kind}_{law}"
+
+
 @functools.cache
-def _load_power() -> None:
-    """Build (if needed), load and register the power law's full kernels (`POWER_DEFINE`)."""
-    _load_library((f"-D{POWER_DEFINE}",), "the fused chain kernel's power-law runs",
-                  ((POWER_FULL_TARGET, "HertzChainFullForward"), (POWER_TANGENT_TARGET, "HertzChainFullTangent"),
-                   (POWER_BOOKS_TARGET, "HertzChainFullBooks")))
+def _load_law(law: str) -> None:
+    """Build (if needed), load and register the full kernels of a law other than Hertz's
+    (`LAW_DEFINES`)."""
+    _load_library((f"-D{LAW_DEFINES[law]}",), f"the fused chain kernel's {law} runs",
+                  tuple((_law_target(kind, law), symbol) for kind, symbol in (
+                      ("full", "HertzChainFullForward"), ("tangent", "HertzChainFullTangent"),
+                      ("books", "HertzChainFullBooks"))))
 
 
 def available() -> bool:
@@ -331,16 +345,13 @@ class FusedKernel(NamedTuple):
 
 def kernel_for(flags, devices) -> FusedKernel | None:
     """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
-    devices, or None (the JAX kernel: elastic-plastic contacts, the power law on a GPU, with a
-    dashpot or in an undamped run with the books, the books of damping or friction on a GPU,
-    devices of another kind, no compiler)."""
+    devices, or None (the JAX kernel: laws other than Hertz's on a GPU or with a dashpot, the
+    books of damping or friction on a GPU, devices of another kind, no compiler)."""
     platforms = {d.platform for d in devices} if devices else {jax.default_backend()}
-    if flags.law == "power_law":  # the full kernel's power-law library, on the host, no dashpot
-        if flags.dashpot or (flags.ledger and not flags.full_state) or platforms != {"cpu"} or not available():
+    if flags.law != "hertz":  # the full kernel's library of the law (`LAW_DEFINES`), on the host, no dashpot
+        if flags.dashpot or platforms != {"cpu"} or not available():
             return None
         return FusedKernel("full", "host")
-    if flags.law != "hertz":
-        return None
     physics = "full" if flags.full_state else "conservative"
     if platforms == {"cpu"} and available():
         return FusedKernel(physics, "host")
@@ -366,8 +377,8 @@ _THREAD_SYMBOLS = {"forward": "HertzChainThreadForward", "full": "HertzChainThre
                    "tangent": "HertzChainThreadFullTangent"}
 _HOST_TARGETS = {"forward": TARGET, "full": FULL_TARGET, "tangent": TANGENT_TARGET, "books": BOOKS_TARGET,
                  "full_dashpot": DASHPOT_FULL_TARGET, "tangent_dashpot": DASHPOT_TANGENT_TARGET,
-                 "books_dashpot": DASHPOT_BOOKS_TARGET, "full_power": POWER_FULL_TARGET,
-                 "tangent_power": POWER_TANGENT_TARGET, "books_power": POWER_BOOKS_TARGET}
+                 "books_dashpot": DASHPOT_BOOKS_TARGET} | {
+                     f"{kind}_{law}": _law_target(kind, law) for law in LAW_DEFINES for kind in ("full", "tangent", "books")}
 
 
 def _nvcc() -> str | None:
@@ -451,12 +462,13 @@ class _Ffi(NamedTuple):
     def call(self, kind: str, shapes, args, index, attrs) -> tuple:
         """`kind`: "forward", "full", "tangent", "books", the last three with a dashpot
         ("_dashpot": its own host library; the thread kernels compile it into the same one) or
-        on the power law ("_power": its own host library)."""
+        on another law ("_<law>", a `LAW_DEFINES` key: its own host library)."""
         if self.backend == "host":
             if kind.endswith("_dashpot"):
                 _load_dashpot()
-            if kind.endswith("_power"):
-                _load_power()
+            for law in LAW_DEFINES:
+                if kind.endswith(f"_{law}"):
+                    _load_law(law)
             return tuple(jax.ffi.ffi_call(_HOST_TARGETS[kind], shapes)(*args, index, **attrs))
         target = _thread_target(self.backend, int(self.rows), kind.removesuffix("_dashpot"))
         return tuple(jax.ffi.ffi_call(target, shapes)(*args, channels=index, **attrs))
@@ -563,7 +575,7 @@ def _fold_directions(size: int, batched, tangents):
 
 def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples: int,
              channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
-             dashpot: bool = False, power: bool = False, backend: str = "host"):
+             dashpot: bool = False, law: str = "hertz", backend: str = "host"):
     """The full step (`batched._step` with velocities and accelerations apart: damping,
     friction) from displacements `x`, velocities `v` and accelerations `a` (bodies + 1, B)
     at the impact, through `n_samples` samples of `steps_per_sample` steps of `dt_s`
@@ -576,48 +588,55 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     without tangents): a vmapped batch of fits, `jacfwd` of `vmap` and `vmap` of `jacfwd`
     are one kernel run each. Reverse mode is not available (use the JAX kernel,
     `kernel="jax"`). `dashpot`: a linear dashpot on every contact (`p["dashpot"]`, N s/m;
-    needs `viscous`), its terms compiled into this call's kernel only. `power`: every contact
-    on `contact.power_law_force` (`p["exponent"]`, `p["reference_overlap_m"]`; host only, no
-    dashpot), in a library of its own. `backend` as for `run`."""
+    needs `viscous`), its terms compiled into this call's kernel only. `law`: the contacts'
+    elastic law (`batched.KernelFlags.law`: "hertz", or "power_law" on `contact.power_law_force`,
+    "thornton" or "jackson_green" on the elastic-plastic laws of `forces.elastic_parts`, from
+    the arrays `batched` stores for them; host only, no dashpot, each in a library of its own;
+    an elastic-plastic run starts from the largest overlaps so far at `x`). `backend` as for
+    `run`."""
     _require(backend)
-    if power and (backend != "host" or dashpot):
-        raise ValueError("run_full: the power law runs on the host kernel, without a dashpot.")
-    args = _full_args(p, jax.numpy.concatenate([x, v, a]), preload, springs, dashpot, power, backend)
+    _check_law(law, dashpot, backend, "run_full")
+    args = _full_args(p, jax.numpy.concatenate([x, v, a]), preload, springs, dashpot, law, backend)
     config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
-              bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), bool(power), backend)
+              bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), law, backend)
     return _full_call(config)(*args)
 
 
 def run_full_books(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
                    channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
-                   dashpot: bool = False, power: bool = False):
+                   dashpot: bool = False, law: str = "hertz"):
     """`run_full` with the books, on the host: advances the packed state `state0` (rows, B)
-    of `batched._Layout` for the full step with the books (x, v, a; every contact's largest
-    total force; with damping, the viscous force on every body; the energy dissipated by
+    of `batched._Layout` for the full step with the books (x, v, a; for elastic-plastic
+    contacts every contact's largest overlap so far; every contact's largest total force; with damping, the viscous force on every body; the energy dissipated by
     damping and friction so far) and returns (the (B, n_samples) force traces, one per
     channel, N; the final packed state). The books' sums over the bodies follow
     `batched._step`'s order; the run is not differentiable (sweeps; fits call `run_full`).
-    `dashpot`, `power` as for `run_full`."""
+    `dashpot`, `law` as for `run_full`."""
     _require("host")
     if dashpot and not viscous:
         raise ValueError("run_full_books: a dashpot needs viscous=True (the kernel's rates come with the damping).")
-    if power and dashpot:
-        raise ValueError("run_full_books: the power law runs without a dashpot.")
-    args = _full_args(p, state0, preload, springs, dashpot, power, "host") + (p["mass"],)
+    _check_law(law, dashpot, "host", "run_full_books")
+    args = _full_args(p, state0, preload, springs, dashpot, law, "host") + (p["mass"],)
     attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample), viscous=np.int64(viscous),
                  friction=np.int64(friction), extras=np.int64(preload or springs), dashpot=np.int64(dashpot))
     call = _Ffi("host", p["inv_mass"].shape[-2], n_samples)
     shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + call.trace_shapes(state0, len(channels))
     index = np.asarray(channels, dtype=np.int64)
-    kind = "books_dashpot" if dashpot else "books_power" if power else "books"
+    kind = "books_dashpot" if dashpot else "books" if law == "hertz" else f"books_{law}"
     state, *traces = call.call(kind, shapes, args, index, attrs)
     return tuple(traces), state
 
 
-def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool, power: bool, backend: str) -> tuple:
+def _check_law(law: str, dashpot: bool, backend: str, caller: str) -> None:
+    if law not in CONTACT_LAWS:
+        raise ValueError(f"{caller}: law must be one of {CONTACT_LAWS}, got {law!r}.")
+    if law != "hertz" and (backend != "host" or dashpot):
+        raise ValueError(f"{caller}: the {law} law runs on the host kernel, without a dashpot.")
+
+
+def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool, law: str, backend: str) -> tuple:
     """The full kernels' arrays: the state, then the eight parameter arrays (zeros for the
-    physics a run does not have) and, for the host kernels, the power law's exponent and
-    reference overlap (2, 1 or B)."""
+    physics a run does not have) and, for the host kernels, the law's (`_law_array`)."""
     width = lambda leaf: leaf.shape[-1]  # noqa: E731
     zeros = lambda leaf: jax.numpy.zeros_like(leaf)  # noqa: E731
     return (
@@ -631,20 +650,33 @@ def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool, pow
         jax.numpy.reshape(p["friction"], (1, width(p["friction"]))),
         # the linear dashpot (N s/m, `contact.contact_force`), zeros without one
         jax.numpy.reshape(p["dashpot"], (1, width(p["dashpot"]))) if dashpot else jax.numpy.zeros((1, 1)),
-    ) + ((_power_law(p) if power else jax.numpy.zeros((2, 1))),) * (backend == "host")
+    ) + (_law_array(p, law),) * (backend == "host")
 
 
-def _power_law(p: dict):
-    """The power law's exponent and reference overlap (m) as the kernels' (2, 1 or B) array."""
-    rows = [jax.numpy.reshape(p[name], (1, -1)) for name in ("exponent", "reference_overlap_m")]
+def _law_array(p: dict, law: str):
+    """The law's parameters as the host kernels' (rows, 1 or B) array (`chain_kernel.cc`'s
+    `LawRows`): Hertz's, two rows of zeros; the power law's exponent and reference overlap
+    (m); Thornton's, every contact's yield force (N); Jackson-Green's, every contact's yield
+    force, reduced radius (m) and Poisson ratio, then the yield stress (Pa) and the hardness
+    ratio (`contact.JG_HARDNESS_RATIO`, the one `forces.elastic_parts` applies)."""
+    if law == "hertz":
+        return jax.numpy.zeros((2, 1))
+    if law == "power_law":
+        rows = [p["exponent"], p["reference_overlap_m"]]
+    elif law == "thornton":
+        rows = [p["yield_force_n"]]
+    else:
+        hardness = jax.numpy.full((1,), contact.JG_HARDNESS_RATIO)
+        rows = [p["yield_force_n"], p["reduced_radius_m"], p["poisson"], p["yield_stress_pa"], hardness]
+    rows = [jax.numpy.reshape(row, (-1, row.shape[-1]) if row.ndim > 1 else (1, -1)) for row in rows]
     width = max(row.shape[-1] for row in rows)
-    return jax.numpy.concatenate([jax.numpy.broadcast_to(row, (1, width)) for row in rows])
+    return jax.numpy.concatenate([jax.numpy.broadcast_to(row, (row.shape[0], width)) for row in rows])
 
 
 @functools.cache
 def _full_call(config):
     """The full kernel for one configuration as a function of its arrays, with its JVP."""
-    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, dashpot, power, backend = config
+    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, dashpot, law, backend = config
     if dashpot and not viscous:
         raise ValueError("run_full: a dashpot needs viscous=True (the kernel's rates come with the damping).")
     # dashpot: the kernel with the dashpot's terms compiled in (`DASHPOT_DEFINE`)
@@ -653,8 +685,8 @@ def _full_call(config):
                  dashpot=np.int64(dashpot))
     index = np.asarray(channels, dtype=np.int64)
     n_args = 10 if backend == "host" else 9  # the state, the eight parameter arrays (host: and the law's)
-    kinds = ("full_dashpot", "tangent_dashpot") if dashpot else ("full_power", "tangent_power") if power else (
-        "full", "tangent")
+    kinds = ("full_dashpot", "tangent_dashpot") if dashpot else ("full", "tangent") if law == "hertz" else (
+        f"full_{law}", f"tangent_{law}")
 
     def ffi(args):
         return _Ffi(backend, args[1].shape[-2], n_samples)

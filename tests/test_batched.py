@@ -258,6 +258,9 @@ LAWS = {
     "all_together": dict(viscous=True, springs=True, preload=True, friction=True, dashpot=True),
     "power_law": dict(viscous=False, springs=False, preload=True, friction=False, law="power_law"),
     "power_law_damped_and_friction": dict(viscous=True, springs=True, preload=True, friction=True, law="power_law"),
+    "thornton": dict(viscous=False, springs=False, preload=True, friction=False, law="thornton"),
+    "jackson_green_damped_and_friction": dict(viscous=True, springs=True, preload=True, friction=True,
+                                              law="jackson_green"),
 }
 
 
@@ -288,8 +291,8 @@ def test_every_kernel_applies_the_laws_of_contact(law, kernel):
     flags = batched.KernelFlags(**LAWS[law], ledger=False)
     if kernel.endswith("_conservative") and flags.full_state:
         pytest.skip("the conservative kernels have no damping or friction (the full ones do)")
-    if flags.law == "power_law" and kernel not in ("jax", "native_full"):
-        pytest.skip("the power law is in the JAX kernel and the host's full kernel only")
+    if flags.law != "hertz" and kernel not in ("jax", "native_full"):
+        pytest.skip("laws other than Hertz's are in the JAX kernel and the host's full kernel only")
     v0 = np.array([0.8, 0.05, -0.3])  # m/s: striker speeds (the last one moving away)
     batch = v0.size
     ones = np.ones((2, batch))
@@ -307,6 +310,15 @@ def test_every_kernel_applies_the_laws_of_contact(law, kernel):
     }
     if flags.law == "power_law":  # n = 1.7 about a reference overlap of 1 um
         p |= {"exponent": np.full(batch, 1.7), "reference_overlap_m": np.full(batch, 1e-6)}
+    # elastic-plastic: contact 0 leaves Hertz at about 1.5 um, past the preload's 2.5 um (the
+    # striker moving away unloads it along the flattened curve) and within the fast striker's
+    # reach (loading); the wall contact stays elastic
+    if flags.law == "thornton":
+        p |= {"yield_force_n": np.array([[22.0] * batch, [np.inf] * batch])}
+    if flags.law == "jackson_green":
+        p |= {"yield_force_n": np.array([[1.0] * batch, [np.inf] * batch]),
+              "reduced_radius_m": np.full((2, batch), 2.5e-3), "poisson": np.full((2, batch), 0.28),
+              "yield_stress_pa": np.full(batch, 1.3e9)}
     p = {k: jnp.asarray(v) for k, v in p.items()}
     grid = TimeGrid(dt_s=1e-7, steps_per_sample=3, n_samples=40)
     if kernel == "jax":
@@ -324,16 +336,26 @@ def test_every_kernel_applies_the_laws_of_contact(law, kernel):
         lambda w: w)
     x, v = np.zeros((3, batch)), np.zeros((3, batch))
     v[0] = v0
-    expected, elastic, damped = [], [], []
+    peak = np.asarray(p["overlap0"])  # largest overlaps so far (elastic-plastic laws)
+    expected, elastic, damped, hertz = [], [], [], []
     for _ in range(grid.n_samples):
         for _ in range(grid.steps_per_sample):
             w = kick(v)
             x = x + grid.dt_s * w
             v = kick(w)
+            peak = np.maximum(peak, x[:-1] - x[1:] + np.asarray(p["overlap0"]))
         overlap = x[:-1] - x[1:] + np.asarray(p["overlap0"])
         rate = v[:-1] - v[1:]
         if flags.law == "power_law":
             law = contact.power_law_force(overlap, p["kappa"], p["exponent"], p["reference_overlap_m"])
+        elif flags.law == "thornton":
+            law = np.where(np.isfinite(p["yield_force_n"]), contact.thornton_contact(
+                overlap, peak, p["kappa"], jnp.where(np.isfinite(p["yield_force_n"]), p["yield_force_n"], 1.0))[0],
+                contact.hertz_force(overlap, p["kappa"]))
+        elif flags.law == "jackson_green":  # its constants as `forces.elastic_parts` gives them
+            law = np.where(np.isfinite(p["yield_force_n"]), contact.jackson_green_contact(
+                overlap, peak, p["kappa"], p["reduced_radius_m"], p["yield_stress_pa"], p["poisson"])[0],
+                contact.hertz_force(overlap, p["kappa"]))
         else:
             law = contact.hertz_force(overlap, p["kappa"])
         if flags.viscous:
@@ -345,10 +367,13 @@ def test_every_kernel_applies_the_laws_of_contact(law, kernel):
             force = force + contact.spring_force(overlap, p["spring"])
         expected.append(np.asarray(force))
         elastic.append(np.asarray(law))
+        hertz.append(np.asarray(contact.hertz_force(overlap, p["kappa"])))
     # (contacts, B, n_samples)
-    expected, elastic, damped = (np.stack(a, axis=-1) if a else None for a in (expected, elastic, damped))
+    expected, elastic, damped, hertz = (np.stack(a, axis=-1) if a else None for a in (expected, elastic, damped, hertz))
     scale = np.max(np.abs(expected))
     assert scale > 1.0 and np.any(elastic[0] == 0.0)  # loaded contacts, and an open one
+    if flags.plastic:  # contact 0 yields on loading (below Hertz) and opens above zero overlap on unloading
+        assert elastic[0, 0, -1] < 0.9 * hertz[0, 0, -1] and np.any((elastic[0, 2] == 0.0) & (hertz[0, 2] > 0.0))
     if flags.viscous:  # the clip at zero acts: an opening contact with elastic force left
         assert np.any((elastic[0] > 0) & (damped[0] == 0.0))
     if flags.friction:  # the slow striker sticks

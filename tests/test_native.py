@@ -340,7 +340,8 @@ def test_power_law_runs_on_the_full_kernel_equal_to_the_jax_kernel():
     ours, reference = assert_forces_equal_the_jax_kernels(base, grid, books=True)
     assert_books_equal_the_jax_kernels(ours, reference)
     elastic, _ = _batch(contact_exponent=1.4)
-    assert native.kernel_for(kernel_flags(elastic), None) is None  # undamped books: the JAX kernel
+    assert native.kernel_for(kernel_flags(elastic), None) == native.FusedKernel("full", "host")
+    assert_books_equal_the_jax_kernels(*assert_forces_equal_the_jax_kernels(elastic, grid, books=True))
     assert_forces_equal_the_jax_kernels(elastic, grid, books=False)
 
     def traced(q, kernel):
@@ -353,13 +354,60 @@ def test_power_law_runs_on_the_full_kernel_equal_to_the_jax_kernel():
 
     q = jnp.asarray([1e-6, 0.1, 1.6, 2e-6, 1.0])
     jacobian = jax.jit(jax.jacfwd(lambda q: traced(q, "auto")))
-    assert jacobian.lower(q).as_text().count(f"custom_call @{native.POWER_TANGENT_TARGET}") == 1
+    assert jacobian.lower(q).as_text().count(f"custom_call @{native._law_target('tangent', 'power_law')}") == 1
     jac = np.asarray(jacobian(q))
     expected = np.asarray(jax.jit(jax.jacfwd(lambda q: traced(q, "jax")))(q))
     for i in range(q.size):
         scale = np.max(np.abs(expected[..., i]))
         assert scale > 0.0
         np.testing.assert_allclose(jac[..., i], expected[..., i], rtol=0, atol=1e-10 * scale)
+
+
+@pytest.mark.parametrize("law", ["thornton", "jackson_green"])
+def test_elastic_plastic_contacts_run_on_the_full_kernel_equal_to_the_jax_kernel(law):
+    """Elastic-plastic contacts (`contact.thornton_contact`, `contact.jackson_green_contact`;
+    sigma_Y = 1.2 GPa, so that the faster strikers yield the contacts) run the full C++
+    kernel's library of their law, every contact's largest overlap carried through the steps:
+    an undamped sweep and a damped, frictional, preloaded one with the books, forces, largest
+    forces and energies (the plastic work included) equal to the JAX kernel's to round-off;
+    and `jax.jacfwd` through `record_batched` (damped, frictional, preloaded) in damping, the
+    yield stress, the impact speed and the beads' Poisson ratio (the unloading curves' own
+    tangents, carried from the peaks) equal to `jax.jacfwd` through the JAX kernel."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    from hertzchain.batched import record_batched
+
+    plastic = dict(plasticity=True, plastic_law=law, bead_yield_stress_pa=1.2e9)
+    elastic, _ = _batch(speeds=(0.3, 3.0, 1.5), **plastic)
+    grid = hc.choose_time_grid(elastic, t_end_s=0.4e-3, sample_interval_s=2e-6)  # the first contacts yield
+    assert native.kernel_for(kernel_flags(elastic), None) == native.FusedKernel("full", "host")
+    ours, reference = assert_forces_equal_the_jax_kernels(elastic, grid, books=True)
+    assert_books_equal_the_jax_kernels(ours, reference)
+    spent = np.asarray(ours.dissipated_j) / np.asarray(ours.initial_energy_j)  # plastic work alone here
+    assert np.all(spent[2:] > 0.5) and np.all(spent >= 0.0), spent  # the 3 m/s strikers yield the contacts
+
+    base, _ = _batch(speeds=(0.3, 3.0, 1.5), eta_s=1e-6, mu=0.1, precompression_n=1.0, **plastic)
+    flags = kernel_flags(base)
+    assert_books_equal_the_jax_kernels(*assert_forces_equal_the_jax_kernels(base, grid, books=True))
+
+    def traced(q, kernel):
+        ones = jnp.ones(base.eta_s.shape)
+        setup = eqx.tree_at(
+            lambda s: (s.eta_s, s.bead_yield_stress_pa, s.striker_velocity_m_s, s.bead_poisson), base,
+            (q[0] * ones, q[1] * ones, q[2] * base.striker_velocity_m_s, q[3] * base.bead_poisson))
+        out = record_batched(setup, grid, Recording((2, 6)), flags._replace(ledger=False), kernel=kernel)
+        return jnp.stack([out.forces_n[name] for name in out.channel_names])
+
+    q = jnp.asarray([1e-6, 1.2e9, 1.0, 1.0])
+    jacobian = jax.jit(jax.jacfwd(lambda q: traced(q, "auto")))
+    assert jacobian.lower(q).as_text().count(f"custom_call @{native._law_target('tangent', law)}") == 1
+    jac = np.asarray(jacobian(q))
+    expected = np.asarray(jax.jit(jax.jacfwd(lambda q: traced(q, "jax")))(q))
+    for i in range(q.size):
+        scale = np.max(np.abs(expected[..., i]))
+        assert scale > 0.0
+        np.testing.assert_allclose(jac[..., i], expected[..., i], rtol=0, atol=1e-11 * scale)
 
 
 _TRANSFORMS = {
