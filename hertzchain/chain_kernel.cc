@@ -382,6 +382,34 @@ struct BooksIO {
 
 using hertzchain::KickSlope;
 
+// The unloading curve of an elastic-plastic contact (`hertzchain::Unloading`) from its inputs
+// `in`: the largest overlap so far (m), kappa, then the law's own (Thornton: the yield force;
+// Jackson-Green: reduced radius, yield stress, Poisson ratio, hardness ratio), and, where
+// `slopes` is given, the partial derivatives of the residual overlap (first) and of the
+// stiffness (then) by each input. Out of line: compiled once per library, not once per
+// variant of the kernel (a third of the library's build time), and called only when a
+// contact's largest overlap grows.
+template <Law kLaw>
+__attribute__((noinline)) hertzchain::Unloading<double> PlasticCurve(const double* in, double* slopes) {
+  constexpr int kN = kLaw == Law::kJacksonGreen ? 6 : 3;
+  if (slopes != nullptr) {
+    hertzchain::Dual<kN> x[kN];
+    for (int k = 0; k < kN; ++k) x[k] = hertzchain::Input<kN>(in[k], k);
+    hertzchain::Unloading<hertzchain::Dual<kN>> t;
+    if constexpr (kLaw == Law::kThornton)
+      t = hertzchain::ThorntonUnloading(x[0], x[1], x[2]);
+    else
+      t = hertzchain::JacksonGreenUnloading(x[0], x[1], x[2], x[3], x[4], x[5]);
+    for (int k = 0; k < kN; ++k) {
+      slopes[k] = t.residual.d[k];
+      slopes[kN + k] = t.kappa.d[k];
+    }
+    return {t.residual.v, t.kappa.v};
+  }
+  if constexpr (kLaw == Law::kThornton) return hertzchain::ThorntonUnloading<double>(in[0], in[1], in[2]);
+  return hertzchain::JacksonGreenUnloading<double>(in[0], in[1], in[2], in[3], in[4], in[5]);
+}
+
 template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras, bool kDashpot, bool kBooks,
           Law kLaw>
 void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
@@ -490,38 +518,25 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         }
       return;
     }
+    double in[kInputs], slopes[2 * kInputs];  // `PlasticCurve`'s inputs and partials
+    in[0] = pk[c];
+    in[1] = kap[c];
     if constexpr (kLaw == Law::kThornton) {
-      const double fy = law[c];
-      const hertzchain::Unloading<double> u = hertzchain::ThorntonUnloading<double>(pk[c], kap[c], fy);
-      res[c] = u.residual;
-      kpl[c] = u.kappa;
-      if constexpr (kTangent) {
-        using D3 = hertzchain::Dual<3>;
-        const hertzchain::Unloading<D3> t = hertzchain::ThorntonUnloading(
-            hertzchain::Input<3>(pk[c], 0), hertzchain::Input<3>(kap[c], 1), hertzchain::Input<3>(fy, 2));
-        for (int k = 0; k < 3; ++k) {
-          dres[k * plastic_size + c] = t.residual.d[k];
-          dkpl[k * plastic_size + c] = t.kappa.d[k];
-        }
-      }
-    } else if constexpr (kLaw == Law::kJacksonGreen) {
-      const double radius = law[(contacts + i) * kLanes + j], poisson = law[(2 * contacts + i) * kLanes + j];
-      const double stress = law[3 * contacts * kLanes + j], hardness = law[(3 * contacts + 1) * kLanes + j];
-      const hertzchain::Unloading<double> u =
-          hertzchain::JacksonGreenUnloading<double>(pk[c], kap[c], radius, stress, poisson, hardness);
-      res[c] = u.residual;
-      kpl[c] = u.kappa;
-      if constexpr (kTangent) {
-        using D6 = hertzchain::Dual<6>;
-        const hertzchain::Unloading<D6> t = hertzchain::JacksonGreenUnloading(
-            hertzchain::Input<6>(pk[c], 0), hertzchain::Input<6>(kap[c], 1), hertzchain::Input<6>(radius, 2),
-            hertzchain::Input<6>(stress, 3), hertzchain::Input<6>(poisson, 4), hertzchain::Input<6>(hardness, 5));
-        for (int k = 0; k < 6; ++k) {
-          dres[k * plastic_size + c] = t.residual.d[k];
-          dkpl[k * plastic_size + c] = t.kappa.d[k];
-        }
-      }
+      in[2] = law[c];  // the yield force
+    } else {
+      in[2] = law[(contacts + i) * kLanes + j];        // reduced radius
+      in[3] = law[3 * contacts * kLanes + j];          // yield stress
+      in[4] = law[(2 * contacts + i) * kLanes + j];    // Poisson ratio
+      in[5] = law[(3 * contacts + 1) * kLanes + j];    // hardness ratio
     }
+    const hertzchain::Unloading<double> u = PlasticCurve<kLaw>(in, kTangent ? slopes : nullptr);
+    res[c] = u.residual;
+    kpl[c] = u.kappa;
+    if constexpr (kTangent)
+      for (int k = 0; k < kInputs; ++k) {
+        dres[k * plastic_size + c] = slopes[k];
+        dkpl[k * plastic_size + c] = slopes[kInputs + k];
+      }
   };
   // the tangent of input k of contact i, lane j, along direction d (`kInputs`' order)
   auto plastic_input = [&](int k, int64_t d, int64_t i, int64_t j) {
@@ -688,7 +703,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     }
   };
   hertzchain::PowerLawSlopes slopes[kLanes];  // contact i's, lane by lane (kPower and kTangent)
-  double grow[kLanes];  // kPlastic and kTangent: d max(peak, overlap) / d overlap of contact i (1, 1/2 or 0)
+  double grow[kLanes];   // kPlastic and kTangent: d max(peak, overlap) / d overlap of contact i (1, 1/2 or 0)
+  double fresh[kLanes];  // kPlastic: 1 where contact i's largest overlap grew and its law yields
 
   for (int64_t n = 0; n < n_samples; ++n) {
     for (int64_t s = 0; s < steps_per_sample; ++s) {
@@ -741,14 +757,6 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double dl = x[ri + j] - x[rn + j];
           if constexpr (kExtras) dl = dl + ov0[ri + j];
           double rt_rate = p_prev[j] - pred;
-          if constexpr (kPlastic) {  // the largest overlap so far, with this one (`batched._step`)
-            const double old = pk[ri + j];
-            if constexpr (kTangent) grow[j] = dl > old ? 1.0 : dl == old ? 0.5 : 0.0;  // JAX's max rule
-            if (dl > old) {
-              pk[ri + j] = dl;
-              if (yields[ri + j] != 0.0) unload(i, j);
-            }
-          }
           double elastic_i;
           double f = contact_force(dl, rt_rate, kj, kvj, dj, spr[ri + j], ri + j, j, &rt, &sm, &elastic_i, &slopes[j],
                                    &plin);
@@ -792,6 +800,28 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           p_prev[j] = pred;
         });
         };
+        if constexpr (kPlastic) {
+          // Contact i's largest overlap so far, with this step's (`batched._step`), before the
+          // sweep: the overlap from body i + 1's drift as the sweep computes it (the same
+          // operations, so the same bits), then the unloading curve of the lanes whose
+          // overlap grew. The sweep itself then has no branch and vectorises.
+          bool grown = false;
+          ForLanes<kLanes>([&](int64_t j) {
+            double w = v[rn + j] + h * a[rn + j];
+            double s_kick;
+            if (kFriction) w = kick(w, loss[j], &s_kick);
+            double dl = x[ri + j] - (x[rn + j] + dt * w);
+            if constexpr (kExtras) dl = dl + ov0[ri + j];
+            const double old = pk[ri + j];
+            if constexpr (kTangent) grow[j] = dl > old ? 1.0 : dl == old ? 0.5 : 0.0;  // JAX's max rule
+            fresh[j] = dl > old && yields[ri + j] != 0.0 ? 1.0 : 0.0;
+            pk[ri + j] = dl > old ? dl : old;
+            grown = grown || fresh[j] != 0.0;
+          });
+          if (grown)
+            for (int64_t j = 0; j < kLanes; ++j)
+              if (fresh[j] != 0.0) unload(i, j);
+        }
         using T = std::true_type;
         using F = std::false_type;
         if (uniform_k[i]) {
