@@ -51,6 +51,16 @@
 #include "chain_ffi.h"
 #include "chain_laws.h"
 
+// The power-law library's powers and logarithms as glibc's vector functions (libmvec, linked
+// by `native` for it): declared SIMD-callable, so that the loops over the lanes that call them
+// vectorise (one scalar call per contact and step left them scalar). glibc declares them so
+// only under -ffast-math, which the kernels do not use; libmvec's functions are accurate to
+// 4 ulp (glibc's manual), the scalar ones to 1.
+#if defined(HC_POWER_LIBRARY) && defined(__x86_64__) && defined(__GLIBC__)
+extern "C" __attribute__((simd("notinbranch"))) double pow(double, double) noexcept;
+extern "C" __attribute__((simd("notinbranch"))) double log(double) noexcept;
+#endif
+
 namespace ffi = xla::ffi;
 
 // HC_PART (set by `native`'s build): which of the library's handlers this translation unit

@@ -189,6 +189,14 @@ def _compile(command_for, path: Path, name: str) -> None:
 SOURCE_PARTS = (1, 2)
 
 
+def _libraries(defines: tuple[str, ...]) -> tuple[str, ...]:
+    """What a library built with `defines` links beyond the C++ runtime: the power-law
+    library, on x86-64 Linux, glibc's vector maths (libmvec: its vectorised `pow` and `log`,
+    declared in `chain_kernel.cc`)."""
+    vector_maths = platform.machine() == "x86_64" and platform.libc_ver()[0] == "glibc"
+    return ("-lmvec",) if vector_maths and f"-D{LAW_DEFINES['power_law']}" in defines else ()
+
+
 def _build(path: Path, defines: tuple[str, ...] = (), source: Path = SOURCE) -> None:
     """Compile the host kernel `source` into `path` (`defines`: `-D` macros): `chain_kernel.cc`
     as its `SOURCE_PARTS` in parallel, then linked; other sources as one unit."""
@@ -209,7 +217,8 @@ def _build(path: Path, defines: tuple[str, ...] = (), source: Path = SOURCE) -> 
         failed = [err for proc, err in zip(compiling, failed) if proc.returncode != 0]
         if failed:
             raise RuntimeError(f"compiling {source.name} failed:\n{failed[0][-2000:]}")
-        _compile(lambda partial: [compiler, *_flags(), *map(str, objects), "-o", str(partial)], path, source.name)
+        _compile(lambda partial: [compiler, *_flags(), *map(str, objects), "-o", str(partial), *_libraries(defines)],
+                 path, source.name)
 
 
 # glibc's malloc options (mallopt): the size from which a request is served by its own
