@@ -363,6 +363,13 @@ def test_power_law_runs_on_the_full_kernel_equal_to_the_jax_kernel():
         np.testing.assert_allclose(jac[..., i], expected[..., i], rtol=0, atol=1e-10 * scale)
 
 
+# In the slow suite (about 12 s each beyond the laws' builds, with the default suite at its
+# 10 minutes): the default suite holds both laws' C++ forces to `contact` in
+# `test_batched.py::test_every_kernel_applies_the_laws_of_contact`, Jackson-Green's C++
+# forces and books to `solve` in `test_batched.py::test_matches_solve_to_round_off`, and a
+# fit's Jacobian through yielding Jackson-Green contacts on the C++ kernel to `solve`'s in
+# `test_fit_model.py::test_batched_kernel_and_solve_give_the_same_model_and_jacobian`.
+@pytest.mark.slow
 @pytest.mark.parametrize("law", ["thornton", "jackson_green"])
 def test_elastic_plastic_contacts_run_on_the_full_kernel_equal_to_the_jax_kernel(law):
     """Elastic-plastic contacts (`contact.thornton_contact`, `contact.jackson_green_contact`;
@@ -399,7 +406,9 @@ def test_elastic_plastic_contacts_run_on_the_full_kernel_equal_to_the_jax_kernel
         return jnp.stack([out.forces_n[name] for name in out.channel_names])
 
     q = jnp.asarray([1e-6, 1.2e9, 1.0, 1.0])
-    evaluation = lambda kernel: jax.jit(lambda q: (traced(q, kernel), jax.jacfwd(lambda q: traced(q, kernel))(q)))  # noqa: E731
+    def evaluation(kernel):  # a fit's evaluation: the forces and their Jacobian
+        return jax.jit(lambda q: (traced(q, kernel), jax.jacfwd(lambda q: traced(q, kernel))(q)))
+
     fused = evaluation("auto")
     assert fused.lower(q).as_text().count(f"custom_call @{native._law_target('tangent', law)}") == 1
     (forces, jac), (expected_forces, expected) = fused(q), evaluation("jax")(q)
