@@ -360,6 +360,9 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
 // and HC_JACKSON_GREEN_LIBRARY the elastic-plastic laws).
 enum class Law { kHertz, kPower, kThornton, kJacksonGreen };
 
+// Whether a law is elastic-plastic: its contacts carry their largest overlap so far.
+constexpr bool IsPlastic(Law law) { return law == Law::kThornton || law == Law::kJacksonGreen; }
+
 // Rows of the `law` array (1 or B columns): Hertz's runs read none (2 rows of zeros); the
 // power law its exponent and reference overlap (m); Thornton's law every contact's yield
 // force (N; infinite: elastic); Jackson-Green's every contact's yield force (whether it
@@ -428,7 +431,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
                   int64_t directions, TangentInputs tin, const std::vector<double*>& ttraces, BooksIO books) {
   static_assert(!(kBooks && kTangent), "the books are kept by forward runs only");
   constexpr bool kPower = kLaw == Law::kPower;
-  constexpr bool kPlastic = kLaw == Law::kThornton || kLaw == Law::kJacksonGreen;
+  constexpr bool kPlastic = IsPlastic(kLaw);
   const int64_t rows_x = bodies + 1, contacts = bodies;
   const int64_t law_rows = LawRows(kLaw, contacts);
   const double h = 0.5 * dt;
@@ -1048,8 +1051,7 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   auto dims = state0.dimensions();
   const int64_t batch = dims[dims.size() - 1];
   const int64_t bodies = inv_mass.dimensions()[inv_mass.dimensions().size() - 2] - 1;
-  constexpr bool kPlasticLibrary = kLibraryLaw == Law::kThornton || kLibraryLaw == Law::kJacksonGreen;
-  const int64_t peak_rows = books && kPlasticLibrary ? bodies : 0;
+  const int64_t peak_rows = books && IsPlastic(kLibraryLaw) ? bodies : 0;
   const int64_t state_rows = 3 * (bodies + 1) + (books ? peak_rows + bodies + (viscous ? bodies + 1 : 0) + 1 : 0);
   if (static_cast<int64_t>(state0.element_count()) != state_rows * batch)
     return ffi::Error::InvalidArgument(books ? "state0 must be (3 (bodies + 1) + the books' rows, B)"
