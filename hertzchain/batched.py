@@ -110,8 +110,9 @@ class KernelFlags(NamedTuple):
     dashpot: bool = False
     # The full step's state whatever the physics: set where the full C++ kernel runs a
     # conservative chain (laws other than Hertz's, `native.kernel_for`), whose books come in
-    # and out in that layout. The JAX kernel keeps the conservative one for those chains:
-    # an undamped Jackson-Green sweep ran 4.9x slower in the full one.
+    # and out in that layout. The JAX kernel keeps the conservative one for those chains: in
+    # the full one an undamped Jackson-Green sweep took 18.2 s against 3.9 s
+    # (`benchmarks/results/plastic_kernel/jackson_green_kernel.json`, `jax_full_state`).
     full_step: bool = False
 
     @property
