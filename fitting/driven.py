@@ -304,14 +304,17 @@ class DrivenFit:
 
 def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "precompression_n",
                                                       "damping_rate_per_s", "drive_scale"),
-               x_start=None, max_steps: int = 30, progress: bool = True, precompression_grid=None) -> DrivenFit:
+               x_start=None, max_steps: int = 100, progress: bool = True, precompression_grid=None) -> DrivenFit:
     """Fit the parameters `free` (names of `PARAMETERS`) to a driven experiment.
 
     Starts from `x_start` (default: `linear_start`, then the best of `precompression_grid`
     (N) on the coarse grid, when the precompression is free). With 14 drive levels or
     more the fit runs first on a coarse grid (`COARSE_ROW_STRIDE`, `COARSE_LEVEL_STRIDE`),
-    then on every point from there. `max_steps` optimiser iterations per stage; each costs one batched grid run and
-    its forward-mode tangents.
+    then on every point from there. `max_steps` optimiser iterations per stage (the fitting
+    commands' default, `--max-steps`); each costs one batched grid run and its forward-mode
+    tangents. The two-bead sweep of `examples/lydon2015` takes 31 on the coarse grid and 64 on
+    every point, where each step lowers chi^2 by under 1 % (30 stopped at chi^2 1713, the
+    optimum's is 1562).
     """
     began = time.perf_counter()
     layout = DrivenLayout.for_beads(experiment.n_beads)
