@@ -333,7 +333,7 @@ def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "pr
     if model.levels.size >= 2 * COARSE_LEVEL_STRIDE:  # first on a coarse grid: a twentieth of the cost
         coarse = DrivenModel(experiment, rows=model.rows[::COARSE_ROW_STRIDE], levels=model.levels[::COARSE_LEVEL_STRIDE],
                              progress=progress)
-        first = least_squares(coarse, x, columns, max_steps=max_steps)
+        first = least_squares(coarse, x, columns, max_steps=max_steps, extrapolate=True)
         x, steps = coarse.clip(first.x), first.steps
     # on every point, the optimiser stops when no step gains a third of a standard error: 0.1 in
     # chi^2 of independent points of unit variance is 0.1 s^2 (1 + rho)/(1 - rho) in chi^2 of these
@@ -348,7 +348,7 @@ def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "pr
         previous, variance = variance, float(residuals @ residuals) / max(residuals.size - len(columns), 1)
         if variance > 0.5 * previous:
             break
-        result = least_squares(model, x, columns, max_steps=max_steps,
+        result = least_squares(model, x, columns, max_steps=max_steps, extrapolate=True,
                                tolerance=0.1 * variance * (1 + rho) / (1 - rho))
         x, steps = model.clip(result.x), steps + result.steps
     return finish_fit(model, x, columns, result.converged, steps, began)

@@ -87,7 +87,7 @@ def diagnose_driven(experiment, *, max_effects: int = 3, min_share: float = 0.2,
         }
 
     def fit(x, names):
-        result = least_squares(model, x, _columns(layout, names), max_steps=max_steps)
+        result = least_squares(model, x, _columns(layout, names), max_steps=max_steps, extrapolate=True)
         return model.clip(result.x), result.chi2, result.converged
 
     # the nominal model: the file's constants, only the viscous damping fitted

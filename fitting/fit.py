@@ -523,7 +523,7 @@ class _Scaled:
 
 
 def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
-                  tolerance: float = OPTIMUM_TOLERANCE) -> LeastSquares:
+                  tolerance: float = OPTIMUM_TOLERANCE, extrapolate: bool = False) -> LeastSquares:
     """Fit the parameters `free` (indices) from the values `x_start` (SI), the others held
     there, with `fit`'s solver and test of an optimum, on residuals a caller evaluates
     between the optimiser's compiled steps (one optimistix Levenberg-Marquardt step per
@@ -541,6 +541,15 @@ def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
     out, e.g. the end of a record; default 1). `tolerance`: as `fit`'s (chi^2,
     dimensionless). The free block is padded to a width of 8, 16, 32, ... so that fits of
     different subsets share a compilation; neither `tolerance` nor `weights` recompiles.
+
+    `extrapolate`: before the optimiser's proposed step is evaluated, go on along it (2, 4, ...
+    `_EXTRAPOLATION_LIMIT` times its length; residuals only) while chi^2 falls, and restart the
+    optimiser from the best point where it lies below the proposal by the test's threshold
+    (each restart counts as a step). For residuals
+    that are rough on a scale far below their trend (`fitting.driven`: lock-in curves whose
+    sharp peaks move across the frequency grid), where the Jacobian is exact but the linear
+    model holds only over a step much shorter than the way down, and a residual costs a tenth of
+    a linearisation there.
     """
     x_start = np.array(x_start, dtype=float)
     free = [int(c) for c in free]
@@ -564,10 +573,33 @@ def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
     v = jnp.zeros(width)
     state = _lm_init(solver, v, (jnp.asarray(r), jnp.asarray(jac / scaled.scale), v))
     steps, previous, ok = 0, math.inf, False
+    evaluated = np.zeros(width)  # where r and jac were evaluated, in the optimiser's coordinates
+
+    def restart(better, evaluated_there: bool):
+        # go on from the values `better`, the optimiser restarted there; `evaluated_there`: its
+        # first step reuses the residuals and Jacobian of the restart (at the values the
+        # optimiser's coordinates give), else it evaluates them again
+        nonlocal v, r, jac, state, evaluated, previous
+        v = jnp.asarray((better - scaled.values0) * scaled.scale)
+        r, jac = scaled.linearize(scaled.values(v) if evaluated_there else better)
+        if evaluated_there:
+            evaluated = np.asarray(v)
+        state = _lm_init(solver, v, (jnp.asarray(r), jnp.asarray(jac / scaled.scale), v))
+        previous = math.inf
+
+    chi2 = math.inf
     while steps < max_steps and not ok:
         at = np.asarray(state.y_eval)
-        if steps:  # the start's evaluation is the one above
+        if extrapolate and steps and not np.array_equal(at, np.asarray(v)):
+            further = _extrapolated(scaled, scaled.values(v), scaled.values(at), chi2,
+                                    float(_chi2_threshold(chi2, dof, tolerance)))
+            if further is not None:
+                restart(further, evaluated_there=True)
+                steps += 1
+                continue
+        if not np.array_equal(at, evaluated):  # (the start's, and a restart's, are evaluated already)
             r, jac = scaled.linearize(scaled.values(at))
+            evaluated = at
         v, state, chi2, since = _lm_step(solver, v, state,
                                          (jnp.asarray(r), jnp.asarray(jac / scaled.scale), jnp.asarray(at)))
         steps += 1
@@ -582,16 +614,34 @@ def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
                                             tolerance)
             if better is not None and steps < max_steps:
                 # the optimiser only proposes moves too small to count, and a step of the test
-                # lowers chi^2 by more (a kink): go on from there, the optimiser restarted
-                v = jnp.asarray((better - scaled.values0) * scaled.scale)
-                r, jac = scaled.linearize(better)
-                state = _lm_init(solver, v, (jnp.asarray(r), jnp.asarray(jac / scaled.scale), v))
-                previous = math.inf
+                # lowers chi^2 by more (a kink): go on from there
+                restart(better, evaluated_there=False)
     values = scaled.values(v)
     if not ok and steps >= max_steps and np.all(np.isfinite(values)):
         ok, _ = _host_optimum_test(scaled, values, scaled.values(state.y_eval), mask, dof, tolerance)
     r = scaled.residuals(values)
     return LeastSquares(scaled.point(values), float(r @ r), steps, bool(ok and np.all(np.isfinite(r))))
+
+
+# The longest extrapolation of an accepted step (`least_squares`, `extrapolate`), in its lengths.
+_EXTRAPOLATION_LIMIT = 64
+
+
+def _extrapolated(scaled, start, proposed, chi2, threshold):
+    """Along the optimiser's proposed step from the values `start` (chi^2 there `chi2`): chi^2
+    at start + t (proposed - start), t = 1, 2, 4, ... `_EXTRAPOLATION_LIMIT`, t doubled while it
+    falls; the values where it is lowest if t > 1 there and it lies below both the proposal's
+    (t = 1) and `chi2` by `threshold`, else None (the optimiser then evaluates its proposal as
+    it would)."""
+    step = proposed - start
+    at_proposal = best_chi2 = float(np.sum(scaled.residuals(proposed) ** 2))
+    best, t = None, 2.0
+    while t <= _EXTRAPOLATION_LIMIT:
+        trial = float(np.sum(scaled.residuals(start + t * step) ** 2))
+        if not trial < best_chi2:
+            break
+        best, best_chi2, t = start + t * step, trial, 2.0 * t
+    return best if best is not None and min(at_proposal, chi2) - best_chi2 >= threshold else None
 
 
 def _host_optimum_test(scaled, values, proposed, mask, dof, tolerance):
