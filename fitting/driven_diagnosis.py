@@ -14,6 +14,11 @@ chi^2, and repeats (at most `max_effects` times). Candidates, each a set of para
 - `amplitude_dependent_contact_loss`: Kuwabara-Kono damping at every contact (a loss that
   grows with the contacts' motion, `eta_s`).
 
+A candidate tried on top of named effects, the precompression among its parameters, is fitted
+from where the last round ended and from the data's own start with the precompression scan
+(as `fit_driven` starts), the lower chi^2 kept: the contacts' fit of an earlier round can end
+where a stiffness and a preload compensate the effect still missing.
+
 Every step records the gap before and after (median over drive levels of the RMS misfit as a
 fraction of each curve's peak), the resonance shift from the lowest to the highest drive, and
 the peak velocity per metre of drive at the top drive over the lowest's (the amplitude-
@@ -100,6 +105,7 @@ def diagnose_driven(experiment, *, max_effects: int = 3, min_share: float = 0.2,
     current = state(x, chi2)
     log(f"nominal model (damping fitted): median misfit {100 * current['gap_median']:.1f} % of peak")
     nominal = current
+    measured_start = linear_start(experiment)
     steps, named = [], []
     for _ in range(max_effects):
         trials = {}
@@ -108,11 +114,21 @@ def diagnose_driven(experiment, *, max_effects: int = 3, min_share: float = 0.2,
                 continue
             start = x.copy()
             if name == "contact_stiffness_and_preload":
-                measured_start = linear_start(experiment)
                 start[layout.index("linear_resonance_hz")] = measured_start[layout.index("linear_resonance_hz")]
                 start = scan_precompression(experiment, start)
-            trial_x, trial_chi2, trial_ok = fit(start, free + list(params))
-            trials[name] = (trial_x, trial_chi2, trial_ok)
+            trial = fit(start, free + list(params))
+            if "precompression_n" in free + list(params) and name != "contact_stiffness_and_preload":
+                # the contacts' fit of an earlier round can end in a valley where a stiffness and
+                # a preload compensate the effect still missing: also from the data's own start
+                # (`linear_start`: the resonance and damping of the lowest curve) and the best
+                # of the precompression scan, as `fit_driven` starts; the lower of the two
+                again = x.copy()
+                for label in ("linear_resonance_hz", "damping_rate_per_s"):
+                    again[layout.index(label)] = measured_start[layout.index(label)]
+                trial = min(trial, fit(scan_precompression(experiment, again), free + list(params)),
+                            key=lambda t: t[1])
+            trial_x, trial_chi2, trial_ok = trial
+            trials[name] = trial
             log(f"candidate {name}: chi^2 {current['chi2']:.5g} -> {trial_chi2:.5g}")
         if not trials:
             break
