@@ -71,7 +71,9 @@ def test_a_grid_without_a_ramp_equals_the_jax_kernel():
     assert _relative(lockin_grid(chain, FREQUENCIES_HZ, DRIVES_M, **kw).complex_amplitude, reference) < 1e-12
 
 
-@pytest.mark.parametrize("name", ["one_bead_undamped_contacts", "three_beads_opening_contacts"])
+# three beads whose contacts open in the default suite; the one-bead chain with `-m slow` (suite time)
+@pytest.mark.parametrize("name", [pytest.param("one_bead_undamped_contacts", marks=pytest.mark.slow),
+                                  "three_beads_opening_contacts"])
 def test_jacobians_equal_jacfwd_through_the_jax_kernel(name):
     """`jax.jacfwd` in every field of the chain (masses, stiffnesses, precompression,
     damping, eta), in the frequencies (each run's step and angular frequency) and in the

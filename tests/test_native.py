@@ -293,7 +293,11 @@ def _traced(base, grid, q, kernel):
     return jnp.stack([out.forces_n[name] for name in out.channel_names])
 
 
-@pytest.mark.parametrize("case", ["viscous_friction", "viscous_friction_dashpot",
+# The default suite keeps the dashpot case (the same five directions, and the dashpot's, through
+# the dashpot library); the main library's tangents in eta, mu and C stay held to the JAX
+# kernel's by `test_fit_residuals_and_jacobian_equal_the_jax_kernels` and
+# `tests/test_fit_model.py`. The other two run with `-m slow` (suite time).
+@pytest.mark.parametrize("case", [pytest.param("viscous_friction", marks=pytest.mark.slow), "viscous_friction_dashpot",
                                   pytest.param("sensors_preload_viscous_friction", marks=pytest.mark.slow)])
 def test_forward_mode_derivatives_equal_jacfwd_through_the_jax_kernel(case):
     """`jax.jacfwd` through `record_batched` on the C++ kernel (its own tangents, five or six

@@ -386,7 +386,9 @@ def test_posterior_intervals_are_calibrated_over_data_drawn_from_the_prior():
         assert abs(covered[i] - 0.9 * n_sets) < 3 * sigma, covered
 
 
-@pytest.mark.parametrize("chains", [1, 3])
+# vectorised chains (what `posterior` runs) in the default suite; one chain with an adapted
+# metric (`adapt_metric`, not the default) with `-m slow` (suite time)
+@pytest.mark.parametrize("chains", [pytest.param(1, marks=pytest.mark.slow), 3])
 def test_chains_driven_here_are_numpyros_mcmc_draw_for_draw(chains):
     """`_run_chains` calls NumPyro's NUTS kernel itself (a compiled `init`, one compiled
     iteration for warmup and draws); its draws, tree sizes, statistics and step sizes must
