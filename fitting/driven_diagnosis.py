@@ -96,7 +96,8 @@ def diagnose_driven(experiment, *, max_effects: int = 3, min_share: float = 0.2,
         return model.clip(result.x), result.chi2, result.converged
 
     # the nominal model: the file's constants, only the viscous damping fitted
-    x = linear_start(experiment)  # the damping rate from the lowest curve's width
+    measured_start = linear_start(experiment)  # the resonance and damping of the lowest curve
+    x = measured_start.copy()
     x[layout.index("linear_resonance_hz")] = nominal_modes_hz(experiment)
     x[layout.index("precompression_n")] = experiment.precompression_n
     x[layout.index("drive_scale")] = 1.0
@@ -105,7 +106,6 @@ def diagnose_driven(experiment, *, max_effects: int = 3, min_share: float = 0.2,
     current = state(x, chi2)
     log(f"nominal model (damping fitted): median misfit {100 * current['gap_median']:.1f} % of peak")
     nominal = current
-    measured_start = linear_start(experiment)
     steps, named = [], []
     for _ in range(max_effects):
         trials = {}
