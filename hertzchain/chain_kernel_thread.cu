@@ -48,7 +48,13 @@ namespace {
 constexpr int kRows = HC_ROWS;
 constexpr int kContacts = kRows - 1;
 constexpr int kMaxChannels = 16;
-constexpr int kThreadsPerBlock = 128;
+#ifndef HC_THREADS_PER_BLOCK
+#define HC_THREADS_PER_BLOCK 128  // (a build variant can set it: benchmarks/gpu_variants.py)
+#endif
+#ifndef HC_MIN_BLOCKS_PER_SM
+#define HC_MIN_BLOCKS_PER_SM 1  // more caps the registers a thread (a build variant, likewise)
+#endif
+constexpr int kThreadsPerBlock = HC_THREADS_PER_BLOCK;
 
 struct Param {
   const double* data;
@@ -364,7 +370,7 @@ ffi::Error Launch(Stream, int64_t threads, const Thread& thread) {
 #else
 using Stream = cudaStream_t;
 template <class Thread>
-__global__ void __launch_bounds__(kThreadsPerBlock) Each(int64_t threads, Thread thread) {
+__global__ void __launch_bounds__(kThreadsPerBlock, HC_MIN_BLOCKS_PER_SM) Each(int64_t threads, Thread thread) {
   const int64_t t = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   if (t < threads) thread(t);
 }

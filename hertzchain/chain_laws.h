@@ -12,13 +12,37 @@
 #define HC_HD
 #endif
 
+// On a GPU (one thread per chain) a contact's square root is taken in contact only: out of
+// contact, where most of a chain's contacts are most of the time, a warp's threads branch
+// past its instructions; the numbers are the same (sqrt(0) = 0). The vectorised host
+// kernels keep the branch-free form. `-DHC_ALWAYS_ROOT` builds the GPU kernel without the
+// branch (to measure it: benchmarks/README.md), `-DHC_BRANCH_ON_CONTACT=1` the host
+// emulation with it.
+#ifndef HC_BRANCH_ON_CONTACT
+#if defined(__CUDA_ARCH__) && !defined(HC_ALWAYS_ROOT)
+#define HC_BRANCH_ON_CONTACT 1
+#else
+#define HC_BRANCH_ON_CONTACT 0
+#endif
+#endif
+
 namespace hertzchain {
+
+// sqrt(delta_+) of a positive part delta_+ >= 0, m^0.5
+HC_HD inline double RootOfPositive(double positive) {
+#if HC_BRANCH_ON_CONTACT
+  if (positive > 0.0) return std::sqrt(positive);
+  return 0.0;
+#else
+  return std::sqrt(positive);
+#endif
+}
 
 // contact.hertz_force: kappa delta_+ sqrt(delta_+), then (kSprings) + spring delta, N
 template <bool kSprings>
 HC_HD inline double ElasticForce(double overlap, double kappa, double spring) {
   double positive = overlap > 0.0 ? overlap : 0.0;
-  double force = kappa * positive * std::sqrt(positive);
+  double force = kappa * positive * RootOfPositive(positive);
   if (kSprings) force = force + spring * overlap;
   return force;
 }
@@ -121,7 +145,7 @@ template <bool kViscous, bool kExtras, bool kDashpot>
 HC_HD inline double TotalForce(double dl, double rate, double k, double kv, double dash, double sp, double* root,
                                double* sum) {
   double positive = dl > 0.0 ? dl : 0.0;
-  double rt = std::sqrt(positive);
+  double rt = RootOfPositive(positive);
   *root = rt;
   return DampedTotal<kViscous, kExtras, kDashpot>(k * positive * rt, rt, dl, rate, kv, dash, sp, sum);
 }

@@ -57,6 +57,7 @@ import functools
 import hashlib
 import os
 import platform
+import shlex
 import shutil
 import subprocess
 import sys
@@ -382,6 +383,11 @@ THREAD_SOURCE = Path(__file__).with_name("chain_kernel_thread.cu")
 NVCC_FLAGS = ("-O3", "-arch=native", "--fmad=false", "-std=c++17", "-shared", "-Xcompiler", "-fPIC")
 # The host build checks numbers, not speed: optimised lightly, it compiles in a few seconds.
 EMULATION_FLAGS = ("-O1", "-ffp-contract=off", "-fno-math-errno", "-std=c++17", "-shared", "-fPIC")
+# Extra flags for the one-thread-per-chain build (nvcc, or the C++ compiler of the host
+# emulation), space-separated in this variable, e.g. "-DHC_ALWAYS_ROOT" or
+# "-maxrregcount=128": to measure a variant of the kernel (`benchmarks/gpu_variants.py`).
+# They are part of the build's cache key.
+THREAD_FLAGS_VARIABLE = "HERTZCHAIN_THREAD_FLAGS"
 _THREAD_SYMBOLS = {"forward": "HertzChainThreadForward", "full": "HertzChainThreadFullForward",
                    "tangent": "HertzChainThreadFullTangent"}
 _HOST_TARGETS = {"forward": TARGET, "full": FULL_TARGET, "tangent": TANGENT_TARGET, "books": BOOKS_TARGET,
@@ -412,7 +418,8 @@ def thread_unavailable_reason(backend: str) -> str | None:
 
 
 def _thread_build_command(backend: str, rows: int, output: Path) -> list[str]:
-    define = [f"-DHC_ROWS={rows}", f"-I{jax.ffi.include_dir()}", f"-I{SOURCE.parent}"]
+    define = [f"-DHC_ROWS={rows}", f"-I{jax.ffi.include_dir()}", f"-I{SOURCE.parent}",
+              *shlex.split(os.environ.get(THREAD_FLAGS_VARIABLE, ""))]
     if backend == "cuda":
         return [_nvcc(), *NVCC_FLAGS, *define, str(THREAD_SOURCE), "-o", str(output)]
     return [_cxx(), "-x", "c++", "-DHC_HOST_EMULATION", *EMULATION_FLAGS, *define, str(THREAD_SOURCE), "-o", str(output)]
