@@ -209,3 +209,47 @@ def test_diagnosis_names_what_a_scipy_simulated_bead_hides():
     assert final["damping_rate_per_s"] == pytest.approx(gamma, rel=2e-2)
     assert final["drive_scale"] == pytest.approx(scale, rel=1e-2)
     assert second["after"]["gap_median"] < 0.01
+
+
+def _diagnosis_result(measured_ratio, step_ratios, precompression_after_n, model_ratio, probe_ratio):
+    """A `diagnose_driven` result with the numbers the conclusion reads (no simulation): one
+    step freeing the contacts, its top-over-lowest peak-per-drive ratio going
+    step_ratios[0] -> step_ratios[1]; the file's precompression 3 N."""
+    nominal = {"x": {"linear_resonance_hz": 3000.0, "precompression_n": 3.0, "eta_s": 0.0},
+               "gap_median": 0.2, "shift": [0.0], "peak_per_drive_top_over_lowest": [step_ratios[0]]}
+    after = {"x": {"linear_resonance_hz": 2500.0, "precompression_n": precompression_after_n, "eta_s": 0.0},
+             "gap_median": 0.05, "shift": [-0.05], "peak_per_drive_top_over_lowest": [step_ratios[1]]}
+    step = {"effect": "contact_stiffness_and_preload", "parameters": ["linear_resonance_hz", "precompression_n"],
+            "accepted": True, "share_of_chi2_removed": 0.8, "gap_before": 0.2, "gap_after": 0.05,
+            "before": nominal, "after": after}
+    final = dict(after, peak_per_drive_top_over_lowest=[model_ratio])
+    return {"nominal": nominal, "steps": [step], "final": final, "eta_on_final": None,
+            "eta_probe": {"x": {"eta_s": 1e-6}, "peak_per_drive_top_over_lowest": [probe_ratio]},
+            "contact_opening": {"static_overlap_m": 50e-9, "bead_amplitude_at_top_drive_peak_m": 110e-9},
+            "measured": {"shift": [-0.06], "peak_per_drive_top_over_lowest": [measured_ratio]}}
+
+
+def test_diagnosis_conclusion_states_the_datas_direction_and_values_far_from_the_file():
+    """The conclusion names a fitted constant 10 times or more from the file's value with both
+    values, a step that moves the amplitude dependence away from the data, and says which way
+    the measured response per nm of drive goes: a gain (ratio > 1) is not called a loss."""
+    from fitting.driven_diagnosis import FAR_FROM_FILE, conclusion
+
+    # data whose response per nm grows with the drive (Lydon's two beads: 1.13); the step takes
+    # the preload to 8.7e5 times the file's and the ratio from 1.00 to 0.76
+    text = conclusion(_diagnosis_result(1.13, (1.0, 0.76), 2.6e6, 0.70, 0.78))
+    assert "precompression_n = 2.6e+06 is 8.7e+05 times the file's 3" in text
+    assert "linear_resonance_hz = 2500 is" not in text  # 0.83 times the file's: not named
+    assert "from 1.00 to 0.76, away from the measured 1.13" in text
+    assert "0.70 in the final model (it falls with the drive) against 1.13 measured (it grows)" in text
+    assert "measured loss" not in text and "needs another mechanism" not in text
+    assert "contacts open for part of each cycle, while the measured response per nm of drive grows" in text
+    # a loss in the data (the single bead: 0.70) that contact damping pushes away from
+    text = conclusion(_diagnosis_result(0.70, (1.0, 0.88), 3.0 / (FAR_FROM_FILE * 1.01), 0.88, 0.92))
+    assert "is 0.099 times the file's 3" in text
+    assert "away from the measured" not in text  # 1.00 -> 0.88 goes towards 0.70
+    assert "(it falls)" in text and "needs another mechanism" in text
+    # a preload just inside the factor is not named; an explained dependence says so
+    text = conclusion(_diagnosis_result(0.90, (1.0, 0.91), 3.0 / (0.99 * FAR_FROM_FILE), 0.91, 0.95))
+    assert "Far from the file" not in text
+    assert text.splitlines()[-1].startswith("The amplitude dependence of the response is explained")

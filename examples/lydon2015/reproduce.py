@@ -1,12 +1,14 @@
 """Every Lydon et al. result of the README, in one command:
 
     python examples/lydon2015/reproduce.py --data-root ../shared/data/real [--out examples/lydon2015/results]
+        [--only NAME ...]
 
-runs `hertzchain fit` on the single- and two-bead bending files, `hertzchain diagnose` on the
-single bead, and the 2014 band-edge script, each into its own folder under `--out`, and writes
+runs `hertzchain fit` and `hertzchain diagnose` on the single- and two-bead bending files,
+and the 2014 band-edge script, each into its own folder under `--out`, and writes
 `summary.json`: the acceptance numbers of each, the wall time of each command (with the
 machine's load average at the start: timings from a loaded machine are marked so) and the
-command lines.
+command lines. `--only` runs the named ones (`JOBS`, `lydon2014_band_edge`) and keeps the
+other entries of an existing `summary.json` as they are.
 """
 
 from __future__ import annotations
@@ -24,6 +26,14 @@ from hertzchain.atomic import write_json
 HERE = Path(__file__).resolve().parent
 
 
+JOBS = {
+    "single_bead_fit": ("fit", HERE / "single_bead_bending.toml"),
+    "two_bead_fit": ("fit", HERE / "two_bead_bending.toml"),
+    "single_bead_diagnosis": ("diagnose", HERE / "single_bead_bending.toml"),
+    "two_bead_diagnosis": ("diagnose", HERE / "two_bead_bending.toml"),
+}
+
+
 def _run(command: list[str]) -> float:
     began = time.perf_counter()
     print("$ " + " ".join(command), flush=True)
@@ -35,25 +45,35 @@ def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data-root", required=True, type=Path, help="folder holding lydon-2015/ and lydon-2014/")
     parser.add_argument("--out", type=Path, default=HERE / "results")
+    parser.add_argument("--only", action="append", default=[], metavar="NAME",
+                        help="run only this one (repeatable); the summary keeps the others' entries")
     args = parser.parse_args(argv)
     python = sys.executable
     data_2015 = str(args.data_root / "lydon-2015")
     summary = {"cpu_count": os.cpu_count(), "load_average_at_start": os.getloadavg()[0], "runs": {}}
-    jobs = {
-        "single_bead_fit": ["fit", str(HERE / "single_bead_bending.toml")],
-        "two_bead_fit": ["fit", str(HERE / "two_bead_bending.toml")],
-        "single_bead_diagnosis": ["diagnose", str(HERE / "single_bead_bending.toml")],
-    }
-    for name, (command, toml) in jobs.items():
+    names = list(JOBS) + ["lydon2014_band_edge"]
+    unknown = sorted(set(args.only) - set(names))
+    if unknown:
+        parser.error(f"--only: unknown {', '.join(unknown)} (choose from {', '.join(names)})")
+    chosen = args.only or names
+    previous = args.out / "summary.json"
+    if args.only and previous.exists():  # the other entries as they were
+        summary["runs"] = {k: v for k, v in json.loads(previous.read_text())["runs"].items() if k not in chosen}
+    for name, (command, toml) in JOBS.items():
+        if name not in chosen:
+            continue
         out = args.out / name
-        line = [python, "-m", "hertzchain", command, toml, "--data-dir", data_2015, "--out", str(out)]
+        line = [python, "-m", "hertzchain", command, str(toml), "--data-dir", data_2015, "--out", str(out)]
         load = os.getloadavg()[0]
         seconds = _run(line)
         summary["runs"][name] = {"command": " ".join(line[1:]), "wall_s": seconds, "load_average": load}
-    line = [python, str(HERE / "lydon2014_band_edge.py"), "--data-dir", str(args.data_root / "lydon-2014"),
-            "--out", str(args.out / "lydon2014_band_edge")]
-    summary["runs"]["lydon2014_band_edge"] = {"command": " ".join(line[1:]), "wall_s": _run(line)}
+    if "lydon2014_band_edge" in chosen:
+        line = [python, str(HERE / "lydon2014_band_edge.py"), "--data-dir", str(args.data_root / "lydon-2014"),
+                "--out", str(args.out / "lydon2014_band_edge")]
+        summary["runs"]["lydon2014_band_edge"] = {"command": " ".join(line[1:]), "wall_s": _run(line)}
     for name in ("single_bead_fit", "two_bead_fit"):
+        if name not in chosen:
+            continue
         fit = json.loads((args.out / name / "fit.json").read_text())
         summary["runs"][name]["result"] = {
             "linear_resonance_hz": fit["params"]["linear_resonance_hz"],
