@@ -67,15 +67,17 @@ def test_chains_do_not_depend_on_their_neighbours_in_a_block():
         np.testing.assert_array_equal(together.max_force_n[i], one.max_force_n[0])
 
 
-def test_full_kernel_chains_do_not_depend_on_their_neighbours():
-    """The full kernel on 75 damped, frictional chains: a block of 64, one of 8 and a
-    block of 4 with 3 chains (its idle lane repeats the last chain): each chain's trace is
-    the one it gets alone (a single lane), bit for bit."""
-    speeds = np.linspace(0.2, 1.2, 75)
+@pytest.mark.parametrize("chains, checked", [(75, (0, 63, 64, 71, 72, 74)), (8, (0, 3, 4, 7))])
+def test_full_kernel_chains_do_not_depend_on_their_neighbours(chains, checked):
+    """The full kernel on damped, frictional chains: 75 as a block of 64, one of 8 and a
+    block of 4 with 3 chains (its idle lane repeats the last chain); 8 (on two CPUs or more)
+    as two blocks of 4, one per thread: each chain's trace is the one it gets alone (a single
+    lane), bit for bit."""
+    speeds = np.linspace(0.2, 1.2, chains)
     setup, _ = hc.batch_setup(hc.ChainSetup(10, eta_s=2e-6, mu=0.19), striker_velocity_m_s=speeds)
     grid = hc.choose_time_grid(setup, t_end_s=0.5e-3, sample_interval_s=2e-6)
     together = solve_batched(setup, grid, Recording((4,)), books=False)
-    for i in (0, 63, 64, 71, 72, 74):
+    for i in checked:
         alone = jax.tree_util.tree_map(lambda leaf, i=i: leaf[i : i + 1], setup)
         one = solve_batched(alone, grid, Recording((4,)), books=False)
         for name in together.channel_names:
