@@ -385,7 +385,7 @@ NVCC_FLAGS = ("-O3", "-arch=native", "--fmad=false", "-std=c++17", "-shared", "-
 EMULATION_FLAGS = ("-O1", "-ffp-contract=off", "-fno-math-errno", "-std=c++17", "-shared", "-fPIC")
 # Extra flags for the one-thread-per-chain build (nvcc, or the C++ compiler of the host
 # emulation), space-separated in this variable, e.g. "-DHC_ALWAYS_ROOT" or
-# "-maxrregcount=128": to measure a variant of the kernel (`benchmarks/gpu_variants.py`).
+# "-DHC_MIN_BLOCKS_PER_SM=3": to measure a variant of the kernel (`benchmarks/gpu_variants.py`).
 # They are part of the build's cache key.
 THREAD_FLAGS_VARIABLE = "HERTZCHAIN_THREAD_FLAGS"
 _THREAD_SYMBOLS = {"forward": "HertzChainThreadForward", "full": "HertzChainThreadFullForward",
