@@ -51,7 +51,9 @@ if [ "${FITS:-1}" != 0 ]; then
   rm -f "$out"/fit_bench_*.md  # (rewritten from the JSON with fit_bench.py --table-from)
   phase fits
 fi
-if [ "${POSTERIOR:-1}" != 0 ]; then
+if [ "${POSTERIOR:-1}" != 0 ] && ! "$python" -c "import arviz, numpyro" 2> /dev/null; then
+  echo "posterior: skipped, it needs arviz and numpyro (pip install arviz numpyro)" | tee -a "$out/bench.log"
+elif [ "${POSTERIOR:-1}" != 0 ]; then
   timeout "${POSTERIOR_TIMEOUT_S:-240}" "$python" benchmarks/posterior_bench.py --out "$out/posterior_gpu.json" \
     --warmup "${POSTERIOR_WARMUP:-20}" --draws "${POSTERIOR_DRAWS:-20}" 2>&1 | grep -v '^ ' | tail -20 | tee -a "$out/bench.log"
   phase posterior
