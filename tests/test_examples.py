@@ -84,3 +84,13 @@ def test_07_scope_files(small):
     assert set(diagnosis.missing_effects) == {"viscous_damping", "track_friction"}
     assert (small / "07_scope_files" / "fit" / "fit.json").exists()
     assert (small / "07_scope_files" / "diagnosis").is_dir()
+
+
+def test_lydon_reproduce_refuses_an_unknown_part(capsys):
+    """`reproduce.py --only` names the parts it knows when given another (before any run)."""
+    reproduce = runpy.run_path(str(EXAMPLES / "lydon2015" / "reproduce.py"))
+    with pytest.raises(SystemExit) as stop:
+        reproduce["main"](["--data-root", "nowhere", "--only", "two_beads_diagnosis"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert "unknown two_beads_diagnosis" in err and "two_bead_diagnosis" in err and "lydon2014_band_edge" in err
