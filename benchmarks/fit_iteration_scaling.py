@@ -3,11 +3,9 @@ share the cores.
 
     python benchmarks/fit_iteration_scaling.py --out FILE.json [--traces 1,4,5,8,10,16,20,24,40]
 
-For each count n: n synthetic traces of the paper's chain (impact speeds 0.15-0.6 m/s,
-eta 2 us, mu 0.19, contacts 6, 11 and the wall, 2.5 ms at 2 us, as `run.py`'s fit
-iteration), and the whitened residuals with their Jacobian in eta, mu, C
-(`fitting.model.residuals_and_jacobian`), timed 7 times after a first call (median and
-least, ms). The host kernel splits the chains into blocks of 64, 8 and 4 lanes and single
+For each count n: n traces of `run.py`'s fit iteration (`run.fit_bench_traces`), and the
+whitened residuals with their Jacobian in eta, mu, C (`fitting.model.residuals_and_jacobian`),
+timed 7 times after a first call (median and least, ms). The host kernel splits the chains into blocks of 64, 8 and 4 lanes and single
 chains (`chain_kernel.cc`), run side by side on the process's CPUs: the time steps where a
 block more or less leaves a core idle.
 """
@@ -23,7 +21,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from run import _time  # noqa: E402  (first call s, median s, min s, max s, result)
+from run import _time, fit_bench_traces  # noqa: E402  (_time: first call s, median s, min s, max s, result)
 
 
 def main(argv=None) -> int:
@@ -38,19 +36,15 @@ def main(argv=None) -> int:
 
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
-    import numpy as np
-
     from fitting.fit import initial_values, make_problem
     from fitting.model import residuals_and_jacobian
-    from fitting.synthetic import paper_setups, synthetic_traces
     from hertzchain import native
     from hertzchain.atomic import write_json
 
     result = {"label": args.label, "cpus": len(os.sched_getaffinity(0)), "processor": platform.processor(),
               "kernel": native.unavailable_reason() or "host C++ kernel", "fit_iteration_ms": {}}
     for n in counts:
-        files = synthetic_traces(paper_setups(np.linspace(0.15, 0.6, n)), contacts=(6, 11), t_end_s=2.5e-3,
-                                 sample_interval_s=2e-6, noise_std_n=0.3, seed=1)
+        files = fit_bench_traces(n)
         problem = make_problem(files, ("eta", "mu", "C"))
         x = jnp.asarray(initial_values(problem))
         first, median, low, _, _ = _time(lambda: residuals_and_jacobian(problem, x), 7)

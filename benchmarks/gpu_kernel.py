@@ -43,7 +43,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from run import _time  # noqa: E402  (first call s, median s, min s, max s, result)
+from run import _time, fit_bench_traces  # noqa: E402  (_time: first call s, median s, min s, max s, result)
 
 N_BEADS = 21
 DT_S = 1e-6
@@ -286,13 +286,9 @@ def item_fit_cpu(cores: int) -> dict:
 
 
 def item_fit() -> dict:
-    import numpy as np
-
     import fitting
-    from fitting.synthetic import paper_setups, synthetic_traces
 
-    files = synthetic_traces(paper_setups(np.linspace(0.15, 0.6, 10)), contacts=(6, 11), t_end_s=2.5e-3,
-                             sample_interval_s=2e-6, noise_std_n=0.3, seed=1)
+    files = fit_bench_traces()
     row = {"n_traces": len(files), "truth": {"eta_s": 2e-6, "mu": 0.19}}
     for label in ("cold", "warm"):
         start = time.perf_counter()

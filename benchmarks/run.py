@@ -517,6 +517,18 @@ def numba_threads() -> int | None:
         return None
 
 
+def fit_bench_traces(n_traces: int = 10) -> list:
+    """The fit benchmarks' data: `n_traces` synthetic traces of the paper's chain (impact
+    speeds 0.15-0.6 m/s, eta 2 us, mu 0.19, contacts 6 and 11 and the wall, 2.5 ms at 2 us,
+    noise 0.3 N)."""
+    import numpy as np
+
+    from fitting.synthetic import paper_setups, synthetic_traces
+
+    return synthetic_traces(paper_setups(np.linspace(0.15, 0.6, n_traces)), contacts=(6, 11), t_end_s=2.5e-3,
+                            sample_interval_s=2e-6, noise_std_n=0.3, seed=1)
+
+
 def worker_fit_iteration() -> dict:
     """One fit iteration as `fitting` runs it (whitened residuals and their Jacobian in eta,
     mu, C: `residuals_and_jacobian`) on 10 synthetic traces of the paper's chain (0.15-0.6
@@ -527,7 +539,6 @@ def worker_fit_iteration() -> dict:
     try:
         from fitting.fit import initial_values, make_problem
         from fitting.model import residuals_and_jacobian
-        from fitting.synthetic import paper_setups, synthetic_traces
     except ImportError as error:
         return {"available": False, "reason": f"fitting not available: {error}"}
     import equinox as eqx
@@ -538,8 +549,7 @@ def worker_fit_iteration() -> dict:
     from hertzchain import native
     from hertzchain.batched import solve_batched
 
-    files = synthetic_traces(paper_setups(np.linspace(0.15, 0.6, 10)), contacts=(6, 11), t_end_s=2.5e-3,
-                             sample_interval_s=2e-6, noise_std_n=0.3, seed=1)
+    files = fit_bench_traces()
     problem = make_problem(files, ("eta", "mu", "C"))
     x = jnp.asarray(initial_values(problem))
     first, median, low, high, (r, jac) = _time(lambda: residuals_and_jacobian(problem, x), 7)

@@ -1104,8 +1104,9 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   // runs the last one: its chains go as two blocks of 4, one per thread (a fit iteration of
   // 8 traces on 2 cores of an AVX-512 Xeon 24.7 -> 16.5 ms, 24 traces 50.5 -> 40.3 ms:
   // benchmarks/results/fit_iteration_scaling/)
-  const bool two_threads = pool.num_threads() >= 1 && hertzchain::CpuLimit() >= 2;  // the caller and a helper
-  if (!kB && !kLawLibrary && narrow % 2 == 1 && lo >= batch && two_threads) {
+  // (two threads: the caller and a helper of the pool, on two CPUs at least)
+  if (!kB && !kLawLibrary && narrow % 2 == 1 && lo >= batch && pool.num_threads() >= 1 &&
+      hertzchain::CpuLimit() >= 2) {
     const int64_t last = blocks.back().lo;
     blocks.back() = {last, kQuarterLanes};
     blocks.push_back({last + kQuarterLanes, kQuarterLanes});
