@@ -214,10 +214,10 @@ def _far_from_file(x: dict, nominal_x: dict, names) -> list[str]:
         if label.split("[")[0] not in names or not file_value or not np.isfinite(value):
             continue
         factor = value / file_value
-        if factor >= FAR_FROM_FILE or 0.0 < factor <= 1.0 / FAR_FROM_FILE:
-            notes.append(f"{label} = {value:.4g} is {factor:.2g} times the file's {file_value:.4g}")
-        elif factor <= 0.0:
+        if factor < 0.0:
             notes.append(f"{label} = {value:.4g} has the other sign than the file's {file_value:.4g}")
+        elif factor >= FAR_FROM_FILE or factor <= 1.0 / FAR_FROM_FILE:
+            notes.append(f"{label} = {value:.4g} is {factor:.2g} times the file's {file_value:.4g}")
     return notes
 
 

@@ -253,3 +253,6 @@ def test_diagnosis_conclusion_states_the_datas_direction_and_values_far_from_the
     text = conclusion(_diagnosis_result(0.90, (1.0, 0.91), 3.0 / (0.99 * FAR_FROM_FILE), 0.91, 0.95))
     assert "Far from the file" not in text
     assert text.splitlines()[-1].startswith("The amplitude dependence of the response is explained")
+    # a preload fitted to zero is 0 times the file's, not of the other sign
+    text = conclusion(_diagnosis_result(0.90, (1.0, 0.91), 0.0, 0.91, 0.95))
+    assert "precompression_n = 0 is 0 times the file's 3" in text and "other sign" not in text
