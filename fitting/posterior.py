@@ -445,22 +445,24 @@ def _run_chains(starts, key, *, potential, warmup, draws, target_accept, max_tre
     The iterations are driven here, one compiled NUTS iteration called `warmup + draws` times,
     rather than by `numpyro.infer.MCMC`, which compiles its loop once for the warmup and
     again for the draws (a compilation of the whole iteration, gradient included: seconds
-    per device). It is the same kernel (`NUTS.init` with the chains' keys split as MCMC
-    splits them, then `NUTS.sample` on the state, whose iteration count switches the
-    adaptation off after the warmup), so the draws are MCMC's draw for draw
-    (`tests/test_posterior.py`).
+    per device). It is the same kernel (`_nuts`: the chains' keys split as MCMC splits them,
+    the state's iteration count switching the adaptation off after the warmup), so the
+    draws are MCMC's draw for draw (`tests/test_posterior.py`). The chains run in lockstep
+    (`_lockstep_axes`), so the adaptation's branches are taken, not both evaluated.
     """
-    from numpyro.infer import NUTS
-
     from hertzchain.progress import Progress
 
     chains = starts.shape[0]
-    kernel = NUTS(potential_fn=potential, target_accept_prob=target_accept,
-                  max_tree_depth=max_tree_depth, dense_mass=False, adapt_mass_matrix=adapt_metric,
-                  find_heuristic_step_size=True)
-    keys = jax.random.split(key, chains) if chains > 1 else key
-    state = _start(kernel, keys, warmup, starts if chains > 1 else starts[0])
-    iterate = jax.jit(lambda s: kernel.sample(s, (), {}))
+    init, step = _nuts(potential, warmup=warmup, target_accept=target_accept,
+                       max_tree_depth=max_tree_depth, adapt_metric=adapt_metric)
+    if chains > 1:
+        state = jax.jit(jax.vmap(init))(starts, jax.random.split(key, chains))
+        axes = _lockstep_axes(state)
+        state = _shared_fields(state)
+        iterate = jax.jit(jax.vmap(step, in_axes=(axes,), out_axes=axes))
+    else:
+        state = jax.jit(init)(starts[0], key)
+        iterate = jax.jit(step)
     report = Progress(warmup + draws, f"NUTS, {chains} chain(s), {warmup} warmup + {draws} draws") \
         if progress else None
     fields = ("z", "num_steps", "diverging", "accept_prob", "potential_energy")
@@ -488,15 +490,53 @@ def _run_chains(starts, key, *, potential, warmup, draws, target_accept, max_tre
             "warmed": warmed, "ended": time.perf_counter()}
 
 
-def _start(kernel, keys, warmup: int, starts):
-    """`kernel.init` (NumPyro's NUTS: the potential and its gradient at `starts`, the
-    heuristic step size), compiled. Run eagerly, `init` dispatches and compiles each
-    operation of the potential's gradient on its own (11-13 s a device for the benchmark's
-    posterior); compiled, the start's gradient is evaluated as every later step's is (the
-    compiled iteration's), where the eager one differed from it by round-off, 4e-12 of itself
+def _nuts(potential, *, warmup: int, target_accept: float, max_tree_depth: int, adapt_metric: bool):
+    """NumPyro's NUTS for one chain through its functional interface (`numpyro.infer.hmc.hmc`):
+    `init(start, key)`, the chain's first state as `NUTS.init` makes it (the potential and
+    its gradient at `start`, the heuristic step size; the key split as `NUTS.init` splits it),
+    and `step(state)`, one iteration (`NUTS.sample`). `init` must be traced before `step`:
+    it sets the kernel's warmup length and tree depth.
+
+    Compiled by the caller: run eagerly, `init` dispatches and compiles each operation of the
+    potential's gradient on its own (11-13 s a device for the benchmark's posterior);
+    compiled, the start's gradient is evaluated as every later step's is, where the eager
+    one differed from it by round-off, 4e-12 of itself
     (`tests/test_posterior.py::test_compiled_sampler_start_equals_numpyros_eager_start`)."""
-    return jax.jit(lambda keys_, starts_: kernel.init(keys_, warmup, starts_, model_args=(), model_kwargs={}))(
-        keys, starts)
+    from numpyro.infer.hmc import hmc
+
+    init_kernel, sample_kernel = hmc(potential_fn=potential, algo="NUTS")
+
+    def init(start, key):
+        key, _ = jax.random.split(key)  # `NUTS.init` splits off a key for a model (none here)
+        return init_kernel(start, num_warmup=warmup, adapt_mass_matrix=adapt_metric, dense_mass=False,
+                           target_accept_prob=target_accept, max_tree_depth=max_tree_depth,
+                           find_heuristic_step_size=True, rng_key=key)
+
+    return init, lambda state: sample_kernel(state, (), {})
+
+
+def _lockstep_axes(state):
+    """`jax.vmap` axes of a vectorised NUTS state: 0 for every field but the two the chains of a
+    batch share, the iteration count and the adaptation window it selects (None).
+
+    Why: NumPyro's iteration branches on the iteration count (adapt or not; at the end of an
+    adaptation window, search a new step size). With the count batched, as `NUTS.sample`
+    vectorises it, `vmap` turns each branch into a select that evaluates both sides: the
+    step-size search, with its leapfrog steps and gradients, ran at every iteration, draws
+    included, and was thrown away (about one gradient in seven of the benchmark's posterior).
+    Shared, the branches stay branches; the values taken are the same."""
+    axes = jax.tree_util.tree_map(lambda _: 0, state)
+    return axes._replace(i=None, adapt_state=axes.adapt_state._replace(window_idx=None))
+
+
+def _shared_fields(state):
+    """A vectorised NUTS state with its iteration count and adaptation window as one value
+    (every chain's is the same)."""
+    window = state.adapt_state.window_idx
+    for name, value in (("i", state.i), ("window_idx", window)):
+        if not bool(jnp.all(value == value[0])):
+            raise RuntimeError(f"NUTS chains of one batch out of step: {name} = {np.asarray(value)}")
+    return state._replace(i=state.i[0], adapt_state=state.adapt_state._replace(window_idx=window[0]))
 
 
 def _on_device(device, function, *args, **kwargs):
