@@ -329,27 +329,37 @@ def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "pr
     if progress:
         print(f"fitting {', '.join(layout.labels[c] for c in columns)} to {model.measured.size} points ...",
               file=sys.stderr, flush=True)
-    steps = 0
-    if model.levels.size >= 2 * COARSE_LEVEL_STRIDE:  # first on a coarse grid: a twentieth of the cost
-        coarse = DrivenModel(experiment, rows=model.rows[::COARSE_ROW_STRIDE], levels=model.levels[::COARSE_LEVEL_STRIDE],
-                             progress=progress)
-        first = least_squares(coarse, x, columns, max_steps=max_steps, extrapolate=True)
-        x, steps = coarse.clip(first.x), first.steps
     # on every point, the optimiser stops when no step gains a third of a standard error: 0.1 in
     # chi^2 of independent points of unit variance is 0.1 s^2 (1 + rho)/(1 - rho) in chi^2 of these
     # residuals, which are fractions of each curve's peak (variance s^2: no noise level is known)
     # correlated along frequency (lag-1 correlation rho). Both are read where the last pass ended
     # (far from an optimum the residuals are all correlated and s^2 too large), so the fit runs
     # again from there while s^2 still fell by more than half (3 passes at most).
-    variance = np.inf
-    for _ in range(3):
+    def variance_and_tolerance(x):
         residuals = model.residuals(x)
         rho = min(max(lag1_autocorrelation(residuals.reshape(model.measured.shape)), 0.0), 0.999)
-        previous, variance = variance, float(residuals @ residuals) / max(residuals.size - len(columns), 1)
+        variance = float(residuals @ residuals) / max(residuals.size - len(columns), 1)
+        return variance, 0.1 * variance * (1 + rho) / (1 - rho)
+
+    every_point = np.ones(model.measured.size)  # the weights: every point counts
+    # a given start can be the optimum already (a refit from a saved result): it is tested on
+    # every point first (one linearisation), where the coarse grid's optimum would lead away
+    if x_start is not None and least_squares(model, x, columns, max_steps=0, weights=every_point,
+                                             tolerance=variance_and_tolerance(x)[1]).converged:
+        return finish_fit(model, x, columns, True, 0, began)
+    steps = 0
+    if model.levels.size >= 2 * COARSE_LEVEL_STRIDE:  # first on a coarse grid: a twentieth of the cost
+        coarse = DrivenModel(experiment, rows=model.rows[::COARSE_ROW_STRIDE], levels=model.levels[::COARSE_LEVEL_STRIDE],
+                             progress=progress)
+        first = least_squares(coarse, x, columns, max_steps=max_steps, extrapolate=True)
+        x, steps = coarse.clip(first.x), first.steps
+    variance = np.inf
+    for _ in range(3):
+        previous, (variance, tolerance) = variance, variance_and_tolerance(x)
         if variance > 0.5 * previous:
             break
-        result = least_squares(model, x, columns, max_steps=max_steps, extrapolate=True,
-                               tolerance=0.1 * variance * (1 + rho) / (1 - rho))
+        result = least_squares(model, x, columns, max_steps=max_steps, extrapolate=True, tolerance=tolerance,
+                               weights=every_point)
         x, steps = model.clip(result.x), steps + result.steps
     return finish_fit(model, x, columns, result.converged, steps, began)
 

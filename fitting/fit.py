@@ -541,6 +541,8 @@ def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
     out, e.g. the end of a record; default 1). `tolerance`: as `fit`'s (chi^2,
     dimensionless). The free block is padded to a width of 8, 16, 32, ... so that fits of
     different subsets share a compilation; neither `tolerance` nor `weights` recompiles.
+    A start that passes the test of an optimum's Gauss-Newton part ends the fit there with 0
+    steps (`_start_is_optimum`); `max_steps=0` makes only that test.
 
     `extrapolate`: before the optimiser's proposed step is evaluated, go on along it (2, 4, ...
     `_EXTRAPOLATION_LIMIT` times its length; residuals only) while chi^2 falls, and restart the
@@ -566,10 +568,12 @@ def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
     # sizes differ by orders of magnitude (a damping time in s beside a dashpot in N s/m) are
     # damped alike only in such coordinates
     r, jac = scaled.linearize(scaled.values0)
+    dof = int(np.count_nonzero(weights)) - len(free)
+    if _start_is_optimum(r, jac, mask, dof, tolerance):
+        return LeastSquares(x_start, float(r @ r), 0, True)
     scale = np.linalg.norm(jac, axis=0) * math.sqrt(_START_DAMPING)
     scaled.scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
     solver = _make_solver()
-    dof = int(np.count_nonzero(weights)) - len(free)
     v = jnp.zeros(width)
     state = _lm_init(solver, v, (jnp.asarray(r), jnp.asarray(jac / scaled.scale), v))
     steps, previous, ok = 0, math.inf, False
@@ -617,7 +621,7 @@ def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
                 # lowers chi^2 by more (a kink): go on from there
                 restart(better, evaluated_there=False)
     values = scaled.values(v)
-    if not ok and steps >= max_steps and np.all(np.isfinite(values)):
+    if not ok and 0 < max_steps <= steps and np.all(np.isfinite(values)):
         ok, _ = _host_optimum_test(scaled, values, scaled.values(state.y_eval), mask, dof, tolerance)
     r = scaled.residuals(values)
     return LeastSquares(scaled.point(values), float(r @ r), steps, bool(ok and np.all(np.isfinite(r))))
@@ -642,6 +646,16 @@ def _extrapolated(scaled, start, proposed, chi2, threshold):
             break
         best, best_chi2, t = start + t * step, trial, 2.0 * t
     return best if best is not None and min(at_proposal, chi2) - best_chi2 >= threshold else None
+
+
+def _start_is_optimum(r, jac, mask, dof, tolerance) -> bool:
+    """Whether no Gauss-Newton step from the start (residuals `r`, Jacobian `jac` there, free
+    columns `mask`) would lower chi^2 by the test's threshold (`_at_optimum`): a fit started at
+    its optimum (a refit from a saved result, a candidate effect that does not help) then ends
+    there, on the linearisation every fit makes at its start, with 0 steps."""
+    chi2 = float(r @ r)
+    _, decrement = _decrement(jnp.asarray(r), jnp.asarray(jac), jnp.asarray(mask))
+    return math.isfinite(chi2) and float(decrement) < float(_chi2_threshold(chi2, dof, tolerance))
 
 
 def _host_optimum_test(scaled, values, proposed, mask, dof, tolerance):

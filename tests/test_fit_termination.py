@@ -100,3 +100,38 @@ def test_predictions_from_the_residuals_equal_the_model_evaluated_again(default_
         for channel in theirs:
             scale = np.max(np.abs(theirs[channel]))
             np.testing.assert_allclose(mine[channel], theirs[channel], rtol=0, atol=1e-12 * scale)
+
+
+class _LinearModel:
+    """r = A x - b (300 residuals of unit noise, 3 parameters); counts its linearisations."""
+
+    def __init__(self):
+        rng = np.random.default_rng(8)
+        self.a = rng.normal(size=(300, 3))
+        self.b = self.a @ np.array([1.0, -2.0, 0.5]) + rng.normal(size=300)
+        self.linearisations = 0
+
+    def residuals(self, x):
+        return self.a @ x - self.b
+
+    def linearize(self, x, columns):
+        self.linearisations += 1
+        return self.a @ x - self.b, self.a[:, list(columns)]
+
+
+def test_least_squares_started_at_its_optimum_ends_there_at_once():
+    """The host-driven fit (`least_squares`: the diagnosis's and the driven fits') tests its
+    start on the linearisation it makes there: at the optimum it ends with 0 steps, the start
+    unchanged; a start 3 standard errors away is not taken for one."""
+    model = _LinearModel()
+    optimum = np.linalg.lstsq(model.a, model.b, rcond=None)[0]
+    at = fit_module.least_squares(model, optimum, [0, 1, 2])
+    assert at.converged and at.steps == 0 and model.linearisations == 1
+    np.testing.assert_array_equal(at.x, optimum)
+    stderr = np.sqrt(np.diag(np.linalg.inv(model.a.T @ model.a)))
+    away = fit_module.least_squares(model, optimum + 3 * stderr * np.array([1, 0, 0]), [0, 1, 2])
+    assert away.converged and away.steps > 0
+    np.testing.assert_allclose(away.x, optimum, atol=0.1 * stderr.min())
+    tested_only = fit_module.least_squares(model, optimum + 3 * stderr * np.array([1, 0, 0]), [0, 1, 2],
+                                           max_steps=0)
+    assert not tested_only.converged and tested_only.steps == 0
