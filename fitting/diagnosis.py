@@ -141,15 +141,24 @@ class _Evaluator:
     (an infinite yield force), at a quarter of the cost of the elastic-plastic contact law.
     With `power` (power-law contacts) and `power_columns`, points where the exponent's shift
     is not 0 are evaluated on `power` (compiled on first use).
+    With `twins` (each of those problems -> the same with rigid sensor beads and without the
+    dashpot effect, which the batched kernel runs: `fitting.effects.EffectsSimulation`),
+    `compliance_columns` (`sensor_coupling`, `sensor_rate`) and `dashpot_column`, points where
+    the twin gives the model and the derivatives asked for are evaluated on it (`twin_exact`):
+    the same numbers to round-off, several times faster.
     """
 
     def __init__(self, problem: Problem, elastic: Problem | None = None, plastic_columns=(),
-                 power: Problem | None = None, power_columns=()):
+                 power: Problem | None = None, power_columns=(), twins: dict | None = None,
+                 compliance_columns=(), dashpot_column: int | None = None):
         self.problem = problem
         self.elastic = elastic
         self.plastic_columns = np.asarray(plastic_columns, dtype=int)
         self.power = power
         self.power_columns = np.asarray(power_columns, dtype=int)
+        self.twins = twins or {}
+        self.compliance_columns = tuple(int(c) for c in compliance_columns)
+        self.dashpot_column = dashpot_column
         self.calls = 0
         self.residual_calls = 0
         self.seconds = 0.0
@@ -165,15 +174,16 @@ class _Evaluator:
                 return self._cache[cached]
         began = time.perf_counter()
         self.calls += 1
-        r, jac = residuals_and_jacobian(self.problem_at(x), np.asarray(x, dtype=float), wanted)
+        x = np.asarray(x, dtype=float)
+        r, jac = residuals_and_jacobian(self.problem_at(x, range(x.size) if wanted is None else wanted), x, wanted)
         if len(self._cache) > 6:
             self._cache.pop(next(iter(self._cache)))
         self._cache[(key, wanted)] = (r, jac)
         self.seconds += time.perf_counter() - began
         return r, jac
 
-    def problem_at(self, x) -> Problem:
-        """The problem evaluated at `x`: `elastic` where no contact can yield, `power` where
+    def law_at(self, x) -> Problem:
+        """The contact law's problem at `x`: `elastic` where no contact can yield, `power` where
         the contact exponent differs from Hertz's (plasticity, built on Hertz contacts,
         takes precedence where both are on)."""
         x = np.asarray(x)
@@ -183,16 +193,37 @@ class _Evaluator:
             return self.power
         return self.elastic
 
+    def twin_exact(self, x, columns) -> bool:
+        """Whether the twin (rigid sensor beads, no dashpot effect) gives the model at `x` and
+        its derivatives in `columns`: the sensors' compliance c x rate is 0 there, and so is
+        its derivative in each of `columns` (in c: the rate; in the rate: c); the dashpot's
+        strength is 0 and its derivative not asked for."""
+        if self.dashpot_column is not None and (x[self.dashpot_column] != 0.0 or self.dashpot_column in columns):
+            return False
+        if not self.compliance_columns:
+            return True
+        coupling, rate = self.compliance_columns
+        c, f = float(x[coupling]), float(x[rate])
+        return c * f == 0.0 and not (coupling in columns and f != 0.0) and not (rate in columns and c != 0.0)
+
+    def problem_at(self, x, columns=()) -> Problem:
+        """The problem that evaluates the model at `x` and its derivatives in `columns`: the
+        law's (`law_at`), on its twin where that is exact."""
+        law = self.law_at(x)
+        if law in self.twins and self.twin_exact(np.asarray(x), set(int(c) for c in columns)):
+            return self.twins[law]
+        return law
+
     def off_variant(self, x, columns) -> list[int]:
         """The columns of `columns` that switch on a variant of the law which is off at `x`
         (the contact exponent and stiffness with Hertz contacts evaluated, the yield force
         with Hertz contacts): where such a column is 0 in the Jacobian at `x`, it is for
         want of the variant, not the derivative of the law it switches on."""
-        problem = self.problem_at(x)
+        law = self.law_at(x)
         missing = set()
-        if problem is not self.problem:
+        if law is not self.problem:
             missing.update(int(c) for c in self.plastic_columns)
-        if self.power is not None and problem is not self.power:
+        if self.power is not None and law is not self.power:
             missing.update(int(c) for c in self.power_columns)
         return [int(c) for c in columns if int(c) in missing]
 
@@ -433,13 +464,20 @@ class _Search:
             name: [self.labels.index(par[len(fx.PREFIX):]) for par in effect.parameters]
             for name, effect in self.library.items()
         }
-        def variant(**law):
+        def variant(plastic=False, **law):
             return Problem(seed.experiments, instances, seed.base_setups,
-                           fx.effects_forward_model(self.n_beads, steps_per_contact, plastic=False,
+                           fx.effects_forward_model(self.n_beads, steps_per_contact, plastic=plastic,
                                                     reference_force_n=reference_force_n, **law))
 
-        self.evaluate = _Evaluator(self.problem, variant(), self.effect_columns["plasticity"],
-                                   variant(power_law=True), self.effect_columns["contact_exponent"])
+        elastic, power = variant(), variant(power_law=True)
+        twin = dict(compliant_sensors=False, dashpot=False)  # what the batched kernel runs
+        twins = {self.problem: variant(plastic=True, **twin), elastic: variant(**twin),
+                 power: variant(power_law=True, **twin)}
+        self.evaluate = _Evaluator(self.problem, elastic, self.effect_columns["plasticity"],
+                                   power, self.effect_columns["contact_exponent"], twins=twins,
+                                   compliance_columns=[self.labels.index(name)
+                                                       for name in ("sensor_coupling", "sensor_rate")],
+                                   dashpot_column=self.labels.index("dashpot_n_s_m"))
         x0 = np.zeros(p)
         x0[:n_base] = self.base_start
         for i, inst in enumerate(self.problem.instances[:n_base]):

@@ -44,7 +44,7 @@ from hertzchain.compliant_sensor import CompliantSensors
 from hertzchain.integrate import Recording, solve
 from hertzchain.sensor import sensor_signal
 
-from .model import ForwardModel
+from .model import ForwardModel, KernelForm
 from .parameters import REGISTRY, ParameterSpec, register_parameter
 
 SENSOR_REFERENCE_HZ = 100e3
@@ -304,48 +304,86 @@ class _Forces(eqx.Module):
     rest_n: jax.Array
 
 
-def _simulate_with_effects(setup, grid, recording, extras, *, plastic: bool, power_law: bool = False):
-    p = PREFIX
-    changed = apply_effects(setup, extras, plastic=plastic, power_law=power_law)
-    extra_contacts = {k - 1 for k in recording.contacts if k >= 1}
-    contacts = tuple(sorted(set(recording.contacts) | extra_contacts))
-    omega_ref = 2.0 * math.pi * SENSOR_REFERENCE_HZ
-    sensors = CompliantSensors(tuple(k for k in recording.contacts if k >= 1), extras[p + "sensor_beta"],
-                               extras[p + "sensor_coupling"] * extras[p + "sensor_rate"] / omega_ref**2)
-    traces = solve(changed, grid, Recording(contacts=contacts), compliant_sensors=sensors if sensors.beads else None)
-    unseen = (1.0 - extras[p + "preload_seen"]) * extras[p + "preload_n"]
-    forces = {name: value - unseen for name, value in traces.forces_n.items()}
-    start = changed.precompression_n - unseen
-    step = grid.sample_interval_s
-    for k in recording.contacts:
-        front = jnp.concatenate([start[None], forces[f"contact_{k}"]])
-        back = front if k == 0 else jnp.concatenate([start[None], forces[f"contact_{k - 1}"]])
-        signal = sensor_output(front, back, extras[p + "sensor_beta"], extras[p + "sensor_rate"], step)
-        forces[f"contact_{k}"] = signal[1:]
-    return _Forces(forces_n=forces, rest_n=start)
+@dataclasses.dataclass(frozen=True)
+class EffectsSimulation(KernelForm):
+    """The chain with every effect of `extras` switched on: `apply_effects`, the recorded
+    contacts and what the channels read (`readings`: the unseen preload, the sensors' Eq. 4).
 
+    Called, it simulates with `hertzchain.solve` (one chain; a fit takes it under `vmap`).
+    As a `fitting.model.KernelForm` the batched kernel runs it (the same numbers to
+    round-off), where the sensors are rigid: `compliant_sensors` (default) shortens each
+    recorded bead by `sensor_coupling` times its sensor's compression (`CompliantSensors`),
+    which only `solve` does; off, `sensor_coupling` acts on nothing: exact wherever the
+    compliance, `sensor_coupling` x `sensor_rate`, is 0 (the base model), and so are its
+    derivatives in those two where the other of them is 0. `dashpot` off: `dashpot_n_s_m`
+    acts on nothing (exact where it is 0, not its derivative), so that the kernel is built
+    without the dashpot's term (the C++ kernel has it with Hertz contacts only).
+    `fitting.diagnosis` chooses where these twins hold.
+    """
 
-def _simulate_plastic(setup, grid, recording, extras):
-    return _simulate_with_effects(setup, grid, recording, extras, plastic=True)
+    plastic: bool
+    power_law: bool = False
+    compliant_sensors: bool = True
+    dashpot: bool = True
 
+    def setup(self, setup, extras):
+        if not self.dashpot:
+            extras = dict(extras, **{PREFIX + "dashpot_n_s_m": 0.0})
+        return apply_effects(setup, extras, plastic=self.plastic, power_law=self.power_law)
 
-def _simulate_elastic(setup, grid, recording, extras):
-    return _simulate_with_effects(setup, grid, recording, extras, plastic=False)
+    def physics(self, names):
+        """The kernel physics `extras` named `names` can switch on."""
+        switches = {PREFIX + "eta_s": "viscous", PREFIX + "mu": "friction", PREFIX + "preload_n": "preload"}
+        if self.dashpot:
+            switches[PREFIX + "dashpot_n_s_m"] = "dashpot"
+        return {switches[name] for name in names if name in switches}
 
+    def recording(self, recording):
+        """`recording` with the back contact (K-1) of every recorded contact K's sensor."""
+        behind = {k - 1 for k in recording.contacts if k >= 1}
+        return Recording(contacts=tuple(sorted(set(recording.contacts) | behind)))
 
-def _simulate_power_law(setup, grid, recording, extras):
-    return _simulate_with_effects(setup, grid, recording, extras, plastic=False, power_law=True)
+    def readings(self, forces_n, setup, extras, grid, recording):
+        """What the channels of `recording` read from the simulated forces `forces_n` (name ->
+        (S,), N) of the chain `setup` (the effects applied): the unseen share of the preload
+        taken off, each contact K through its sensor's Eq. 4; and what they read at rest."""
+        p = PREFIX
+        unseen = (1.0 - extras[p + "preload_seen"]) * extras[p + "preload_n"]
+        forces = {name: value - unseen for name, value in forces_n.items()}
+        start = setup.precompression_n - unseen
+        step = grid.sample_interval_s
+        for k in recording.contacts:
+            front = jnp.concatenate([start[None], forces[f"contact_{k}"]])
+            back = front if k == 0 else jnp.concatenate([start[None], forces[f"contact_{k - 1}"]])
+            signal = sensor_output(front, back, extras[p + "sensor_beta"], extras[p + "sensor_rate"], step)
+            forces[f"contact_{k}"] = signal[1:]
+        return forces, start
+
+    def __call__(self, setup, grid, recording, extras):
+        p = PREFIX
+        changed = self.setup(setup, extras)
+        beads = tuple(k for k in recording.contacts if k >= 1)
+        omega_ref = 2.0 * math.pi * SENSOR_REFERENCE_HZ
+        sensors = CompliantSensors(beads, extras[p + "sensor_beta"],
+                                   extras[p + "sensor_coupling"] * extras[p + "sensor_rate"] / omega_ref**2)
+        traces = solve(changed, grid, self.recording(recording),
+                       compliant_sensors=sensors if beads and self.compliant_sensors else None)
+        forces, rest = self.readings(traces.forces_n, changed, extras, grid, recording)
+        return _Forces(forces_n=forces, rest_n=rest)
 
 
 def effects_forward_model(n_beads: int, steps_per_contact: int = 200, *, plastic: bool = True,
-                          power_law: bool = False, reference_force_n: float = 100.0) -> ForwardModel:
+                          power_law: bool = False, reference_force_n: float = 100.0,
+                          compliant_sensors: bool = True, dashpot: bool = True) -> ForwardModel:
     """A `ForwardModel` with every effect of `library(n_beads)` available, all off by default.
 
     Effect strengths are fitted parameters of kind "extra" (registry names starting with
     `dx_`); the ones not fitted take their default 0 (off). `plastic=False`: Hertz contacts
     whatever `yield_softening` (exact where it is 0, several times faster); `power_law`:
     power-law contacts (for `exponent_shift` other than 0), equal to Hertz's at the overlap
-    of `reference_force_n` (N; choose it near the data's forces).
+    of `reference_force_n` (N; choose it near the data's forces). `compliant_sensors=False`:
+    rigid sensor beads, a model the batched kernel runs; `dashpot=False`: without the
+    `dashpot_damping` effect (`EffectsSimulation`).
     """
     if plastic and power_law:
         raise ValueError("effects_forward_model: plastic and power_law contacts cannot be combined.")
@@ -353,8 +391,10 @@ def effects_forward_model(n_beads: int, steps_per_contact: int = 200, *, plastic
     for b in range(1, n_beads + 1):
         defaults[dispersion_parameter(b)] = 0.0
     defaults["reference_force_n"] = float(reference_force_n)
-    simulate = _simulate_power_law if power_law else (_simulate_plastic if plastic else _simulate_elastic)
-    return ForwardModel(simulate=simulate, steps_per_contact=steps_per_contact, extras_defaults=defaults)
+    simulation = EffectsSimulation(plastic=plastic, power_law=power_law, compliant_sensors=compliant_sensors,
+                                   dashpot=dashpot)
+    return ForwardModel(simulate=simulation, steps_per_contact=steps_per_contact, extras_defaults=defaults,
+                        kernel=None if compliant_sensors else simulation)
 
 
 def nominal_yield_forces_n(setup: ChainSetup) -> np.ndarray:

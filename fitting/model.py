@@ -34,6 +34,7 @@ is second order in the step).
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 import functools
 import math
@@ -45,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from hertzchain import native
-from hertzchain.batched import kernel_flags, record_batched
+from hertzchain.batched import contact_law, kernel_flags, record_batched
 from hertzchain.chain import ChainSetup
 from hertzchain.integrate import Recording, solve, stack_setups
 from hertzchain.theory import discrete_fwhm_s, discrete_velocity_constant
@@ -97,6 +98,33 @@ def _default_simulate(setup: ChainSetup, grid: TimeGrid, recording: Recording, e
     return solve(setup, grid, recording)
 
 
+class KernelForm(abc.ABC):
+    """A `ForwardModel`'s simulation in the form the batched kernel (`record_batched`) runs:
+    the chain with the extras applied, simulated, and what the channels read from its
+    recorded forces. `ForwardModel.simulate` must compute the same (on `solve`), so that the
+    two paths agree to round-off (`fitting.effects.EffectsSimulation` is both)."""
+
+    @abc.abstractmethod
+    def setup(self, setup: ChainSetup, extras: dict) -> ChainSetup:
+        """The chain to simulate: `setup` with the `extras` applied (traced, one chain)."""
+
+    @abc.abstractmethod
+    def physics(self, names) -> set:
+        """The kernel physics (`kernel_flags`'s `switched_on` names) that extras named `names`
+        (those a problem carries as parameters) can switch on."""
+
+    @abc.abstractmethod
+    def recording(self, recording: Recording) -> Recording:
+        """What the kernel must record for the channels of `recording`."""
+
+    @abc.abstractmethod
+    def readings(self, forces_n: dict, setup: ChainSetup, extras: dict, grid: TimeGrid,
+                 recording: Recording):
+        """(forces_n, rest_n): the channels of `recording` (name -> (S,), N) from the
+        simulated forces `forces_n` of the chain `setup` (`setup()`'s), and what they read at
+        rest before the impact (N)."""
+
+
 @dataclasses.dataclass(frozen=True)
 class ForwardModel:
     """How predictions are made; replace `simulate` to add model switches.
@@ -111,11 +139,14 @@ class ForwardModel:
       Default: `hertzchain.solve`, ignoring `extras`.
     - `steps_per_contact`: Verlet steps per shortest contact time (default 400).
     - `extras_defaults`: values of `extras` entries that are not fitted.
+    - `kernel`: the same model as a `KernelForm`, for the batched kernel (None: `simulate`
+      under `vmap` whenever it is not the default).
     """
 
     simulate: Callable = _default_simulate
     steps_per_contact: int = STEPS_PER_CONTACT
     extras_defaults: dict = dataclasses.field(default_factory=dict)
+    kernel: KernelForm | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -292,7 +323,8 @@ class Problem:
     def fast_path_flags(self, group: _Group):
         """The batched kernel's flags for `group`, or None where it takes `solve` under
         `vmap` (a custom forward model, a setup or a freed parameter the kernel lacks)."""
-        if self.forward.simulate is not _default_simulate:
+        form = self.forward.kernel
+        if self.forward.simulate is not _default_simulate and form is None:
             return None
         indices = list(group.global_index) + [int(i) for i in np.ravel(group.local_index[:1])]
         specs = [self.instances[i].spec for i in indices]
@@ -300,7 +332,14 @@ class Problem:
             return None
         switched_on = {FAST_PATH_PHYSICS[spec.name] for spec in specs if spec.kind == "setup"} - {None}
         # a fit reads the recorded forces only: no running maxima, no energy books
-        return kernel_flags(group.setups, switched_on=switched_on)._replace(ledger=False)
+        flags = kernel_flags(group.setups, switched_on=switched_on)._replace(ledger=False)
+        if form is None:
+            return flags
+        # the extras' physics, and the law of the chain they make (a static field of the setup)
+        applied = form.setup(jax.tree_util.tree_map(lambda a: a[0], group.setups), self.forward.extras_defaults)
+        extras = form.physics({spec.name for spec in specs if spec.kind == "extra"})
+        return kernel_flags(group.setups, switched_on=switched_on | extras)._replace(
+            ledger=False, law=contact_law(applied))
 
     def simulates_natively(self) -> bool:
         """Whether every group's simulation runs the C++ kernel (`hertzchain.native`) in a fit."""
@@ -366,20 +405,31 @@ class Problem:
                 per_chain = jax.vmap(jac_one, in_axes=(0, None, 0))
                 return jax.vmap(per_chain, in_axes=(None, 0, 0))(group.setups, theta_global, theta_local)
         else:
+            form = forward.kernel
+
             @jax.jit
             def batch(theta_global, theta_local):
                 chains, experiments = theta_local.shape[:2]
                 per_experiment = jax.vmap(applied, in_axes=(0, None, 0))
-                setups, _ = jax.vmap(per_experiment, in_axes=(None, 0, 0))(group.setups, theta_global, theta_local)
+                setups, extras = jax.vmap(per_experiment, in_axes=(None, 0, 0))(group.setups, theta_global, theta_local)
                 # chains x experiments on the kernel's batch axis
-                setups = jax.tree_util.tree_map(lambda a: a.reshape((chains * experiments,) + a.shape[2:]), setups)
+                setups, extras = jax.tree_util.tree_map(
+                    lambda a: jnp.broadcast_to(a, (chains, experiments) + jnp.shape(a)[2:]).reshape(
+                        (chains * experiments,) + jnp.shape(a)[2:]), (setups, extras))
+                recording = group.recording if form is None else form.recording(group.recording)
+                if form is not None:
+                    setups = jax.vmap(form.setup)(setups, extras)
                 # one sample per loop iteration: a fit's batch is small, so the loop overhead
                 # that longer unrolled blocks hide matters less than their compile time
                 # (fit benchmark: 20 steps per block compiled in 6.7 s, one sample of 6 in 3.4 s,
                 # the same run time)
-                traces = record_batched(setups, group.grid, group.recording, flags,
+                traces = record_batched(setups, group.grid, recording, flags,
                                         block_steps=group.grid.steps_per_sample)
-                out = channels(traces.forces_n, setups.precompression_n, 1)
+                if form is None:
+                    out = channels(traces.forces_n, setups.precompression_n, 1)
+                else:
+                    read = jax.vmap(form.readings, in_axes=(0, 0, 0, None, None))
+                    out = channels(*read(traces.forces_n, setups, extras, group.grid, group.recording), 1)
                 return out.reshape((chains, experiments) + out.shape[1:])
 
             @jax.jit

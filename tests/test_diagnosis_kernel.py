@@ -1,0 +1,90 @@
+"""The diagnosis's models on the batched kernel: `fitting.effects.EffectsSimulation` with rigid
+sensor beads and without the dashpot effect (its twin) is a `fitting.model.KernelForm`, which
+the C++ kernel runs; it must give the numbers of the full model on `solve` under `vmap` where
+the sensors' compliance and the dashpot are 0, values and derivatives, and the diagnosis's
+evaluator must choose it only where that holds.
+Data: a 7-bead brass-like chain (not the paper's), two shots, contacts 2 and 5."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fitting import effects as fx
+from fitting.diagnosis import _Evaluator
+from fitting.fit import initial_values, make_problem
+from fitting.hidden import hidden_effect_traces
+from fitting.model import Problem, residuals_and_jacobian
+from fitting.parameters import ParameterInstance, get_spec
+
+EXTRAS = ("eta_s", "dashpot_n_s_m", "preload_n", "preload_seen", "sensor_beta", "sensor_rate", "sensor_coupling",
+          "yield_softening", "wall_softening")
+
+
+@pytest.fixture(scope="module")
+def brass_files():
+    return hidden_effect_traces((), n_beads=7, velocities_m_s=(0.15, 0.5), contacts=(2, 5), seed=2,
+                                bead_radius_m=5e-3, bead_density_kg_m3=8500.0, bead_youngs_pa=110e9,
+                                t_end_s=6e-4)
+
+
+def _problem(files, **law):
+    forward = fx.effects_forward_model(7, **law)
+    seed = make_problem(files, ("eta", "C", "striker_velocity"), forward=forward)
+    extra = [ParameterInstance(get_spec(fx.PREFIX + name), label=name) for name in EXTRAS]
+    problem = Problem(seed.experiments, tuple(seed.instances) + tuple(extra), seed.base_setups, forward)
+    return problem, np.concatenate([initial_values(seed), np.zeros(len(extra))])
+
+
+@pytest.mark.parametrize("plastic", [False, True])
+def test_twin_on_the_kernel_equals_the_full_model_at_zero_compliance_and_dashpot(brass_files, plastic):
+    """Effects on (extra damping, a preload half seen, sensors' Eq. 4 at f0 = 183 kHz and,
+    with `plastic`, yield forces 1/512 of the nominal, which the contacts cross), the
+    sensors' coupling and the dashpot 0: residuals to 1e-12 of their largest and every
+    Jacobian column to 1e-8 of its largest (measured on the paper's chain: 4e-14, and 2e-9
+    for the sensors' rate, whose filter takes a second difference of the forces); the
+    coupling's column (rate 0 there) is 0 in both."""
+    compliant, x = _problem(brass_files, plastic=plastic)
+    rigid, _ = _problem(brass_files, plastic=plastic, compliant_sensors=False, dashpot=False)
+    assert rigid.simulates_natively() and not compliant.simulates_natively()
+    for name, value in (("eta_s", 3e-7), ("preload_n", 0.5), ("preload_seen", 0.5), ("sensor_beta", 0.2),
+                        ("sensor_rate", 0.3), ("yield_softening", 8.0 if plastic else 0.0)):
+        x[compliant.labels.index(name)] = value
+    coupling = compliant.labels.index("sensor_coupling")
+    # (on Hertz contacts the yield's column is 0 in both)
+    skipped = ("sensor_coupling", "dashpot_n_s_m") + (() if plastic else ("yield_softening",))
+    wanted = [c for c in range(x.size) if compliant.labels[c] not in skipped]
+    r_ref, j_ref = residuals_and_jacobian(compliant, x, wanted)
+    r, j = residuals_and_jacobian(rigid, x, wanted)
+    assert np.max(np.abs(r - r_ref)) <= 1e-12 * np.max(np.abs(r_ref))
+    scale = np.max(np.abs(j_ref[:, wanted]), axis=0)
+    assert np.all(scale > 0)
+    assert np.all(np.max(np.abs(j[:, wanted] - j_ref[:, wanted]), axis=0) <= 1e-8 * scale)
+    x[compliant.labels.index("sensor_rate")] = 0.0
+    _, j_ref = residuals_and_jacobian(compliant, x, [coupling])
+    _, j = residuals_and_jacobian(rigid, x, [coupling])
+    assert np.all(j_ref[:, coupling] == 0.0) and np.all(j[:, coupling] == 0.0)
+
+
+def test_evaluator_takes_the_twin_only_where_it_is_exact():
+    """Compliance c x rate: the twin where it is 0 and so is its derivative in every column
+    asked for (in c: the rate; in the rate: c), and the dashpot is 0 and its column not asked
+    for; the law's own problem elsewhere."""
+    law, elastic, law_twin, elastic_twin = (object() for _ in range(4))
+    evaluate = _Evaluator(law, elastic, plastic_columns=[4], twins={law: law_twin, elastic: elastic_twin},
+                          compliance_columns=(0, 1), dashpot_column=5)
+    x = np.zeros(6)
+    assert evaluate.problem_at(x) is elastic_twin and evaluate.problem_at(x, range(5)) is elastic_twin
+    assert evaluate.problem_at(x, [5]) is elastic
+    x[4] = 1.0  # a yield force: the plastic law
+    assert evaluate.problem_at(x, range(5)) is law_twin
+    x[1] = 0.3  # a rate, coupling 0: exact unless the coupling's derivative is asked for
+    assert evaluate.problem_at(x) is law_twin and evaluate.problem_at(x, [1, 2]) is law_twin
+    assert evaluate.problem_at(x, [0]) is law
+    x[0], x[1] = 0.5, 0.0  # a coupling, rate 0: exact unless the rate's derivative is asked for
+    assert evaluate.problem_at(x, [0, 3]) is law_twin and evaluate.problem_at(x, [1]) is law
+    x[1] = 0.3  # both: compliant sensors
+    assert evaluate.problem_at(x) is law
+    x[0] = 0.0
+    x[5] = 1e-3  # a dashpot
+    assert evaluate.problem_at(x) is law
