@@ -331,15 +331,15 @@ class Problem:
         if any(spec.kind == "setup" and spec.name not in FAST_PATH_PHYSICS for spec in specs):
             return None
         switched_on = {FAST_PATH_PHYSICS[spec.name] for spec in specs if spec.kind == "setup"} - {None}
+        if form is not None:
+            switched_on |= form.physics({spec.name for spec in specs if spec.kind == "extra"})
         # a fit reads the recorded forces only: no running maxima, no energy books
         flags = kernel_flags(group.setups, switched_on=switched_on)._replace(ledger=False)
         if form is None:
             return flags
-        # the extras' physics, and the law of the chain they make (a static field of the setup)
+        # the law of the chain the extras make (a static field of the setup)
         applied = form.setup(jax.tree_util.tree_map(lambda a: a[0], group.setups), self.forward.extras_defaults)
-        extras = form.physics({spec.name for spec in specs if spec.kind == "extra"})
-        return kernel_flags(group.setups, switched_on=switched_on | extras)._replace(
-            ledger=False, law=contact_law(applied))
+        return flags._replace(law=contact_law(applied))
 
     def simulates_natively(self) -> bool:
         """Whether every group's simulation runs the C++ kernel (`hertzchain.native`) in a fit."""
@@ -416,8 +416,10 @@ class Problem:
                 setups, extras = jax.tree_util.tree_map(
                     lambda a: jnp.broadcast_to(a, (chains, experiments) + jnp.shape(a)[2:]).reshape(
                         (chains * experiments,) + jnp.shape(a)[2:]), (setups, extras))
-                recording = group.recording if form is None else form.recording(group.recording)
-                if form is not None:
+                if form is None:
+                    recording = group.recording
+                else:
+                    recording = form.recording(group.recording)
                     setups = jax.vmap(form.setup)(setups, extras)
                 # one sample per loop iteration: a fit's batch is small, so the loop overhead
                 # that longer unrolled blocks hide matters less than their compile time
