@@ -142,7 +142,8 @@ class _Evaluator:
     With `power` (power-law contacts) and `power_columns`, points where the exponent's shift
     is not 0 are evaluated on `power` (compiled on first use).
     With `twins` (each of those problems -> the same with rigid sensor beads and without the
-    dashpot effect, which the batched kernel runs: `fitting.effects.EffectsSimulation`),
+    dashpot effect, which the C++ kernel runs: `fitting.effects.EffectsSimulation`; the
+    problems themselves run the batched JAX kernel),
     `compliance_columns` (`sensor_coupling`, `sensor_rate`) and `dashpot_column`, points where
     the twin gives the model and the derivatives asked for are evaluated on it (`twin_exact`):
     the same numbers to round-off, several times faster.
@@ -470,7 +471,7 @@ class _Search:
                                                     reference_force_n=reference_force_n, **law))
 
         elastic, power = variant(), variant(power_law=True)
-        twin = dict(compliant_sensors=False, dashpot=False)  # what the batched kernel runs
+        twin = dict(compliant_sensors=False, dashpot=False)  # what the C++ kernel runs
         twins = {self.problem: variant(plastic=True, **twin), elastic: variant(**twin),
                  power: variant(power_law=True, **twin)}
         self.evaluate = _Evaluator(self.problem, elastic, self.effect_columns["plasticity"],

@@ -311,19 +311,19 @@ class EffectsSimulation(KernelForm):
 
     Called, it simulates with `hertzchain.solve` (one chain; a fit takes it under `vmap`).
     As a `fitting.model.KernelForm` the batched kernel runs it (the same numbers to
-    round-off), where the sensors are rigid: `compliant_sensors` (default) shortens each
-    recorded bead by `sensor_coupling` times its sensor's compression (`CompliantSensors`),
-    which only `solve` does; off, `sensor_coupling` acts on nothing: exact wherever the
-    compliance, `sensor_coupling` x `sensor_rate`, is 0 (the base model), and so are its
-    derivatives in those two where the other of them is 0. `dashpot` off: `dashpot_n_s_m`
-    acts on nothing (exact where it is 0, not its derivative), so that the kernel is built
-    without the dashpot's term (the C++ kernel has it with Hertz contacts only).
-    `fitting.diagnosis` chooses where these twins hold.
+    round-off). `compliant` (default) shortens each recorded bead by `sensor_coupling` times
+    its sensor's compression (`compliant_sensors`), which the JAX kernel runs and the C++
+    kernel does not; off, `sensor_coupling` acts on nothing: exact wherever the compliance,
+    `sensor_coupling` x `sensor_rate`, is 0 (the base model), and so are its derivatives in
+    those two where the other of them is 0. `dashpot` off: `dashpot_n_s_m` acts on nothing
+    (exact where it is 0, not its derivative), so that the kernel is built without the
+    dashpot's term (the C++ kernel has it with Hertz contacts only). These twins run on the
+    C++ kernel; `fitting.diagnosis` chooses where they hold.
     """
 
     plastic: bool
     power_law: bool = False
-    compliant_sensors: bool = True
+    compliant: bool = True
     dashpot: bool = True
 
     def setup(self, setup, extras):
@@ -359,15 +359,22 @@ class EffectsSimulation(KernelForm):
             forces[f"contact_{k}"] = signal[1:]
         return forces, start
 
-    def __call__(self, setup, grid, recording, extras):
-        p = PREFIX
-        changed = self.setup(setup, extras)
+    def compliant_sensors(self, recording, extras):
+        """The sensor of every recorded contact K >= 1 in its bead K, shortened by
+        `sensor_coupling` x `sensor_rate` / (2 pi `SENSOR_REFERENCE_HZ`)^2 per unit of force
+        (None without `compliant_sensors`, or without such a contact)."""
         beads = tuple(k for k in recording.contacts if k >= 1)
+        if not (beads and self.compliant):
+            return None
+        p = PREFIX
         omega_ref = 2.0 * math.pi * SENSOR_REFERENCE_HZ
-        sensors = CompliantSensors(beads, extras[p + "sensor_beta"],
-                                   extras[p + "sensor_coupling"] * extras[p + "sensor_rate"] / omega_ref**2)
+        return CompliantSensors(beads, extras[p + "sensor_beta"],
+                                extras[p + "sensor_coupling"] * extras[p + "sensor_rate"] / omega_ref**2)
+
+    def __call__(self, setup, grid, recording, extras):
+        changed = self.setup(setup, extras)
         traces = solve(changed, grid, self.recording(recording),
-                       compliant_sensors=sensors if beads and self.compliant_sensors else None)
+                       compliant_sensors=self.compliant_sensors(recording, extras))
         forces, rest = self.readings(traces.forces_n, changed, extras, grid, recording)
         return _Forces(forces_n=forces, rest_n=rest)
 
@@ -381,9 +388,10 @@ def effects_forward_model(n_beads: int, steps_per_contact: int = 200, *, plastic
     `dx_`); the ones not fitted take their default 0 (off). `plastic=False`: Hertz contacts
     whatever `yield_softening` (exact where it is 0, several times faster); `power_law`:
     power-law contacts (for `exponent_shift` other than 0), equal to Hertz's at the overlap
-    of `reference_force_n` (N; choose it near the data's forces). `compliant_sensors=False`:
-    rigid sensor beads, a model the batched kernel runs; `dashpot=False`: without the
-    `dashpot_damping` effect (`EffectsSimulation`).
+    of `reference_force_n` (N; choose it near the data's forces). Either way the batched
+    kernel runs it: `compliant_sensors=False` (rigid sensor beads) and `dashpot=False`
+    (without the `dashpot_damping` effect) give the models its C++ kernel runs
+    (`EffectsSimulation`).
     """
     if plastic and power_law:
         raise ValueError("effects_forward_model: plastic and power_law contacts cannot be combined.")
@@ -391,10 +399,10 @@ def effects_forward_model(n_beads: int, steps_per_contact: int = 200, *, plastic
     for b in range(1, n_beads + 1):
         defaults[dispersion_parameter(b)] = 0.0
     defaults["reference_force_n"] = float(reference_force_n)
-    simulation = EffectsSimulation(plastic=plastic, power_law=power_law, compliant_sensors=compliant_sensors,
+    simulation = EffectsSimulation(plastic=plastic, power_law=power_law, compliant=compliant_sensors,
                                    dashpot=dashpot)
     return ForwardModel(simulate=simulation, steps_per_contact=steps_per_contact, extras_defaults=defaults,
-                        kernel=None if compliant_sensors else simulation)
+                        kernel=simulation)
 
 
 def nominal_yield_forces_n(setup: ChainSetup) -> np.ndarray:

@@ -15,8 +15,9 @@ derivatives; `n_fitted` counts the samples that do.
 Experiments with the same chain structure (number of beads, end, sensor beads) are
 simulated together on a common grid: by `hertzchain.batched.record_batched` (the batch on
 the SIMD axis, several times faster than `solve` per chain) when the default forward model
-runs and every freed parameter is physics that kernel has (`FAST_PATH_PHYSICS`); otherwise
-by `solve` under `vmap` (extra effects of a custom `ForwardModel`). Both integrate the same equations in the same order (they agree to
+runs, or a custom `ForwardModel` gives its `KernelForm` (`fitting.effects`'s does), and every
+freed parameter is physics that kernel has (`FAST_PATH_PHYSICS`); otherwise by `solve` under
+`vmap` (extra effects of a custom `ForwardModel` without a `KernelForm`). Both integrate the same equations in the same order (they agree to
 round-off: `tests/test_fit_model.py`).
 
 Jacobian. The residual's derivative is assembled by a custom JVP: the simulator is
@@ -48,6 +49,7 @@ import numpy as np
 from hertzchain import native
 from hertzchain.batched import contact_law, kernel_flags, record_batched
 from hertzchain.chain import ChainSetup
+from hertzchain.compliant_sensor import CompliantSensors
 from hertzchain.integrate import Recording, solve, stack_setups
 from hertzchain.theory import discrete_fwhm_s, discrete_velocity_constant
 from hertzchain.timegrid import TimeGrid, choose_time_grid, shortest_contact_time_s
@@ -123,6 +125,13 @@ class KernelForm(abc.ABC):
         """(forces_n, rest_n): the channels of `recording` (name -> (S,), N) from the
         simulated forces `forces_n` of the chain `setup` (`setup()`'s), and what they read at
         rest before the impact (N)."""
+
+    def compliant_sensors(self, recording: Recording, extras: dict) -> CompliantSensors | None:
+        """Embedded sensors in compliance form the chain has for the channels of `recording`
+        (their beads from `recording` alone; strengths from `extras`, which may be batched),
+        or None (the default: rigid beads)."""
+        del recording, extras
+        return None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -339,7 +348,8 @@ class Problem:
             return flags
         # the law of the chain the extras make (a static field of the setup)
         applied = form.setup(jax.tree_util.tree_map(lambda a: a[0], group.setups), self.forward.extras_defaults)
-        return flags._replace(law=contact_law(applied))
+        sensors = form.compliant_sensors(group.recording, self.forward.extras_defaults)
+        return flags._replace(law=contact_law(applied), sensors=() if sensors is None else tuple(sensors.beads))
 
     def simulates_natively(self) -> bool:
         """Whether every group's simulation runs the C++ kernel (`hertzchain.native`) in a fit."""
@@ -425,8 +435,9 @@ class Problem:
                 # that longer unrolled blocks hide matters less than their compile time
                 # (fit benchmark: 20 steps per block compiled in 6.7 s, one sample of 6 in 3.4 s,
                 # the same run time)
+                sensors = None if form is None else form.compliant_sensors(group.recording, extras)
                 traces = record_batched(setups, group.grid, recording, flags,
-                                        block_steps=group.grid.steps_per_sample)
+                                        block_steps=group.grid.steps_per_sample, compliant_sensors=sensors)
                 if form is None:
                     out = channels(traces.forces_n, setups.precompression_n, 1)
                 else:

@@ -25,8 +25,9 @@ same contact laws from `contact`, so the results agree to round-off), but
 
 It covers everything `ChainSetup` describes: Hertz, power-law and elastic-plastic contacts
 (Thornton's and Jackson-Green's laws, each contact's largest overlap carried in the state),
-embedded sensors, rigid/elastic walls and free ends, preload, Kuwabara-Kono damping, linear
-dashpots and track friction; the laws are `forces.elastic_parts` and `contact`'s, the
+embedded sensors (split beads; and, in `record_batched` without the books, in compliance
+form: `hertzchain.compliant_sensor`), rigid/elastic walls and free ends, preload,
+Kuwabara-Kono damping, linear dashpots and track friction; the laws are `forces.elastic_parts` and `contact`'s, the
 general solver's. On the CPU, `solve_batched` runs the same step in a fused C++ kernel
 instead where one covers the physics (`hertzchain.native`, Hertz contacts:
 blocks of chains kept in cache through all their steps; agrees with this module's kernel to
@@ -49,7 +50,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
-from . import contact, forces, native
+from . import compliant_sensor, contact, forces, native
 from .chain import PLASTIC_LAWS, ChainSetup, build_model, internal_contact_index, internal_sensor_index
 from .integrate import Recording, _channel_names, _layout, stack_setups  # noqa: F401
 from .timegrid import TimeGrid
@@ -114,12 +115,17 @@ class KernelFlags(NamedTuple):
     # the full one an undamped Jackson-Green sweep took 18.2 s against 3.9 s
     # (`benchmarks/results/plastic_kernel/jackson_green_kernel.json`, `jax_full_state`).
     full_step: bool = False
+    # Beads K (1..N-1) with an embedded sensor in compliance form (`compliant_sensor`; their
+    # strengths are `record_batched`'s `compliant_sensors`): the JAX kernel's full step only,
+    # without the books.
+    sensors: tuple[int, ...] = ()
 
     @property
     def full_state(self) -> bool:
         """Velocities and accelerations kept apart (damping or friction acts between the
-        two half kicks, or `full_step`), rather than the next half kick's velocity alone."""
-        return self.viscous or self.friction or self.full_step
+        two half kicks, compliant sensors, or `full_step`), rather than the next half kick's
+        velocity alone."""
+        return self.viscous or self.friction or self.full_step or bool(self.sensors)
 
     @property
     def plastic(self) -> bool:
@@ -260,10 +266,18 @@ def _law(p, flags: KernelFlags, rows=lambda a: a) -> forces.ElasticLaw:
                                 for field in forces.ElasticLaw._fields if field in p})
 
 
-def _contact_forces(p, flags: KernelFlags, x, v, contacts=None, peak=None):
+def _shortened(p, flags: KernelFlags, amount, values):
+    """`values` of every contact (n_bodies, B: overlaps, m, or rates, m/s) less what the
+    compliant sensors compressed by `amount` (N, or N/s: (n_sensors, B)) take
+    (`compliant_sensor.shortened`)."""
+    return compliant_sensor.shortened(flags.sensors, p["sensor_back"], p["sensor_front"], amount, values)
+
+
+def _contact_forces(p, flags: KernelFlags, x, v, contacts=None, peak=None, sensor=None):
     """Total and elastic force of every contact, wall last (n_bodies, B), or of the listed
     `contacts` only, N, from displacements x (m) and velocities v (m/s) of the bodies and
-    the wall (and, for plastic laws, every contact's largest overlap so far, `peak`, m):
+    the wall (and, for plastic laws, every contact's largest overlap so far, `peak`, m; with
+    compliant sensors, their forces and rates, `sensor`, N and N/s, (n_sensors, B) each):
     the laws of `contact` (the ones `forces.chain_forces` uses), elementwise."""
 
     def rows(a):
@@ -278,6 +292,13 @@ def _contact_forces(p, flags: KernelFlags, x, v, contacts=None, peak=None):
         front_v, back_v = pair(v)
         rate = front_v - back_v
     overlap = front - back + rows(p["overlap0"]) if flags.preload else front - back
+    if flags.sensors and sensor is not None:  # (None: at rest)
+        force, sensor_rate = sensor
+        if contacts is not None:
+            raise ValueError("compliant sensors: the contact forces of every contact only")
+        overlap = _shortened(p, flags, force - p["first_force"], overlap)
+        if flags.viscous:
+            rate = _shortened(p, flags, sensor_rate, rate)
     return _forces_at(p, flags, overlap, rate, rows, None if peak is None else rows(peak))
 
 
@@ -300,10 +321,14 @@ def _forces_at(p, flags: KernelFlags, overlap, rate, rows=lambda a: a, peak=None
     return total, elastic
 
 
-def _overlaps(p, flags: KernelFlags, x):
-    """Overlap of every contact, wall last (n_bodies, B), m. Without preload every static
+def _overlaps(p, flags: KernelFlags, x, sensor_force=None):
+    """Overlap of every contact, wall last (n_bodies, B), m (with compliant sensors, those
+    of sensor forces `sensor_force`, N, (n_sensors, B)). Without preload every static
     overlap is 0 and is not added (one array less to read per step)."""
-    return x[:-1] - x[1:] + p["overlap0"] if flags.preload else x[:-1] - x[1:]
+    overlap = x[:-1] - x[1:] + p["overlap0"] if flags.preload else x[:-1] - x[1:]
+    if flags.sensors and sensor_force is not None:  # (None: at rest)
+        overlap = _shortened(p, flags, sensor_force - p["first_force"], overlap)
+    return overlap
 
 
 def _body_force(force, external=None):
@@ -339,6 +364,9 @@ class _Layout(NamedTuple):
         b, c = self.bodies + 1, self.bodies
         # plastic contacts: every contact's largest overlap so far
         peak = (("peak", c),) if flags.plastic else ()
+        if flags.sensors:  # compliant sensors: force, rate and drive (Eq. 4) of each
+            n = len(flags.sensors)
+            peak = peak + (("sensor_force", n), ("sensor_rate", n), ("sensor_drive", n))
         if flags.full_state:
             # x, v, a at the step; running maxima; viscous body forces; dissipated energy
             viscous = (("viscous", b),) if flags.viscous else ()
@@ -366,10 +394,16 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
     barrier = jax.lax.optimization_barrier
     new = {}
 
+    sensor = None
+    if flags.sensors:  # the sensors' first half kick and drift (`compliant_sensor.drift`)
+        force, half_rate, predicted_rate, quasi_static = compliant_sensor.drift(
+            p["sensor_inv"], dt, s["sensor_force"], s["sensor_rate"], s["sensor_drive"])
+        sensor = (force, predicted_rate)
+
     def contact_forces(x, v):  # plastic contacts: their largest overlaps, these included
         if flags.plastic:
-            new["peak"] = jnp.maximum(s["peak"], _overlaps(p, flags, x))
-        return _contact_forces(p, flags, x, v, peak=new.get("peak"))
+            new["peak"] = jnp.maximum(s["peak"], _overlaps(p, flags, x, None if sensor is None else sensor[0]))
+        return _contact_forces(p, flags, x, v, peak=new.get("peak"), sensor=sensor)
 
     if not flags.full_state:
         x = s["x"] + dt * s["u"]
@@ -401,6 +435,10 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
     a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
     v = v_half + h * a
     new |= {"x": x, "a": a, "v": v}
+    if flags.sensors:  # the second half kick, from the new drive
+        drive = compliant_sensor.drive(p["sensor_beta"], *compliant_sensor.contacts_of(flags.sensors, total))
+        new |= {"sensor_force": force, "sensor_drive": drive,
+                "sensor_rate": compliant_sensor.kick(p["sensor_inv"], dt, force, half_rate, drive, quasi_static)}
     if flags.viscous and flags.ledger:
         viscous = _body_force(total - elastic)
         work = work + jnp.sum(viscous * h * 0.5 * (v_half + v), axis=0)
@@ -450,6 +488,9 @@ def _initial(p, flags: KernelFlags, layout: _Layout, dt: float):
     """Packed state at the impact and the bodies' (x, v) there."""
     x, v, a, total, elastic = _start(p, flags)
     peak = {"peak": _initial_peak(p, flags, x)} if flags.plastic else {}
+    if flags.sensors:  # at rest: the preload's force
+        at_rest = jnp.zeros_like(p["sensor_beta"]) + p["first_force"]
+        peak |= {"sensor_force": at_rest, "sensor_rate": jnp.zeros_like(at_rest), "sensor_drive": at_rest}
     if flags.full_state:
         parts = {"x": x, "v": v, "a": a, "max": total, "dissipated": jnp.zeros_like(x[:1])}
         if flags.viscous:
@@ -498,7 +539,12 @@ def _kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ...], blo
         # The recorded channels alone, from the new state (with viscous damping, at the
         # step's final velocity, as `solve` records them).
         s = layout.unpack(flags, state)
-        force = _contact_forces(p, flags, s["x"], s.get("v"), channels, s.get("peak"))[0]
+        sensor = (s["sensor_force"], s["sensor_rate"]) if flags.sensors else None
+        if flags.sensors:  # the sensors shorten contacts that need not be recorded
+            force = _contact_forces(p, flags, s["x"], s.get("v"), None, s.get("peak"), sensor)[0]
+            force = jnp.stack([force[k] for k in channels])
+        else:
+            force = _contact_forces(p, flags, s["x"], s.get("v"), channels, s.get("peak"))[0]
         return state, jax.lax.optimization_barrier(force)
 
     def iteration(count):
@@ -738,6 +784,7 @@ def record_batched(
     *,
     block_steps: int = DEFAULT_BLOCK_STEPS,
     kernel: str = "auto",
+    compliant_sensors: compliant_sensor.CompliantSensors | None = None,
 ) -> BatchedTraces:
     """`solve_batched`'s fast kernel for a batched setup whose values may be traced
     (inside `jit`, `vmap`, `jax.jacfwd`), on one device.
@@ -755,6 +802,9 @@ def record_batched(
       `jax.linearize` and `jax.vmap` work; a jacfwd's directions, the forces and a vmapped
       batch of setups in one kernel run; reverse mode is not available there); "jax": the
       JAX kernel (every transformation).
+    - `compliant_sensors`: embedded sensors in compliance form, as `solve` takes them, with
+      `beta` and `inv_omega0_sq_s2` of shape (B,) or (B, n_sensors); their beads must be
+      `flags.sensors` (the JAX kernel runs them, without the books).
 
     **Returns:** `BatchedTraces`; with `flags.ledger` off, its maxima and energies are NaN
     (not computed). The two kernels agree to round-off, values and derivatives.
@@ -766,7 +816,35 @@ def record_batched(
                          f"{contact_law(setup)!r}; pass kernel_flags(setup, ...).")
     names, rows, user = _plan(setup, recording)
     batch = batch_size(setup)
+    params = _params(setup, None)
+    if flags.sensors or compliant_sensors is not None:
+        params = _with_compliant_sensors(params, setup, flags, compliant_sensors)
     fused = native.kernel_for(flags, None) if kernel == "auto" and not flags.ledger else None
     if fused is not None:  # the full kernel carries the tangents, whatever the physics
         fused = fused._replace(physics="full")
-    return _assemble(_params(setup, None), batch, flags, grid, rows, names, user, int(block_steps), None, fused)
+    return _assemble(params, batch, flags, grid, rows, names, user, int(block_steps), None, fused)
+
+
+def _with_compliant_sensors(params: dict, setup: ChainSetup, flags: KernelFlags, sensors) -> dict:
+    """The kernel arrays with the compliant sensors': mass fraction and 1/omega0^2
+    (n_sensors, B), and the overlap every contact loses per unit of their compression
+    (`compliant_sensor.loss_matrix`, (n_sensors, n_bodies, B)), checked against `flags`."""
+    beads = () if sensors is None else compliant_sensor.checked_beads(sensors.beads, setup.n_beads)
+    if beads != tuple(flags.sensors):
+        raise ValueError(f"compliant_sensors: beads {beads} but flags.sensors is {tuple(flags.sensors)}; pass "
+                         "kernel_flags(...)._replace(sensors=<the sensors' beads>).")
+    if flags.ledger:
+        raise ValueError("compliant_sensors: the kernel keeps no books with compliant sensors; pass flags with "
+                         "ledger=False (the recorded forces only) or use solve.")
+    if setup.sensor_beads:
+        raise ValueError(f"compliant_sensors: the setup already splits sensor beads {setup.sensor_beads}; use one "
+                         "sensor model (sensor_beads=() here).")
+    shape = (batch_size(setup), len(beads))
+
+    def per_sensor(value):  # (), (B,) or (B, n_sensors) -> (n_sensors, B)
+        value = jnp.asarray(value, dtype=jnp.float64)
+        return jnp.broadcast_to(value[:, None] if value.ndim == 1 else value, shape).T
+
+    beta, inv = per_sensor(sensors.beta), per_sensor(sensors.inv_omega0_sq_s2)
+    back, front, _ = compliant_sensor.compliances(params["mass"][np.asarray(beads, dtype=int)], beta, inv)
+    return params | {"sensor_beta": beta, "sensor_inv": inv, "sensor_back": back, "sensor_front": front}

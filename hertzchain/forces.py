@@ -14,7 +14,7 @@ import jax.numpy as jnp
 
 from . import contact
 from .chain import ChainModel
-from .compliant_sensor import overlap_offsets
+from .compliant_sensor import shortened_by_model
 
 
 class ChainForces(NamedTuple):
@@ -40,7 +40,7 @@ def overlaps(model: ChainModel, displacement_m, sensor_force_n=None):
     their compliance times the force beyond the preload's (None: at the preload's)."""
     contacts = displacement_m[:-1] - displacement_m[1:] + model.overlap0_m
     if model.compliant is not None and sensor_force_n is not None:
-        contacts = contacts - overlap_offsets(model, sensor_force_n - model.first_bead_force_n)
+        contacts = shortened_by_model(model, sensor_force_n - model.first_bead_force_n, contacts)
     return contacts, displacement_m[-1] + model.wall_overlap0_m
 
 
@@ -130,7 +130,7 @@ def chain_forces(model: ChainModel, displacement_m, velocity_m_s, max_overlap_m=
     overlap, wall_overlap = overlap_all[:-1], overlap_all[-1]
     rate = velocity_m_s[:-1] - velocity_m_s[1:]
     if model.compliant is not None and sensor_rate_n_s is not None:
-        rate = rate - overlap_offsets(model, sensor_rate_n_s)
+        rate = shortened_by_model(model, sensor_rate_n_s, rate)
     hertz_elastic, hertz_total = contact.contact_force(
         overlap, rate, model.kappa, model.eta_s, elastic_all[:-1], model.dashpot_n_s_m
     )

@@ -178,16 +178,11 @@ class _SensorDrift(NamedTuple):
 
 
 def _sensor_drift(model: ChainModel, dt_s: float, state: ChainState) -> _SensorDrift:
-    """First half kick and drift of the compliant sensors' forces (quasi-static ones take
-    the previous step's drive)."""
+    """First half kick and drift of the compliant sensors' forces (`compliant_sensor.drift`)."""
     if model.compliant is None:
         return _SensorDrift(None, None, None, None)
-    h = 0.5 * dt_s
-    quasi_static = cs.is_quasi_static(model, dt_s)
-    accel = cs.sensor_accel(model, state.sensor_drive_n, state.sensor_force_n, quasi_static)
-    half_rate = state.sensor_rate_n_s + h * accel
-    force = jnp.where(quasi_static, state.sensor_drive_n, state.sensor_force_n + dt_s * half_rate)
-    return _SensorDrift(force, half_rate, half_rate + h * accel, quasi_static)
+    return _SensorDrift(*cs.drift(model.compliant.inv_omega0_sq_s2, dt_s, state.sensor_force_n,
+                                  state.sensor_rate_n_s, state.sensor_drive_n))
 
 
 def _sensor_kick(model: ChainModel, dt_s: float, sensor: _SensorDrift, contact_force_n) -> dict:
@@ -196,8 +191,8 @@ def _sensor_kick(model: ChainModel, dt_s: float, sensor: _SensorDrift, contact_f
         empty = jnp.zeros((0,))
         return {"sensor_force_n": empty, "sensor_rate_n_s": empty, "sensor_drive_n": empty}
     drive = cs.sensor_drive(model, contact_force_n)
-    accel = cs.sensor_accel(model, drive, sensor.force_n, sensor.quasi_static)
-    rate = jnp.where(sensor.quasi_static, 0.0, sensor.half_rate_n_s + 0.5 * dt_s * accel)
+    rate = cs.kick(model.compliant.inv_omega0_sq_s2, dt_s, sensor.force_n, sensor.half_rate_n_s, drive,
+                   sensor.quasi_static)
     return {"sensor_force_n": sensor.force_n, "sensor_rate_n_s": rate, "sensor_drive_n": drive}
 
 

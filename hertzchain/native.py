@@ -355,9 +355,12 @@ class FusedKernel(NamedTuple):
 
 def kernel_for(flags, devices) -> FusedKernel | None:
     """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
-    devices, or None (the JAX kernel: laws other than Hertz's on a GPU or with a dashpot, the
-    books of damping or friction on a GPU, devices of another kind, no compiler)."""
+    devices, or None (the JAX kernel: laws other than Hertz's on a GPU or with a dashpot,
+    compliant sensors, the books of damping or friction on a GPU, devices of another kind, no
+    compiler)."""
     platforms = {d.platform for d in devices} if devices else {jax.default_backend()}
+    if flags.sensors:  # compliant sensors: the JAX kernel's physics only
+        return None
     if flags.law != "hertz":  # the full kernel's library of the law (`LAW_DEFINES`), on the host, no dashpot
         if flags.dashpot or platforms != {"cpu"} or not available():
             return None

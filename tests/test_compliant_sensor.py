@@ -78,3 +78,79 @@ def test_bad_sensor_beads_are_refused():
     grid = TimeGrid(dt_s=2e-7, steps_per_sample=5, n_samples=10)
     with pytest.raises(ValueError, match="already splits sensor beads"):
         solve(ChainSetup(N, sensor_beads=(3,)), grid, RECORD, compliant_sensors=CompliantSensors((2,), BETA, 1e-12))
+
+
+BATCH_CASES = {
+    # brass-like beads, a preload, damping and track friction; two sensors side by side (their
+    # shared contact shortened by both)
+    "brass_preload_damped": (dict(bead_radius_m=5e-3, bead_density_kg_m3=8500.0, bead_youngs_pa=110e9,
+                                  precompression_n=2.0, eta_s=2e-7, mu=0.1), (3, 4)),
+    # the paper's beads, elastic-plastic contacts (Jackson-Green) that yield, with a dashpot
+    "plastic_dashpot": (dict(eta_s=1e-7, dashpot_n_s_m=0.5, plastic_law="jackson_green",
+                             bead_yield_stress_pa=3e8), (2, 5)),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BATCH_CASES))
+def test_batched_kernel_runs_compliant_sensors_as_solve_does(case):
+    """`record_batched` with `compliant_sensors` (the JAX kernel) against `solve`, chain by
+    chain, each chain with its own sensors (f0 85 and 300 kHz): forces to 1e-13 of their
+    peaks (measured 3e-15), and without track friction (which acts on each half of a split
+    bead) against the split-bead model of the same sensors (another model of the same
+    mechanics) to 1e-10; the derivatives in the mass fraction and 1/omega0^2
+    equal `solve`'s to 1e-10 of their largest (measured 2e-15)."""
+    from hertzchain.batched import kernel_flags, record_batched, stack_setups
+
+    changes, beads = BATCH_CASES[case]
+    speeds, betas, f0s = (0.3, 0.6), (0.11, 0.3), (85e3, 300e3)
+    setups = [ChainSetup(N, striker_velocity_m_s=v, **changes) for v in speeds]
+    grid = choose_time_grid(setups[1], t_end_s=0.25e-3, sample_interval_s=1e-6)
+    batch = stack_setups(setups)
+    flags = kernel_flags(batch)._replace(ledger=False, sensors=beads)
+
+    def batched(beta, inv):
+        sensors = CompliantSensors(beads, beta, inv)
+        return record_batched(batch, grid, RECORD, flags, compliant_sensors=sensors).forces_n
+
+    invs = tuple(1.0 / (2 * np.pi * f) ** 2 for f in f0s)
+    out = batched(jnp.asarray(betas), jnp.asarray(invs))
+    for k, (setup, beta, f0) in enumerate(zip(setups, betas, f0s)):
+        sensors = CompliantSensors.from_f0(beads, beta=beta, f0_hz=f0)
+        reference = solve(setup, grid, RECORD, compliant_sensors=sensors).forces_n
+        split = solve(ChainSetup(N, striker_velocity_m_s=speeds[k], sensor_beads=beads, sensor_beta=beta,
+                                 sensor_f0_hz=f0, **changes), grid, RECORD).forces_n
+        for name, trace in reference.items():
+            peak = float(jnp.max(jnp.abs(trace)))
+            np.testing.assert_allclose(out[name][k], trace, rtol=0, atol=1e-13 * peak)
+            if "mu" not in changes:  # (track friction acts on each half of a split bead)
+                np.testing.assert_allclose(out[name][k], split[name], rtol=0, atol=1e-10 * peak)
+    # yielding, for the plastic case: the rigid chain's forces differ (the sensors act)
+    rigid = solve(setups[0], grid, RECORD).forces_n["wall"]
+    assert float(jnp.max(jnp.abs(rigid - out["wall"][0]))) > 1e-3 * float(jnp.max(rigid))
+
+    q = jnp.array([0.2, 3.0])  # beta, 1/omega0^2 in ps^2
+
+    def kernel_side(q):
+        return batched(q[0] * jnp.ones(2), q[1] * 1e-12 * jnp.ones(2))["contact_3"]
+
+    def solve_side(q):
+        return jnp.stack([solve(s, grid, RECORD, compliant_sensors=CompliantSensors(beads, q[0], q[1] * 1e-12))
+                          .forces_n["contact_3"] for s in setups])
+
+    j_kernel, j_solve = jax.jacfwd(kernel_side)(q), jax.jacfwd(solve_side)(q)
+    scale = float(jnp.max(jnp.abs(j_solve)))
+    assert scale > 0
+    np.testing.assert_allclose(j_kernel, j_solve, rtol=0, atol=1e-10 * scale)
+
+
+def test_batched_kernel_refuses_inconsistent_compliant_sensors():
+    from hertzchain.batched import kernel_flags, record_batched, stack_setups
+
+    batch = stack_setups([ChainSetup(N, striker_velocity_m_s=0.3)])
+    grid = TimeGrid(dt_s=2e-7, steps_per_sample=5, n_samples=10)
+    sensors = CompliantSensors(BEADS, BETA, 1e-12)
+    flags = kernel_flags(batch)._replace(ledger=False)
+    with pytest.raises(ValueError, match="flags.sensors"):
+        record_batched(batch, grid, RECORD, flags, compliant_sensors=sensors)
+    with pytest.raises(ValueError, match="no books"):
+        record_batched(batch, grid, RECORD, flags._replace(ledger=True, sensors=BEADS), compliant_sensors=sensors)
