@@ -1158,10 +1158,16 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   auto with_friction = [&](auto v, auto d) { friction_on ? with_extras(v, T{}, d) : with_extras(v, F{}, d); };
   // The dashpot's runs and the other laws' are compiled into libraries of their own
   // (HC_DASHPOT_LIBRARY, HC_POWER_LIBRARY, HC_THORNTON_LIBRARY, HC_JACKSON_GREEN_LIBRARY, built
-  // on first use by `native`), so that the library every run needs does not wait for them.
+  // on first use by `native`), so that the library every run needs does not wait for them;
+  // a law's library runs its law with and without a dashpot.
 #if defined(HC_LAW_LIBRARY)
-  if (dashpot_on) return ffi::Error::InvalidArgument("the libraries of laws other than Hertz's have no dashpot");
-  viscous ? with_friction(T{}, F{}) : with_friction(F{}, F{});
+  if (dashpot_on && !viscous)
+    return ffi::Error::InvalidArgument("a dashpot runs with damping only (the kernels compute rates with it)");
+  if (dashpot_on) {
+    with_friction(T{}, T{});
+  } else {
+    viscous ? with_friction(T{}, F{}) : with_friction(F{}, F{});
+  }
 #elif defined(HC_DASHPOT_LIBRARY)
   if (!dashpot_on || !viscous)
     return ffi::Error::InvalidArgument("the dashpot library runs damped chains with a dashpot only");

@@ -18,8 +18,8 @@ physics it runs, so that the conservative case pays nothing for the rest:
   (`contact.power_law_force`, its tangents in the exponent and reference overlap included)
   and elastic-plastic ones (`contact.thornton_contact`, `contact.jackson_green_contact`,
   every contact's largest overlap so far carried through the steps, tangents in the yield
-  constants included), each law from a library of its own, built on first use, as the
-  dashpot's runs are.
+  constants included), each law from a library of its own (with or without a dashpot),
+  built on first use, as the dashpot's runs on Hertz contacts are.
 
 A run's blocks of chains are spread over the CPU's cores (XLA's intra-op thread pool, the
 first free thread taking the next block; the runs of a process together use at most one
@@ -34,7 +34,7 @@ Under `jax.vmap` (`jax.custom_batching.custom_vmap`) a mapped batch of inputs jo
 kernel's chain axis and mapped tangents its direction axis, so a batch of fits, `jacfwd`
 of `vmap` and `vmap` of `jacfwd` are one kernel run each.
 
-Everything else (laws other than Hertz's with a dashpot or on a GPU, the books of a damped
+Everything else (laws other than Hertz's on a GPU, compliant sensors, the books of a damped
 chain on a GPU, reverse mode) runs the JAX kernel,
 which stays the reference: they agree to round-off, values and derivatives
 (`tests/test_native.py`), and every kernel's laws are held to `contact`'s
@@ -96,7 +96,7 @@ DASHPOT_BOOKS_TARGET = "hertzchain_chain_full_books_dashpot"
 # the power law (`contact.power_law_force`), Thornton's and Jackson-Green's elastic-plastic
 # laws (`contact.thornton_contact`, `contact.jackson_green_contact`), likewise each in a
 # library of its own (`-D` its define), built on first use; its targets are
-# "hertzchain_chain_full_{forward,tangent,books}_<law>".
+# "hertzchain_chain_full_{forward,tangent,books}_<law>", with or without a dashpot.
 LAW_DEFINES = {"power_law": "HC_POWER_LIBRARY", "thornton": "HC_THORNTON_LIBRARY",
                "jackson_green": "HC_JACKSON_GREEN_LIBRARY"}
 CONTACT_LAWS = ("hertz",) + tuple(LAW_DEFINES)
@@ -355,14 +355,13 @@ class FusedKernel(NamedTuple):
 
 def kernel_for(flags, devices) -> FusedKernel | None:
     """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
-    devices, or None (the JAX kernel: laws other than Hertz's on a GPU or with a dashpot,
-    compliant sensors, the books of damping or friction on a GPU, devices of another kind, no
+    devices, or None (the JAX kernel: laws other than Hertz's on a GPU, compliant sensors, the books of damping or friction on a GPU, devices of another kind, no
     compiler)."""
     platforms = {d.platform for d in devices} if devices else {jax.default_backend()}
     if flags.sensors:  # compliant sensors: the JAX kernel's physics only
         return None
-    if flags.law != "hertz":  # the full kernel's library of the law (`LAW_DEFINES`), on the host, no dashpot
-        if flags.dashpot or platforms != {"cpu"} or not available():
+    if flags.law != "hertz":  # the full kernel's library of the law (`LAW_DEFINES`), on the host
+        if platforms != {"cpu"} or not available():
             return None
         return FusedKernel("full", "host")
     physics = "full" if flags.full_state else "conservative"
@@ -610,11 +609,11 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     needs `viscous`), its terms compiled into this call's kernel only. `law`: the contacts'
     elastic law (`batched.KernelFlags.law`: "hertz", or "power_law" on `contact.power_law_force`,
     "thornton" or "jackson_green" on the elastic-plastic laws of `forces.elastic_parts`, from
-    the arrays `batched` stores for them; host only, no dashpot, each in a library of its own;
+    the arrays `batched` stores for them; host only, each in a library of its own;
     an elastic-plastic run starts from the largest overlaps so far at `x`). `backend` as for
     `run`."""
     _require(backend)
-    _check_law(law, dashpot, backend, "run_full")
+    _check_law(law, backend, "run_full")
     args = _full_args(p, jax.numpy.concatenate([x, v, a]), preload, springs, dashpot, law, backend)
     config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
               bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), law, backend)
@@ -634,23 +633,23 @@ def run_full_books(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_sam
     _require("host")
     if dashpot and not viscous:
         raise ValueError("run_full_books: a dashpot needs viscous=True (the kernel's rates come with the damping).")
-    _check_law(law, dashpot, "host", "run_full_books")
+    _check_law(law, "host", "run_full_books")
     args = _full_args(p, state0, preload, springs, dashpot, law, "host") + (p["mass"],)
     attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample), viscous=np.int64(viscous),
                  friction=np.int64(friction), extras=np.int64(preload or springs), dashpot=np.int64(dashpot))
     call = _Ffi("host", p["inv_mass"].shape[-2], n_samples)
     shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + call.trace_shapes(state0, len(channels))
     index = np.asarray(channels, dtype=np.int64)
-    kind = "books_dashpot" if dashpot else "books" if law == "hertz" else f"books_{law}"
+    kind = f"books_{law}" if law != "hertz" else "books_dashpot" if dashpot else "books"
     state, *traces = call.call(kind, shapes, args, index, attrs)
     return tuple(traces), state
 
 
-def _check_law(law: str, dashpot: bool, backend: str, caller: str) -> None:
+def _check_law(law: str, backend: str, caller: str) -> None:
     if law not in CONTACT_LAWS:
         raise ValueError(f"{caller}: law must be one of {CONTACT_LAWS}, got {law!r}.")
-    if law != "hertz" and (backend != "host" or dashpot):
-        raise ValueError(f"{caller}: the {law} law runs on the host kernel, without a dashpot.")
+    if law != "hertz" and backend != "host":
+        raise ValueError(f"{caller}: the {law} law runs on the host kernel (backend 'host').")
 
 
 def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool, law: str, backend: str) -> tuple:
@@ -704,8 +703,9 @@ def _full_call(config):
                  dashpot=np.int64(dashpot))
     index = np.asarray(channels, dtype=np.int64)
     n_args = 10 if backend == "host" else 9  # the state, the eight parameter arrays (host: and the law's)
-    kinds = ("full_dashpot", "tangent_dashpot") if dashpot else ("full", "tangent") if law == "hertz" else (
-        f"full_{law}", f"tangent_{law}")
+    # a dashpot on Hertz contacts: the dashpot library; on another law: that law's library
+    kinds = (f"full_{law}", f"tangent_{law}") if law != "hertz" else (
+        ("full_dashpot", "tangent_dashpot") if dashpot else ("full", "tangent"))
 
     def ffi(args):
         return _Ffi(backend, args[1].shape[-2], n_samples)

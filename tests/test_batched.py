@@ -43,9 +43,11 @@ CASES = {
                                               "precompression_n": 2.0, "eta_s": 1e-6},
     "power_law_free_end": {"contact_exponent": 1.7, "end": "free", "precompression_n": 2.0},
     "dashpot_friction": {"dashpot_n_s_m": 4.0, "mu": 0.1},
+    "jackson_green_dashpot": {"plasticity": True, "plastic_law": "jackson_green", "bead_yield_stress_pa": 0.4e9,
+                              "dashpot_n_s_m": 4.0, "eta_s": 1e-6},
 }
 QUICK = ("sensors_preload_viscous", "friction_viscous_preload", "jackson_green_sensors_preload_viscous",
-         "power_law_free_end", "dashpot_friction")
+         "power_law_free_end", "dashpot_friction", "jackson_green_dashpot")
 
 
 @pytest.mark.parametrize("case", [c if c in QUICK else pytest.param(c, marks=pytest.mark.slow) for c in CASES])
@@ -261,6 +263,10 @@ LAWS = {
     "thornton": dict(viscous=False, springs=False, preload=True, friction=False, law="thornton"),
     "jackson_green_damped_and_friction": dict(viscous=True, springs=True, preload=True, friction=True,
                                               law="jackson_green"),
+    "power_law_dashpot": dict(viscous=True, springs=False, preload=True, friction=False, law="power_law",
+                              dashpot=True),
+    "thornton_dashpot_and_friction": dict(viscous=True, springs=False, preload=True, friction=True, law="thornton",
+                                          dashpot=True),
 }
 
 

@@ -83,9 +83,9 @@ def test_chosen_columns_equal_the_full_jacobian(small_problem):
     assert np.all(np.isnan(some[:, others]))
 
 
-# Contact laws of the fits' setups (fixed, not fitted): Hertz and Jackson-Green's (the full
-# C++ kernel, its tangents), the power law with a dashpot (the batched JAX kernel only). The
-# yield stresses make the 0.5 m/s shot yield.
+# Contact laws of the fits' setups (fixed, not fitted): Hertz, Jackson-Green's and the power
+# law with a dashpot (the full C++ kernel's libraries, their tangents). The yield stresses
+# make the 0.5 m/s shot yield.
 FIT_LAWS = {
     "hertz": {},
     "jackson_green": {"plasticity": True, "plastic_law": "jackson_green", "bead_yield_stress_pa": 0.6e9},
