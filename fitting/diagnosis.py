@@ -525,7 +525,8 @@ class _Search:
             weights = np.zeros(self.n)
             weights[rows] = 1.0
         result = least_squares(_Bounded(self.evaluate, self.lower, self.upper), x_start, cols,
-                               weights=weights, max_steps=max_steps, tolerance=tolerance)
+                               weights=weights, max_steps=max_steps, tolerance=tolerance,
+                               bounds=(self.lower, self.upper))
         return dataclasses.replace(result, x=np.clip(result.x, self.lower, self.upper))
 
     def _acts(self, x, strengths) -> bool:

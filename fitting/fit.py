@@ -502,6 +502,7 @@ class _Scaled:
         self.values0 = np.zeros(width)
         self.values0[:len(free)] = x_start[free]
         self.scale = np.ones(width)
+        self.bounds = None  # (lower, upper) (p,): hold columns on a bound (`held`)
 
     def values(self, v):
         return self.values0 + np.asarray(v) / self.scale
@@ -515,15 +516,28 @@ class _Scaled:
         return self.weights * np.asarray(self.model.residuals(self.point(values)), dtype=float)
 
     def linearize(self, values):
-        """Weighted residuals and Jacobian with respect to the (padded) values."""
+        """Weighted residuals and Jacobian with respect to the (padded) values; with `bounds`,
+        the columns of the parameters held on a bound zeroed (`held`)."""
         r, jac = self.model.linearize(self.point(values), self.free)
         full = np.zeros((np.size(r), self.values0.size))
         full[:, :len(self.free)] = jac
-        return self.weights * np.asarray(r, dtype=float), self.weights[:, None] * full
+        r, full = self.weights * np.asarray(r, dtype=float), self.weights[:, None] * full
+        if self.bounds is not None:
+            full[:, self.held(values, full.T @ r)] = 0.0
+        return r, full
+
+    def held(self, values, gradient) -> np.ndarray:
+        """Which (padded) columns sit on a bound with chi^2's descent, -`gradient`, pointing out."""
+        lower, upper = (np.asarray(b, dtype=float)[self.free] for b in self.bounds)
+        n = len(self.free)
+        value = np.asarray(values)[:n]
+        out = np.zeros(self.values0.size, dtype=bool)
+        out[:n] = ((value >= upper) & (gradient[:n] < 0.0)) | ((value <= lower) & (gradient[:n] > 0.0))
+        return out
 
 
 def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
-                  tolerance: float = OPTIMUM_TOLERANCE, extrapolate: bool = False) -> LeastSquares:
+                  tolerance: float = OPTIMUM_TOLERANCE, extrapolate: bool = False, bounds=None) -> LeastSquares:
     """Fit the parameters `free` (indices) from the values `x_start` (SI), the others held
     there, with `fit`'s solver and test of an optimum, on residuals a caller evaluates
     between the optimiser's compiled steps (one optimistix Levenberg-Marquardt step per
@@ -543,6 +557,14 @@ def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
     different subsets share a compilation; neither `tolerance` nor `weights` recompiles.
     A start that passes the test of an optimum's Gauss-Newton part ends the fit there with 0
     steps (`_start_is_optimum`); `max_steps=0` makes only that test.
+
+    `bounds`: (lower, upper) of every parameter (p,), SI, where `model` clips to them. A free
+    parameter on its bound whose descent (-J^T r) points out of the box is held for that
+    linearisation (its Jacobian column zeroed for the optimiser and for the test of an
+    optimum: the active set of a projected method), so that an optimum on a bound is reached
+    and recognised; without, the optimiser kept proposing moves across the bound that the
+    clipped model did not follow, and a diagnosis's sensor fits (coupling at its bound of 1)
+    ended every refit at its step limit, unconverged.
 
     `extrapolate`: before the optimiser's proposed step is evaluated, go on along it (2, 4, ...
     `_EXTRAPOLATION_LIMIT` times its length; residuals only) while chi^2 falls, and restart the
@@ -567,11 +589,14 @@ def least_squares(model, x_start, free, *, weights=None, max_steps: int = 100,
     # Marquardt's damping of each column by _START_DAMPING of its own curvature; parameters whose
     # sizes differ by orders of magnitude (a damping time in s beside a dashpot in N s/m) are
     # damped alike only in such coordinates
-    r, jac = scaled.linearize(scaled.values0)
+    r, whole = scaled.linearize(scaled.values0)
+    scaled.bounds = bounds
+    jac = whole if bounds is None else np.where(scaled.held(scaled.values0, whole.T @ r)[None, :], 0.0, whole)
     dof = int(np.count_nonzero(weights)) - len(free)
     if _start_is_optimum(r, jac, mask, dof, tolerance):
         return LeastSquares(x_start, float(r @ r), 0, True)
-    scale = np.linalg.norm(jac, axis=0) * math.sqrt(_START_DAMPING)
+    # (the scales of every free column, those held on a bound included)
+    scale = np.linalg.norm(whole, axis=0) * math.sqrt(_START_DAMPING)
     scaled.scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
     solver = _make_solver()
     v = jnp.zeros(width)

@@ -135,3 +135,42 @@ def test_least_squares_started_at_its_optimum_ends_there_at_once():
     tested_only = fit_module.least_squares(model, optimum + 3 * stderr * np.array([1, 0, 0]), [0, 1, 2],
                                            max_steps=0)
     assert not tested_only.converged and tested_only.steps == 0
+
+
+class _ClippedModel(_LinearModel):
+    """`_LinearModel` evaluated at points clipped to a box (as the diagnosis's `_Bounded`),
+    its Jacobian at the clipped point."""
+
+    def __init__(self, lower, upper):
+        super().__init__()
+        self.lower, self.upper = lower, upper
+
+    def residuals(self, x):
+        return super().residuals(np.clip(x, self.lower, self.upper))
+
+    def linearize(self, x, columns):
+        return super().linearize(np.clip(x, self.lower, self.upper), columns)
+
+
+def test_least_squares_ends_at_an_optimum_on_a_bound():
+    """A box whose upper bound on the first parameter cuts off the free optimum (by 5
+    standard errors): with `bounds`, the fit ends converged on that bound in a few steps
+    (measured 3), with the others at their optimum given it (the least squares of the
+    remaining columns, to 1e-6 of their standard errors; measured 6e-7). On the clipped model
+    without `bounds` the optimiser kept proposing steps across the bound that the model did
+    not follow: 14 steps, and it stopped 0.11 standard errors from that optimum."""
+    reference = _LinearModel()
+    optimum = np.linalg.lstsq(reference.a, reference.b, rcond=None)[0]
+    stderr = np.sqrt(np.diag(np.linalg.inv(reference.a.T @ reference.a)))
+    lower, upper = np.full(3, -np.inf), np.full(3, np.inf)
+    upper[0] = optimum[0] - 5 * stderr[0]
+    start = optimum - 2 * stderr  # inside the box
+    bounded = fit_module.least_squares(_ClippedModel(lower, upper), start, [0, 1, 2], bounds=(lower, upper))
+    assert bounded.converged and bounded.steps <= 5
+    x = np.clip(bounded.x, lower, upper)
+    assert x[0] == upper[0]
+    rest = np.linalg.lstsq(reference.a[:, 1:], reference.b - reference.a[:, 0] * upper[0], rcond=None)[0]
+    np.testing.assert_allclose(x[1:], rest, rtol=0, atol=1e-6 * stderr[1:].min())
+    unbounded = fit_module.least_squares(_ClippedModel(lower, upper), start, [0, 1, 2], max_steps=40)
+    assert unbounded.steps > 10
+    assert np.max(np.abs(np.clip(unbounded.x, lower, upper)[1:] - rest) / stderr[1:]) > 0.05
