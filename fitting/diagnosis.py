@@ -143,21 +143,23 @@ class _Evaluator:
     is not 0 are evaluated on `power` (compiled on first use).
     With `twins` (each of those problems -> the same with rigid sensor beads and without the
     dashpot effect, which the C++ kernel runs: `fitting.effects.EffectsSimulation`; the
-    problems themselves run the batched JAX kernel),
+    problems themselves run the batched JAX kernel), `dashpot_twins` (the same with the
+    dashpot effect: its term costs every run, so it has a twin of its own),
     `compliance_columns` (`sensor_coupling`, `sensor_rate`) and `dashpot_column`, points where
-    the twin gives the model and the derivatives asked for are evaluated on it (`twin_exact`):
+    a twin gives the model and the derivatives asked for are evaluated on it (`twin_exact`):
     the same numbers to round-off, several times faster.
     """
 
     def __init__(self, problem: Problem, elastic: Problem | None = None, plastic_columns=(),
                  power: Problem | None = None, power_columns=(), twins: dict | None = None,
-                 compliance_columns=(), dashpot_column: int | None = None):
+                 dashpot_twins: dict | None = None, compliance_columns=(), dashpot_column: int | None = None):
         self.problem = problem
         self.elastic = elastic
         self.plastic_columns = np.asarray(plastic_columns, dtype=int)
         self.power = power
         self.power_columns = np.asarray(power_columns, dtype=int)
         self.twins = twins or {}
+        self.dashpot_twins = dashpot_twins or {}
         self.compliance_columns = tuple(int(c) for c in compliance_columns)
         self.dashpot_column = dashpot_column
         self.calls = 0
@@ -194,12 +196,14 @@ class _Evaluator:
             return self.power
         return self.elastic
 
-    def twin_exact(self, x, columns) -> bool:
-        """Whether the twin (rigid sensor beads, no dashpot effect) gives the model at `x` and
-        its derivatives in `columns`: the sensors' compliance c x rate is 0 there, and so is
-        its derivative in each of `columns` (in c: the rate; in the rate: c); the dashpot's
-        strength is 0 and its derivative not asked for."""
-        if self.dashpot_column is not None and (x[self.dashpot_column] != 0.0 or self.dashpot_column in columns):
+    def twin_exact(self, x, columns, *, dashpot: bool = False) -> bool:
+        """Whether a twin (rigid sensor beads; `dashpot`: with the dashpot effect, else
+        without) gives the model at `x` and its derivatives in `columns`: the sensors'
+        compliance c x rate is 0 there, and so is its derivative in each of `columns` (in c:
+        the rate; in the rate: c); without the dashpot, its strength is 0 and its derivative
+        not asked for."""
+        if not dashpot and self.dashpot_column is not None and (
+                x[self.dashpot_column] != 0.0 or self.dashpot_column in columns):
             return False
         if not self.compliance_columns:
             return True
@@ -209,10 +213,13 @@ class _Evaluator:
 
     def problem_at(self, x, columns=()) -> Problem:
         """The problem that evaluates the model at `x` and its derivatives in `columns`: the
-        law's (`law_at`), on its twin where that is exact."""
+        law's (`law_at`), on a twin where one is exact (the one without the dashpot first)."""
         law = self.law_at(x)
-        if law in self.twins and self.twin_exact(np.asarray(x), set(int(c) for c in columns)):
+        x, columns = np.asarray(x), set(int(c) for c in columns)
+        if law in self.twins and self.twin_exact(x, columns):
             return self.twins[law]
+        if law in self.dashpot_twins and self.twin_exact(x, columns, dashpot=True):
+            return self.dashpot_twins[law]
         return law
 
     def off_variant(self, x, columns) -> list[int]:
@@ -471,11 +478,14 @@ class _Search:
                                                     reference_force_n=reference_force_n, **law))
 
         elastic, power = variant(), variant(power_law=True)
-        twin = dict(compliant_sensors=False, dashpot=False)  # what the C++ kernel runs
-        twins = {self.problem: variant(plastic=True, **twin), elastic: variant(**twin),
-                 power: variant(power_law=True, **twin)}
+        # what the C++ kernel runs: rigid sensor beads, without and with the dashpot effect
+        twins, dashpot_twins = ({self.problem: variant(plastic=True, compliant_sensors=False, dashpot=dashpot),
+                                 elastic: variant(compliant_sensors=False, dashpot=dashpot),
+                                 power: variant(power_law=True, compliant_sensors=False, dashpot=dashpot)}
+                                for dashpot in (False, True))
         self.evaluate = _Evaluator(self.problem, elastic, self.effect_columns["plasticity"],
                                    power, self.effect_columns["contact_exponent"], twins=twins,
+                                   dashpot_twins=dashpot_twins,
                                    compliance_columns=[self.labels.index(name)
                                                        for name in ("sensor_coupling", "sensor_rate")],
                                    dashpot_column=self.labels.index("dashpot_n_s_m"))

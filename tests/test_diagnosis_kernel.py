@@ -66,16 +66,37 @@ def test_twin_on_the_kernel_equals_the_full_model_at_zero_compliance_and_dashpot
     assert np.all(j_ref[:, coupling] == 0.0) and np.all(j[:, coupling] == 0.0)
 
 
+def test_dashpot_twin_on_the_kernel_equals_the_full_model_at_zero_compliance(brass_files):
+    """The twin with the dashpot effect (the C++ dashpot library) against the full model at
+    a dashpot of 0.3 N s/m, the sensors' coupling 0 (Hertz contacts): residuals to 1e-12 and
+    every Jacobian column, the dashpot's included, to 1e-8 of its largest."""
+    compliant, x = _problem(brass_files, plastic=False)
+    rigid, _ = _problem(brass_files, plastic=False, compliant_sensors=False, dashpot=True)
+    assert rigid.simulates_natively()
+    for name, value in (("eta_s", 3e-7), ("dashpot_n_s_m", 0.3), ("preload_n", 0.5), ("preload_seen", 0.5),
+                        ("sensor_beta", 0.2), ("sensor_rate", 0.3)):
+        x[compliant.labels.index(name)] = value
+    skipped = ("sensor_coupling", "yield_softening")
+    wanted = [c for c in range(x.size) if compliant.labels[c] not in skipped]
+    r_ref, j_ref = residuals_and_jacobian(compliant, x, wanted)
+    r, j = residuals_and_jacobian(rigid, x, wanted)
+    assert np.max(np.abs(r - r_ref)) <= 1e-12 * np.max(np.abs(r_ref))
+    scale = np.max(np.abs(j_ref[:, wanted]), axis=0)
+    assert np.all(scale > 0)
+    assert np.all(np.max(np.abs(j[:, wanted] - j_ref[:, wanted]), axis=0) <= 1e-8 * scale)
+
+
 def test_evaluator_takes_the_twin_only_where_it_is_exact():
-    """Compliance c x rate: the twin where it is 0 and so is its derivative in every column
-    asked for (in c: the rate; in the rate: c), and the dashpot is 0 and its column not asked
-    for; the law's own problem elsewhere."""
-    law, elastic, law_twin, elastic_twin = (object() for _ in range(4))
+    """Compliance c x rate: a twin where it is 0 and so is its derivative in every column
+    asked for (in c: the rate; in the rate: c); the one without the dashpot where the dashpot
+    is 0 and its column not asked for, else the one with it; the law's own problem elsewhere."""
+    law, elastic, law_twin, elastic_twin, law_dashpot, elastic_dashpot = (object() for _ in range(6))
     evaluate = _Evaluator(law, elastic, plastic_columns=[4], twins={law: law_twin, elastic: elastic_twin},
+                          dashpot_twins={law: law_dashpot, elastic: elastic_dashpot},
                           compliance_columns=(0, 1), dashpot_column=5)
     x = np.zeros(6)
     assert evaluate.problem_at(x) is elastic_twin and evaluate.problem_at(x, range(5)) is elastic_twin
-    assert evaluate.problem_at(x, [5]) is elastic
+    assert evaluate.problem_at(x, [5]) is elastic_dashpot
     x[4] = 1.0  # a yield force: the plastic law
     assert evaluate.problem_at(x, range(5)) is law_twin
     x[1] = 0.3  # a rate, coupling 0: exact unless the coupling's derivative is asked for
@@ -85,6 +106,8 @@ def test_evaluator_takes_the_twin_only_where_it_is_exact():
     assert evaluate.problem_at(x, [0, 3]) is law_twin and evaluate.problem_at(x, [1]) is law
     x[1] = 0.3  # both: compliant sensors
     assert evaluate.problem_at(x) is law
-    x[0] = 0.0
-    x[5] = 1e-3  # a dashpot
+    x[5] = 1e-3  # a dashpot, with compliant sensors
     assert evaluate.problem_at(x) is law
+    x[0] = 0.0  # a dashpot, rigid sensors
+    assert evaluate.problem_at(x) is law_dashpot and evaluate.problem_at(x, [5]) is law_dashpot
+    assert evaluate.problem_at(x, [0]) is law
