@@ -17,8 +17,8 @@ energy) besides the recorded forces. Measured here:
 
     python benchmarks/sweep_books.py --out benchmarks/results/sweep_books [--before DIR]
 
-`--build-times` instead times the main C++ library's build from this checkout's source and
-from `--before`'s (`build_times.json`).
+`--build-times` instead times the builds of the main C++ library and of the dashpot's and two
+laws' libraries from this checkout's source and from `--before`'s (`build_times.json`).
 """
 
 from __future__ import annotations
@@ -122,22 +122,27 @@ def whole_command(native_on: bool, source: Path | None = None) -> dict:
 
 
 def build_times(before: Path | None) -> dict:
-    """Seconds to build the main C++ library from this checkout's source (and from `before`'s),
-    each into a scratch folder, one after the other."""
+    """Seconds to build the main C++ library, and the dashpot's and two laws' libraries (built
+    on first use), from this checkout's source (and from `before`'s), each into a scratch
+    folder, one after the other."""
     env = dict(os.environ)
-    script = ("import sys, time, tempfile, pathlib; from hertzchain import native; "
-              "d = pathlib.Path(tempfile.mkdtemp()); t = time.perf_counter(); "
-              "native._build(d / 'k.so'); print(time.perf_counter() - t)")
-    times = {}
+    prefix = "import sys, time, tempfile, pathlib; from hertzchain import native; t = time.perf_counter(); "
+    scripts = {"main_library_build_s": prefix + "native._build(pathlib.Path(tempfile.mkdtemp()) / 'k.so')",
+               "dashpot_library_build_s": prefix + "native._load_dashpot()",
+               "jackson_green_library_build_s": prefix + "native._load_law('jackson_green')",
+               "power_law_library_build_s": prefix + "native._load_law('power_law')"}
+    times = {name: {} for name in scripts}
     for label, source in (("this_checkout", HERE.parent), ("before", before)):
         if source is None:
             continue
-        with tempfile.TemporaryDirectory() as scratch:
-            env["PYTHONPATH"] = str(source)
-            out = subprocess.run([sys.executable, "-c", script], env=env, cwd=scratch, capture_output=True,
-                                 text=True, check=True).stdout
-            times[label] = float(out.strip().splitlines()[-1])
-    return {"main_library_build_s": times}
+        for name, script in scripts.items():
+            with tempfile.TemporaryDirectory() as scratch:
+                env["PYTHONPATH"] = str(source)
+                env["HERTZCHAIN_CACHE"] = scratch  # nothing built yet
+                out = subprocess.run([sys.executable, "-c", script + "; print(time.perf_counter() - t)"], env=env,
+                                     cwd=scratch, capture_output=True, text=True, check=True).stdout
+                times[name][label] = float(out.strip().splitlines()[-1])
+    return times
 
 
 def main() -> None:
@@ -146,7 +151,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=9)
     parser.add_argument("--before", type=Path, help="another checkout whose sweep command is timed too")
     parser.add_argument("--build-times", action="store_true",
-                        help="only time the main library's build (this checkout, and --before's), into build_times.json")
+                        help="only time the libraries' builds (this checkout, and --before's), into build_times.json")
     args = parser.parse_args()
     if args.build_times:
         args.out.mkdir(parents=True, exist_ok=True)
