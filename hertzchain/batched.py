@@ -362,19 +362,19 @@ class _Layout(NamedTuple):
 
     def fields(self, flags: KernelFlags) -> tuple[tuple[str, int], ...]:
         b, c = self.bodies + 1, self.bodies
-        # plastic contacts: every contact's largest overlap so far
-        peak = (("peak", c),) if flags.plastic else ()
-        if flags.sensors:  # compliant sensors: force, rate and drive (Eq. 4) of each
-            n = len(flags.sensors)
-            peak = peak + (("sensor_force", n), ("sensor_rate", n), ("sensor_drive", n))
+        # plastic contacts: every contact's largest overlap so far; compliant sensors: the
+        # force, rate and drive (Eq. 4) of each
+        n = len(flags.sensors)
+        carried = ((("peak", c),) if flags.plastic else ()) + (
+            (("sensor_force", n), ("sensor_rate", n), ("sensor_drive", n)) if flags.sensors else ())
         if flags.full_state:
             # x, v, a at the step; running maxima; viscous body forces; dissipated energy
             viscous = (("viscous", b),) if flags.viscous else ()
             books = (("max", c),) + viscous + (("dissipated", 1),)
-            return (("x", b), ("v", b), ("a", b)) + peak + (books if flags.ledger else ())
+            return (("x", b), ("v", b), ("a", b)) + carried + (books if flags.ledger else ())
         # x, u = v + (dt/2) a (the next half-kick's velocity), largest overlaps so far
         # (the elastic forces grow with the overlap, so their maxima are the forces there)
-        return (("x", b), ("u", b)) + peak + ((("max", c),) if flags.ledger else ())
+        return (("x", b), ("u", b)) + carried + ((("max", c),) if flags.ledger else ())
 
     def unpack(self, flags: KernelFlags, state) -> dict:
         out, row = {}, 0
@@ -487,17 +487,17 @@ def _initial_peak(p, flags: KernelFlags, x):
 def _initial(p, flags: KernelFlags, layout: _Layout, dt: float):
     """Packed state at the impact and the bodies' (x, v) there."""
     x, v, a, total, elastic = _start(p, flags)
-    peak = {"peak": _initial_peak(p, flags, x)} if flags.plastic else {}
+    carried = {"peak": _initial_peak(p, flags, x)} if flags.plastic else {}
     if flags.sensors:  # at rest: the preload's force
         at_rest = jnp.zeros_like(p["sensor_beta"]) + p["first_force"]
-        peak |= {"sensor_force": at_rest, "sensor_rate": jnp.zeros_like(at_rest), "sensor_drive": at_rest}
+        carried |= {"sensor_force": at_rest, "sensor_rate": jnp.zeros_like(at_rest), "sensor_drive": at_rest}
     if flags.full_state:
         parts = {"x": x, "v": v, "a": a, "max": total, "dissipated": jnp.zeros_like(x[:1])}
         if flags.viscous:
             parts["viscous"] = _body_force(total - elastic)
     else:
         parts = {"x": x, "u": v + 0.5 * dt * a, "max": _overlaps(p, flags, x)}
-    return layout.pack(flags, parts | peak), x, v
+    return layout.pack(flags, parts | carried), x, v
 
 
 def _final(p, flags: KernelFlags, layout: _Layout, dt: float, state):
@@ -826,9 +826,9 @@ def record_batched(
 
 
 def _with_compliant_sensors(params: dict, setup: ChainSetup, flags: KernelFlags, sensors) -> dict:
-    """The kernel arrays with the compliant sensors': mass fraction and 1/omega0^2
-    (n_sensors, B), and the overlap every contact loses per unit of their compression
-    (`compliant_sensor.loss_matrix`, (n_sensors, n_bodies, B)), checked against `flags`."""
+    """The kernel arrays with the compliant sensors' mass fractions, 1/omega0^2 (s^2) and
+    back and front compliances (m/N; `compliant_sensor.compliances`), (n_sensors, B) each,
+    checked against `flags`."""
     beads = () if sensors is None else compliant_sensor.checked_beads(sensors.beads, setup.n_beads)
     if beads != tuple(flags.sensors):
         raise ValueError(f"compliant_sensors: beads {beads} but flags.sensors is {tuple(flags.sensors)}; pass "
