@@ -270,7 +270,10 @@ def _shortened(p, flags: KernelFlags, amount, values):
     """`values` of every contact (n_bodies, B: overlaps, m, or rates, m/s) less what the
     compliant sensors compressed by `amount` (N, or N/s: (n_sensors, B)) take
     (`compliant_sensor.shortened`)."""
-    return compliant_sensor.shortened(flags.sensors, p["sensor_back"], p["sensor_front"], amount, values)
+    back, front = p["sensor_back"], p["sensor_front"]
+    if amount.ndim == 3:  # (n_sensors, k, B): k quantities at once
+        back, front = back[:, None], front[:, None]
+    return compliant_sensor.shortened(flags.sensors, back, front, amount, values)
 
 
 def _contact_forces(p, flags: KernelFlags, x, v, contacts=None, peak=None, sensor=None):
@@ -296,9 +299,12 @@ def _contact_forces(p, flags: KernelFlags, x, v, contacts=None, peak=None, senso
         force, sensor_rate = sensor
         if contacts is not None:
             raise ValueError("compliant sensors: the contact forces of every contact only")
-        overlap = _shortened(p, flags, force - p["first_force"], overlap)
-        if flags.viscous:
-            rate = _shortened(p, flags, sensor_rate, rate)
+        if flags.viscous:  # overlaps and rates in one scatter
+            both = _shortened(p, flags, jnp.stack([force - p["first_force"], sensor_rate], axis=1),
+                              jnp.stack([overlap, rate], axis=1))
+            overlap, rate = both[:, 0], both[:, 1]
+        else:
+            overlap = _shortened(p, flags, force - p["first_force"], overlap)
     return _forces_at(p, flags, overlap, rate, rows, None if peak is None else rows(peak))
 
 
