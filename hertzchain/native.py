@@ -62,6 +62,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import NamedTuple
 
@@ -311,6 +312,17 @@ def _load_dashpot() -> None:
     _load_library((f"-D{DASHPOT_DEFINE}",), "the fused chain kernel's dashpot runs",
                   ((DASHPOT_FULL_TARGET, "HertzChainFullForward"), (DASHPOT_TANGENT_TARGET, "HertzChainFullTangent"),
                    (DASHPOT_BOOKS_TARGET, "HertzChainFullBooks")))
+
+
+def load_on_demand_libraries():
+    """Build (where not built yet) and load the host libraries otherwise built on first use:
+    the dashpot's (Hertz contacts with a dashpot) and each other contact law's
+    (`LAW_DEFINES`, with or without a dashpot). Yields (name, path, seconds) as each is ready."""
+    for name, defines, load in [("dashpot", (f"-D{DASHPOT_DEFINE}",), _load_dashpot)] + [
+            (law, (f"-D{define}",), functools.partial(_load_law, law)) for law, define in LAW_DEFINES.items()]:
+        began = time.perf_counter()
+        load()
+        yield name, _library_path(defines, SOURCE), time.perf_counter() - began
 
 
 def _law_target(kind: str, law: str) -> str:

@@ -27,3 +27,22 @@ def test_ready_kernel_names_its_build():
     assert done.returncode == 0, done.stdout + done.stderr
     path = Path(done.stdout.split("ready (")[1].split(";")[0])
     assert path == native.library_path() and path.exists()
+
+
+@pytest.mark.skipif(not native.available(), reason=f"no C++ kernel here: {native.unavailable_reason()}")
+def test_all_also_loads_the_libraries_built_on_first_use(monkeypatch, capsys):
+    """`--all` asks for the dashpot's library and every other law's (recorded, not built here:
+    a build takes 15-20 s) and names each with its path."""
+    import argparse
+
+    from hertzchain.cli import kernel
+
+    asked = []
+    monkeypatch.setattr(native, "_load_dashpot", lambda: asked.append("dashpot"))
+    monkeypatch.setattr(native, "_load_law", lambda law: asked.append(law))
+    assert kernel.run(argparse.Namespace(quiet=False, all=True)) == 0
+    assert asked == ["dashpot", *native.LAW_DEFINES]
+    out = capsys.readouterr().out
+    for name in asked:
+        assert f"{name} library ready (" in out
+    assert native._library_path((f"-D{native.LAW_DEFINES['thornton']}",)).name in out

@@ -4,7 +4,9 @@ The kernel (`hertzchain.native`) is compiled on its first use, once per machine,
 JAX version (under a minute on two cores). Run this after installing, so that the first fit or
 sweep does not wait for it; it also says why the kernel cannot be used where it cannot
 (no compiler, `HERTZCHAIN_NATIVE=0`), in which case every command runs the JAX kernel (exit
-status 0 either way: the README's install command goes on).
+status 0 either way: the README's install command goes on). `--all` also builds the libraries
+that are otherwise built on their first use, 15-20 s each on two cores: the dashpot's and those
+of the other contact laws, which diagnoses and elastic-plastic or power-law runs call.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from .. import native
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="print nothing when the kernel is ready")
+    parser.add_argument("--all", action="store_true",
+                        help="also build the libraries built on first use (the dashpot's, the other contact laws')")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -28,4 +32,8 @@ def run(args: argparse.Namespace) -> int:
         return 0  # not an error: everything runs, on the JAX kernel
     if not args.quiet:
         print(f"hertzchain kernel: ready ({native.library_path()}; {time.perf_counter() - began:.1f} s)")
+    if args.all:
+        for name, path, seconds in native.load_on_demand_libraries():
+            if not args.quiet:
+                print(f"hertzchain kernel: {name} library ready ({path}; {seconds:.1f} s)", flush=True)
     return 0
