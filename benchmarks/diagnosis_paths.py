@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import os
 import statistics
 import time
@@ -104,7 +103,7 @@ def main(argv=None):
     result["load_after"] = os.getloadavg()[0]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    atomic.write_text(out / "paths.json", json.dumps(result, indent=1))
+    atomic.write_json(out / "paths.json", result)
 
 
 if __name__ == "__main__":

@@ -317,8 +317,8 @@ class EffectsSimulation(KernelForm):
     `sensor_coupling` x `sensor_rate`, is 0 (the base model), and so are its derivatives in
     those two where the other of them is 0. `dashpot` off: `dashpot_n_s_m` acts on nothing
     (exact where it is 0, not its derivative), so that the kernel is built without the
-    dashpot's term (the C++ kernel has it with Hertz contacts only). These twins run on the
-    C++ kernel; `fitting.diagnosis` chooses where they hold.
+    dashpot's term (which costs every run that carries it). These twins run on the C++
+    kernel; `fitting.diagnosis` chooses where they hold.
     """
 
     plastic: bool
