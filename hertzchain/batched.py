@@ -116,8 +116,8 @@ class KernelFlags(NamedTuple):
     # (`benchmarks/results/plastic_kernel/jackson_green_kernel.json`, `jax_full_state`).
     full_step: bool = False
     # Beads K (1..N-1) with an embedded sensor in compliance form (`compliant_sensor`; their
-    # strengths are `record_batched`'s `compliant_sensors`): the JAX kernel's full step only,
-    # without the books.
+    # strengths are `record_batched`'s `compliant_sensors`): the full step only, without the
+    # books (the JAX kernel's, and on the CPU with Hertz contacts the C++ sensor library's).
     sensors: tuple[int, ...] = ()
 
     @property
@@ -490,13 +490,19 @@ def _initial_peak(p, flags: KernelFlags, x):
     return _overlaps(p, flags, x) if flags.plastic else None
 
 
+def _sensors_at_rest(p) -> dict:
+    """The compliant sensors' force (the preload's, N), rate (0, N/s) and drive (N) before the
+    impact, (n_sensors, B) each."""
+    at_rest = jnp.zeros_like(p["sensor_beta"]) + p["first_force"]
+    return {"sensor_force": at_rest, "sensor_rate": jnp.zeros_like(at_rest), "sensor_drive": at_rest}
+
+
 def _initial(p, flags: KernelFlags, layout: _Layout, dt: float):
     """Packed state at the impact and the bodies' (x, v) there."""
     x, v, a, total, elastic = _start(p, flags)
     carried = {"peak": _initial_peak(p, flags, x)} if flags.plastic else {}
-    if flags.sensors:  # at rest: the preload's force
-        at_rest = jnp.zeros_like(p["sensor_beta"]) + p["first_force"]
-        carried |= {"sensor_force": at_rest, "sensor_rate": jnp.zeros_like(at_rest), "sensor_drive": at_rest}
+    if flags.sensors:
+        carried |= _sensors_at_rest(p)
     if flags.full_state:
         parts = {"x": x, "v": v, "a": a, "max": total, "dissipated": jnp.zeros_like(x[:1])}
         if flags.viscous:
@@ -597,10 +603,15 @@ def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ..
         return traces, state, layout
     if which.physics == "full":
         x, v, a, _, _ = _start(p, flags)
+        sensor_state = None
+        if flags.sensors:
+            at_rest = _sensors_at_rest(p)
+            sensor_state = jnp.concatenate([at_rest[name] for name in ("sensor_force", "sensor_rate", "sensor_drive")])
         traces = native.run_full(
             p, x, v, a, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
             channels=channels, viscous=flags.viscous, friction=flags.friction, preload=flags.preload,
             springs=flags.springs, dashpot=flags.dashpot, law=flags.law, backend=which.backend,
+            sensors=flags.sensors, sensor_state=sensor_state,
         )
         return traces, None, layout
     state, _, _ = _initial(p, flags, layout, grid.dt_s)
@@ -810,7 +821,8 @@ def record_batched(
       JAX kernel (every transformation).
     - `compliant_sensors`: embedded sensors in compliance form, as `solve` takes them, with
       `beta` and `inv_omega0_sq_s2` of shape (B,) or (B, n_sensors); their beads must be
-      `flags.sensors` (the JAX kernel runs them, without the books).
+      `flags.sensors` (without the books; on the CPU with Hertz contacts the C++ kernel's
+      sensor library runs them, `native.run_full(..., sensors=)`, elsewhere the JAX kernel).
 
     **Returns:** `BatchedTraces`; with `flags.ledger` off, its maxima and energies are NaN
     (not computed). The two kernels agree to round-off, values and derivatives.

@@ -9,7 +9,8 @@
 //    forward-mode tangents, and its run with the books (below, `RunFullBlock`); compiled with
 //    HC_DASHPOT_LIBRARY (a linear dashpot), HC_POWER_LIBRARY (power-law contacts),
 //    HC_THORNTON_LIBRARY or HC_JACKSON_GREEN_LIBRARY (elastic-plastic contacts) into
-//    libraries of their own.
+//    libraries of their own, and with HC_SENSOR_LIBRARY (compliant sensor beads,
+//    `hertzchain.compliant_sensor`, forward and tangent runs) into one more.
 //
 // The arithmetic is that of the JAX kernel, operation for operation and in the same
 // order (compiled without contraction into fused multiply-adds), so that the two agree to
@@ -372,14 +373,23 @@ constexpr int64_t LawRows(Law law, int64_t contacts) {
   return law == Law::kThornton ? contacts : law == Law::kJacksonGreen ? 3 * contacts + 2 : 2;
 }
 
+// Rows of the `sensors` array of n compliant sensors (`compliant_sensor`; 1 or B columns):
+// each sensor's front-half mass fraction beta, then its 1/omega0^2 (s^2), its back and front
+// compliances (m/N), n rows each, then the preload's force on the first bead (N), from which
+// a sensor's compression is counted.
+constexpr int64_t SensorRows(int64_t sensors) { return 4 * sensors + 1; }
+
 struct FullParams {
   Param inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot;
-  Param law;  // the law's parameters (`LawRows`)
+  Param law;      // the law's parameters (`LawRows`)
+  Param sensors;  // the compliant sensors' (`SensorRows`; the sensor library's runs)
+  const int64_t* beads = nullptr;  // their beads K (back contact K - 1, front contact K)
+  int64_t n_sensors = 0;
 };
 
 struct TangentInputs {
-  Tangent state0;  // x, v, a: (D, 3 (bodies + 1), B)
-  Tangent inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot, law;
+  Tangent state0;  // x, v, a (and the sensors' force, rate, drive): (D, 3 (bodies + 1) + 3 n, B)
+  Tangent inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot, law, sensors;
 };
 
 // The books of a forward run (kBooks), in `batched._Layout`'s rows after x, v, a (and, for
@@ -424,12 +434,13 @@ __attribute__((noinline)) hertzchain::Unloading<double> PlasticCurve(const doubl
 }
 
 template <int64_t kLanes, bool kViscous, bool kFriction, bool kTangent, bool kExtras, bool kDashpot, bool kBooks,
-          Law kLaw>
+          Law kLaw, bool kSensors>
 void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
                   int64_t steps_per_sample, double dt, const double* state0, FullParams p,
                   const std::vector<int64_t>& channels, const std::vector<double*>& traces,
                   int64_t directions, TangentInputs tin, const std::vector<double*>& ttraces, BooksIO books) {
   static_assert(!(kBooks && kTangent), "the books are kept by forward runs only");
+  static_assert(!kSensors || (!kBooks && kLaw == Law::kHertz), "compliant sensors: Hertz contacts, no books");
   constexpr bool kPower = kLaw == Law::kPower;
   constexpr bool kPlastic = IsPlastic(kLaw);
   const int64_t rows_x = bodies + 1, contacts = bodies;
@@ -452,6 +463,41 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   Load<kLanes>(p.eta, 1, lo, eta.data(), valid);
   Load<kLanes>(p.friction, 1, lo, fr.data(), valid);
   if (kDashpot) Load<kLanes>(p.dashpot, 1, lo, dash.data(), valid);
+  // kSensors: the compliant sensors (`compliant_sensor`, `batched._step`): their forces (N),
+  // rates (N/s) and drives (Eq. 4, N) after x, v, a in state0 (n rows each), their
+  // parameters `sp` (`SensorRows`); per step the half-step rates, the predicted rates, the
+  // compressions counted from the preload's force (F_s - F_0) and whether the step resolves
+  // the resonance (`compliant_sensor.drift`), and the total forces of their back and front
+  // contacts (the next drive). `back_of[i]` / `front_of[i]`: the sensor whose back / front
+  // contact is contact i (-1: none). `cut` / `cut_rate`: what the sensors take from every
+  // contact's overlap (m) and rate (m/s) in the step (`compliant_sensor.shortened`; 0 for
+  // the contacts without a sensor: adding 0 changes no bit; a contact between two sensors
+  // loses the back's term, then the front's).
+  const int64_t ns = kSensors ? p.n_sensors : 0;
+  const int64_t sensor_rows = kSensors ? SensorRows(ns) : 0;
+  std::vector<double> sf(ns * kLanes), sr(ns * kLanes), sd(ns * kLanes), sp(sensor_rows * kLanes);
+  std::vector<double> s_half(ns * kLanes), s_pred(ns * kLanes), s_amt(ns * kLanes), s_quasi(ns * kLanes);
+  std::vector<double> s_fb(ns * kLanes), s_ff(ns * kLanes);
+  std::vector<double> cut(kSensors ? contacts * kLanes : 0), cut_rate(kSensors ? contacts * kLanes : 0);
+  std::vector<int64_t> back_of(kSensors ? contacts : 0, -1), front_of(kSensors ? contacts : 0, -1);
+  if constexpr (kSensors) {
+    const double* s0 = state0 + 3 * rows_x * batch;
+    Load<kLanes>({s0, batch}, ns, lo, sf.data(), valid);
+    Load<kLanes>({s0 + ns * batch, batch}, ns, lo, sr.data(), valid);
+    Load<kLanes>({s0 + 2 * ns * batch, batch}, ns, lo, sd.data(), valid);
+    Load<kLanes>(p.sensors, sensor_rows, lo, sp.data(), valid);
+    for (int64_t k = 0; k < ns; ++k) {
+      back_of[p.beads[k] - 1] = k;
+      front_of[p.beads[k]] = k;
+    }
+  }
+  // rows of `sp` (and of its tangents, direction by direction)
+  const auto beta_row = [&](int64_t k) { return k; };
+  const auto inv_row = [&](int64_t k) { return ns + k; };
+  const auto back_row = [&](int64_t k) { return 2 * ns + k; };
+  const auto front_row = [&](int64_t k) { return 3 * ns + k; };
+  const int64_t first_row = 4 * ns;
+  const double dt2 = dt * dt;
   // kPower: every contact's law is `contact.power_law_force` of the chain's exponent (row 0)
   // and reference overlap (row 1); kPlastic: the rows of `LawRows`
   std::vector<double> law(kPower || kPlastic ? law_rows * kLanes : 0);
@@ -488,7 +534,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   std::vector<double> tdash(D * kLanes);
   if (kTangent) {
     for (int64_t d = 0; d < D; ++d) {
-      const double* s0 = tin.state0.data + (tin.state0.shared ? 0 : d * 3 * rows_x * batch);
+      const double* s0 = tin.state0.data + (tin.state0.shared ? 0 : d * (3 * rows_x + 3 * ns) * batch);
       Load<kLanes>({s0, batch}, rows_x, lo, &tx[d * rows_x * kLanes], valid);
       Load<kLanes>({s0 + rows_x * batch, batch}, rows_x, lo, &tv[d * rows_x * kLanes], valid);
       Load<kLanes>({s0 + 2 * rows_x * batch, batch}, rows_x, lo, &ta[d * rows_x * kLanes], valid);
@@ -502,6 +548,24 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     LoadTangent<kLanes>(tin.friction, D, 1, batch, lo, tfr.data(), valid);
     if (kDashpot) LoadTangent<kLanes>(tin.dashpot, D, 1, batch, lo, tdash.data(), valid);
   }
+  // kSensors: the tangents of the sensors' state and parameters, (D, rows, kLanes), and of
+  // the step's half-step rates, predicted rates, compressions, contact forces and cuts
+  std::vector<double> tsf(D * ns * kLanes), tsr(D * ns * kLanes), tsd(D * ns * kLanes);
+  std::vector<double> tsp(D * sensor_rows * kLanes), ts_half(D * ns * kLanes), ts_pred(D * ns * kLanes);
+  std::vector<double> ts_amt(D * ns * kLanes), ts_fb(D * ns * kLanes), ts_ff(D * ns * kLanes);
+  std::vector<double> tcut(kSensors ? D * contacts * kLanes : 0), tcut_rate(kSensors ? D * contacts * kLanes : 0);
+  if (kTangent && kSensors) {
+    for (int64_t d = 0; d < D; ++d) {
+      const double* s0 = tin.state0.data + (tin.state0.shared ? 0 : d * (3 * rows_x + 3 * ns) * batch) +
+                         3 * rows_x * batch;
+      Load<kLanes>({s0, batch}, ns, lo, &tsf[d * ns * kLanes], valid);
+      Load<kLanes>({s0 + ns * batch, batch}, ns, lo, &tsr[d * ns * kLanes], valid);
+      Load<kLanes>({s0 + 2 * ns * batch, batch}, ns, lo, &tsd[d * ns * kLanes], valid);
+    }
+    LoadTangent<kLanes>(tin.sensors, D, sensor_rows, batch, lo, tsp.data(), valid);
+  }
+  // the sensors' tangent rows of direction d
+  const auto tsens = [&](int64_t d, int64_t row) { return &tsp[(d * sensor_rows + row) * kLanes]; };
   std::vector<double> tlaw(kPower || kPlastic ? D * law_rows * kLanes : 0);  // (D, law_rows, kLanes)
   if (kTangent && (kPower || kPlastic)) {
     LoadTangent<kLanes>(tin.law, D, law_rows, batch, lo, tlaw.data(), valid);
@@ -721,6 +785,60 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
 
   for (int64_t n = 0; n < n_samples; ++n) {
     for (int64_t s = 0; s < steps_per_sample; ++s) {
+      if constexpr (kSensors) {  // the sensors' first half kick and drift (`compliant_sensor.drift`)
+        for (int64_t k = 0; k < ns; ++k)
+          for (int64_t j = 0; j < kLanes; ++j) {
+            const int64_t c = k * kLanes + j;
+            const double inv_w2 = sp[inv_row(k) * kLanes + j];
+            const bool quasi = inv_w2 < dt2;  // the step does not resolve the resonance
+            const double gap = sd[c] - sf[c];
+            const double accel = quasi ? 0.0 : gap / inv_w2;
+            const double half = sr[c] + h * accel;
+            const double force = quasi ? sd[c] : sf[c] + dt * half;
+            if constexpr (kTangent)  // (JAX's rules: d(a/b) = da/b + (-db a) b^-2)
+              for (int64_t d = 0; d < D; ++d) {
+                const int64_t q = (d * ns + k) * kLanes + j;
+                const double tinv_w2 = tsens(d, inv_row(k))[j];
+                const double taccel =
+                    quasi ? 0.0 : (tsd[q] - tsf[q]) / inv_w2 + ((-tinv_w2) * gap) * (1.0 / (inv_w2 * inv_w2));
+                const double thalf = tsr[q] + h * taccel;
+                tsf[q] = quasi ? tsd[q] : tsf[q] + dt * thalf;
+                ts_half[q] = thalf;
+                ts_pred[q] = thalf + h * taccel;
+                ts_amt[q] = tsf[q] - tsens(d, first_row)[j];
+              }
+            sf[c] = force;
+            s_half[c] = half;
+            s_pred[c] = half + h * accel;
+            s_amt[c] = force - sp[first_row * kLanes + j];
+            s_quasi[c] = quasi ? 1.0 : 0.0;
+          }
+        // the cuts of every sensor's back (row K - 1) and front (row K) contacts: zeroed,
+        // then the backs' terms, then the fronts' (the order of `compliant_sensor.shortened`)
+        for (int64_t k = 0; k < ns; ++k)
+          for (const int64_t row : {p.beads[k] - 1, p.beads[k]})
+            for (int64_t j = 0; j < kLanes; ++j) {
+              cut[row * kLanes + j] = cut_rate[row * kLanes + j] = 0.0;
+              for (int64_t d = 0; d < D; ++d)
+                tcut[(d * contacts + row) * kLanes + j] = tcut_rate[(d * contacts + row) * kLanes + j] = 0.0;
+            }
+        for (const int64_t side : {0, 1})  // 0: the sensors' back contacts, 1: their front ones
+          for (int64_t k = 0; k < ns; ++k) {
+            const int64_t row = p.beads[k] - 1 + side, crow = side == 0 ? back_row(k) : front_row(k);
+            for (int64_t j = 0; j < kLanes; ++j) {
+              const int64_t e = k * kLanes + j, i = row * kLanes + j;
+              const double comp = sp[crow * kLanes + j];
+              cut[i] = cut[i] - comp * s_amt[e];
+              cut_rate[i] = cut_rate[i] - comp * s_pred[e];
+              for (int64_t d = 0; d < D; ++d) {  // (JAX's rule for c a: dc a + c da)
+                const int64_t td = (d * contacts + row) * kLanes + j, te = (d * ns + k) * kLanes + j;
+                const double tcomp = tsens(d, crow)[j];
+                tcut[td] = tcut[td] - (tcomp * s_amt[e] + comp * ts_amt[te]);
+                tcut_rate[td] = tcut_rate[td] - (tcomp * s_pred[e] + comp * ts_pred[te]);
+              }
+            }
+          }
+      }
       // body 0: half kick, friction, drift, predicted velocity
       for (int64_t j = 0; j < kLanes; ++j) {
         double w = v[j] + h * a[j];
@@ -752,6 +870,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           });
       for (int64_t i = 0; i < contacts; ++i) {
         const int64_t ri = i * kLanes, rn = (i + 1) * kLanes;
+        // kSensors: the sensor whose back (sb) and front (sf_) contact this is (-1: none)
+        const int64_t sb = kSensors ? back_of[i] : -1, sf_ = kSensors ? front_of[i] : -1;
         // kUK / kUM: kappa and 1.5 eta kappa / the inverse mass of body i are one value
         // for every lane of the row (read once: the same numbers)
         auto sweep = [&](auto uniform_k_tag, auto uniform_m_tag) {
@@ -770,6 +890,10 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double dl = x[ri + j] - x[rn + j];
           if constexpr (kExtras) dl = dl + ov0[ri + j];
           double rt_rate = p_prev[j] - pred;
+          if constexpr (kSensors) {
+            dl = dl + cut[ri + j];
+            rt_rate = rt_rate + cut_rate[ri + j];
+          }
           double elastic_i;
           double f = contact_force(dl, rt_rate, kj, kvj, dj, spr[ri + j], ri + j, j, &rt, &sm, &elastic_i, &slopes[j],
                                    &plin);
@@ -842,6 +966,10 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         } else {
           uniform_m[i] ? sweep(F{}, T{}) : sweep(F{}, F{});
         }
+        if constexpr (kSensors) {  // contact i's total force: a sensor's next drive
+          if (sb >= 0) std::copy(f_prev, f_prev + kLanes, &s_fb[sb * kLanes]);
+          if (sf_ >= 0) std::copy(f_prev, f_prev + kLanes, &s_ff[sf_ * kLanes]);
+        }
         if (kTangent)
           for (int64_t d = 0; d < D; ++d) {
             const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
@@ -853,12 +981,17 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               tx[tn + j] = tx[tn + j] + dt * tw;
               double tpred = tw + h * ta[tn + j];
               double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
+              double trate = tp_prev[q] - tpred;
+              if constexpr (kSensors) {
+                tdl = tdl + tcut[tc + j];
+                trate = trate + tcut_rate[tc + j];
+              }
               if constexpr (kPlastic) {  // the peak's tangent: max(peak, overlap)'s
                 const double tp = tpk[tc + j];
                 tpk[tc + j] = grow[j] == 1.0 ? tdl : grow[j] == 0.5 ? 0.5 * tp + 0.5 * tdl : tp;
               }
               double tf = tforce(lin, j, slopes[j], plin, i, d, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl,
-                                 tp_prev[q] - tpred, tkap[tc + j], t15eta[q],
+                                 trate, tkap[tc + j], t15eta[q],
                                  kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, tspr[tc + j]);
               double tb = tf_prev[q] - tf + text[ti + j];
               double tacc = tb * inv[ri + j] + body[j] * tinv[ti + j];
@@ -870,6 +1003,11 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               tw_prev[q] = tw;
               tp_prev[q] = tpred;
             });
+            if constexpr (kSensors) {
+              const double* tf_i = &tf_prev[d * kLanes];
+              if (sb >= 0) std::copy(tf_i, tf_i + kLanes, &ts_fb[(d * ns + sb) * kLanes]);
+              if (sf_ >= 0) std::copy(tf_i, tf_i + kLanes, &ts_ff[(d * ns + sf_) * kLanes]);
+            }
           }
       }
       // the wall's row (inverse mass 0: it stays at rest, as in the JAX kernel)
@@ -909,14 +1047,50 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
             ta[tw_row + j] = tacc;
             tv[tw_row + j] = tvn;
           });
+      if constexpr (kSensors) {  // the sensors' second half kick, from the new drive (`compliant_sensor.kick`)
+        for (int64_t k = 0; k < ns; ++k)
+          for (int64_t j = 0; j < kLanes; ++j) {
+            const int64_t c = k * kLanes + j;
+            const double beta = sp[beta_row(k) * kLanes + j], inv_w2 = sp[inv_row(k) * kLanes + j];
+            const bool quasi = s_quasi[c] != 0.0;
+            const double drive = beta * s_fb[c] + (1.0 - beta) * s_ff[c];
+            const double gap = drive - sf[c];
+            const double accel = quasi ? 0.0 : gap / inv_w2;
+            if constexpr (kTangent)
+              for (int64_t d = 0; d < D; ++d) {
+                const int64_t q = (d * ns + k) * kLanes + j;
+                const double tbeta = tsens(d, beta_row(k))[j], tinv_w2 = tsens(d, inv_row(k))[j];
+                const double tdrive = (tbeta * s_fb[c] + beta * ts_fb[q]) + ((-tbeta) * s_ff[c] + (1.0 - beta) * ts_ff[q]);
+                const double taccel =
+                    quasi ? 0.0 : (tdrive - tsf[q]) / inv_w2 + ((-tinv_w2) * gap) * (1.0 / (inv_w2 * inv_w2));
+                tsr[q] = quasi ? 0.0 : ts_half[q] + h * taccel;
+                tsd[q] = tdrive;
+              }
+            sr[c] = quasi ? 0.0 : s_half[c] + h * accel;
+            sd[c] = drive;
+          }
+      }
     }
     // The recorded channels from the new displacements and velocities.
     for (int64_t c = 0; c < n_channels; ++c) {
       const int64_t i = channels[c], ri = i * kLanes, rn = (i + 1) * kLanes;
+      // kSensors: the sensors' forces and rates at the sample shorten contact i
+      const int64_t sb = kSensors ? back_of[i] : -1, sf_ = kSensors ? front_of[i] : -1;
       for (int64_t j = 0; j < kLanes; ++j) {
         double dl = x[ri + j] - x[rn + j];
         if constexpr (kExtras) dl = dl + ov0[ri + j];
         double rate = v[ri + j] - v[rn + j];
+        if constexpr (kSensors) {
+          const double first = sp[first_row * kLanes + j];
+          if (sb >= 0) {
+            dl = dl - sp[back_row(sb) * kLanes + j] * (sf[sb * kLanes + j] - first);
+            rate = rate - sp[back_row(sb) * kLanes + j] * sr[sb * kLanes + j];
+          }
+          if (sf_ >= 0) {
+            dl = dl - sp[front_row(sf_) * kLanes + j] * (sf[sf_ * kLanes + j] - first);
+            rate = rate - sp[front_row(sf_) * kLanes + j] * sr[sf_ * kLanes + j];
+          }
+        }
         double rt, sm, elastic;
         const double dj = kDashpot ? dsh[ri + j] : 0.0;
         hertzchain::PowerLawSlopes here_slopes;
@@ -932,6 +1106,17 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           const int64_t tc = (d * contacts + i) * kLanes;
           double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
           double trate = tv[ti + j] - tv[tn + j];
+          if constexpr (kSensors) {
+            const double first = sp[first_row * kLanes + j], tfirst = tsens(d, first_row)[j];
+            auto shorten = [&](int64_t k, int64_t row) {  // sensor k's compliance in `row`
+              const double comp = sp[row * kLanes + j], tcomp = tsens(d, row)[j];
+              const int64_t e = k * kLanes + j, te = (d * ns + k) * kLanes + j;
+              tdl = tdl - (tcomp * (sf[e] - first) + comp * (tsf[te] - tfirst));
+              trate = trate - (tcomp * sr[e] + comp * tsr[te]);
+            };
+            if (sb >= 0) shorten(sb, back_row(sb));
+            if (sf_ >= 0) shorten(sf_, front_row(sf_));
+          }
           record.slot(d + 1, c)[j] =
               tforce(here, j, here_slopes, plin, i, d, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, trate,
                      tkap[tc + j],
@@ -957,7 +1142,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   }
 }
 
-#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_LAW_LIBRARY) && HC_PART_FORWARD  // (the main library only)
+#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_LAW_LIBRARY) && !defined(HC_SENSOR_LIBRARY) && \
+    HC_PART_FORWARD  // (the main library only)
 ffi::Error Forward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                    ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                    ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
@@ -1038,6 +1224,17 @@ constexpr Law kLibraryLaw = Law::kHertz;
 // leave the loops over the lanes unvectorised, so they run blocks of 8 only (blocks of 64, 8
 // and 4 ran the power law no faster and built in 20 s, not 11 s).
 constexpr bool kLawLibrary = kLibraryLaw != Law::kHertz;
+// The compliant sensors' library (HC_SENSOR_LIBRARY: Hertz contacts, with or without a
+// dashpot, forward and tangent runs): its runs carry the sensors (`RunFullBlock`'s
+// kSensors), the others refuse them.
+#if defined(HC_SENSOR_LIBRARY)
+constexpr bool kSensorLibrary = true;
+#else
+constexpr bool kSensorLibrary = false;
+#endif
+// Libraries that run blocks of 8 chains only: the laws other than Hertz's, and the sensors'
+// (a diagnosis's few traces; with blocks of 8, 4 and 1 it built in 34 s, not 14 s, on 2 cores).
+constexpr bool kEightLanesOnly = kLawLibrary || kSensorLibrary;
 
 // state0 and parameters as for the full kernel.
 template <Pass kPass>
@@ -1045,17 +1242,35 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
                    ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                    ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                    ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction, ffi::Buffer<ffi::F64> dashpot,
-                   ffi::Buffer<ffi::F64> law, ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
+                   ffi::Buffer<ffi::F64> law, ffi::Buffer<ffi::F64> sensors, ffi::Buffer<ffi::S64> channels,
+                   ffi::Buffer<ffi::S64> beads, double dt, int64_t steps_per_sample,
                    int64_t viscous, int64_t friction_on, int64_t extras, int64_t dashpot_on,
                    const TangentInputs* tangents, ffi::RemainingRets results, const BooksIO* books = nullptr) {
   auto dims = state0.dimensions();
   const int64_t batch = dims[dims.size() - 1];
   const int64_t bodies = inv_mass.dimensions()[inv_mass.dimensions().size() - 2] - 1;
+  const int64_t n_sensors = static_cast<int64_t>(beads.element_count());
+  if (n_sensors > 0 && !kSensorLibrary)
+    return ffi::Error::InvalidArgument("compliant sensors run the sensor library's kernel (HC_SENSOR_LIBRARY)");
+  if (n_sensors > 0 && books) return ffi::Error::InvalidArgument("compliant sensors: the kernel keeps no books");
   const int64_t peak_rows = books && IsPlastic(kLibraryLaw) ? bodies : 0;
-  const int64_t state_rows = 3 * (bodies + 1) + (books ? peak_rows + bodies + (viscous ? bodies + 1 : 0) + 1 : 0);
+  const int64_t state_rows = 3 * (bodies + 1) + 3 * n_sensors +
+                             (books ? peak_rows + bodies + (viscous ? bodies + 1 : 0) + 1 : 0);
   if (static_cast<int64_t>(state0.element_count()) != state_rows * batch)
     return ffi::Error::InvalidArgument(books ? "state0 must be (3 (bodies + 1) + the books' rows, B)"
-                                             : "state0 must be (3 (bodies + 1), B) for one primal");
+                                             : "state0 must be (3 (bodies + 1) + 3 sensors, B) for one primal");
+  const int64_t* bead = beads.typed_data();
+  std::vector<char> seen(2 * bodies, 0);  // each contact the back of one sensor and the front of one at most
+  for (int64_t k = 0; k < n_sensors; ++k) {
+    if (bead[k] < 1 || bead[k] >= bodies)
+      return ffi::Error::InvalidArgument("a sensor bead K needs contacts K - 1 and K in the chain");
+    if (seen[bead[k] - 1] || seen[bodies + bead[k]])
+      return ffi::Error::InvalidArgument("a sensor bead is listed twice");
+    seen[bead[k] - 1] = seen[bodies + bead[k]] = 1;
+  }
+  if (static_cast<int64_t>(sensors.element_count()) != SensorRows(n_sensors) &&
+      static_cast<int64_t>(sensors.element_count()) != SensorRows(n_sensors) * batch)
+    return ffi::Error::InvalidArgument("sensors must be (4 sensors + 1, 1 or B) (chain_kernel.cc, SensorRows)");
   std::vector<int64_t> rows(channels.typed_data(),
                             channels.typed_data() + channels.element_count());
   // results: one (B, n_samples) trace per channel, then (tangents) one (D, B, n_samples)
@@ -1082,8 +1297,9 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   if (static_cast<int64_t>(law.element_count()) != law_rows &&
       static_cast<int64_t>(law.element_count()) != law_rows * batch)
     return ffi::Error::InvalidArgument("law must be (rows, 1 or B): the law's parameters (chain_kernel.cc, LawRows)");
-  FullParams p{AsParam(inv_mass), AsParam(kappa), AsParam(overlap0), AsParam(spring), AsParam(external),
-               AsParam(eta),      AsParam(friction), AsParam(dashpot), AsParam(law)};
+  FullParams p{AsParam(inv_mass), AsParam(kappa),    AsParam(overlap0), AsParam(spring), AsParam(external),
+               AsParam(eta),      AsParam(friction), AsParam(dashpot),  AsParam(law),    AsParam(sensors),
+               bead,              n_sensors};
   TangentInputs none{};
   const TangentInputs& tin = tangents ? *tangents : none;
   const BooksIO no_books{};
@@ -1091,21 +1307,21 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   // blocks of 64, then of 8 (the last one may be partial), the last 2-4 chains in a block
   // of 4 (a vector costs about what one chain alone does), a last single chain alone; runs
   // with the books (sweeps: large batches) in blocks of 64 and 8 only, so that they add two
-  // block widths to the library's build, not four; the laws other than Hertz's in blocks of 8
-  // only (`kLawLibrary`)
+  // block widths to the library's build, not four; the laws other than Hertz's and the
+  // compliant sensors in blocks of 8 only (`kEightLanesOnly`)
   std::vector<Block> blocks;
   int64_t lo = 0;
-  for (; !kLawLibrary && lo + kWideLanes <= batch; lo += kWideLanes) blocks.push_back({lo, kWideLanes});
+  for (; !kEightLanesOnly && lo + kWideLanes <= batch; lo += kWideLanes) blocks.push_back({lo, kWideLanes});
   constexpr bool kB = kPass == Pass::kBooks;
   int64_t narrow = 0;
-  for (; batch - lo > (kB || kLawLibrary ? 0 : kQuarterLanes); lo += kNarrowLanes, ++narrow)
+  for (; batch - lo > (kB || kEightLanesOnly ? 0 : kQuarterLanes); lo += kNarrowLanes, ++narrow)
     blocks.push_back({lo, kNarrowLanes});
   // an odd number of 8-lane blocks and nothing after them leaves a thread idle while another
   // runs the last one: its chains go as two blocks of 4, one per thread (a fit iteration of
   // 8 traces on 2 cores of an AVX-512 Xeon 24.7 -> 16.5 ms, 24 traces 50.5 -> 40.3 ms:
   // benchmarks/results/fit_iteration_scaling/)
   // (two threads: the caller and a helper of the pool, on two CPUs at least)
-  if (!kB && !kLawLibrary && narrow % 2 == 1 && lo >= batch && pool.num_threads() >= 1 &&
+  if (!kB && !kEightLanesOnly && narrow % 2 == 1 && lo >= batch && pool.num_threads() >= 1 &&
       hertzchain::CpuLimit() >= 2) {
     const int64_t last = blocks.back().lo;
     blocks.back() = {last, kQuarterLanes};
@@ -1125,13 +1341,13 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
       // blocks of 8 and 4 with the extras' terms (zeros: the same numbers): without them
       // GCC 12 leaves the damped 8-lane loop scalar ("control flow in loop"), 2.5x slower
       constexpr bool kENarrow = kE || kL == kNarrowLanes || kL == kQuarterLanes;
-      RunFullBlock<kL, kV, kF, kT, kENarrow, kD, kB, kLibraryLaw>(bodies, first, batch, n_samples,
-                                                                  steps_per_sample, dt, state0.typed_data(), p,
-                                                                  rows, outs, directions, tin, touts, kept);
+      RunFullBlock<kL, kV, kF, kT, kENarrow, kD, kB, kLibraryLaw, kSensorLibrary>(
+          bodies, first, batch, n_samples, steps_per_sample, dt, state0.typed_data(), p, rows, outs, directions, tin,
+          touts, kept);
     };
     RunBlocks(pool, blocks, [&](int64_t b) {
       const Block& block = blocks[b];
-      if constexpr (kLawLibrary) {
+      if constexpr (kEightLanesOnly) {
         advance(std::integral_constant<int64_t, kNarrowLanes>{}, block.lo);
       } else {
         if (block.lanes == kWideLanes) return advance(std::integral_constant<int64_t, kWideLanes>{}, block.lo);
@@ -1159,8 +1375,9 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   // The dashpot's runs and the other laws' are compiled into libraries of their own
   // (HC_DASHPOT_LIBRARY, HC_POWER_LIBRARY, HC_THORNTON_LIBRARY, HC_JACKSON_GREEN_LIBRARY, built
   // on first use by `native`), so that the library every run needs does not wait for them;
-  // a law's library runs its law with and without a dashpot.
-#if defined(HC_LAW_LIBRARY)
+  // a law's library runs its law with and without a dashpot, and so does the compliant
+  // sensors' library (HC_SENSOR_LIBRARY) Hertz's.
+#if defined(HC_LAW_LIBRARY) || defined(HC_SENSOR_LIBRARY)
   if (dashpot_on && !viscous)
     return ffi::Error::InvalidArgument("a dashpot runs with damping only (the kernels compute rates with it)");
   if (dashpot_on) {
@@ -1184,16 +1401,16 @@ ffi::Error FullForward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::
                        ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                        ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                        ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction, ffi::Buffer<ffi::F64> dashpot,
-                       ffi::Buffer<ffi::F64> law, ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
-                       int64_t viscous, int64_t friction_on, int64_t extras, int64_t dashpot_on,
-                       ffi::RemainingRets traces) {
+                       ffi::Buffer<ffi::F64> law, ffi::Buffer<ffi::F64> sensors, ffi::Buffer<ffi::S64> channels,
+                       ffi::Buffer<ffi::S64> beads, double dt, int64_t steps_per_sample, int64_t viscous,
+                       int64_t friction_on, int64_t extras, int64_t dashpot_on, ffi::RemainingRets traces) {
   return RunFull<Pass::kForward>(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot,
-                                 law, channels, dt, steps_per_sample, viscous, friction_on, extras, dashpot_on, nullptr,
-                                 traces);
+                                 law, sensors, channels, beads, dt, steps_per_sample, viscous, friction_on, extras,
+                                 dashpot_on, nullptr, traces);
 }
 #endif  // HC_PART_FORWARD
 
-#if HC_PART_TANGENT
+#if HC_PART_TANGENT && !defined(HC_SENSOR_LIBRARY)
 // The full forward run with the books (`BooksIO`): state0 and the result `state` the packed
 // state of `batched._Layout` (x, v, a, the largest forces, with damping the viscous forces,
 // the dissipated energy), `mass` (bodies, 1 or B), kg.
@@ -1201,39 +1418,45 @@ ffi::Error FullBooks(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Bu
                      ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                      ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                      ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction, ffi::Buffer<ffi::F64> dashpot,
-                     ffi::Buffer<ffi::F64> law, ffi::Buffer<ffi::F64> mass, ffi::Buffer<ffi::S64> channels, double dt,
-                     int64_t steps_per_sample, int64_t viscous, int64_t friction_on, int64_t extras,
-                     int64_t dashpot_on, ffi::ResultBuffer<ffi::F64> state, ffi::RemainingRets traces) {
+                     ffi::Buffer<ffi::F64> law, ffi::Buffer<ffi::F64> sensors, ffi::Buffer<ffi::F64> mass,
+                     ffi::Buffer<ffi::S64> channels, ffi::Buffer<ffi::S64> beads, double dt, int64_t steps_per_sample,
+                     int64_t viscous, int64_t friction_on, int64_t extras, int64_t dashpot_on,
+                     ffi::ResultBuffer<ffi::F64> state, ffi::RemainingRets traces) {
   if (state->element_count() != state0.element_count())
     return ffi::Error::InvalidArgument("the books' state must have state0's shape");
   const BooksIO books{state0.typed_data(), AsParam(mass), state->typed_data()};
   return RunFull<Pass::kBooks>(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot,
-                               law, channels, dt, steps_per_sample, viscous, friction_on, extras, dashpot_on, nullptr,
-                               traces, &books);
+                               law, sensors, channels, beads, dt, steps_per_sample, viscous, friction_on, extras,
+                               dashpot_on, nullptr, traces, &books);
 }
+#endif  // HC_PART_TANGENT && !HC_SENSOR_LIBRARY
+
+#if HC_PART_TANGENT
 
 ffi::Error FullTangent(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                        ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
                        ffi::Buffer<ffi::F64> spring, ffi::Buffer<ffi::F64> external,
                        ffi::Buffer<ffi::F64> eta, ffi::Buffer<ffi::F64> friction, ffi::Buffer<ffi::F64> dashpot,
-                       ffi::Buffer<ffi::F64> law, ffi::Buffer<ffi::F64> t_state0, ffi::Buffer<ffi::F64> t_inv_mass,
+                       ffi::Buffer<ffi::F64> law, ffi::Buffer<ffi::F64> sensors, ffi::Buffer<ffi::F64> t_state0, ffi::Buffer<ffi::F64> t_inv_mass,
                        ffi::Buffer<ffi::F64> t_kappa, ffi::Buffer<ffi::F64> t_overlap0,
                        ffi::Buffer<ffi::F64> t_spring, ffi::Buffer<ffi::F64> t_external,
                        ffi::Buffer<ffi::F64> t_eta, ffi::Buffer<ffi::F64> t_friction,
-                       ffi::Buffer<ffi::F64> t_dashpot, ffi::Buffer<ffi::F64> t_law,
-                       ffi::Buffer<ffi::S64> channels, double dt, int64_t steps_per_sample,
-                       int64_t viscous, int64_t friction_on, int64_t extras, int64_t dashpot_on,
-                       ffi::RemainingRets tangent_traces) {
+                       ffi::Buffer<ffi::F64> t_dashpot, ffi::Buffer<ffi::F64> t_law, ffi::Buffer<ffi::F64> t_sensors,
+                       ffi::Buffer<ffi::S64> channels, ffi::Buffer<ffi::S64> beads, double dt,
+                       int64_t steps_per_sample, int64_t viscous, int64_t friction_on, int64_t extras,
+                       int64_t dashpot_on, ffi::RemainingRets tangent_traces) {
   auto dims = state0.dimensions();
   const int64_t batch = dims[dims.size() - 1];
   const int64_t rows_x = inv_mass.dimensions()[inv_mass.dimensions().size() - 2];
-  const int64_t counts[10] = {
-      Directions(t_state0, 3 * rows_x, batch), Directions(t_inv_mass, rows_x, batch),
+  const int64_t n_sensors = static_cast<int64_t>(beads.element_count());
+  const int64_t counts[11] = {
+      Directions(t_state0, 3 * rows_x + 3 * n_sensors, batch), Directions(t_inv_mass, rows_x, batch),
       Directions(t_kappa, rows_x - 1, batch),  Directions(t_overlap0, rows_x - 1, batch),
       Directions(t_spring, rows_x - 1, batch), Directions(t_external, rows_x, batch),
       Directions(t_eta, 1, batch),             Directions(t_friction, 1, batch),
-      Directions(t_dashpot, 1, batch),         Directions(t_law, LawRows(kLibraryLaw, rows_x - 1), batch)};
-  const int64_t directions = *std::max_element(counts, counts + 10);
+      Directions(t_dashpot, 1, batch),         Directions(t_law, LawRows(kLibraryLaw, rows_x - 1), batch),
+      Directions(t_sensors, SensorRows(n_sensors), batch)};
+  const int64_t directions = *std::max_element(counts, counts + 11);
   for (int64_t count : counts)
     if (count != 1 && count != directions)
       return ffi::Error::InvalidArgument("tangents must be (directions or 1, rows, B)");
@@ -1244,24 +1467,29 @@ ffi::Error FullTangent(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::
                     tangent(t_kappa, counts[2]),     tangent(t_overlap0, counts[3]),
                     tangent(t_spring, counts[4]),    tangent(t_external, counts[5]),
                     tangent(t_eta, counts[6]),       tangent(t_friction, counts[7]),
-                    tangent(t_dashpot, counts[8]),    tangent(t_law, counts[9])};
+                    tangent(t_dashpot, counts[8]),    tangent(t_law, counts[9]),
+                    tangent(t_sensors, counts[10])};
   return RunFull<Pass::kTangent>(pool, state0, inv_mass, kappa, overlap0, spring, external, eta, friction, dashpot,
-                                 law, channels, dt, steps_per_sample, viscous, friction_on, extras, dashpot_on, &tin,
-                                 tangent_traces);
+                                 law, sensors, channels, beads, dt, steps_per_sample, viscous, friction_on, extras,
+                                 dashpot_on, &tin, tangent_traces);
 }
 #endif  // HC_PART_TANGENT
 
 }  // namespace
 
 // The handlers' argument lists: `chain_ffi.h` (the recorded channels, a buffer here, after
-// the parameters); the host's full kernels also take the power law's parameters (`law`,
-// read by the power-law library: zeros elsewhere) after the full kernels' arguments.
+// the parameters); the host's full kernels also take the contact law's parameters (`law`,
+// `LawRows`: read by the law libraries, zeros elsewhere) and the compliant sensors' (`sensors`,
+// `SensorRows`: read by the sensor library) after the full kernels' arguments, and the
+// sensors' beads (a buffer, empty without) after the channels.
 template <class Binding>
 auto HostFullArgs(Binding&& binding) {
-  return hertzchain::FullArgs(std::forward<Binding>(binding)).template Arg<ffi::Buffer<ffi::F64>>();  // law
+  return hertzchain::FullArgs(std::forward<Binding>(binding))
+      .template Arg<ffi::Buffer<ffi::F64>>()   // law
+      .template Arg<ffi::Buffer<ffi::F64>>();  // sensors
 }
 
-#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_LAW_LIBRARY) && HC_PART_FORWARD
+#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_LAW_LIBRARY) && !defined(HC_SENSOR_LIBRARY) && HC_PART_FORWARD
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
                               hertzchain::ForwardAttrs(hertzchain::ChainArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
                                                            .Arg<ffi::Buffer<ffi::S64>>())  // channels
@@ -1272,22 +1500,28 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
 #if HC_PART_FORWARD
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullForward, FullForward,
                               hertzchain::FullAttrs(HostFullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
-                                                        .Arg<ffi::Buffer<ffi::S64>>())  // channels
+                                                        .Arg<ffi::Buffer<ffi::S64>>()   // channels
+                                                        .Arg<ffi::Buffer<ffi::S64>>())  // sensor beads
                                   .RemainingRets());                                    // traces
 #endif
 
-#if HC_PART_TANGENT
+#if HC_PART_TANGENT && !defined(HC_SENSOR_LIBRARY)
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainFullBooks, FullBooks,
                               hertzchain::FullAttrs(HostFullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
                                                         .Arg<ffi::Buffer<ffi::F64>>()   // mass
-                                                        .Arg<ffi::Buffer<ffi::S64>>())  // channels
+                                                        .Arg<ffi::Buffer<ffi::S64>>()   // channels
+                                                        .Arg<ffi::Buffer<ffi::S64>>())  // sensor beads
                                   .Ret<ffi::Buffer<ffi::F64>>()  // state
                                   .RemainingRets());             // traces
+#endif
+
+#if HC_PART_TANGENT
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(
     HertzChainFullTangent, FullTangent,
     hertzchain::FullAttrs(
         HostFullArgs(HostFullArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>()))  // values, tangents
-            .Arg<ffi::Buffer<ffi::S64>>())                                                 // channels
+            .Arg<ffi::Buffer<ffi::S64>>()                                    // channels
+            .Arg<ffi::Buffer<ffi::S64>>())                                   // sensor beads
         .RemainingRets());  // traces, then their tangents
 #endif  // HC_PART_TANGENT

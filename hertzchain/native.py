@@ -34,8 +34,11 @@ Under `jax.vmap` (`jax.custom_batching.custom_vmap`) a mapped batch of inputs jo
 kernel's chain axis and mapped tangents its direction axis, so a batch of fits, `jacfwd`
 of `vmap` and `vmap` of `jacfwd` are one kernel run each.
 
-Everything else (laws other than Hertz's on a GPU, compliant sensors, the books of a damped
-chain on a GPU, reverse mode) runs the JAX kernel,
+The full kernel runs compliant sensor beads as well (`hertzchain.compliant_sensor`, on Hertz
+contacts, forward and tangent runs, no books), from a library of its own built on first use.
+
+Everything else (laws other than Hertz's on a GPU, compliant sensors on a GPU or on other
+laws, the books of a damped chain on a GPU, reverse mode) runs the JAX kernel,
 which stays the reference: they agree to round-off, values and derivatives
 (`tests/test_native.py`), and every kernel's laws are held to `contact`'s
 (`tests/test_batched.py::test_every_kernel_applies_the_laws_of_contact`).
@@ -98,6 +101,12 @@ DASHPOT_BOOKS_TARGET = "hertzchain_chain_full_books_dashpot"
 # laws (`contact.thornton_contact`, `contact.jackson_green_contact`), likewise each in a
 # library of its own (`-D` its define), built on first use; its targets are
 # "hertzchain_chain_full_{forward,tangent,books}_<law>", with or without a dashpot.
+# The full kernel with compliant sensor beads (`hertzchain.compliant_sensor`; Hertz contacts,
+# with or without a dashpot, forward and tangent runs, no books): likewise in a library of
+# its own, built on first use (the diagnosis's sensor refits).
+SENSOR_DEFINE = "HC_SENSOR_LIBRARY"
+SENSOR_FULL_TARGET = "hertzchain_chain_full_forward_sensors"
+SENSOR_TANGENT_TARGET = "hertzchain_chain_full_tangent_sensors"
 LAW_DEFINES = {"power_law": "HC_POWER_LIBRARY", "thornton": "HC_THORNTON_LIBRARY",
                "jackson_green": "HC_JACKSON_GREEN_LIBRARY"}
 CONTACT_LAWS = ("hertz",) + tuple(LAW_DEFINES)
@@ -314,11 +323,20 @@ def _load_dashpot() -> None:
                    (DASHPOT_BOOKS_TARGET, "HertzChainFullBooks")))
 
 
+@functools.cache
+def _load_sensors() -> None:
+    """Build (if needed), load and register the compliant sensors' full kernels (`SENSOR_DEFINE`)."""
+    _load_library((f"-D{SENSOR_DEFINE}",), "the fused chain kernel's compliant sensors",
+                  ((SENSOR_FULL_TARGET, "HertzChainFullForward"), (SENSOR_TANGENT_TARGET, "HertzChainFullTangent")))
+
+
 def load_on_demand_libraries():
     """Build (where not built yet) and load the host libraries otherwise built on first use:
-    the dashpot's (Hertz contacts with a dashpot) and each other contact law's
-    (`LAW_DEFINES`, with or without a dashpot). Yields (name, path, seconds) as each is ready."""
-    for name, defines, load in [("dashpot", (f"-D{DASHPOT_DEFINE}",), _load_dashpot)] + [
+    the dashpot's (Hertz contacts with a dashpot), the compliant sensors' and each other
+    contact law's (`LAW_DEFINES`, with or without a dashpot). Yields (name, path, seconds) as
+    each is ready."""
+    for name, defines, load in [("dashpot", (f"-D{DASHPOT_DEFINE}",), _load_dashpot),
+                                ("compliant sensors", (f"-D{SENSOR_DEFINE}",), _load_sensors)] + [
             (law, (f"-D{define}",), functools.partial(_load_law, law)) for law, define in LAW_DEFINES.items()]:
         began = time.perf_counter()
         load()
@@ -367,11 +385,14 @@ class FusedKernel(NamedTuple):
 
 def kernel_for(flags, devices) -> FusedKernel | None:
     """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
-    devices, or None (the JAX kernel: laws other than Hertz's on a GPU, compliant sensors, the books of damping or friction on a GPU, devices of another kind, no
-    compiler)."""
+    devices, or None (the JAX kernel: laws other than Hertz's on a GPU, compliant sensors on
+    a GPU or on other laws than Hertz's, the books of damping or friction on a GPU, devices
+    of another kind, no compiler)."""
     platforms = {d.platform for d in devices} if devices else {jax.default_backend()}
-    if flags.sensors:  # compliant sensors: the JAX kernel's physics only
-        return None
+    if flags.sensors:  # compliant sensors: the host's sensor library, Hertz contacts, no books
+        if flags.law != "hertz" or flags.ledger or platforms != {"cpu"} or not available():
+            return None
+        return FusedKernel("full", "host")
     if flags.law != "hertz":  # the full kernel's library of the law (`LAW_DEFINES`), on the host
         if platforms != {"cpu"} or not available():
             return None
@@ -406,7 +427,8 @@ _THREAD_SYMBOLS = {"forward": "HertzChainThreadForward", "full": "HertzChainThre
                    "tangent": "HertzChainThreadFullTangent"}
 _HOST_TARGETS = {"forward": TARGET, "full": FULL_TARGET, "tangent": TANGENT_TARGET, "books": BOOKS_TARGET,
                  "full_dashpot": DASHPOT_FULL_TARGET, "tangent_dashpot": DASHPOT_TANGENT_TARGET,
-                 "books_dashpot": DASHPOT_BOOKS_TARGET} | {
+                 "books_dashpot": DASHPOT_BOOKS_TARGET, "full_sensors": SENSOR_FULL_TARGET,
+                 "tangent_sensors": SENSOR_TANGENT_TARGET} | {
                      f"{kind}_{law}": _law_target(kind, law) for law in LAW_DEFINES for kind in ("full", "tangent", "books")}
 
 
@@ -489,17 +511,22 @@ class _Ffi(NamedTuple):
         shape = (batch, self.n_samples) if self.backend == "host" else (self.n_samples, batch)
         return tuple(jax.ShapeDtypeStruct(leading + shape, state0.dtype) for _ in range(count))
 
-    def call(self, kind: str, shapes, args, index, attrs) -> tuple:
+    def call(self, kind: str, shapes, args, index, attrs, beads=()) -> tuple:
         """`kind`: "forward", "full", "tangent", "books", the last three with a dashpot
         ("_dashpot": its own host library; the thread kernels compile it into the same one) or
-        on another law ("_<law>", a `LAW_DEFINES` key: its own host library)."""
+        on another law ("_<law>", a `LAW_DEFINES` key: its own host library), the first two
+        also with compliant sensors ("_sensors", in `beads`: their own host library)."""
         if self.backend == "host":
             if kind.endswith("_dashpot"):
                 _load_dashpot()
+            if kind.endswith("_sensors"):
+                _load_sensors()
             for law in LAW_DEFINES:
                 if kind.endswith(f"_{law}"):
                     _load_law(law)
-            return tuple(jax.ffi.ffi_call(_HOST_TARGETS[kind], shapes)(*args, index, **attrs))
+            # the host's full kernels take the sensors' beads after the channels (empty without)
+            extra = () if kind == "forward" else (np.asarray(beads, dtype=np.int64),)
+            return tuple(jax.ffi.ffi_call(_HOST_TARGETS[kind], shapes)(*args, index, *extra, **attrs))
         target = _thread_target(self.backend, int(self.rows), kind.removesuffix("_dashpot"))
         return tuple(jax.ffi.ffi_call(target, shapes)(*args, channels=index, **attrs))
 
@@ -605,7 +632,8 @@ def _fold_directions(size: int, batched, tangents):
 
 def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples: int,
              channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
-             dashpot: bool = False, law: str = "hertz", backend: str = "host"):
+             dashpot: bool = False, law: str = "hertz", backend: str = "host",
+             sensors: tuple[int, ...] = (), sensor_state=None):
     """The full step (`batched._step` with velocities and accelerations apart: damping,
     friction) from displacements `x`, velocities `v` and accelerations `a` (bodies + 1, B)
     at the impact, through `n_samples` samples of `steps_per_sample` steps of `dt_s`
@@ -623,12 +651,23 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     "thornton" or "jackson_green" on the elastic-plastic laws of `forces.elastic_parts`, from
     the arrays `batched` stores for them; host only, each in a library of its own;
     an elastic-plastic run starts from the largest overlaps so far at `x`). `backend` as for
-    `run`."""
+    `run`. `sensors`: beads K with a compliant sensor (`hertzchain.compliant_sensor`, the
+    step of `batched._step`; Hertz contacts, on the host, in a library of its own), whose
+    parameters `p` holds as `batched` stores them ("sensor_beta", "sensor_inv",
+    "sensor_back", "sensor_front", (n_sensors, 1 or B) each, and "first_force"), and
+    `sensor_state` their forces (N), rates (N/s) and drives (N) at the impact, (3 n_sensors, B)."""
     _require(backend)
     _check_law(law, backend, "run_full")
-    args = _full_args(p, jax.numpy.concatenate([x, v, a]), preload, springs, dashpot, law, backend)
+    sensors = tuple(int(k) for k in sensors)
+    if sensors and (law != "hertz" or backend != "host"):
+        raise ValueError("run_full: compliant sensors run on Hertz contacts on the host kernel.")
+    if sensors and (sensor_state is None or sensor_state.shape[0] != 3 * len(sensors)):
+        raise ValueError("run_full: sensor_state must hold the sensors' forces, rates and drives, "
+                         "(3 n_sensors, B).")
+    state0 = jax.numpy.concatenate([x, v, a] + ([sensor_state] if sensors else []))
+    args = _full_args(p, state0, preload, springs, dashpot, law, backend, sensors)
     config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
-              bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), law, backend)
+              bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), law, backend, sensors)
     return _full_call(config)(*args)
 
 
@@ -664,9 +703,11 @@ def _check_law(law: str, backend: str, caller: str) -> None:
         raise ValueError(f"{caller}: the {law} law runs on the host kernel (backend 'host').")
 
 
-def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool, law: str, backend: str) -> tuple:
+def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool, law: str, backend: str,
+               sensors: tuple[int, ...] = ()) -> tuple:
     """The full kernels' arrays: the state, then the eight parameter arrays (zeros for the
-    physics a run does not have) and, for the host kernels, the law's (`_law_array`)."""
+    physics a run does not have) and, for the host kernels, the law's (`_law_array`) and the
+    compliant sensors' (`_sensor_array`)."""
     width = lambda leaf: leaf.shape[-1]  # noqa: E731
     zeros = lambda leaf: jax.numpy.zeros_like(leaf)  # noqa: E731
     return (
@@ -680,7 +721,20 @@ def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool, law
         jax.numpy.reshape(p["friction"], (1, width(p["friction"]))),
         # the linear dashpot (N s/m, `contact.contact_force`), zeros without one
         jax.numpy.reshape(p["dashpot"], (1, width(p["dashpot"]))) if dashpot else jax.numpy.zeros((1, 1)),
-    ) + (_law_array(p, law),) * (backend == "host")
+    ) + ((_law_array(p, law), _sensor_array(p, sensors)) if backend == "host" else ())
+
+
+def _sensor_array(p: dict, sensors: tuple[int, ...]):
+    """The compliant sensors' parameters as the host kernels' (rows, 1 or B) array
+    (`chain_kernel.cc`'s `SensorRows`): their mass fractions, 1/omega0^2 (s^2), back and
+    front compliances (m/N), then the preload's force on the first bead (N); one row of zeros
+    without sensors."""
+    if not sensors:
+        return jax.numpy.zeros((1, 1))
+    rows = [p["sensor_beta"], p["sensor_inv"], p["sensor_back"], p["sensor_front"],
+            jax.numpy.reshape(p["first_force"], (1, -1))]
+    width = max(row.shape[-1] for row in rows)
+    return jax.numpy.concatenate([jax.numpy.broadcast_to(row, (row.shape[0], width)) for row in rows])
 
 
 def _law_array(p: dict, law: str):
@@ -706,7 +760,7 @@ def _law_array(p: dict, law: str):
 @functools.cache
 def _full_call(config):
     """The full kernel for one configuration as a function of its arrays, with its JVP."""
-    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, dashpot, law, backend = config
+    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, dashpot, law, backend, sensors = config
     if dashpot and not viscous:
         raise ValueError("run_full: a dashpot needs viscous=True (the kernel's rates come with the damping).")
     # dashpot: the kernel with the dashpot's terms compiled in (`DASHPOT_DEFINE`)
@@ -714,9 +768,12 @@ def _full_call(config):
                  viscous=np.int64(viscous), friction=np.int64(friction), extras=np.int64(extras),
                  dashpot=np.int64(dashpot))
     index = np.asarray(channels, dtype=np.int64)
-    n_args = 10 if backend == "host" else 9  # the state, the eight parameter arrays (host: and the law's)
-    # a dashpot on Hertz contacts: the dashpot library; on another law: that law's library
+    # the state, the eight parameter arrays (host: and the law's and the sensors')
+    n_args = 11 if backend == "host" else 9
+    # a dashpot on Hertz contacts: the dashpot library; on another law: that law's library;
+    # compliant sensors (with or without a dashpot): the sensors' library
     kinds = (f"full_{law}", f"tangent_{law}") if law != "hertz" else (
+        ("full_sensors", "tangent_sensors") if sensors else
         ("full_dashpot", "tangent_dashpot") if dashpot else ("full", "tangent"))
 
     def ffi(args):
@@ -726,7 +783,7 @@ def _full_call(config):
     def traces(*args):
         call = ffi(args)
         shapes = call.trace_shapes(args[0], len(channels))
-        return call.traces(call.call(kinds[0], shapes, args, index, attrs))
+        return call.traces(call.call(kinds[0], shapes, args, index, attrs, sensors))
 
     @traces.def_vmap
     def _(size, batched, *args):
@@ -742,7 +799,7 @@ def _full_call(config):
         call = ffi(primals)
         n = len(channels)
         out_shapes = call.trace_shapes(primals[0], n) + call.trace_shapes(primals[0], n, (directions,))
-        out = call.call(kinds[1], out_shapes, primals + tangents, index, attrs)
+        out = call.call(kinds[1], out_shapes, primals + tangents, index, attrs, sensors)
         return call.traces(out[:n]) + call.traces(out[n:])
 
     @traces_and_tangents.def_vmap

@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from hertzchain import native
 from hertzchain.chain import ChainSetup, build_model
 from hertzchain.compliant_sensor import CompliantSensors, with_compliant_sensors
 from hertzchain.integrate import Recording, solve
@@ -93,7 +94,8 @@ BATCH_CASES = {
 
 @pytest.mark.parametrize("case", sorted(BATCH_CASES))
 def test_batched_kernel_runs_compliant_sensors_as_solve_does(case):
-    """`record_batched` with `compliant_sensors` (the JAX kernel) against `solve`, chain by
+    """`record_batched` with `compliant_sensors` (the C++ sensor library on Hertz contacts, the
+    JAX kernel on the plastic ones) against `solve`, chain by
     chain, each chain with its own sensors (f0 85 and 300 kHz): forces to 1e-13 of their
     peaks (measured 3e-15), and without track friction (which acts on each half of a split
     bead) against the split-bead model of the same sensors (another model of the same
@@ -141,6 +143,56 @@ def test_batched_kernel_runs_compliant_sensors_as_solve_does(case):
     scale = float(jnp.max(jnp.abs(j_solve)))
     assert scale > 0
     np.testing.assert_allclose(j_kernel, j_solve, rtol=0, atol=1e-10 * scale)
+
+
+KERNEL_CASES = {
+    # brass-like beads, a preload, damping and track friction; two sensors side by side
+    "preload_damped_friction": (dict(bead_radius_m=5e-3, bead_density_kg_m3=8500.0, bead_youngs_pa=110e9,
+                                     precompression_n=2.0, eta_s=2e-7, mu=0.1), (3, 4)),
+    # the paper's beads, no damping (the kernel without rates)
+    "undamped": (dict(), (2, 5)),
+    # damping with a linear dashpot (the sensor library's dashpot runs)
+    "dashpot": (dict(eta_s=1e-7, dashpot_n_s_m=0.5), (2, 5)),
+}
+
+
+@pytest.mark.skipif(not native.available(), reason=f"no native kernel: {native.unavailable_reason()}")
+@pytest.mark.parametrize("case", sorted(KERNEL_CASES))
+def test_cpp_kernel_runs_compliant_sensors_as_the_jax_kernel(case):
+    """The C++ sensor library (`native.run_full(..., sensors=)`, what `record_batched` runs on
+    the CPU) against the JAX kernel, 9 chains (two blocks of 8, one of them 1 chain and 7 copies of it), each with its own
+    mass fraction and f0 (one quasi-static at 30 MHz): forces to 1e-13 of each channel's
+    largest (measured 2e-15), and `jacfwd` in the mass fraction and 1/omega0^2 (its custom
+    JVP: the tangents carried through the kernel) to 1e-10 (measured 1e-14)."""
+    from hertzchain.batched import kernel_flags, record_batched, stack_setups
+
+    changes, beads = KERNEL_CASES[case]
+    record = Recording(contacts=(1, 2, 3, 4, 5, 6))
+    speeds = np.linspace(0.3, 0.6, 9)
+    setups = [ChainSetup(N, striker_velocity_m_s=float(v), **changes) for v in speeds]
+    grid = choose_time_grid(setups[-1], t_end_s=0.2e-3, sample_interval_s=1e-6)
+    batch = stack_setups(setups)
+    flags = kernel_flags(batch)._replace(ledger=False, sensors=beads)
+    assert native.kernel_for(flags, None) == native.FusedKernel("full", "host")
+
+    def run(beta, inv, kernel):
+        sensors = CompliantSensors(beads, beta, inv)
+        return record_batched(batch, grid, record, flags, compliant_sensors=sensors, kernel=kernel).forces_n
+
+    betas = jnp.linspace(0.1, 0.5, 9)
+    invs = 1.0 / (2 * np.pi * jnp.array([85e3, 120e3, 3e7, 200e3, 300e3, 90e3, 150e3, 250e3, 100e3])) ** 2
+    cpp, reference = run(betas, invs, "auto"), run(betas, invs, "jax")
+    for name, trace in reference.items():
+        np.testing.assert_allclose(cpp[name], trace, rtol=0, atol=1e-13 * float(jnp.max(jnp.abs(trace))))
+
+    def side(q, kernel):  # beta, 1/omega0^2 in ps^2, every chain's
+        return run(q[0] * jnp.ones(9), q[1] * 1e-12 * jnp.ones(9), kernel)["contact_4"]
+
+    q = jnp.array([0.2, 3.0])
+    j_cpp, j_jax = jax.jacfwd(lambda q: side(q, "auto"))(q), jax.jacfwd(lambda q: side(q, "jax"))(q)
+    scale = float(jnp.max(jnp.abs(j_jax)))
+    assert scale > 0
+    np.testing.assert_allclose(j_cpp, j_jax, rtol=0, atol=1e-10 * scale)
 
 
 def test_batched_kernel_refuses_inconsistent_compliant_sensors():

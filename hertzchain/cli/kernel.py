@@ -5,8 +5,9 @@ JAX version (under a minute on two cores). Run this after installing, so that th
 sweep does not wait for it; it also says why the kernel cannot be used where it cannot
 (no compiler, `HERTZCHAIN_NATIVE=0`), in which case every command runs the JAX kernel (exit
 status 0 either way: the README's install command goes on). `--all` also builds the libraries
-that are otherwise built on their first use, 15-20 s each on two cores: the dashpot's and those
-of the other contact laws, which diagnoses and elastic-plastic or power-law runs call.
+that are otherwise built on their first use, 14-20 s each on two cores: the dashpot's, the
+compliant sensor beads' and those of the other contact laws, which diagnoses and
+elastic-plastic or power-law runs call.
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ from .. import native
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="print nothing when the kernel is ready")
     parser.add_argument("--all", action="store_true",
-                        help="also build the libraries built on first use (the dashpot's, the other contact laws')")
+                        help="also build the libraries built on first use (the dashpot's, the compliant sensors', "
+                             "the other contact laws')")
 
 
 def run(args: argparse.Namespace) -> int:
