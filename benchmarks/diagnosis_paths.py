@@ -2,14 +2,16 @@
 
 The diagnosis's forward model (`fitting.effects.effects_forward_model`: every candidate effect
 applied to the chain) runs on three paths: `solve` under `vmap` (a `ForwardModel` without its
-`KernelForm`), the batched JAX kernel (compliant sensor beads: `record_batched(...,
-compliant_sensors=)`) and the C++ kernel (its twin with rigid sensor beads, with or without
-the dashpot effect). This times the residuals with a 6-column and with the whole Jacobian on
+`KernelForm`), the batched kernel with compliant sensor beads (`record_batched(...,
+compliant_sensors=)`: the C++ kernel's sensor library, or the JAX kernel where the C++ one is
+off, `HERTZCHAIN_NATIVE=0`; `runs_cpp_kernel` says which) and the C++ kernel's twin with rigid
+sensor beads (with or without the dashpot effect; the JAX kernel where the C++ one is off). This times the residuals with a 6-column and with the whole Jacobian on
 each, for 21 beads of the paper's chain, 4 shots (0.1-0.5 m/s), contacts 5, 10 and 15 read
 by embedded sensors; damping, sensors' Eq. 4 and the dashpot on, and the same with track
 friction.
 
     python benchmarks/diagnosis_paths.py --out benchmarks/results/diagnosis_paths
+    HERTZCHAIN_NATIVE=0 python benchmarks/diagnosis_paths.py --out DIR   # the JAX kernel alone
 
 Writes `paths.json`: per case and path, the first call (compile included) and the median of 5
 more, s, the largest difference of the residuals from `solve`'s (relative to their largest),
@@ -42,7 +44,7 @@ VALUES = {"eta_s": 3e-7, "dashpot_n_s_m": 0.3, "sensor_beta": 0.2, "sensor_rate"
 
 
 def _problems(files, friction: bool):
-    """(solve, JAX kernel, C++ twin) problems and the point x: compliance and dashpot on for
+    """(solve, batched kernel, C++ twin) problems and the point x: compliance and dashpot on for
     the first two; the twin's sensors rigid (coupling 0, where it is exact)."""
     forward = fx.effects_forward_model(N_BEADS, plastic=False)
     seed = make_problem(files, ("eta", "C", "striker_velocity"), forward=forward)
@@ -51,7 +53,7 @@ def _problems(files, friction: bool):
     def problem(model):
         return Problem(seed.experiments, tuple(seed.instances) + extra, seed.base_setups, model)
 
-    paths = {"solve_vmap": problem(dataclasses.replace(forward, kernel=None)), "jax_kernel": problem(forward),
+    paths = {"solve_vmap": problem(dataclasses.replace(forward, kernel=None)), "batched_kernel": problem(forward),
              "cpp_twin": problem(fx.effects_forward_model(N_BEADS, plastic=False, compliant_sensors=False))}
     x = np.concatenate([initial_values(seed), np.zeros(len(extra))])
     labels = paths["solve_vmap"].labels
@@ -60,7 +62,7 @@ def _problems(files, friction: bool):
     x[labels.index("mu")] = 0.1 if friction else 0.0
     compliant = x.copy()
     compliant[labels.index("sensor_coupling")] = 0.5
-    return paths, {"solve_vmap": compliant, "jax_kernel": compliant, "cpp_twin": x}, labels
+    return paths, {"solve_vmap": compliant, "batched_kernel": compliant, "cpp_twin": x}, labels
 
 
 def _time(problem, x, columns):
@@ -95,7 +97,7 @@ def main(argv=None):
                       f"(first call {entry[label]['first_s']:.1f} s)", flush=True)
             if name == "solve_vmap":
                 reference = r
-            elif name == "jax_kernel":
+            elif name == "batched_kernel":
                 entry["residuals_difference_over_largest"] = float(np.max(np.abs(r - reference))
                                                                    / np.max(np.abs(reference)))
             case[name] = entry

@@ -17,8 +17,9 @@ energy) besides the recorded forces. Measured here:
 
     python benchmarks/sweep_books.py --out benchmarks/results/sweep_books [--before DIR]
 
-`--build-times` instead times the builds of the main C++ library and of the dashpot's and two
-laws' libraries from this checkout's source and from `--before`'s (`build_times.json`).
+`--build-times` instead times the builds of the main C++ library and of the dashpot's, the
+compliant sensors' and two laws' libraries from this checkout's source and from `--before`'s
+(`build_times.json`).
 """
 
 from __future__ import annotations
@@ -122,13 +123,14 @@ def whole_command(native_on: bool, source: Path | None = None) -> dict:
 
 
 def build_times(before: Path | None) -> dict:
-    """Seconds to build the main C++ library, and the dashpot's and two laws' libraries (built
-    on first use), from this checkout's source (and from `before`'s), each into a scratch
+    """Seconds to build the main C++ library, and the dashpot's, the compliant sensors' and two
+    laws' libraries (built on first use), from this checkout's source (and from `before`'s), each into a scratch
     folder, one after the other."""
     env = dict(os.environ)
     prefix = "import sys, time, tempfile, pathlib; from hertzchain import native; t = time.perf_counter(); "
     scripts = {"main_library_build_s": prefix + "native._build(pathlib.Path(tempfile.mkdtemp()) / 'k.so')",
                "dashpot_library_build_s": prefix + "native._load_dashpot()",
+               "sensor_library_build_s": prefix + "native._load_sensors()",
                "jackson_green_library_build_s": prefix + "native._load_law('jackson_green')",
                "power_law_library_build_s": prefix + "native._load_law('power_law')"}
     times = {name: {} for name in scripts}

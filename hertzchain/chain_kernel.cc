@@ -1232,9 +1232,13 @@ constexpr bool kSensorLibrary = true;
 #else
 constexpr bool kSensorLibrary = false;
 #endif
-// Libraries that run blocks of 8 chains only: the laws other than Hertz's, and the sensors'
-// (a diagnosis's few traces; with blocks of 8, 4 and 1 it built in 34 s, not 14 s, on 2 cores).
-constexpr bool kEightLanesOnly = kLawLibrary || kSensorLibrary;
+// Libraries that run blocks of one width only (a partial last block repeats its last chain):
+// the laws other than Hertz's blocks of 8, the sensors' blocks of 4, one AVX2 vector (a
+// diagnosis evaluates 4-10 traces: an AVX-512 core that splits 512-bit operations in two
+// ran 4 chains in an 8-lane block in twice the time; with blocks of 8, 4 and 1 the library
+// built in 34 s, with blocks of 8 or of 4 alone in 14 s, on 2 cores).
+constexpr bool kOneWidth = kLawLibrary || kSensorLibrary;
+constexpr int64_t kOneWidthLanes = kSensorLibrary ? kQuarterLanes : kNarrowLanes;
 
 // state0 and parameters as for the full kernel.
 template <Pass kPass>
@@ -1308,20 +1312,22 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   // of 4 (a vector costs about what one chain alone does), a last single chain alone; runs
   // with the books (sweeps: large batches) in blocks of 64 and 8 only, so that they add two
   // block widths to the library's build, not four; the laws other than Hertz's and the
-  // compliant sensors in blocks of 8 only (`kEightLanesOnly`)
+  // compliant sensors in blocks of one width (`kOneWidth`)
   std::vector<Block> blocks;
   int64_t lo = 0;
-  for (; !kEightLanesOnly && lo + kWideLanes <= batch; lo += kWideLanes) blocks.push_back({lo, kWideLanes});
+  if constexpr (kOneWidth)
+    for (; lo < batch; lo += kOneWidthLanes) blocks.push_back({lo, kOneWidthLanes});
+  for (; lo + kWideLanes <= batch; lo += kWideLanes) blocks.push_back({lo, kWideLanes});
   constexpr bool kB = kPass == Pass::kBooks;
   int64_t narrow = 0;
-  for (; batch - lo > (kB || kEightLanesOnly ? 0 : kQuarterLanes); lo += kNarrowLanes, ++narrow)
+  for (; batch - lo > (kB ? 0 : kQuarterLanes); lo += kNarrowLanes, ++narrow)
     blocks.push_back({lo, kNarrowLanes});
   // an odd number of 8-lane blocks and nothing after them leaves a thread idle while another
   // runs the last one: its chains go as two blocks of 4, one per thread (a fit iteration of
   // 8 traces on 2 cores of an AVX-512 Xeon 24.7 -> 16.5 ms, 24 traces 50.5 -> 40.3 ms:
   // benchmarks/results/fit_iteration_scaling/)
   // (two threads: the caller and a helper of the pool, on two CPUs at least)
-  if (!kB && !kEightLanesOnly && narrow % 2 == 1 && lo >= batch && pool.num_threads() >= 1 &&
+  if (!kB && narrow % 2 == 1 && lo >= batch && pool.num_threads() >= 1 &&
       hertzchain::CpuLimit() >= 2) {
     const int64_t last = blocks.back().lo;
     blocks.back() = {last, kQuarterLanes};
@@ -1347,8 +1353,8 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
     };
     RunBlocks(pool, blocks, [&](int64_t b) {
       const Block& block = blocks[b];
-      if constexpr (kEightLanesOnly) {
-        advance(std::integral_constant<int64_t, kNarrowLanes>{}, block.lo);
+      if constexpr (kOneWidth) {
+        advance(std::integral_constant<int64_t, kOneWidthLanes>{}, block.lo);
       } else {
         if (block.lanes == kWideLanes) return advance(std::integral_constant<int64_t, kWideLanes>{}, block.lo);
         if (block.lanes == kNarrowLanes) return advance(std::integral_constant<int64_t, kNarrowLanes>{}, block.lo);
