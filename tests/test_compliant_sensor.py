@@ -157,7 +157,9 @@ KERNEL_CASES = {
 
 
 @pytest.mark.skipif(not native.available(), reason=f"no native kernel: {native.unavailable_reason()}")
-@pytest.mark.parametrize("case", sorted(KERNEL_CASES))
+@pytest.mark.parametrize("case", [
+    # (the damped and frictional case is also held to `solve` by the test above: slow here)
+    pytest.param(case, marks=pytest.mark.slow) if case != "undamped" else case for case in sorted(KERNEL_CASES)])
 def test_cpp_kernel_runs_compliant_sensors_as_the_jax_kernel(case):
     """The C++ sensor library (`native.run_full(..., sensors=)`, what `record_batched` runs on
     the CPU) against the JAX kernel, 9 chains (two blocks of 8, one of them 1 chain and 7 copies of it), each with its own
