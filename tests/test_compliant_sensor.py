@@ -197,6 +197,21 @@ def test_cpp_kernel_runs_compliant_sensors_as_the_jax_kernel(case):
     np.testing.assert_allclose(j_cpp, j_jax, rtol=0, atol=1e-10 * scale)
 
 
+@pytest.mark.skipif(not native.available(), reason=f"no native kernel: {native.unavailable_reason()}")
+def test_cpp_kernel_refuses_sensors_it_cannot_run():
+    """`native.run_full` with compliant sensors: Hertz contacts on the host only, and their
+    state (force, rate, drive of each) given."""
+    p = {name: jnp.zeros((3, 1)) for name in ("inv_mass", "kappa", "overlap0", "spring", "external")}
+    p.update(eta=jnp.zeros(1), friction=jnp.zeros(1), dashpot=jnp.zeros(1))
+    x = jnp.zeros((3, 1))
+    common = dict(dt_s=1e-7, steps_per_sample=1, n_samples=1, channels=(0,), viscous=False, friction=False,
+                  preload=False, springs=False, sensors=(1,))
+    with pytest.raises(ValueError, match="Hertz contacts on the host"):
+        native.run_full(p, x, x, x, law="power_law", sensor_state=jnp.zeros((3, 1)), **common)
+    with pytest.raises(ValueError, match="sensor_state"):
+        native.run_full(p, x, x, x, sensor_state=jnp.zeros((2, 1)), **common)
+
+
 def test_batched_kernel_refuses_inconsistent_compliant_sensors():
     from hertzchain.batched import kernel_flags, record_batched, stack_setups
 
