@@ -117,7 +117,7 @@ class KernelFlags(NamedTuple):
     full_step: bool = False
     # Beads K (1..N-1) with an embedded sensor in compliance form (`compliant_sensor`; their
     # strengths are `record_batched`'s `compliant_sensors`): the full step only, without the
-    # books (the JAX kernel's, and on the CPU with Hertz contacts the C++ sensor library's).
+    # books (the JAX kernel's, and on the CPU the C++ sensor libraries').
     sensors: tuple[int, ...] = ()
 
     @property
@@ -821,8 +821,8 @@ def record_batched(
       JAX kernel (every transformation).
     - `compliant_sensors`: embedded sensors in compliance form, as `solve` takes them, with
       `beta` and `inv_omega0_sq_s2` of shape (B,) or (B, n_sensors); their beads must be
-      `flags.sensors` (without the books; on the CPU with Hertz contacts the C++ kernel's
-      sensor library runs them, `native.run_full(..., sensors=)`, elsewhere the JAX kernel).
+      `flags.sensors` (without the books; on the CPU the C++ kernel's sensor libraries run
+      them, `native.run_full(..., sensors=)`, elsewhere the JAX kernel).
 
     **Returns:** `BatchedTraces`; with `flags.ledger` off, its maxima and energies are NaN
     (not computed). The two kernels agree to round-off, values and derivatives.

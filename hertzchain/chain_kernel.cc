@@ -10,7 +10,8 @@
 //    HC_DASHPOT_LIBRARY (a linear dashpot), HC_POWER_LIBRARY (power-law contacts),
 //    HC_THORNTON_LIBRARY or HC_JACKSON_GREEN_LIBRARY (elastic-plastic contacts) into
 //    libraries of their own, and with HC_SENSOR_LIBRARY (compliant sensor beads,
-//    `hertzchain.compliant_sensor`, forward and tangent runs) into one more.
+//    `hertzchain.compliant_sensor`, forward and tangent runs; alone on Hertz contacts, or
+//    beside a law's define on that law) into more.
 //
 // The arithmetic is that of the JAX kernel, operation for operation and in the same
 // order (compiled without contraction into fused multiply-adds), so that the two agree to
@@ -440,7 +441,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
                   const std::vector<int64_t>& channels, const std::vector<double*>& traces,
                   int64_t directions, TangentInputs tin, const std::vector<double*>& ttraces, BooksIO books) {
   static_assert(!(kBooks && kTangent), "the books are kept by forward runs only");
-  static_assert(!kSensors || (!kBooks && kLaw == Law::kHertz), "compliant sensors: Hertz contacts, no books");
+  static_assert(!kSensors || !kBooks, "compliant sensors: no books");
   constexpr bool kPower = kLaw == Law::kPower;
   constexpr bool kPlastic = IsPlastic(kLaw);
   const int64_t rows_x = bodies + 1, contacts = bodies;
@@ -949,6 +950,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
             if (kFriction) w = kick(w, loss[j], &s_kick);
             double dl = x[ri + j] - (x[rn + j] + dt * w);
             if constexpr (kExtras) dl = dl + ov0[ri + j];
+            if constexpr (kSensors) dl = dl + cut[ri + j];
             const double old = pk[ri + j];
             if constexpr (kTangent) grow[j] = dl > old ? 1.0 : dl == old ? 0.5 : 0.0;  // JAX's max rule
             fresh[j] = dl > old && yields[ri + j] != 0.0 ? 1.0 : 0.0;
@@ -1224,9 +1226,9 @@ constexpr Law kLibraryLaw = Law::kHertz;
 // leave the loops over the lanes unvectorised, so they run blocks of 8 only (blocks of 64, 8
 // and 4 ran the power law no faster and built in 20 s, not 11 s).
 constexpr bool kLawLibrary = kLibraryLaw != Law::kHertz;
-// The compliant sensors' library (HC_SENSOR_LIBRARY: Hertz contacts, with or without a
-// dashpot, forward and tangent runs): its runs carry the sensors (`RunFullBlock`'s
-// kSensors), the others refuse them.
+// The compliant sensors' libraries (HC_SENSOR_LIBRARY: Hertz contacts, or with a law's define
+// that law's, with or without a dashpot, forward and tangent runs): their runs carry the
+// sensors (`RunFullBlock`'s kSensors), the others refuse them.
 #if defined(HC_SENSOR_LIBRARY)
 constexpr bool kSensorLibrary = true;
 #else
@@ -1381,8 +1383,8 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   // The dashpot's runs and the other laws' are compiled into libraries of their own
   // (HC_DASHPOT_LIBRARY, HC_POWER_LIBRARY, HC_THORNTON_LIBRARY, HC_JACKSON_GREEN_LIBRARY, built
   // on first use by `native`), so that the library every run needs does not wait for them;
-  // a law's library runs its law with and without a dashpot, and so does the compliant
-  // sensors' library (HC_SENSOR_LIBRARY) Hertz's.
+  // a law's library runs its law with and without a dashpot, and so do the compliant
+  // sensors' libraries (HC_SENSOR_LIBRARY, on Hertz's law or on a law's define).
 #if defined(HC_LAW_LIBRARY) || defined(HC_SENSOR_LIBRARY)
   if (dashpot_on && !viscous)
     return ffi::Error::InvalidArgument("a dashpot runs with damping only (the kernels compute rates with it)");

@@ -26,8 +26,8 @@ The energy ledger counts the sensor's spring and internal kinetic energy; it is 
 without viscous damping (the viscous force's work on the sensor's internal motion is not
 booked). `solve` runs these sensors, and so does the batched JAX kernel
 (`batched.record_batched(..., compliant_sensors=)`, without the books): both take the step's
-sensor arithmetic from here (`drift`, `kick`, `shortened`). On the CPU, with Hertz contacts,
-`record_batched` runs them in the C++ kernel's sensor library (`native.run_full(...,
+sensor arithmetic from here (`drift`, `kick`, `shortened`). On the CPU `record_batched` runs
+them in the C++ kernel's sensor libraries (one per contact law) (`native.run_full(...,
 sensors=)`, its tangents included), the same arithmetic in the same order but for a contact
 between two sensors, which loses the two terms summed (equal to round-off).
 """

@@ -34,11 +34,11 @@ Under `jax.vmap` (`jax.custom_batching.custom_vmap`) a mapped batch of inputs jo
 kernel's chain axis and mapped tangents its direction axis, so a batch of fits, `jacfwd`
 of `vmap` and `vmap` of `jacfwd` are one kernel run each.
 
-The full kernel runs compliant sensor beads as well (`hertzchain.compliant_sensor`, on Hertz
-contacts, forward and tangent runs, no books), from a library of its own built on first use.
+The full kernel runs compliant sensor beads as well (`hertzchain.compliant_sensor`, on every
+law, forward and tangent runs, no books), from a library of their own per law built on first
+use.
 
-Everything else (laws other than Hertz's on a GPU, compliant sensors on a GPU or on other
-laws, the books of a damped chain on a GPU, reverse mode) runs the JAX kernel,
+Everything else (laws other than Hertz's on a GPU, compliant sensors on a GPU, the books of a damped chain on a GPU, reverse mode) runs the JAX kernel,
 which stays the reference: they agree to round-off, values and derivatives
 (`tests/test_native.py`), and every kernel's laws are held to `contact`'s
 (`tests/test_batched.py::test_every_kernel_applies_the_laws_of_contact`).
@@ -101,9 +101,10 @@ DASHPOT_BOOKS_TARGET = "hertzchain_chain_full_books_dashpot"
 # laws (`contact.thornton_contact`, `contact.jackson_green_contact`), likewise each in a
 # library of its own (`-D` its define), built on first use; its targets are
 # "hertzchain_chain_full_{forward,tangent,books}_<law>", with or without a dashpot.
-# The full kernel with compliant sensor beads (`hertzchain.compliant_sensor`; Hertz contacts,
-# with or without a dashpot, forward and tangent runs, no books): likewise in a library of
-# its own, built on first use (the diagnosis's sensor refits).
+# The full kernel with compliant sensor beads (`hertzchain.compliant_sensor`; with or without
+# a dashpot, forward and tangent runs, no books): likewise in a library of its own, built on
+# first use (the diagnosis's sensor refits), on Hertz contacts and, with a law's define
+# (`LAW_DEFINES`), on that law ("hertzchain_chain_full_{forward,tangent}_<law>_sensors").
 SENSOR_DEFINE = "HC_SENSOR_LIBRARY"
 SENSOR_FULL_TARGET = "hertzchain_chain_full_forward_sensors"
 SENSOR_TANGENT_TARGET = "hertzchain_chain_full_tangent_sensors"
@@ -324,10 +325,17 @@ def _load_dashpot() -> None:
 
 
 @functools.cache
-def _load_sensors() -> None:
-    """Build (if needed), load and register the compliant sensors' full kernels (`SENSOR_DEFINE`)."""
-    _load_library((f"-D{SENSOR_DEFINE}",), "the fused chain kernel's compliant sensors",
-                  ((SENSOR_FULL_TARGET, "HertzChainFullForward"), (SENSOR_TANGENT_TARGET, "HertzChainFullTangent")))
+def _load_sensors(law: str = "hertz") -> None:
+    """Build (if needed), load and register the compliant sensors' full kernels (`SENSOR_DEFINE`)
+    on `law`'s contacts."""
+    if law == "hertz":
+        _load_library((f"-D{SENSOR_DEFINE}",), "the fused chain kernel's compliant sensors",
+                      ((SENSOR_FULL_TARGET, "HertzChainFullForward"),
+                       (SENSOR_TANGENT_TARGET, "HertzChainFullTangent")))
+        return
+    _load_library((f"-D{LAW_DEFINES[law]}", f"-D{SENSOR_DEFINE}"), f"the fused chain kernel's compliant sensors on {law}",
+                  ((_law_target("full", law) + "_sensors", "HertzChainFullForward"),
+                   (_law_target("tangent", law) + "_sensors", "HertzChainFullTangent")))
 
 
 def load_on_demand_libraries():
@@ -337,7 +345,9 @@ def load_on_demand_libraries():
     each is ready."""
     for name, defines, load in [("dashpot", (f"-D{DASHPOT_DEFINE}",), _load_dashpot),
                                 ("compliant sensors", (f"-D{SENSOR_DEFINE}",), _load_sensors)] + [
-            (law, (f"-D{define}",), functools.partial(_load_law, law)) for law, define in LAW_DEFINES.items()]:
+            (law, (f"-D{define}",), functools.partial(_load_law, law)) for law, define in LAW_DEFINES.items()] + [
+            (f"{law} compliant sensors", (f"-D{define}", f"-D{SENSOR_DEFINE}"), functools.partial(_load_sensors, law))
+            for law, define in LAW_DEFINES.items()]:
         began = time.perf_counter()
         load()
         yield name, _library_path(defines, SOURCE), time.perf_counter() - began
@@ -386,11 +396,11 @@ class FusedKernel(NamedTuple):
 def kernel_for(flags, devices) -> FusedKernel | None:
     """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
     devices, or None (the JAX kernel: laws other than Hertz's on a GPU, compliant sensors on
-    a GPU or on other laws than Hertz's, the books of damping or friction on a GPU, devices
+    a GPU or with the books, the books of damping or friction on a GPU, devices
     of another kind, no compiler)."""
     platforms = {d.platform for d in devices} if devices else {jax.default_backend()}
-    if flags.sensors:  # compliant sensors: the host's sensor library, Hertz contacts, no books
-        if flags.law != "hertz" or flags.ledger or platforms != {"cpu"} or not available():
+    if flags.sensors:  # compliant sensors: the host's sensor libraries, no books
+        if flags.ledger or platforms != {"cpu"} or not available():
             return None
         return FusedKernel("full", "host")
     if flags.law != "hertz":  # the full kernel's library of the law (`LAW_DEFINES`), on the host
@@ -429,7 +439,9 @@ _HOST_TARGETS = {"forward": TARGET, "full": FULL_TARGET, "tangent": TANGENT_TARG
                  "full_dashpot": DASHPOT_FULL_TARGET, "tangent_dashpot": DASHPOT_TANGENT_TARGET,
                  "books_dashpot": DASHPOT_BOOKS_TARGET, "full_sensors": SENSOR_FULL_TARGET,
                  "tangent_sensors": SENSOR_TANGENT_TARGET} | {
-                     f"{kind}_{law}": _law_target(kind, law) for law in LAW_DEFINES for kind in ("full", "tangent", "books")}
+                     f"{kind}_{law}": _law_target(kind, law) for law in LAW_DEFINES for kind in ("full", "tangent", "books")} | {
+                     f"{kind}_{law}_sensors": _law_target(kind, law) + "_sensors" for law in LAW_DEFINES
+                     for kind in ("full", "tangent")}
 
 
 def _nvcc() -> str | None:
@@ -519,11 +531,12 @@ class _Ffi(NamedTuple):
         if self.backend == "host":
             if kind.endswith("_dashpot"):
                 _load_dashpot()
-            if kind.endswith("_sensors"):
-                _load_sensors()
             for law in LAW_DEFINES:
                 if kind.endswith(f"_{law}"):
                     _load_law(law)
+            if kind.endswith("_sensors"):  # on Hertz contacts or on a law's ("<kind>_<law>_sensors")
+                on = kind.removesuffix("_sensors").split("_", 1)
+                _load_sensors(on[1] if len(on) > 1 and on[1] in LAW_DEFINES else "hertz")
             # the host's full kernels take the sensors' beads after the channels (empty without)
             extra = () if kind == "forward" else (np.asarray(beads, dtype=np.int64),)
             return tuple(jax.ffi.ffi_call(_HOST_TARGETS[kind], shapes)(*args, index, *extra, **attrs))
@@ -652,15 +665,15 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     the arrays `batched` stores for them; host only, each in a library of its own;
     an elastic-plastic run starts from the largest overlaps so far at `x`). `backend` as for
     `run`. `sensors`: beads K with a compliant sensor (`hertzchain.compliant_sensor`, the
-    step of `batched._step`; Hertz contacts, on the host, in a library of its own), whose
+    step of `batched._step`; on the host, in a library of its own for each law), whose
     parameters `p` holds as `batched` stores them ("sensor_beta", "sensor_inv",
     "sensor_back", "sensor_front", (n_sensors, 1 or B) each, and "first_force"), and
     `sensor_state` their forces (N), rates (N/s) and drives (N) at the impact, (3 n_sensors, B)."""
     _require(backend)
     _check_law(law, backend, "run_full")
     sensors = tuple(int(k) for k in sensors)
-    if sensors and (law != "hertz" or backend != "host"):
-        raise ValueError("run_full: compliant sensors run on Hertz contacts on the host kernel.")
+    if sensors and backend != "host":
+        raise ValueError("run_full: compliant sensors run on the host kernel (backend 'host').")
     if sensors and (sensor_state is None or sensor_state.shape[0] != 3 * len(sensors)):
         raise ValueError("run_full: sensor_state must hold the sensors' forces, rates and drives, "
                          "(3 n_sensors, B).")
@@ -772,9 +785,14 @@ def _full_call(config):
     n_args = 11 if backend == "host" else 9
     # a dashpot on Hertz contacts: the dashpot library; on another law: that law's library;
     # compliant sensors (with or without a dashpot): the sensors' library
-    kinds = (f"full_{law}", f"tangent_{law}") if law != "hertz" else (
-        ("full_sensors", "tangent_sensors") if sensors else
-        ("full_dashpot", "tangent_dashpot") if dashpot else ("full", "tangent"))
+    if law != "hertz":
+        kinds = (f"full_{law}", f"tangent_{law}")
+    elif dashpot and not sensors:
+        kinds = ("full_dashpot", "tangent_dashpot")
+    else:
+        kinds = ("full", "tangent")
+    if sensors:
+        kinds = tuple(f"{kind}_sensors" for kind in kinds)
 
     def ffi(args):
         return _Ffi(backend, args[1].shape[-2], n_samples)

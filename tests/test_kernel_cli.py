@@ -31,19 +31,20 @@ def test_ready_kernel_names_its_build():
 
 @pytest.mark.skipif(not native.available(), reason=f"no C++ kernel here: {native.unavailable_reason()}")
 def test_all_also_loads_the_libraries_built_on_first_use(monkeypatch, capsys):
-    """`--all` asks for the dashpot's library, the compliant sensors' and every other law's
-    (recorded, not built here: a build takes 14-20 s) and names each with its path."""
+    """`--all` asks for the dashpot's library, every other law's and the compliant sensors' on
+    each law (recorded, not built here: a build takes 14-20 s) and names each with its path."""
     import argparse
 
     from hertzchain.cli import kernel
 
     asked = []
     monkeypatch.setattr(native, "_load_dashpot", lambda: asked.append("dashpot"))
-    monkeypatch.setattr(native, "_load_sensors", lambda: asked.append("compliant sensors"))
+    monkeypatch.setattr(native, "_load_sensors", lambda law="hertz": asked.append(f"{law} sensors"))
     monkeypatch.setattr(native, "_load_law", lambda law: asked.append(law))
     assert kernel.run(argparse.Namespace(quiet=False, all=True)) == 0
-    assert asked == ["dashpot", "compliant sensors", *native.LAW_DEFINES]
+    assert asked == ["dashpot", "hertz sensors", *native.LAW_DEFINES, *(f"{law} sensors" for law in native.LAW_DEFINES)]
     out = capsys.readouterr().out
-    for name in asked:
+    for name in ("dashpot", "compliant sensors", *native.LAW_DEFINES, *(f"{law} compliant sensors"
+                                                                        for law in native.LAW_DEFINES)):
         assert f"{name} library ready (" in out
     assert native._library_path((f"-D{native.LAW_DEFINES['thornton']}",)).name in out
