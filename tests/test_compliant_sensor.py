@@ -166,6 +166,8 @@ KERNEL_CASES = {
     "plastic": (dict(eta_s=1e-7, plasticity=True, plastic_law="jackson_green", bead_yield_stress_pa=3e8), (3, 4)),
     # power-law contacts
     "power_law": (dict(power_law=True, contact_exponent=1.6, exponent_reference_overlap_m=1e-6), (2, 5)),
+    # Thornton's elastic-plastic contacts with damping and friction
+    "thornton": (dict(eta_s=1e-7, mu=0.1, plasticity=True, plastic_law="thornton", bead_yield_stress_pa=3e8), (3, 4)),
 }
 
 
@@ -190,7 +192,7 @@ def test_cpp_kernel_runs_compliant_sensors_as_the_jax_kernel(case):
     batch = stack_setups(setups)
     flags = kernel_flags(batch)._replace(ledger=False, sensors=beads)
     assert native.kernel_for(flags, None) == native.FusedKernel("full", "host")
-    assert flags.law == ("jackson_green" if changes.get("plasticity") else
+    assert flags.law == (changes["plastic_law"] if changes.get("plasticity") else
                          "power_law" if changes.get("power_law") else "hertz")
 
     def run(beta, inv, kernel):
