@@ -314,7 +314,8 @@ class EffectsSimulation(KernelForm):
     round-off). `compliant` (default) shortens each recorded bead by `sensor_coupling` times
     its sensor's compression (`compliant_sensors`), which the C++ kernel runs on the CPU (its
     sensor libraries, one per contact law: blocks of 4 chains, with the sensors' arithmetic in
-    every step) and the JAX kernel elsewhere; off, `sensor_coupling` acts on nothing: exact wherever the compliance,
+    every step) and the JAX kernel elsewhere; off, `sensor_coupling` acts on nothing: exact
+    wherever the compliance,
     `sensor_coupling` x `sensor_rate`, is 0 (the base model), and so are its derivatives in
     those two where the other of them is 0. `dashpot` off: `dashpot_n_s_m` acts on nothing
     (exact where it is 0, not its derivative), so that the kernel is built without the

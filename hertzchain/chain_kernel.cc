@@ -1062,7 +1062,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               for (int64_t d = 0; d < D; ++d) {
                 const int64_t q = (d * ns + k) * kLanes + j;
                 const double tbeta = tsens(d, beta_row(k))[j], tinv_w2 = tsens(d, inv_row(k))[j];
-                const double tdrive = (tbeta * s_fb[c] + beta * ts_fb[q]) + ((-tbeta) * s_ff[c] + (1.0 - beta) * ts_ff[q]);
+                const double tdrive =
+                    (tbeta * s_fb[c] + beta * ts_fb[q]) + ((-tbeta) * s_ff[c] + (1.0 - beta) * ts_ff[q]);
                 const double taccel =
                     quasi ? 0.0 : (tdrive - tsf[q]) / inv_w2 + ((-tinv_w2) * gap) * (1.0 / (inv_w2 * inv_w2));
                 tsr[q] = quasi ? 0.0 : ts_half[q] + h * taccel;

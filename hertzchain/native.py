@@ -38,7 +38,8 @@ The full kernel runs compliant sensor beads as well (`hertzchain.compliant_senso
 law, forward and tangent runs, no books), from a library of their own per law built on first
 use.
 
-Everything else (laws other than Hertz's on a GPU, compliant sensors on a GPU, the books of a damped chain on a GPU, reverse mode) runs the JAX kernel,
+Everything else (laws other than Hertz's on a GPU, compliant sensors on a GPU, the books of
+a damped chain on a GPU, reverse mode) runs the JAX kernel,
 which stays the reference: they agree to round-off, values and derivatives
 (`tests/test_native.py`), and every kernel's laws are held to `contact`'s
 (`tests/test_batched.py::test_every_kernel_applies_the_laws_of_contact`).
@@ -333,7 +334,8 @@ def _load_sensors(law: str = "hertz") -> None:
                       ((SENSOR_FULL_TARGET, "HertzChainFullForward"),
                        (SENSOR_TANGENT_TARGET, "HertzChainFullTangent")))
         return
-    _load_library((f"-D{LAW_DEFINES[law]}", f"-D{SENSOR_DEFINE}"), f"the fused chain kernel's compliant sensors on {law}",
+    _load_library((f"-D{LAW_DEFINES[law]}", f"-D{SENSOR_DEFINE}"),
+                  f"the fused chain kernel's compliant sensors on {law}",
                   ((_law_target("full", law) + "_sensors", "HertzChainFullForward"),
                    (_law_target("tangent", law) + "_sensors", "HertzChainFullTangent")))
 

@@ -177,11 +177,12 @@ KERNEL_CASES = {
     # as the others; the yielding one, on a law's own sensor library, in the default suite)
     pytest.param(case, marks=pytest.mark.slow) if case != "plastic" else case for case in sorted(KERNEL_CASES)])
 def test_cpp_kernel_runs_compliant_sensors_as_the_jax_kernel(case):
-    """The C++ sensor library (`native.run_full(..., sensors=)`, what `record_batched` runs on
-    the CPU) against the JAX kernel, 9 chains (two blocks of 8, one of them 1 chain and 7 copies of it), each with its own
-    mass fraction and f0 (one quasi-static at 30 MHz): forces to 1e-13 of each channel's
-    largest (measured 2e-15), and `jacfwd` in the mass fraction and 1/omega0^2 (its custom
-    JVP: the tangents carried through the kernel) to 1e-10 (measured 1e-14)."""
+    """The C++ sensor library of the case's law (`native.run_full(..., sensors=)`, what
+    `record_batched` runs on the CPU) against the JAX kernel, 9 chains (three blocks of 4, the
+    last one chain and 3 copies of it), each with its own mass fraction and f0 (one
+    quasi-static at 30 MHz): forces to 1e-13 of each channel's largest (measured 2e-15), and
+    `jacfwd` in the mass fraction and 1/omega0^2 (its custom JVP: the tangents carried
+    through the kernel) to 1e-10 (measured 1e-14)."""
     from hertzchain.batched import kernel_flags, record_batched, stack_setups
 
     changes, beads = KERNEL_CASES[case]
