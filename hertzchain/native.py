@@ -530,15 +530,14 @@ class _Ffi(NamedTuple):
         ("_dashpot": its own host library; the thread kernels compile it into the same one) or
         on another law ("_<law>", a `LAW_DEFINES` key: its own host library), the first two
         also with compliant sensors ("_sensors", in `beads`: their own host library)."""
-        if self.backend == "host":
-            if kind.endswith("_dashpot"):
+        if self.backend == "host":  # the library built on first use that holds the handler
+            law = next((law for law in LAW_DEFINES if f"_{law}" in kind), "hertz")
+            if kind.endswith("_sensors"):
+                _load_sensors(law)
+            elif kind.endswith("_dashpot"):
                 _load_dashpot()
-            for law in LAW_DEFINES:
-                if kind.endswith(f"_{law}"):
-                    _load_law(law)
-            if kind.endswith("_sensors"):  # on Hertz contacts or on a law's ("<kind>_<law>_sensors")
-                on = kind.removesuffix("_sensors").split("_", 1)
-                _load_sensors(on[1] if len(on) > 1 and on[1] in LAW_DEFINES else "hertz")
+            elif law != "hertz":
+                _load_law(law)
             # the host's full kernels take the sensors' beads after the channels (empty without)
             extra = () if kind == "forward" else (np.asarray(beads, dtype=np.int64),)
             return tuple(jax.ffi.ffi_call(_HOST_TARGETS[kind], shapes)(*args, index, *extra, **attrs))
