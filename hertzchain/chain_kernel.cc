@@ -549,6 +549,15 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     LoadTangent<kLanes>(tin.friction, D, 1, batch, lo, tfr.data(), valid);
     if (kDashpot) LoadTangent<kLanes>(tin.dashpot, D, 1, batch, lo, tdash.data(), valid);
   }
+  // Whether no direction moves this block's inverse masses nor, with kExtras, its preload's
+  // overlaps, springs or external forces (a fit of damping, friction and stiffness): the
+  // sweep's tangent pass then leaves their terms out (products with 0: no value changes)
+  // and reads a third fewer rows.
+  const auto all_zero = [](const std::vector<double>& rows) {
+    return std::all_of(rows.begin(), rows.end(), [](double t) { return t == 0.0; });
+  };
+  const bool fixed_inputs =
+      kTangent && all_zero(tinv) && (!kExtras || (all_zero(tov0) && all_zero(tspr) && all_zero(text)));
   // kSensors: the tangents of the sensors' state and parameters, (D, rows, kLanes), and of
   // the step's half-step rates, predicted rates, compressions, contact forces and cuts
   std::vector<double> tsf(D * ns * kLanes), tsr(D * ns * kLanes), tsd(D * ns * kLanes);
@@ -639,9 +648,10 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         for (int64_t d = 0; d < D; ++d)
           for (int64_t i = 0; i < contacts; ++i)
             for (int64_t j = 0; j < kLanes; ++j)
-              tpk[(d * contacts + i) * kLanes + j] = tx[(d * rows_x + i) * kLanes + j] -
-                                                     tx[(d * rows_x + i + 1) * kLanes + j] +
-                                                     tov0[(d * contacts + i) * kLanes + j];
+              tpk[(d * contacts + i) * kLanes + j] =
+                  kExtras ? tx[(d * rows_x + i) * kLanes + j] - tx[(d * rows_x + i + 1) * kLanes + j] +
+                                tov0[(d * contacts + i) * kLanes + j]
+                          : tx[(d * rows_x + i) * kLanes + j] - tx[(d * rows_x + i + 1) * kLanes + j];
     }
     for (int64_t i = 0; i < contacts; ++i)
       for (int64_t j = 0; j < kLanes; ++j) {
@@ -752,10 +762,12 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   // its tangent along direction d (`hertzchain::TangentForce`; with kPower, `TangentTotal` about
   // the power law's tangent from `slopes`; with kPlastic, about Hertz's along the unloading
   // curve of contact i, `pl`, whose residual and stiffness move with the peak and the law's
-  // inputs): c2 = 1.5 eta kappa = kv
-  auto tforce = [&](const Linear& l, int64_t j, const hertzchain::PowerLawSlopes& slopes, const PlasticLinear& pl,
-                    int64_t i, int64_t d, double k, double c1j, double c2, double sp, double tdl, double trate,
-                    double tk, double t15e, double td, double tsp) {
+  // inputs): c2 = 1.5 eta kappa = kv; `spring_tangent` (std::true_type or false_type): whether
+  // the spring's tangent `tsp` can be other than 0
+  auto tforce = [&](auto spring_tangent, const Linear& l, int64_t j, const hertzchain::PowerLawSlopes& slopes,
+                    const PlasticLinear& pl, int64_t i, int64_t d, double k, double c1j, double c2, double sp,
+                    double tdl, double trate, double tk, double t15e, double td, double tsp) {
+    constexpr bool kST = decltype(spring_tangent)::value;
     const hertzchain::Linearisation one{l.delta[j], l.rate[j],       l.in[j], l.positive[j], l.root[j],
                                         l.half_inv_root[j], l.kp[j], l.c3[j], l.slope[j]};
     if constexpr (kPlastic) {
@@ -768,16 +780,17 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
       const double ts = tdl - tres;
       const double telastic = (tkpl * pl.positive[j] + pl.kappa[j] * (ts * pl.in[j])) * pl.root[j] +
                               (pl.kappa[j] * pl.positive[j]) * (ts * pl.half_inv_root[j]);
-      return hertzchain::TangentTotal<kViscous, kDashpot>(one, telastic, k, c1j, c2, sp, tdl, trate, tk, t15e, td,
-                                                          tsp);
+      return hertzchain::TangentTotal<kViscous, kExtras, kDashpot, kST>(one, telastic, k, c1j, c2, sp, tdl, trate, tk,
+                                                                         t15e, td, tsp);
     } else if constexpr (kPower) {
       const double telastic = slopes.overlap * tdl + slopes.kappa * tk +
                               slopes.reference * tlaw[(d * 2 + 1) * kLanes + j] +
                               slopes.exponent * tlaw[d * 2 * kLanes + j];
-      return hertzchain::TangentTotal<kViscous, kDashpot>(one, telastic, k, c1j, c2, sp, tdl, trate, tk, t15e, td,
-                                                          tsp);
+      return hertzchain::TangentTotal<kViscous, kExtras, kDashpot, kST>(one, telastic, k, c1j, c2, sp, tdl, trate, tk,
+                                                                         t15e, td, tsp);
     } else {
-      return hertzchain::TangentForce<kViscous, kDashpot>(one, k, c1j, c2, sp, tdl, trate, tk, t15e, td, tsp);
+      return hertzchain::TangentForce<kViscous, kExtras, kDashpot, kST>(one, k, c1j, c2, sp, tdl, trate, tk, t15e, td,
+                                                                         tsp);
     }
   };
   hertzchain::PowerLawSlopes slopes[kLanes];  // contact i's, lane by lane (kPower and kTangent)
@@ -972,7 +985,10 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           if (sb >= 0) std::copy(f_prev, f_prev + kLanes, &s_fb[sb * kLanes]);
           if (sf_ >= 0) std::copy(f_prev, f_prev + kLanes, &s_ff[sf_ * kLanes]);
         }
-        if (kTangent)
+        // the tangent pass; kFixed: the bodies' and contacts' own inputs (inverse masses,
+        // preload, springs, external forces) have no tangent in this block (`fixed_inputs`)
+        auto tangent_pass = [&](auto fixed_tag) {
+          constexpr bool kFixed = decltype(fixed_tag)::value;
           for (int64_t d = 0; d < D; ++d) {
             const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
             const int64_t tc = (d * contacts + i) * kLanes;
@@ -982,7 +998,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               if (kFriction) tw = (pm1[j] * tw - tloss[q]) * g1[j];
               tx[tn + j] = tx[tn + j] + dt * tw;
               double tpred = tw + h * ta[tn + j];
-              double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
+              double tdl = tx[ti + j] - tx[tn + j];
+              if constexpr (kExtras && !kFixed) tdl = tdl + tov0[tc + j];
               double trate = tp_prev[q] - tpred;
               if constexpr (kSensors) {
                 tdl = tdl + tcut[tc + j];
@@ -992,11 +1009,13 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
                 const double tp = tpk[tc + j];
                 tpk[tc + j] = grow[j] == 1.0 ? tdl : grow[j] == 0.5 ? 0.5 * tp + 0.5 * tdl : tp;
               }
-              double tf = tforce(lin, j, slopes[j], plin, i, d, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl,
-                                 trate, tkap[tc + j], t15eta[q],
-                                 kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, tspr[tc + j]);
-              double tb = tf_prev[q] - tf + text[ti + j];
-              double tacc = tb * inv[ri + j] + body[j] * tinv[ti + j];
+              double tf = tforce(std::bool_constant<!kFixed>{}, lin, j, slopes[j], plin, i, d, kap[ri + j], c1[j],
+                                 kvis[ri + j], spr[ri + j], tdl, trate, tkap[tc + j], t15eta[q],
+                                 kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, kFixed ? 0.0 : tspr[tc + j]);
+              double tb = tf_prev[q] - tf;
+              if constexpr (kExtras && !kFixed) tb = tb + text[ti + j];
+              double tacc = tb * inv[ri + j];
+              if constexpr (!kFixed) tacc = tacc + body[j] * tinv[ti + j];
               double tvn = tw_prev[q] + h * tacc;
               if (kFriction) tvn = (pm2[j] * tvn - tloss[q]) * g2[j];
               ta[ti + j] = tacc;
@@ -1011,6 +1030,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               if (sf_ >= 0) std::copy(tf_i, tf_i + kLanes, &ts_ff[(d * ns + sf_) * kLanes]);
             }
           }
+        };
+        if constexpr (kTangent) fixed_inputs ? tangent_pass(T{}) : tangent_pass(F{});
       }
       // the wall's row (inverse mass 0: it stays at rest, as in the JAX kernel)
       const int64_t rw = contacts * kLanes;
@@ -1042,7 +1063,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         for (int64_t d = 0; d < D; ++d)
           ForLanes<kLanes>([&](int64_t j) {
             const int64_t q = d * kLanes + j, tw_row = (d * rows_x + contacts) * kLanes;
-            double tb = tf_prev[q] + text[tw_row + j];
+            double tb = tf_prev[q];
+            if constexpr (kExtras) tb = tb + text[tw_row + j];
             double tacc = tb * inv[rw + j] + body[j] * tinv[tw_row + j];
             double tvn = tw_prev[q] + h * tacc;
             if (kFriction) tvn = (pm2[j] * tvn - tloss[q]) * g2[j];
@@ -1107,7 +1129,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           const int64_t q = d * kLanes + j;
           const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
           const int64_t tc = (d * contacts + i) * kLanes;
-          double tdl = tx[ti + j] - tx[tn + j] + tov0[tc + j];
+          double tdl = tx[ti + j] - tx[tn + j];
+          if constexpr (kExtras) tdl = tdl + tov0[tc + j];
           double trate = tv[ti + j] - tv[tn + j];
           if constexpr (kSensors) {
             const double first = sp[first_row * kLanes + j], tfirst = tsens(d, first_row)[j];
@@ -1121,7 +1144,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
             if (sf_ >= 0) shorten(sf_, front_row(sf_));
           }
           record.slot(d + 1, c)[j] =
-              tforce(here, j, here_slopes, plin, i, d, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, trate,
+              tforce(std::true_type{}, here, j, here_slopes, plin, i, d, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, trate,
                      tkap[tc + j],
                      t15eta[q], kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, tspr[tc + j]);
         }

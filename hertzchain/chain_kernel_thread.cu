@@ -278,11 +278,13 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
           if (kFriction) tw = (pm1 * tw - tloss) * g1;
           tx[nx] = tx[nx] + dt * tw;
           double tpred = tw + h * ta[nx];
-          double tdl = tx[i] - tx[nx] + tangent_param(A.t_overlap0, i, kContacts);
-          double tf = TangentForce<kViscous, kDashpot>(l, k, c1, kv, sp, tdl, tp_prev - tpred,
+          double tdl = tx[i] - tx[nx];
+          if (kExtras) tdl = tdl + tangent_param(A.t_overlap0, i, kContacts);
+          double tf = TangentForce<kViscous, kExtras, kDashpot>(l, k, c1, kv, sp, tdl, tp_prev - tpred,
                                              tangent_param(A.t_kappa, i, kContacts), t15eta,
                                              kDashpot && k > 0.0 ? tdashpot : 0.0, tangent_param(A.t_spring, i, kContacts));
-          double tb = tf_prev - tf + tangent_param(A.t_external, i, kRows);
+          double tb = tf_prev - tf;
+          if (kExtras) tb = tb + tangent_param(A.t_external, i, kRows);
           double tacc = tb * inv + body * tangent_param(A.t_inv_mass, i, kRows);
           double tvn = tw_prev + h * tacc;
           if (kFriction) tvn = (pm2 * tvn - tloss) * g2;
@@ -310,7 +312,8 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
       a[kContacts] = acc;
       v[kContacts] = vn;
       if (kTangent) {
-        double tb = tf_prev + tangent_param(A.t_external, kContacts, kRows);
+        double tb = tf_prev;
+        if (kExtras) tb = tb + tangent_param(A.t_external, kContacts, kRows);
         double tacc = tb * inv + body * tangent_param(A.t_inv_mass, kContacts, kRows);
         double tvn = tw_prev + h * tacc;
         if (kFriction) tvn = (pm2 * tvn - tloss) * g2;
@@ -334,9 +337,10 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
       double tf = 0.0;
       if (kTangent) {
         const Linearisation l = Linearise<kDashpot>(dl, rate, k, kv, dash, root, sum);
-        double tdl = tx[i] - tx[i + 1] + tangent_param(A.t_overlap0, i, kContacts);
+        double tdl = tx[i] - tx[i + 1];
+        if (kExtras) tdl = tdl + tangent_param(A.t_overlap0, i, kContacts);
         double trate = tv[i] - tv[i + 1];
-        tf = TangentForce<kViscous, kDashpot>(l, k, c1, kv, sp, tdl, trate, tangent_param(A.t_kappa, i, kContacts), t15eta,
+        tf = TangentForce<kViscous, kExtras, kDashpot>(l, k, c1, kv, sp, tdl, trate, tangent_param(A.t_kappa, i, kContacts), t15eta,
                                     kDashpot && k > 0.0 ? tdashpot : 0.0, tangent_param(A.t_spring, i, kContacts));
       }
       for (int c = 0; c < A.channels.count; ++c) {

@@ -174,11 +174,14 @@ HC_HD inline Linearisation Linearise(double dl, double rate, double k, double kv
   return l;
 }
 
-// The tangent of `TotalForce` (kExtras) along one direction: c1 = 1.5 eta, c2 = c1 kappa,
-// sp the spring, tdl / trate / tk / t15e (= 1.5 t_eta) / tdash (`ContactDashpot`'s, read
-// with kDashpot only) / tsp the inputs' tangents.
+// The tangent of `TotalForce` along one direction: c1 = 1.5 eta, c2 = c1 kappa, sp the
+// spring, tdl / trate / tk / t15e (= 1.5 t_eta) / tdash (`ContactDashpot`'s, read with
+// kDashpot only) / tsp the inputs' tangents. The spring's terms are read with kExtras only,
+// as `TotalForce` reads the spring: without them the force does not depend on it; and the
+// spring's own tangent tsp with kSpringTangent only (a caller that knows it is 0 drops
+// tsp delta = 0, which changes no value).
 // `TangentForce` about the elastic force's tangent `telastic` (any law).
-template <bool kViscous, bool kDashpot>
+template <bool kViscous, bool kExtras, bool kDashpot, bool kSpringTangent = kExtras>
 HC_HD inline double TangentTotal(const Linearisation& l, double telastic, double k, double c1, double c2, double sp,
                                  double tdl, double trate, double tk, double t15e, double tdash, double tsp) {
   double troot = tdl * l.half_inv_root;
@@ -188,16 +191,17 @@ HC_HD inline double TangentTotal(const Linearisation& l, double telastic, double
     if (kDashpot) tc3 = tc3 + tdash;
     tf = (telastic + (tc3 * l.rate + l.c3 * trate)) * l.slope;
   }
-  return tf + (tsp * l.delta + sp * tdl);
+  if (kExtras) tf = kSpringTangent ? tf + (tsp * l.delta + sp * tdl) : tf + sp * tdl;
+  return tf;
 }
 
-template <bool kViscous, bool kDashpot>
+template <bool kViscous, bool kExtras, bool kDashpot, bool kSpringTangent = kExtras>
 HC_HD inline double TangentForce(const Linearisation& l, double k, double c1, double c2, double sp, double tdl,
                                  double trate, double tk, double t15e, double tdash, double tsp) {
   double tpositive = tdl * l.in;
   double troot = tdl * l.half_inv_root;
   double telastic = (tk * l.positive + k * tpositive) * l.root + l.kp * troot;
-  return TangentTotal<kViscous, kDashpot>(l, telastic, k, c1, c2, sp, tdl, trate, tk, t15e, tdash, tsp);
+  return TangentTotal<kViscous, kExtras, kDashpot, kSpringTangent>(l, telastic, k, c1, c2, sp, tdl, trate, tk, t15e, tdash, tsp);
 }
 
 // ---------------------------------------------------------------------------------------

@@ -165,7 +165,7 @@ void RunDrivenBlock(const Run& r, int64_t lo, const Inputs& in, const TangentInp
   };
   auto tforce = [&](int64_t d, int64_t c, int64_t j, double tdl, double trate) {
     const int64_t q = c * L + j;
-    tF[q] = hertzchain::TangentForce<kViscous, false>(lin.Get(q), k[q], c1[j], kv[q], 0.0, tdl, trate,
+    tF[q] = hertzchain::TangentForce<kViscous, false, false>(lin.Get(q), k[q], c1[j], kv[q], 0.0, tdl, trate,
                                                       tk[(d * c_rows + c) * L + j], t15e[d * L + j], 0.0, 0.0);
   };
   // f = (F_i - F_{i+1}) m_i, and its tangent along direction d
