@@ -405,6 +405,7 @@ struct BooksIO {
 };
 
 using hertzchain::KickSlope;
+using hertzchain::KickTangent;
 
 // The unloading curve of an elastic-plastic contact (`hertzchain::Unloading`) from its inputs
 // `in`: the largest overlap so far (m), kappa, then the law's own (Thornton: the yield force;
@@ -679,8 +680,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   double loss[kLanes];              // mu g dt/2
   double w_prev[kLanes], p_prev[kLanes], f_prev[kLanes];  // body i: kicked half-step and predicted velocity; force before
   double c1[kLanes];                // 1.5 eta
-  // the two friction kicks' derivatives: d kick = (pm t - t_loss) g (`KickSlope`)
-  double pm1[kLanes], g1[kLanes], pm2[kLanes], g2[kLanes];
+  // the two friction kicks' slopes (`KickSlope`, `KickTangent`)
+  double sg1[kLanes], m1[kLanes], sg2[kLanes], m2[kLanes];
   double body[kLanes];              // the force on body i
   struct Linear {                   // a contact's linearisation, per lane (`TangentForce`)
     double delta[kLanes], rate[kLanes], in[kLanes], positive[kLanes], root[kLanes], half_inv_root[kLanes],
@@ -864,7 +865,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double s_first;
           double raw = w;
           w = kick(w, loss[j], &s_first);
-          if constexpr (kTangent) KickSlope(raw, s_first, &pm1[j], &g1[j]);
+          if constexpr (kTangent) KickSlope(raw, s_first, &sg1[j], &m1[j]);
         }
         x[j] = x[j] + dt * w;
         w_prev[j] = w;
@@ -876,7 +877,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           ForLanes<kLanes>([&](int64_t j) {
             const int64_t q = d * kLanes + j;
             double tw = tv[d * rows_x * kLanes + j] + h * ta[d * rows_x * kLanes + j];
-            if (kFriction) tw = (pm1[j] * tw - tloss[q]) * g1[j];
+            if (kFriction) tw = KickTangent(tw, tloss[q], sg1[j], m1[j]);
             tx[d * rows_x * kLanes + j] = tx[d * rows_x * kLanes + j] + dt * tw;
             tw_prev[q] = tw;
             tp_prev[q] = tw + h * ta[d * rows_x * kLanes + j];
@@ -940,8 +941,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           v[ri + j] = vn;
           if constexpr (kTangent) {  // what the tangent pass needs of this step
             if (kFriction) {
-              KickSlope(w_raw, s_first, &pm1[j], &g1[j]);
-              KickSlope(vn_raw, s_second, &pm2[j], &g2[j]);
+              KickSlope(w_raw, s_first, &sg1[j], &m1[j]);
+              KickSlope(vn_raw, s_second, &sg2[j], &m2[j]);
             }
             linearise(lin, j, dl, rt_rate, kj, kvj, dj, rt, sm);
             body[j] = b;
@@ -995,7 +996,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
             ForLanes<kLanes>([&](int64_t j) {
               const int64_t q = d * kLanes + j;
               double tw = tv[tn + j] + h * ta[tn + j];
-              if (kFriction) tw = (pm1[j] * tw - tloss[q]) * g1[j];
+              if (kFriction) tw = KickTangent(tw, tloss[q], sg1[j], m1[j]);
               tx[tn + j] = tx[tn + j] + dt * tw;
               double tpred = tw + h * ta[tn + j];
               double tdl = tx[ti + j] - tx[tn + j];
@@ -1017,7 +1018,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
               double tacc = tb * inv[ri + j];
               if constexpr (!kFixed) tacc = tacc + body[j] * tinv[ti + j];
               double tvn = tw_prev[q] + h * tacc;
-              if (kFriction) tvn = (pm2[j] * tvn - tloss[q]) * g2[j];
+              if (kFriction) tvn = KickTangent(tvn, tloss[q], sg2[j], m2[j]);
               ta[ti + j] = tacc;
               tv[ti + j] = tvn;
               tf_prev[q] = tf;
@@ -1044,7 +1045,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         if (kFriction) {
           double s_second;
           vn = kick(vn, loss[j], &s_second);
-          if constexpr (kTangent) KickSlope(vn_raw, s_second, &pm2[j], &g2[j]);
+          if constexpr (kTangent) KickSlope(vn_raw, s_second, &sg2[j], &m2[j]);
         }
         if constexpr (kBooks) {  // the wall's terms, then the step's dissipation
           if (kViscous) {
@@ -1067,7 +1068,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
             if constexpr (kExtras) tb = tb + text[tw_row + j];
             double tacc = tb * inv[rw + j] + body[j] * tinv[tw_row + j];
             double tvn = tw_prev[q] + h * tacc;
-            if (kFriction) tvn = (pm2[j] * tvn - tloss[q]) * g2[j];
+            if (kFriction) tvn = KickTangent(tvn, tloss[q], sg2[j], m2[j]);
             ta[tw_row + j] = tacc;
             tv[tw_row + j] = tvn;
           });

@@ -223,20 +223,20 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
 
   for (int64_t n = 0; n < A.n_samples; ++n) {
     for (int64_t s = 0; s < A.steps_per_sample; ++s) {
-      double pm1 = 0.0, g1 = 0.0, pm2 = 0.0, g2 = 0.0;
+      double sg1 = 0.0, m1 = 0.0, sg2 = 0.0, m2 = 0.0;
       // body 0: half kick, friction, drift, predicted velocity
       double w = v[0] + h * a[0];
       if (kFriction) {
         double s_first, raw = w;
         w = Kick(w, loss, &s_first);
-        if (kTangent) KickSlope(raw, s_first, &pm1, &g1);
+        if (kTangent) KickSlope(raw, s_first, &sg1, &m1);
       }
       x[0] = x[0] + dt * w;
       double w_prev = w, p_prev = w + h * a[0], f_prev = 0.0;
       double tw_prev = 0.0, tp_prev = 0.0, tf_prev = 0.0;
       if (kTangent) {
         double tw = tv[0] + h * ta[0];
-        if (kFriction) tw = (pm1 * tw - tloss) * g1;
+        if (kFriction) tw = KickTangent(tw, tloss, sg1, m1);
         tx[0] = tx[0] + dt * tw;
         tw_prev = tw;
         tp_prev = tw + h * ta[0];
@@ -270,12 +270,12 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
         v[i] = vn;
         if (kTangent) {
           if (kFriction) {
-            KickSlope(w_raw, s_first, &pm1, &g1);
-            KickSlope(vn_raw, s_second, &pm2, &g2);
+            KickSlope(w_raw, s_first, &sg1, &m1);
+            KickSlope(vn_raw, s_second, &sg2, &m2);
           }
           const Linearisation l = Linearise<kDashpot>(dl, rate, k, kv, dash, root, sum);
           double tw = tv[nx] + h * ta[nx];
-          if (kFriction) tw = (pm1 * tw - tloss) * g1;
+          if (kFriction) tw = KickTangent(tw, tloss, sg1, m1);
           tx[nx] = tx[nx] + dt * tw;
           double tpred = tw + h * ta[nx];
           double tdl = tx[i] - tx[nx];
@@ -287,7 +287,7 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
           if (kExtras) tb = tb + tangent_param(A.t_external, i, kRows);
           double tacc = tb * inv + body * tangent_param(A.t_inv_mass, i, kRows);
           double tvn = tw_prev + h * tacc;
-          if (kFriction) tvn = (pm2 * tvn - tloss) * g2;
+          if (kFriction) tvn = KickTangent(tvn, tloss, sg2, m2);
           ta[i] = tacc;
           tv[i] = tvn;
           tf_prev = tf;
@@ -307,7 +307,7 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
       if (kFriction) {
         double s_second, raw = vn;
         vn = Kick(vn, loss, &s_second);
-        if (kTangent) KickSlope(raw, s_second, &pm2, &g2);
+        if (kTangent) KickSlope(raw, s_second, &sg2, &m2);
       }
       a[kContacts] = acc;
       v[kContacts] = vn;
@@ -316,7 +316,7 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
         if (kExtras) tb = tb + tangent_param(A.t_external, kContacts, kRows);
         double tacc = tb * inv + body * tangent_param(A.t_inv_mass, kContacts, kRows);
         double tvn = tw_prev + h * tacc;
-        if (kFriction) tvn = (pm2 * tvn - tloss) * g2;
+        if (kFriction) tvn = KickTangent(tvn, tloss, sg2, m2);
         ta[kContacts] = tacc;
         tv[kContacts] = tvn;
       }

@@ -328,6 +328,40 @@ def test_forward_mode_derivatives_equal_jacfwd_through_the_jax_kernel(case):
     np.testing.assert_allclose(np.asarray(value), expected, rtol=0, atol=2e-12 * np.max(np.abs(expected)))
 
 
+def test_friction_derivatives_with_and_without_loss_equal_the_jax_kernels():
+    """The friction kick's tangent (`KickSlope`, `KickTangent`) in one batch of chains with
+    friction and chains with friction switched on but mu = 0 (beads at rest ahead of the
+    wave: the loss above the speed, or a kept speed of exactly 0): `jax.jacfwd` in damping,
+    friction and impact speed equals it through the JAX kernel, and mu's direction moves the
+    mu = 0 chains not at all. (At a velocity of exactly 0 with no loss, sign(0) = 0 makes
+    the slope 0, as `KickSlope` keeps it; the tangents reaching such a bead are 0 here, so
+    that case is not observable in a chain's traces.)"""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    from hertzchain.batched import record_batched
+
+    base, grid = _batch(speeds=(0.3, 1.0, 0.5, 0.8), eta_s=1e-6)
+    flags = kernel_flags(base, switched_on=("viscous", "friction"))._replace(ledger=False)
+    chains = base.eta_s.shape[0]  # 4 speeds x 2 walls
+    mu = jnp.asarray(np.resize([0.0, 0.19, 0.0, 0.1, 0.19], chains))
+
+    def traced(q, kernel):
+        setup = eqx.tree_at(lambda s: (s.eta_s, s.mu, s.striker_velocity_m_s), base,
+                            (q[0] * jnp.ones(chains), q[1] * mu, q[2] * base.striker_velocity_m_s))
+        out = record_batched(setup, grid, Recording((2, 6)), flags, kernel=kernel)
+        return jnp.stack([out.forces_n[name] for name in out.channel_names])
+
+    q = jnp.asarray([1e-6, 1.0, 1.0])
+    jac = np.asarray(jax.jit(jax.jacfwd(lambda q: traced(q, "auto")))(q))
+    reference = np.asarray(jax.jit(jax.jacfwd(lambda q: traced(q, "jax")))(q))
+    for i in range(q.size):
+        scale = np.max(np.abs(reference[..., i]))
+        assert scale > 0.0
+        np.testing.assert_allclose(jac[..., i], reference[..., i], rtol=0, atol=1e-10 * scale)
+    np.testing.assert_array_equal(jac[:, np.asarray(mu) == 0.0, :, 1], 0.0)  # mu = 0 moves nothing
+
+
 def test_power_law_runs_on_the_full_kernel_equal_to_the_jax_kernel():
     """Power-law contacts (n = 1.6) run the full C++ kernel's power-law library: a damped,
     frictional sweep with the books and a conservative run without them equal the JAX
