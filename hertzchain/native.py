@@ -281,6 +281,13 @@ def _load() -> str | None:
                       ((TARGET, "HertzChainForward"), (FULL_TARGET, "HertzChainFullForward"),
                        (TANGENT_TARGET, "HertzChainFullTangent"), (BOOKS_TARGET, "HertzChainFullBooks")))
     except (OSError, RuntimeError) as error:
+        # said once (this function's result is cached): a run that silently took the JAX
+        # kernel would be several times slower with nothing to tell why
+        first = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+        print(f"hertzchain: the fused C++ kernel is not available ({first}); the JAX kernel runs "
+              "instead, several times slower. hertzchain.native.unavailable_reason() gives the "
+              "whole message; HERTZCHAIN_NATIVE=0 chooses the JAX kernel without this notice.",
+              file=sys.stderr, flush=True)
         return str(error)
     return None
 

@@ -627,6 +627,24 @@ def test_failed_build_names_the_compiler_error(tmp_path):
     assert not target.exists() and list(target.parent.iterdir()) == []
 
 
+def test_a_kernel_that_cannot_be_built_is_announced_once_with_its_reason(monkeypatch, capsys):
+    """No compiler (or a failed build): the JAX kernel runs, and stderr says so with the
+    first line of the reason; switched off on purpose (HERTZCHAIN_NATIVE=0), nothing is said."""
+    def no_compiler(*args, **kwargs):
+        raise RuntimeError("no C++ compiler found (set CXX, or install g++)\nmore detail")
+
+    monkeypatch.setattr(native, "_load_library", no_compiler)
+    load = native._load.__wrapped__  # the uncached build-and-load (the cache says it once a process)
+    monkeypatch.delenv("HERTZCHAIN_NATIVE", raising=False)
+    assert load() == "no C++ compiler found (set CXX, or install g++)\nmore detail"
+    said = capsys.readouterr().err
+    assert "fused C++ kernel is not available (no C++ compiler found (set CXX, or install g++))" in said
+    assert "the JAX kernel runs instead" in said and "more detail" not in said
+    monkeypatch.setenv("HERTZCHAIN_NATIVE", "0")
+    assert load() == "switched off (HERTZCHAIN_NATIVE=0)"
+    assert capsys.readouterr().err == ""
+
+
 def _fit_problem():
     from fitting.fit import initial_values, make_problem
     from fitting.synthetic import paper_setups, synthetic_traces
