@@ -61,6 +61,7 @@ import functools
 import hashlib
 import os
 import platform
+import re
 import shlex
 import shutil
 import subprocess
@@ -157,6 +158,62 @@ def _cache_dir() -> Path:
     if root:
         return Path(root)
     return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "hertzchain"
+
+
+# A cached library's name: its source and variant (the stem, e.g. "chain_kernel-sensor",
+# "chain_thread-emulated-r22"), then the digest of everything its build read.
+_LIBRARY_NAME = re.compile(r"^(?P<stem>(?:chain_kernel|chain_thread|driven_kernel)[a-z0-9_-]*?)-[0-9a-f]{16}\.so$")
+# A build's scratch folder (`_compile`, `_build`) left by a process that was killed: one
+# this old is no build in progress.
+_STALE_SCRATCH_S = 3600.0
+
+
+def _current_host_libraries() -> set[Path]:
+    """The host libraries this installation builds on this machine with these flags: the
+    main one, those built on first use (`load_on_demand_libraries`) and the driven chains'."""
+    defines = [(), (f"-D{DASHPOT_DEFINE}",), (f"-D{SENSOR_DEFINE}",)] + [
+        (f"-D{define}",) + extra for define in LAW_DEFINES.values() for extra in ((), (f"-D{SENSOR_DEFINE}",))]
+    return {_library_path(d) for d in defines} | {_library_path((), SOURCE.with_name("driven_kernel.cc"))}
+
+
+def prune_cache(now: float | None = None) -> tuple[int, int]:
+    """Delete from the library cache (`_cache_dir`) the libraries that a newer build of the
+    same kind has superseded: of every stem (source, variant and, for the thread kernels,
+    chain length) the newest library stays, and so does every host library this
+    installation builds here (`_current_host_libraries`); the others go with their lock
+    files, and so do build folders left over for more than an hour. A library that another
+    installation still uses is built again on its next use. Returns (files deleted, bytes
+    freed)."""
+    now = time.time() if now is None else now
+    folder = _cache_dir()
+    if not folder.is_dir():
+        return 0, 0
+    newest: dict[str, Path] = {}
+    libraries = []
+    for path in folder.iterdir():
+        match = _LIBRARY_NAME.match(path.name)
+        if match and path.is_file():
+            libraries.append((match["stem"], path))
+            best = newest.get(match["stem"])
+            if best is None or path.stat().st_mtime > best.stat().st_mtime:
+                newest[match["stem"]] = path
+    current = _current_host_libraries()
+    doomed = [path for stem, path in libraries if path != newest[stem] and path not in current]
+    doomed += [path.with_name(path.name + ".lock") for path in doomed]
+    scratch = [path for path in folder.iterdir()
+               if path.is_dir() and path.name.startswith("tmp") and now - path.stat().st_mtime > _STALE_SCRATCH_S]
+    deleted = freed = 0
+    for path in doomed:
+        if path.exists():
+            freed += path.stat().st_size
+            path.unlink()
+            deleted += 1
+    for path in scratch:
+        files = [part for part in path.rglob("*") if part.is_file()]
+        freed += sum(part.stat().st_size for part in files)
+        deleted += len(files)
+        shutil.rmtree(path)
+    return deleted, freed
 
 
 def _cpu_key() -> str:
@@ -385,6 +442,12 @@ def available() -> bool:
 def unavailable_reason() -> str | None:
     """Why the kernel cannot be used, or None when it can."""
     return _load()
+
+
+def cache_dir() -> Path:
+    """Where the built libraries are kept: `$HERTZCHAIN_CACHE`, else `hertzchain` in
+    `$XDG_CACHE_HOME` or `~/.cache`."""
+    return _cache_dir()
 
 
 def library_path() -> Path:

@@ -7,7 +7,9 @@ sweep does not wait for it; it also says why the kernel cannot be used where it 
 status 0 either way: the README's install command goes on). `--all` also builds the libraries
 that are otherwise built on their first use, 14-20 s each on two cores: the dashpot's, the
 compliant sensor beads' and those of the other contact laws, which diagnoses and
-elastic-plastic or power-law runs call.
+elastic-plastic or power-law runs call. `--prune` deletes the cached libraries that newer
+builds have superseded (every update of hertzchain or JAX builds new ones; the cache keeps
+the newest of each kind) and build folders left by killed builds.
 """
 
 from __future__ import annotations
@@ -23,10 +25,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--all", action="store_true",
                         help="also build the libraries built on first use (the dashpot's, the compliant sensors', "
                              "the other contact laws')")
+    parser.add_argument("--prune", action="store_true",
+                        help="delete the cached libraries that newer builds of the same kind superseded")
 
 
 def run(args: argparse.Namespace) -> int:
     began = time.perf_counter()
+    if args.prune:
+        deleted, freed = native.prune_cache()
+        print(f"hertzchain kernel: pruned {deleted} superseded files ({freed / 2**20:.1f} MiB) "
+              f"from {native.cache_dir()}")
     reason = native.unavailable_reason()
     if reason is not None:
         print(f"hertzchain kernel: the fused C++ kernel cannot be used ({reason}); "
