@@ -55,7 +55,9 @@ def _assert_twin_equals(twin, full, x, skipped):
     assert np.all(np.max(np.abs(j[:, wanted] - j_ref[:, wanted]), axis=0) <= 1e-8 * scale)
 
 
-@pytest.mark.parametrize("plastic", [False, True])
+# The Hertz case runs with `-m slow` (suite time); the yielding one, which runs the same
+# twin through the elastic-plastic library as well, stays in the default suite.
+@pytest.mark.parametrize("plastic", [pytest.param(False, marks=pytest.mark.slow), True])
 def test_twin_on_the_kernel_equals_the_full_model_at_zero_compliance_and_dashpot(brass_files, plastic):
     """Effects on (extra damping, a preload half seen, sensors' Eq. 4 at f0 = 183 kHz and,
     with `plastic`, yield forces 1/512 of the nominal, which the contacts cross), the
