@@ -83,6 +83,8 @@ except ImportError:  # not a POSIX system: builds are not serialised between pro
     fcntl = None
 
 SOURCE = Path(__file__).with_name("chain_kernel.cc")
+# The driven chains' lock-in kernel (`hertzchain.driven.fused`), built by `_load_library` too.
+DRIVEN_SOURCE = Path(__file__).with_name("driven_kernel.cc")
 LAWS = Path(__file__).with_name("chain_laws.h")  # the laws both kernels include
 FFI_ARGS = Path(__file__).with_name("chain_ffi.h")  # their handlers' argument lists
 BLOCKS = Path(__file__).with_name("chain_blocks.h")  # the host kernels' layouts and threads
@@ -173,7 +175,7 @@ def _current_host_libraries() -> set[Path]:
     main one, those built on first use (`load_on_demand_libraries`) and the driven chains'."""
     defines = [(), (f"-D{DASHPOT_DEFINE}",), (f"-D{SENSOR_DEFINE}",)] + [
         (f"-D{define}",) + extra for define in LAW_DEFINES.values() for extra in ((), (f"-D{SENSOR_DEFINE}",))]
-    return {_library_path(d) for d in defines} | {_library_path((), SOURCE.with_name("driven_kernel.cc"))}
+    return {_library_path(d) for d in defines} | {_library_path((), DRIVEN_SOURCE)}
 
 
 def prune_cache(now: float | None = None) -> tuple[int, int]:
@@ -188,17 +190,13 @@ def prune_cache(now: float | None = None) -> tuple[int, int]:
     folder = _cache_dir()
     if not folder.is_dir():
         return 0, 0
-    newest: dict[str, Path] = {}
-    libraries = []
+    kinds: dict[str, list[Path]] = {}
     for path in folder.iterdir():
         match = _LIBRARY_NAME.match(path.name)
         if match and path.is_file():
-            libraries.append((match["stem"], path))
-            best = newest.get(match["stem"])
-            if best is None or path.stat().st_mtime > best.stat().st_mtime:
-                newest[match["stem"]] = path
-    current = _current_host_libraries()
-    doomed = [path for stem, path in libraries if path != newest[stem] and path not in current]
+            kinds.setdefault(match["stem"], []).append(path)
+    kept = _current_host_libraries() | {max(paths, key=lambda path: path.stat().st_mtime) for paths in kinds.values()}
+    doomed = [path for paths in kinds.values() for path in paths if path not in kept]
     doomed += [path.with_name(path.name + ".lock") for path in doomed]
     scratch = [path for path in folder.iterdir()
                if path.is_dir() and path.name.startswith("tmp") and now - path.stat().st_mtime > _STALE_SCRATCH_S]

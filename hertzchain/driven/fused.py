@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import functools
 import os
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -32,7 +31,7 @@ from .. import native
 from . import drive as drives
 from .lockin import step_reference
 
-SOURCE = Path(native.__file__).with_name("driven_kernel.cc")
+SOURCE = native.DRIVEN_SOURCE
 TARGET = "hertzchain_driven_lockin"
 TANGENT_TARGET = "hertzchain_driven_lockin_tangent"
 # The quantities the kernel reads (a bead's row of the state).
