@@ -214,9 +214,9 @@ def _markdown(summary) -> str:
                      f"{entry['fitted_yield_stress_mpa']:.0f} | {_pct(entry['rms_over_peak_fitted'])} |")
     lines += ["", "The same curves with a Kuwabara-Kono damping time per material (`--damping`) or a time shift "
               "of the records per curve (`--time-shift`): [`rate_terms.md`](rate_terms.md) "
-              "(`python benchmarks/contact_rate_terms.py`). What the damped law still misses, curve by curve: "
-              "[`misfit.md`](misfit.md) (`python benchmarks/contact_misfit.py`); which stored record and "
-              "processing each curve is: [`processing.md`](processing.md) (`python benchmarks/contact_processing.py`)."]
+              "(`python -m benchmarks.contact_rate_terms`). What the damped law still misses, curve by curve: "
+              "[`misfit.md`](misfit.md) (`python -m benchmarks.contact_misfit`); which stored record and "
+              "processing each curve is: [`processing.md`](processing.md) (`python -m benchmarks.contact_processing`)."]
     return "\n".join(lines) + "\n"
 
 

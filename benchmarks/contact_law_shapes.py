@@ -2,7 +2,7 @@
 `jackson_green_contact` against the fully plastic limit of a truncated sphere, and what
 bounds the misfit of any elastic unloading.
 
-    python benchmarks/contact_law_shapes.py [--data PATH] [--out benchmarks/results/contact_burgoyne]
+    python -m benchmarks.contact_law_shapes [--data PATH] [--out benchmarks/results/contact_burgoyne]
 
 Candidates, sigma_Y fitted once per material (`fitting.fit.least_squares`, published rate
 constants, approach offset at the first sample shifted out, as `contact_burgoyne.py`):

@@ -1,7 +1,7 @@
 """What the contact law misses on Burgoyne & Daraio's curves once damping is fitted: where in
 each record the misfit sits, what bounds it, and what fitting more of the law's constants does.
 
-    python benchmarks/contact_misfit.py [--data PATH] [--out benchmarks/results/contact_burgoyne] [--reuse]
+    python -m benchmarks.contact_misfit [--data PATH] [--out benchmarks/results/contact_burgoyne] [--reuse]
 
 Starts from `damping/` of `contact_rate_terms.py` (sigma_Y and a Kuwabara-Kono damping time
 fitted once per material, published rate constants, approach offset shifted out; run it

@@ -1,7 +1,7 @@
 """Which stored bar record each of Burgoyne & Daraio's 15 Caltech curves comes from, and how
 its force and approach compare with that record's other processing.
 
-    python benchmarks/contact_processing.py [--data PATH] [--out benchmarks/results/contact_burgoyne]
+    python -m benchmarks.contact_processing [--data PATH] [--out benchmarks/results/contact_burgoyne]
 
 The paper's curves (`ExperimentalData`, force and approach in time) and the processed records
 of the two test days (`hopkinson_tests_5-22/`, `hopkinson_tests_6-6/`: `fd1..8` of May/June,
@@ -128,7 +128,7 @@ def main(argv=None) -> int:
              "Force matched as F_curve = k F_record over alignments overlapping ≥ 90 % of the curve (100 ns "
              "samples); approach at that alignment as d_curve = s d_record + c. Deviations: RMS, force in % of "
              "the curve's peak, approach in µm. `fd1..8`: May/June processing; `fd_s440-*`: July reprocessing "
-             "(`python benchmarks/contact_processing.py`).", "",
+             "(`python -m benchmarks.contact_processing`).", "",
              "| curve | record | force deviation (%) | k | next record (deviation %) | s | c (µm) | approach deviation (µm) |",
              "|---|---|---|---|---|---|---|---|"]
     for r in rows:

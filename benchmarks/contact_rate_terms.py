@@ -2,7 +2,7 @@
 a contact damping term or a time misalignment of the two bar records, tested on the 15
 Caltech curves with sigma_Y fitted once per material.
 
-    python benchmarks/contact_rate_terms.py [--data PATH] [--out benchmarks/results/contact_burgoyne] [--reuse]
+    python -m benchmarks.contact_rate_terms [--data PATH] [--out benchmarks/results/contact_burgoyne] [--reuse]
 
 Runs (`fitting.contact_calibration.calibrate`, published rate constants, approach offset at
 the first sample shifted out, as `contact_burgoyne.py`), each into its own folder under --out:

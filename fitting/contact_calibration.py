@@ -23,7 +23,8 @@ rate constant or the hardness ratio is fitted with it); the larger
 is reported as `stderr`.
 
 Two optional terms account for a measured force that peaks before the approach does, which
-no rate-independent law follows (both off by default):
+no rate-independent law follows, and a third for an approach record that drifts (all off by
+default):
 
 - `fit_damping`: a Kuwabara-Kono viscous force on top of the law, the project's one damping
   law (`hertzchain.contact.contact_force`): $F = \\max(F_{JG} + \\tfrac32\\eta\\kappa
@@ -35,8 +36,20 @@ no rate-independent law follows (both off by default):
   distances from the sample, moved to its faces with the bar's wave speed and a dispersion
   correction): the law is driven with the approach at $t + \\tau$, $\\tau$ fitted per curve
   within $\\pm$`max_shift_s` (`bounded_shift_s`; positive: the force leads the approach). Its standard error is the
-  Gauss-Newton one inflated for the residuals' correlation along time (lag-1 autocorrelation
-  $\\rho$ of the curve's residuals: factor $\\sqrt{(1+\\rho)/(1-\\rho)}$, an AR(1) noise).
+  Gauss-Newton one with each curve's residuals weighted by their own variance, inflated for
+  their correlation along time (lag-1 autocorrelation $\\rho$ of the curve's residuals: factor
+  $\\sqrt{(1+\\rho)/(1-\\rho)}$, an AR(1) noise), marginal over the material's constants
+  fitted with it.
+- `fit_approach_drift`: a linear drift of the approach record, fitted per curve: the law is
+  driven with $\\delta(t) - b\\,(t - t_0)$ and its rate with $\\dot\\delta - b$ ($b$ in m/s,
+  $t_0$ the first sample; positive: the record's approach grows faster than the contact's).
+  The approach of a bar test is the difference of the two bar ends' displacements, each a
+  time integral of gauge strains ($u = c_0\\int(\\varepsilon_i - \\varepsilon_r)\\,dt$ on the
+  incident side), so a gain or dispersion mismatch $e$ between the incident and reflected
+  pulses, or a strain baseline error, integrates to a velocity error $b \\approx e\\,c_0
+  \\varepsilon_i$ that accumulates over the record, while the force (one gauge's strain)
+  carries none. Its standard error is found as the shift's. The strain rate of the rate
+  hardening stays the record's.
 """
 
 from __future__ import annotations
@@ -70,7 +83,8 @@ SECANT_FRACTIONS = (0.9, 0.5)
 MAX_TIME_SHIFT_S = 13e-6
 # A fitted shift beyond this fraction of its bound is reported without a standard error.
 SHIFT_AT_BOUND = 0.99
-# Parameters of the fit, in this order; per-curve time shifts follow them.
+# Parameters of the fit, in this order; per-curve time shifts, then per-curve approach drifts
+# (m/s), follow them.
 PARAMETERS = ("ln_yield_stress", "rate_constant", "eta_s", "ln_hardness_ratio")
 
 
@@ -241,7 +255,7 @@ def time_shifted(values, time_step_s, shift_s):
 def approach_rate_m_s(curve: ContactCurve, approach_m) -> np.ndarray:
     """Approach speed, m/s: the gradient of the approach averaged over `PEAK_WINDOW_S`."""
     if curve.time_s is None:
-        raise ValueError(f"{curve.name}: the file has no time column; contact damping and a time shift need one.")
+        raise ValueError(f"{curve.name}: the file has no time column; contact damping, a time shift and an approach drift need one.")
     step = float(np.median(np.diff(curve.time_s)))
     width = max(1, int(round(PEAK_WINDOW_S / step)))
     padded = np.pad(np.asarray(approach_m, float), width // 2, mode="edge")
@@ -256,13 +270,22 @@ def bounded_shift_s(value, max_shift_s):
     return max_shift_s * jnp.tanh(value / max_shift_s)
 
 
+def drift_corrected(approach_m, rate_m_s, time_step_s, drift_m_s):
+    """(approach m, rate m/s) of a uniformly sampled record without a linear drift of `drift_m_s`
+    (m/s) from its first sample: $\\delta - b\\,(t - t_0)$, $\\dot\\delta - b$."""
+    approach_m, rate_m_s = jnp.asarray(approach_m), jnp.asarray(rate_m_s)
+    elapsed = jnp.arange(approach_m.shape[0]) * time_step_s
+    return approach_m - drift_m_s * elapsed, rate_m_s - drift_m_s
+
+
 def model_force(approach_m, rate_m_s, time_step_s, kappa, geometry: ContactGeometry, yield_stress_pa, poisson,
-                eta_s=0.0, shift_s=0.0, hardness_ratio=contact.JG_HARDNESS_RATIO):
+                eta_s=0.0, shift_s=0.0, hardness_ratio=contact.JG_HARDNESS_RATIO, drift_m_s=0.0):
     """The law along a measured history with the optional terms, N: the approach (and its rate)
-    read `shift_s` later (s; 0: none), the Kuwabara-Kono damping time `eta_s` (s; 0: none), the
-    law's hardness ratio $H/\\sigma_Y$."""
-    approach = time_shifted(approach_m, time_step_s, shift_s)
-    rate = time_shifted(rate_m_s, time_step_s, shift_s)
+    without a linear drift `drift_m_s` (m/s; 0: none) and read `shift_s` later (s; 0: none), the
+    Kuwabara-Kono damping time `eta_s` (s; 0: none), the law's hardness ratio $H/\\sigma_Y$."""
+    approach, rate = drift_corrected(approach_m, rate_m_s, time_step_s, drift_m_s)
+    approach = time_shifted(approach, time_step_s, shift_s)
+    rate = time_shifted(rate, time_step_s, shift_s)
     elastic = law_force(approach, kappa, geometry, yield_stress_pa, poisson, hardness_ratio)
     return contact.contact_force(approach, rate, kappa, eta_s, elastic_n=elastic)[1]
 
@@ -291,19 +314,23 @@ def unloading_secant_n_m(approach_m, force_n) -> float | None:
 
 class _Residuals:
     """The whitened residuals of one material's curves in x = (ln sigma_Y, C, eta_s, ln h, shift_1 ..
-    shift_n), for `fitting.fit.least_squares`; the shifts enter through `bounded_shift_s`."""
+    shift_n, drift_1 .. drift_n), for `fitting.fit.least_squares`; the shifts enter through
+    `bounded_shift_s`, the approach drifts (m/s) as they are."""
 
     def __init__(self, pieces, kappa, geometry, poisson, max_shift_s):
         self.pieces = [(jnp.asarray(a), jnp.asarray(v), dt, jnp.asarray(f), p, r) for a, v, dt, f, p, r in pieces]
         first = len(PARAMETERS)
+        n = len(self.pieces)
 
         def residuals(x):
+            if x.shape != (first + 2 * n,):
+                raise ValueError(f"x must hold {first} constants, {n} shifts and {n} drifts, got shape {x.shape}.")
             out = []
             for k, (approach, speed, step, force, peak, rate) in enumerate(self.pieces):
                 stress = contact.rate_hardened_yield_stress(jnp.exp(x[0]), x[1], rate)
                 shift = bounded_shift_s(x[first + k], max_shift_s)
                 model = model_force(approach, speed, step, kappa, geometry, stress, poisson, x[2], shift,
-                                    jnp.exp(x[3]))
+                                    jnp.exp(x[3]), x[first + n + k])
                 out.append((model - force) / (peak * math.sqrt(force.size)))
             return jnp.concatenate(out)
 
@@ -320,24 +347,28 @@ class _Residuals:
 
 def _fit_material(pieces, material, kappa, geometry, options):
     """(values {yield_stress_pa, rate_constant, eta_s}, stderr {...}, converged, per-curve sigma_Y,
-    per-curve shifts (s) with their standard errors (s))."""
+    per-curve shifts (s) and approach drifts (m/s), each a list of (value, standard error))."""
     n = len(pieces)
     first = len(PARAMETERS)
     start = np.concatenate([[math.log(material.yield_stress_pa), material.yield_rate_constant or 0.0, 0.0,
-                             math.log(contact.JG_HARDNESS_RATIO)], np.zeros(n)])
+                             math.log(contact.JG_HARDNESS_RATIO)], np.zeros(2 * n)])
     base = [0] + ([1] if options["fit_rate_constant"] else []) + ([2] if options["fit_damping"] else []) \
         + ([3] if options["fit_hardness_ratio"] else [])
 
     def solve(indices):
         problem = _Residuals([pieces[i] for i in indices], kappa, geometry, material.poisson, options["max_shift_s"])
-        free = base + ([first + k for k in range(len(indices))] if options["fit_time_shift"] else [])
-        x0 = np.concatenate([start[:first], start[first:][list(indices)]])
+        m = len(indices)
+        free = base + ([first + k for k in range(m)] if options["fit_time_shift"] else []) \
+            + ([first + m + k for k in range(m)] if options["fit_approach_drift"] else [])
+        x0 = np.concatenate([start[:first], start[first:first + n][list(indices)],
+                             start[first + n:][list(indices)]])
         return problem, least_squares(problem, x0, free, max_steps=60, tolerance=1e-8), free
 
     problem, result, free = solve(range(n))
     x = result.x.copy()
     r, jac = problem.linearize(x, free)
-    labels = [PARAMETERS[c] if c < first else f"shift_{c - first}" for c in free]
+    labels = [PARAMETERS[c] if c < first else f"shift_{c - first}" if c < first + n else f"drift_{c - first - n}"
+              for c in free]
     cov = covariance_from_jacobian(jac, labels, chi2=float(r @ r), dof=max(r.size - len(free), 1), scale="residual")
     stderr = dict(zip(free, cov.stderr))
     stress = math.exp(x[0])
@@ -354,61 +385,80 @@ def _fit_material(pieces, material, kappa, geometry, options):
               "eta_s": float(stderr[2]) if 2 in stderr else None,
               "hardness_ratio": math.exp(x[3]) * float(stderr[3]) if 3 in stderr else None}
     bound = options["max_shift_s"]
-    shifts, shift_errors = [float(bounded_shift_s(v, bound)) for v in x[first:]], [None] * n
+    sizes = np.cumsum([0] + [np.size(p[3]) for p in pieces])
+
+    # Gauss-Newton covariance with each curve's rows weighted by its own residual variance
+    # (whitened per curve: the sample count cancels), inflated for their correlation along time
+    # (AR(1): (1 + rho) / (1 - rho)); a curve's own parameter's error is marginal over the
+    # material's constants fitted with it
+    weighted = jac.copy()
+    for k in range(n):
+        rows = slice(sizes[k], sizes[k + 1])
+        rho = min(max(lag1_autocorrelation(r[rows]), 0.0), 0.999)
+        variance = float(r[rows] @ r[rows]) / max(sizes[k + 1] - sizes[k] - 1, 1)
+        weighted[rows] /= math.sqrt(variance * (1 + rho) / (1 - rho)) if variance > 0 else 1.0
+    used = np.abs(weighted).max(axis=0) > 0
+    marginal = np.full(len(free), np.nan)
+    marginal[used] = np.diag(np.linalg.pinv(weighted[:, used].T @ weighted[:, used]))
+
+    def curve_stderr(k, index, slope=1.0):
+        """The standard error of curve k's own parameter x[index] (`slope`: d value / d x)."""
+        variance = marginal[free.index(index)]
+        return None if not np.isfinite(variance) else abs(slope) * math.sqrt(variance)
+
+    shifts = [(float(bounded_shift_s(v, bound)), None) for v in x[first:first + n]]
     if options["fit_time_shift"]:
-        # the Gauss-Newton error of a shift from its own curve's residuals (whitened per curve:
-        # the sample count cancels), inflated for their correlation along time
-        sizes = np.cumsum([0] + [np.size(p[3]) for p in pieces])
-        for k in range(n):
-            rows = slice(sizes[k], sizes[k + 1])
-            rho = min(max(lag1_autocorrelation(r[rows]), 0.0), 0.999)
-            column = jac[rows, free.index(first + k)]
-            variance = float(r[rows] @ r[rows]) / max(sizes[k + 1] - sizes[k] - 1, 1)
-            # the column is d r / d x; d shift / d x = 1 - (shift / bound)^2
-            slope = 1.0 - (shifts[k] / bound) ** 2
-            at_bound = abs(shifts[k]) > SHIFT_AT_BOUND * bound
-            shift_errors[k] = None if at_bound or not column.any() else slope * math.sqrt(
-                variance * (1 + rho) / (1 - rho) / float(column @ column))
-    return values, errors, bool(result.converged), singles, shifts, shift_errors
+        # d shift / d x = 1 - (shift / bound)^2; no error for a shift stopped at its bound
+        shifts = [(s, None if abs(s) > SHIFT_AT_BOUND * bound else curve_stderr(k, first + k, 1.0 - (s / bound) ** 2))
+                  for k, (s, _) in enumerate(shifts)]
+    drifts = [(float(v), curve_stderr(k, first + n + k) if options["fit_approach_drift"] else None)
+              for k, v in enumerate(x[first + n:])]
+    return values, errors, bool(result.converged), singles, shifts, drifts
 
 
-def _piece(curve, approach, peak, rate, damping_or_shift):
+def _piece(curve, approach, peak, rate, timed):
     """(approach m, approach speed m/s, time step s, force N, peak N, strain rate 1/s) of a curve
-    for the fit; files without time have no speed (zeros) and a unit step (neither is used)."""
-    if damping_or_shift:
+    for the fit (`timed`: a term that needs the time is fitted); files without time have no
+    speed (zeros) and a unit step (neither is used)."""
+    if timed:
         speed, step = approach_rate_m_s(curve, approach), float(np.median(np.diff(curve.time_s)))
     else:
         speed, step = np.zeros_like(approach), 1.0
     return approach, speed, step, curve.force_n, peak, rate
 
 
-def _curve_report(curve, piece, kappa, geometry, given, fitted, own_stress_pa=None, shift_s=0.0,
-                  shift_stderr_s=None):
-    """Numbers of one curve at the given and the fitted constants (with the fitted damping time
-    and time shift, where fitted)."""
+def _curve_report(curve, piece, kappa, geometry, given, fitted, own_stress_pa=None, shift=(0.0, None),
+                  drift=(0.0, None)):
+    """Numbers of one curve at the given and the fitted constants (with the fitted damping time,
+    time shift and approach drift, where fitted; `shift`, `drift`: (value, standard error), s
+    and m/s)."""
+    (shift_s, shift_stderr_s), (drift_m_s, drift_stderr_m_s) = shift, drift
     approach, speed, step, _, _, rate = piece
     smooth = _smoothed(curve)
     peak = float(np.max(smooth))
 
-    def force(stress_pa, rate_constant, eta_s=0.0, shift=0.0, hardness_ratio=contact.JG_HARDNESS_RATIO):
+    def force(stress_pa, rate_constant, eta_s=0.0, shift=0.0, hardness_ratio=contact.JG_HARDNESS_RATIO, drift=0.0):
         stress = contact.rate_hardened_yield_stress(stress_pa, rate_constant, rate)
         return np.asarray(model_force(jnp.asarray(approach), jnp.asarray(speed), step, kappa, geometry, stress,
-                                      curve.material.poisson, eta_s, shift, hardness_ratio))
+                                      curve.material.poisson, eta_s, shift, hardness_ratio, drift))
 
     model = force(given["yield_stress_pa"], given["rate_constant"])
-    fit = force(fitted["yield_stress_pa"], fitted["rate_constant"], fitted["eta_s"], shift_s, fitted["hardness_ratio"])
+    fit = force(fitted["yield_stress_pa"], fitted["rate_constant"], fitted["eta_s"], shift_s, fitted["hardness_ratio"],
+                drift_m_s)
     old = np.asarray(thornton_force(approach, curve.material, geometry, given["yield_stress_pa"]))
-    # the measured force against the approach it is aligned with (the fitted shift; none: as stored)
-    aligned = np.asarray(time_shifted(approach, step, shift_s)) if shift_s else approach
+    # the measured force against the approach it is aligned with (without the fitted drift, at the
+    # fitted shift; neither: as stored)
+    aligned = approach if not (shift_s or drift_m_s) else np.asarray(
+        time_shifted(drift_corrected(approach, speed, step, drift_m_s)[0], step, shift_s))
     data_secant = unloading_secant_n_m(aligned, smooth)
     secants = {"model": unloading_secant_n_m(approach, model), "fitted": unloading_secant_n_m(aligned, fit)}
     i_peak = int(np.argmax(smooth))
     loading, unloading = slice(0, i_peak + 1), slice(i_peak + 1, None)
     own = None if own_stress_pa is None else force(own_stress_pa, fitted["rate_constant"], fitted["eta_s"], shift_s,
-                                                   fitted["hardness_ratio"])
+                                                   fitted["hardness_ratio"], drift_m_s)
     modulus = 0.75 * kappa / math.sqrt(geometry.reduced_radius_m)
     fitted_stress = contact.rate_hardened_yield_stress(fitted["yield_stress_pa"], fitted["rate_constant"], rate)
-    radius = float(contact.jackson_green_contact_radius(float(np.max(approach)), kappa, geometry.reduced_radius_m,
+    radius = float(contact.jackson_green_contact_radius(float(np.max(aligned)), kappa, geometry.reduced_radius_m,
                                                         fitted_stress, curve.material.poisson))
     return {
         "file": curve.name,
@@ -418,6 +468,10 @@ def _curve_report(curve, piece, kappa, geometry, given, fitted, own_stress_pa=No
         "strain_rate_s": rate,
         "time_shift_s": float(shift_s),
         "time_shift_stderr_s": shift_stderr_s,
+        "approach_drift_m_s": float(drift_m_s),
+        "approach_drift_stderr_m_s": drift_stderr_m_s,
+        # what the drift adds to the record's approach over its span, m
+        "approach_drift_over_record_m": float(drift_m_s) * step * (np.size(approach) - 1),
         "peak_force_measured_n": peak,
         "approach_at_peak_m": float(approach[i_peak]),
         "mean_pressure_truncated_area_over_yield_stress": peak / (
@@ -449,18 +503,19 @@ def _curve_report(curve, piece, kappa, geometry, given, fitted, own_stress_pa=No
 
 def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample", fit_rate_constant: bool = False,
               fit_damping: bool = False, fit_time_shift: bool = False, fit_hardness_ratio: bool = False,
-              max_shift_s: float = MAX_TIME_SHIFT_S,
+              fit_approach_drift: bool = False, max_shift_s: float = MAX_TIME_SHIFT_S,
               strain_rate_s_given: float | None = None, progress=None) -> dict:
     """Predict and calibrate the contact law on `curves` (`ContactCurve`, grouped by material).
 
     `fit_damping`: fit a Kuwabara-Kono damping time per material; `fit_time_shift`: fit a
-    time alignment of the force and approach records per curve within +-`max_shift_s` (s)
-    (module docstring; both need a time column); `fit_rate_constant`, `fit_hardness_ratio`:
+    time alignment of the force and approach records per curve within +-`max_shift_s` (s);
+    `fit_approach_drift`: a linear drift of the approach record per curve (m/s) (module
+    docstring; all three need a time column); `fit_rate_constant`, `fit_hardness_ratio`:
     fit the rate constant C, the hardness ratio h (fitted as ln h) per material with sigma_Y.
 
     **Returns:** a dict: `materials` (per material: given and fitted constants with standard
     errors, converged flag, per-curve yield stresses) and `curves` (per curve: strain rate,
-    fitted time shift and its standard error, measured peak, peak-force errors at the given
+    fitted time shift and approach drift with their standard errors, measured peak, peak-force errors at the given
     constants, the fitted ones and with the earlier Thornton law, RMS misfit over the peak,
     unloading secant stiffness 90 -> 50 % of the peak, measured and as ratios). `_series`
     entries hold the model forces for the per-file CSV and the figure.
@@ -476,11 +531,12 @@ def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample"
                              "give one (--yield-stress, Pa).")
         groups.setdefault(curve.material.name, []).append(i)
     options = {"fit_rate_constant": fit_rate_constant, "fit_damping": fit_damping, "fit_time_shift": fit_time_shift,
-               "fit_hardness_ratio": fit_hardness_ratio, "max_shift_s": max_shift_s}
+               "fit_hardness_ratio": fit_hardness_ratio, "fit_approach_drift": fit_approach_drift,
+               "max_shift_s": max_shift_s}
     approaches = [shifted_approach(c, offset) for c in curves]
     rates = [strain_rate_s(c, geometry, strain_rate_s_given) if (c.material.yield_rate_constant or
              fit_rate_constant) else 1e-3 for c in curves]
-    pieces = [_piece(c, a, float(np.max(_smoothed(c))), r, fit_damping or fit_time_shift)
+    pieces = [_piece(c, a, float(np.max(_smoothed(c))), r, fit_damping or fit_time_shift or fit_approach_drift)
               for c, a, r in zip(curves, approaches, rates)]
     report = {"geometry": dataclasses.asdict(geometry), "reduced_radius_m": geometry.reduced_radius_m,
               "offset": offset, **options, "materials": {}, "curves": []}
@@ -489,7 +545,7 @@ def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample"
         kappa = _kappa(material, geometry)
         if progress:
             progress(f"fitting {name} on {len(members)} curve(s)")
-        values, errors, converged, singles, shifts, shift_errors = _fit_material(
+        values, errors, converged, singles, shifts, drifts = _fit_material(
             [pieces[i] for i in members], material, kappa, geometry, options)
         given = {"yield_stress_pa": material.yield_stress_pa, "rate_constant": material.yield_rate_constant or 0.0,
                  "eta_s": 0.0, "hardness_ratio": contact.JG_HARDNESS_RATIO}
@@ -502,7 +558,7 @@ def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample"
         }
         for k, i in enumerate(members):
             report["curves"].append(_curve_report(curves[i], pieces[i], kappa, geometry, given, values,
-                                                  singles[k] if singles else None, shifts[k], shift_errors[k]))
+                                                  singles[k] if singles else None, shifts[k], drifts[k]))
     return report
 
 

@@ -17,7 +17,10 @@ a Kuwabara-Kono damping force with one damping time per material, fitted with si
 Burgoyne & Daraio's curves it follows the force's lead over the approach and their
 unloading: `benchmarks/results/contact_burgoyne/rate_terms.md`); `--time-shift` fits a time
 alignment of the force and approach records per curve instead (a processing nuisance,
-bounded by `--max-shift`), reported per curve with its sigma.
+bounded by `--max-shift`), reported per curve with its sigma; `--approach-drift` fits a
+linear drift of each curve's approach record (m/s; the approach of a bar test is the
+difference of two integrated gauge records, which a gain mismatch or a baseline error makes
+drift), reported per curve with its sigma.
 """
 
 from __future__ import annotations
@@ -56,6 +59,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fit a Kuwabara-Kono damping time per material on top of the law [off]")
     parser.add_argument("--time-shift", action="store_true",
                         help="fit a time shift of the approach against the force per curve [off]")
+    parser.add_argument("--approach-drift", action="store_true",
+                        help="fit a linear drift (m/s) of each curve's approach record [off]")
     parser.add_argument("--max-shift", default=f"{MAX_TIME_SHIFT_S * 1e6:g}us",
                         help=f"bound of --time-shift (s, or 13us) [{MAX_TIME_SHIFT_S * 1e6:g}us]")
     parser.add_argument("--out", default="out/contact", help="output folder [out/contact]")
@@ -106,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--max-shift: {error}") from None
     report = calibrate(curves, geometry, offset=args.offset, fit_rate_constant=args.fit_rate_constant,
                        fit_damping=args.damping, fit_time_shift=args.time_shift,
-                       fit_hardness_ratio=args.fit_hardness_ratio, max_shift_s=max_shift_s,
+                       fit_hardness_ratio=args.fit_hardness_ratio, fit_approach_drift=args.approach_drift,
+                       max_shift_s=max_shift_s,
                        strain_rate_s_given=args.strain_rate,
                        progress=lambda text: print(text, file=sys.stderr, flush=True))
     data = write_outputs(report, curves, args.out)
@@ -123,6 +129,9 @@ def run(args: argparse.Namespace) -> int:
               f"{100 * entry['rms_over_peak_fitted']:.1f} %"
               + (f", time shift {entry['time_shift_s'] * 1e6:+.2f} us "
                  + (f"+- {entry['time_shift_stderr_s'] * 1e6:.2f} us" if entry['time_shift_stderr_s'] is not None
-                    else "(at its bound)") if args.time_shift else ""))
+                    else "(at its bound)") if args.time_shift else "")
+              + (f", approach drift {entry['approach_drift_m_s']:+.3f}"
+                 + (f" +- {entry['approach_drift_stderr_m_s']:.3f}" if entry['approach_drift_stderr_m_s'] is not None
+                    else "") + " m/s" if args.approach_drift else ""))
     print(f"wrote contact.json, contact.png, residuals.png and {len(curves)} CSV files to {args.out}")
     return 0
