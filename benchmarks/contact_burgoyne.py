@@ -216,7 +216,9 @@ def _markdown(summary) -> str:
               "of the records per curve (`--time-shift`): [`rate_terms.md`](rate_terms.md) "
               "(`python -m benchmarks.contact_rate_terms`). What the damped law still misses, curve by curve: "
               "[`misfit.md`](misfit.md) (`python -m benchmarks.contact_misfit`); which stored record and "
-              "processing each curve is: [`processing.md`](processing.md) (`python -m benchmarks.contact_processing`)."]
+              "processing each curve is: [`processing.md`](processing.md) (`python -m benchmarks.contact_processing`); "
+              "with a linear drift of each curve's approach record fitted as well (`--approach-drift`): "
+              "[`approach_drift.md`](approach_drift.md) (`python -m benchmarks.contact_approach_drift`)."]
     return "\n".join(lines) + "\n"
 
 
