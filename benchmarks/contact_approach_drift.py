@@ -37,6 +37,7 @@ import numpy as np
 
 from benchmarks.contact_burgoyne import caltech_arguments, run_calibration, stored_report
 from benchmarks.contact_processing import best_alignment
+from benchmarks.contact_rate_terms import _span
 from fitting.contact_calibration import shifted_approach
 from hertzchain import atomic
 
@@ -64,11 +65,6 @@ def processing_drift(first, second):
     line = np.polyfit(time, difference, 1)
     rms = float(np.sqrt(np.mean((difference - np.polyval(line, time)) ** 2)))
     return float(line[0]), rms, float(time[-1]), float(deviation), int(lag)
-
-
-def _span(values, digits=1):
-    values = [v for v in values if v is not None]
-    return f"{min(values):.{digits}f} … {max(values):.{digits}f}" if values else "-"
 
 
 def main(argv=None) -> int:

@@ -74,7 +74,7 @@ def stored_report(out, label, script):
     `script` that writes it) where it is missing."""
     path = out / label / "contact.json"
     if not path.is_file():
-        print(f"{path} missing: run benchmarks/{script} first", file=sys.stderr)
+        print(f"{path} missing: run python -m benchmarks.{Path(script).stem} first", file=sys.stderr)
         return None
     return json.loads(path.read_text())
 
