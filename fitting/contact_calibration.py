@@ -74,6 +74,9 @@ GEOMETRIES = ("sphere-sphere", "sphere-flat")
 OFFSETS = ("first-sample", "none")
 # Window of the moving mean that gives a measured peak force (the data's ringing), s.
 PEAK_WINDOW_S = 1e-6
+# Largest deviation of a sampling interval from the median, as a fraction of it, that the terms
+# read on a uniform grid (damping, time shift, approach drift) accept.
+UNIFORM_SAMPLING = 0.01
 # Unloading secant stiffness between these fractions of the peak force.
 SECANT_FRACTIONS = (0.9, 0.5)
 # Default bound of the fitted time alignment of the force and approach records, s: ten times
@@ -191,6 +194,11 @@ def read_curve(path, material: Material) -> ContactCurve:
             raise ValueError(f"{path}: the {label} column holds non-finite values.")
     if approach.size < 10:
         raise ValueError(f"{path}: {approach.size} samples; a curve needs at least 10.")
+    if time is not None and not np.all(np.diff(time) > 0):
+        first = int(np.argmax(np.diff(time) <= 0))
+        raise ValueError(f"{path}: the time column must increase from sample to sample; sample {first + 1} is at "
+                         f"{time[first + 1]:.9g} s after {time[first]:.9g} s (sort the rows, drop repeated samples, "
+                         "or leave the time column out).")
     return ContactCurve(path.stem, time, approach, force, material)
 
 
@@ -256,7 +264,12 @@ def approach_rate_m_s(curve: ContactCurve, approach_m) -> np.ndarray:
     """Approach speed, m/s: the gradient of the approach averaged over `PEAK_WINDOW_S`."""
     if curve.time_s is None:
         raise ValueError(f"{curve.name}: the file has no time column; contact damping, a time shift and an approach drift need one.")
-    step = float(np.median(np.diff(curve.time_s)))
+    steps = np.diff(curve.time_s)
+    step = float(np.median(steps))
+    if np.max(np.abs(steps - step)) > UNIFORM_SAMPLING * step:
+        raise ValueError(f"{curve.name}: the time column is not uniformly sampled (intervals {np.min(steps):.4g} to "
+                         f"{np.max(steps):.4g} s); contact damping, a time shift and an approach drift read the "
+                         "record on a uniform grid: resample it, or leave those options out.")
     width = max(1, int(round(PEAK_WINDOW_S / step)))
     padded = np.pad(np.asarray(approach_m, float), width // 2, mode="edge")
     smooth = np.convolve(padded, np.ones(width) / width, mode="valid")[: np.size(approach_m)]

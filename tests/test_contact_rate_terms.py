@@ -117,6 +117,25 @@ def test_bad_max_shift_names_the_flag(tmp_path, capsys):
     assert not (tmp_path / "out" / "contact.json").exists()
 
 
+def test_time_columns_that_do_not_increase_or_are_not_uniform_are_refused(tmp_path, capsys):
+    _write(tmp_path / "curve.csv", 700e6)
+    rows = (tmp_path / "curve.csv").read_text().splitlines()
+    # two rows swapped: the time goes back
+    (tmp_path / "swapped.csv").write_text("\n".join(rows[:5] + [rows[6], rows[5]] + rows[7:]) + "\n")
+    rc = main(["contact", str(tmp_path / "swapped.csv"), "--material", "steel_440C", "--radius", "2mm",
+               "--out", str(tmp_path / "out")])
+    assert rc == 2 and "the time column must increase" in capsys.readouterr().err
+    # every other sample left out of the first half: the terms read on a uniform grid refuse
+    # it, naming what to do (the law alone needs no grid)
+    kept = [rows[0]] + [row for k, row in enumerate(rows[1:]) if k > 400 or k % 2 == 0]
+    (tmp_path / "uneven.csv").write_text("\n".join(kept) + "\n")
+    rc = main(["contact", str(tmp_path / "uneven.csv"), "--material", "steel_440C", "--radius", "2mm",
+               "--approach-drift", "--out", str(tmp_path / "out")])
+    said = capsys.readouterr().err
+    assert rc == 2 and "not uniformly sampled" in said and "resample it" in said
+    assert not (tmp_path / "out" / "contact.json").exists()
+
+
 def test_time_shifted_reads_between_samples_and_beyond_the_ends():
     values = np.array([1.0, 2.0, 4.0, 8.0])
     np.testing.assert_allclose(np.asarray(time_shifted(values, 0.5, 0.25)), [1.5, 3.0, 6.0, 10.0])
