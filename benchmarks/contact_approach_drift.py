@@ -35,7 +35,7 @@ import sys
 
 import numpy as np
 
-from benchmarks.contact_burgoyne import caltech_arguments, run_calibration, stored_report
+from benchmarks.contact_burgoyne import caltech_and_base, run_calibration
 from benchmarks.contact_processing import best_alignment
 from benchmarks.contact_rate_terms import _span
 from fitting.contact_calibration import shifted_approach
@@ -68,12 +68,10 @@ def processing_drift(first, second):
 
 
 def main(argv=None) -> int:
-    args, _, out, curves = caltech_arguments(argv, __doc__.splitlines()[0])
-    if curves is None:
+    started = caltech_and_base(argv, __doc__.splitlines()[0], "damping", "contact_rate_terms.py")
+    if started is None:
         return 1
-    base = stored_report(out, "damping", "contact_rate_terms.py")
-    if base is None:
-        return 1
+    args, out, curves, base = started
     runs = {"damping": base}
     for label, options in RUNS.items():
         print(f"{label} ...", file=sys.stderr, flush=True)

@@ -95,6 +95,17 @@ def caltech_arguments(argv, description):
                                  for m, names in CALTECH.items() for name in names]
 
 
+def caltech_and_base(argv, description, label, script):
+    """(arguments, output folder, the 15 Caltech curves, the stored run `label`) of a benchmark
+    that starts from another one's run (`script` writes it); None where the data or that run
+    are missing (said on stderr)."""
+    args, _, out, curves = caltech_arguments(argv, description)
+    if curves is None:
+        return None
+    base = stored_report(out, label, script)
+    return None if base is None else (args, out, curves, base)
+
+
 def main(argv=None) -> int:
     args, data_dir, out, caltech = caltech_arguments(argv, __doc__.splitlines()[0])
     if caltech is None:

@@ -58,7 +58,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.optimize import isotonic_regression
 
-from benchmarks.contact_burgoyne import GEOMETRY, caltech_arguments, run_calibration, stored_report
+from benchmarks.contact_burgoyne import GEOMETRY, caltech_and_base, run_calibration
 from fitting.contact_calibration import (ContactCurve, _kappa, _smoothed, approach_rate_m_s, model_force,
                                          shifted_approach)
 from hertzchain import atomic, contact
@@ -214,12 +214,10 @@ def _figures(curves, rows, out):
 
 
 def main(argv=None) -> int:
-    args, _, out, curves = caltech_arguments(argv, __doc__.splitlines()[0])
-    if curves is None:
+    started = caltech_and_base(argv, __doc__.splitlines()[0], "damping", "contact_rate_terms.py")
+    if started is None:
         return 1
-    damping = stored_report(out, "damping", "contact_rate_terms.py")
-    if damping is None:
-        return 1
+    args, out, curves, damping = started
     rows = []
     for curve, entry in zip(curves, damping["curves"]):
         material = damping["materials"][curve.material.name]

@@ -38,7 +38,7 @@ import time
 
 import numpy as np
 
-from benchmarks.contact_burgoyne import GEOMETRY, caltech_arguments, stored_report
+from benchmarks.contact_burgoyne import GEOMETRY, caltech_and_base
 from fitting.contact_calibration import _kappa, _smoothed, calibrate, shifted_approach, write_outputs
 from hertzchain import atomic
 
@@ -71,12 +71,10 @@ def _span(values, digits=1):
 
 
 def main(argv=None) -> int:
-    args, _, out, curves = caltech_arguments(argv, __doc__.splitlines()[0])
-    if curves is None:
+    started = caltech_and_base(argv, __doc__.splitlines()[0], "published", "contact_burgoyne.py")
+    if started is None:
         return 1
-    base = stored_report(out, "published", "contact_burgoyne.py")
-    if base is None:
-        return 1
+    args, out, curves, base = started
     runs = {"law_alone": base}
     elapsed = {}
     for label, options in RUNS.items():
