@@ -306,10 +306,17 @@ def model_force(approach_m, rate_m_s, time_step_s, kappa, geometry: ContactGeome
 def thornton_force(approach_m, material: Material, geometry: ContactGeometry, yield_stress_pa):
     """The earlier law, `thornton_contact` with `yield_force`, along an approach history, N."""
     theta = contact.theta(material.youngs_pa, material.poisson)
-    other_theta = theta
-    yield_force = contact.yield_force(yield_stress_pa, geometry.radius_m, theta, geometry.other_radius_m, other_theta)
-    peak = jax.lax.cummax(jnp.asarray(approach_m))
-    return contact.thornton_contact(jnp.asarray(approach_m), peak, _kappa(material, geometry), yield_force)[0]
+    yield_force = contact.yield_force(yield_stress_pa, geometry.radius_m, theta, geometry.other_radius_m, theta)
+    return _compiled_thornton_along(jnp.asarray(approach_m), _kappa(material, geometry), yield_force)
+
+
+# The law along a record as one compiled program per record length: run op by op, every
+# primitive is compiled for every record's length, which took most of a calibration's time.
+_compiled_model_force = jax.jit(model_force, static_argnames=("geometry",))
+_compiled_thornton_along = jax.jit(lambda approach_m, kappa, yield_force_n: contact.thornton_contact(
+    approach_m, jax.lax.cummax(approach_m), kappa, yield_force_n)[0])
+_compiled_aligned_approach = jax.jit(lambda approach_m, rate_m_s, time_step_s, drift_m_s, shift_s: time_shifted(
+    drift_corrected(approach_m, rate_m_s, time_step_s, drift_m_s)[0], time_step_s, shift_s))
 
 
 def unloading_secant_n_m(approach_m, force_n) -> float | None:
@@ -452,7 +459,7 @@ def _curve_report(curve, piece, kappa, geometry, given, fitted, own_stress_pa=No
 
     def force(stress_pa, rate_constant, eta_s=0.0, shift=0.0, hardness_ratio=contact.JG_HARDNESS_RATIO, drift=0.0):
         stress = contact.rate_hardened_yield_stress(stress_pa, rate_constant, rate)
-        return np.asarray(model_force(jnp.asarray(approach), jnp.asarray(speed), step, kappa, geometry, stress,
+        return np.asarray(_compiled_model_force(jnp.asarray(approach), jnp.asarray(speed), step, kappa, geometry, stress,
                                       curve.material.poisson, eta_s, shift, hardness_ratio, drift))
 
     model = force(given["yield_stress_pa"], given["rate_constant"])
@@ -462,7 +469,7 @@ def _curve_report(curve, piece, kappa, geometry, given, fitted, own_stress_pa=No
     # the measured force against the approach it is aligned with (without the fitted drift, at the
     # fitted shift; neither: as stored)
     aligned = approach if not (shift_s or drift_m_s) else np.asarray(
-        time_shifted(drift_corrected(approach, speed, step, drift_m_s)[0], step, shift_s))
+        _compiled_aligned_approach(jnp.asarray(approach), jnp.asarray(speed), step, drift_m_s, shift_s))
     data_secant = unloading_secant_n_m(aligned, smooth)
     secants = {"model": unloading_secant_n_m(approach, model), "fitted": unloading_secant_n_m(aligned, fit)}
     i_peak = int(np.argmax(smooth))
