@@ -332,37 +332,79 @@ def unloading_secant_n_m(approach_m, force_n) -> float | None:
     return float((force_n[i] - force_n[j]) / change) if change > 0 else None
 
 
+def _padded_length(n: int) -> int:
+    """The record length a curve of `n` samples is padded to in a fit: the next power of two,
+    so that fits of curves of about one length share their compiled programs."""
+    return 1 << (n - 1).bit_length()
+
+
+def _padded(values, length):
+    """A record continued to `length` samples along its last segment (what `time_shifted` reads
+    beyond the end)."""
+    values = np.asarray(values, dtype=float)
+    extra = np.arange(1, length - values.size + 1)
+    return np.concatenate([values, values[-1] + extra * (values[-1] - values[-2])])
+
+
+def _whitened_residuals(x, data, kappa, poisson, max_shift_s, geometry):
+    """The whitened residuals of `data` (per curve: padded approach m, speed m/s, force N, the
+    whitening factor of each sample (0 on the padding), time step s, strain rate 1/s) in `x`
+    (`_Residuals`), padded."""
+    first, n = len(PARAMETERS), len(data)
+    out = []
+    for k, (approach, speed, force, factor, step, rate) in enumerate(data):
+        stress = contact.rate_hardened_yield_stress(jnp.exp(x[0]), x[1], rate)
+        shift = bounded_shift_s(x[first + k], max_shift_s)
+        model = model_force(approach, speed, step, kappa, geometry, stress, poisson, x[2], shift, jnp.exp(x[3]),
+                            x[first + n + k])
+        out.append((model - force) * factor)
+    return jnp.concatenate(out)
+
+
+_compiled_residuals = jax.jit(_whitened_residuals, static_argnames=("geometry",))
+_compiled_jacobian = jax.jit(jax.jacfwd(_whitened_residuals), static_argnames=("geometry",))
+
+
 class _Residuals:
     """The whitened residuals of one material's curves in x = (ln sigma_Y, C, eta_s, ln h, shift_1 ..
     shift_n, drift_1 .. drift_n), for `fitting.fit.least_squares`; the shifts enter through
-    `bounded_shift_s`, the approach drifts (m/s) as they are."""
+    `bounded_shift_s`, the approach drifts (m/s) as they are.
+
+    The curves are padded to `_padded_length` and their data passed to one compiled program per
+    set of padded lengths and geometry (every per-curve fit of a calibration shares one); the
+    padding's residuals are 0 and left out of what this returns."""
 
     def __init__(self, pieces, kappa, geometry, poisson, max_shift_s):
-        self.pieces = [(jnp.asarray(a), jnp.asarray(v), dt, jnp.asarray(f), p, r) for a, v, dt, f, p, r in pieces]
-        first = len(PARAMETERS)
-        n = len(self.pieces)
+        data, keep = [], []
+        for approach, speed, step, force, peak, rate in pieces:
+            n = np.size(force)
+            length = _padded_length(n)
+            factor = np.where(np.arange(length) < n, 1.0 / (peak * math.sqrt(n)), 0.0)
+            data.append((jnp.asarray(_padded(approach, length)), jnp.asarray(_padded(speed, length)),
+                         jnp.asarray(np.pad(np.asarray(force, float), (0, length - n))), jnp.asarray(factor),
+                         jnp.asarray(float(step)), jnp.asarray(float(rate))))
+            keep.append(np.arange(length) < n)
+        self._data, self._keep = tuple(data), np.concatenate(keep)
+        self._arguments = (jnp.asarray(float(kappa)), jnp.asarray(float(poisson)), jnp.asarray(float(max_shift_s)))
+        self._geometry = geometry
+        self._size = len(PARAMETERS) + 2 * len(data)
 
-        def residuals(x):
-            if x.shape != (first + 2 * n,):
-                raise ValueError(f"x must hold {first} constants, {n} shifts and {n} drifts, got shape {x.shape}.")
-            out = []
-            for k, (approach, speed, step, force, peak, rate) in enumerate(self.pieces):
-                stress = contact.rate_hardened_yield_stress(jnp.exp(x[0]), x[1], rate)
-                shift = bounded_shift_s(x[first + k], max_shift_s)
-                model = model_force(approach, speed, step, kappa, geometry, stress, poisson, x[2], shift,
-                                    jnp.exp(x[3]), x[first + n + k])
-                out.append((model - force) / (peak * math.sqrt(force.size)))
-            return jnp.concatenate(out)
-
-        self._residuals = jax.jit(residuals)
-        self._jacobian = jax.jit(jax.jacfwd(residuals))
+    def _x(self, x):
+        x = jnp.asarray(x, dtype=float)
+        if x.shape != (self._size,):
+            n = len(self._data)
+            raise ValueError(f"x must hold {len(PARAMETERS)} constants, {n} shifts and {n} drifts, got shape {x.shape}.")
+        return x
 
     def residuals(self, x):
-        return np.asarray(self._residuals(jnp.asarray(x, dtype=float)))
+        r = _compiled_residuals(self._x(x), self._data, *self._arguments, geometry=self._geometry)
+        return np.asarray(r)[self._keep]
 
     def linearize(self, x, columns):
-        x = jnp.asarray(x, dtype=float)
-        return np.asarray(self._residuals(x)), np.asarray(self._jacobian(x))[:, list(columns)]
+        x = self._x(x)
+        r = _compiled_residuals(x, self._data, *self._arguments, geometry=self._geometry)
+        jac = _compiled_jacobian(x, self._data, *self._arguments, geometry=self._geometry)
+        return np.asarray(r)[self._keep], np.asarray(jac)[self._keep][:, list(columns)]
 
 
 def _fit_material(pieces, material, kappa, geometry, options):
