@@ -324,12 +324,16 @@ def _keep_freed_buffers() -> bool:
         return False
 
 
+# `unavailable_reason()` where `HERTZCHAIN_NATIVE=0` switched the kernel off
+SWITCHED_OFF = "switched off (HERTZCHAIN_NATIVE=0)"
+
+
 @functools.cache
 def _load() -> str | None:
     """Build (if needed), load and register the kernel (and tune malloc for its results,
     `_keep_freed_buffers`): None on success, else why not."""
     if os.environ.get("HERTZCHAIN_NATIVE", "1") == "0":
-        return "switched off (HERTZCHAIN_NATIVE=0)"
+        return SWITCHED_OFF
     _keep_freed_buffers()
     try:
         _load_library((), "the fused chain kernel",
@@ -527,7 +531,7 @@ def thread_unavailable_reason(backend: str) -> str | None:
     """Why the one-thread-per-chain kernel cannot be built for `backend` ("cuda" or
     "emulated"), or None when it can."""
     if os.environ.get("HERTZCHAIN_NATIVE", "1") == "0":
-        return "switched off (HERTZCHAIN_NATIVE=0)"
+        return SWITCHED_OFF
     if backend == "cuda":
         return None if _nvcc() else "no CUDA compiler (nvcc) found (set CUDA_HOME, or install the CUDA toolkit)"
     if backend == "emulated":

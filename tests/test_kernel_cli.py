@@ -21,6 +21,19 @@ def test_switched_off_kernel_is_named_with_its_reason():
     assert "HERTZCHAIN_NATIVE=0" in done.stdout and "JAX kernel" in done.stdout
 
 
+def test_a_kernel_that_cannot_be_built_is_announced_once_and_its_reason_given_whole(tmp_path):
+    # an empty library cache and a compiler that fails: the build is tried, and fails
+    compiler = tmp_path / "failing-c++"
+    compiler.write_text("#!/bin/sh\necho 'first line of the failure' >&2\necho 'second line' >&2\nexit 1\n")
+    compiler.chmod(0o755)
+    done = _run(CXX=str(compiler), HERTZCHAIN_CACHE=str(tmp_path / "cache"), HERTZCHAIN_NATIVE="1")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stderr.count("the fused C++ kernel is not available") == 1
+    assert "the JAX kernel runs instead" in done.stderr
+    assert "could not be built, in full" in done.stdout and "second line" in done.stdout
+    assert "runs the JAX kernel instead" not in done.stdout  # said once, on stderr
+
+
 @pytest.mark.skipif(not native.available(), reason=f"no C++ kernel here: {native.unavailable_reason()}")
 def test_ready_kernel_names_its_build():
     done = _run()

@@ -36,9 +36,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"hertzchain kernel: pruned {deleted} superseded files ({freed / 2**20:.1f} MiB) "
               f"from {native.cache_dir()}")
     reason = native.unavailable_reason()
-    if reason is not None:
+    if reason == native.SWITCHED_OFF:
         print(f"hertzchain kernel: the fused C++ kernel cannot be used ({reason}); "
               "every command runs the JAX kernel instead.")
+    elif reason is not None:
+        # the build's failure was announced on stderr with its first line: here is all of it
+        print(f"hertzchain kernel: why the fused C++ kernel could not be built, in full:\n{reason}")
+    if reason is not None:
         return 0  # not an error: everything runs, on the JAX kernel
     if not args.quiet:
         print(f"hertzchain kernel: ready ({native.library_path()}; {time.perf_counter() - began:.1f} s)")

@@ -42,7 +42,7 @@ QUANTITIES = ("velocity", "displacement")
 def _load() -> str | None:
     """Build (if needed), load and register the kernel: None on success, else why not."""
     if os.environ.get("HERTZCHAIN_NATIVE", "1") == "0":
-        return "switched off (HERTZCHAIN_NATIVE=0)"
+        return native.SWITCHED_OFF
     try:
         native._load_library((), "the driven chains' lock-in kernel",
                              ((TARGET, "HertzChainDrivenLockin"), (TANGENT_TARGET, "HertzChainDrivenLockinTangent")),
