@@ -291,14 +291,19 @@ def drift_corrected(approach_m, rate_m_s, time_step_s, drift_m_s):
     return approach_m - drift_m_s * elapsed, rate_m_s - drift_m_s
 
 
+def aligned_record(approach_m, rate_m_s, time_step_s, drift_m_s, shift_s):
+    """(approach m, rate m/s) the law is driven with: the record without its drift `drift_m_s`
+    (m/s), read `shift_s` (s) later."""
+    approach, rate = drift_corrected(approach_m, rate_m_s, time_step_s, drift_m_s)
+    return time_shifted(approach, time_step_s, shift_s), time_shifted(rate, time_step_s, shift_s)
+
+
 def model_force(approach_m, rate_m_s, time_step_s, kappa, geometry: ContactGeometry, yield_stress_pa, poisson,
                 eta_s=0.0, shift_s=0.0, hardness_ratio=contact.JG_HARDNESS_RATIO, drift_m_s=0.0):
     """The law along a measured history with the optional terms, N: the approach (and its rate)
     without a linear drift `drift_m_s` (m/s; 0: none) and read `shift_s` later (s; 0: none), the
     Kuwabara-Kono damping time `eta_s` (s; 0: none), the law's hardness ratio $H/\\sigma_Y$."""
-    approach, rate = drift_corrected(approach_m, rate_m_s, time_step_s, drift_m_s)
-    approach = time_shifted(approach, time_step_s, shift_s)
-    rate = time_shifted(rate, time_step_s, shift_s)
+    approach, rate = aligned_record(approach_m, rate_m_s, time_step_s, drift_m_s, shift_s)
     elastic = law_force(approach, kappa, geometry, yield_stress_pa, poisson, hardness_ratio)
     return contact.contact_force(approach, rate, kappa, eta_s, elastic_n=elastic)[1]
 
@@ -315,8 +320,7 @@ def thornton_force(approach_m, material: Material, geometry: ContactGeometry, yi
 _compiled_model_force = jax.jit(model_force, static_argnames=("geometry",))
 _compiled_thornton_along = jax.jit(lambda approach_m, kappa, yield_force_n: contact.thornton_contact(
     approach_m, jax.lax.cummax(approach_m), kappa, yield_force_n)[0])
-_compiled_aligned_approach = jax.jit(lambda approach_m, rate_m_s, time_step_s, drift_m_s, shift_s: time_shifted(
-    drift_corrected(approach_m, rate_m_s, time_step_s, drift_m_s)[0], time_step_s, shift_s))
+_compiled_aligned_record = jax.jit(aligned_record)
 
 
 def unloading_secant_n_m(approach_m, force_n) -> float | None:
@@ -511,7 +515,7 @@ def _curve_report(curve, piece, kappa, geometry, given, fitted, own_stress_pa=No
     # the measured force against the approach it is aligned with (without the fitted drift, at the
     # fitted shift; neither: as stored)
     aligned = approach if not (shift_s or drift_m_s) else np.asarray(
-        _compiled_aligned_approach(jnp.asarray(approach), jnp.asarray(speed), step, drift_m_s, shift_s))
+        _compiled_aligned_record(jnp.asarray(approach), jnp.asarray(speed), step, drift_m_s, shift_s)[0])
     data_secant = unloading_secant_n_m(aligned, smooth)
     secants = {"model": unloading_secant_n_m(approach, model), "fitted": unloading_secant_n_m(aligned, fit)}
     i_peak = int(np.argmax(smooth))
