@@ -21,6 +21,10 @@ bounded by `--max-shift`), reported per curve with its sigma; `--approach-drift`
 linear drift of each curve's approach record (m/s; the approach of a bar test is the
 difference of two integrated gauge records, which a gain mismatch or a baseline error makes
 drift), reported per curve with its sigma.
+
+Compiled programs are kept in JAX's persistent compilation cache (`fitting.compilation_cache`),
+so that a second calibration of records of the same lengths skips compiling;
+`--no-compile-cache` turns it off.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ import sys
 from hertzchain.materials import Material, material
 from hertzchain.units import parse_quantity
 
+from ..compilation_cache import enable_compilation_cache
 from ..contact_calibration import GEOMETRIES, MAX_TIME_SHIFT_S, OFFSETS, ContactGeometry, calibrate, read_curve, write_outputs
 
 
@@ -63,6 +68,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fit a linear drift (m/s) of each curve's approach record [off]")
     parser.add_argument("--max-shift", default=f"{MAX_TIME_SHIFT_S * 1e6:g}us",
                         help=f"bound of --time-shift (s, or 13us) [{MAX_TIME_SHIFT_S * 1e6:g}us]")
+    parser.add_argument("--no-compile-cache", action="store_true",
+                        help="do not keep compiled programs between runs (default: kept in "
+                        "~/.cache/hertzchain/jax; also off with HERTZCHAIN_NO_COMPILE_CACHE=1)")
     parser.add_argument("--out", default="out/contact", help="output folder [out/contact]")
 
 
@@ -99,6 +107,7 @@ def _materials(args) -> list[Material]:
 
 
 def run(args: argparse.Namespace) -> int:
+    enable_compilation_cache(not args.no_compile_cache)
     geometry = ContactGeometry(args.geometry, _length(args.radius, "radius"),
                                None if args.radius_b is None else _length(args.radius_b, "radius-b"))
     curves = [read_curve(path, m) for path, m in zip(args.files, _materials(args))]
