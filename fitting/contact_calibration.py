@@ -139,6 +139,37 @@ class ContactCurve:
     material: Material
 
 
+def _csv_columns(path: Path) -> dict:
+    """A force-approach CSV file as name -> values; refuses, naming the line and the fix, text
+    that is not UTF-8, a ';'-separated file, rows with more or fewer cells than the header and
+    cells that are not numbers (a byte-order mark is ignored)."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not UTF-8 text; save the CSV file as UTF-8.") from None
+    lines = [(number, line) for number, line in enumerate(text.splitlines(), start=1) if line.strip()]
+    if len(lines) < 2:
+        raise ValueError(f"{path}: no data rows under a header (approach_m, force_n, optional time_s).")
+    (first, header_line), rows = lines[0], lines[1:]
+    if ";" in header_line and "," not in header_line:
+        raise ValueError(f"{path}: line {first}: the columns are separated by ';'; separate them by ',' and write "
+                         "decimals with '.' (approach_m,force_n,time_s).")
+    names = [name.strip() for name in next(csv.reader([header_line]))]
+    columns = {name: [] for name in names}
+    for number, line in rows:
+        cells = next(csv.reader([line]))
+        if len(cells) != len(names):
+            decimal = " (is ',' the decimal point? write decimals with '.')" if len(cells) > len(names) else ""
+            raise ValueError(f"{path}: line {number} has {len(cells)} cells for the {len(names)} columns "
+                             f"{','.join(names)}{decimal}.")
+        for name, cell in zip(names, cells):
+            try:
+                columns[name].append(float(cell))
+            except ValueError:
+                raise ValueError(f"{path}: line {number}, column {name}: {cell.strip()!r} is not a number.") from None
+    return columns
+
+
 def _column(table, names, path, required=True):
     for name in names:
         if name in table:
@@ -163,7 +194,12 @@ def read_curve(path, material: Material) -> ContactCurve:
     if path.suffix.lower() == ".mat":
         import scipy.io
 
-        variables = {k: v for k, v in scipy.io.loadmat(path).items() if not k.startswith("__")}
+        try:
+            content = scipy.io.loadmat(path)
+        except (ValueError, TypeError, NotImplementedError, OSError) as error:
+            raise ValueError(f"{path}: not a MATLAB file scipy.io can read ({error}); give a .mat file (v4-v7, "
+                             "not v7.3) with Fexternal or fdK, or a .csv file.") from None
+        variables = {k: v for k, v in content.items() if not k.startswith("__")}
         if "Fexternal" in variables:
             table = np.asarray(variables["Fexternal"], dtype=float)
             if table.ndim != 2 or table.shape[1] != 3:
@@ -179,11 +215,7 @@ def read_curve(path, material: Material) -> ContactCurve:
                 raise ValueError(f"{path}: {key} must be N x 2 (approach m, force N), got shape {table.shape}.")
             time, (approach, force) = None, table.T
     elif path.suffix.lower() == ".csv":
-        with open(path, newline="") as handle:
-            rows = list(csv.DictReader(handle))
-        if not rows:
-            raise ValueError(f"{path}: no data rows under a header (approach_m, force_n, optional time_s).")
-        table = {name.strip(): [float(row[name]) for row in rows] for name in rows[0]}
+        table = _csv_columns(path)
         approach = _column(table, ("approach_m",), path)
         force = _column(table, ("force_n", "force_measured_n"), path)
         time = _column(table, ("time_s",), path, required=False)

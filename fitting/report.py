@@ -18,7 +18,6 @@
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
 
 import matplotlib
@@ -27,14 +26,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hertzchain.atomic import save_figure, write_csv, write_json  # noqa: E402
+from hertzchain.atomic import file_stem, save_figure, write_csv, write_json  # noqa: E402
 
 # Points per curve of the summary figure (min-max thinned, so peaks stay).
 SUMMARY_POINTS = 1500
-
-
-def _safe(name: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_")
 
 
 def _cell(value) -> str:
@@ -110,13 +105,13 @@ def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False
             data = experiment.data(channel)
             columns += [data, predicted[channel], data - predicted[channel]]
             header += [f"data_{channel}", f"model_{channel}", f"residual_{channel}"]
-        path = out / f"residuals_{_safe(experiment.label)}.csv"
+        path = out / f"residuals_{file_stem(experiment.label)}.csv"
         line = ",".join(["%.9g"] * len(columns))
         write_csv(path, header, ((line % tuple(row)).split(",") for row in np.column_stack(columns).tolist()))
         written.append(path)
     for label, profile in result.profiles.items():
         table(
-            f"profile_{_safe(label)}.csv",
+            f"profile_{file_stem(label)}.csv",
             [f"{label}", "delta_chi2", "converged"],
             zip(profile["values"], profile["delta_chi2"], profile["converged"]),
         )
@@ -216,7 +211,7 @@ def _plots(result, predictions, out: Path, per_trace: bool) -> list[Path]:
             axes[-1, 0].set_xlabel("time after impact (us)")
             figure.suptitle(f"{experiment.label}: {'fit' if kind == 'overlay' else 'residuals'}")
             figure.tight_layout()
-            path = out / f"{kind}_{_safe(experiment.label)}.png"
+            path = out / f"{kind}_{file_stem(experiment.label)}.png"
             save_figure(figure, path, dpi=110)
             plt.close(figure)
             written.append(path)
@@ -234,7 +229,7 @@ def _plots(result, predictions, out: Path, per_trace: bool) -> list[Path]:
         ax.set_ylabel("delta chi^2 / s^2 (1)")
         ax.set_title(f"profile likelihood of {label}")
         figure.tight_layout()
-        path = out / f"profile_{_safe(label)}.png"
+        path = out / f"profile_{file_stem(label)}.png"
         save_figure(figure, path, dpi=110)
         plt.close(figure)
         written.append(path)

@@ -79,6 +79,7 @@ from pathlib import Path
 import numpy as np
 
 from . import conditioning
+from .atomic import file_stem
 from .scopefiles import FORMATS, ScopeFileError, merge_waveforms, read_waveforms
 from .tracefile import FORMAT, HEADER_KEYS, TraceFile, TraceFileError, format_rows, write_trace
 from .units import parse_quantity
@@ -282,9 +283,15 @@ def load_experiment(path) -> ExperimentDescription:
     path = Path(path)
     where = str(path)
     try:
-        document = tomllib.loads(path.read_text())
+        document = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as error:
         _fail(where, f"not valid TOML ({error}).")
+    except UnicodeDecodeError:
+        _fail(where, "not UTF-8 text; an experiment file is TOML, saved as UTF-8.")
+    if "kind" in document:
+        _fail(where, f"kind = {document['kind']!r}: an experiment of shots (scope files) has no kind key; a driven "
+                     "experiment (kind = \"driven\", lock-in sweeps) is read by `hertzchain fit` and `hertzchain "
+                     "diagnose` with --data-dir.")
     _check_keys(document, _TOP_KEYS, where)
     for key in ("chain", "channel", "shot"):
         if key not in document:
@@ -336,9 +343,12 @@ def load_experiment(path) -> ExperimentDescription:
         if missing:
             _fail(at, f"no such file: {', '.join(missing)} (paths are relative to the experiment file).")
         label = str(table.get("label", Path(files[0]).stem))
-        if label in labels:
+        if re.search(r"[/\\]", label) or label.strip().startswith("."):
+            _fail(at, f"label = {label!r} names a path; a label is a plain name (its trace file is "
+                      f"written as <label>.csv in the output folder): write e.g. label = {file_stem(label)!r}.")
+        if file_stem(label) in labels:
             label = f"{label}_{k + 1}"
-        labels.add(label)
+        labels.add(file_stem(label))
         overrides = _chain_values({key: table[key] for key in table if key in CHAIN_KEYS}, at)
         velocity = table.get("striker_velocity_m_s")
         nominal = table.get("nominal_velocity_m_s")
@@ -359,10 +369,17 @@ def load_experiment(path) -> ExperimentDescription:
 
 def _read_shot(description: ExperimentDescription, shot: Shot, where: str):
     parts = []
+    folder = description.path.parent.resolve()
     for file in shot.files:
         try:
             parts.append(read_waveforms(file, description.format))
         except ScopeFileError as error:
+            if not file.resolve().is_relative_to(folder):
+                # the reader's message quotes the file's lines: not of a file outside the experiment's folder
+                raise ExperimentFileError(
+                    f"{where}: {file} is not a scope file of format {description.format!r}; it lies outside the "
+                    f"experiment's folder {folder}, so its content is not shown: check files = [...] of the shot."
+                ) from None
             raise ExperimentFileError(f"{where}: {error}") from error
     try:
         return merge_waveforms(parts, where)
@@ -527,7 +544,7 @@ def write_imported(path, out_dir) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     written = []
     for trace in traces:
-        target = out / f"{trace.header['x_shot']}.csv"
+        target = out / f"{file_stem(trace.header['x_shot'])}.csv"
         write_trace(target, trace)
         written.append(target)
     return written

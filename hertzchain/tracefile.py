@@ -380,9 +380,10 @@ def _parse_value(key: str, text: str, where: str):
     try:
         number = float(text)
     except ValueError:
-        _fail(where, f"header {key} = {text!r} is not a number.")
+        decimal = " (write decimals with '.')" if re.fullmatch(r"\s*[-+]?\d+,\d+\s*", text) else ""
+        _fail(where, f"header {key} = {text!r} is not a number{decimal}.")
     if spec.kind is int:
-        if number != int(number):
+        if not math.isfinite(number) or number != int(number):
             _fail(where, f"header {key} must be an integer, got {text!r}.")
         return int(number)
     return number
@@ -391,8 +392,14 @@ def _parse_value(key: str, text: str, where: str):
 def read_trace(path) -> TraceFile:
     """Read and validate a trace file; raises `TraceFileError` saying exactly what is wrong."""
     where = str(path)
-    text = Path(path).read_text()
-    header, table_lines = {}, []
+    raw = Path(path).read_bytes()
+    try:
+        text = raw.decode("utf-8-sig")  # a byte-order mark, as some editors write, is no part of the text
+    except UnicodeDecodeError as error:
+        line = raw[:error.start].count(b"\n") + 1
+        _fail(where, f"line {line}: not UTF-8 text (byte {raw[error.start:error.start + 1]!r}); a trace file is "
+                     "plain text: save it as UTF-8.")
+    header, table_lines, line_numbers = {}, [], []
     for number, line in enumerate(text.splitlines(), start=1):
         if line.startswith("#"):
             match = _HEADER_LINE.match(line)
@@ -404,15 +411,25 @@ def read_trace(path) -> TraceFile:
             continue
         if line.strip():
             table_lines.append(line)
+            line_numbers.append(number)
     if "format" not in header:
         _fail(where, f"not a trace file: no '# format = {FORMAT}' header line.")
     if not table_lines:
         _fail(where, "no table: expected a 'time_s,...' column line and data rows.")
+    if ";" in table_lines[0] and "," not in table_lines[0]:
+        _fail(where, f"line {line_numbers[0]}: the columns are separated by ';'; a trace file separates them "
+                     "by ',' and writes decimals with '.' (time_s,contact_5,...).")
     columns = [name.strip() for name in table_lines[0].split(",")]
     if columns[0] != "time_s":
         _fail(where, f"the first column must be time_s, got {columns[0]!r}.")
     if len(set(columns)) != len(columns):
         _fail(where, f"a column name appears twice: {columns}.")
+    for number, line in zip(line_numbers[1:], table_lines[1:]):
+        cells = line.count(",") + 1
+        if cells != len(columns):
+            decimal = " (is ',' the decimal point? write decimals with '.')" if cells > len(columns) else ""
+            _fail(where, f"line {number} has {cells} values for the {len(columns)} columns "
+                         f"{','.join(columns)}{decimal}; every row holds one value per column.")
     try:
         data = np.genfromtxt(io.StringIO("\n".join(table_lines[1:])), delimiter=",", dtype=float, ndmin=2)
     except ValueError as error:

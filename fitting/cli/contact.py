@@ -8,7 +8,8 @@ Each file is read as it is (`.mat` with `Fexternal` [s, m, N] or `fdK` [m, N]; C
 `approach_m`, `force_n`, optionally `time_s`). `--material` is given once (all files) or
 once per file, a materials-table name; `--youngs`, `--poisson`, `--yield-stress`,
 `--rate-constant` replace its constants (or stand for it). Writes `contact.json`, one
-`<stem>.csv` per file, `contact.png` and `residuals.png` into `--out`.
+`<stem>.csv` per file, `contact.png` and `residuals.png` into `--out`, written as a whole (the
+previous run's folder is replaced; `hertzchain.atomic.output_folder`).
 
 By default the law is rate-independent apart from its dynamic yield stress, with the
 hardness of its fully plastic branch at 2.84 sigma_Y; `--fit-rate-constant` and
@@ -31,8 +32,10 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 
+from hertzchain.atomic import output_folder
 from hertzchain.materials import Material, material
 from hertzchain.units import parse_quantity
 
@@ -74,11 +77,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="out/contact", help="output folder [out/contact]")
 
 
+# A sphere's radius above this many metres is taken as a value written without its unit.
+MAX_RADIUS_M = 1.0
+
+
 def _length(text, name):
+    """A sphere's radius, m: positive, and below `MAX_RADIUS_M` (a bare number is in m)."""
     try:
-        return parse_quantity(text, "m")
+        value = parse_quantity(text, "m")
     except ValueError as error:
         raise ValueError(f"--{name}: {error}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"--{name} {text}: a radius must be positive, e.g. --{name} 3.175mm.")
+    if value >= MAX_RADIUS_M:
+        raise ValueError(f"--{name} {text}: {value:g} m is not a sphere's radius (a bare number is in m); "
+                         f"did you mean {text.strip()}mm?")
+    return value
 
 
 def _materials(args) -> list[Material]:
@@ -118,13 +132,14 @@ def run(args: argparse.Namespace) -> int:
         max_shift_s = parse_quantity(args.max_shift, "s")
     except ValueError as error:
         raise ValueError(f"--max-shift: {error}") from None
-    report = calibrate(curves, geometry, offset=args.offset, fit_rate_constant=args.fit_rate_constant,
-                       fit_damping=args.damping, fit_time_shift=args.time_shift,
-                       fit_hardness_ratio=args.fit_hardness_ratio, fit_approach_drift=args.approach_drift,
-                       max_shift_s=max_shift_s,
-                       strain_rate_s_given=args.strain_rate,
-                       progress=lambda text: print(text, file=sys.stderr, flush=True))
-    data = write_outputs(report, curves, args.out)
+    with output_folder(args.out, "contact") as out:
+        report = calibrate(curves, geometry, offset=args.offset, fit_rate_constant=args.fit_rate_constant,
+                           fit_damping=args.damping, fit_time_shift=args.time_shift,
+                           fit_hardness_ratio=args.fit_hardness_ratio, fit_approach_drift=args.approach_drift,
+                           max_shift_s=max_shift_s,
+                           strain_rate_s_given=args.strain_rate,
+                           progress=lambda text: print(text, file=sys.stderr, flush=True))
+        data = write_outputs(report, curves, out)
     for name, entry in data["materials"].items():
         fitted, given, errors = entry["fitted"], entry["given"], entry["stderr"]
         print(f"{name}: sigma_Y fitted {fitted['yield_stress_pa'] / 1e6:.0f} +- {errors['yield_stress_pa'] / 1e6:.0f} MPa "
