@@ -280,11 +280,16 @@ def load_driven_experiment(path, data_dir) -> DrivenExperiment:
     if "amplitude_file" not in sweep:
         _fail(where, "missing key 'amplitude_file' (the sweeper's 'Signal Amplitude_0' text file, "
                      "relative to --data-dir).")
+    amplitude_file = data_dir / str(sweep["amplitude_file"])
     try:
-        table = read_sweeper_table(data_dir / str(sweep["amplitude_file"]))
+        table = read_sweeper_table(amplitude_file)
         _refuse_other_kinds(table, where)
         measured = lockin_sweep(table, drive_m_per_v=drive_m_per_v, sensor_m_s_per_v=sensor_m_s_per_v)
     except SweeperFileError as error:
+        if amplitude_file.is_file() and not amplitude_file.resolve().is_relative_to(data_dir.resolve()):
+            # the reader's message may quote the file's lines: not of a file outside the folder named
+            _fail(where, f"amplitude_file {amplitude_file} is not a sweeper text file; it lies outside --data-dir "
+                         f"{data_dir}, so its content is not shown: check the path.")
         _fail(where, str(error))
     mask = np.ones(measured.frequencies_hz.size, bool)
     for band in sweep.get("exclude_hz", []):

@@ -68,13 +68,13 @@ def _remove_orphans(target: Path) -> None:
 
 
 @contextlib.contextmanager
-def output_folder(path: str | os.PathLike, command: str):
+def output_folder(path: str | os.PathLike, command: str, result_file: str):
     """Yield a new, empty temporary folder beside `path` to write a command's outputs into; on
     success it replaces `path` as a whole, so that the folder never holds files of two runs.
 
     Checked before the work starts: `path` is a folder (or absent) and, when it exists, empty
-    or an earlier output folder of hertzchain (it holds `FOLDER_MARKER`, written here), so that
-    a folder holding the user's own files is never replaced. On an error the temporary is
+    or an earlier output folder of hertzchain (it holds `FOLDER_MARKER`, written here, or the
+    command's `result_file`), so that a folder holding the user's own files is never replaced. On an error the temporary is
     removed and `path` stays as it was; temporaries of killed runs are removed on the next run
     into the same `path`.
 
@@ -82,6 +82,8 @@ def output_folder(path: str | os.PathLike, command: str):
 
     - `path`: the output folder (`--out`).
     - `command`: the command's name, written into the marker.
+    - `result_file`: the file every run of the command writes (`"fit.json"`): a folder that
+      holds it is an earlier output, written before folders carried the marker.
 
     **Raises:** `FileExistsError` (a file at `path`, or a folder with other files), `OSError`
     when the parent folder cannot be written.
@@ -90,7 +92,8 @@ def output_folder(path: str | os.PathLike, command: str):
     for place in (target, *target.parents):
         if place.exists() and not place.is_dir():
             raise FileExistsError(f"{target}: {place} is a file, not a folder; give an output folder (--out DIR).")
-    if target.is_dir() and any(target.iterdir()) and not (target / FOLDER_MARKER).is_file():
+    earlier = (target / FOLDER_MARKER).is_file() or (target / result_file).is_file()
+    if target.is_dir() and any(target.iterdir()) and not earlier:
         raise FileExistsError(
             f"{target}: the folder holds files that hertzchain did not write; give a new or empty "
             "output folder (--out DIR), since an output folder is replaced whole by the next run.")

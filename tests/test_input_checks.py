@@ -16,6 +16,7 @@ from fitting.driven_experiment import DrivenExperimentError, is_driven_experimen
 from fitting.priors import PriorError, parse_prior
 from hertzchain.atomic import FOLDER_MARKER, file_stem, output_folder
 from hertzchain.cli import main
+from hertzchain.cli.errors import input_error_text
 from hertzchain.importer import ExperimentFileError, load_experiment
 from hertzchain.tracefile import TraceFile, TraceFileError, read_trace, setup_header, write_trace
 
@@ -234,8 +235,6 @@ def test_an_output_path_that_is_a_file_is_refused_before_the_work(trace, tmp_pat
 
 
 def test_file_system_errors_are_one_line(tmp_path, capsys):
-    from hertzchain.cli import input_error_text
-
     full = OSError(28, "No space left on device")
     full.filename = str(tmp_path / "out" / "fit.json")
     assert input_error_text(full) == f"{full.filename}: No space left on device; the disk is full: free space or " \
@@ -298,16 +297,16 @@ def test_contact_radius_without_unit_is_refused_before_anything_is_written(tmp_p
 # --- output folders are written as a whole ---------------------------------------------------------
 def test_output_folder_is_replaced_whole(tmp_path):
     out = tmp_path / "out"
-    with output_folder(out, "test") as folder:
+    with output_folder(out, "test", "fit.json") as folder:
         (folder / "residuals_shot1.csv").write_text("first run")
         (folder / "plot.png").write_text("first run")
     assert sorted(p.name for p in out.iterdir()) == [FOLDER_MARKER, "plot.png", "residuals_shot1.csv"]
-    with output_folder(out, "test") as folder:
+    with output_folder(out, "test", "fit.json") as folder:
         assert sorted(p.name for p in folder.iterdir()) == [FOLDER_MARKER]
         (folder / "plot.png").write_text("second run")
     assert sorted(p.name for p in out.iterdir()) == [FOLDER_MARKER, "plot.png"]  # no stale residuals
     assert (out / "plot.png").read_text() == "second run"
-    with pytest.raises(RuntimeError), output_folder(out, "test") as folder:  # a failed run changes nothing
+    with pytest.raises(RuntimeError), output_folder(out, "test", "fit.json") as folder:  # a failed run changes nothing
         (folder / "plot.png").write_text("failed run")
         raise RuntimeError
     assert (out / "plot.png").read_text() == "second run"
@@ -327,7 +326,7 @@ def test_temporaries_of_killed_runs_are_removed_on_the_next_run(tmp_path):
     (orphan / "fit.json").write_text("{}")
     alive = tmp_path / f".out.new-{os.getpid()}-xyz"  # a run still going: left alone
     alive.mkdir()
-    with output_folder(tmp_path / "out", "test"):
+    with output_folder(tmp_path / "out", "test", "fit.json"):
         pass
     assert sorted(p.name for p in tmp_path.iterdir()) == [alive.name, "out"]
 
@@ -353,3 +352,13 @@ def test_load_experiment_refuses_a_file_that_is_not_utf8(tmp_path):
     path.write_bytes("[chain]\n# caf\u00e9\n".encode("latin-1"))
     with pytest.raises(ExperimentFileError, match="e.toml: not UTF-8 text"):
         load_experiment(path)
+
+
+def test_content_of_a_sweep_file_outside_the_data_dir_is_not_shown(tmp_path):
+    (tmp_path / "data").mkdir()
+    (tmp_path / "private.txt").write_text("hunter2\t1\n")
+    toml = tmp_path / "e.toml"
+    toml.write_text(DRIVEN.replace("FILE", "../private.txt"))
+    with pytest.raises(DrivenExperimentError, match="outside --data-dir") as refused:
+        load_driven_experiment(toml, tmp_path / "data")
+    assert "hunter2" not in str(refused.value)

@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
         max_shift_s = parse_quantity(args.max_shift, "s")
     except ValueError as error:
         raise ValueError(f"--max-shift: {error}") from None
-    with output_folder(args.out, "contact") as out:
+    with output_folder(args.out, "contact", "contact.json") as out:
         report = calibrate(curves, geometry, offset=args.offset, fit_rate_constant=args.fit_rate_constant,
                            fit_damping=args.damping, fit_time_shift=args.time_shift,
                            fit_hardness_ratio=args.fit_hardness_ratio, fit_approach_drift=args.approach_drift,

@@ -61,7 +61,7 @@ def run(args) -> int:
     ForwardModel(steps_per_contact=args.steps_per_contact)  # refuses a step count the solver cannot run
     # driven experiment files (lock-in sweeps of a driven chain) have their own diagnosis
     driven = is_driven_run(args.files, args.data_dir)
-    with output_folder(args.out, "diagnose") as out:
+    with output_folder(args.out, "diagnose", "diagnosis.json") as out:
         if driven:
             return run_driven_diagnose(args, out)
         return _diagnose(args, out)

@@ -147,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     from ..driven_cli import is_driven_run, run_fit as run_driven_fit
 
     driven = is_driven_run(args.files, args.data_dir)
-    with output_folder(args.out, "fit") as out:
+    with output_folder(args.out, "fit", "fit.json") as out:
         if driven:
             return run_driven_fit(args, out)
         return _fit(args, out, began, forward, noise)

@@ -376,7 +376,7 @@ def _plot_restitution(points, law, path):
 def run(args: argparse.Namespace) -> int:
     if not 0 <= args.threshold < 1:
         raise ValueError(f"--threshold must be in [0, 1), got {args.threshold}.")
-    with output_folder(args.out, "analyze") as out:
+    with output_folder(args.out, "analyze", "analysis.json") as out:
         _analyze(args, out)
     print(f"wrote pulses.csv, analysis.json and plots to {args.out}")
     return 0

@@ -56,7 +56,7 @@ def _plot(trace, path: Path) -> None:
 def run(args: argparse.Namespace) -> int:
     if not Path(args.experiment).is_file():
         raise FileNotFoundError(f"no such experiment file: {args.experiment}")
-    with output_folder(args.out, "import") as out:
+    with output_folder(args.out, "import", "import.json") as out:
         traces = import_experiment(args.experiment)
         listing = _write(traces, out, args)
     print(f"wrote {len(listing)} trace files and import.json to {args.out}")
