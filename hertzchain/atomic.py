@@ -74,9 +74,9 @@ def output_folder(path: str | os.PathLike, command: str, result_file: str):
 
     Checked before the work starts: `path` is a folder (or absent) and, when it exists, empty
     or an earlier output folder of hertzchain (it holds `FOLDER_MARKER`, written here, or the
-    command's `result_file`), so that a folder holding the user's own files is never replaced. On an error the temporary is
-    removed and `path` stays as it was; temporaries of killed runs are removed on the next run
-    into the same `path`.
+    command's `result_file`), so that a folder holding the user's own files is never replaced.
+    On an error the temporary is removed and `path` stays as it was; temporaries of killed runs
+    are removed on the next run into the same `path`.
 
     **Arguments:**
 

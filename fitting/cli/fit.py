@@ -3,10 +3,11 @@
 The chain of each file is described by its header (see `hertzchain.tracefile`); the
 command fits the chosen parameters and writes `fit.json`, CSV tables and PNG plots
 (`fitting.report`) into `--out`, written as a whole: a temporary folder beside it replaces
-the previous run's folder when the command ends (`hertzchain.atomic.output_folder`). `--prior` (and an experiment file's `[prior]` table)
-states a lab's tolerances (`fitting.priors`): each frees its parameter and the optimum is
-the MAP point. `--posterior` then samples the posterior by NUTS (`fitting.posterior`) and
-writes `posterior.json`, `posterior.nc`, `draws.csv`, `posterior_summary.md` and plots
+the previous run's folder when the command ends (`hertzchain.atomic.output_folder`).
+`--prior` (and an experiment file's `[prior]` table) states a lab's tolerances
+(`fitting.priors`): each frees its parameter and the optimum is the MAP point.
+`--posterior` then samples the posterior by NUTS (`fitting.posterior`) and writes
+`posterior.json`, `posterior.nc`, `draws.csv`, `posterior_summary.md` and plots
 (`fitting.posterior_report`) beside the fit's files. Exit status: 0 converged, 3 not
 converged (the report is still written, marked `"converged": false`), 4 the posterior's
 diagnostics fail and `--strict` was given, 2 bad input.

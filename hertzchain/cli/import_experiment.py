@@ -7,8 +7,8 @@ keys) and writes `DIR/<shot>.csv` per shot, a plot of each, and `import.json` li
 files with each channel's offset, noise and clipped samples, and each shot's time zero with
 its check against the pulse's arrivals (`importer.check_time_zero`). Nothing is written unless
 every shot imports; the folder is written as a whole and replaces the previous run's
-(`hertzchain.atomic.output_folder`). `fit`, `diagnose`, `analyze` and `design` also take the experiment
-file directly (imported in memory).
+(`hertzchain.atomic.output_folder`). `fit`, `diagnose`, `analyze` and `design` also take the
+experiment file directly (imported in memory).
 """
 
 from __future__ import annotations
@@ -64,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write(traces, out: Path, args) -> list:
+    """Each shot's trace file (and plot) and `import.json` in `out`; returns the listing."""
     listing = []
     for trace in traces:
         label = trace.header["x_shot"]
