@@ -47,9 +47,11 @@ unit):
   estimated from the pre-trigger segment), `range_v = [low, high]` (the digitiser's
   limits, when the file does not state them), `invert` (a sensor wired with the opposite
   sign).
-- `[[shot]]`: `SHOT_KEYS`: also `label`, `nominal_velocity_m_s` (shots at the same nominal
-  velocity are repeats, see `hertzchain analyze`), and any `[chain]` key that differs for
-  this shot (another wall, say).
+- `[[shot]]`: `SHOT_KEYS`: also `label` (a plain name, not a path: the shot's trace file is
+  `<label>.csv`, named by `hertzchain.atomic.file_stem`), `nominal_velocity_m_s` (shots at
+  the same nominal velocity are repeats, see `hertzchain analyze`), and any `[chain]` key
+  that differs for this shot (another wall, say). A scope file outside the experiment file's
+  folder may be named, but the content of such a file is never quoted in an error.
 - `[prior]` (optional): the lab's tolerances, `name = "TEXT"` in the syntax of
   `fitting.priors` (`bead_youngs = "203GPa+-4GPa"`, `sensor_gain = "+-2%"`); `hertzchain
   fit` uses them as if given with `--prior`.
