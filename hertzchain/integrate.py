@@ -59,6 +59,7 @@ from .forces import (
     plastic_dissipation,
     preload_potential,
 )
+from .precision import require_float64
 from .progress import Progress
 from .timegrid import DEFAULT_STEPS_PER_CONTACT, TimeGrid, choose_time_grid
 from .traces import Traces
@@ -370,6 +371,7 @@ def solve(setup: ChainSetup, grid: TimeGrid, recording: Recording = Recording(),
     for a setup without `sensor_beads`; their beads are shortened by the sensor force, which
     is not itself recorded (record the bead's two contacts).
     """
+    require_float64("solve")
     model = build_model(setup)
     if compliant_sensors is not None:
         if setup.sensor_beads:
@@ -474,6 +476,7 @@ def simulate(
 
     **Returns:** `Traces`.
     """
+    require_float64("simulate")
     recording = Recording(tuple(int(k) for k in contacts), bool(record_all))
     _layout(setup, recording)
     grid = choose_time_grid(
