@@ -2,7 +2,8 @@
 
 `parse_quantity("13mm", "m")` -> 0.013. A bare number is taken as SI. Accepted suffixes
 are SI prefixes on the expected unit (`13mm`, `5GPa`, `2us`, `85kHz`, `0.3m/s`), plus
-`um`/`µm`/`us`/`µs` for micro.
+`um`/`µm`/`us`/`µs` for micro, and for masses prefixes on the gram (`8.9g`, `880mg`). `parse_field("wall_youngs_pa", "5GPa")` takes the unit from
+the field's name: SI field names end in their unit (`unit_of_field`).
 """
 
 from __future__ import annotations
@@ -35,10 +36,34 @@ def parse_quantity(text: str | float, unit: str, *, name: str = "value") -> floa
         prefix = suffix[: -len(unit)]
         if prefix in _PREFIXES:
             return number * _PREFIXES[prefix]
+    if unit == "kg" and suffix.endswith("g") and suffix[:-1] in _PREFIXES:  # grams: 880mg, 0.88g
+        return number * _PREFIXES[suffix[:-1]] * 1e-3
     raise ValueError(
         f"{name}: unit {suffix!r} in {text!r} is not a prefixed {unit!r} "
         f"(e.g. 13mm, 5GPa, 2us); give the value in {unit or 'SI units'}."
     )
+
+
+# The unit a field name's suffix stands for (`bead_radius_m`, `wall_youngs_pa`, `eta_s`);
+# a name without one of these suffixes is dimensionless.
+FIELD_UNITS = {
+    "_m": "m", "_pa": "Pa", "_kg": "kg", "_s": "s", "_hz": "Hz", "_n": "N", "_v": "V",
+    "_m_s": "m/s", "_kg_m3": "kg/m3", "_n_s_m": "Ns/m",
+}
+
+
+def unit_of_field(name: str) -> str:
+    """The unit of a field from its name's suffix (`"eta_s"` -> `"s"`; `""` if dimensionless)."""
+    for suffix in sorted(FIELD_UNITS, key=len, reverse=True):
+        if name.endswith(suffix):
+            return FIELD_UNITS[suffix]
+    return ""
+
+
+def parse_field(name: str, text: str | float, *, where: str | None = None) -> float:
+    """Parse the value of the field `name` in the unit its name carries, to SI
+    (`parse_field("eta_s", "2us")` -> 2e-06); errors name `where` (default: the field)."""
+    return parse_quantity(text, unit_of_field(name), name=where or name)
 
 
 def format_si(value: float, unit: str) -> str:
