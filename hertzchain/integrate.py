@@ -66,7 +66,14 @@ from .traces import Traces
 
 
 class YieldWarning(UserWarning):
-    """A contact force exceeded the yield force of the contact (plastic deformation likely)."""
+    """A contact force exceeded the yield force of the contact (plastic deformation likely).
+
+    `finding` is what happened, without the advice that follows it in the message (the
+    command line gives advice in its own options)."""
+
+    def __init__(self, finding: str, advice: str = ""):
+        super().__init__(f"{finding} {advice}".strip())
+        self.finding = finding
 
 
 class Recording(NamedTuple):
@@ -433,16 +440,16 @@ def check_yield(traces: Traces, on_yield: str = "warn", *, plastic: bool = False
     n_contacts = ratio.shape[-1] - 1
     index = worst[-1]
     name = "the wall contact" if index == n_contacts else f"contact {index}"
-    message = (
+    warning = YieldWarning(
         f"The force at {name} reached {np.asarray(traces.max_force_n)[worst]:.4g} N, above its "
         f"yield force {np.asarray(traces.yield_force_n)[worst]:.4g} N (mean contact pressure "
         "above bead_yield_stress_pa): the contact would deform plastically, which this elastic "
-        "model does not describe. Lower striker_velocity_m_s, model it with plasticity=True, "
-        "or set on_yield='ignore'."
+        "model does not describe.",
+        "Lower striker_velocity_m_s, model it with plasticity=True, or set on_yield='ignore'.",
     )
     if on_yield == "raise":
-        raise ValueError(message)
-    warnings.warn(message, YieldWarning, stacklevel=3)
+        raise ValueError(str(warning))
+    warnings.warn(warning, stacklevel=3)
 
 
 def simulate(

@@ -101,3 +101,25 @@ def test_masses_in_grams():
     assert parse_quantity("8.9g", "kg") == pytest.approx(8.9e-3)
     assert parse_quantity("880mg", "kg") == pytest.approx(8.8e-4)
     assert parse_quantity("2kg", "kg") == 2.0
+
+
+def test_warnings_read_in_the_commands_terms():
+    import warnings
+
+    from hertzchain.cli.warning_format import command_warnings
+    from hertzchain.integrate import YieldWarning
+
+    warning = YieldWarning("The force at contact 0 reached 9 N, above its yield force 4 N (mean contact "
+                           "pressure above bead_yield_stress_pa).",
+                           "Lower striker_velocity_m_s, model it with plasticity=True, or set on_yield='ignore'.")
+    with command_warnings("simulate"):
+        line = warnings.formatwarning(warning, YieldWarning, "integrate.py", 1)
+    assert line == ("hertzchain simulate: warning: The force at contact 0 reached 9 N, above its yield force "
+                    "4 N (mean contact pressure above --bead-yield-stress). Lower --striker-velocity, or "
+                    "model the yield with --plasticity thornton (or jackson_green).\n")
+    with command_warnings("fit"):
+        line = warnings.formatwarning(UserWarning("a\n  two-line text"), UserWarning, "fit.py", 1)
+        with pytest.warns(YieldWarning, match="on_yield='ignore'"):  # the API's warning as it was
+            warnings.warn(warning, stacklevel=1)
+    assert line == "hertzchain fit: warning: a two-line text\n"
+    assert warnings.formatwarning(warning, YieldWarning, "x.py", 1).startswith("x.py:1: YieldWarning")

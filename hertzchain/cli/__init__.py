@@ -13,6 +13,8 @@ import importlib
 import os
 import sys
 
+from .warning_format import command_warnings
+
 COMMANDS = {
     "simulate": ("hertzchain.cli.simulate", "simulate a chain (default: the paper's) and plot it"),
     "analyze": ("hertzchain.cli.analyze", "fit every pulse of trace files (cos^6, speed, restitution)"),
@@ -73,7 +75,8 @@ def main(argv=None) -> int:
             module.add_arguments(sub)
     args = parser.parse_args(argv)
     try:
-        return int(module.run(args) or 0)
+        with command_warnings(args.command):
+            return int(module.run(args) or 0)
     except (ValueError, FileNotFoundError) as error:  # every input error of the library
         print(f"hertzchain {args.command}: error: {error}", file=sys.stderr)
         return 2

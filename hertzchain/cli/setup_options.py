@@ -111,6 +111,11 @@ class ChainChoice:
         return lines
 
 
+def option_of_field(field: str) -> str | None:
+    """The option that sets a `ChainSetup` field (`"eta_s"` -> `"--eta"`), None if none does."""
+    return _OPTION_OF.get(field)
+
+
 def _int_list(text: str) -> tuple[int, ...]:
     try:
         return tuple(int(part) for part in text.split(",") if part.strip())
