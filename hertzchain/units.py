@@ -1,4 +1,4 @@
-"""Unit conversion at the edges (command line, files): everything inside is SI.
+"""Unit conversion at the edges (command line, files, reports): everything inside is SI.
 
 `parse_quantity("13mm", "m")` -> 0.013. A bare number is taken as SI. Accepted suffixes
 are SI prefixes on the expected unit (`13mm`, `5GPa`, `2us`, `85kHz`, `0.3m/s`), plus
@@ -64,6 +64,48 @@ def parse_field(name: str, text: str | float, *, where: str | None = None) -> fl
     """Parse the value of the field `name` in the unit its name carries, to SI
     (`parse_field("eta_s", "2us")` -> 2e-06); errors name `where` (default: the field)."""
     return parse_quantity(text, unit_of_field(name), name=where or name)
+
+
+# Units shown with an SI prefix chosen for the value (20 GPa, 2 µs, 600 MPa); others as they are.
+_PREFIXED_UNITS = ("Pa", "s", "m", "N", "Hz", "J", "V")
+_DISPLAY_PREFIXES = (("T", 1e12), ("G", 1e9), ("M", 1e6), ("k", 1e3), ("", 1.0), ("m", 1e-3),
+                     ("µ", 1e-6), ("n", 1e-9), ("p", 1e-12))
+
+
+def display_unit(unit: str) -> str:
+    """A unit as human text says it: `""` or `"1"` -> `"dimensionless"`, `"us"` -> `"µs"`."""
+    if unit in ("", "1"):
+        return "dimensionless"
+    return re.sub(r"\bu(?=[a-zA-Z])", "µ", unit)
+
+
+def _prefixed(magnitude: float, unit: str) -> tuple[str, float]:
+    if unit not in _PREFIXED_UNITS or not math.isfinite(magnitude) or magnitude == 0:
+        return unit, 1.0
+    for prefix, factor in _DISPLAY_PREFIXES:
+        if magnitude >= factor:
+            return prefix + unit, factor
+    return "p" + unit, 1e-12
+
+
+def format_measured(value: float, sigma: float | None, unit: str = "", *, why: str = "") -> str:
+    """A fitted value with its standard error in human units, to the digits the error allows:
+    `format_measured(2.031e10, 1.2e9, "Pa")` -> `"20.3 ± 1.2 GPa"`. The error is given to two
+    significant digits and the value to the same decimal place. Without a finite, positive
+    error (None, nan, inf, 0) the value is given to four digits and the text says
+    `"σ not determined"`, with `why` where given. A dimensionless value has no unit."""
+    value = float(value)
+    determined = sigma is not None and math.isfinite(float(sigma)) and float(sigma) > 0
+    shown, factor = _prefixed(abs(value) if value else (float(sigma) if determined else 0.0), unit)
+    suffix = f" {display_unit(shown)}" if unit not in ("", "1") else ""
+    if not math.isfinite(value):
+        return f"{value:g}{suffix}"
+    if not determined:
+        note = f"σ not determined: {why}" if why else "σ not determined"
+        return f"{value / factor:.4g}{suffix} ({note})"
+    scaled_sigma = float(sigma) / factor
+    decimals = max(0, 1 - math.floor(math.log10(scaled_sigma)))
+    return f"{value / factor:.{decimals}f} ± {scaled_sigma:.{decimals}f}{suffix}"
 
 
 def format_si(value: float, unit: str) -> str:
