@@ -263,15 +263,15 @@ def _why_undetermined(result, label) -> str:
 
 def fitted_lines(result) -> list[str]:
     """One line per fitted value, `name = value ± σ unit` to the digits σ allows (human units:
-    GPa, µs, MPa), then the speed constant C."""
+    GPa, µs, MPa), then the speed constant C of the fitted chain where C is not fitted itself."""
     lines = [
         f"  {label} = " + format_measured(result.values[label], result.stderr[label], result.units[label],
                                           why=_why_undetermined(result, label))
         for label in result.labels
     ]
     c = result.speed_constant
-    lines.append(f"  C (discrete solitary wave) = "
-                 f"{format_measured(c['C'], c['C_stderr'], 'm/s N^-1/6')}")
+    if "C" not in result.labels:
+        lines.append(f"  C (discrete solitary wave) = {format_measured(c['C'], c['C_stderr'], 'm/s N^-1/6')}")
     return lines
 
 
