@@ -68,6 +68,21 @@ def physical_reading(name: str, value: float, stderr, setup) -> str:
     return ""
 
 
+def readings(diagnosis: Diagnosis) -> list[str]:
+    """One line per named effect's strength that stands for a quantity (`physical_reading`):
+    `"wall_compliance: wall Young's modulus 20.3 ± 1.2 GPa"`."""
+    setup = diagnosis.problem.base_setups[0]
+    lines = []
+    for step in diagnosis.steps:
+        if step.effect not in diagnosis.missing_effects:
+            continue
+        for name, value in step.values.items():
+            reading = physical_reading(name, value, step.stderr.get(name), setup)
+            if reading:
+                lines.append(f"{step.effect}: {reading}")
+    return lines
+
+
 def _unit(label: str) -> str:
     """The SI unit of a fitted label (`name`, `name[file]`, an effect's strength with or
     without its `PREFIX`), "" if not registered."""
@@ -111,6 +126,10 @@ def markdown(diagnosis: Diagnosis) -> str:
       + (f"; free {', '.join(d.settings['free'])}" if d.settings["free"] else "") + ".\n\n")
     w(f"**Missing effects (in the order found):** {', '.join(d.missing_effects) or 'none'}\n\n")
     w(d.conclusion + "\n\n")
+    for line in readings(d):
+        w(f"- {line}\n")
+    if readings(d):
+        w("\n")
     w("## Gap before and after each step\n\n")
     w("Gap = reduced chi^2 of the whitened residuals (1 = noise level).\n\n")
     w("| step | effect | gap before | gap after | excess before (sigma) | excess after (sigma) |\n")

@@ -62,3 +62,14 @@ def test_the_fit_summary_prints_significant_digits_and_no_nan():
                         "(σ not determined: the covariance is not finite at this optimum)")
     assert lines[4] == "  C (discrete solitary wave) = 301.23 ± 0.46 m/s N^-1/6"
     assert "nan" not in summary_text(result) and "+-" not in summary_text(result)
+
+
+def test_the_diagnosis_reads_a_named_soft_wall_in_gpa():
+    from fitting.diagnosis_report import readings
+
+    setup = ChainSetup(5, wall_youngs_pa=203e9)
+    step = types.SimpleNamespace(effect="wall_compliance", values={"wall_softening": math.log(203 / 20.3)},
+                                 stderr={"wall_softening": 0.0123})
+    diagnosis = types.SimpleNamespace(steps=[step], missing_effects=["wall_compliance"],
+                                      problem=types.SimpleNamespace(base_setups=[setup]))
+    assert readings(diagnosis) == ["wall_compliance: wall Young's modulus 20.30 ± 0.25 GPa"]

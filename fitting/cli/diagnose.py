@@ -55,7 +55,7 @@ def run(args) -> int:
         return run_driven_diagnose(args)
     from fitting.data import load_experiments
     from fitting.diagnosis import diagnose
-    from fitting.diagnosis_report import write_diagnosis_report
+    from fitting.diagnosis_report import readings, write_diagnosis_report
 
     if args.max_effects < 0:
         raise ValueError("--max-effects must be >= 0.")
@@ -70,5 +70,7 @@ def run(args) -> int:
     paths = write_diagnosis_report(diagnosis, args.out)
     print(f"missing effects: {', '.join(diagnosis.missing_effects) or 'none'}")
     print(diagnosis.conclusion)
+    for line in readings(diagnosis):
+        print(f"  {line}")
     print(f"report: {paths['markdown']} (JSON {paths['json']})", file=sys.stderr if args.quiet else sys.stdout)
     return 0
