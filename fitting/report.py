@@ -7,7 +7,7 @@
 - `correlation.csv`: the correlation matrix (and `correlation.png` with `per_trace=True`).
 - `rms.csv`: residual RMS per file and channel (N and in units of the noise sigma).
 - `starts.csv`: every start of the multistart batch: chi^2, converged, steps, values.
-- `residuals_<file>.csv`: time, data, model and residual of every channel.
+- `residuals_<file>.csv`: time (s), data, model and residual (N) of every channel.
 - `fit_summary.png`: every file's channels, data and fitted model, and the whitened residuals
   (one figure, drawn from at most `SUMMARY_POINTS` points per curve: about a second), with
   the fitted values and their standard errors (`fitted_lines`) beneath.
@@ -29,7 +29,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from hertzchain.atomic import save_figure, write_csv, write_json  # noqa: E402
-from hertzchain.units import display_unit, format_measured  # noqa: E402
+from hertzchain.units import column_name, display_unit, format_measured  # noqa: E402
 
 # Points per curve of the summary figure (min-max thinned, so peaks stay).
 SUMMARY_POINTS = 1500
@@ -111,7 +111,7 @@ def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False
         for channel in experiment.channels:
             data = experiment.data(channel)
             columns += [data, predicted[channel], data - predicted[channel]]
-            header += [f"data_{channel}", f"model_{channel}", f"residual_{channel}"]
+            header += [f"data_{channel}_n", f"model_{channel}_n", f"residual_{channel}_n"]
         path = out / f"residuals_{_safe(experiment.label)}.csv"
         line = ",".join(["%.9g"] * len(columns))
         write_csv(path, header, ((line % tuple(row)).split(",") for row in np.column_stack(columns).tolist()))
@@ -119,7 +119,7 @@ def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False
     for label, profile in result.profiles.items():
         table(
             f"profile_{_safe(label)}.csv",
-            [f"{label}", "delta_chi2", "converged"],
+            [column_name(label, result.units[label]), "delta_chi2", "converged"],
             zip(profile["values"], profile["delta_chi2"], profile["converged"]),
         )
     if plots:

@@ -52,6 +52,20 @@ FIELD_UNITS = {
 }
 
 
+def column_name(name: str, unit: str) -> str:
+    """A table column for `name` that states its unit: the unit's field suffix where it has
+    one (`column_name("eta", "s")` -> `"eta_s"`, `"striker_velocity[shot1]"`, `"m/s"` ->
+    `"striker_velocity_m_s[shot1]"`), else `"name (unit)"`; `name` alone when dimensionless."""
+    if unit in ("", "1"):
+        return name
+    suffixes = {u: suffix for suffix, u in FIELD_UNITS.items()}
+    suffixes["N s/m"] = "_n_s_m"
+    if unit not in suffixes:
+        return f"{name} ({unit})"
+    base, bracket, rest = name.partition("[")  # a per-file label: striker_velocity_m_s[shot1]
+    return base + suffixes[unit] + bracket + rest
+
+
 def unit_of_field(name: str) -> str:
     """The unit of a field from its name's suffix (`"eta_s"` -> `"s"`; `""` if dimensionless)."""
     for suffix in sorted(FIELD_UNITS, key=len, reverse=True):

@@ -73,3 +73,11 @@ def test_the_diagnosis_reads_a_named_soft_wall_in_gpa():
     diagnosis = types.SimpleNamespace(steps=[step], missing_effects=["wall_compliance"],
                                       problem=types.SimpleNamespace(base_setups=[setup]))
     assert readings(diagnosis) == ["wall_compliance: wall Young's modulus 20.30 ± 0.25 GPa"]
+
+
+def test_table_columns_state_their_units():
+    from hertzchain.units import column_name
+
+    assert column_name("eta", "s") == "eta_s" and column_name("wall_youngs", "Pa") == "wall_youngs_pa"
+    assert column_name("striker_velocity[shot1]", "m/s") == "striker_velocity_m_s[shot1]"
+    assert column_name("mu", "") == "mu" and column_name("C", "m/s N^-1/6") == "C (m/s N^-1/6)"
