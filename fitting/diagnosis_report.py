@@ -47,20 +47,24 @@ def physical_reading(name: str, value: float, stderr, setup) -> str:
     MPa, `eta_s` -> η in µs); "" for a strength without such a reading. `setup`: the
     diagnosed files' nominal chain (the first file's)."""
     stderr = None if stderr is None or not math.isfinite(stderr) else float(stderr)
+
+    def error(scale):  # the standard error of a quantity whose derivative is `scale`
+        return None if stderr is None else abs(scale) * stderr
+
     short = name[len(PREFIX):] if name.startswith(PREFIX) else name
     if short == "wall_softening":
         youngs = fitted_wall_youngs_pa(setup, value)
-        return "wall Young's modulus " + format_measured(youngs, None if stderr is None else youngs * stderr, "Pa")
+        return "wall Young's modulus " + format_measured(youngs, error(youngs), "Pa")
     if short == "yield_softening":
         if value <= 0:
             return "no yield (elastic contacts)"
         nominal = float(setup.bead_yield_stress_pa)
         nominal = nominal if math.isfinite(nominal) else DEFAULT_YIELD_STRESS_PA
         stress = nominal / value
-        return "yield stress " + format_measured(stress, None if stderr is None else stress * stderr / value, "Pa")
+        return "yield stress " + format_measured(stress, error(stress / value), "Pa")
     if short == "sensor_rate" and value > 0:
         f0 = 1e5 / math.sqrt(value)
-        return "sensor resonance f0 " + format_measured(f0, None if stderr is None else 0.5 * f0 * stderr / value, "Hz")
+        return "sensor resonance f0 " + format_measured(f0, error(0.5 * f0 / value), "Hz")
     if short in ("eta_s", "preload_n", "dashpot_n_s_m"):
         quantity = {"eta_s": "η", "preload_n": "preload", "dashpot_n_s_m": "dashpot"}[short]
         unit = {"eta_s": "s", "preload_n": "N", "dashpot_n_s_m": "N s/m"}[short]

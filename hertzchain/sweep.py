@@ -95,7 +95,8 @@ def parse_grid(text: str) -> tuple[str, np.ndarray]:
     name, values = (part.strip() for part in text.split("=", 1))
     unit = unit_of_field(name)
     shape = (f"--grid {text!r}: values must be a comma list of numbers or start:stop:count[:log], "
-             f"in {unit or 'SI units'} or with a unit suffix (e.g. wall_youngs_pa=3GPa,45GPa, eta_s=0:3us:4).")
+             f"in {unit or 'SI units'} or with a unit suffix (e.g. wall_youngs_pa=3GPa,45GPa, "
+             "eta_s=0:3us:4).")
 
     def number(part: str) -> float:
         return parse_quantity(part, unit, name=f"--grid {name}")

@@ -2,8 +2,9 @@
 
 `parse_quantity("13mm", "m")` -> 0.013. A bare number is taken as SI. Accepted suffixes
 are SI prefixes on the expected unit (`13mm`, `5GPa`, `2us`, `85kHz`, `0.3m/s`), plus
-`um`/`µm`/`us`/`µs` for micro, and for masses prefixes on the gram (`8.9g`, `880mg`). `parse_field("wall_youngs_pa", "5GPa")` takes the unit from
-the field's name: SI field names end in their unit (`unit_of_field`).
+`um`/`µm`/`us`/`µs` for micro, and for masses prefixes on the gram (`8.9g`, `880mg`).
+`parse_field("wall_youngs_pa", "5GPa")` takes the unit from the field's name: SI field names
+end in their unit (`unit_of_field`).
 """
 
 from __future__ import annotations

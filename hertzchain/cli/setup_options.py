@@ -94,7 +94,8 @@ class ChainChoice:
         lines = []
         for label, (body, size) in bodies.items():
             name = self.materials.get(body, "")
-            youngs = value(f"{body}_youngs_pa", format_si(float(getattr(setup, f"{body}_youngs_pa").ravel()[0]), "Pa"))
+            youngs = float(getattr(setup, f"{body}_youngs_pa").ravel()[0])
+            youngs = value(f"{body}_youngs_pa", format_si(youngs, "Pa"))
             density = value(f"{body}_density_kg_m3",
                             f"{float(getattr(setup, f'{body}_density_kg_m3').ravel()[0]):.4g} kg/m^3")
             lines.append(f"  {label}: {name + ', ' if name else ''}{size}, Y = {youngs}, rho = {density}")
@@ -173,8 +174,9 @@ def _file_values(path: str) -> dict:
         density = mass / _sphere_mass_kg(values.get("bead_radius_m", 0.013), 1.0)
         given = values.setdefault("bead_density_kg_m3", density)
         if abs(given - density) > REDUNDANT_TOLERANCE * density:
-            raise ValueError(f"{path} [chain]: bead_mass_kg = {mass:.6g} implies a density of {density:.6g} "
-                             f"kg/m^3, bead_density_kg_m3 = {given:.6g}: correct one of them or give only one.")
+            raise ValueError(f"{path} [chain]: bead_mass_kg = {mass:.6g} implies a density of "
+                             f"{density:.6g} kg/m^3, bead_density_kg_m3 = {given:.6g}: correct one of "
+                             "them or give only one.")
     return values
 
 
