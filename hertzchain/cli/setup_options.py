@@ -149,13 +149,15 @@ def add_setup_arguments(parser: argparse.ArgumentParser) -> None:
                             "Thornton's law or Jackson & Green's (measured contacts) [off: Hertz]")
 
 
-def _material_values(body: str, found: Material, option: str) -> dict:
+def _material_values(body: str, found: Material, option: str, density_given: bool) -> dict:
     values = {}
     for attribute, field in _MATERIAL_FIELDS[body].items():
         value = getattr(found, attribute)
         if value is None and attribute == "density_kg_m3":
-            raise ValueError(f"{option} {found.name}: the catalogue has no density for it (a wall "
-                             f"sample); give --{body}-density too, or another material.")
+            if not density_given:
+                raise ValueError(f"{option} {found.name}: the catalogue has no density for it (a wall "
+                                 f"sample); give --{body}-density too, or another material.")
+            continue
         values[field] = value  # a yield stress of None: unknown, no yield check
     return values
 
@@ -220,7 +222,8 @@ def chain_from_args(args: argparse.Namespace) -> ChainChoice:
             except ValueError as error:
                 raise ValueError(f"{option}: {error}") from None
             materials[body] = found.name
-            take(_material_values(body, found, option), f"{option} {name}")
+            density_given = getattr(args, f"{body}_density", None) is not None
+            take(_material_values(body, found, option, density_given), f"{option} {name}")
     options = {}
     for option, field, _ in _QUANTITIES:
         text = getattr(args, option.lstrip("-").replace("-", "_"))
