@@ -52,9 +52,14 @@ def test_simulation_refuses_float64_switched_off_after_import():
         "    hc.driven.chain.DrivenChain(1.0, 1e9, 1.0, 0.0)\n"
         "except hc.precision.Float64Error as error:\n"
         "    print(error)\n"
+        "try:\n"
+        "    fitting.model.Problem([], [], [], None)\n"
+        "except hc.precision.Float64Error as error:\n"
+        "    print(error)\n"
     )
-    result = _python("import hertzchain.driven.chain\n" + code)
+    result = _python("import hertzchain.driven.chain, fitting.model\n" + code)
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     assert lines[0].startswith("simulate: JAX's float64 is switched off")
     assert lines[1].startswith("DrivenChain: JAX's float64 is switched off")
+    assert lines[2].startswith("the fit's Problem: JAX's float64 is switched off")
