@@ -70,7 +70,7 @@ def worker(runs: int, impl: str) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="benchmarks/results", help="output folder [benchmarks/results]")
     parser.add_argument("--runs", type=int, default=16, help="timed runs per setting [16]")
     parser.add_argument("--worker", choices=("hertzchain", "numba"), help=argparse.SUPPRESS)

@@ -107,7 +107,7 @@ def table(rows, columns) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="8-bead chain, one seed, no pairs")
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--pairs", action="store_true", help="also hide the two-effect pairs")

@@ -170,7 +170,7 @@ def machine_info() -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "fit_bench.json"),
                         help="JSON output [benchmarks/results/fit_bench.json]")
     parser.add_argument("--traces", type=int, default=10, help="trace files per case [10]")

@@ -99,7 +99,7 @@ def markdown_table(result: dict) -> str:
 def main(argv=None) -> int:
     import os
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "law_sweep"),
                         help="output folder [benchmarks/results/law_sweep]")
     parser.add_argument("--speeds", type=int, default=64, help="striker speeds per sweep [64]")

@@ -113,7 +113,7 @@ def benchmark_posterior(n_traces: int = 10, *, chains: int = 4, warmup: int = 10
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="posterior_bench.json", help="JSON output [posterior_bench.json]")
     parser.add_argument("--traces", type=int, default=10, help="number of traces [10]")
     parser.add_argument("--chains", type=int, default=4, help="chains [4]")

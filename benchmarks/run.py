@@ -761,7 +761,7 @@ def _quick_table(summary) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true",
                         help="the headline ratios only (conservative, damped, fit iteration), < 3 min")
     parser.add_argument("--out", help="output folder")

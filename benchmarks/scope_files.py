@@ -285,7 +285,7 @@ def _header_value(path: Path, key: str) -> str | None:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--noise", action="store_true", help="8-bit AC-coupled Tektronix files, several seeds")
     parser.add_argument("--second-lab", action="store_true", help="Rigol CSV files with a light gate")
     parser.add_argument("--seeds", type=int, default=20)

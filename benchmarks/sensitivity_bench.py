@@ -109,7 +109,7 @@ def design_benchmark(small: bool) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--setups", type=int, default=1000, help="setups in the sweep [1000]")
     parser.add_argument("--chunk-size", type=int, default=100, help="setups per vmapped call [100]")
     parser.add_argument("--small", action="store_true", help="a quick run (64 setups, small design)")

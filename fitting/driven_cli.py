@@ -7,8 +7,11 @@ given, so that nothing the user asked for is silently dropped.
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
+
+from hertzchain.units import format_measured
 
 from .driven_experiment import is_driven_experiment, load_driven_experiment
 
@@ -63,7 +66,8 @@ def run_fit(args, out) -> int:
     data = report_data(result, data_dir=args.data_dir)
     for name, p in data["params"].items():
         if p["fitted"]:
-            print(f"{name} = {p['value']} +- {p['stderr']} {p['unit']}")
+            stderr = math.nan if p["stderr"] is None else p["stderr"]
+            print(f"{name} = {format_measured(p['value'], stderr, p['unit'])}")
     print(f"misfit: median {100 * data['misfit']['median']:.2f} %, max {100 * data['misfit']['max']:.2f} % of "
           f"each curve's peak; residual lag-1 correlation {result.rho:.3f}")
     for mode in data["bending"]:

@@ -416,6 +416,15 @@ def nominal_yield_forces_n(setup: ChainSetup) -> np.ndarray:
     return np.asarray(nominal.contact_yield_force_n(), dtype=float)
 
 
+def fitted_wall_youngs_pa(setup: ChainSetup, softening: float) -> float:
+    """The wall's Young's modulus, Pa, that `wall_softening` = `softening` gives the model of
+    `setup` (a rigid header wall stands for `_RIGID_WALL_FACTOR` times the beads' modulus)."""
+    nominal = float(setup.wall_youngs_pa)
+    if not math.isfinite(nominal):
+        nominal = _RIGID_WALL_FACTOR * float(np.asarray(setup.bead_youngs_pa)[-1])
+    return nominal * math.exp(-softening)
+
+
 def describe_plasticity(setup: ChainSetup, softening: float, softening_stderr: float) -> str:
     """The fitted `yield_softening` in words: the yield stress (MPa) with its standard error,
     and the force at which contacts between beads then leave Hertz (N)."""

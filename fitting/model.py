@@ -51,6 +51,7 @@ from hertzchain.batched import contact_law, kernel_flags, record_batched
 from hertzchain.chain import ChainSetup
 from hertzchain.compliant_sensor import CompliantSensors
 from hertzchain.integrate import Recording, solve, stack_setups
+from hertzchain.precision import require_float64
 from hertzchain.theory import discrete_fwhm_s, discrete_velocity_constant
 from hertzchain.timegrid import MIN_STEPS_PER_CONTACT, TimeGrid, choose_time_grid, shortest_contact_time_s
 
@@ -231,6 +232,7 @@ class Problem:
     """
 
     def __init__(self, experiments, instances, base_setups, forward: ForwardModel, priors=()):
+        require_float64("the fit's Problem")
         self.experiments: list[Experiment] = list(experiments)
         self.instances: tuple[ParameterInstance, ...] = tuple(instances)
         self.base_setups: list[ChainSetup] = list(base_setups)

@@ -2,15 +2,17 @@
 
 Importing the package enables float64 in JAX (`jax_enable_x64`): the physics needs it
 (energy is conserved to 1e-6 and gradients match finite differences to 1e-5 only in
-double precision). Everything is SI inside; public arguments carry their unit in their name.
+double precision). It refuses to import where `JAX_ENABLE_X64=0` is set, and to simulate
+after a program switched float64 off (`hertzchain.precision`). Everything is SI inside;
+public arguments carry their unit in their name.
 
 Reference: S. Job, F. Melo, A. Sokolow, S. Sen, "How Hertzian solitary waves interact with
 boundaries in a 1-D granular medium", Phys. Rev. Lett. 94, 178002 (2005).
 """
 
-import jax
+from .precision import enable_float64
 
-jax.config.update("jax_enable_x64", True)
+enable_float64()
 
 from . import contact, materials  # noqa: E402
 from . import acquisition, pulses, sensor, theory  # noqa: E402

@@ -1,5 +1,9 @@
 """Output files and folders written whole or not at all (a temporary beside the target,
-then renamed into place), and the rule that turns a label into a file name."""
+then renamed into place), and the rule that turns a label into a file name.
+
+Files are created with the permissions the user's umask gives a new file (0644 under the
+usual umask 022), as `open` would, so lab mates sharing a folder can read them.
+"""
 
 from __future__ import annotations
 
@@ -16,6 +20,17 @@ from pathlib import Path
 import numpy as np
 
 
+def _umask() -> int:
+    """The process's umask, read without changing it where the system says it (Linux)."""
+    with contextlib.suppress(OSError, ValueError):
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike):
     """Yield a temporary path next to `path`; on success it is renamed to `path`."""
@@ -24,6 +39,7 @@ def atomic_path(path: str | os.PathLike):
     handle, temporary = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
     os.close(handle)
     try:
+        os.chmod(temporary, 0o666 & ~_umask())  # mkstemp's file is 0600 whatever the umask
         yield Path(temporary)
         os.replace(temporary, target)
     except BaseException:

@@ -84,7 +84,7 @@ from . import conditioning
 from .atomic import file_stem
 from .scopefiles import FORMATS, ScopeFileError, merge_waveforms, read_waveforms
 from .tracefile import FORMAT, HEADER_KEYS, TraceFile, TraceFileError, format_rows, write_trace
-from .units import parse_quantity
+from .units import parse_field, parse_quantity
 
 # Plausible sensitivities, V/N: from a 0.1 mV/N load cell to a 10 V/N amplified sensor.
 SENSITIVITY_RANGE_V_PER_N = (1e-4, 10.0)
@@ -108,10 +108,6 @@ CHANNEL_KEYS = ("source", "measures", "sensitivity_v_per_n", "coupling", "noise_
 SHOT_KEYS = ("files", "label", "striker_velocity_m_s", "nominal_velocity_m_s", "time_zero") + CHAIN_KEYS
 _TOP_KEYS = ("chain", "scope", "channel", "shot", "prior")
 # Units of keys that may be written as strings with a unit ("13mm").
-_UNITS = {"_m": "m", "_pa": "Pa", "_kg": "kg", "_s": "s", "_hz": "Hz", "_n": "N", "_m_s": "m/s",
-          "_kg_m3": "", "_v": "V"}
-
-
 class TimeZeroWarning(UserWarning):
     """A shot whose pulse arrivals put the impact far from its time zero (see
     `check_time_zero`)."""
@@ -184,9 +180,8 @@ def quantity_of_key(value, key: str, where: str) -> float:
         _fail(where, f"{key} must be a number, got {value!r}.")
     if isinstance(value, (int, float)):
         return float(value)
-    unit = next((u for suffix, u in sorted(_UNITS.items(), key=lambda s: -len(s[0])) if key.endswith(suffix)), "")
     try:
-        return parse_quantity(str(value), unit, name=f"{where}: {key}")
+        return parse_field(key, str(value), where=f"{where}: {key}")
     except ValueError as error:
         raise ExperimentFileError(str(error)) from error
 
@@ -280,27 +275,42 @@ def _channel(table: dict, where: str) -> Channel:
                    invert=bool(table.get("invert", False)), **optional)
 
 
+def _read_document(path: Path) -> dict:
+    try:
+        document = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as error:
+        _fail(str(path), f"not valid TOML ({error}).")
+    except UnicodeDecodeError:
+        _fail(str(path), "not UTF-8 text; an experiment file is TOML, saved as UTF-8.")
+    if "kind" in document:
+        _fail(str(path), f"kind = {document['kind']!r}: an experiment of shots (scope files) has no kind key; a "
+                         "driven experiment (kind = \"driven\", lock-in sweeps) is read by `hertzchain fit` and "
+                         "`hertzchain diagnose` with --data-dir.")
+    _check_keys(document, _TOP_KEYS, str(path))
+    if "chain" not in document:
+        _fail(str(path), "missing [chain] table.")
+    _check_keys(document["chain"], CHAIN_KEYS, f"{path} [chain]")
+    return document
+
+
+def load_chain(path) -> dict:
+    """The `[chain]` table of a TOML file, quantities in SI (`"13mm"` -> 0.013): an experiment
+    file's, or that of a setup file holding only a `[chain]` table (`hertzchain simulate
+    --config`). Keys are those of `CHAIN_KEYS` (and `x_` keys, kept as text); raises
+    `ExperimentFileError` naming the file and the key."""
+    path = Path(path)
+    return _chain_values(_read_document(path)["chain"], f"{path} [chain]")
+
+
 def load_experiment(path) -> ExperimentDescription:
     """Read and check an experiment file; raises `ExperimentFileError` naming what is wrong."""
     path = Path(path)
     where = str(path)
-    try:
-        document = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as error:
-        _fail(where, f"not valid TOML ({error}).")
-    except UnicodeDecodeError:
-        _fail(where, "not UTF-8 text; an experiment file is TOML, saved as UTF-8.")
-    if "kind" in document:
-        _fail(where, f"kind = {document['kind']!r}: an experiment of shots (scope files) has no kind key; a driven "
-                     "experiment (kind = \"driven\", lock-in sweeps) is read by `hertzchain fit` and `hertzchain "
-                     "diagnose` with --data-dir.")
-    _check_keys(document, _TOP_KEYS, where)
-    for key in ("chain", "channel", "shot"):
+    document = _read_document(path)
+    for key in ("channel", "shot"):
         if key not in document:
-            _fail(where, f"missing [{key}]" + (" table." if key == "chain" else f" entries ([[{key}]])."))
-    chain_table = document["chain"]
-    _check_keys(chain_table, CHAIN_KEYS, f"{where} [chain]")
-    chain = _chain_values(chain_table, f"{where} [chain]")
+            _fail(where, f"missing [{key}] entries ([[{key}]]).")
+    chain = _chain_values(document["chain"], f"{where} [chain]")
     scope = document.get("scope", {})
     _check_keys(scope, SCOPE_KEYS, f"{where} [scope]")
     file_format = str(scope.get("format", "auto"))

@@ -59,13 +59,21 @@ from .forces import (
     plastic_dissipation,
     preload_potential,
 )
+from .precision import require_float64
 from .progress import Progress
 from .timegrid import DEFAULT_STEPS_PER_CONTACT, TimeGrid, choose_time_grid
 from .traces import Traces
 
 
 class YieldWarning(UserWarning):
-    """A contact force exceeded the yield force of the contact (plastic deformation likely)."""
+    """A contact force exceeded the yield force of the contact (plastic deformation likely).
+
+    `finding` is what happened, without the advice that follows it in the message (the
+    command line gives advice in its own options)."""
+
+    def __init__(self, finding: str, advice: str = ""):
+        super().__init__(f"{finding} {advice}".strip())
+        self.finding = finding
 
 
 class Recording(NamedTuple):
@@ -370,6 +378,7 @@ def solve(setup: ChainSetup, grid: TimeGrid, recording: Recording = Recording(),
     for a setup without `sensor_beads`; their beads are shortened by the sensor force, which
     is not itself recorded (record the bead's two contacts).
     """
+    require_float64("solve")
     model = build_model(setup)
     if compliant_sensors is not None:
         if setup.sensor_beads:
@@ -431,16 +440,16 @@ def check_yield(traces: Traces, on_yield: str = "warn", *, plastic: bool = False
     n_contacts = ratio.shape[-1] - 1
     index = worst[-1]
     name = "the wall contact" if index == n_contacts else f"contact {index}"
-    message = (
+    warning = YieldWarning(
         f"The force at {name} reached {np.asarray(traces.max_force_n)[worst]:.4g} N, above its "
         f"yield force {np.asarray(traces.yield_force_n)[worst]:.4g} N (mean contact pressure "
         "above bead_yield_stress_pa): the contact would deform plastically, which this elastic "
-        "model does not describe. Lower striker_velocity_m_s, model it with plasticity=True, "
-        "or set on_yield='ignore'."
+        "model does not describe.",
+        "Lower striker_velocity_m_s, model it with plasticity=True, or set on_yield='ignore'.",
     )
     if on_yield == "raise":
-        raise ValueError(message)
-    warnings.warn(message, YieldWarning, stacklevel=3)
+        raise ValueError(str(warning))
+    warnings.warn(warning, stacklevel=3)
 
 
 def simulate(
@@ -474,6 +483,7 @@ def simulate(
 
     **Returns:** `Traces`.
     """
+    require_float64("simulate")
     recording = Recording(tuple(int(k) for k in contacts), bool(record_all))
     _layout(setup, recording)
     grid = choose_time_grid(

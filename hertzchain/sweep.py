@@ -52,6 +52,7 @@ from .integrate import Recording
 from .progress import Progress
 from .timegrid import DEFAULT_STEPS_PER_CONTACT, choose_time_grid
 from .tracefile import setup_header
+from .units import parse_quantity, unit_of_field
 
 SWEEP_FORMAT = "hertzchain-sweep/1"
 # Recorded samples kept in memory per chunk (all channels), bounds the default chunk size.
@@ -85,31 +86,40 @@ def sweepable_fields(setup: ChainSetup) -> tuple[str, ...]:
 
 
 def parse_grid(text: str) -> tuple[str, np.ndarray]:
-    """Parse one grid option `field=values`: a comma list (`3e9,45e9,203e9`), a range
-    `start:stop:count` (linear) or `start:stop:count:log` (log-spaced), SI units."""
+    """Parse one grid option `field=values`: a comma list (`3GPa,45GPa,203GPa`), a range
+    `start:stop:count` (linear) or `start:stop:count:log` (log-spaced). Values are in the
+    unit the field's name carries (`wall_youngs_pa`: Pa, `eta_s`: s), bare numbers SI, unit
+    suffixes accepted (`eta_s=0:3us:4`)."""
     if "=" not in text:
         raise ValueError(f"--grid {text!r}: expected FIELD=VALUES, e.g. striker_velocity_m_s=0.1:1:10:log.")
     name, values = (part.strip() for part in text.split("=", 1))
-    try:
-        if ":" in values:
-            parts = values.split(":")
-            if len(parts) not in (3, 4) or (len(parts) == 4 and parts[3] not in ("log", "lin")):
-                raise ValueError
-            start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
-            if count < 1:
-                raise ValueError
-            if len(parts) == 4 and parts[3] == "log":
-                if start <= 0 or stop <= 0:
-                    raise ValueError
-                array = np.geomspace(start, stop, count)
-            else:
-                array = np.linspace(start, stop, count)
+    unit = unit_of_field(name)
+    shape = (f"--grid {text!r}: values must be a comma list of numbers or start:stop:count[:log], "
+             f"in {unit or 'SI units'} or with a unit suffix (e.g. wall_youngs_pa=3GPa,45GPa, "
+             "eta_s=0:3us:4).")
+
+    def number(part: str) -> float:
+        return parse_quantity(part, unit, name=f"--grid {name}")
+
+    if ":" in values:
+        parts = values.split(":")
+        if len(parts) not in (3, 4) or (len(parts) == 4 and parts[3] not in ("log", "lin")):
+            raise ValueError(shape)
+        start, stop = number(parts[0]), number(parts[1])
+        try:
+            count = int(parts[2])
+        except ValueError:
+            raise ValueError(shape) from None
+        if count < 1:
+            raise ValueError(f"--grid {text!r}: the count must be at least 1, got {count}.")
+        if len(parts) == 4 and parts[3] == "log":
+            if start <= 0 or stop <= 0:
+                raise ValueError(f"--grid {text!r}: a log range needs positive start and stop.")
+            array = np.geomspace(start, stop, count)
         else:
-            array = np.asarray([float(v) for v in values.split(",") if v.strip()])
-    except ValueError as error:
-        raise ValueError(
-            f"--grid {text!r}: values must be a comma list of numbers (SI) or start:stop:count[:log]."
-        ) from error
+            array = np.linspace(start, stop, count)
+    else:
+        array = np.asarray([number(v) for v in values.split(",") if v.strip()])
     if array.size == 0:
         raise ValueError(f"--grid {text!r}: no values.")
     return name, array
@@ -169,7 +179,8 @@ def time_grid(spec: SweepSpec):
 
 
 def default_contacts(n_beads: int) -> tuple[int, ...]:
-    """Two contacts at 0.3 N and 0.53 N (the command line's default)."""
+    """The contacts at 0.3 and 0.53 of an `n_beads` chain's length (6 and 11 of 21 beads): the
+    contacts the command line records unless told others."""
     return tuple(sorted({min(max(round(f * n_beads), 0), n_beads - 1) for f in (0.3, 0.53)}))
 
 

@@ -13,6 +13,7 @@ A file is a block of `# key = value` header lines followed by a CSV table::
     # striker_mass_kg = 0.0089
     # striker_velocity_m_s = 0.3
     # noise_std_n = 0.37
+    # units: time_s in s; contact_K, sensor_K and wall are forces in N
     time_s,contact_6,contact_11,wall
     2.0e-06,0.22,0.82,0.37
 
@@ -100,6 +101,9 @@ CHANNEL_KEYS: dict[str, _Key] = {
     "noise_std_n_": _Key(float, False, 0.0, 1e6, "noise standard deviation of the channel, N"),
     "clipped_": _Key(str, False, meaning="rows at the digitiser's range limit, e.g. 120-131,140"),
 }
+
+# The comment line before the table that states the columns' units (no "=": not a key).
+UNITS_LINE = "units: time_s in s; contact_K, sensor_K and wall are forces in N"
 
 _HEADER_LINE = re.compile(r"^#\s*([A-Za-z_][A-Za-z0-9_]*)\s*=\s*(.*?)\s*$")
 _CHANNEL = re.compile(r"^(contact|sensor)_(\d+)$")
@@ -454,6 +458,7 @@ def format_trace(trace: TraceFile) -> str:
     keys += [k for k in trace.header if k not in HEADER_KEYS and not k.startswith("x_")]
     keys += sorted(k for k in trace.header if k.startswith("x_"))
     lines = [f"# {key} = {_format_value(trace.header[key])}" for key in keys]
+    lines.append(f"# {UNITS_LINE}")
     names = list(trace.channels)
     lines.append(",".join(["time_s"] + names))
     table = np.column_stack([trace.time_s] + [trace.channels[name] for name in names])

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from hertzchain.atomic import save_figure, write_json, write_text
-from hertzchain.cli.setup_options import add_setup_arguments, setup_from_args
+from hertzchain.cli.setup_options import add_setup_arguments, chain_from_args
 from hertzchain.units import parse_quantity
 
 from ..data import load_experiments
@@ -77,11 +77,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="out/design", help="output folder [out/design]")
 
 
-def _values(args, setup) -> dict:
+def _values(chain) -> dict:
+    setup = chain.setup
     values = {"eta": float(setup.eta_s), "mu": float(setup.mu), "mu_star": float(setup.mu_star)}
-    if args.wall_youngs is not None or args.wall_material:
+    if "wall_youngs_pa" in chain.sources:
         values["wall_youngs"] = float(setup.wall_youngs_pa)
-    if args.wall_poisson is not None or args.wall_material:
+    if "wall_poisson" in chain.sources:
         values["wall_poisson"] = float(setup.wall_poisson)
     if float(setup.precompression_n) > 0:
         values["precompression"] = float(setup.precompression_n)
@@ -107,8 +108,9 @@ def _csv(result, recommended=None) -> str:
 def run(args: argparse.Namespace) -> int:
     params = parse_parameter_list(args.params)
     nuisances = _names(args.nuisances)
-    setup = setup_from_args(args)
-    values = _values(args, setup)
+    chain = chain_from_args(args)
+    setup = chain.setup
+    values = _values(chain)
     noise = parse_quantity(args.noise_std, "N", name="--noise-std")
     interval = parse_quantity(args.sample_interval, "s", name="--sample-interval")
     t_end = parse_quantity(args.t_end, "s", name="--t-end")

@@ -71,7 +71,7 @@ def _diagnose(args, out: Path) -> int:
     """The diagnosis of trace files, written into `out` (the temporary of `--out`)."""
     from fitting.data import load_experiments
     from fitting.diagnosis import diagnose
-    from fitting.diagnosis_report import write_diagnosis_report
+    from fitting.diagnosis_report import readings, write_diagnosis_report
 
     experiments = load_experiments(args.files, channels=_names(args.channels) or None)
     diagnosis = diagnose(
@@ -83,5 +83,7 @@ def _diagnose(args, out: Path) -> int:
     final = {key: Path(args.out) / Path(path).name for key, path in paths.items()}
     print(f"missing effects: {', '.join(diagnosis.missing_effects) or 'none'}")
     print(diagnosis.conclusion)
+    for line in readings(diagnosis):
+        print(f"  {line}")
     print(f"report: {final['markdown']} (JSON {final['json']})", file=sys.stderr if args.quiet else sys.stdout)
     return 0

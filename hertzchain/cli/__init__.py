@@ -14,6 +14,7 @@ import os
 import sys
 
 from .errors import EXIT_CODES, input_error_text
+from .warning_format import command_warnings
 
 COMMANDS = {
     "simulate": ("hertzchain.cli.simulate", "simulate a chain (default: the paper's) and plot it"),
@@ -77,7 +78,8 @@ def main(argv=None) -> int:
             module.add_arguments(sub)
     args = parser.parse_args(argv)
     try:
-        return int(module.run(args) or 0)
+        with command_warnings(args.command):
+            return int(module.run(args) or 0)
     except (ValueError, OSError) as error:  # every input error of the library, and of the file system
         print(f"hertzchain {args.command}: error: {input_error_text(error)}", file=sys.stderr)
         return 2

@@ -12,10 +12,20 @@ from ..atomic import save_figure, write_json
 from ..integrate import simulate
 from ..summary import run_summary
 from ..tracefile import TraceFile, setup_header, validate_header, write_trace
-from .setup_options import add_run_arguments, add_setup_arguments, run_options, setup_from_args
+from .setup_options import add_run_arguments, add_setup_arguments, chain_from_args, run_options
+
+DESCRIPTION = (
+    "Simulate a chain and write traces.csv, summary.json and simulation.png. Without options "
+    "it is the paper's chain (21 steel beads of radius 13 mm, a striker like them at 0.3 m/s, a "
+    "steel wall) with lossless contacts (eta = 0); the paper's fits use --eta 2us, as "
+    "`hertzchain reproduce` does. Describe your own chain with materials by name "
+    "(--bead-material brass --striker-material steel --wall-material Cu), values with units "
+    "(--bead-radius 5mm --wall-youngs 5GPa) or a setup file (--config setup.toml)."
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.description = DESCRIPTION
     add_setup_arguments(parser)
     add_run_arguments(parser)
     parser.add_argument(
@@ -27,7 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    setup = setup_from_args(args)
+    chain = chain_from_args(args)
+    setup = chain.setup
     header = setup_header(setup)
     validate_header(header, "setup")
     options = run_options(args, setup.n_beads)
@@ -36,6 +47,8 @@ def run(args: argparse.Namespace) -> int:
         f"{options['t_end_s'] * 1e3:g} ms ...",
         flush=True,
     )
+    for line in chain.describe():
+        print(line, flush=True)
     traces = simulate(setup, record_all=True, progress=True, **options)
     out = Path(args.out)
     rest = float(setup.precompression_n) if args.coupling == "ac" else 0.0
@@ -47,6 +60,8 @@ def run(args: argparse.Namespace) -> int:
         TraceFile(header=header, time_s=np.asarray(traces.time_s), channels=forces),
     )
     summary = run_summary(setup, traces, options)
+    summary["materials"] = chain.materials
+    summary["setup_sources"] = chain.sources
     write_json(out / "summary.json", summary)
     save_figure(plotting.plot_run(traces), out / "simulation.png", dpi=120)
     print(f"wrote {out / 'traces.csv'}, {out / 'summary.json'}, {out / 'simulation.png'}")

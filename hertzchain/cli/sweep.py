@@ -3,7 +3,7 @@
 Example::
 
     hertzchain sweep --grid striker_velocity_m_s=0.1:1:10:log \\
-        --grid wall_youngs_pa=3e9,45e9,203e9 --grid eta_s=0,2e-6 --out out/sweep
+        --grid wall_youngs_pa=3GPa,45GPa,203GPa --grid eta_s=0,2us --out out/sweep
 
 Run the same command again after an interruption: finished chunks are kept.
 """
@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..sweep import SweepSpec, parse_grid, run_sweep
 from ..units import parse_quantity
-from .setup_options import add_run_arguments, add_setup_arguments, setup_from_args
+from .setup_options import add_run_arguments, add_setup_arguments, chain_from_args
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,7 +26,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="FIELD=VALUES",
-        help="a swept ChainSetup field and its values (SI): a comma list, start:stop:count or "
+        help="a swept ChainSetup field and its values, in the unit the field's name carries or with "
+        "a suffix: a comma list (wall_youngs_pa=3GPa,45GPa), start:stop:count (eta_s=0:3us:4) or "
         "start:stop:count:log; repeat for an outer product",
     )
     parser.add_argument("--out", default="out/sweep", help="output folder [out/sweep]")
@@ -78,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
     start_distributed(args)
     if not args.grid:
         raise ValueError("give at least one --grid FIELD=VALUES, e.g. --grid striker_velocity_m_s=0.1:1:10:log")
-    setup = setup_from_args(args)
+    chain = chain_from_args(args)
+    setup = chain.setup
     grid = dict(parse_grid(text) for text in args.grid)
     spec = SweepSpec(
         setup=setup,
@@ -89,6 +91,8 @@ def run(args: argparse.Namespace) -> int:
         contacts=tuple(args.contacts or ()),
     )
     print(f"sweep of {spec.n_runs} runs over {', '.join(grid)} into {args.out}", flush=True)
+    for line in chain.describe(swept=grid):
+        print(line, flush=True)
     result = run_sweep(
         spec,
         Path(args.out),

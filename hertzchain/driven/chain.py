@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import contact
+from ..precision import require_float64
 
 
 class DrivenChain(eqx.Module):
@@ -54,6 +55,7 @@ class DrivenChain(eqx.Module):
     eta_s: jax.Array | None
 
     def __init__(self, bead_mass_kg, contact_kappa_n_m1p5, precompression_n, damping_rate_per_s, eta_s=0.0):
+        require_float64("DrivenChain")
         self.bead_mass_kg = jnp.atleast_1d(jnp.asarray(bead_mass_kg, dtype=jnp.float64))
         n = self.bead_mass_kg.shape[0]
         self.contact_kappa_n_m1p5 = jnp.asarray(contact_kappa_n_m1p5, dtype=jnp.float64)
