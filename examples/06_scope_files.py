@@ -1,5 +1,5 @@
 # %% [markdown]
-# # 7. Your own data: from oscilloscope files to η, μ, C and a diagnosis
+# # 6. Your own data: from oscilloscope files to η, μ, C and a diagnosis
 #
 # A lab's shots come off the scope in volts: a pre-trigger segment, a DC offset on each
 # channel, 12-bit steps, the sensors' sensitivities in the notebook. Here a stand-in for the
@@ -28,7 +28,7 @@ from fitting.diagnosis_report import write_diagnosis_report
 from fitting.report import write_report
 
 SMALL = os.environ.get("HERTZCHAIN_EXAMPLE_SMALL") == "1"
-OUT = Path(os.environ.get("HERTZCHAIN_EXAMPLE_OUT", "out/examples")) / "07_scope_files"
+OUT = Path(os.environ.get("HERTZCHAIN_EXAMPLE_OUT", "out/examples")) / "06_scope_files"
 OUT.mkdir(parents=True, exist_ok=True)
 
 # %% [markdown]
