@@ -30,8 +30,8 @@ def _docstring(module_name: str) -> str:
 
 def _markdown_of_docstring(text: str) -> str:
     """A docstring as Markdown: reST literal blocks (`::` and an indented block) become
-    fenced code, the first line (the command's synopsis) is dropped (the page shows it)."""
-    lines = text.splitlines()[1:]
+    fenced code."""
+    lines = text.splitlines()
     out, index = [], 0
     while index < len(lines):
         line = lines[index]
