@@ -1,7 +1,7 @@
 """Benchmark of `fitting.posterior`: eta, mu, C with the lab's tolerances on 10 traces of
 the paper's 21-bead chain (the data of `benchmarks/fit_bench.py`).
 
-    python benchmarks/posterior_bench.py [--out posterior_bench.json] [--traces 10]
+    python benchmarks/posterior_bench.py [--out benchmarks/results/posterior_bench/latest.json] [--traces 10]
         [--chains 4] [--warmup 100] [--draws 200]
 
 Measured:

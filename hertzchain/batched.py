@@ -113,7 +113,7 @@ class KernelFlags(NamedTuple):
     # conservative chain (laws other than Hertz's, `native.kernel_for`), whose books come in
     # and out in that layout. The JAX kernel keeps the conservative one for those chains: in
     # the full one an undamped Jackson-Green sweep took 18.2 s against 3.9 s
-    # (`benchmarks/results/plastic_kernel/jackson_green_kernel.json`, `jax_full_state`).
+    # (`benchmarks/results/law_kernel/jackson_green/latest.json`, `jax_full_state`).
     full_step: bool = False
     # Beads K (1..N-1) with an embedded sensor in compliance form (`compliant_sensor`; their
     # strengths are `record_batched`'s `compliant_sensors`): the full step only, without the

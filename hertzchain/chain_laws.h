@@ -119,7 +119,7 @@ HC_HD inline double ContactDashpot(double k, double dashpot) { return k > 0.0 ? 
 // linearisation. Branch-free (selects only): sqrt(0) = 0 is the root out of contact, as
 // `contact` has it, where elastic = viscous = 0; a dashpot would push there, so with one the
 // total is also 0 out of contact. kDashpot is a compile-time switch: its terms cost every
-// damped run about 17 % (`benchmarks/results/dashpot_in_cpp_kernel_not_kept.md`), so only
+// damped run about 17 % (`benchmarks/results/dashpot_kernel/history/dashpot_in_cpp_kernel_not_kept.md`), so only
 // the runs that have a dashpot carry them.
 // `TotalForce` about a given elastic force (`elastic`, N; the root sqrt(dl_+) `rt`): the
 // damped sum, clipped, plus the spring (kExtras).

@@ -94,7 +94,7 @@ COUPLINGS = ("ac", "dc")
 # correlated and signal-dependent: the quantisation theorem's white, uniform error model holds
 # for a normal input once its sigma reaches about half a step (Widrow & Kollar, Quantization
 # Noise, 2008, ch. 11), not below. Measured on 8-bit AC-coupled files of a second generator
-# (benchmarks/results/scope_noise_tek8bit_*.json): at 0.25 step the white-noise standard
+# (benchmarks/results/scope_files/noise*/): at 0.25 step the white-noise standard
 # errors were 0.58-0.81 of the spread over seeds, at 1 step 0.85-1.13; the value is the
 # theorem's, not fitted between the two.
 DITHER_STEPS = 0.5

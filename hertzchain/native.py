@@ -93,7 +93,8 @@ FULL_TARGET = "hertzchain_chain_full_forward"
 TANGENT_TARGET = "hertzchain_chain_full_tangent"
 BOOKS_TARGET = "hertzchain_chain_full_books"
 # The full kernel with a linear dashpot: its terms compiled in for its runs alone (they cost
-# every damped run ~17 % as a runtime term, `benchmarks/results/dashpot_in_cpp_kernel_not_kept.md`),
+# every damped run ~17 % as a runtime term,
+# `benchmarks/results/dashpot_kernel/history/dashpot_in_cpp_kernel_not_kept.md`),
 # in a library of their own (`-D` DASHPOT_DEFINE) built on first use, so that the main
 # library every run needs does not wait for them (36 s -> 50 s when built into it, 2 cores).
 DASHPOT_DEFINE = "HC_DASHPOT_LIBRARY"
@@ -128,8 +129,8 @@ ARCH_VARIABLE = "HERTZCHAIN_NATIVE_ARCH"
 # under a condition (the slopes of the friction kick and of the clipped force in the
 # tangent run) and leaves those loops scalar; -fno-trapping-math lets it compute both
 # sides and select. The IEEE results are the same (exceptions are never read here). The
-# AVX2 build's fit iteration went from 59.1 to 34.1 ms (`benchmarks/results/
-# epyc-avx512-as-avx2-2cores-quick-malloc/` and `...-quick-trapping/`); the AVX-512 build
+# AVX2 build's fit iteration went from 59.1 to 34.1 ms (`benchmarks/results/run/
+# quick_avx2/history/epyc-avx512-as-avx2-2cores-quick-malloc/` and `...-quick-trapping/`); the AVX-512 build
 # ran its tangents a few per cent slower with it, so it keeps the default.
 UNMASKED_FLAGS = ("-fno-trapping-math",)
 
@@ -306,7 +307,7 @@ def _keep_freed_buffers() -> bool:
     By default glibc maps each such buffer anew and unmaps it when freed, and its own
     adaptive threshold settles only after some runs: every page of the traces is then
     faulted in and zeroed again at each run. Measured on the standard damped case (N = 21,
-    B = 1024, 2500 steps, 2 cores; `benchmarks/results/allocation_2cores/`): about 15
+    B = 1024, 2500 steps, 2 cores; `benchmarks/results/allocation/`): about 15
     thousand page faults per run and 0.90-0.98e9 bead-steps/s, against 3 faults and
     1.27-1.32e9 once freed buffers are reused. Process-wide (malloc has no per-caller
     setting), the memory kept is at most `KEPT_FREE_BYTES`; `HERTZCHAIN_MALLOC_TUNING=0`
