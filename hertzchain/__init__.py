@@ -29,7 +29,9 @@ from .materials import MATERIALS, Material, material  # noqa: E402
 from .timegrid import TimeGrid, choose_time_grid, shortest_contact_time_s  # noqa: E402
 from .traces import Traces  # noqa: E402
 
-__version__ = "0.1.0"
+from ._version import installed_version  # noqa: E402
+
+__version__ = installed_version()
 
 __all__ = [
     "ChainModel",

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import pytest
 
+import hertzchain
 from hertzchain.cli import main
 
 
@@ -14,3 +15,4 @@ def test_version_is_the_declared_one(capsys):
         main(["--version"])
     assert stop.value.code == 0
     assert capsys.readouterr().out.strip() == f"hertzchain {declared['project']['version']}"
+    assert hertzchain.__version__ == declared["project"]["version"]

@@ -13,6 +13,7 @@ import importlib
 import os
 import sys
 
+from .. import __version__
 from .errors import EXIT_CODES, input_error_text
 from .warning_format import command_warnings
 
@@ -57,23 +58,6 @@ def expose_cpu_cores() -> None:
         pass
 
 
-def installed_version() -> str:
-    """The version of the installed `hertzchain` distribution (its metadata), or of
-    `pyproject.toml` beside the package when it runs from a checkout that is not installed."""
-    from importlib import metadata
-
-    try:
-        return metadata.version("hertzchain")
-    except metadata.PackageNotFoundError:
-        import tomllib
-        from pathlib import Path
-
-        pyproject = Path(__file__).resolve().parents[2] / "pyproject.toml"
-        if pyproject.is_file():
-            return tomllib.loads(pyproject.read_text())["project"]["version"]
-        return "unknown"
-
-
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv and argv[0] in CORES_AS_DEVICES:
@@ -84,7 +68,7 @@ def main(argv=None) -> int:
         "(Job, Melo, Sokolow, Sen, PRL 94, 178002, 2005).",
         epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--version", action="version", version=f"hertzchain {installed_version()}")
+    parser.add_argument("--version", action="version", version=f"hertzchain {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     chosen = argv[0] if argv and argv[0] in COMMANDS else None
     module = None
