@@ -52,14 +52,26 @@ class TimeGrid(NamedTuple):
         return self.steps_per_sample * self.n_samples
 
 
+def _reduced_striker_mass_kg(setup: ChainSetup):
+    bead_mass = setup.bead_mass_kg
+    return setup.striker_mass_kg * bead_mass[0] / (setup.striker_mass_kg + bead_mass[0])
+
+
+def peak_force_estimate_n(setup: ChainSetup):
+    """Largest contact force one (unbatched) setup can produce, N (jnp): 2.5 times the peak
+    of the striker's Hertz collision with bead 1, plus the preload."""
+    kappa = setup.contact_kappa()[0]
+    overlap = (1.25 * _reduced_striker_mass_kg(setup) * setup.striker_velocity_m_s**2 / kappa) ** 0.4
+    return _FORCE_MARGIN * kappa * overlap**1.5 + setup.precompression_n
+
+
 def _contact_times(setup: ChainSetup):
     """Contact-time estimates of one (unbatched) setup, s, as a 1-D array (jnp)."""
     bead_mass = setup.bead_mass_kg
     kappa = setup.contact_kappa()
-    reduced_striker = setup.striker_mass_kg * bead_mass[0] / (setup.striker_mass_kg + bead_mass[0])
+    reduced_striker = _reduced_striker_mass_kg(setup)
     velocity = setup.striker_velocity_m_s
-    overlap = (1.25 * reduced_striker * velocity**2 / kappa[0]) ** 0.4
-    peak = _FORCE_MARGIN * kappa[0] * overlap**1.5 + setup.precompression_n
+    peak = peak_force_estimate_n(setup)
     times = [contact.collision_time(reduced_striker, kappa[0], velocity)]
     loaded = [(0.5 * jnp.min(bead_mass), jnp.max(kappa))]
     if setup.end == "wall":

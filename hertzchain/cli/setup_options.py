@@ -7,6 +7,7 @@ import argparse
 from ..chain import PLASTIC_LAWS, ChainSetup
 from ..materials import material
 from ..units import parse_quantity
+from ..validation import check_plausible
 
 # (option, ChainSetup field, unit, help)
 _QUANTITIES = (
@@ -62,6 +63,7 @@ def setup_from_args(args: argparse.Namespace) -> ChainSetup:
         text = getattr(args, option.lstrip("-").replace("-", "_"))
         if text is not None:
             values[field] = parse_quantity(text, unit, name=option)
+            check_plausible(field, values[field], where=option)
     if args.wall_material:
         if "wall_youngs_pa" in values:
             raise ValueError("Give --wall-material or --wall-youngs, not both.")
