@@ -29,7 +29,8 @@ last recorded contact over the difference of their arrival times); `incident_pea
 pulse at the last recorded contact); `force_ratio` (wall peak / incident peak);
 `energy_error_rel`, `dissipated_fraction`, `final_energy_fraction` (the energy balance at
 the end, relative to the impact energy); `peak_over_yield` (the largest ratio of a contact's
-peak force to its yield force, `ChainSetup.contact_yield_force_n`) and `result_finite`
+peak force to its yield force, `ChainSetup.contact_yield_force_n`) and
+`peak_over_yield_contact` (that contact; N: the wall), `result_finite`
 (every peak force and energy finite: a row with false is not a result); then `setup_sha256`
 (the hash of the base setup) and `setup.<field>`, the value of every field of the base
 setup that is not swept and has one value (per-bead arrays of equal beads included), so
@@ -426,11 +427,18 @@ def _result_finite(columns: dict) -> np.ndarray:
     return np.all(np.stack([np.isfinite(np.asarray(columns[k], dtype=float)) for k in keys]), axis=0)
 
 
-def _peak_over_yield(setup: ChainSetup, out: BatchedTraces) -> np.ndarray:
-    """Largest peak force / yield force over the contacts and the wall, per run (batched setup)."""
-    yield_force = np.asarray(jax.vmap(lambda s: s.contact_yield_force_n())(setup))
+# Yield force of contacts 0..N-1 and the wall of each setup of a batch (one compiled program).
+_yield_forces_n = jax.jit(jax.vmap(ChainSetup.contact_yield_force_n))
+
+
+def _peak_over_yield(setup: ChainSetup, out: BatchedTraces) -> dict[str, np.ndarray]:
+    """`peak_over_yield`, the largest peak force / yield force over the contacts and the wall
+    of each run (batched setup), and `peak_over_yield_contact`, where (N: the wall)."""
+    yield_force = np.asarray(_yield_forces_n(setup))
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.max(np.asarray(out.max_force_n) / yield_force, axis=1)
+        ratio = np.nan_to_num(np.asarray(out.max_force_n) / yield_force, nan=0.0)
+    return {"peak_over_yield": np.max(ratio, axis=1),
+            "peak_over_yield_contact": np.argmax(ratio, axis=1).astype(np.int64)}
 
 
 def run_sweep(
@@ -525,7 +533,7 @@ def run_sweep(
         columns = {"run": np.arange(start, stop, dtype=np.int64)}
         columns.update({name: values[start:stop] for name, values in inputs.items()})
         columns.update(summarize(spec.setup, spec.contacts, out))
-        columns["peak_over_yield"] = _peak_over_yield(setup, out)
+        columns.update(_peak_over_yield(setup, out))
         columns["result_finite"] = _result_finite(columns)
         _write_parquet(_chunk_path(folder, index), columns, _chunk_metadata(sweep_sha256, index, start, stop))
         if bar:
@@ -561,19 +569,22 @@ def nonfinite_runs(table: dict) -> np.ndarray:
     return np.asarray(table["run"])[~np.asarray(table["result_finite"], dtype=bool)]
 
 
-def yield_notice(table: dict, setup: ChainSetup) -> str | None:
+def table_yield_notice(table: dict, setup: ChainSetup) -> str | None:
     """One line naming the runs of a sweep table whose peak force exceeded a contact's yield
-    force, when the contacts are modelled elastic (else None)."""
+    force and those contacts, when the contacts are modelled elastic (else None)."""
     if setup.plasticity or "peak_over_yield" not in table:
         return None
     ratio = np.asarray(table["peak_over_yield"], dtype=float)
-    over = np.asarray(table["run"])[ratio > 1.0]
-    if not over.size:
+    over = ratio > 1.0
+    if not np.any(over):
         return None
+    where = sorted({int(k) for k in np.asarray(table["peak_over_yield_contact"])[over]})
+    names = ", ".join("the wall" if k == setup.n_beads else f"contact {k}" for k in where)
     return (
-        f"{over.size} of {ratio.size} runs exceed a contact's yield force (peak/yield up to "
-        f"{np.nanmax(ratio):.3g}; column peak_over_yield): those contacts would deform plastically; "
-        "add --plasticity thornton (or jackson_green) to model it, or lower the impact velocity."
+        f"{int(np.sum(over))} of {ratio.size} runs exceed the yield force of {names} (peak/yield up to "
+        f"{np.max(ratio):.3g}; columns peak_over_yield, peak_over_yield_contact): those contacts deform "
+        "plastically, which the elastic model does not describe; add --plasticity thornton (or jackson_green) "
+        "to model it, or lower the impact velocity."
     )
 
 

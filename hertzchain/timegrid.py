@@ -11,6 +11,7 @@ coarser than 1/20 of the shortest contact time is refused.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -92,12 +93,17 @@ def shortest_contact_time_s(setup: ChainSetup) -> float:
     and half the period of any embedded sensor. A batched setup (leading axes on every
     field) gives the minimum over the batch.
     """
-    batch_ndim = jnp.ndim(setup.striker_velocity_m_s)
-    times = _contact_times
-    for _ in range(batch_ndim):
-        times = jax.vmap(times)
     # one compiled program: run op by op, the estimate compiles each of its ~30 operations apart
-    return float(np.min(np.asarray(jax.jit(times)(setup))))
+    return float(np.min(np.asarray(batched_program(_contact_times, jnp.ndim(setup.striker_velocity_m_s))(setup))))
+
+
+@functools.lru_cache(maxsize=None)
+def batched_program(function, batch_ndim: int):
+    """`function` of one setup, vmapped over `batch_ndim` leading axes and jitted: built once
+    per batch rank, so that JAX's cache of compiled programs finds it again."""
+    for _ in range(batch_ndim):
+        function = jax.vmap(function)
+    return jax.jit(function)
 
 
 def _check_resolution(dt_s: float, t_contact_s: float) -> None:

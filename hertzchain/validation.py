@@ -210,13 +210,9 @@ def damping_rate_1_s(setup) -> float:
     keeps the overlaps below the elastic peak's: the same chain is within 3e-4 of the finer
     step up to 4 times the bound, 34 % off at 10 times and reaches infinite forces at 100 times.
     """
-    import jax
-    import jax.numpy as jnp
+    from .timegrid import batched_program
 
-    rate = _damping_rate_one
-    for _ in range(jnp.ndim(setup.striker_velocity_m_s)):
-        rate = jax.vmap(rate)
-    return float(np.max(np.asarray(jax.jit(rate)(setup))))
+    return float(np.max(np.asarray(batched_program(_damping_rate_one, np.ndim(setup.striker_velocity_m_s))(setup))))
 
 
 def _damping_rate_one(setup):
@@ -337,3 +333,38 @@ def check_simulation_size(setup, options: dict) -> None:
     n_bodies = setup.n_beads + 1 + len(setup.sensor_beads)
     check_run_size(estimate_run_size(n_runs_in_memory=1, n_runs=1, n_bodies=n_bodies, n_channels=4 * n_bodies + 2,
                                      n_samples=grid.n_samples, n_steps=grid.n_steps))
+
+
+# -- yield -----------------------------------------------------------------------------------
+
+def yield_velocity_m_s(setup) -> float:
+    """Impact velocity at which the striker's Hertz collision with bead 1 reaches the yield
+    force of contact 0 (`ChainSetup.contact_yield_force_n`), m/s (inf: no yield stress).
+
+    From $\\tfrac12 m^* v^2 = \\tfrac25\\kappa\\delta^{5/2}$ at $\\kappa\\delta^{3/2} = F_Y$
+    (`contact.velocity_for_peak_force`). Faster shots deform that contact plastically."""
+    from . import contact
+
+    striker, bead = float(setup.striker_mass_kg), float(setup.bead_mass_kg[0])
+    yield_force = float(setup.contact_yield_force_n()[0])
+    if not math.isfinite(yield_force):
+        return math.inf
+    kappa = float(setup.contact_kappa()[0])
+    return float(contact.velocity_for_peak_force(striker * bead / (striker + bead), kappa, yield_force))
+
+
+def yield_notice(setup, velocities_m_s, *, what: str = "shots") -> str | None:
+    """One line naming the impact velocities beyond `yield_velocity_m_s` of an elastic setup
+    and the option that models them, or None (none beyond, or `plasticity` on)."""
+    if setup.plasticity:
+        return None
+    limit = yield_velocity_m_s(setup)
+    over = sorted({float(v) for v in velocities_m_s if v > limit})
+    if not over:
+        return None
+    return (
+        f"{what} at {', '.join(f'{v:g}' for v in over)} m/s exceed the yield force of contact 0 (striker on bead 1: "
+        f"{float(setup.contact_yield_force_n()[0]):.4g} N, reached above {limit:.3g} m/s): that contact deforms "
+        "plastically, which the elastic model does not describe; add --plasticity thornton (or jackson_green) to "
+        "model it, or keep the velocities below the limit."
+    )

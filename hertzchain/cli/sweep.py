@@ -14,7 +14,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..sweep import SweepSpec, nonfinite_runs, parse_grid, run_sweep, yield_notice
+from ..sweep import SweepSpec, nonfinite_runs, parse_grid, run_sweep, table_yield_notice
 from ..units import parse_quantity
 from ..validation import check_plausible
 from .setup_options import add_run_arguments, add_setup_arguments, setup_from_args
@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"wrote {result.folder / 'sweep.csv'} and {result.folder / 'sweep.parquet'} "
           f"({len(result.table['run'])} runs, {result.computed} chunks computed now)")
-    notice = yield_notice(result.table, setup)
+    notice = table_yield_notice(result.table, setup)
     if notice:
         print(f"hertzchain sweep: warning: {notice}", file=sys.stderr)
     failed = nonfinite_runs(result.table)
