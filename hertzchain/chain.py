@@ -20,6 +20,7 @@ import numpy as np
 
 from . import contact
 from .materials import BEAD_STEEL
+from .validation import check_setup, check_values
 
 ENDS = ("wall", "free")
 PLASTIC_LAWS = ("thornton", "jackson_green")
@@ -34,17 +35,6 @@ def _as_float(value, name: str):
         return jnp.asarray(value, dtype=jnp.float64)
     except (TypeError, ValueError) as error:
         raise ValueError(f"{name} must be a number (SI units), got {value!r}.") from error
-
-
-def _check(name: str, value, ok, requirement: str) -> None:
-    """Raise a ValueError naming `name` if a concrete `value` fails `ok(value)`."""
-    if not _is_concrete(value):
-        return
-    array = np.asarray(value, dtype=float)
-    if np.any(np.isnan(array)):
-        raise ValueError(f"{name} contains NaN; give {requirement}.")
-    if not np.all(ok(array)):
-        raise ValueError(f"{name} must be {requirement}, got {array.tolist()}.")
 
 
 class ChainSetup(eqx.Module):
@@ -182,10 +172,10 @@ class ChainSetup(eqx.Module):
             return array
 
         radius = per_bead(bead_radius_m, "bead_radius_m")
-        _check("bead_radius_m", radius, lambda r: np.isfinite(r) & (r > 0), "positive and finite (m)")
+        check_values("bead_radius_m", radius)
         if bead_mass_kg is not None:
             mass = per_bead(bead_mass_kg, "bead_mass_kg")
-            _check("bead_mass_kg", mass, lambda m: np.isfinite(m) & (m > 0), "positive (kg)")
+            check_values("bead_mass_kg", mass)
             density = mass / (4.0 / 3.0 * jnp.pi * radius**3)
         else:
             density = per_bead(bead_density_kg_m3, "bead_density_kg_m3")
@@ -206,7 +196,7 @@ class ChainSetup(eqx.Module):
             raise ValueError("Give striker_mass_kg or striker_radius_m, not both.")
         if striker_mass_kg is not None:
             striker_mass = _as_float(striker_mass_kg, "striker_mass_kg")
-            _check("striker_mass_kg", striker_mass, lambda m: m > 0, "positive (kg)")
+            check_values("striker_mass_kg", striker_mass)
             striker_radius_m = (3.0 * striker_mass / (4.0 * jnp.pi * self.striker_density_kg_m3)) ** (
                 1.0 / 3.0
             )
@@ -251,37 +241,7 @@ class ChainSetup(eqx.Module):
                              "the elastic-plastic law is built on Hertz contacts.")
 
     def __check_init__(self):
-        positive_finite = lambda x: np.isfinite(x) & (x > 0)  # noqa: E731
-        poisson_range = lambda x: (x > -1.0) & (x < 0.5)  # noqa: E731
-        _check("bead_density_kg_m3", self.bead_density_kg_m3, positive_finite, "positive (kg/m^3)")
-        _check("bead_youngs_pa", self.bead_youngs_pa, positive_finite, "positive and finite (Pa)")
-        _check("bead_poisson", self.bead_poisson, poisson_range, "in (-1, 0.5)")
-        _check("bead_yield_stress_pa", self.bead_yield_stress_pa, lambda x: x > 0, "positive (Pa)")
-        _check("striker_radius_m", self.striker_radius_m, positive_finite, "positive and finite (m)")
-        _check("striker_density_kg_m3", self.striker_density_kg_m3, positive_finite, "positive")
-        _check("striker_youngs_pa", self.striker_youngs_pa, positive_finite, "positive (Pa)")
-        _check("striker_poisson", self.striker_poisson, poisson_range, "in (-1, 0.5)")
-        _check(
-            "striker_velocity_m_s",
-            self.striker_velocity_m_s,
-            positive_finite,
-            "positive and finite (m/s; the striker moves towards bead 1)",
-        )
-        _check("wall_youngs_pa", self.wall_youngs_pa, lambda x: x > 0, "positive (Pa; inf = rigid)")
-        _check("wall_poisson", self.wall_poisson, poisson_range, "in (-1, 0.5)")
-        _check("eta_s", self.eta_s, lambda x: np.isfinite(x) & (x >= 0), "non-negative (s)")
-        _check("dashpot_n_s_m", self.dashpot_n_s_m, lambda x: np.isfinite(x) & (x >= 0),
-               "non-negative (N s/m)")
-        _check("contact_exponent", self.contact_exponent, lambda x: np.isfinite(x) & (x >= 1.0) & (x <= 3.0),
-               "between 1 and 3 (Hertz: 1.5)")
-        _check("exponent_reference_overlap_m", self.exponent_reference_overlap_m, positive_finite,
-               "positive (m)")
-        _check("mu", self.mu, lambda x: np.isfinite(x) & (x >= 0), "non-negative")
-        _check("mu_star", self.mu_star, lambda x: np.isfinite(x) & (x > -1), "greater than -1")
-        _check(
-            "precompression_n", self.precompression_n, lambda x: np.isfinite(x) & (x >= 0), ">= 0 (N)"
-        )
-        _check("gravity_m_s2", self.gravity_m_s2, lambda x: np.isfinite(x) & (x >= 0), ">= 0 (m/s^2)")
+        check_setup(self)
         for bead in self.sensor_beads:
             if not 1 <= bead <= self.n_beads:
                 raise ValueError(
@@ -289,9 +249,6 @@ class ChainSetup(eqx.Module):
                 )
         if len(set(self.sensor_beads)) != len(self.sensor_beads):
             raise ValueError(f"sensor_beads lists a bead twice: {self.sensor_beads}.")
-        if self.sensor_beads:
-            _check("sensor_beta", self.sensor_beta, lambda x: (x > 0) & (x < 1), "in (0, 1)")
-            _check("sensor_f0_hz", self.sensor_f0_hz, positive_finite, "positive (Hz)")
 
     @property
     def n_beads(self) -> int:

@@ -63,6 +63,7 @@ from .precision import require_float64
 from .progress import Progress
 from .timegrid import DEFAULT_STEPS_PER_CONTACT, TimeGrid, choose_time_grid
 from .traces import Traces
+from .validation import check_step_stability, check_values
 
 
 class YieldWarning(UserWarning):
@@ -482,6 +483,9 @@ def simulate(
       then run in chunks.
 
     **Returns:** `Traces`.
+
+    **Raises:** `ValueError` before running when the damping (`eta_s`, `dashpot_n_s_m`) is
+    beyond the stability of the step (`validation.check_step_stability`).
     """
     require_float64("simulate")
     recording = Recording(tuple(int(k) for k in contacts), bool(record_all))
@@ -490,6 +494,7 @@ def simulate(
         setup, t_end_s=t_end_s, sample_interval_s=sample_interval_s, dt_s=dt_s,
         steps_per_contact=steps_per_contact,
     )
+    check_step_stability(setup, grid.dt_s)
     if progress and grid.n_steps > _PROGRESS_STEPS:
         traces = _solve_with_progress(setup, grid, recording, unroll)
     else:
@@ -508,6 +513,7 @@ def batch_setup(setup: ChainSetup, **values) -> tuple[ChainSetup, tuple[int, ...
     for name in values:
         if not hasattr(setup, name) or name in ("end", "sensor_beads"):
             raise ValueError(f"Cannot sweep over {name!r}: not a numeric field of ChainSetup.")
+        check_values(name, values[name])
     axes = [np.asarray(v, dtype=float).ravel() for v in values.values()]
     shape = tuple(len(a) for a in axes)
     mesh = np.meshgrid(*axes, indexing="ij")
@@ -574,6 +580,7 @@ def simulate_batch(setup: ChainSetup, *, t_end_s: float = 2.5e-3, sample_interva
         batched, t_end_s=t_end_s, sample_interval_s=sample_interval_s, dt_s=dt_s,
         steps_per_contact=steps_per_contact,
     )
+    check_step_stability(batched, grid.dt_s)
     traces = solve_stacked(batched, grid, recording, unroll)
     check_yield(traces, on_yield, plastic=setup.plasticity)
     return jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), traces)

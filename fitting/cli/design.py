@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,7 @@ import numpy as np
 from hertzchain.atomic import save_figure, write_json, write_text
 from hertzchain.cli.setup_options import add_setup_arguments, chain_from_args
 from hertzchain.units import parse_quantity
+from hertzchain.validation import yield_notice
 
 from ..data import load_experiments
 from ..design import (
@@ -134,6 +136,9 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError("the plan records no channel: give --contacts, --sensors or keep the wall.")
         print(f"simulating the plan: {len(velocities)} shot(s), channels {', '.join(channels)} ...",
               flush=True)
+        notice = yield_notice(setup, velocities, what="the plan's shots")
+        if notice:
+            print(f"hertzchain design: warning: {notice}", file=sys.stderr)
         plan = plan_experiments(setup, velocities, channels=channels, noise_std_n=noise,
                                 sample_interval_s=interval, t_end_s=t_end, coupling=args.coupling)
         baseline_units = [(v, c) for v in velocities for c in channels]
@@ -176,6 +181,9 @@ def run(args: argparse.Namespace) -> int:
         data["optimization"] = optimization.to_json()
         chosen = ", ".join(f"{c} at {v:g} m/s" for v, c in optimization.chosen)
         print(f"  recommended: {chosen}")
+        notice = yield_notice(base, [v for v, _ in optimization.chosen], what="recommended shots")
+        if notice:
+            print(f"hertzchain design: warning: {notice}", file=sys.stderr)
     if args.check_fits:
         check = {"given_plan": fit_scatter(plan, params, values=values, nuisances=nuisances,
                                            n_seeds=args.check_fits).to_json()}

@@ -20,6 +20,7 @@ from ..materials import BEAD_STEEL, Material, material
 from ..sweep import default_contacts
 from ..tracefile import REDUNDANT_TOLERANCE
 from ..units import format_si, parse_field, parse_quantity
+from ..validation import check_plausible
 
 # (option, ChainSetup field, help); the value's unit is the one the field's name carries.
 _QUANTITIES = (
@@ -229,6 +230,7 @@ def chain_from_args(args: argparse.Namespace) -> ChainChoice:
         text = getattr(args, option.lstrip("-").replace("-", "_"))
         if text is not None:
             options[field] = parse_field(field, text, where=option)
+            check_plausible(field, options[field], where=option)
             take({field: options[field]}, option)
     if "striker_mass_kg" in options and "striker_radius_m" not in options:
         sources.pop("striker_radius_m", None)  # a mass on the command line replaces the file's radius

@@ -12,6 +12,7 @@ from ..atomic import save_figure, write_json
 from ..integrate import simulate
 from ..summary import run_summary
 from ..tracefile import TraceFile, setup_header, validate_header, write_trace
+from ..validation import check_simulation_size
 from .setup_options import add_run_arguments, add_setup_arguments, chain_from_args, run_options
 
 DESCRIPTION = (
@@ -34,6 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "since before the impact (a static --precompression is not in them) [dc]",
     )
     parser.add_argument("--out", default="out/simulate", help="output folder [out/simulate]")
+    parser.add_argument("--yes", action="store_true",
+                        help="run even when the run needs more memory than is available or more than 1e10 "
+                        "bead-steps")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -42,6 +46,8 @@ def run(args: argparse.Namespace) -> int:
     header = setup_header(setup)
     validate_header(header, "setup")
     options = run_options(args, setup.n_beads)
+    if not args.yes:
+        check_simulation_size(setup, options)
     print(
         f"simulating {setup.n_beads} beads, impact {float(setup.striker_velocity_m_s):g} m/s, "
         f"{options['t_end_s'] * 1e3:g} ms ...",

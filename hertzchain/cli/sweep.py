@@ -11,10 +11,12 @@ Run the same command again after an interruption: finished chunks are kept.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
-from ..sweep import SweepSpec, parse_grid, run_sweep
+from ..sweep import SweepSpec, nonfinite_runs, parse_grid, run_sweep, table_yield_notice
 from ..units import parse_quantity
+from ..validation import check_plausible
 from .setup_options import add_run_arguments, add_setup_arguments, chain_from_args
 
 
@@ -45,6 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--num-processes", type=int, help="with --distributed: number of processes P")
     parser.add_argument("--process-id", type=int, help="with --distributed: this process's index, 0..P-1")
     parser.add_argument("--no-plots", action="store_true", help="do not draw the summary plots")
+    parser.add_argument("--yes", action="store_true",
+                        help="run even when the sweep needs more memory than is available or more than 1e10 "
+                        "bead-steps")
 
 
 def start_distributed(args: argparse.Namespace) -> None:
@@ -82,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
     chain = chain_from_args(args)
     setup = chain.setup
     grid = dict(parse_grid(text) for text in args.grid)
+    for name, values in grid.items():
+        check_plausible(name, values, where="--grid")
     spec = SweepSpec(
         setup=setup,
         grid=grid,
@@ -100,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
         max_chunks=args.max_chunks,
         distributed=args.distributed,
         plots=not args.no_plots,
+        check_size=not args.yes,
     )
     if args.distributed and jax_process_index() != 0:
         print(f"process {jax_process_index()}: computed {result.computed} chunks; process 0 writes the table.",
@@ -113,4 +121,14 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"wrote {result.folder / 'sweep.csv'} and {result.folder / 'sweep.parquet'} "
           f"({len(result.table['run'])} runs, {result.computed} chunks computed now)")
+    notice = table_yield_notice(result.table, setup)
+    if notice:
+        print(f"hertzchain sweep: warning: {notice}", file=sys.stderr)
+    failed = nonfinite_runs(result.table)
+    if failed.size:
+        shown = ", ".join(str(run) for run in failed[:10]) + (" ..." if failed.size > 10 else "")
+        print(f"hertzchain sweep: error: {failed.size} of {len(result.table['run'])} runs gave non-finite forces "
+              f"or energies (runs {shown}; result_finite = 0 in sweep.csv): not results; narrow the grid or "
+              "give a smaller --dt.", file=sys.stderr)
+        return 3
     return 0
