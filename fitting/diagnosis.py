@@ -368,6 +368,8 @@ class Diagnosis:
     - `indistinguishable`: candidate pairs with |cos| > 0.95 of their projected sensitivities.
     - `misspecification`: True when the final excess misfit is above the noise band.
     - `conclusion`: one paragraph in words.
+    - `unconverged`: the fits the result rests on (named effects' refits, the fits adding
+      them, the final fit) that reached no optimum, in words; empty: `converged`.
     - `problem`, `x_base`, `x_final`: the problem and parameter vectors (predictions, plots).
     """
 
@@ -381,6 +383,7 @@ class Diagnosis:
     dropped_in_backward_check: list
     misspecification: bool
     conclusion: str
+    unconverged: list
     settings: dict
     problem: Problem
     x_base: np.ndarray
@@ -390,9 +393,16 @@ class Diagnosis:
     evaluation_seconds: float = 0.0
     residual_evaluations: int = 0
 
+    @property
+    def converged(self) -> bool:
+        """Whether every fit the result rests on reached an optimum."""
+        return not self.unconverged
+
     def to_json(self) -> dict:
         return json_ready({
             "missing_effects": list(self.missing_effects),
+            "converged": self.converged,
+            "unconverged_fits": list(self.unconverged),
             "steps": [s.to_json() for s in self.steps],
             "base_fit": self.base_fit,
             "final": self.final,
@@ -1021,8 +1031,9 @@ class _Workflow:
         dof = self.dof_of(self.accepted)
         excess = self.chi2 - dof
         at_noise = self.at_noise(self.chi2, dof, self.location)
-        return [self._verdict(c, excess, dof, at_noise) if c.separable and math.isfinite(c.delta_chi2) else c
-                for c in results]
+        judged = [self._verdict(c, excess, dof, at_noise) if c.separable and math.isfinite(c.delta_chi2) else c
+                  for c in results]
+        return judged if at_noise else [self._with_status(c) for c in judged]
 
     def _verdict(self, c: CandidateResult, excess, dof, at_noise) -> CandidateResult:
         """`c` with `passed`, `reason` and `heldout_gain` set by the checks of `heldout_check`."""
@@ -1051,6 +1062,17 @@ class _Workflow:
                     f"held-out chi^2 improves by only {heldout_gain:.4g} (needs {margin:.4g})"))
         return dataclasses.replace(c, heldout_gain=heldout_gain, passed=True,
                                    reason="passes BIC, practical-significance and held-out checks")
+
+    @staticmethod
+    def _with_status(c: CandidateResult) -> CandidateResult:
+        """`c` with its reason saying so when its refit did not converge: it is judged at its
+        last iterate, whose chi^2 is above the optimum's (the fit only descends), so its gain
+        is a lower bound: a pass stands, a rejection may not."""
+        if c.converged is not False:
+            return c
+        verdict = "named on a lower bound of its gain" if c.passed else "the rejection may not stand"
+        return dataclasses.replace(c, reason=f"{c.reason}; its refit did not converge within {c.steps} steps "
+                                             f"({verdict})")
 
     def name(self, passed, results, location):
         """Add the candidate of `passed` with the largest held-out gain to the model, refit."""
@@ -1108,6 +1130,25 @@ class _Workflow:
                 self.x, self.chi2, self.status = x_wo, chi2_wo, _status(result)
 
     # --- 7. report ----------------------------------------------------------------------------------
+    def unconverged_fits(self, named) -> list[str]:
+        """The fits the result rests on that reached no optimum (`fitting.fit`'s test), in
+        words: each named effect's candidate refit (what its verdict judged) and the fit that
+        added it, and the final fit (the values reported)."""
+        notes = []
+        final_is_last = bool(self.steps) and not self.dropped
+        for k, step in enumerate(self.steps):
+            if step.effect not in named:
+                continue
+            winner = next((c for c in step.candidates if c.effect == step.effect), None)
+            if winner is not None and winner.converged is False:
+                notes.append(f"the refit of candidate {step.effect} ({winner.steps} steps)")
+            if step.status.get("converged") is False:
+                final = " (the final fit)" if final_is_last and k == len(self.steps) - 1 else ""
+                notes.append(f"the fit with {step.effect} added{final} ({step.status['steps']} steps)")
+        if not self.status["converged"] and not (final_is_last and self.steps[-1].status.get("converged") is False):
+            notes.append(f"the final fit ({self.status['steps']} steps)")
+        return notes
+
     def conclusion(self, named, final_location) -> tuple[bool, str, list]:
         """(misspecification alarm, the conclusion in words, where the final misfit lies)."""
         search, x, chi2 = self.search, self.x, self.chi2
@@ -1132,6 +1173,15 @@ class _Workflow:
                      f"it. Largest gaps: {'; '.join(where)}.")
         else:
             text += f" The final misfit is at the noise level (chi^2/dof = {chi2 / dof:.4g})."
+        unconverged = self.unconverged_fits(named)
+        if unconverged:
+            text += (f" NOT CONVERGED: {'; '.join(unconverged)} reached no optimum; the values reported are "
+                     "their last iterate's, and an effect named on such a refit stands on a lower bound of its "
+                     "gain (rerun with the named effects in --model to refit them).")
+        rejected = [c.effect for c in self.last_candidates if c.converged is False]
+        if rejected:
+            text += (f" Refits that did not converge, judged at their last iterate (their rejection may not "
+                     f"stand): {', '.join(rejected)}.")
         if self.not_separable:
             text += (f" Not separable from the free parameters and the named effects: "
                      f"{', '.join(sorted(self.not_separable))} (e.g. a uniform stiffness scale while both striker "
@@ -1158,6 +1208,7 @@ class _Workflow:
         named = [s.effect for s in self.steps if s.effect not in self.dropped]
         final_location = self.locate()
         alarm, text, where = self.conclusion(named, final_location)
+        unconverged = self.unconverged_fits(named)
         base_summary = self.summary(self.x_base, self.chi2_base, parse_model(self.model, search.n_beads),
                                     self.status_base)
         base_summary["location"] = (self.steps[0].location_before if self.steps else self.locate(self.x_base))
@@ -1175,6 +1226,7 @@ class _Workflow:
             dropped_in_backward_check=self.dropped,
             misspecification=bool(alarm),
             conclusion=text,
+            unconverged=unconverged,
             settings={
                 "model": self.model, "free": settings["free"], "nuisances": settings["nuisances"],
                 "candidates": search.candidates, "left_out": search.skipped, "max_effects": settings["max_effects"],

@@ -76,7 +76,7 @@ def run_fit(args) -> int:
 
 
 def run_diagnose(args) -> int:
-    """The driven branch of `hertzchain diagnose`."""
+    """The driven branch of `hertzchain diagnose` (exit 0 converged, 3 not converged)."""
     from .driven_diagnosis import diagnose_driven, write_driven_diagnosis
 
     _refuse(args, _DIAGNOSE_DEFAULTS, "diagnose")
@@ -87,4 +87,8 @@ def run_diagnose(args) -> int:
     print(f"missing effects: {', '.join(diagnosis['missing_effects']) or 'none'}")
     print(diagnosis["conclusion"])
     print(f"report: {paths[0]}")
+    if not diagnosis["converged"]:
+        print(f"hertzchain diagnose: error: no optimum reached by {'; '.join(diagnosis['unconverged_fits'])} "
+              "(their values are the last iterate's).", file=sys.stderr)
+        return 3
     return 0

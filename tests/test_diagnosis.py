@@ -3,6 +3,7 @@ workflow naming hidden effects (fast cases here; the per-candidate sweep is mark
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -13,7 +14,7 @@ import pytest
 
 import hertzchain  # noqa: F401
 from fitting import effects as fx
-from fitting.diagnosis import DiagnosisError, diagnose, parse_model
+from fitting.diagnosis import DiagnosisError, Step, diagnose, parse_model
 from fitting.diagnosis_report import write_diagnosis_report
 from fitting.hidden import NOMINAL, hidden_effect_traces, truth_fields
 from fitting.locate import cell, window_masks
@@ -262,6 +263,7 @@ def test_report_files(viscous_short, tmp_path):
     # the named model's refit starts where its candidate's fit ended, at its optimum, and stays
     assert step["converged"] is True and step["steps"] == 0
     assert payload["base_fit"]["converged"] is True and payload["final"]["converged"] is True
+    assert payload["converged"] is True and payload["unconverged_fits"] == []
     refitted = [c for c in step["candidates"] if c["chi2"] is not None]
     assert refitted and all(isinstance(c["converged"], bool) and c["steps"] > 0 for c in refitted)
     assert "viscous_damping" in paths["markdown"].read_text()
@@ -382,7 +384,7 @@ def test_contact_exponent_is_named_with_its_value():
 
 
 @pytest.mark.slow
-def test_command_line_writes_the_report(tmp_path):
+def test_command_line_writes_the_report(tmp_path, monkeypatch, capsys):
     from hertzchain.cli import main
     from hertzchain.tracefile import write_trace
 
@@ -397,7 +399,19 @@ def test_command_line_writes_the_report(tmp_path):
     payload = json.loads((out / "diagnosis.json").read_text())
     assert payload["missing_effects"] == ["track_friction"]
     assert payload["steps"][0]["gap_after"] < payload["steps"][0]["gap_before"]
+    assert payload["converged"] is True
     assert main(["diagnose", *paths, "--model", "base+nonsense", "--out", str(out)]) == 2
+    # fits held to one step reach no optimum: the command writes its report and exits 3, as fit does
+    from fitting import diagnosis
+    from fitting.fit import least_squares
+
+    monkeypatch.setattr(diagnosis, "least_squares", lambda *a, **k: least_squares(*a, **dict(k, max_steps=1)))
+    capsys.readouterr()
+    assert main(["diagnose", *paths, "--candidates", "track_friction", "--out", str(out), "--quiet"]) == 3
+    assert "hertzchain diagnose: error: no optimum reached by" in capsys.readouterr().err
+    payload = json.loads((out / "diagnosis.json").read_text())
+    assert payload["converged"] is False and "final fit" in " ".join(payload["unconverged_fits"])
+    assert "NOT CONVERGED" in payload["conclusion"]
 
 
 def test_local_band_sees_a_pulse_window_excess_that_a_low_global_chi2_hides():
@@ -417,3 +431,75 @@ def test_local_band_sees_a_pulse_window_excess_that_a_low_global_chi2_hides():
     chi2 = sum(c["chi2"] for c in cells)
     assert chi2 / n < 0.6 and chi2 - n <= NOISE_BAND_SIGMA * math.sqrt(2 * n)  # hidden globally
     assert max(c["excess_sigma"] for c in cells) > LOCAL_BAND_SIGMA  # seen locally
+
+
+class _CountingSearch:
+    """What `_Workflow`'s verdict and conclusion read of a search: two base columns and one per
+    strength, 1000 residuals, no folds (no held-out check), no law to interpret."""
+
+    n_beads = 6
+    folds: list = []
+    effect_columns = {"viscous_damping": [2], "track_friction": [3]}
+
+    class problem:  # noqa: N801
+        n_fitted = 1000
+
+    def columns(self, effects):
+        return [0, 1] + [c for e in effects for c in self.effect_columns[e]]
+
+    def interpret(self, *args):
+        return ""
+
+    def log(self, text):
+        pass
+
+
+def _step(effect, converged, steps, candidates):
+    location = {"worst": [], "by_frequency": {}}
+    return Step(effect=effect, gap_before=3.0, gap_after=1.0, chi2_before=3000.0, chi2_after=1000.0,
+                dof_before=998, dof_after=997, values={}, stderr={}, candidates=candidates,
+                location_before=location, location_after=location, x_before=np.zeros(4), x_after=np.zeros(4),
+                status={"converged": converged, "steps": steps})
+
+
+def test_a_refit_without_an_optimum_is_named_so_in_the_verdict_and_the_conclusion():
+    """A refit that reached no optimum: its verdict says so (a pass on a lower bound of its
+    gain, a rejection that may not stand), unless the misfit is at the noise level anyway;
+    the conclusion and `unconverged_fits` name the candidate's refit, the fit that added it
+    (once, as the final fit) and a rejected refit; converged fits are not named."""
+    from fitting.diagnosis import CandidateResult, _Workflow
+
+    run = _Workflow(_CountingSearch(), "base", min_share=0.2, max_refits=3, progress=False)
+    run.x, run.chi2, run.status = np.zeros(4), 3000.0, {"converged": True, "steps": 5}
+    penalty = math.log(1000)
+    strong = CandidateResult(effect="viscous_damping", n_parameters=1, score_chi2=2100.0, chi2=1000.0,
+                             delta_chi2=2000.0, bic_gain=2000.0 - penalty, share_of_excess=2000.0 / 2002.0,
+                             converged=False, steps=20, x=np.zeros(4))
+    weak = dataclasses.replace(strong, effect="track_friction", chi2=2990.0, delta_chi2=10.0,
+                               bic_gain=10.0 - penalty, share_of_excess=10.0 / 2002.0)
+    judged = {c.effect: c for c in run.heldout_check([strong, weak])}
+    assert judged["viscous_damping"].passed
+    assert "did not converge within 20 steps (named on a lower bound of its gain)" in judged["viscous_damping"].reason
+    assert not judged["track_friction"].passed
+    assert judged["track_friction"].reason.startswith("removes only 0.5 % of the excess misfit")
+    assert judged["track_friction"].reason.endswith("did not converge within 20 steps (the rejection may not stand)")
+    converged = dataclasses.replace(strong, converged=True)
+    assert "converge" not in run.heldout_check([converged])[0].reason
+    run.chi2 = 1000.0  # at the noise level: the verdict does not rest on the refit
+    assert run.heldout_check([strong])[0].reason == "the misfit is already at the noise level"
+
+    run.chi2, run.status = 1000.0, {"converged": False, "steps": 20}
+    run.steps = [_step("viscous_damping", False, 20, [judged["viscous_damping"]])]
+    run.accepted, run.last_candidates = ["viscous_damping"], [judged["track_friction"]]
+    notes = run.unconverged_fits(["viscous_damping"])
+    assert notes == ["the refit of candidate viscous_damping (20 steps)",
+                     "the fit with viscous_damping added (the final fit) (20 steps)"]
+    _, text, _ = run.conclusion(["viscous_damping"], {"worst": [], "by_frequency": {}})
+    assert "NOT CONVERGED: the refit of candidate viscous_damping (20 steps); the fit with" in text
+    assert "(their rejection may not stand): track_friction." in text
+    # everything converged: nothing said, nothing listed
+    run.status = {"converged": True, "steps": 3}
+    run.steps = [_step("viscous_damping", True, 3, [converged])]
+    run.last_candidates = [dataclasses.replace(judged["track_friction"], converged=True)]
+    assert run.unconverged_fits(["viscous_damping"]) == []
+    assert "converge" not in run.conclusion(["viscous_damping"], {"worst": [], "by_frequency": {}})[1]

@@ -2,7 +2,9 @@
 chain model is missing (see `fitting.diagnosis`).
 
 Writes `DIR/diagnosis.json` (`missing_effects` in the order found, `steps` with
-`gap_before`/`gap_after`), `diagnosis.md`, `gaps.csv`, `gap.png` and overlay PNGs.
+`gap_before`/`gap_after`, `converged` and `unconverged_fits`), `diagnosis.md`, `gaps.csv`,
+`gap.png` and overlay PNGs. Exits 3 when a fit the result rests on (a named effect's refit,
+the fit adding it, the final fit) reached no optimum, as `hertzchain fit` does.
 """
 
 from __future__ import annotations
@@ -13,12 +15,16 @@ import sys
 from fitting.effects import EFFECT_NAMES
 from fitting.model import STEPS_PER_CONTACT
 
+from . import EXIT_NOT_CONVERGED, exit_codes_epilog
+
 
 def _names(text: str) -> list[str]:
     return [part.strip() for part in text.split(",") if part.strip()]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = exit_codes_epilog("a fit the result rests on (a named effect's refit, the fit adding it, "
+                                      "the final fit; for driven files a named effect's fit) reached no optimum")
     parser.add_argument("files", nargs="+", metavar="FILE",
                         help="trace files (hertzchain-trace/1) or experiment files (.toml)")
     parser.add_argument("--model", default="base",
@@ -71,4 +77,8 @@ def run(args) -> int:
     print(f"missing effects: {', '.join(diagnosis.missing_effects) or 'none'}")
     print(diagnosis.conclusion)
     print(f"report: {paths['markdown']} (JSON {paths['json']})", file=sys.stderr if args.quiet else sys.stdout)
+    if not diagnosis.converged:
+        print(f"hertzchain diagnose: error: no optimum reached by {'; '.join(diagnosis.unconverged)}.",
+              file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     return 0
