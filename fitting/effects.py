@@ -416,6 +416,24 @@ def nominal_yield_forces_n(setup: ChainSetup) -> np.ndarray:
     return np.asarray(nominal.contact_yield_force_n(), dtype=float)
 
 
+def nominal_wall_youngs_pa(setup: ChainSetup) -> float:
+    """The wall's Young's modulus at wall_softening 0, Pa: the header's, a rigid wall's stand-in
+    (`_RIGID_WALL_FACTOR` times the last bead's) where the header has none."""
+    wall = float(setup.wall_youngs_pa)
+    return wall if math.isfinite(wall) else _RIGID_WALL_FACTOR * float(np.asarray(setup.bead_youngs_pa)[-1])
+
+
+def describe_wall(setup: ChainSetup, softening: float, softening_stderr: float) -> str:
+    """The fitted `wall_softening` in words: the wall's Young's modulus (GPa) with its standard
+    error (Y_w = Y_w,header e^-w, so sigma_Y = Y_w sigma_w), against the header's."""
+    nominal = nominal_wall_youngs_pa(setup)
+    wall = nominal * math.exp(-softening)
+    header = (f"header {nominal / 1e9:.4g} GPa" if math.isfinite(float(setup.wall_youngs_pa))
+              else "header: rigid")
+    return (f" wall_compliance: wall Young's modulus {wall / 1e9:.4g} +- {wall * softening_stderr / 1e9:.2g} GPa "
+            f"({header}).")
+
+
 def describe_plasticity(setup: ChainSetup, softening: float, softening_stderr: float) -> str:
     """The fitted `yield_softening` in words: the yield stress (MPa) with its standard error,
     and the force at which contacts between beads then leave Hertz (N)."""

@@ -439,6 +439,7 @@ class _CountingSearch:
 
     n_beads = 6
     folds: list = []
+    noise_estimate_variance = 0.0
     effect_columns = {"viscous_damping": [2], "track_friction": [3]}
 
     class problem:  # noqa: N801
@@ -503,3 +504,37 @@ def test_a_refit_without_an_optimum_is_named_so_in_the_verdict_and_the_conclusio
     run.last_candidates = [dataclasses.replace(judged["track_friction"], converged=True)]
     assert run.unconverged_fits(["viscous_damping"]) == []
     assert "converge" not in run.conclusion(["viscous_damping"], {"worst": [], "by_frequency": {}})[1]
+
+
+def test_noise_band_holds_chi2_whitened_by_noise_levels_estimated_from_pre_trigger_samples():
+    """The band of a model that holds, on white noise whitened by sigmas each estimated from m
+    samples (as the importer estimates them): 8 channels of 2650 samples, m = 250, 4000 draws
+    of chi^2 = sum_c X_c / s_c, X_c ~ chi^2(n), s_c ~ chi^2(m - 1) / (m - 1). The band with
+    `noise_estimate_variance` (read from the headers' `x_import_<channel>_noise_samples`) is left
+    in under 1 % of the draws; the band of 2 dof alone in about a third of the draws
+    (a false alarm at chi^2/dof ~ 1.03, as on imported scope files); a model 10 % off in
+    amplitude still leaves it."""
+    from fitting.data import make_experiment
+    from fitting.diagnosis import NOISE_BAND_SIGMA, noise_estimate_variance
+    from hertzchain.tracefile import TraceFile, setup_header
+
+    n, m, channels = 2650, 250, ("wall", "contact_5")
+    time = 1e-6 * np.arange(n)
+    pulse = 100.0 * np.exp(-(((time - 1e-3) / 2e-5) ** 2))  # a record the files' checks accept
+    stated_header = setup_header(ChainSetup(10, striker_velocity_m_s=0.1)) | {"noise_std_n": 1.0}
+    files = []
+    for shot in range(4):
+        header = stated_header | {f"x_import_{c}_noise_samples": str(m) for c in channels}
+        files.append(make_experiment(TraceFile(header, time, {c: pulse for c in channels})))
+    variance = noise_estimate_variance(files)
+    assert variance == pytest.approx(8 * 2 * n**2 / (m - 1), rel=1e-12)
+    rng = np.random.default_rng(11)
+    dof = 8 * n
+    chi2 = np.sum(rng.chisquare(n, (4000, 8)) / (rng.chisquare(m - 1, (4000, 8)) / (m - 1)), axis=1)
+    band = NOISE_BAND_SIGMA * math.sqrt(2 * dof + variance)
+    assert np.mean(chi2 - dof > band) < 0.01  # 0.5 %: 1 / s_c skews the tail beyond a normal's 0.13 %
+    assert np.mean(chi2 - dof > NOISE_BAND_SIGMA * math.sqrt(2 * dof)) > 0.25
+    assert 1.21 * dof - dof > band  # residuals 10 % too large: still an alarm
+    # a file that states its noise adds nothing
+    stated = make_experiment(TraceFile(stated_header, time, {"wall": pulse}))
+    assert noise_estimate_variance([stated]) == 0.0
