@@ -19,13 +19,15 @@ chain, its wall brass at 110 GPa):
     python benchmarks/diagnosis_second_path.py [--cases wall,plasticity] [--out DIR]
 
 Writes `DIR/latest.json` (default `benchmarks/results/diagnosis_second_path`): per case the
-effects named, the alarm, the convergence, the wall modulus or yield stress read, the run time.
+effects named, the alarm, the convergence, the wall modulus or yield stress read, the run time
+(`runtime_s`, the diagnosis from the records made), with the machine's load average.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -186,6 +188,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     cases = [c.strip() for c in args.cases.split(",") if c.strip()]
     results = {"setup": {SETUP: {k: v for k, v in SETUPS[SETUP].items() if k != "fields"}},
+               "cpu_count": os.cpu_count(), "load_average_1min_at_start": os.getloadavg()[0],
                "data": "0.5 % noise, 11 bits, 2 us, piezo channels, true header velocity, nominal header", "cases": {}}
     for case in cases:
         began = time.perf_counter()
@@ -209,6 +212,7 @@ def main(argv=None) -> int:
         results["cases"][case] = entry
         print(f"{case}: named {entry['named']} (alarm {entry['alarm']}, converged {entry['converged']}) "
               f"in {entry['runtime_s']:.0f} s", flush=True)
+    results["load_average_1min_at_end"] = os.getloadavg()[0]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "latest.json", json_ready(results))

@@ -538,3 +538,36 @@ def test_noise_band_holds_chi2_whitened_by_noise_levels_estimated_from_pre_trigg
     # a file that states its noise adds nothing
     stated = make_experiment(TraceFile(stated_header, time, {"wall": pulse}))
     assert noise_estimate_variance([stated]) == 0.0
+
+
+def _estimated_noise(files, samples: int, seed: int):
+    """`files` as the importer leaves them: each channel's noise sigma estimated from `samples`
+    noise-only samples (a pre-trigger segment), written with their count."""
+    rng = np.random.default_rng(seed)
+    for trace in files:
+        sigma = float(trace.header["noise_std_n"])
+        for name in trace.channels:
+            trace.header[f"noise_std_n_{name}"] = float(np.std(sigma * rng.standard_normal(samples), ddof=1))
+            trace.header[f"x_import_{name}_noise_samples"] = str(samples)
+    return files
+
+
+@pytest.mark.slow
+def test_noise_band_with_estimated_noise_no_alarm_when_the_model_holds_an_alarm_when_it_does_not():
+    """On a chain the rule was not tuned on (9 brass beads of 5 mm; the example's was 21 steel
+    beads), channels whitened by noise levels estimated from 250 samples: with viscous
+    damping hidden and a candidate for it, it is named and no alarm is raised; with track
+    friction hidden too and no candidate for it, the alarm is raised."""
+    from hertzchain.materials import BRASS
+
+    brass = dict(n_beads=9, contacts=(3, 6), velocities_m_s=(0.05, 0.2, 0.6, 1.2), sample_interval_s=1e-6,
+                 bead_radius_m=5e-3, bead_density_kg_m3=BRASS.density_kg_m3, bead_youngs_pa=BRASS.youngs_pa,
+                 bead_poisson=BRASS.poisson)
+    held = _estimated_noise(hidden_effect_traces({"viscous_damping": 1.5e-6}, seed=21, noise_fraction=0.004,
+                                                 **brass), 250, seed=22)
+    result = diagnose(held, candidates=("viscous_damping", "track_friction"), max_effects=2, progress=False)
+    assert result.missing_effects == ["viscous_damping"] and not result.misspecification
+    missing = _estimated_noise(hidden_effect_traces({"viscous_damping": 1.5e-6, "track_friction": 0.3}, seed=21,
+                                                    noise_fraction=0.004, **brass), 250, seed=22)
+    result = diagnose(missing, candidates=("viscous_damping",), max_effects=1, progress=False)
+    assert result.misspecification
