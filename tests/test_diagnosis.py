@@ -571,3 +571,25 @@ def test_noise_band_with_estimated_noise_no_alarm_when_the_model_holds_an_alarm_
                                                     noise_fraction=0.004, **brass), 250, seed=22)
     result = diagnose(missing, candidates=("viscous_damping",), max_effects=1, progress=False)
     assert result.misspecification
+
+
+def test_a_candidate_whose_score_reaches_the_noise_band_is_refitted_whatever_its_rank():
+    """Screening ranks five candidates; the best `max_refits` = 3 are refitted, and so is the
+    fourth, whose score alone would leave an excess of 3 (chi^2 3000 - 2000 on 997 dof) within
+    the band 3 sqrt(2 x 997) = 134, not the fifth (an excess of 1003)."""
+    from fitting.diagnosis import _Workflow
+
+    class Screening(_CountingSearch):
+        candidates = ["a", "b", "c", "d", "e"]
+        effect_columns = {name: [2 + k] for k, name in enumerate(candidates)}
+
+        def screen(self, x, effects, names):
+            scores = {"a": 2900.0, "b": 2800.0, "c": 2700.0, "d": 2000.0, "e": 1000.0}
+            return scores, {n: [x] for n in names}, {n: True for n in names}, []
+
+    run = _Workflow(Screening(), "base", min_share=0.2, max_refits=3, progress=False)
+    run.x, run.chi2, run.location = np.zeros(7), 3000.0, None
+    todo, scores, _, _, worth = run.screen()
+    assert worth == ["a", "b", "c", "d"]
+    run.chi2 = 3200.0  # now "d" would leave 203 above its dof: outside the band
+    assert run.screen()[4] == ["a", "b", "c"]
