@@ -92,7 +92,7 @@ from hertzchain.progress import Progress
 from . import effects as fx
 from .data import Experiment, as_experiments
 from .fit import OPTIMUM_TOLERANCE, LeastSquares, initial_values, least_squares, make_problem
-from .locate import describe, locate
+from .locate import describe, estimate_variance, locate, noise_estimate_samples
 from .model import STEPS_PER_CONTACT, Problem, residuals_and_jacobian
 from .parameters import ParameterInstance, get_spec, parse_parameter_list
 from .uncertainty import covariance_choice, covariance_from_jacobian
@@ -450,13 +450,8 @@ def noise_estimate_variance(experiments) -> float:
     pre-trigger segment, `x_import_<channel>_noise_samples`), have their chi^2 scaled by
     sigma^2 / sigma_est^2 ~ chi^2(m - 1) / (m - 1), of relative variance 2 / (m - 1): each adds
     2 n^2 / (m - 1). Noise levels stated in a file (m = 0) add nothing."""
-    total = 0.0
-    for e in experiments:
-        for name in e.channels:
-            m = int(e.trace.header.get(f"x_import_{name}_noise_samples", 0) or 0)
-            if m > 1:
-                total += 2.0 * float(np.sum(e.used(name))) ** 2 / (m - 1)
-    return total
+    return sum(estimate_variance(int(np.sum(e.used(name))), noise_estimate_samples(e, name))
+               for e in experiments for name in e.channels)
 
 
 class _Search:

@@ -535,6 +535,17 @@ def test_noise_band_holds_chi2_whitened_by_noise_levels_estimated_from_pre_trigg
     assert np.mean(chi2 - dof > band) < 0.01  # 0.5 %: 1 / s_c skews the tail beyond a normal's 0.13 %
     assert np.mean(chi2 - dof > NOISE_BAND_SIGMA * math.sqrt(2 * dof)) > 0.25
     assert 1.21 * dof - dof > band  # residuals 10 % too large: still an alarm
+    # one channel x window cell of 3000 such samples (`fitting.locate.cell`): its excess leaves
+    # LOCAL_BAND_SIGMA in several % of the draws in white-noise units, rarely with the estimate's
+    from fitting.diagnosis import LOCAL_BAND_SIGMA
+    from fitting.locate import estimate_variance
+
+    window = rng.chisquare(3000, 4000) / (rng.chisquare(m - 1, 4000) / (m - 1))
+    assert np.mean((window - 3000) / math.sqrt(2 * 3000) > LOCAL_BAND_SIGMA) > 0.05
+    assert np.mean((window - 3000) / math.sqrt(2 * 3000 + estimate_variance(3000, m)) > LOCAL_BAND_SIGMA) < 0.002
+    residuals = rng.standard_normal(3000) * 1.1
+    assert cell(residuals, estimate_variance(3000, m))["excess_sigma"] == pytest.approx(
+        (float(residuals @ residuals) - 3000) / math.sqrt(6000 + 2 * 3000**2 / (m - 1)), rel=1e-12)
     # a file that states its noise adds nothing
     stated = make_experiment(TraceFile(stated_header, time, {"wall": pulse}))
     assert noise_estimate_variance([stated]) == 0.0
