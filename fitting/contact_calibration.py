@@ -444,8 +444,9 @@ class _Residuals:
 
 
 def _fit_material(pieces, material, kappa, geometry, options):
-    """(values {yield_stress_pa, rate_constant, eta_s}, stderr {...}, converged, per-curve sigma_Y,
-    per-curve shifts (s) and approach drifts (m/s), each a list of (value, standard error))."""
+    """(values {yield_stress_pa, rate_constant, eta_s}, stderr {...}, converged (the joint fit's),
+    per-curve sigma_Y and whether each of those fits converged, per-curve shifts (s) and
+    approach drifts (m/s), each a list of (value, standard error))."""
     n = len(pieces)
     first = len(PARAMETERS)
     start = np.concatenate([[math.log(material.yield_stress_pa), material.yield_rate_constant or 0.0, 0.0,
@@ -472,7 +473,9 @@ def _fit_material(pieces, material, kappa, geometry, options):
     stress = math.exp(x[0])
     # sigma_Y alone per curve; not where it trades off against another constant fitted with it
     traded = options["fit_rate_constant"] or options["fit_hardness_ratio"]
-    singles = [] if traded else [math.exp(solve([i])[1].x[0]) for i in range(n)]
+    single_fits = [] if traded else [solve([i])[1] for i in range(n)]
+    singles = [math.exp(fit.x[0]) for fit in single_fits]
+    singles_converged = [bool(fit.converged) for fit in single_fits]
     scatter = float(np.std(singles, ddof=1) / math.sqrt(len(singles))) if len(singles) > 1 else math.nan
     gauss_newton = stress * float(stderr[0])
     values = {"yield_stress_pa": stress, "rate_constant": float(x[1]), "eta_s": float(x[2]),
@@ -511,7 +514,7 @@ def _fit_material(pieces, material, kappa, geometry, options):
                   for k, (s, _) in enumerate(shifts)]
     drifts = [(float(v), curve_stderr(k, first + n + k) if options["fit_approach_drift"] else None)
               for k, v in enumerate(x[first + n:])]
-    return values, errors, bool(result.converged), singles, shifts, drifts
+    return values, errors, bool(result.converged), singles, singles_converged, shifts, drifts
 
 
 def _piece(curve, approach, peak, rate, timed):
@@ -612,7 +615,9 @@ def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample"
     fit the rate constant C, the hardness ratio h (fitted as ln h) per material with sigma_Y.
 
     **Returns:** a dict: `materials` (per material: given and fitted constants with standard
-    errors, converged flag, per-curve yield stresses) and `curves` (per curve: strain rate,
+    errors, per-curve yield stresses and whether each of those fits converged, `converged`:
+    the joint fit and every per-curve fit reached an optimum, else `unconverged_fits` names
+    them) and `curves` (per curve: strain rate,
     fitted time shift and approach drift with their standard errors, measured peak, peak-force errors at the given
     constants, the fitted ones and with the earlier Thornton law, RMS misfit over the peak,
     unloading secant stiffness 90 -> 50 % of the peak, measured and as ratios). `_series`
@@ -643,16 +648,23 @@ def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample"
         kappa = _kappa(material, geometry)
         if progress:
             progress(f"fitting {name} on {len(members)} curve(s)")
-        values, errors, converged, singles, shifts, drifts = _fit_material(
+        values, errors, converged, singles, singles_converged, shifts, drifts = _fit_material(
             [pieces[i] for i in members], material, kappa, geometry, options)
+        files = [curves[i].name for i in members]
+        # the curves' scatter is an error reported (the larger of it and the joint fit's): a
+        # per-curve fit without an optimum makes that error unfounded
+        unconverged = ([] if converged else ["the joint fit"]) + [
+            f"the fit of {name} alone" for name, ok in zip(files, singles_converged) if not ok]
         given = {"yield_stress_pa": material.yield_stress_pa, "rate_constant": material.yield_rate_constant or 0.0,
                  "eta_s": 0.0, "hardness_ratio": contact.JG_HARDNESS_RATIO}
         report["materials"][name] = {
             "youngs_pa": material.youngs_pa, "poisson": material.poisson, "given": given, "fitted": values,
-            "stderr": errors, "converged": converged,
+            "stderr": errors, "converged": not unconverged, "joint_fit_converged": converged,
+            "unconverged_fits": unconverged,
             "fitted_over_given_yield_stress": values["yield_stress_pa"] / material.yield_stress_pa,
-            "yield_stress_per_curve_pa": dict(zip([curves[i].name for i in members], singles)),
-            "files": [curves[i].name for i in members],
+            "yield_stress_per_curve_pa": dict(zip(files, singles)),
+            "yield_stress_per_curve_converged": dict(zip(files, singles_converged)),
+            "files": files,
         }
         for k, i in enumerate(members):
             report["curves"].append(_curve_report(curves[i], pieces[i], kappa, geometry, given, values,

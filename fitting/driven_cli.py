@@ -82,7 +82,8 @@ def run_fit(args, out) -> int:
 
 
 def run_diagnose(args, out) -> int:
-    """The driven branch of `hertzchain diagnose`, written into the folder `out`."""
+    """The driven branch of `hertzchain diagnose`, written into the folder `out` (exit 0
+    converged, 3 not converged)."""
     from .driven_diagnosis import diagnose_driven, write_driven_diagnosis
 
     _refuse(args, _DIAGNOSE_DEFAULTS, "diagnose")
@@ -93,4 +94,8 @@ def run_diagnose(args, out) -> int:
     print(f"missing effects: {', '.join(diagnosis['missing_effects']) or 'none'}")
     print(diagnosis["conclusion"])
     print(f"report: {Path(args.out) / paths[0].name}")
+    if not diagnosis["converged"]:
+        print(f"hertzchain diagnose: error: no optimum reached by {'; '.join(diagnosis['unconverged_fits'])} "
+              "(their values are the last iterate's).", file=sys.stderr)
+        return 3
     return 0

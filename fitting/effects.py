@@ -43,6 +43,7 @@ from hertzchain.chain import ChainSetup
 from hertzchain.compliant_sensor import CompliantSensors
 from hertzchain.integrate import Recording, solve
 from hertzchain.sensor import sensor_signal
+from hertzchain.units import format_measured
 
 from .model import ForwardModel, KernelForm
 from .parameters import REGISTRY, ParameterSpec, register_parameter
@@ -416,13 +417,28 @@ def nominal_yield_forces_n(setup: ChainSetup) -> np.ndarray:
     return np.asarray(nominal.contact_yield_force_n(), dtype=float)
 
 
+def nominal_wall_youngs_pa(setup: ChainSetup) -> float:
+    """The wall's Young's modulus at wall_softening 0, Pa: the header's, a rigid wall's stand-in
+    (`_RIGID_WALL_FACTOR` times the last bead's) where the header has none."""
+    wall = float(setup.wall_youngs_pa)
+    return wall if math.isfinite(wall) else _RIGID_WALL_FACTOR * float(np.asarray(setup.bead_youngs_pa)[-1])
+
+
 def fitted_wall_youngs_pa(setup: ChainSetup, softening: float) -> float:
     """The wall's Young's modulus, Pa, that `wall_softening` = `softening` gives the model of
-    `setup` (a rigid header wall stands for `_RIGID_WALL_FACTOR` times the beads' modulus)."""
-    nominal = float(setup.wall_youngs_pa)
-    if not math.isfinite(nominal):
-        nominal = _RIGID_WALL_FACTOR * float(np.asarray(setup.bead_youngs_pa)[-1])
-    return nominal * math.exp(-softening)
+    `setup`: Y_w = Y_w,nominal e^-w (`nominal_wall_youngs_pa`)."""
+    return nominal_wall_youngs_pa(setup) * math.exp(-softening)
+
+
+def describe_wall(setup: ChainSetup, softening: float, softening_stderr: float) -> str:
+    """The fitted `wall_softening` in words: the wall's Young's modulus (GPa) with its standard
+    error (Y_w = Y_w,header e^-w, so sigma_Y = Y_w sigma_w), against the header's."""
+    nominal = nominal_wall_youngs_pa(setup)
+    wall = fitted_wall_youngs_pa(setup, softening)
+    header = (f"header {nominal / 1e9:.4g} GPa" if math.isfinite(float(setup.wall_youngs_pa))
+              else "header: rigid")
+    return (f" wall_compliance: wall Young's modulus {format_measured(wall, wall * softening_stderr, 'Pa')} "
+            f"({header}).")
 
 
 def describe_plasticity(setup: ChainSetup, softening: float, softening_stderr: float) -> str:

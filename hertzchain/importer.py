@@ -63,7 +63,8 @@ pulse's arrivals (`check_time_zero`: a `TimeZeroWarning` that names the delay it
 they put the impact elsewhere); offset removed (the
 notebook's `offset_v`, else the pre-trigger mean); volts to newtons by the sensitivity;
 noise sigma per channel (the notebook's, else the pre-trigger standard deviation with the
-quantisation floor) written as `noise_std_n_<channel>`; samples at the range limit written
+quantisation floor) written as `noise_std_n_<channel>`, with the number of pre-trigger
+samples it was estimated from as `x_import_<channel>_noise_samples` (0: the notebook's); samples at the range limit written
 as `clipped_<channel>` (left out of fits). An `"ac"` channel, and a `"dc"` channel whose
 zero comes from the pre-trigger segment, reads the change of force since before the
 impact: it is listed in `ac_channels`, and the model compares it with that change.
@@ -477,6 +478,7 @@ def condition_shot(description: ExperimentDescription, shot: Shot) -> TraceFile:
                 prefix + "offset_source": "notebook" if channel.offset_v is not None else
                 f"pre-trigger mean of {base.n_samples} samples",
                 prefix + "noise_source": noise_source,
+                prefix + "noise_samples": str(base.n_samples if noise_source == "pre-trigger" else 0),
                 prefix + "quantisation_step_v": "unknown" if step_v is None else repr(step_v),
                 prefix + "range_v": "unknown" if range_v is None else f"{range_v[0]!r};{range_v[1]!r}",
                 prefix + "clipped_samples": str(int(clipped.sum())),

@@ -23,6 +23,10 @@ linear drift of each curve's approach record (m/s; the approach of a bar test is
 difference of two integrated gauge records, which a gain mismatch or a baseline error makes
 drift), reported per curve with its sigma.
 
+Exits 3 (as `hertzchain fit` on an unconverged fit) when a material's joint fit or a
+per-curve fit, whose scatter is one of the yield stress's reported errors, reached no
+optimum; `contact.json` names them (`unconverged_fits`, `yield_stress_per_curve_converged`).
+
 Compiled programs are kept in JAX's persistent compilation cache (`fitting.compilation_cache`),
 so that a second calibration of records of the same lengths skips compiling;
 `--no-compile-cache` turns it off.
@@ -40,10 +44,13 @@ from hertzchain.materials import Material, material
 from hertzchain.units import parse_quantity
 
 from ..compilation_cache import enable_compilation_cache
+from . import EXIT_NOT_CONVERGED, exit_codes_epilog
 from ..contact_calibration import GEOMETRIES, MAX_TIME_SHIFT_S, OFFSETS, ContactGeometry, calibrate, read_curve, write_outputs
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = exit_codes_epilog("a material's joint fit or a per-curve fit of its yield stress "
+                                      "reached no optimum")
     parser.add_argument("files", nargs="+", help="force-approach files (.mat Fexternal/fdK, .csv)")
     parser.add_argument("--material", action="append", default=[],
                         help="materials-table name, once for all files or once per file")
@@ -146,7 +153,8 @@ def run(args: argparse.Namespace) -> int:
               f"(given {given['yield_stress_pa'] / 1e6:.0f} MPa), rate constant {fitted['rate_constant']:.4g}"
               + (f", damping time {fitted['eta_s'] * 1e6:.3g} us" if args.damping else "")
               + (f", hardness ratio {fitted['hardness_ratio']:.3g} +- {errors['hardness_ratio']:.2g}"
-                 if args.fit_hardness_ratio else ""))
+                 if args.fit_hardness_ratio else "")
+              + ("" if entry["converged"] else " (NOT CONVERGED)"))
     for entry in data["curves"]:
         print(f"  {entry['file']}: peak force {entry['peak_force_measured_n'] / 1e3:.3g} kN, error at given "
               f"constants {100 * entry['peak_force_error_model']:+.1f} %, RMS/peak fitted "
@@ -158,4 +166,10 @@ def run(args: argparse.Namespace) -> int:
                  + (f" +- {entry['approach_drift_stderr_m_s']:.3f}" if entry['approach_drift_stderr_m_s'] is not None
                     else "") + " m/s" if args.approach_drift else ""))
     print(f"wrote contact.json, contact.png, residuals.png and {len(curves)} CSV files to {args.out}")
+    unconverged = [f"{name}: {', '.join(entry['unconverged_fits'])}" for name, entry in data["materials"].items()
+                   if not entry["converged"]]
+    if unconverged:
+        print(f"hertzchain contact: error: no optimum reached by {'; '.join(unconverged)} (their values and "
+              "errors are the last iterate's).", file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     return 0

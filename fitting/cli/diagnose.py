@@ -2,8 +2,10 @@
 chain model is missing (see `fitting.diagnosis`).
 
 Writes `DIR/diagnosis.json` (`missing_effects` in the order found, `steps` with
-`gap_before`/`gap_after`), `diagnosis.md`, `gaps.csv`, `gap.png` and overlay PNGs; the folder
-is written as a whole and replaces the previous run's (`hertzchain.atomic.output_folder`).
+`gap_before`/`gap_after`, `converged` and `unconverged_fits`), `diagnosis.md`, `gaps.csv`,
+`gap.png` and overlay PNGs; the folder is written as a whole and replaces the previous run's
+(`hertzchain.atomic.output_folder`). Exits 3 when a fit the result rests on (a named effect's
+refit, the fit adding it, the final fit) reached no optimum, as `hertzchain fit` does.
 """
 
 from __future__ import annotations
@@ -17,12 +19,16 @@ from fitting.effects import EFFECT_NAMES
 from fitting.model import STEPS_PER_CONTACT, ForwardModel
 from hertzchain.atomic import output_folder
 
+from . import EXIT_NOT_CONVERGED, exit_codes_epilog
+
 
 def _names(text: str) -> list[str]:
     return [part.strip() for part in text.split(",") if part.strip()]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = exit_codes_epilog("a fit the result rests on (a named effect's refit, the fit adding it, "
+                                      "the final fit; for driven files a named effect's fit) reached no optimum")
     parser.add_argument("files", nargs="+", metavar="FILE",
                         help="trace files (hertzchain-trace/1) or experiment files (.toml)")
     parser.add_argument("--model", default="base",
@@ -86,4 +92,8 @@ def _diagnose(args, out: Path) -> int:
     for line in readings(diagnosis):
         print(f"  {line}")
     print(f"report: {final['markdown']} (JSON {final['json']})", file=sys.stderr if args.quiet else sys.stdout)
+    if not diagnosis.converged:
+        print(f"hertzchain diagnose: error: no optimum reached by {'; '.join(diagnosis.unconverged)}.",
+              file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     return 0
