@@ -49,6 +49,7 @@ from .atomic import atomic_path, save_figure, write_csv, write_json
 from .batched import BatchedTraces, solve_batched
 from .chain import ChainSetup
 from .integrate import Recording
+from .native import kernel_record
 from .progress import Progress
 from .timegrid import DEFAULT_STEPS_PER_CONTACT, choose_time_grid
 from .tracefile import setup_header
@@ -338,7 +339,7 @@ def run_sweep(
     manifest = _manifest(spec, chunk_size, n_chunks, grid)
     manifest_path = folder / "manifest.json"
     if manifest_path.exists():
-        existing = json.loads(manifest_path.read_text())
+        existing = {k: v for k, v in json.loads(manifest_path.read_text()).items() if k != "kernel"}
         if existing != json.loads(json.dumps(manifest)):
             differing = sorted(k for k in manifest if existing.get(k) != json.loads(json.dumps(manifest[k])))
             raise ValueError(
@@ -369,6 +370,8 @@ def run_sweep(
         _write_parquet(_chunk_path(folder, index), columns)
         if bar:
             bar.advance(stop - start)
+    if todo and (not distributed or jax.process_index() == 0):  # the kernel of this run's chunks
+        write_json(manifest_path, {**manifest, "kernel": kernel_record()})
     if distributed:
         from jax.experimental import multihost_utils
 
