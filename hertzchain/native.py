@@ -196,7 +196,8 @@ def prune_cache(now: float | None = None) -> tuple[int, int]:
     same kind has superseded: of every stem (source, variant and, for the thread kernels,
     chain length) the newest library stays, and so does every host library this
     installation builds here (`_current_host_libraries`); the others go with their lock
-    files and build records, and so do build folders left over for more than an hour. A
+    files and build records, and so do build folders and half-written build records left
+    over for more than an hour. A
     library that another installation still uses is built again on its next use. Returns
     (files deleted, bytes freed)."""
     now = time.time() if now is None else now
@@ -211,6 +212,9 @@ def prune_cache(now: float | None = None) -> tuple[int, int]:
     kept = _current_host_libraries() | {max(paths, key=lambda path: path.stat().st_mtime) for paths in kinds.values()}
     doomed = [path for paths in kinds.values() for path in paths if path not in kept]
     doomed += [path.with_name(path.name + suffix) for path in doomed for suffix in (".lock", ".json")]
+    # build records half-written by a process that was killed (`_write_record`)
+    doomed += [path for path in folder.iterdir() if path.name.startswith(".") and path.name.endswith(".tmp")
+               and path.is_file() and now - path.stat().st_mtime > _STALE_SCRATCH_S]
     scratch = [path for path in folder.iterdir()
                if path.is_dir() and path.name.startswith("tmp") and now - path.stat().st_mtime > _STALE_SCRATCH_S]
     deleted = freed = 0

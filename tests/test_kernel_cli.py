@@ -107,18 +107,21 @@ def test_prune_keeps_the_newest_library_of_each_kind(tmp_path, monkeypatch, caps
         return path
 
     old = [make("chain_kernel-" + "a" * 16 + ".so", 900, 100), make("chain_kernel-" + "a" * 16 + ".so.lock", 900, 0),
-           make("chain_thread-emulated-r12-" + "d" * 16 + ".so", 500, 30)]
+           make("chain_thread-emulated-r12-" + "d" * 16 + ".so", 500, 30),
+           make(".chain_kernel-" + "b" * 16 + ".so.json.123.tmp", 7200, 4)]
     kept = [make("chain_kernel-" + "b" * 16 + ".so", 10), make("chain_kernel-" + "b" * 16 + ".so.lock", 10, 0),
             make("chain_kernel-sensor-" + "c" * 16 + ".so", 5000), make("chain_thread-emulated-r12-" + "e" * 16 + ".so", 20),
             make("chain_thread-emulated-r22-" + "f" * 16 + ".so", 9000), make("notes.txt", 9000),
             make(native.library_path().name, 5000)]  # this installation's, older than the "b" one
     (tmp_path / "jax").mkdir()
     kept.append(make("jax/entry", 9000))
+    kept.append(make(".chain_kernel-" + "b" * 16 + ".so.json.456.tmp", 60, 4))  # a record being written
     for name, age in (("tmpold", 7200.0), ("tmpnew", 60.0)):
         (tmp_path / name).mkdir()
         make(f"{name}/part1.o", age, 7)
         os.utime(tmp_path / name, (now - age, now - age))
-    assert native.prune_cache(now) == (4, 137)  # 2 old libraries, a lock, a stale build's object file
+    # 2 old libraries, a lock, a stale build's object file, a half-written build record
+    assert native.prune_cache(now) == (5, 141)
     assert not any(path.exists() for path in old) and not (tmp_path / "tmpold").exists()
     assert all(path.exists() for path in kept) and (tmp_path / "tmpnew" / "part1.o").exists()
     assert native.prune_cache(now) == (0, 0)
