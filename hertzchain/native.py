@@ -320,9 +320,10 @@ def _check(path: Path) -> tuple[str | None, str | None]:
     return None, digest
 
 
-# The cold build times measured on two cores (`benchmarks/results/kernel_build/latest.json`):
-# said when a library is compiled on first use.
-BUILD_TIME_NOTE = "once; 1-2 minutes on two cores"
+# How long a library's cold build takes, said when one is compiled: on two idle cores the
+# main library took 110 s and each of the others about 60 s; on a loaded machine many times
+# that (`benchmarks/results/kernel_build/latest.json` stores the load with the times).
+BUILD_TIME_NOTE = "once; 1-2 minutes on two idle cores"
 
 
 def _ensure_built(path: Path, what: str, build, *, announce: bool = True, note: str | None = None) -> str:
