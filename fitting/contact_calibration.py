@@ -65,6 +65,7 @@ import numpy as np
 
 from hertzchain import contact
 from hertzchain.materials import Material
+from hertzchain.native import kernel_record
 
 from .driven import lag1_autocorrelation
 from .fit import least_squares
@@ -749,6 +750,6 @@ def write_outputs(report: dict, curves, out_dir, *, title: str = "") -> dict:
     data["summary"] = summary_table(report)
     data["median_unloading_secant_ratio_fitted"] = median_secant_ratio(report)
     data["median_unloading_secant_ratio_model"] = median_secant_ratio(report, "unloading_secant_ratio_model")
-    data = atomic.json_ready(data)
+    data = atomic.json_ready({**data, "kernel": kernel_record()})
     atomic.write_json(out / "contact.json", data)
     return data

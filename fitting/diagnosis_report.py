@@ -24,6 +24,7 @@ import numpy as np  # noqa: E402
 
 from hertzchain.atomic import save_figure, write_csv, write_json, write_text  # noqa: E402
 from hertzchain.units import display_unit, format_measured  # noqa: E402
+from hertzchain.native import kernel_record  # noqa: E402
 
 from .diagnosis import Diagnosis  # noqa: E402
 from .effects import DEFAULT_YIELD_STRESS_PA, PREFIX, fitted_wall_youngs_pa  # noqa: E402
@@ -256,7 +257,7 @@ def write_diagnosis_report(diagnosis: Diagnosis, out_dir) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     paths = {"json": out / "diagnosis.json", "markdown": out / "diagnosis.md", "gap_png": out / "gap.png",
              "gaps_csv": out / "gaps.csv"}
-    write_json(paths["json"], diagnosis.to_json())
+    write_json(paths["json"], {**diagnosis.to_json(), "kernel": kernel_record()})
     write_text(paths["markdown"], markdown(diagnosis))
     write_csv(paths["gaps_csv"], GAP_HEADER, _gap_rows(diagnosis))
     fig = _gap_figure(diagnosis)

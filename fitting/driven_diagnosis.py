@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from hertzchain.atomic import json_ready, save_figure, write_csv, write_json, write_text
+from hertzchain.native import kernel_record
 
 from .driven import DrivenLayout, DrivenModel, chain_at, linear_start, nominal_modes_hz, scan_precompression
 from .driven_report import bending
@@ -320,7 +321,7 @@ def write_driven_diagnosis(result: dict, out_dir) -> list[Path]:
     """`diagnosis.json`, `diagnosis.md`, `gaps.csv` and `diagnosis.png` in `out_dir`."""
     out = Path(out_dir)
     data = {k: v for k, v in result.items() if not k.startswith("_")}
-    write_json(out / "diagnosis.json", json_ready(data))
+    write_json(out / "diagnosis.json", json_ready({**data, "kernel": kernel_record()}))
     text = [f"# Diagnosis: {result['label']}", "", result["conclusion"].replace("\n", "\n\n"), "",
             "| step | effect | accepted | median misfit before | after | shift after | peak/nm top/lowest after |",
             "|---|---|---|---|---|---|---|"]

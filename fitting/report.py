@@ -29,6 +29,7 @@ import numpy as np  # noqa: E402
 
 from hertzchain.atomic import file_stem, save_figure, write_csv, write_json  # noqa: E402
 from hertzchain.units import column_name, display_unit, format_measured  # noqa: E402
+from hertzchain.native import kernel_record  # noqa: E402
 
 # Points per curve of the summary figure (min-max thinned, so peaks stay).
 SUMMARY_POINTS = 1500
@@ -57,7 +58,7 @@ def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False
         write_csv(out / name, header, ([_cell(v) for v in row] for row in rows))
         written.append(out / name)
 
-    write_json(out / "fit.json", result.to_json())
+    write_json(out / "fit.json", {**result.to_json(), "kernel": kernel_record()})
     written.append(out / "fit.json")
     table(
         "params.csv",

@@ -62,6 +62,7 @@ from .atomic import atomic_path, save_figure, write_csv, write_json
 from .batched import BatchedTraces, solve_batched
 from .chain import ChainSetup
 from .integrate import Recording
+from .native import kernel_record
 from .progress import Progress
 from .timegrid import DEFAULT_STEPS_PER_CONTACT, choose_time_grid
 from .units import parse_quantity, unit_of_field
@@ -506,6 +507,7 @@ def run_sweep(
     manifest_path = folder / "manifest.json"
     existing = json.loads(manifest_path.read_text()) if manifest_path.exists() else None
     if existing is not None:
+        existing.pop("kernel", None)  # which kernel computed the chunks so far is not what the sweep is
         _check_same_sweep(folder, existing, manifest)
 
     def runs(index):
@@ -549,6 +551,8 @@ def run_sweep(
         _write_parquet(_chunk_path(folder, index), columns, _chunk_metadata(sweep_sha256, index, start, stop))
         if bar:
             bar.advance(stop - start)
+    if todo and (not distributed or jax.process_index() == 0):  # the kernel of this run's chunks
+        write_json(manifest_path, {**manifest, "kernel": kernel_record()})
     if distributed:
         from jax.experimental import multihost_utils
 

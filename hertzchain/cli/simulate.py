@@ -9,6 +9,7 @@ import numpy as np
 
 from .. import plotting
 from ..atomic import save_figure, write_json
+from ..native import kernel_record
 from ..integrate import simulate
 from ..summary import run_summary
 from ..tracefile import TraceFile, setup_header, validate_header, write_trace
@@ -68,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     summary = run_summary(setup, traces, options)
     summary["materials"] = chain.materials
     summary["setup_sources"] = chain.sources
-    write_json(out / "summary.json", summary)
+    write_json(out / "summary.json", {**summary, "kernel": kernel_record()})
     save_figure(plotting.plot_run(traces), out / "simulation.png", dpi=120)
     print(f"wrote {out / 'traces.csv'}, {out / 'summary.json'}, {out / 'simulation.png'}")
     for name, peak in summary["peak_force_n"].items():
