@@ -12,7 +12,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from . import contact, materials  # noqa: E402
+from . import contact, laws, materials  # noqa: E402
 from . import acquisition, pulses, sensor, theory  # noqa: E402
 from .chain import ChainModel, ChainSetup, build_model  # noqa: E402
 from .integrate import (  # noqa: E402
@@ -43,6 +43,7 @@ __all__ = [
     "build_model",
     "choose_time_grid",
     "contact",
+    "laws",
     "material",
     "materials",
     "pulses",

@@ -79,7 +79,7 @@ def sweepable_fields(setup: ChainSetup) -> tuple[str, ...]:
     """Scalar numeric fields of a setup that a sweep can vary."""
     return tuple(
         name
-        for name in setup.__dataclass_fields__
+        for name in (*setup.__dataclass_fields__, *setup.law_attributes)
         if isinstance(getattr(setup, name), jax.Array) and jnp.ndim(getattr(setup, name)) == 0
     )
 
