@@ -12,6 +12,7 @@ from .contact_law import AbstractContactLaw as AbstractContactLaw
 from .contact_law import ContactConstants as ContactConstants
 from .dissipation import AbstractDissipation as AbstractDissipation
 from .dissipation import Dashpot as Dashpot
+from .dissipation import VelocitySquared as VelocitySquared
 from .dissipation import Viscoelastic as Viscoelastic
 from .dissipation import is_damped as is_damped
 from .dissipation import total_force as total_force

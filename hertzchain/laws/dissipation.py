@@ -106,3 +106,36 @@ def is_damped(dissipation):
     for law in dissipation:
         active = active | law.is_active()
     return active
+
+
+class VelocitySquared(AbstractDissipation):
+    """Velocity-squared contact dissipation, $F_d = c\\,|\\dot\\delta|\\,\\dot\\delta$ while in
+    contact: the loss Vergara (PRL 104, 118001, 2010) proposed for dry granular chains, a
+    drag that grows with the square of the beads' relative speed (a dissipation that grows
+    with amplitude, which a viscous law's does not). The sign follows $\\dot\\delta$, so it
+    resists both approach and separation; the sum with the elastic force is clipped at 0
+    (`total_force`), so beads never pull. Smooth ($C^1$) in $\\dot\\delta$, and of the
+    dashpot's form $\\gamma\\dot\\delta$ with $\\gamma = c|\\dot\\delta|$. A weak one takes
+    $\\Delta E = \\tfrac{10}{7}\\,c\\,v^2\\delta_m$ from a binary Hertz collision at relative speed
+    v and largest overlap $\\delta_m$ ($c\\int|\\dot\\delta|^3dt$ along the elastic collision).
+
+    **Arguments:**
+
+    - `c_n_s2_m2`: c, N s^2/m^2 (>= 0).
+    """
+
+    c_n_s2_m2: jax.Array
+
+    def __init__(self, c_n_s2_m2=0.0):
+        self.c_n_s2_m2 = jnp.asarray(c_n_s2_m2, dtype=jnp.float64)
+
+    def __check_init__(self):
+        if not isinstance(self.c_n_s2_m2, jax.core.Tracer) and not bool(
+                jnp.all(jnp.isfinite(self.c_n_s2_m2) & (self.c_n_s2_m2 >= 0.0))):
+            raise ValueError(f"c_n_s2_m2 must be non-negative and finite (N s^2/m^2), got {self.c_n_s2_m2}.")
+
+    def force(self, overlap_m, overlap_rate_m_s, kappa_n_m1p5):
+        return jnp.where(kappa_n_m1p5 > 0.0, self.c_n_s2_m2, 0.0) * jnp.abs(overlap_rate_m_s) * overlap_rate_m_s
+
+    def is_active(self):
+        return self.c_n_s2_m2 != 0.0

@@ -9,7 +9,7 @@ says which kernel ran).
 from __future__ import annotations
 
 from .contact_law import AbstractContactLaw
-from .dissipation import AbstractDissipation, Dashpot, Viscoelastic
+from .dissipation import AbstractDissipation, Dashpot, VelocitySquared, Viscoelastic
 from .elastic import Hertz, PowerLaw
 from .plastic import JacksonGreen, Thornton
 
@@ -20,6 +20,7 @@ NATIVE_NAMES: dict[type, str | None] = {
     JacksonGreen: "jackson_green",
     Viscoelastic: "viscous",
     Dashpot: "dashpot",
+    VelocitySquared: None,
 }
 
 
