@@ -86,6 +86,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from hertzchain import laws
 from hertzchain.atomic import json_ready
 from hertzchain.progress import Progress
 
@@ -699,8 +700,8 @@ class _Search:
             # a few thousandths to a few hundredths of the critical damping of a contact
             # linearised at the largest observed force
             setup = self.problem.base_setups[0]
-            kappa, mass = float(setup.contact_kappa()[1]), float(setup.bead_mass_kg[0])
-            stiffness = 1.5 * kappa ** (2 / 3) * largest ** (1 / 3)
+            kappa, mass = setup.contact_kappa()[1], float(setup.bead_mass_kg[0])
+            stiffness = float(setup.contact_law.stiffness_at_force(largest, laws.ContactConstants(kappa)))
             critical = 2.0 * math.sqrt(stiffness * mass)
             return [start(share * critical) for share in (0.003, 0.01, 0.03)]
         if effect == "track_friction":

@@ -39,7 +39,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from hertzchain.chain import ChainSetup
+from hertzchain import laws
+from hertzchain.chain import DEPRECATED_LAW_KEYWORDS, ChainSetup
 from hertzchain.compliant_sensor import CompliantSensors
 from hertzchain.integrate import Recording, solve
 from hertzchain.sensor import sensor_signal
@@ -54,8 +55,6 @@ _SENSOR_EXACT_BELOW_HZ = 2e6
 _SENSOR_SWITCH_RATE = (SENSOR_REFERENCE_HZ / _SENSOR_EXACT_BELOW_HZ) ** 2
 # Yield stress used by `plasticity` when the header's beads never yield (the paper's 2 GPa).
 DEFAULT_YIELD_STRESS_PA = 2e9
-# The contact law of `plasticity` (`hertzchain.ChainSetup.plastic_law`).
-PLASTIC_LAW = "jackson_green"
 # A rigid nominal wall is represented as this many times stiffer than the beads.
 _RIGID_WALL_FACTOR = 1e3
 PREFIX = "dx_"
@@ -212,12 +211,15 @@ COVERED_BY = {
 
 
 def rebuild_setup(setup: ChainSetup, **changes) -> ChainSetup:
-    """A copy of `setup` with fields replaced, static ones (`plasticity`, `sensor_beads`) included.
+    """A copy of `setup` with fields replaced, static ones (`contact_law`'s type, `sensor_beads`)
+    included; `eta_s` and `dashpot_n_s_m` replace the coefficients of those laws.
 
     Works on traced setups (inside `jit`/`vmap`/`jacfwd`): the constructor's concrete checks
     skip traced values.
     """
     values = {f.name: getattr(setup, f.name) for f in dataclasses.fields(setup)}
+    if any(name in changes for name in DEPRECATED_LAW_KEYWORDS):  # the former spelling of contact_law
+        del values["contact_law"]
     values.update(changes)
     return ChainSetup(setup.n_beads, **values)
 
@@ -257,7 +259,7 @@ def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True,
                   power_law: bool = False) -> ChainSetup:
     """The setup with every effect strength of `extras` applied.
 
-    `plastic`: elastic-plastic contacts, `PLASTIC_LAW` (needed as soon as `yield_softening` > 0);
+    `plastic`: elastic-plastic contacts, `laws.JacksonGreen` (needed as soon as `yield_softening` > 0);
     `False` gives Hertz contacts, the same model where `yield_softening` is 0 (an infinite
     yield force) at a fraction of the cost. `power_law`: power-law contacts of exponent
     3/2 + `exponent_shift`, equal to Hertz at the overlap of `extras["reference_force_n"]`
@@ -277,6 +279,16 @@ def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True,
     softening = extras[p + "yield_softening"]
     yields = softening > 0
     sigma = jnp.where(yields, sigma0 / jnp.where(yields, softening, 1.0), jnp.inf)
+    if plastic and power_law:
+        raise ValueError("apply_effects: plastic and power_law contacts cannot be combined: the elastic-plastic "
+                         "law is built on Hertz contacts.")
+    if plastic:
+        contact_law = laws.JacksonGreen()
+    elif power_law:
+        reference = (extras["reference_force_n"] / setup.contact_kappa()[min(1, n - 1)]) ** (2 / 3)
+        contact_law = laws.PowerLaw(1.5 + extras[p + "exponent_shift"], reference)
+    else:
+        contact_law = laws.Hertz()
     return rebuild_setup(
         setup,
         bead_radius_m=radius,
@@ -288,12 +300,7 @@ def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True,
         wall_youngs_pa=wall,
         precompression_n=setup.precompression_n + extras[p + "preload_n"],
         bead_yield_stress_pa=sigma,
-        plasticity=plastic,
-        plastic_law=PLASTIC_LAW,
-        power_law=power_law,
-        contact_exponent=1.5 + extras[p + "exponent_shift"],
-        exponent_reference_overlap_m=(extras["reference_force_n"] / setup.contact_kappa()[min(1, n - 1)])
-        ** (2 / 3),
+        contact_law=contact_law,
     )
 
 
@@ -412,7 +419,7 @@ def nominal_yield_forces_n(setup: ChainSetup) -> np.ndarray:
     """Every contact's yield force under `plasticity` at yield_softening 1, N: striker-bead,
     bead-bead..., wall (the header's yield stress, else `DEFAULT_YIELD_STRESS_PA`)."""
     stress = float(setup.bead_yield_stress_pa)
-    nominal = rebuild_setup(setup, plastic_law=PLASTIC_LAW,
+    nominal = rebuild_setup(setup, contact_law=laws.JacksonGreen(),
                             bead_yield_stress_pa=stress if math.isfinite(stress) else DEFAULT_YIELD_STRESS_PA)
     return np.asarray(nominal.contact_yield_force_n(), dtype=float)
 

@@ -14,7 +14,7 @@ from .precision import enable_float64
 
 enable_float64()
 
-from . import contact, materials  # noqa: E402
+from . import contact, laws, materials  # noqa: E402
 from . import acquisition, pulses, sensor, theory  # noqa: E402
 from .chain import ChainModel, ChainSetup, build_model  # noqa: E402
 from .integrate import (  # noqa: E402
@@ -47,6 +47,7 @@ __all__ = [
     "build_model",
     "choose_time_grid",
     "contact",
+    "laws",
     "material",
     "materials",
     "pulses",

@@ -446,7 +446,8 @@ def check_yield(traces: Traces, on_yield: str = "warn", *, plastic: bool = False
         f"yield force {np.asarray(traces.yield_force_n)[worst]:.4g} N (mean contact pressure "
         "above bead_yield_stress_pa): the contact would deform plastically, which this elastic "
         "model does not describe.",
-        "Lower striker_velocity_m_s, model it with plasticity=True, or set on_yield='ignore'.",
+        "Lower striker_velocity_m_s, model it with an elastic-plastic contact law "
+        "(contact_law=hertzchain.laws.JacksonGreen()), or set on_yield='ignore'.",
     )
     if on_yield == "raise":
         raise ValueError(str(warning))

@@ -94,7 +94,7 @@ def sweepable_fields(setup: ChainSetup) -> tuple[str, ...]:
     """Scalar numeric fields of a setup that a sweep can vary."""
     return tuple(
         name
-        for name in setup.__dataclass_fields__
+        for name in (*setup.__dataclass_fields__, *setup.law_attributes)
         if isinstance(getattr(setup, name), jax.Array) and jnp.ndim(getattr(setup, name)) == 0
     )
 
@@ -226,10 +226,36 @@ def _record(value):
     return numbers[0] if array.ndim == 0 else numbers
 
 
+# The laws' coefficients that ChainSetup names as attributes (`law_attributes`), as options and
+# grids name them: (field holding the law, index in a sequence or None, the law's field, name).
+_NAMED_COEFFICIENTS = (
+    ("dissipation", 0, "eta_s", "eta_s"),
+    ("dissipation", 1, "gamma_n_s_m", "dashpot_n_s_m"),
+    ("contact_law", None, "exponent", "contact_exponent"),
+    ("contact_law", None, "reference_overlap_m", "exponent_reference_overlap_m"),
+)
+
+
 def setup_record(setup: ChainSetup) -> dict:
     """Every field of a (non-batched) setup, by name, in a canonical JSON-ready form: a field
-    added to `ChainSetup` (or a law object inside it) is covered without naming it here."""
-    return _record(setup)
+    added to `ChainSetup` (or a law object inside it) is covered without naming it here.
+
+    The coefficients that `ChainSetup` names (`eta_s`, `dashpot_n_s_m`, a power law's
+    `contact_exponent`) stand under those names, as grids and options give them; every other
+    law stands under its class name with its fields (`contact_law.class`,
+    `dissipation.VelocitySquared.c_n_s2_m2`), so a difference is named to the coefficient."""
+    record = _record(setup)
+    laws_given = record["dissipation"]
+    for holder, index, field, name in _NAMED_COEFFICIENTS:
+        law = record[holder] if index is None else laws_given[index]
+        if field in law:
+            record[name] = law.pop(field)
+    others: dict = {}
+    for law in laws_given[2:]:
+        name = law.pop("class")
+        others[name if name not in others else f"{name}#{sum(k.split('#')[0] == name for k in others) + 1}"] = law
+    record["dissipation"] = others
+    return record
 
 
 def sha256_of(record) -> str:

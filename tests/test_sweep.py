@@ -69,8 +69,8 @@ def test_resume_with_other_physics_or_a_foreign_chunk_is_refused(tmp_path):
     assert first.chunks_done == 1
     for field, value, shown in (("mu", 0.3, "setup.mu = 0.0 there, 0.3 now"),
                                 ("dashpot_n_s_m", 50.0, "setup.dashpot_n_s_m = 0.0 there, 50.0 now"),
-                                ("plastic_law", "jackson_green", 'setup.plastic_law = "thornton" there, '
-                                                                 '"jackson_green" now')):
+                                ("contact_law", hc.laws.JacksonGreen(), 'setup.contact_law.class = "Hertz" there, '
+                                                                        '"JacksonGreen" now')):
         other = spec._replace(setup=hc.ChainSetup(N, **{field: value}))
         with pytest.raises(ValueError, match=f"holds a different sweep \\({shown}\\).*--out"):
             run_sweep(other, tmp_path / "a", chunk_size=2, progress=False, plots=False)
