@@ -118,7 +118,8 @@ def command_page(name: str) -> str:
         _options_table(parser),
         "## Exit status",
         "0 on success; 2 for an input error (the message names the field and the fix). "
-        "Further statuses of this command, if any, are stated in its description above.",
+        "Further statuses of this command, if any, are stated in its description above; every "
+        "command's statuses: [Exit status](../exit-status.md).",
         *([(ROOT / "docs" / "reference" / "cli" / "notes" / f"{name}.md").read_text().strip()]
           if (ROOT / "docs" / "reference" / "cli" / "notes" / f"{name}.md").is_file() else []),
         f"*Module:* `{module_name}`.",
