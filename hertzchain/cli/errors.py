@@ -9,8 +9,11 @@ EXIT_CODES = """exit status:
   0  done (fit: converged)
   2  bad input: an option, a file that cannot be read or parsed, an output folder that
      cannot be written (one line on stderr names the file or option and the fix)
-  3  fit: the optimiser did not converge (the report is still written, marked so)
-  4  fit --posterior --strict: the posterior's diagnostics fail"""
+  3  fit: the optimiser did not converge; diagnose, contact: a fit the result rests on did
+     not converge (the reports are still written, marked so); sweep: some runs are not
+     finite (their rows have result_finite = 0)
+  4  fit --posterior --strict: the posterior's diagnostics fail; kernel: a library could not
+     be built (the compiler's message is printed; those runs use the JAX kernel)"""
 
 
 def input_error_text(error: Exception) -> str:
