@@ -28,6 +28,18 @@ def _docstring(module_name: str) -> str:
     return ast.get_docstring(ast.parse(Path(spec.origin).read_text())) or ""
 
 
+def _indented_block(lines: list[str], index: int) -> tuple[list[str], int]:
+    """The indented block (4 spaces, blank lines inside) from `lines[index]`, unindented and
+    without trailing blank lines, and the index after it."""
+    block = []
+    while index < len(lines) and (lines[index].startswith("    ") or not lines[index].strip()):
+        block.append(lines[index][4:])
+        index += 1
+    while block and not block[-1].strip():
+        block.pop()
+    return block, index
+
+
 def _markdown_of_docstring(text: str) -> str:
     """A docstring as Markdown: reST literal blocks (`::` and an indented block) become
     fenced code."""
@@ -40,21 +52,11 @@ def _markdown_of_docstring(text: str) -> str:
             index += 1
             while index < len(lines) and not lines[index].strip():
                 index += 1
-            block = []
-            while index < len(lines) and (lines[index].startswith("    ") or not lines[index].strip()):
-                block.append(lines[index][4:])
-                index += 1
-            while block and not block[-1].strip():
-                block.pop()
+            block, index = _indented_block(lines, index)
             out += ["", "```bash", *block, "```", ""]
             continue
         if line.startswith("    ") and (not out or not out[-1].strip()):  # an indented block: code
-            block = []
-            while index < len(lines) and (lines[index].startswith("    ") or not lines[index].strip()):
-                block.append(lines[index][4:])
-                index += 1
-            while block and not block[-1].strip():
-                block.pop()
+            block, index = _indented_block(lines, index)
             out += ["```bash", *block, "```", ""]
             continue
         out.append(line)
