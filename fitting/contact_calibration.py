@@ -64,6 +64,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from hertzchain import contact
+from hertzchain.covariance import gauss_newton_covariance
 from hertzchain.materials import Material
 from hertzchain.native import kernel_record
 
@@ -501,7 +502,7 @@ def _fit_material(pieces, material, kappa, geometry, options):
         weighted[rows] /= math.sqrt(variance * (1 + rho) / (1 - rho)) if variance > 0 else 1.0
     used = np.abs(weighted).max(axis=0) > 0
     marginal = np.full(len(free), np.nan)
-    marginal[used] = np.diag(np.linalg.pinv(weighted[:, used].T @ weighted[:, used]))
+    marginal[used] = gauss_newton_covariance(weighted[:, used]).stderr ** 2
 
     def curve_stderr(k, index, slope=1.0):
         """The standard error of curve k's own parameter x[index] (`slope`: d value / d x)."""

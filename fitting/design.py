@@ -48,6 +48,7 @@ import numpy as np
 
 from hertzchain.atomic import json_ready
 from hertzchain.chain import ChainSetup
+from hertzchain.covariance import gauss_newton_covariance, information_rows
 from hertzchain.progress import Progress
 from hertzchain.tracefile import TraceFile, setup_header
 
@@ -56,7 +57,6 @@ from .fit import OPTIMUM_TOLERANCE, fit_datasets, make_problem
 from .model import ForwardModel, Problem, residuals_and_jacobian
 from .parameters import get_spec, parse_parameter_list
 from .synthetic import simulate_clean
-from .uncertainty import DEGENERATE_RATIO
 
 # Verlet steps per contact time of the noise-free data of a planned experiment: the design
 # uses the data only for the fit's input checks and its choice of simulation sampling.
@@ -292,26 +292,23 @@ class _Plan:
         return jac
 
 
-def _degeneracy_message(fisher, labels) -> str | None:
-    """Name the parameters of directions the plan cannot see (None if there are none)."""
+def _degeneracy_message(fisher, labels, gauss_newton) -> str | None:
+    """Name the parameters of directions the plan cannot see (None if there are none);
+    `gauss_newton` is `fisher`'s `hertzchain.covariance.GaussNewtonCovariance`."""
     diag = np.diag(fisher)
     blind = [labels[j] for j in range(len(labels)) if not diag[j] > 0]
-    safe = np.sqrt(np.where(diag > 0, diag, 1.0))
-    normalised = fisher / np.outer(safe, safe)
-    eig, vec = np.linalg.eigh(normalised)
-    top = max(float(eig[-1]), 1e-300)
+    singular = gauss_newton.singular_values
+    top = singular[0] if singular[0] > 0 else 1.0
     parts = []
     if blind:
         parts.append(f"the residuals do not depend on {', '.join(blind)} at all")
-    for k in range(len(eig)):
-        relative = math.sqrt(max(float(eig[k]), 0.0) / top)
-        if relative >= DEGENERATE_RATIO:
-            continue
-        names = [labels[j] for j in range(len(labels)) if abs(vec[j, k]) > 0.1 and labels[j] not in blind]
+    for k in np.nonzero(~gauss_newton.kept)[0]:
+        direction = gauss_newton.directions[k]
+        names = [labels[j] for j in range(len(labels)) if abs(direction[j]) > 0.1 and labels[j] not in blind]
         if names:
             parts.append(
                 f"{', '.join(names)} can change together without changing any residual "
-                f"(relative singular value {relative:.1e})"
+                f"(relative singular value {singular[k] / top:.1e})"
             )
     if not parts:
         return None
@@ -324,10 +321,11 @@ def _degeneracy_message(fisher, labels) -> str | None:
 
 def _result_from_fisher(fisher, labels, x, interest, nuisances, units, plan_rows) -> DesignResult:
     labels = tuple(labels)
-    message = _degeneracy_message(fisher, labels)
+    gauss_newton = gauss_newton_covariance(information_rows(fisher))
+    message = _degeneracy_message(fisher, labels, gauss_newton)
     if message:
         raise DesignError(message)
-    covariance = np.linalg.inv(fisher)
+    covariance = gauss_newton.covariance
     idx = list(interest)
     cov = covariance[np.ix_(idx, idx)]
     stderr = np.sqrt(np.clip(np.diag(cov), 0, None))

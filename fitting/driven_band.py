@@ -11,11 +11,13 @@ criterion, and `lydon2014_band_edges` reports the edge for several.
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
 from scipy.signal import find_peaks
 
+from hertzchain.covariance import gauss_newton_covariance
 from hertzchain.driven.sweeper_files import read_mat_variables
 
 # Lydon 2014's static-force channel: F0 = (V - V_ref) x 4.09 N/V, V_ref the 17th of 81 steps
@@ -75,12 +77,11 @@ def power_law(force_n, edges_hz) -> dict:
     design = np.column_stack([np.ones_like(x), x])
     coef, residual, *_ = np.linalg.lstsq(design, y, rcond=None)
     dof = max(x.size - 2, 1)
-    sigma2 = float(np.sum((y - design @ coef) ** 2)) / dof
-    cov = sigma2 * np.linalg.inv(design.T @ design)
+    sigma = math.sqrt(float(np.sum((y - design @ coef) ** 2)) / dof)
     return {
         "prefactor_hz": float(np.exp(coef[0])),
         "exponent": float(coef[1]),
-        "exponent_stderr": float(np.sqrt(cov[1, 1])),
+        "exponent_stderr": float(gauss_newton_covariance(design, residual_std=sigma).stderr[1]),
         "prefactor_sixth_hz": float(np.exp(np.mean(y - x / 6))),
         "points": int(x.size),
     }

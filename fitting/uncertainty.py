@@ -51,11 +51,11 @@ import math
 
 import numpy as np
 
-DEGENERATE_RATIO = 1e-6
+from hertzchain.covariance import DEGENERATE_RATIO as DEGENERATE_RATIO
+from hertzchain.covariance import PARTICIPATION, gauss_newton_covariance
+
 CORRELATION_LIMIT = 0.99
 RELATIVE_ERROR_LIMIT = 0.5
-# Participation (component of a normalised singular vector) that names a parameter.
-_PARTICIPATION = 0.1
 # Share by which chi^2/dof may differ from 1 (either way) before the residuals are taken to
 # contradict the noise estimate (module docstring); and the width of the chi^2 distribution
 # added on each side, in its standard deviations sqrt(2/dof).
@@ -143,40 +143,29 @@ class Covariance:
 
 def covariance_from_jacobian(jacobian, labels, *, chi2: float, dof: int, scale: str,
                              score_covariance=None) -> Covariance:
-    """Gauss-Newton covariance from the whitened Jacobian (see the module docstring);
-    `scale` "correlated" needs `score_covariance` (`correlated_score_covariance`)."""
+    """Gauss-Newton covariance from the whitened Jacobian (see the module docstring), by
+    `hertzchain.covariance.gauss_newton_covariance`; `scale` "correlated" needs
+    `score_covariance` (`correlated_score_covariance`)."""
     if scale not in ("noise", "residual", "correlated"):
         raise ValueError(f"covariance scale must be 'noise', 'residual' or 'correlated', got {scale!r}.")
     if scale == "correlated" and score_covariance is None:
         raise ValueError("the 'correlated' covariance needs the score's covariance (correlated_score_covariance).")
-    jac = np.asarray(jacobian, dtype=float)
-    p = jac.shape[1]
-    norms = np.linalg.norm(jac, axis=0)
-    safe = np.where(norms > 0, norms, 1.0)
-    _, singular, vt = np.linalg.svd(jac / safe, full_matrices=False)
-    top = singular[0] if singular.size and singular[0] > 0 else 1.0
-    relative = singular / top
-    good = relative > DEGENERATE_RATIO
-    inverse = np.where(good, 1.0 / np.where(good, singular, 1.0) ** 2, 0.0)
-    normalised_cov = (vt.T * inverse) @ vt
     factor = 1.0 if scale == "noise" else (chi2 / dof if dof > 0 else math.nan)
-    if scale == "correlated":  # the sandwich, in the normalised columns
-        meat = np.asarray(score_covariance, dtype=float) / np.outer(safe, safe)
-        cov = normalised_cov @ meat @ normalised_cov / np.outer(safe, safe)
+    if scale == "correlated":  # the sandwich (J^T J)^+ B (J^T J)^+, at least the residual scale
+        unscaled = gauss_newton_covariance(jacobian)
+        inverse = unscaled.covariance
+        cov = inverse @ np.asarray(score_covariance, dtype=float) @ inverse
         factor = max(factor, 1.0) if math.isfinite(factor) else 1.0
+        stderr = np.where(np.isinf(unscaled.stderr), np.inf, np.sqrt(np.clip(np.diag(cov), 0, None)))
+        gauss_newton = unscaled
     else:
-        cov = factor * normalised_cov / np.outer(safe, safe)
-    weak = []
-    for k in np.nonzero(~good)[0]:
-        components = {labels[j]: float(vt[k, j]) for j in range(p) if abs(vt[k, j]) > _PARTICIPATION}
-        weak.append((float(relative[k]), components))
-    stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
-    unconstrained = set()
-    for _, components in weak:
-        unconstrained.update(components)
-    for j, label in enumerate(labels):
-        if norms[j] == 0 or label in unconstrained:
-            stderr[j] = np.inf
+        gauss_newton = gauss_newton_covariance(jacobian, residual_std=math.sqrt(factor))
+        cov, stderr = gauss_newton.covariance, gauss_newton.stderr
+    singular, vt = gauss_newton.singular_values, gauss_newton.directions
+    top = singular[0] if singular.size and singular[0] > 0 else 1.0
+    weak = [(float(singular[k] / top),
+             {labels[j]: float(vt[k, j]) for j in range(len(labels)) if abs(vt[k, j]) > PARTICIPATION})
+            for k in np.nonzero(~gauss_newton.kept)[0]]
     with np.errstate(invalid="ignore", divide="ignore"):
         correlation = cov / np.outer(stderr, stderr)
     correlation = np.where(np.isfinite(correlation), correlation, np.nan)

@@ -30,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import theory
+from .covariance import gauss_newton_covariance
 
 # ----------------------------------------------------------------------------------------
 # One peak
@@ -290,8 +291,7 @@ def _fit_one(time_s, force_n, threshold, window_s, noise_std_n, n_iterations, le
     n_points = jnp.sum(weight)
     dof = jnp.maximum(n_points - 3.0, 1.0)
     variance = jnp.where(jnp.isnan(noise_std_n), jnp.sum(r**2) / dof, (noise_std_n / f_guess) ** 2)
-    covariance = variance * _inverse3(j.T @ j)
-    se = jnp.sqrt(jnp.abs(jnp.diag(covariance)))
+    se = gauss_newton_covariance(j, residual_std=jnp.sqrt(variance)).stderr
     last_step = -_inverse3(j.T @ j + 1e-12 * jnp.eye(3)) @ (j.T @ r)
     converged = (n_points >= 4) & jnp.all(jnp.abs(last_step) <= 1e-6 + 1e-3 * se)
     return Cos6Fit(
@@ -404,7 +404,9 @@ def wave_speed(positions_m, arrival_times_s, *, time_stderr_s=None) -> SpeedFit:
         stderr = slope**2 * float(time_stderr_s) / math.sqrt(float(np.sum(xc**2)))
     elif len(x) > 2:
         residual = x - (intercept_x + slope * t)
-        stderr = math.sqrt(float(np.sum(residual**2)) / (len(x) - 2) / float(np.sum(tc**2)))
+        line = np.column_stack([np.ones_like(t), t])
+        stderr = float(gauss_newton_covariance(
+            line, residual_std=math.sqrt(float(np.sum(residual**2)) / (len(x) - 2))).stderr[1])
     else:
         stderr = math.nan
     return SpeedFit(slope, stderr, float(-intercept_x / slope), len(x))
@@ -501,16 +503,16 @@ def fit_velocity_law(peak_force_n, speed_m_s, *, speed_stderr_m_s=None) -> Veloc
         scale = float(np.sum(w * residual**2)) / (n - 1)
         if speed_stderr_m_s is not None:
             scale = max(scale, 1.0)
-        stderr = math.sqrt(scale / sxx)
     else:
-        stderr = math.sqrt(1.0 / sxx) if speed_stderr_m_s is not None else math.nan
+        scale = 1.0 if speed_stderr_m_s is not None else math.nan
+    stderr = float(gauss_newton_covariance((np.sqrt(w) * x)[:, None], residual_std=math.sqrt(scale)).stderr[0])
     exponent, exponent_se = math.nan, math.nan
     if n > 2 and np.ptp(np.log(force)) > 0:
         design = np.column_stack([np.ones(n), np.log(force)])
         coef, *_ = np.linalg.lstsq(design, np.log(speed), rcond=None)
         res = np.log(speed) - design @ coef
-        cov = float(np.sum(res**2)) / (n - 2) * np.linalg.inv(design.T @ design)
-        exponent, exponent_se = float(coef[1]), math.sqrt(float(cov[1, 1]))
+        line = gauss_newton_covariance(design, residual_std=math.sqrt(float(np.sum(res**2)) / (n - 2)))
+        exponent, exponent_se = float(coef[1]), float(line.stderr[1])
     relative_rms = float(np.sqrt(np.mean((speed / (c * x) - 1.0) ** 2)))
     return VelocityLawFit(c, stderr, exponent, exponent_se, relative_rms, n)
 
@@ -590,8 +592,7 @@ def fit_restitution_law(
     coef, *_ = np.linalg.lstsq(design, loss, rcond=None)
     residual = loss - design @ coef
     if n > k:
-        cov = float(np.sum(residual**2)) / (n - k) * np.linalg.inv(design.T @ design)
-        se = np.sqrt(np.diag(cov))
+        se = gauss_newton_covariance(design, residual_std=math.sqrt(float(np.sum(residual**2)) / (n - k))).stderr
     else:
         se = np.full(k, math.nan)
     values = dict(c_v=0.0, c_s=0.0, c_v_stderr=math.nan, c_s_stderr=math.nan)
