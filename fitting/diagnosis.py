@@ -79,7 +79,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 import time
 
 import equinox as eqx
@@ -460,7 +459,6 @@ class _Search:
 
     def __init__(self, experiments: list[Experiment], *, free, nuisances, steps_per_contact, candidates,
                  min_share, report):
-        self.began = time.perf_counter()
         n_beads = {e.trace.n_beads for e in experiments}
         if len(n_beads) != 1:
             raise DiagnosisError(
@@ -526,7 +524,7 @@ class _Search:
         self.x0 = x0
         self.n = self.problem.n_residuals
         self.min_share = min_share
-        self.report = report
+        self.report = Progress(None, "diagnose") if report else None
         self.row_time_fraction = np.concatenate([
             np.asarray(e.time_s) / float(e.time_s[-1]) for e in self.problem.experiments for _ in e.channels
         ])
@@ -543,9 +541,8 @@ class _Search:
         self.noise_estimate_variance = noise_estimate_variance(self.problem.experiments)
 
     def log(self, text: str):
-        if self.report:
-            sys.stderr.write(f"diagnose [{time.perf_counter() - self.began:.0f} s]: {text}\n")
-            sys.stderr.flush()
+        if self.report is not None:
+            self.report.note(text)
 
     def columns(self, effects) -> list[int]:
         cols = list(self.base_columns)

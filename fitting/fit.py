@@ -16,7 +16,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-import sys
 import time
 import warnings
 
@@ -29,6 +28,7 @@ import optimistix as optx
 from hertzchain import contact
 from hertzchain.atomic import json_ready
 from hertzchain.importer import DITHER_STEPS
+from hertzchain.progress import Progress
 
 from . import start as start_values
 from .data import FitInputError, as_experiments
@@ -166,30 +166,21 @@ def initial_values(problem: Problem, start=None) -> np.ndarray:
 
 # --- the optimisation ---------------------------------------------------------------------------
 class _IterationReport:
-    """Host-side progress of the optimiser: one line per iteration (at most every 0.5 s; none
-    when `quiet`), and the times of the first and the last iteration (`first`, `latest`:
-    `time.perf_counter()`) for the fit's timings. Called with the iteration and the chi^2 of
-    every row of the batch at its last accepted point."""
+    """Host-side progress of the optimiser: a `hertzchain.progress.Progress` note per iteration
+    (at most every 0.5 s; none when `progress` is None), and the times of the first and the
+    last iteration (`first`, `latest`: `time.perf_counter()`) for the fit's timings. Called
+    with the iteration and the chi^2 of every row of the batch at its last accepted point."""
 
-    def __init__(self, label: str, stream=None, min_interval_s: float = 0.5, quiet: bool = False):
-        self.label = label
-        self.stream = sys.stderr if stream is None else stream
-        self.min_interval_s = min_interval_s
-        self.quiet = quiet
-        self.start = time.perf_counter()
-        self.last = -math.inf
+    def __init__(self, progress: Progress | None):
+        self.progress = progress
         self.first = self.latest = None
 
     def __call__(self, step: int, chi2):
         self.latest = time.perf_counter()
         self.first = self.first or self.latest
         finite = np.asarray(chi2)[np.isfinite(chi2)]
-        if self.quiet or self.latest - self.last < self.min_interval_s or not finite.size:
-            return
-        self.last = self.latest
-        self.stream.write(f"{self.label}: iteration {step}, best chi^2 = {float(np.min(finite)):.6g}, "
-                          f"{self.latest - self.start:.1f} s\n")
-        self.stream.flush()
+        if self.progress is not None and finite.size:
+            self.progress.note(f"iteration {step}, best chi^2 = {float(np.min(finite)):.6g}", throttle=True)
 
 
 # --- the test of an optimum (one rule for every fit: `fit`, `fit_datasets`, profiles, `least_squares`)
@@ -991,7 +982,7 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
     z0 = to_unbounded(problem.instances, x0)
     points = _multistart_points(problem, z0, multistart, seed)
     p = len(problem.instances)
-    report = _IterationReport("fit", quiet=not progress)
+    report = _IterationReport(Progress(None, "fit", min_interval_s=0.5) if progress else None)
     solver = _make_solver()
     set_up = time.perf_counter()
 

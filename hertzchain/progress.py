@@ -1,4 +1,5 @@
-"""Progress reports for long work: a line on stderr with percentage, elapsed time and ETA."""
+"""Progress reports for long work on stderr: counted work with percentage, elapsed time and
+ETA (`Progress.advance`), and lines of open-ended work with the elapsed time (`Progress.note`)."""
 
 from __future__ import annotations
 
@@ -7,22 +8,33 @@ import time
 
 
 class Progress:
-    """Report progress of `total` units of work; call `advance(n)` as they finish.
+    """Report the progress of one piece of work under `label`.
 
-    Writes to stderr, rewriting one line on a terminal and one line per report otherwise
-    (at most every `min_interval_s` seconds, and always at the end).
+    Counted work: `total` units, call `advance(n)` as they finish; a line with the count,
+    percentage, elapsed time and ETA, rewriting one line on a terminal and one line per
+    report otherwise (at most every `min_interval_s` seconds, and always at the end).
+    Open-ended work (`total` None: an optimiser's iterations, a diagnosis's stages): call
+    `note(text)`, a line `label: text, elapsed` each time (`throttle=True`: at most every
+    `min_interval_s` seconds). Writes to `stream` (default stderr).
     """
 
-    def __init__(self, total: int, label: str, *, stream=None, min_interval_s: float = 1.0):
-        self.total = max(int(total), 1)
+    def __init__(self, total: int | None, label: str, *, stream=None, min_interval_s: float = 1.0):
+        self.total = None if total is None else max(int(total), 1)
         self.label = label
         self.done = 0
         self.stream = sys.stderr if stream is None else stream
         self.min_interval_s = min_interval_s
         self.start = time.perf_counter()
         self._last = -float("inf")
+        self._open_line = False  # a terminal line rewritten in place and not ended yet
+
+    def _terminal(self) -> bool:
+        return getattr(self.stream, "isatty", lambda: False)()
 
     def advance(self, n: int = 1) -> None:
+        """`n` more units of the `total` are done."""
+        if self.total is None:
+            raise ValueError(f"Progress({self.label!r}) counts no total: report open-ended work with note().")
         self.done = min(self.done + n, self.total)
         now = time.perf_counter()
         if self.done < self.total and now - self._last < self.min_interval_s:
@@ -34,7 +46,20 @@ class Progress:
             f"{self.label}: {self.done}/{self.total} ({100 * self.done / self.total:.0f} %), "
             f"{elapsed:.1f} s elapsed, ETA {eta:.1f} s"
         )
-        terminal = getattr(self.stream, "isatty", lambda: False)()
-        end = "\n" if (self.done == self.total or not terminal) else ""
+        terminal = self._terminal()
+        self._open_line = terminal and self.done < self.total
+        end = "" if self._open_line else "\n"
         self.stream.write(("\r" if terminal else "") + line + end)
         self.stream.flush()
+
+    def note(self, text: str, *, throttle: bool = False) -> bool:
+        """Write `label: text, <elapsed> s elapsed` as a line of its own; with `throttle`,
+        only if `min_interval_s` has passed since the last report. Returns whether it wrote."""
+        now = time.perf_counter()
+        if throttle and now - self._last < self.min_interval_s:
+            return False
+        self._last = now
+        self.stream.write(("\n" if self._open_line else "") + f"{self.label}: {text}, {now - self.start:.1f} s elapsed\n")
+        self._open_line = False
+        self.stream.flush()
+        return True
