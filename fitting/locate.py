@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from hertzchain.pulses import first_run
+from hertzchain.peaks import first_run
 
 WINDOWS = ("before", "leading_edge", "peak", "trailing_edge", "after")
 FREQUENCY_BANDS_HZ = ((0.0, 5e3), (5e3, 20e3), (20e3, 60e3), (60e3, 200e3), (200e3, math.inf))

@@ -34,49 +34,13 @@ import math
 import numpy as np
 
 from hertzchain import theory
-from hertzchain.pulses import first_run
+from hertzchain.peaks import measured_first_peak
 from hertzchain.tracefile import TraceFile
 
 from .parameters import bare_speed_constant
 
 DEFAULT_ETA_S = 1e-6
 DEFAULT_MU = 0.05
-
-
-def first_peak(time_s, values, threshold: float = 0.3, top_fraction: float = 0.8):
-    """(time s, force N) of the first pulse's maximum, or None if there is no clear pulse.
-
-    Robust to measurement noise: the first pulse is the first run of samples above
-    `threshold` times the channel's maximum; its peak is the vertex of a least-squares
-    parabola through the contiguous samples around the run's largest one that stay above
-    `top_fraction` of it (tens of samples for a pulse resolved as the fit needs, so
-    the noise averages out; a cos^6 top is symmetric, so the vertex time is unbiased).
-
-    Deliberately not `hertzchain.pulses.first_peak`: that one stops at the first sample not
-    below its successor and fits a parabola through three samples, exact on simulated
-    traces but stopped by any noise wiggle on a measured leading edge. The run is found by
-    `hertzchain.pulses.first_run` (as `fitting.locate` finds its windows).
-    """
-    time_s = np.asarray(time_s, dtype=float)
-    values = np.asarray(values, dtype=float)
-    run = first_run(values, threshold)
-    if run is None:
-        return None
-    i = run[2]
-    level = top_fraction * values[i]
-    left, right = i, i
-    while left > 0 and values[left - 1] >= level:
-        left -= 1
-    while right + 1 < len(values) and values[right + 1] >= level:
-        right += 1
-    if right - left < 2:
-        return float(time_s[i]), float(values[i])
-    t = time_s[left:right + 1] - time_s[i]
-    a, b, c = np.polyfit(t, values[left:right + 1], 2)
-    if a >= 0:
-        return float(time_s[i]), float(values[i])
-    vertex = float(np.clip(-b / (2 * a), t[0], t[-1]))
-    return float(time_s[i] + vertex), float(c + vertex * (b + a * vertex))
 
 
 def _position(channel: str) -> float | None:
@@ -95,7 +59,7 @@ def channel_peaks(trace: TraceFile) -> list[tuple[float, float, float]]:
         position = _position(name)
         if position is None:
             continue
-        peak = first_peak(trace.time_s, values)
+        peak = measured_first_peak(trace.time_s, values)
         if peak is not None:
             peaks.append((position, peak[0], peak[1]))
     return sorted(peaks)

@@ -51,8 +51,7 @@ import math
 
 import numpy as np
 
-from hertzchain.covariance import DEGENERATE_RATIO as DEGENERATE_RATIO
-from hertzchain.covariance import PARTICIPATION, gauss_newton_covariance
+from hertzchain.covariance import DEGENERATE_RATIO, PARTICIPATION, gauss_newton_covariance  # noqa: F401
 
 CORRELATION_LIMIT = 0.99
 RELATIVE_ERROR_LIMIT = 0.5

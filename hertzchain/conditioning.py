@@ -116,7 +116,7 @@ IMPACT_BAND_WITH_WALL_TRANSITS = (-2.0, 1.0)
 def half_rise_time_s(time_s, force_n) -> float | None:
     """Time (s) at which the first pulse (the first run above 30 % of the trace maximum)
     rises through half its peak, interpolated between samples; None without a pulse."""
-    from .pulses import first_run
+    from .peaks import first_run
 
     force = np.asarray(force_n, dtype=float)
     run = first_run(force, 0.3)

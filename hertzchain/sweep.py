@@ -22,7 +22,7 @@ written at once as its own Parquet file, atomically. The folder holds:
 Columns of the table: `run` (index), the swept fields, then for each recorded channel
 `peak_<channel>_n` (largest force over every step for contacts and the wall, over the
 samples for sensors); for each recorded contact `arrival_<channel>_s` (time of the first
-pulse's parabolic peak, `pulses.first_peak`) and `duration_<channel>_s` (the cos^6 duration
+pulse's parabolic peak, `peaks.first_peak`) and `duration_<channel>_s` (the cos^6 duration
 $2\\tau$ of its main pulse, `pulses.fit_cos6`; NaN where that fit did not converge, which
 `duration_<channel>_converged` says); `speed_m_s` (distance between the first and
 last recorded contact over the difference of their arrival times); `incident_peak_n` (first
@@ -368,7 +368,7 @@ def _contact_positions_m(setup: ChainSetup, contacts) -> np.ndarray:
 
 def summarize(setup: ChainSetup, contacts, out: BatchedTraces) -> dict[str, np.ndarray]:
     """The result columns of a chunk (see the module docstring)."""
-    from . import pulses
+    from . import peaks, pulses
 
     time = np.asarray(out.time_s)
     columns: dict[str, np.ndarray] = {}
@@ -386,7 +386,7 @@ def summarize(setup: ChainSetup, contacts, out: BatchedTraces) -> dict[str, np.n
         else:
             columns[f"peak_{name}_n"] = np.max(np.asarray(trace), axis=1)
         if name.startswith("contact_"):
-            arrival, first = pulses.first_peak(time, trace)
+            arrival, first = peaks.first_peak(time, trace)
             peak_times[name] = (np.asarray(arrival), np.asarray(first))
             columns[f"arrival_{name}_s"] = np.asarray(arrival)
             fit = pulses.fit_cos6(time, trace)

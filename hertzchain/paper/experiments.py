@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import pulses, theory
+from .. import peaks, pulses, theory
 from ..chain import ChainSetup
 from ..materials import BEAD_STEEL, MATERIALS, PAPER_WALL_MATERIALS
 from ..sensor import deconvolve_sensor
@@ -82,8 +82,8 @@ def _np(x) -> np.ndarray:
     return np.asarray(x, dtype=float)
 
 
-# `pulses.first_peak` compiled once per shape: every trace of a batch in one call.
-_first_peaks = jax.jit(pulses.first_peak)
+# `peaks.first_peak` compiled once per shape: every trace of a batch in one call.
+_first_peaks = jax.jit(peaks.first_peak)
 
 
 def _incident(time_s, forces_n, radius_m):
@@ -359,7 +359,7 @@ def _deconvolve_pulses(time, sensor_n, front_n, delay_s, beta, f0_hz):
     the reflected one the front half (delay -t0). Returns (force, error incident, error
     reflected), errors as max |recovered - true| over the pulse (true force above 5 % of its
     peak) relative to the true peak."""
-    found = pulses.find_pulses(time, sensor_n, noise_std_n=0.0)
+    found = peaks.find_pulses(time, sensor_n, noise_std_n=0.0)
     index = np.arange(len(time))
     recovered = np.zeros_like(sensor_n)
     errors = []
@@ -615,9 +615,9 @@ def _wall_case(name, youngs, poisson, time, wall, contact10, f_m, wall_peak, ene
     """Measure one wall's run; `energies` = (impact, kinetic, potential, wall elastic) J."""
     wall_setup = ChainSetup(wall_youngs_pa=youngs, wall_poisson=poisson)
     momentum = pulses.momentum_check(time, wall, contact10, noise_std_n=0.0)
-    found = pulses.find_pulses(time, contact10, min_fraction=0.01, noise_std_n=0.0)
+    found = peaks.find_pulses(time, contact10, min_fraction=0.01, noise_std_n=0.0)
     reflected = [p for p in found if p.label != "incident"]
-    on_wall = pulses.find_pulses(time, wall, channel="wall", min_fraction=0.01, noise_std_n=0.0)
+    on_wall = peaks.find_pulses(time, wall, channel="wall", min_fraction=0.01, noise_std_n=0.0)
     energy0, kinetic, potential, wall_energy = energies
     window = (time > 0.5e-3) & (time < 1.6e-3)  # the wall encounter
     return WallCase(
@@ -645,7 +645,7 @@ def measure_fig3(sweep: Sweep) -> Fig3:
     kappa = float(sweep.setup.contact_kappa()[1])
     incident = np.stack([runs.contact_n[k] for k in SPEED_CONTACTS], axis=-2)
     _, f_m = _incident(time, incident, radius)
-    wall_peak = _np(jax.jit(pulses.refine_peak)(time, runs.wall_n)[1])
+    wall_peak = _np(jax.jit(peaks.refine_peak)(time, runs.wall_n)[1])
     cases = {}
     for i, name in enumerate(runs.names):
         energies = (float(runs.initial_energy_j[i]), runs.kinetic_j[i], runs.potential_j[i],

@@ -17,9 +17,9 @@ preload: at zero the static overlap F^(2/3) makes the derivative singular), `yie
 **Observables** (`observable_names`), with `CH` one of `contact_K`, `wall`, `sensor_K`:
 
 - `CH_peak` (N): the peak of the incident pulse: the first local maximum of the trace above
-  30 % of its height above the static preload (`pulses.first_peak_index`; for `wall`: the
+  30 % of its height above the static preload (`peaks.first_peak_index`; for `wall`: the
   largest value), refined by the parabola through the three samples around it
-  (`pulses.refine_peak`). The parabola's vertex value is a smooth function of the samples,
+  (`peaks.refine_peak`). The parabola's vertex value is a smooth function of the samples,
   so its derivative is that of the interpolated peak (the envelope theorem), not of an
   array index.
 - `CH_peak_time` (s): the vertex time of that parabola.

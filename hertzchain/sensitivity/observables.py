@@ -12,7 +12,7 @@ import jax.numpy as jnp
 
 from ..chain import ChainSetup
 from ..integrate import Recording
-from ..pulses import first_peak_index, refine_peak
+from ..peaks import first_peak_index, refine_peak
 from ..theory import COS6_HALF_WIDTH
 from ..traces import Traces
 
@@ -121,8 +121,8 @@ class _Pulse(NamedTuple):
 def _pulse(force_n, dt_s: float, baseline_n, scale_n, use_global_max: bool) -> _Pulse:
     """Peak, peak time and half-height crossings of the incident pulse of one trace.
 
-    The peak sample is `pulses.first_peak_index` of the trace above the precompression
-    baseline (for the wall: the largest sample), its vertex `pulses.refine_peak`'s
+    The peak sample is `peaks.first_peak_index` of the trace above the precompression
+    baseline (for the wall: the largest sample), its vertex `peaks.refine_peak`'s
     three-point parabola. Inside the jitted and differentiated observable function nothing
     can raise, so what is not found is flagged instead (its values stay finite).
     """
