@@ -122,7 +122,7 @@ def main(argv=None) -> int:
     jax.config.update("jax_enable_x64", True)
     from gpu_kernel import item_cuda
 
-    from hertzchain.atomic import write_json
+    from hertzchain.io.atomic import write_json
 
     result["device"] = str(jax.devices()[0])
     for kind in ("conservative", "damped"):

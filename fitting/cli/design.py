@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hertzchain.atomic import save_figure, write_json, write_text
 from hertzchain.cli.setup_options import add_setup_arguments, chain_from_args
+from hertzchain.io.atomic import save_figure, write_json, write_text
 from hertzchain.units import parse_quantity
 from hertzchain.validation import yield_notice
 

@@ -4,7 +4,7 @@ chain model is missing (see `fitting.diagnosis`).
 Writes `DIR/diagnosis.json` (`missing_effects` in the order found, `steps` with
 `gap_before`/`gap_after`, `converged` and `unconverged_fits`), `diagnosis.md`, `gaps.csv`,
 `gap.png` and overlay PNGs; the folder is written as a whole and replaces the previous run's
-(`hertzchain.atomic.output_folder`). Exits 3 when a fit the result rests on (a named effect's
+(`hertzchain.io.atomic.output_folder`). Exits 3 when a fit the result rests on (a named effect's
 refit, the fit adding it, the final fit) reached no optimum, as `hertzchain fit` does.
 """
 
@@ -17,7 +17,7 @@ from pathlib import Path
 
 from fitting.effects import EFFECT_NAMES
 from fitting.model import STEPS_PER_CONTACT, ForwardModel
-from hertzchain.atomic import output_folder
+from hertzchain.io.atomic import output_folder
 
 from . import EXIT_NOT_CONVERGED, exit_codes_epilog
 

@@ -1,9 +1,9 @@
 """`hertzchain fit FILE... --params eta,mu,C`: fit parameters to trace files.
 
-The chain of each file is described by its header (see `hertzchain.tracefile`); the
+The chain of each file is described by its header (see `hertzchain.io.tracefile`); the
 command fits the chosen parameters and writes `fit.json`, CSV tables and PNG plots
 (`fitting.report`) into `--out`, written as a whole: a temporary folder beside it replaces
-the previous run's folder when the command ends (`hertzchain.atomic.output_folder`).
+the previous run's folder when the command ends (`hertzchain.io.atomic.output_folder`).
 `--prior` (and an experiment file's `[prior]` table) states a lab's tolerances
 (`fitting.priors`): each frees its parameter and the optimum is the MAP point.
 `--posterior` then samples the posterior by NUTS (`fitting.posterior`) and writes
@@ -29,10 +29,10 @@ import time
 import warnings
 from pathlib import Path
 
-from hertzchain.atomic import output_folder, write_json
+from hertzchain.io.atomic import output_folder, write_json
 from hertzchain.units import parse_quantity
 
-from hertzchain.importer import experiment_priors
+from hertzchain.io.importer import experiment_priors
 
 from ..compilation_cache import enable_compilation_cache, jax_cache_on
 from ..data import load_experiments

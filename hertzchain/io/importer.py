@@ -81,11 +81,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import conditioning
+from .. import conditioning
+from ..units import parse_field, parse_quantity
 from .atomic import file_stem
 from .scopefiles import FORMATS, ScopeFileError, merge_waveforms, read_waveforms
 from .tracefile import FORMAT, HEADER_KEYS, TraceFile, TraceFileError, format_rows, write_trace
-from .units import parse_field, parse_quantity
 
 # Plausible sensitivities, V/N: from a 0.1 mV/N load cell to a 10 V/N amplified sensor.
 SENSITIVITY_RANGE_V_PER_N = (1e-4, 10.0)
