@@ -15,8 +15,12 @@ import importlib.util
 import sys
 import warnings
 
-MOVED = {f"hertzchain.{name}": f"hertzchain.io.{name}"
-         for name in ("atomic", "importer", "scopefiles", "summary", "tracefile")}
+MOVED = {
+    **{f"hertzchain.{name}": f"hertzchain.io.{name}"
+       for name in ("atomic", "importer", "scopefiles", "summary", "tracefile")},
+    "fitting.cli": "hertzchain.cli",
+    **{f"fitting.cli.{name}": f"hertzchain.cli.{name}" for name in ("contact", "design", "diagnose", "fit")},
+}
 
 
 class MovedModuleFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):

@@ -17,9 +17,9 @@ from pathlib import Path
 
 from fitting.effects import EFFECT_NAMES
 from fitting.model import STEPS_PER_CONTACT, ForwardModel
-from hertzchain.io.atomic import output_folder
+from ..io.atomic import output_folder
 
-from . import EXIT_NOT_CONVERGED, exit_codes_epilog
+from .errors import EXIT_NOT_CONVERGED, exit_codes_epilog
 
 
 def _names(text: str) -> list[str]:

@@ -39,13 +39,13 @@ import dataclasses
 import math
 import sys
 
-from hertzchain.io.atomic import output_folder
-from hertzchain.materials import Material, material
-from hertzchain.units import parse_quantity
+from ..io.atomic import output_folder
+from ..materials import Material, material
+from ..units import parse_quantity
 
-from ..compilation_cache import enable_compilation_cache
-from . import EXIT_NOT_CONVERGED, exit_codes_epilog
-from ..contact_calibration import GEOMETRIES, MAX_TIME_SHIFT_S, OFFSETS, ContactGeometry, calibrate, read_curve, write_outputs
+from fitting.compilation_cache import enable_compilation_cache
+from .errors import EXIT_NOT_CONVERGED, exit_codes_epilog
+from fitting.contact_calibration import GEOMETRIES, MAX_TIME_SHIFT_S, OFFSETS, ContactGeometry, calibrate, read_curve, write_outputs
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
