@@ -19,7 +19,9 @@ MOVED = {
     **{f"hertzchain.{name}": f"hertzchain.io.{name}"
        for name in ("atomic", "importer", "scopefiles", "summary", "tracefile")},
     "fitting.cli": "hertzchain.cli",
-    **{f"fitting.cli.{name}": f"hertzchain.cli.{name}" for name in ("contact", "design", "diagnose", "fit")},
+    **{f"fitting.cli.{name}": f"hertzchain.cli.{name}"
+       for name in ("contact", "design", "diagnose", "fit")},
+    "fitting.driven_cli": "hertzchain.cli.driven_experiments",
 }
 
 

@@ -57,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from fitting.compilation_cache import enable_compilation_cache
-    from fitting.driven_cli import is_driven_run, run_diagnose as run_driven_diagnose
+    from .driven_experiments import is_driven_run, run_diagnose as run_driven_diagnose
 
     enable_compilation_cache(not args.no_compile_cache)
     if args.max_effects < 0:

@@ -145,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
     forward = ForwardModel(steps_per_contact=args.steps_per_contact)
     noise = _noise_std_n(args.noise_std)
     # driven experiment files (lock-in sweeps of a driven chain) have their own fit
-    from fitting.driven_cli import is_driven_run, run_fit as run_driven_fit
+    from .driven_experiments import is_driven_run, run_fit as run_driven_fit
 
     driven = is_driven_run(args.files, args.data_dir)
     with output_folder(args.out, "fit", "fit.json") as out:
