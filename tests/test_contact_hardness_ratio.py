@@ -1,6 +1,6 @@
 """`hertzchain contact --fit-hardness-ratio`: the hardness ratio h = H/sigma_Y of the law's
 fully plastic branch fitted with sigma_Y, recovered from load-unload curves written by the
-independent NumPy implementation of the law in `test_contact_plasticity_diagnosis.py` (two
+independent NumPy implementation of the law in `tests/helpers.py` (two
 setups: a steel sphere on a flat, two aluminium spheres). Its gradient against finite
 differences: `test_contact_rate_terms.py`."""
 
@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from test_contact_plasticity_diagnosis import _jackson_green
+from helpers import jackson_green_force
 
 from hertzchain.cli import main
 
@@ -28,7 +28,7 @@ def _write(path, geometry, radius_m, youngs_pa, nu, sigma_pa, hardness, depth_m)
     modulus = youngs_pa / (2 * (1 - nu**2))  # E* of two bodies of one material
     reduced = radius_m if geometry == "sphere-flat" else radius_m / 2
     kappa = 4 / 3 * modulus * math.sqrt(reduced)
-    force = _jackson_green(approach, np.maximum.accumulate(approach), kappa, reduced, sigma_pa, nu, hardness)
+    force = jackson_green_force(approach, np.maximum.accumulate(approach), kappa, reduced, sigma_pa, nu, hardness)
     with open(path, "w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(["time_s", "approach_m", "force_n"])

@@ -6,11 +6,11 @@ only the two fastest of four shots above the yield force.
 
 Slow: a whole diagnosis (`python -m pytest -m slow tests/test_contact_plasticity_diagnosis.py`)."""
 
-import math
 import time
 
 import numpy as np
 import pytest
+from helpers import jackson_green_force
 
 import hertzchain as hc
 from fitting.diagnosis import diagnose
@@ -20,26 +20,6 @@ from hertzchain.io.tracefile import TraceFile
 TRUE_YIELD_STRESS_PA = 1.8e9
 VELOCITIES_M_S = (0.1, 0.3, 0.8, 1.5)
 CONTACTS = (6, 11)
-
-
-def _jackson_green(overlap, peak, kappa, radius, sigma, nu, hardness=2.84):
-    """Jackson & Green (2005) loading with hardness h sigma_Y, Hertz unloading about the residual."""
-    modulus = 3 * kappa / (4 * np.sqrt(radius))
-    c = 1.295 * math.exp(0.736 * nu)
-    critical = (math.pi * c * sigma / (2 * modulus)) ** 2 * radius
-    exponent = 0.14 * np.exp(23 * sigma / modulus)
-
-    def load(x):
-        return np.exp(-0.25 * x ** (5 / 12)) * x**1.5 + 4 * hardness / c * (1 - np.exp(-x ** (5 / 9) / 25)) * x
-
-    ratio = peak / critical
-    yielded = ratio > 1.9
-    r = np.where(yielded, ratio, 1.9)
-    peak_force = np.where(yielded, kappa * critical**1.5 * (load(r) - load(1.9) + 1.9**1.5), kappa * peak**1.5)
-    contact_radius = np.sqrt(radius * peak * np.where(yielded, (r / 1.9) ** exponent, 1.0))
-    span = np.where(yielded, 3 * peak_force / (4 * modulus * np.maximum(contact_radius, 1e-300)), peak)
-    fraction = np.clip((overlap - (peak - span)) / np.maximum(span, 1e-300), 0.0, None)
-    return np.where(peak > 0, peak_force * fraction**1.5, 0.0)
 
 
 def _independent_run(setup, t_end_s=1.6e-3, dt_s=25e-9, every=10):
@@ -56,7 +36,7 @@ def _independent_run(setup, t_end_s=1.6e-3, dt_s=25e-9, every=10):
     def forces(x):
         overlap = np.concatenate([x[:-1] - x[1:], x[-1:]])
         np.maximum(peak, overlap, out=peak)
-        f = _jackson_green(overlap, peak, kappa, radius, sigma, nu)
+        f = jackson_green_force(overlap, peak, kappa, radius, sigma, nu)
         acceleration = (np.concatenate([[0.0], f[:-1]]) - f) / mass
         return f, acceleration
 

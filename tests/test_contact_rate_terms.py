@@ -3,7 +3,7 @@ material, a time shift between the force and approach records and a linear drift
 approach record fitted per curve, recovered from curves this test writes with its own
 arithmetic (analytic approach and speed, the force evaluated at the shifted time itself, no
 interpolation; the drift added to the written approach; the law from the independent NumPy
-implementation in `test_contact_plasticity_diagnosis.py`), and their gradients against finite
+implementation in `tests/helpers.py`), and their gradients against finite
 differences."""
 
 import csv
@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from test_contact_plasticity_diagnosis import _jackson_green
+from helpers import jackson_green_force
 
 from fitting.contact_calibration import ContactGeometry, _Residuals, time_shifted
 from hertzchain import contact
@@ -36,7 +36,7 @@ def _write(path, sigma_pa, eta_s=0.0, shift_s=0.0, drift_m_s=0.0, noise_n=0.0):
     approach = _approach(time + shift_s)
     speed = np.where(time + shift_s > 0, DEPTH_M * np.pi / PERIOD_S * np.cos(np.pi * (time + shift_s) / PERIOD_S), 0)
     kappa = float(contact.kappa_sphere_flat(RADIUS_M, YOUNGS_PA, NU, YOUNGS_PA, NU))
-    elastic = _jackson_green(approach, np.maximum.accumulate(approach), kappa, RADIUS_M, sigma_pa, NU,
+    elastic = jackson_green_force(approach, np.maximum.accumulate(approach), kappa, RADIUS_M, sigma_pa, NU,
                              contact.JG_HARDNESS_RATIO)
     force = np.maximum(elastic + 1.5 * eta_s * kappa * np.sqrt(approach) * speed, 0.0)
     force = force + noise_n * np.random.default_rng(7).standard_normal(time.size)
