@@ -96,7 +96,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     sys.path.insert(0, str(HERE.parent))
-    from hertzchain.atomic import write_json
+    from hertzchain.io.atomic import write_json
 
     write_json(out / "latest.json", results)
     return 0

@@ -30,7 +30,7 @@ from fitting.effects import EFFECT_NAMES, nominal_yield_forces_n  # noqa: E402
 from fitting.hidden import hidden_effect_traces  # noqa: E402
 import hertzchain as hc  # noqa: E402
 from independent_data import SETUPS, hidden_records, true_strength  # noqa: E402
-from hertzchain.atomic import write_csv, write_json, write_text  # noqa: E402
+from hertzchain.io.atomic import write_csv, write_json, write_text  # noqa: E402
 
 PAIRS = (("viscous_damping", "wall_compliance"), ("track_friction", "sensor_dynamics"),
          ("viscous_damping", "track_friction"))

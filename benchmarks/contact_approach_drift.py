@@ -39,7 +39,7 @@ from benchmarks.contact_burgoyne import caltech_and_base, run_calibration
 from benchmarks.contact_processing import best_alignment
 from benchmarks.contact_rate_terms import _span
 from fitting.contact_calibration import shifted_approach
-from hertzchain import atomic
+from hertzchain.io import atomic
 
 RUNS = {
     "approach_drift": {"fit_approach_drift": True},

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from fitting.contact_calibration import ContactGeometry, calibrate, read_curve, write_outputs
-from hertzchain import atomic
+from hertzchain.io import atomic
 from hertzchain.materials import ALUMINIUM_2017, STEEL_302, STEEL_440C
 
 DATA = Path(__file__).resolve().parents[2] / "shared/data/real/burgoyne-2014"

@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 from benchmarks.contact_burgoyne import CALTECH, caltech_arguments
-from hertzchain import atomic
+from hertzchain.io import atomic
 
 FLAGS = ["--radius", "3.175mm", "--damping", "--approach-drift"]
 

@@ -41,7 +41,8 @@ from benchmarks.contact_burgoyne import CALTECH, DATA, GEOMETRY
 from fitting.contact_calibration import (_kappa, _smoothed, law_force, read_curve, shifted_approach, strain_rate_s,
                                          unloading_secant_n_m)
 from fitting.fit import least_squares
-from hertzchain import atomic, contact
+from hertzchain import contact
+from hertzchain.io import atomic
 
 HARDNESS_RATIO = contact.JG_HARDNESS_RATIO
 

@@ -61,7 +61,8 @@ from scipy.optimize import isotonic_regression
 from benchmarks.contact_burgoyne import GEOMETRY, caltech_and_base, run_calibration
 from fitting.contact_calibration import (ContactCurve, _kappa, _smoothed, approach_rate_m_s, model_force,
                                          shifted_approach)
-from hertzchain import atomic, contact
+from hertzchain import contact
+from hertzchain.io import atomic
 
 PHASES = ("toe", "rise", "top", "fall", "tail")
 PHASE_COLOURS = {"toe": "tab:gray", "rise": "tab:blue", "top": "tab:red", "fall": "tab:orange", "tail": "tab:green"}

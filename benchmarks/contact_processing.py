@@ -34,7 +34,7 @@ import numpy as np
 
 from benchmarks.contact_burgoyne import caltech_arguments, run_calibration
 from fitting.contact_calibration import ContactCurve, read_curve
-from hertzchain import atomic
+from hertzchain.io import atomic
 from hertzchain.materials import STEEL_440C
 
 # Sampling interval of the processed records, s (the raw records are at 10 MHz).

@@ -40,7 +40,7 @@ import numpy as np
 
 from benchmarks.contact_burgoyne import GEOMETRY, caltech_and_base
 from fitting.contact_calibration import _kappa, _smoothed, calibrate, shifted_approach, write_outputs
-from hertzchain import atomic
+from hertzchain.io import atomic
 
 # Travel time from the incident gauge minus that from the transmission gauge to the sample, s
 # (25.375 in and 14.5 in at c0 = 4865.5 m/s; the data's README)

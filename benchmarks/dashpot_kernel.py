@@ -114,7 +114,7 @@ def main(argv=None) -> int:
     expose_cpu_cores()  # one device under `taskset -c 1`
     import hertzchain
     from fit_bench import machine_info
-    from hertzchain.atomic import write_json
+    from hertzchain.io.atomic import write_json
 
     result = {"label": args.label, "source": str(Path(hertzchain.__file__).parent),
               "posterior_gradient_ms": posterior_gradient_ms(args.calls),

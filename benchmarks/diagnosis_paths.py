@@ -34,7 +34,7 @@ from fitting.fit import initial_values, make_problem
 from fitting.hidden import hidden_effect_traces
 from fitting.model import Problem, residuals_and_jacobian
 from fitting.parameters import ParameterInstance, get_spec
-from hertzchain import atomic
+from hertzchain.io import atomic
 
 N_BEADS = 21
 EXTRAS = ("eta_s", "dashpot_n_s_m", "mu", "preload_n", "preload_seen", "sensor_beta", "sensor_rate",

@@ -39,10 +39,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import hertzchain as hc  # noqa: E402
 from fitting.diagnosis import diagnose  # noqa: E402
 from hertzchain.acquisition import Acquisition, acquire  # noqa: E402
-from hertzchain.atomic import json_ready, write_json  # noqa: E402
+from hertzchain.io.atomic import json_ready, write_json  # noqa: E402
 from hertzchain.chain import build_model  # noqa: E402
 from hertzchain.reference import simulate_reference  # noqa: E402
-from hertzchain.tracefile import TraceFile, setup_header  # noqa: E402
+from hertzchain.io.tracefile import TraceFile, setup_header  # noqa: E402
 from independent_data import SETUPS, hidden_records, true_strength  # noqa: E402
 
 SETUP = "brass"

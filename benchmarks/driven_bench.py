@@ -40,7 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import hertzchain  # noqa: F401  (float64)
-from hertzchain.atomic import write_json
+from hertzchain.io.atomic import write_json
 from hertzchain.driven import (
     DrivenChain,
     HarmonicSchedule,

@@ -23,8 +23,8 @@ import numpy as np
 import hertzchain  # noqa: F401  (float64)
 from fitting import driven
 from fitting.driven_experiment import load_driven_experiment
-from hertzchain.atomic import write_json
 from hertzchain.driven import fused
+from hertzchain.io.atomic import write_json
 
 HERE = Path(__file__).resolve().parent
 # where the two-bead fit ends (examples/lydon2015/results/two_bead_fit/fit.json), eta_s = 0

@@ -115,7 +115,7 @@ def run_command(paths, out: Path, cache: Path) -> dict:
 
 def benchmark_case(name: str, n_traces: int = 10) -> dict:
     """Cold and warm runs of the command on case `name`; a JSON-ready dict."""
-    from hertzchain.tracefile import write_trace
+    from hertzchain.io.tracefile import write_trace
 
     description, make = CASES[name]
     files, truth, data_s = make(n_traces)
@@ -179,7 +179,7 @@ def main(argv=None) -> int:
     parser.add_argument("--table-from", metavar="JSON",
                         help="only write the Markdown table (beside the JSON) of a stored result")
     args = parser.parse_args(argv)
-    from hertzchain.atomic import write_json, write_text
+    from hertzchain.io.atomic import write_json, write_text
 
     if args.table_from:
         path = Path(args.table_from)

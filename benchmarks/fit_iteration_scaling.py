@@ -39,7 +39,7 @@ def main(argv=None) -> int:
     from fitting.fit import initial_values, make_problem
     from fitting.model import residuals_and_jacobian
     from hertzchain import native
-    from hertzchain.atomic import write_json
+    from hertzchain.io.atomic import write_json
 
     result = {"label": args.label, "cpus": len(os.sched_getaffinity(0)), "processor": platform.processor(),
               "kernel": native.unavailable_reason() or "host C++ kernel", "fit_iteration_ms": {}}

@@ -314,7 +314,7 @@ def main(argv=None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from hertzchain.atomic import write_json
+    from hertzchain.io.atomic import write_json
 
     start = time.perf_counter()
     device = jax.devices()[0]

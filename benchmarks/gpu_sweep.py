@@ -37,9 +37,9 @@ def main(argv=None) -> int:
     import numpy as np
 
     import hertzchain as hc
-    from hertzchain.atomic import write_json
     from hertzchain.batched import DEFAULT_BLOCK_STEPS, solve_batched
     from hertzchain.integrate import Recording
+    from hertzchain.io.atomic import write_json
 
     devices = jax.devices()
     platform = devices[0].platform

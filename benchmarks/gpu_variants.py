@@ -3,7 +3,7 @@
     python benchmarks/gpu_variants.py --out gpu_variants.json [--size 100000]
         [--variant NAME=FLAGS ...] [--cache-root DIR [--build-only]]
 
-Each variant is the kernel of `hertzchain/chain_kernel_thread.cu` built with extra flags
+Each variant is the kernel of `hertzchain/kernels/csrc/chain_kernel_thread.cu` built with extra flags
 (`native.THREAD_FLAGS_VARIABLE`) into a cache of its own; the builds run in parallel, then
 each variant runs in a child process of its own: `gpu_kernel.py`'s `item_kernel_alone` (the
 kernel jitted alone on the bench case, N = 21, f64, 2500 steps, three forces every step),
@@ -122,7 +122,7 @@ def main(argv=None) -> int:
     jax.config.update("jax_enable_x64", True)
     from gpu_kernel import item_cuda
 
-    from hertzchain.atomic import write_json
+    from hertzchain.io.atomic import write_json
 
     result["device"] = str(jax.devices()[0])
     for kind in ("conservative", "damped"):

@@ -29,10 +29,10 @@ import hertzchain as hc
 from fitting.effects import nominal_yield_forces_n
 from fitting.hidden import truth_fields
 from hertzchain.acquisition import Acquisition, acquire
+from hertzchain.io.tracefile import TraceFile, format_rows, setup_header
 from hertzchain.materials import BRASS
 from hertzchain.reference import simulate_reference
 from hertzchain.sensor import sensor_signal
-from hertzchain.tracefile import TraceFile, format_rows, setup_header
 
 SETUPS = {
     "paper": dict(n_beads=21, fields={}, contacts=(6, 11), velocities_m_s=(0.05, 0.12, 0.3, 0.6, 1.0),

@@ -106,7 +106,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     from fit_bench import machine_info
 
-    from hertzchain.atomic import write_json, write_text
+    from hertzchain.io.atomic import write_json, write_text
 
     load_before = os.getloadavg()[0]
     laws = {}

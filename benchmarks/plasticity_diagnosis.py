@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from fitting.diagnosis import diagnose
-from hertzchain import atomic
+from hertzchain.io import atomic
 
 TEST = Path(__file__).resolve().parents[1] / "tests" / "test_contact_plasticity_diagnosis.py"
 # Interval of the load-average samples stored with each draw's time, s.

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 import hertzchain as hc
-from hertzchain import atomic
+from hertzchain.io import atomic
 
 SPEEDS_M_S = (0.1, 0.3, 0.5, 0.8, 1.0, 1.5, 2.0, 3.0)
 T_END_S = 1.6e-3

@@ -123,7 +123,7 @@ def main(argv=None) -> int:
     from hertzchain.cli import expose_cpu_cores
 
     expose_cpu_cores()  # as `hertzchain fit --posterior`: the cores as devices
-    from hertzchain.atomic import write_json
+    from hertzchain.io.atomic import write_json
 
     result = benchmark_posterior(args.traces, chains=args.chains, warmup=args.warmup, draws=args.draws)
     write_json(args.out, result)

@@ -657,7 +657,7 @@ def _plot(rows, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hertzchain.atomic import save_figure
+    from hertzchain.io.atomic import save_figure
 
     fig, axes = plt.subplots(1, len({r["n_beads"] for r in rows}), figsize=(12, 4), squeeze=False)
     for ax, n in zip(axes[0], sorted({r["n_beads"] for r in rows})):
@@ -689,7 +689,7 @@ def _fit_iteration() -> dict:
 
 def quick(out: Path) -> dict:
     """The headline ratios in under 3 minutes on 2 quiet cores (see the module docstring)."""
-    from hertzchain.atomic import write_json, write_text
+    from hertzchain.io.atomic import write_json, write_text
     from hertzchain.progress import Progress
 
     cores = os.cpu_count() or 1
@@ -787,7 +787,7 @@ def main(argv=None) -> int:
         return 0
     import numpy as np
 
-    from hertzchain.atomic import write_json, write_text
+    from hertzchain.io.atomic import write_json, write_text
     from hertzchain.progress import Progress
 
     out = Path(args.out)

@@ -45,7 +45,7 @@ import numpy as np
 
 import hertzchain as hc
 from hertzchain.acquisition import Acquisition, acquire
-from hertzchain.atomic import json_ready, write_json
+from hertzchain.io.atomic import json_ready, write_json
 from hertzchain.materials import BEAD_STEEL, BRASS
 from hertzchain.reference import simulate_reference
 

@@ -28,7 +28,7 @@ import numpy as np
 
 import hertzchain as hc
 from hertzchain import sensitivity as S
-from hertzchain.atomic import write_json
+from hertzchain.io.atomic import write_json
 
 
 def sweep_benchmark(n_setups: int, chunk_size: int) -> dict:

@@ -17,8 +17,8 @@ import numpy as np
 
 import hertzchain as hc
 from hertzchain import plotting
-from hertzchain.atomic import save_figure
-from hertzchain.tracefile import TraceFile, setup_header, write_trace
+from hertzchain.io.atomic import save_figure
+from hertzchain.io.tracefile import TraceFile, setup_header, write_trace
 
 SMALL = os.environ.get("HERTZCHAIN_EXAMPLE_SMALL") == "1"
 OUT = Path(os.environ.get("HERTZCHAIN_EXAMPLE_OUT", "out/examples"))

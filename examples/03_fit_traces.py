@@ -16,7 +16,7 @@ from pathlib import Path
 
 import hertzchain as hc
 from hertzchain.acquisition import Acquisition, acquire_trace
-from hertzchain.tracefile import write_trace
+from hertzchain.io.tracefile import write_trace
 
 import fitting
 from fitting.report import write_report

@@ -18,7 +18,7 @@
 import os
 from pathlib import Path
 
-from hertzchain.tracefile import write_trace
+from hertzchain.io.tracefile import write_trace
 
 from fitting.diagnosis import diagnose
 from fitting.diagnosis_report import write_diagnosis_report

@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 
 import hertzchain as hc  # noqa: E402
 from fitting import design as fd  # noqa: E402
-from hertzchain.atomic import save_figure, write_json  # noqa: E402
+from hertzchain.io.atomic import save_figure, write_json  # noqa: E402
 
 SMALL = os.environ.get("HERTZCHAIN_EXAMPLE_SMALL") == "1"
 OUT = Path(os.environ.get("HERTZCHAIN_EXAMPLE_OUT", "out/examples"))

@@ -20,7 +20,7 @@ import numpy as np
 
 import hertzchain as hc
 from hertzchain.acquisition import Acquisition, acquire
-from hertzchain.importer import import_experiment
+from hertzchain.io.importer import import_experiment
 
 import fitting
 from fitting.diagnosis import diagnose

@@ -1,6 +1,6 @@
 """The data model of a fit: experiments (trace files) and the checks they must pass.
 
-An `Experiment` is one trace file (`hertzchain.tracefile.TraceFile`) plus the choice of
+An `Experiment` is one trace file (`hertzchain.io.tracefile.TraceFile`) plus the choice of
 channels to fit and the noise level of each channel. The noise standard deviation whitens
 the residuals. It comes from the file's `noise_std_n_<channel>` or `noise_std_n` header
 when there is one; otherwise
@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
+from hertzchain.io.tracefile import TraceFile, read_trace
 from hertzchain.pulses import estimate_noise_std_n
 from hertzchain.theory import discrete_fwhm_s
-from hertzchain.tracefile import TraceFile, read_trace
 
 from .parameters import bare_speed_constant
 
@@ -110,7 +110,7 @@ def make_experiment(trace: TraceFile, *, label: str | None = None, channels=None
 
     **Arguments:**
 
-    - `trace`: a `TraceFile` (e.g. from `hertzchain.tracefile.read_trace`).
+    - `trace`: a `TraceFile` (e.g. from `hertzchain.io.tracefile.read_trace`).
     - `label`: name in reports (default: the file stem, or `trace<k>`).
     - `channels`: channels to fit (default all).
     - `noise_std_n`: noise standard deviation, N (default: the header's, else estimated).
@@ -249,16 +249,16 @@ def _refuse_repeats(paths) -> None:
 def load_experiments(sources, *, channels=None, noise_std_n=None) -> list[Experiment]:
     """Read trace files (paths) or take `TraceFile`s and check them for fitting.
 
-    An experiment file (`.toml`, see `hertzchain.importer`) stands for its shots, imported
+    An experiment file (`.toml`, see `hertzchain.io.importer`) stands for its shots, imported
     in memory. Labels are the shot labels or file stems, made unique with a suffix when two
     share one. A file given twice (or a byte-for-byte copy of one) is refused.
     """
     sources = list(sources)
     _refuse_repeats([s for s in sources if isinstance(s, (str, Path))])
     if any(isinstance(s, (str, Path)) and str(s).lower().endswith(".toml") for s in sources):
-        # experiment files (`hertzchain.importer.is_experiment_file`): the scope-file readers
+        # experiment files (`hertzchain.io.importer.is_experiment_file`): the scope-file readers
         # and their packages load only when one is given
-        from hertzchain.importer import expand_sources
+        from hertzchain.io.importer import expand_sources
 
         sources = expand_sources(sources)
     experiments, used = [], set()

@@ -22,7 +22,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hertzchain.atomic import save_figure, write_csv, write_json, write_text  # noqa: E402
+from hertzchain.io.atomic import save_figure, write_csv, write_json, write_text  # noqa: E402
 from hertzchain.units import display_unit, format_measured  # noqa: E402
 from hertzchain.native import kernel_record  # noqa: E402
 

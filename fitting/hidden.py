@@ -30,8 +30,8 @@ import numpy as np
 
 from hertzchain import laws
 from hertzchain.chain import ChainSetup
+from hertzchain.io.tracefile import TraceFile, setup_header
 from hertzchain.theory import wave_amplitude_n
-from hertzchain.tracefile import TraceFile, setup_header
 
 from .effects import EFFECT_NAMES
 from .parameters import bare_speed_constant

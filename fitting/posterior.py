@@ -51,7 +51,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from hertzchain.atomic import json_ready
+from hertzchain.io.atomic import json_ready
 
 from .fit import FitResult, FitWarning, fit
 from .model import ForwardModel, Problem

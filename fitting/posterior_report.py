@@ -24,7 +24,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hertzchain.atomic import atomic_path, file_stem, save_figure, write_csv, write_json, write_text  # noqa: E402
+from hertzchain.io.atomic import (  # noqa: E402
+    atomic_path,
+    file_stem,
+    save_figure,
+    write_csv,
+    write_json,
+    write_text,
+)
 
 from .posterior import PosteriorResult, posterior_predictive  # noqa: E402
 

@@ -1,6 +1,6 @@
 """Fit reports: JSON, CSV and PNG files of a `FitResult`.
 
-`write_report(result, out_dir)` writes (all atomically, through `hertzchain.atomic`):
+`write_report(result, out_dir)` writes (all atomically, through `hertzchain.io.atomic`):
 
 - `fit.json`: everything in `FitResult.to_json()` (SI units).
 - `params.csv`: label, value, standard error, relative error, unit.
@@ -27,7 +27,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hertzchain.atomic import file_stem, save_figure, write_csv, write_json  # noqa: E402
+from hertzchain.io.atomic import file_stem, save_figure, write_csv, write_json  # noqa: E402
 from hertzchain.units import column_name, display_unit, format_measured  # noqa: E402
 from hertzchain.native import kernel_record  # noqa: E402
 

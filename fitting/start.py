@@ -34,8 +34,8 @@ import math
 import numpy as np
 
 from hertzchain import theory
+from hertzchain.io.tracefile import TraceFile
 from hertzchain.peaks import measured_first_peak
-from hertzchain.tracefile import TraceFile
 
 from .parameters import bare_speed_constant
 

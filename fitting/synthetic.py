@@ -12,8 +12,8 @@ import numpy as np
 
 from hertzchain.chain import ChainSetup
 from hertzchain.integrate import Recording, solve_stacked, stack_setups
+from hertzchain.io.tracefile import TraceFile, setup_header
 from hertzchain.timegrid import choose_time_grid
-from hertzchain.tracefile import TraceFile, setup_header
 
 from .model import SENSOR_STEPS_PER_HALF_PERIOD, interpolate, time_step_s
 

@@ -10,9 +10,11 @@ Reference: S. Job, F. Melo, A. Sokolow, S. Sen, "How Hertzian solitary waves int
 boundaries in a 1-D granular medium", Phys. Rev. Lett. 94, 178002 (2005).
 """
 
+from ._moved import install_finder
 from .precision import enable_float64
 
 enable_float64()
+install_finder()  # the module paths that moved (hertzchain._moved)
 
 from . import contact, laws, materials  # noqa: E402
 from . import acquisition, pulses, sensor, theory  # noqa: E402

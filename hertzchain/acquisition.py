@@ -42,7 +42,7 @@ import math
 
 import numpy as np
 
-from .tracefile import TraceFile, format_rows, setup_header
+from .io.tracefile import TraceFile, format_rows, setup_header
 
 # Sensitivities of the paper's sensors, V/N.
 EMBEDDED_SENSITIVITY_V_PER_N = 11.24e-3

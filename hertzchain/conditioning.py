@@ -1,7 +1,7 @@
 """Conditioning of recorded channels: from a scope's volts to forces on the model's clock.
 
 Each step is a small pure function on numpy arrays, so that an importer (see
-`hertzchain.importer`) can apply them in order and record what each one did:
+`hertzchain.io.importer`) can apply them in order and record what each one did:
 
 1. `regular_time_grid`: times as written by a scope carry a few significant digits; a grid
    that is uniform to within `TIME_ROUNDING` of a sample interval is replaced by the exact

@@ -90,12 +90,13 @@ try:
 except ImportError:  # not a POSIX system: builds are not serialised between processes
     fcntl = None
 
-SOURCE = Path(__file__).with_name("chain_kernel.cc")
+CSRC = Path(__file__).parent / "kernels" / "csrc"  # the kernels' C++ and CUDA sources
+SOURCE = CSRC / "chain_kernel.cc"
 # The driven chains' lock-in kernel (`hertzchain.driven.fused`), built by `_load_library` too.
-DRIVEN_SOURCE = Path(__file__).with_name("driven_kernel.cc")
-LAWS = Path(__file__).with_name("chain_laws.h")  # the laws both kernels include
-FFI_ARGS = Path(__file__).with_name("chain_ffi.h")  # their handlers' argument lists
-BLOCKS = Path(__file__).with_name("chain_blocks.h")  # the host kernels' layouts and threads
+DRIVEN_SOURCE = CSRC / "driven_kernel.cc"
+LAWS = CSRC / "chain_laws.h"  # the laws both kernels include
+FFI_ARGS = CSRC / "chain_ffi.h"  # their handlers' argument lists
+BLOCKS = CSRC / "chain_blocks.h"  # the host kernels' layouts and threads
 TARGET = "hertzchain_chain_forward"
 FULL_TARGET = "hertzchain_chain_full_forward"
 TANGENT_TARGET = "hertzchain_chain_full_tangent"
@@ -749,7 +750,7 @@ def kernel_for(flags, devices) -> FusedKernel | None:
 # length (its loops unrolled, its state in registers), built on first use with nvcc for
 # this machine's GPU ("cuda") or with the C++ compiler for the host ("emulated").
 
-THREAD_SOURCE = Path(__file__).with_name("chain_kernel_thread.cu")
+THREAD_SOURCE = CSRC / "chain_kernel_thread.cu"
 # IEEE division and square roots (nvcc's defaults) and no contraction into fused
 # multiply-adds: the JAX kernel's arithmetic, as on the host.
 NVCC_FLAGS = ("-O3", "-arch=native", "--fmad=false", "-std=c++17", "-shared", "-Xcompiler", "-fPIC")

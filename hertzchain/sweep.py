@@ -58,10 +58,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .atomic import atomic_path, save_figure, write_csv, write_json
 from .batched import BatchedTraces, solve_batched
 from .chain import ChainSetup
 from .integrate import Recording
+from .io.atomic import atomic_path, save_figure, write_csv, write_json
 from .native import kernel_record
 from .progress import Progress
 from .timegrid import DEFAULT_STEPS_PER_CONTACT, choose_time_grid

@@ -1,10 +1,18 @@
 """Shared pieces of the tests: independent references written in NumPy from their papers, which
-several test files compare the library with (a test file imports them from here, never from
-another test file)."""
+several test files compare the library with, the chains several of them build and the
+comparisons of the fused kernels with the JAX kernel that several of them make (a test file
+imports them from here, never from another test file)."""
 
 import math
 
+import jax
 import numpy as np
+
+import hertzchain as hc
+from hertzchain import native
+from hertzchain.batched import solve_batched
+from hertzchain.driven import DrivenChain
+from hertzchain.integrate import Recording
 
 
 def jackson_green_force(overlap, peak, kappa, radius, sigma, nu, hardness=2.84):
@@ -28,3 +36,171 @@ def jackson_green_force(overlap, peak, kappa, radius, sigma, nu, hardness=2.84):
     span = np.where(yielded, 3 * peak_force / (4 * modulus * np.maximum(contact_radius, 1e-300)), peak)
     fraction = np.clip((overlap - (peak - span)) / np.maximum(span, 1e-300), 0.0, None)
     return np.where(peak > 0, peak_force * fraction**1.5, 0.0)
+
+
+# Driven chains (hertzchain.driven)
+
+
+def lydon_bead(n_beads=1, precompression_n=4.5, damping_rate_per_s=1800.0):
+    """316 steel beads of 19.05 mm, 28 g, between steel faces (Lydon et al. 2015's setup)."""
+    return DrivenChain.from_materials(
+        n_beads=n_beads, bead_radius_m=9.525e-3, bead_mass_kg=0.028, bead_youngs_pa=193e9, bead_poisson=0.3,
+        driver_youngs_pa=193e9, driver_poisson=0.3, wall_youngs_pa=193e9, wall_poisson=0.3,
+        precompression_n=precompression_n, damping_rate_per_s=damping_rate_per_s,
+    )
+
+
+def lydon_fitted_bead():
+    """The single bead as the research notes fitted it: delta_0 = 22.6 nm at F0 = 0.133 N
+    (linear resonance 3993 Hz), zeta = 0.036."""
+    kappa = 0.133 / (22.6e-9) ** 1.5
+    return DrivenChain(bead_mass_kg=[0.028], contact_kappa_n_m1p5=[kappa, kappa], precompression_n=0.133,
+                       damping_rate_per_s=2 * 0.036 * 2 * np.pi * 3993.0)
+
+
+def uneven_chain():
+    """A second setup: three unequal beads, unequal contacts, unequal damping."""
+    return DrivenChain(
+        bead_mass_kg=[0.011, 0.02, 0.015],
+        contact_kappa_n_m1p5=[6e9, 9e9, 4e9, 1.2e10],
+        precompression_n=2.0,
+        damping_rate_per_s=[900.0, 1500.0, 600.0],
+    )
+
+
+def linear_response(chain, frequency_hz):
+    """Closed-form steady state of the chain linearised about F0: bead velocities' complex
+    amplitudes per metre of drive, (n, F), from (K - w^2 M + i w C) X = k_0 e_1."""
+    k = np.asarray(chain.contact_stiffness_n_m())
+    m = np.asarray(chain.bead_mass_kg)
+    gamma = np.asarray(chain.damping_rate_per_s)
+    n = m.size
+    stiffness = np.diag(k[:-1] + k[1:]) - np.diag(k[1:-1], 1) - np.diag(k[1:-1], -1)
+    force = np.zeros(n)
+    force[0] = k[0]
+    out = []
+    for f in np.atleast_1d(frequency_hz):
+        w = 2 * np.pi * f
+        x = np.linalg.solve(stiffness - w**2 * np.diag(m) + 1j * w * np.diag(m * gamma), force)
+        out.append(1j * w * x)
+    return np.asarray(out).T
+
+
+def linear_mode_frequencies_hz(chain):
+    """Frequencies of the chain linearised about F0 (undamped), Hz, ascending."""
+    k = np.asarray(chain.contact_stiffness_n_m())
+    stiffness = np.diag(k[:-1] + k[1:]) - np.diag(k[1:-1], 1) - np.diag(k[1:-1], -1)
+    return np.sqrt(np.sort(np.linalg.eigvals(stiffness / np.asarray(chain.bead_mass_kg)[:, None]).real)) / (2 * np.pi)
+
+
+# The fused kernels (hertzchain.native) against the JAX kernel
+
+
+def ten_bead_batch(speeds=(0.3, 1.0), **kwargs):
+    """`hc.batch_setup` of a 10-bead chain (`ChainSetup` fields `kwargs`) with striker speeds
+    `speeds` (m/s) and walls of Young's modulus 3 GPa and 400 GPa, and its time grid (0.8 ms,
+    a sample every 2 us)."""
+    setup, _ = hc.batch_setup(hc.ChainSetup(10, **kwargs), striker_velocity_m_s=list(speeds),
+                              wall_youngs_pa=[3e9, 4e11])
+    return setup, hc.choose_time_grid(setup, t_end_s=0.8e-3, sample_interval_s=2e-6)
+
+
+def recorded_forces(base, grid, q, kernel):
+    """`record_batched` at parameter values q = (eta s, mu, striker-speed factor, preload N,
+    bead Young's modulus factor[, dashpot N s/m]): the recorded forces (channels, B, n_samples)."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    from hertzchain.batched import kernel_flags, record_batched
+
+    dashpot = ("dashpot",) if q.shape[0] > 5 else ()
+    flags = kernel_flags(base, switched_on=("viscous", "friction", "preload") + dashpot)._replace(ledger=False)
+    ones = jnp.ones(base.eta_s.shape)
+    setup = eqx.tree_at(
+        lambda s: (s.eta_s, s.mu, s.striker_velocity_m_s, s.precompression_n, s.bead_youngs_pa), base,
+        (q[0] * ones, q[1] * ones, q[2] * base.striker_velocity_m_s, q[3] * ones, q[4] * base.bead_youngs_pa),
+    )
+    if dashpot:
+        setup = eqx.tree_at(lambda s: s.dashpot_n_s_m, setup, q[5] * ones)
+    out = record_batched(setup, grid, Recording((2, 6)), flags, kernel=kernel)
+    return jnp.stack([out.forces_n[name] for name in out.channel_names])
+
+
+TRANSFORMS = {
+    # a batch of fits: every parameter vector its own chains
+    "vmap": lambda f, q, qs: jax.vmap(f)(qs),
+    "jacfwd": lambda f, q, qs: jax.jacfwd(f)(q),
+    "vmap_of_jacfwd": lambda f, q, qs: jax.vmap(jax.jacfwd(f))(qs),
+    "jacfwd_of_vmap": lambda f, q, qs: jax.jacfwd(lambda s: jax.vmap(f)(qs * s))(np.ones(q.size)),
+    "vmap_of_vmap_of_jacfwd": lambda f, q, qs: jax.vmap(jax.vmap(jax.jacfwd(f)))(jax.numpy.stack([qs, qs[::-1]])),
+}
+
+
+def synthetic_fit_problem():
+    """The fit problem (eta, mu, C free) of two synthetic 12-bead shots (0.2 and 0.5 m/s,
+    contact 4 recorded, noise 0.3 N) and its starting values."""
+    from fitting.fit import initial_values, make_problem
+    from fitting.synthetic import paper_setups, synthetic_traces
+
+    files = synthetic_traces(paper_setups([0.2, 0.5], n_beads=12), contacts=(4,), t_end_s=0.6e-3,
+                             sample_interval_s=2e-6, noise_std_n=0.3, seed=3)
+    problem = make_problem(files, ("eta", "mu", "C"))
+    return problem, initial_values(problem)
+
+
+def assert_forces_equal_the_jax_kernels(setup, grid, *, books: bool):
+    """`solve_batched`'s default kernel against the JAX kernel (contacts 2 and 6 and the
+    wall): every recorded force within 2e-12 of its channel's largest force. Returns both
+    results (the default kernel's first)."""
+    recording = Recording((2, 6))
+    ours = solve_batched(setup, grid, recording, books=books)
+    reference = solve_batched(setup, grid, recording, books=books, kernel="jax")
+    for name in ours.channel_names:
+        scale = float(np.max(np.abs(reference.forces_n[name])))
+        assert scale > 1.0 or (name == "wall" and setup.end == "free")
+        np.testing.assert_allclose(ours.forces_n[name], reference.forces_n[name], rtol=0, atol=2e-12 * scale)
+    return ours, reference
+
+
+def assert_transform_is_one_call_equal_to_the_jax_kernel(transform: str, targets) -> None:
+    """`record_batched` under `TRANSFORMS[transform]` on the fused kernel: the custom call
+    `targets(transform)` names appears once in the compiled program (no loop around it), and
+    the values and derivatives are those of the JAX kernel under the same transformation to
+    round-off (friction's derivative crosses stick-slip kinks: 1e-10 of each column's largest
+    value)."""
+    import jax.numpy as jnp
+
+    base, _ = ten_bead_batch(speeds=(0.3, 1.0, 0.5), precompression_n=1.0)
+    grid = hc.choose_time_grid(base, t_end_s=0.3e-3, sample_interval_s=2e-6)
+    q = jnp.asarray([2e-6, 0.19, 1.0, 1.0, 1.0])
+    qs = q * jnp.asarray([[1.0] * 5, [1.3, 0.7, 1.1, 0.5, 1.02], [0.6, 1.2, 0.9, 1.5, 0.98]])
+    run = lambda kernel: jax.jit(lambda q, qs: TRANSFORMS[transform](  # noqa: E731
+        lambda p: recorded_forces(base, grid, p, kernel), q, qs))
+    hlo = run("auto").lower(q, qs).as_text()
+    assert hlo.count(targets(transform)) == 1 and "while" not in hlo
+    fused, reference = np.asarray(run("auto")(q, qs)), np.asarray(run("jax")(q, qs))
+    assert fused.shape == reference.shape
+    columns = tuple(range(reference.ndim - 1)) if "jacfwd" in transform else None
+    scale = np.max(np.abs(reference), axis=columns)
+    assert np.all(scale > 0.0)
+    np.testing.assert_array_less(np.max(np.abs(fused - reference), axis=columns), 1e-10 * scale)
+
+
+def assert_fit_iteration_equals_the_jax_kernels(monkeypatch) -> None:
+    """What a fit iteration computes (`fitting.model.residuals_and_jacobian`: whitened
+    residuals and their Jacobian in eta, mu, C and the nuisances) on the fused kernel that
+    `native.kernel_for` picks equals the same on the JAX kernel to round-off."""
+    from fitting.model import residuals_and_jacobian
+
+    problem, x = synthetic_fit_problem()
+    assert problem.simulates_natively()
+    r, jac = residuals_and_jacobian(problem, x)
+    monkeypatch.setattr(native, "kernel_for", lambda flags, devices: None)
+    problem_jax, _ = synthetic_fit_problem()
+    r_jax, jac_jax = residuals_and_jacobian(problem_jax, x)
+    assert r.shape == r_jax.shape and np.linalg.norm(r) > 10.0  # the start is off the data
+    np.testing.assert_allclose(r, r_jax, rtol=0, atol=1e-10 * np.max(np.abs(r_jax)))
+    for column, label in enumerate(problem.labels):
+        scale = np.max(np.abs(jac_jax[:, column]))
+        np.testing.assert_allclose(jac[:, column], jac_jax[:, column], rtol=0, atol=1e-9 * scale + 1e-300,
+                                   err_msg=label)

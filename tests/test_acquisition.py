@@ -8,7 +8,7 @@ import pytest
 import hertzchain
 from hertzchain import acquisition as acq
 from hertzchain import pulses, theory
-from hertzchain.tracefile import read_trace, write_trace
+from hertzchain.io.tracefile import read_trace, write_trace
 
 FINE = 0.1e-6
 T = FINE * np.arange(1, 20001)  # 2 ms after the impact

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hertzchain.cli import main
-from hertzchain.tracefile import read_trace
+from hertzchain.io.tracefile import read_trace
 
 
 @pytest.fixture(scope="module")
@@ -101,7 +101,7 @@ def test_repeated_shots_report_their_scatter(tmp_path):
     as repeats, with the sample standard deviation of their per-shot amplitudes and speeds."""
     import hertzchain as hc
     from hertzchain.acquisition import Acquisition, record_simulation
-    from hertzchain.tracefile import write_trace
+    from hertzchain.io.tracefile import write_trace
 
     paths = []
     for k, velocity in enumerate((0.3, 0.3, 0.15, 0.3)):
@@ -132,7 +132,7 @@ def test_one_contact_channel_gives_amplitudes_and_says_why_no_speed(tmp_path, ca
     why instead of printing NaN."""
     import hertzchain as hc
     from hertzchain.acquisition import Acquisition, record_simulation
-    from hertzchain.tracefile import write_trace
+    from hertzchain.io.tracefile import write_trace
 
     paths = []
     for k in range(2):

@@ -9,8 +9,8 @@ import pytest
 
 from hertzchain.cli import main
 from hertzchain.cli.setup_options import add_setup_arguments, chain_from_args
+from hertzchain.io.tracefile import read_trace
 from hertzchain.sweep import parse_grid
-from hertzchain.tracefile import read_trace
 from hertzchain.units import parse_quantity
 
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from hertzchain.cli import main
-from hertzchain.tracefile import read_trace
+from hertzchain.io.tracefile import read_trace
 
 
 def test_simulate_writes_traces_summary_and_plot(tmp_path, capsys):

@@ -15,7 +15,7 @@ from helpers import jackson_green_force
 import hertzchain as hc
 from fitting.diagnosis import diagnose
 from hertzchain.acquisition import Acquisition, acquire_trace
-from hertzchain.tracefile import TraceFile
+from hertzchain.io.tracefile import TraceFile
 
 TRUE_YIELD_STRESS_PA = 1.8e9
 VELOCITIES_M_S = (0.1, 0.3, 0.8, 1.5)

@@ -326,7 +326,7 @@ def _exponent_traces(exponent, *, n_beads=6, velocities=(0.05, 0.15, 0.4), noise
     """Traces of a chain whose contacts follow F = kappa_eff delta^exponent (outside the
     library), from a small velocity-Verlet integrator of its own; kappa_eff matches the Hertz
     force at a 10 um overlap so the pulses have the usual size."""
-    from hertzchain.tracefile import TraceFile, setup_header
+    from hertzchain.io.tracefile import TraceFile, setup_header
 
     rng = np.random.default_rng(seed)
     setup = ChainSetup(n_beads)
@@ -386,7 +386,7 @@ def test_contact_exponent_is_named_with_its_value():
 @pytest.mark.slow
 def test_command_line_writes_the_report(tmp_path, monkeypatch, capsys):
     from hertzchain.cli import main
-    from hertzchain.tracefile import write_trace
+    from hertzchain.io.tracefile import write_trace
 
     files = hidden_effect_traces({"track_friction": 0.3}, seed=8, noise_fraction=0.004, **SHORT)
     paths = []
@@ -516,7 +516,7 @@ def test_noise_band_holds_chi2_whitened_by_noise_levels_estimated_from_pre_trigg
     amplitude still leaves it."""
     from fitting.data import make_experiment
     from fitting.diagnosis import NOISE_BAND_SIGMA, noise_estimate_variance
-    from hertzchain.tracefile import TraceFile, setup_header
+    from hertzchain.io.tracefile import TraceFile, setup_header
 
     n, m, channels = 2650, 250, ("wall", "contact_5")
     time = 1e-6 * np.arange(n)

@@ -21,10 +21,10 @@ import pytest
 import hertzchain as hc
 from fitting.diagnosis import diagnose
 from hertzchain.acquisition import Acquisition, acquire_trace
+from hertzchain.io.tracefile import TraceFile, setup_header
 from hertzchain.materials import BRASS
 from hertzchain.reference import simulate_reference
 from hertzchain.sensor import sensor_signal
-from hertzchain.tracefile import TraceFile, setup_header
 
 # the records reach forces above the beads' nominal yield force: only the plasticity data
 # are meant to show it

@@ -6,37 +6,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import (
+    linear_mode_frequencies_hz,
+    linear_response,
+    lydon_bead,
+    lydon_fitted_bead,
+    uneven_chain,
+)
 from scipy.integrate import solve_ivp
 
 from hertzchain.driven import DrivenChain, kernel, lockin, lockin_grid, settle_periods
 from hertzchain.driven import drive as drives
-
-
-def lydon_bead(n_beads=1, precompression_n=4.5, damping_rate_per_s=1800.0):
-    """316 steel beads of 19.05 mm, 28 g, between steel faces (Lydon et al. 2015's setup)."""
-    return DrivenChain.from_materials(
-        n_beads=n_beads, bead_radius_m=9.525e-3, bead_mass_kg=0.028, bead_youngs_pa=193e9, bead_poisson=0.3,
-        driver_youngs_pa=193e9, driver_poisson=0.3, wall_youngs_pa=193e9, wall_poisson=0.3,
-        precompression_n=precompression_n, damping_rate_per_s=damping_rate_per_s,
-    )
-
-
-def lydon_fitted_bead():
-    """The single bead as the research notes fitted it: delta_0 = 22.6 nm at F0 = 0.133 N
-    (linear resonance 3993 Hz), zeta = 0.036."""
-    kappa = 0.133 / (22.6e-9) ** 1.5
-    return DrivenChain(bead_mass_kg=[0.028], contact_kappa_n_m1p5=[kappa, kappa], precompression_n=0.133,
-                       damping_rate_per_s=2 * 0.036 * 2 * np.pi * 3993.0)
-
-
-def uneven_chain():
-    """A second setup: three unequal beads, unequal contacts, unequal damping."""
-    return DrivenChain(
-        bead_mass_kg=[0.011, 0.02, 0.015],
-        contact_kappa_n_m1p5=[6e9, 9e9, 4e9, 1.2e10],
-        precompression_n=2.0,
-        damping_rate_per_s=[900.0, 1500.0, 600.0],
-    )
 
 
 def test_from_materials_stiffness_and_static_equilibrium():
@@ -62,24 +42,6 @@ def test_from_materials_stiffness_and_static_equilibrium():
         np.testing.assert_allclose(np.asarray(force), float(c.precompression_n), rtol=1e-13)
         net = np.asarray(state.contact_accel_m_s2) * np.asarray(c.bead_mass_kg)[:, None]
         assert np.max(np.abs(net)) < 1e-13 * float(c.precompression_n)
-
-
-def linear_response(chain, frequency_hz):
-    """Closed-form steady state of the chain linearised about F0: bead velocities' complex
-    amplitudes per metre of drive, (n, F), from (K - w^2 M + i w C) X = k_0 e_1."""
-    k = np.asarray(chain.contact_stiffness_n_m())
-    m = np.asarray(chain.bead_mass_kg)
-    gamma = np.asarray(chain.damping_rate_per_s)
-    n = m.size
-    stiffness = np.diag(k[:-1] + k[1:]) - np.diag(k[1:-1], 1) - np.diag(k[1:-1], -1)
-    force = np.zeros(n)
-    force[0] = k[0]
-    out = []
-    for f in np.atleast_1d(frequency_hz):
-        w = 2 * np.pi * f
-        x = np.linalg.solve(stiffness - w**2 * np.diag(m) + 1j * w * np.diag(m * gamma), force)
-        out.append(1j * w * x)
-    return np.asarray(out).T
 
 
 @pytest.mark.parametrize("chain_name", ["one_bead", "uneven"])
@@ -237,13 +199,6 @@ def independent_lockin(chain, frequency_hz, amplitude_m, ramp, hold, window, bea
                     t_eval=t_window, max_step=1 / (40 * frequency_hz))
     velocity = sol.y[n + bead - 1]
     return lockin(velocity, t_window[1] - t_window[0], frequency_hz, start_time_s=t_window[0]).complex_amplitude
-
-
-def linear_mode_frequencies_hz(chain):
-    """Frequencies of the chain linearised about F0 (undamped), Hz, ascending."""
-    k = np.asarray(chain.contact_stiffness_n_m())
-    stiffness = np.diag(k[:-1] + k[1:]) - np.diag(k[1:-1], 1) - np.diag(k[1:-1], -1)
-    return np.sqrt(np.sort(np.linalg.eigvals(stiffness / np.asarray(chain.bead_mass_kg)[:, None]).real)) / (2 * np.pi)
 
 
 @pytest.mark.parametrize("n_beads, eta_s", [(1, 0.0), (2, 0.0), (2, 2e-6)])

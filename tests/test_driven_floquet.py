@@ -5,8 +5,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import linear_mode_frequencies_hz, lydon_bead, lydon_fitted_bead, uneven_chain
 from scipy.linalg import expm
-from test_driven import linear_mode_frequencies_hz, lydon_bead, lydon_fitted_bead, uneven_chain
 
 from hertzchain.driven.floquet import floquet_multipliers, period_doubling_threshold, period_map
 

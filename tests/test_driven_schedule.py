@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from test_driven import linear_mode_frequencies_hz, lydon_bead, uneven_chain
+from helpers import linear_mode_frequencies_hz, lydon_bead, uneven_chain
 
 from hertzchain.driven import (
     HarmonicSchedule,

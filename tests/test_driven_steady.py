@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from test_driven import linear_response, lydon_bead
+from helpers import linear_response, lydon_bead
 
 from hertzchain.driven import lockin_grid
 from hertzchain.driven.steady import lockin_until_steady

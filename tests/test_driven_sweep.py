@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 import pytest
-from test_driven import lydon_bead
+from helpers import lydon_bead
 
 from hertzchain.driven import lockin_grid
 from hertzchain.driven.grid_sweep import read_lockin_sweep, run_lockin_sweep
@@ -41,12 +41,12 @@ def test_sweep_resumes_and_matches_one_batch(tmp_path):
         run_lockin_sweep(chain, frequencies, amplitudes * 2, tmp_path, chunk_size=4, progress=False, **OPTIONS)
 
 
-_SHARDED = """
+_SHARDED = f"""
 import json, sys
 import jax, numpy as np
 sys.path.insert(0, "tests")
-from test_driven import lydon_bead
-from test_driven_sweep import OPTIONS
+from helpers import lydon_bead
+OPTIONS = {OPTIONS!r}
 from hertzchain.driven.grid_sweep import run_lockin_sweep
 assert len(jax.devices()) == 2
 chain = lydon_bead(precompression_n=0.133, damping_rate_per_s=1280.0)

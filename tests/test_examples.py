@@ -28,7 +28,7 @@ def _run(name):
 def test_01_simulate_paper_chain(small):
     namespace = _run("01_simulate_paper_chain.py")
     assert (small / "01_paper_chain.png").stat().st_size > 20_000
-    from hertzchain.tracefile import read_trace
+    from hertzchain.io.tracefile import read_trace
 
     trace = read_trace(small / "01_paper_chain.csv")
     assert trace.channel_names == ("contact_5", "contact_10", "wall")

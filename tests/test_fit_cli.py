@@ -8,8 +8,8 @@ import pytest
 from fitting.parameters import bare_speed_constant
 from fitting.synthetic import paper_setups, synthetic_traces
 from hertzchain.cli import main
+from hertzchain.io.tracefile import write_trace
 from hertzchain.theory import long_wave_velocity_constant
-from hertzchain.tracefile import write_trace
 
 TRUTH = {"eta": 2e-6, "mu": 0.19, "mu_star": 0.01}
 

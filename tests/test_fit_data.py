@@ -9,7 +9,7 @@ import fitting
 import hertzchain as hc
 from fitting.data import FitInputError, estimate_noise_std, make_experiment
 from fitting.synthetic import paper_setups, synthetic_traces
-from hertzchain.tracefile import TraceFile, setup_header
+from hertzchain.io.tracefile import TraceFile, setup_header
 
 
 def _trace(interval_s=1e-6, t_end_s=1.2e-3, noise=0.05, seed=0, velocity=0.2):

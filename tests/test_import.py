@@ -22,9 +22,9 @@ import hertzchain as hc
 from fitting.design import design
 from hertzchain.acquisition import Acquisition, acquire
 from hertzchain.cli import main
-from hertzchain.importer import ExperimentFileError, TimeZeroWarning, import_experiment, load_experiment
+from hertzchain.io.importer import ExperimentFileError, TimeZeroWarning, import_experiment, load_experiment
 from hertzchain.materials import BRASS, BEAD_STEEL
-from hertzchain.tracefile import read_trace
+from hertzchain.io.tracefile import read_trace
 
 TRUTH = {"eta": 1.5e-6, "mu": 0.15}
 VELOCITIES = (0.05, 0.15, 0.4)
@@ -297,7 +297,7 @@ def test_time_zero_from_a_trigger_channel_crossing(tmp_path, lab):
 
 
 def test_time_zero_syntax_with_a_delay(tmp_path, lab):
-    from hertzchain.importer import _time_zero
+    from hertzchain.io.importer import _time_zero
 
     assert _time_zero("channel:CH3>2.5V+40us", "x") == ("channel", "CH3", 2.5, True, pytest.approx(40e-6))
     assert _time_zero("channel:CH3 < -1V - 5us", "x") == ("channel", "CH3", -1.0, False, pytest.approx(-5e-6))
@@ -324,7 +324,7 @@ def test_analyze_and_design_take_the_experiment_file(lab, tmp_path):
 
 def test_experiment_priors_are_read_and_must_agree(tmp_path, lab):
     from fitting.priors import parse_priors
-    from hertzchain.importer import experiment_priors
+    from hertzchain.io.importer import experiment_priors
 
     path = _experiment(tmp_path, lab)
     path.write_text(path.read_text() + '\n[prior]\nbead_youngs = "110GPa+-2GPa"\nsensor_gain = "+-2%"\n')

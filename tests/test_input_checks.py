@@ -14,11 +14,11 @@ import hertzchain as hc
 from fitting.data import FitInputError, load_experiments
 from fitting.driven_experiment import DrivenExperimentError, is_driven_experiment, load_driven_experiment
 from fitting.priors import PriorError, parse_prior
-from hertzchain.atomic import FOLDER_MARKER, file_stem, output_folder
+from hertzchain.io.atomic import FOLDER_MARKER, file_stem, output_folder
 from hertzchain.cli import main
 from hertzchain.cli.errors import input_error_text
-from hertzchain.importer import ExperimentFileError, load_experiment
-from hertzchain.tracefile import TraceFile, TraceFileError, read_trace, setup_header, write_trace
+from hertzchain.io.importer import ExperimentFileError, load_experiment
+from hertzchain.io.tracefile import TraceFile, TraceFileError, read_trace, setup_header, write_trace
 
 LYDON_2015 = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" / "lydon-2015"
 TONGUE = "SingleBead/BifurcationTongue/SingleBeadBif Signal Amplitude_02013Jul3_9h28m45s.txt"

@@ -15,9 +15,9 @@ import pytest
 import fitting
 import hertzchain as hc
 from hertzchain.acquisition import Acquisition, acquire_trace
+from hertzchain.io.tracefile import TraceFile, TraceFileError, read_trace, setup_header, write_trace
 from hertzchain.materials import BRASS
 from hertzchain.reference import simulate_reference
-from hertzchain.tracefile import TraceFile, TraceFileError, read_trace, setup_header, write_trace
 
 PRELOAD_N = 2.0
 

@@ -9,6 +9,14 @@ import sys
 import jax
 import numpy as np
 import pytest
+from helpers import (
+    TRANSFORMS,
+    assert_fit_iteration_equals_the_jax_kernels,
+    assert_forces_equal_the_jax_kernels,
+    assert_transform_is_one_call_equal_to_the_jax_kernel,
+    recorded_forces,
+    ten_bead_batch,
+)
 
 import hertzchain as hc
 from hertzchain import native
@@ -35,18 +43,12 @@ CASES = {
 }
 
 
-def _batch(speeds=(0.3, 1.0), **kwargs):
-    setup, _ = hc.batch_setup(hc.ChainSetup(10, **kwargs), striker_velocity_m_s=list(speeds),
-                              wall_youngs_pa=[3e9, 4e11])
-    return setup, hc.choose_time_grid(setup, t_end_s=0.8e-3, sample_interval_s=2e-6)
-
-
 @pytest.mark.parametrize("case", list(CASES))
 def test_agrees_with_the_jax_kernel_and_solve(case):
     """Forces, maxima and energy books of the C++ kernel equal the JAX kernel's to
     round-off (no fused multiply-adds in the C++ kernel, XLA may use them) and the general
     solver's within its own round-off tolerance."""
-    setup, grid = _batch(**CASES[case])
+    setup, grid = ten_bead_batch(**CASES[case])
     recording = Recording((2, 6))
     fused = solve_batched(setup, grid, recording)
     reference = solve_batched(setup, grid, recording, kernel="jax")
@@ -67,7 +69,7 @@ def test_chains_do_not_depend_on_their_neighbours_in_a_block():
     """70 chains run as one block of 64, then 6 single chains: each chain's trace is the
     one it gets alone, bit for bit (the lanes of a block never mix)."""
     speeds = np.linspace(0.2, 1.2, 35)
-    setup, grid = _batch(speeds=speeds)
+    setup, grid = ten_bead_batch(speeds=speeds)
     together = solve_batched(setup, grid, Recording((4,)))
     for i in (0, 37, 63, 64, 69):
         alone = jax.tree_util.tree_map(lambda leaf, i=i: leaf[i : i + 1], setup)
@@ -183,7 +185,7 @@ FULL_CASES = {
 def test_damped_and_frictional_forces_agree_with_the_jax_kernel(case):
     """The full C++ kernel (damping, friction; recorded forces only) against the JAX
     kernel: round-off (the sensors' stiff springs amplify it a little)."""
-    setup, grid = _batch(**FULL_CASES[case])
+    setup, grid = ten_bead_batch(**FULL_CASES[case])
     assert_forces_equal_the_jax_kernels(setup, grid, books=False)
 
 
@@ -197,7 +199,7 @@ def test_the_dashpot_is_compiled_into_the_runs_that_have_one(dashpot_n_s_m):
 
     from hertzchain.batched import kernel_flags, record_batched
 
-    setup, grid = _batch(eta_s=1e-6, mu=0.1, dashpot_n_s_m=dashpot_n_s_m)
+    setup, grid = ten_bead_batch(eta_s=1e-6, mu=0.1, dashpot_n_s_m=dashpot_n_s_m)
     flags = kernel_flags(setup)._replace(ledger=False)
     text = jax.jit(lambda s: record_batched(s, grid, Recording((2, 6)), flags).forces_n["wall"]).lower(setup).as_text()
     calls = re.findall(r"custom_call @(hertzchain_chain_full_forward\w*)([^\n]*)", text)
@@ -218,20 +220,6 @@ def test_a_dashpot_without_the_damped_kernel_is_refused():
                         friction=False, preload=False, springs=False, dashpot=True)
 
 
-def assert_forces_equal_the_jax_kernels(setup, grid, *, books: bool):
-    """`solve_batched`'s default kernel against the JAX kernel (contacts 2 and 6 and the
-    wall): every recorded force within 2e-12 of its channel's largest force. Returns both
-    results (the default kernel's first)."""
-    recording = Recording((2, 6))
-    ours = solve_batched(setup, grid, recording, books=books)
-    reference = solve_batched(setup, grid, recording, books=books, kernel="jax")
-    for name in ours.channel_names:
-        scale = float(np.max(np.abs(reference.forces_n[name])))
-        assert scale > 1.0 or (name == "wall" and setup.end == "free")
-        np.testing.assert_allclose(ours.forces_n[name], reference.forces_n[name], rtol=0, atol=2e-12 * scale)
-    return ours, reference
-
-
 def assert_books_equal_the_jax_kernels(ours, reference):
     """Largest forces to 1e-12 of themselves and every energy of the books within 1e-12 of
     the impact energy (the sums over the bodies in `batched._step`'s order; XLA may fuse)."""
@@ -247,7 +235,7 @@ def test_damped_and_frictional_books_agree_with_the_jax_kernel(case):
     """With the books (a sweep's call), damped and frictional chains run the full C++ kernel
     (`native.run_full_books`): forces, largest forces and the energy books equal the JAX
     kernel's to round-off, and the chains lose energy (damping and friction dissipate)."""
-    setup, grid = _batch(**FULL_CASES[case])
+    setup, grid = ten_bead_batch(**FULL_CASES[case])
     flags = kernel_flags(setup)
     assert native.kernel_for(flags, None) == native.FusedKernel("full", "host")
     ours, reference = assert_forces_equal_the_jax_kernels(setup, grid, books=True)
@@ -284,27 +272,6 @@ def test_books_of_a_mixed_batch_keep_each_chains_own_numbers():
         np.testing.assert_array_equal(ours.kinetic_j[i], one.kinetic_j[0])
 
 
-def _traced(base, grid, q, kernel):
-    """`record_batched` at parameter values q = (eta s, mu, striker-speed factor, preload N,
-    bead Young's modulus factor[, dashpot N s/m]): the recorded forces (channels, B, n_samples)."""
-    import equinox as eqx
-    import jax.numpy as jnp
-
-    from hertzchain.batched import kernel_flags, record_batched
-
-    dashpot = ("dashpot",) if q.shape[0] > 5 else ()
-    flags = kernel_flags(base, switched_on=("viscous", "friction", "preload") + dashpot)._replace(ledger=False)
-    ones = jnp.ones(base.eta_s.shape)
-    setup = eqx.tree_at(
-        lambda s: (s.eta_s, s.mu, s.striker_velocity_m_s, s.precompression_n, s.bead_youngs_pa), base,
-        (q[0] * ones, q[1] * ones, q[2] * base.striker_velocity_m_s, q[3] * ones, q[4] * base.bead_youngs_pa),
-    )
-    if dashpot:
-        setup = eqx.tree_at(lambda s: s.dashpot_n_s_m, setup, q[5] * ones)
-    out = record_batched(setup, grid, Recording((2, 6)), flags, kernel=kernel)
-    return jnp.stack([out.forces_n[name] for name in out.channel_names])
-
-
 # The default suite keeps the dashpot case (the same five directions, and the dashpot's, through
 # the dashpot library); the main library's tangents in eta, mu and C stay held to the JAX
 # kernel's by `test_fit_residuals_and_jacobian_equal_the_jax_kernels` and
@@ -321,20 +288,20 @@ def test_forward_mode_derivatives_equal_jacfwd_through_the_jax_kernel(case):
     q = jnp.asarray([2e-6, 0.19, 1.0, 1.0, 1.0] + ([3.0] if case.endswith("_dashpot") else []))
     case = case.removesuffix("_dashpot")
     kwargs = {k: v for k, v in FULL_CASES[case].items() if k not in ("eta_s", "mu", "precompression_n")}
-    base, grid = _batch(speeds=(0.3, 1.0, 0.5), precompression_n=1.0, **kwargs)
-    jac = np.asarray(jax.jit(jax.jacfwd(lambda q: _traced(base, grid, q, "auto")))(q))
-    reference = np.asarray(jax.jit(jax.jacfwd(lambda q: _traced(base, grid, q, "jax")))(q))
+    base, grid = ten_bead_batch(speeds=(0.3, 1.0, 0.5), precompression_n=1.0, **kwargs)
+    jac = np.asarray(jax.jit(jax.jacfwd(lambda q: recorded_forces(base, grid, q, "auto")))(q))
+    reference = np.asarray(jax.jit(jax.jacfwd(lambda q: recorded_forces(base, grid, q, "jax")))(q))
     for i in range(q.size):
         scale = np.max(np.abs(reference[..., i]))
         assert scale > 0.0
         # friction's derivative crosses stick-slip kinks: 1e-10 (1e-11 measured)
         np.testing.assert_allclose(jac[..., i], reference[..., i], rtol=0, atol=1e-10 * scale)
     direction = jnp.zeros(q.size).at[1].set(1.0)
-    value, tangent = jax.jvp(lambda q: _traced(base, grid, q, "auto"), (q,), (direction,))
+    value, tangent = jax.jvp(lambda q: recorded_forces(base, grid, q, "auto"), (q,), (direction,))
     np.testing.assert_allclose(np.asarray(tangent), jac[..., 1], rtol=0, atol=1e-12 * np.max(np.abs(jac[..., 1])))
-    _, linear = jax.linearize(lambda q: _traced(base, grid, q, "auto"), q)
+    _, linear = jax.linearize(lambda q: recorded_forces(base, grid, q, "auto"), q)
     np.testing.assert_array_equal(np.asarray(linear(direction)), np.asarray(tangent))
-    expected = np.asarray(_traced(base, grid, q, "jax"))
+    expected = np.asarray(recorded_forces(base, grid, q, "jax"))
     np.testing.assert_allclose(np.asarray(value), expected, rtol=0, atol=2e-12 * np.max(np.abs(expected)))
 
 
@@ -351,7 +318,7 @@ def test_friction_derivatives_with_and_without_loss_equal_the_jax_kernels():
 
     from hertzchain.batched import record_batched
 
-    base, grid = _batch(speeds=(0.3, 1.0, 0.5, 0.8), eta_s=1e-6)
+    base, grid = ten_bead_batch(speeds=(0.3, 1.0, 0.5, 0.8), eta_s=1e-6)
     flags = kernel_flags(base, switched_on=("viscous", "friction"))._replace(ledger=False)
     chains = base.eta_s.shape[0]  # 4 speeds x 2 walls
     mu = jnp.asarray(np.resize([0.0, 0.19, 0.0, 0.1, 0.19], chains))
@@ -383,13 +350,13 @@ def test_power_law_runs_on_the_full_kernel_equal_to_the_jax_kernel():
 
     from hertzchain.batched import record_batched
 
-    base, grid = _batch(speeds=(0.3, 1.0, 0.5), contact_exponent=1.6, eta_s=1e-6, mu=0.1,
+    base, grid = ten_bead_batch(speeds=(0.3, 1.0, 0.5), contact_exponent=1.6, eta_s=1e-6, mu=0.1,
                         sensor_beads=(4,), precompression_n=1.0)
     flags = kernel_flags(base)
     assert native.kernel_for(flags, None) == native.FusedKernel("full", "host")
     ours, reference = assert_forces_equal_the_jax_kernels(base, grid, books=True)
     assert_books_equal_the_jax_kernels(ours, reference)
-    elastic, _ = _batch(contact_exponent=1.4)
+    elastic, _ = ten_bead_batch(contact_exponent=1.4)
     assert native.kernel_for(kernel_flags(elastic), None) == native.FusedKernel("full", "host")
     assert_books_equal_the_jax_kernels(*assert_forces_equal_the_jax_kernels(elastic, grid, books=True))
     assert_forces_equal_the_jax_kernels(elastic, grid, books=False)
@@ -436,7 +403,7 @@ def test_elastic_plastic_contacts_run_on_the_full_kernel_equal_to_the_jax_kernel
     from hertzchain.batched import record_batched
 
     plastic = dict(plasticity=True, plastic_law=law, bead_yield_stress_pa=1.2e9)
-    elastic, _ = _batch(speeds=(0.3, 3.0, 1.5), **plastic)
+    elastic, _ = ten_bead_batch(speeds=(0.3, 3.0, 1.5), **plastic)
     grid = hc.choose_time_grid(elastic, t_end_s=0.4e-3, sample_interval_s=2e-6)  # the first contacts yield
     assert native.kernel_for(kernel_flags(elastic), None) == native.FusedKernel("full", "host")
     ours, reference = assert_forces_equal_the_jax_kernels(elastic, grid, books=True)
@@ -444,7 +411,7 @@ def test_elastic_plastic_contacts_run_on_the_full_kernel_equal_to_the_jax_kernel
     spent = np.asarray(ours.dissipated_j) / np.asarray(ours.initial_energy_j)  # plastic work alone here
     assert np.all(spent[2:] > 0.5) and np.all(spent >= 0.0), spent  # the 3 m/s strikers yield the contacts
 
-    base, _ = _batch(speeds=(0.3, 3.0, 1.5), eta_s=1e-6, mu=0.1, precompression_n=1.0, **plastic)
+    base, _ = ten_bead_batch(speeds=(0.3, 3.0, 1.5), eta_s=1e-6, mu=0.1, precompression_n=1.0, **plastic)
     flags = kernel_flags(base)
 
     def traced(q, kernel):
@@ -470,45 +437,11 @@ def test_elastic_plastic_contacts_run_on_the_full_kernel_equal_to_the_jax_kernel
         np.testing.assert_allclose(jac[..., i], expected[..., i], rtol=0, atol=1e-11 * scale)
 
 
-_TRANSFORMS = {
-    # a batch of fits: every parameter vector its own chains
-    "vmap": lambda f, q, qs: jax.vmap(f)(qs),
-    "jacfwd": lambda f, q, qs: jax.jacfwd(f)(q),
-    "vmap_of_jacfwd": lambda f, q, qs: jax.vmap(jax.jacfwd(f))(qs),
-    "jacfwd_of_vmap": lambda f, q, qs: jax.jacfwd(lambda s: jax.vmap(f)(qs * s))(np.ones(q.size)),
-    "vmap_of_vmap_of_jacfwd": lambda f, q, qs: jax.vmap(jax.vmap(jax.jacfwd(f)))(jax.numpy.stack([qs, qs[::-1]])),
-}
-
-
-def assert_transform_is_one_call_equal_to_the_jax_kernel(transform: str, targets) -> None:
-    """`record_batched` under `_TRANSFORMS[transform]` on the fused kernel: the custom call
-    `targets(transform)` names appears once in the compiled program (no loop around it), and
-    the values and derivatives are those of the JAX kernel under the same transformation to
-    round-off (friction's derivative crosses stick-slip kinks: 1e-10 of each column's largest
-    value)."""
-    import jax.numpy as jnp
-
-    base, _ = _batch(speeds=(0.3, 1.0, 0.5), precompression_n=1.0)
-    grid = hc.choose_time_grid(base, t_end_s=0.3e-3, sample_interval_s=2e-6)
-    q = jnp.asarray([2e-6, 0.19, 1.0, 1.0, 1.0])
-    qs = q * jnp.asarray([[1.0] * 5, [1.3, 0.7, 1.1, 0.5, 1.02], [0.6, 1.2, 0.9, 1.5, 0.98]])
-    run = lambda kernel: jax.jit(lambda q, qs: _TRANSFORMS[transform](  # noqa: E731
-        lambda p: _traced(base, grid, p, kernel), q, qs))
-    hlo = run("auto").lower(q, qs).as_text()
-    assert hlo.count(targets(transform)) == 1 and "while" not in hlo
-    fused, reference = np.asarray(run("auto")(q, qs)), np.asarray(run("jax")(q, qs))
-    assert fused.shape == reference.shape
-    columns = tuple(range(reference.ndim - 1)) if "jacfwd" in transform else None
-    scale = np.max(np.abs(reference), axis=columns)
-    assert np.all(scale > 0.0)
-    np.testing.assert_array_less(np.max(np.abs(fused - reference), axis=columns), 1e-10 * scale)
-
-
 # `jacfwd` alone is `test_forward_mode_derivatives_equal_jacfwd_through_the_jax_kernel`'s
 # (its values; the one call is held by the compositions here), and `vmap` of `vmap` of
 # `jacfwd` composes the rules the others check one level deep: both in the slow suite.
 @pytest.mark.parametrize("transform", [pytest.param(t, marks=pytest.mark.slow)
-                                       if t in ("jacfwd", "vmap_of_vmap_of_jacfwd") else t for t in _TRANSFORMS])
+                                       if t in ("jacfwd", "vmap_of_vmap_of_jacfwd") else t for t in TRANSFORMS])
 def test_vmap_and_jacfwd_are_one_kernel_run_equal_to_the_jax_kernel(transform):
     """A vmapped batch of parameter vectors (the case of a batch of fits), `jacfwd`, and
     their compositions: one run of the C++ kernel each (the mapped chains join its batch,
@@ -525,7 +458,7 @@ def test_conservative_kernel_under_vmap_is_one_run_bit_for_bit():
 
     from hertzchain.batched import _initial, _Layout, kernel_flags, kernel_params
 
-    setup, grid = _batch(speeds=(0.3, 0.6, 1.0))
+    setup, grid = ten_bead_batch(speeds=(0.3, 0.6, 1.0))
     flags = kernel_flags(setup)._replace(ledger=True)
     p = kernel_params(setup)
     layout = _Layout(p["mass"].shape[0])
@@ -547,7 +480,7 @@ def test_conservative_kernel_under_vmap_is_one_run_bit_for_bit():
 
 
 def test_unknown_kernel_is_refused():
-    setup, grid = _batch()
+    setup, grid = ten_bead_batch()
     with pytest.raises(ValueError, match="kernel must be"):
         solve_batched(setup, grid, Recording((4,)), kernel="c++")
 
@@ -572,7 +505,7 @@ def test_switched_off_runs_the_jax_kernel(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     result = json.loads(proc.stdout.strip().splitlines()[-1])
     assert "HERTZCHAIN_NATIVE=0" in result["reason"]
-    setup, grid = _batch()
+    setup, grid = ten_bead_batch()
     reference = solve_batched(setup, grid, Recording((4,)), kernel="jax")
     np.testing.assert_array_equal(np.asarray(result["wall"]), reference.forces_n["wall"])
 
@@ -658,36 +591,6 @@ def test_a_kernel_that_cannot_be_built_is_announced_once_with_its_reason(tmp_pat
     monkeypatch.setenv("HERTZCHAIN_NATIVE", "0")
     assert load() == "switched off (HERTZCHAIN_NATIVE=0)"
     assert capsys.readouterr().err == ""
-
-
-def _fit_problem():
-    from fitting.fit import initial_values, make_problem
-    from fitting.synthetic import paper_setups, synthetic_traces
-
-    files = synthetic_traces(paper_setups([0.2, 0.5], n_beads=12), contacts=(4,), t_end_s=0.6e-3,
-                             sample_interval_s=2e-6, noise_std_n=0.3, seed=3)
-    problem = make_problem(files, ("eta", "mu", "C"))
-    return problem, initial_values(problem)
-
-
-def assert_fit_iteration_equals_the_jax_kernels(monkeypatch) -> None:
-    """What a fit iteration computes (`fitting.model.residuals_and_jacobian`: whitened
-    residuals and their Jacobian in eta, mu, C and the nuisances) on the fused kernel that
-    `native.kernel_for` picks equals the same on the JAX kernel to round-off."""
-    from fitting.model import residuals_and_jacobian
-
-    problem, x = _fit_problem()
-    assert problem.simulates_natively()
-    r, jac = residuals_and_jacobian(problem, x)
-    monkeypatch.setattr(native, "kernel_for", lambda flags, devices: None)
-    problem_jax, _ = _fit_problem()
-    r_jax, jac_jax = residuals_and_jacobian(problem_jax, x)
-    assert r.shape == r_jax.shape and np.linalg.norm(r) > 10.0  # the start is off the data
-    np.testing.assert_allclose(r, r_jax, rtol=0, atol=1e-10 * np.max(np.abs(r_jax)))
-    for column, label in enumerate(problem.labels):
-        scale = np.max(np.abs(jac_jax[:, column]))
-        np.testing.assert_allclose(jac[:, column], jac_jax[:, column], rtol=0, atol=1e-9 * scale + 1e-300,
-                                   err_msg=label)
 
 
 def test_fit_residuals_and_jacobian_equal_the_jax_kernels(monkeypatch):

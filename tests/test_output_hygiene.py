@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from hertzchain.atomic import write_csv, write_json, write_text
+from hertzchain.io.atomic import write_csv, write_json, write_text
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -28,9 +28,9 @@ from fitting.design import design
 from fitting.model import residuals_and_jacobian
 from fitting.posterior import PosteriorWarning, compare_with_laplace, sample_posterior
 from hertzchain.acquisition import Acquisition, acquire_trace
+from hertzchain.io.tracefile import TraceFile
 from hertzchain.materials import BRASS
 from hertzchain.reference import simulate_reference
-from hertzchain.tracefile import TraceFile
 
 ETA_S = 1.5e-6
 NOISE_N = 0.05
@@ -277,7 +277,7 @@ def test_report_files_are_whole_and_agree(noise_only, tmp_path):
 @pytest.mark.slow  # keeps the default suite under 10 min on 2 cores; the strict exit of the CLI; the posterior's own diagnostics are tested in the default suite
 def test_command_line_posterior_is_strict_about_too_few_draws(brass_traces, tmp_path):
     from hertzchain.cli import main
-    from hertzchain.tracefile import write_trace
+    from hertzchain.io.tracefile import write_trace
 
     path = tmp_path / "shot.csv"
     write_trace(path, brass_traces[1])
@@ -305,7 +305,7 @@ def test_command_line_posterior_splits_chains_over_the_cpu_cores(brass_traces, n
     import subprocess
     import sys
 
-    from hertzchain.tracefile import write_trace
+    from hertzchain.io.tracefile import write_trace
 
     paths = []
     for k, trace in enumerate(brass_traces):

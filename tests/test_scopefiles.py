@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from hertzchain.scopefiles import (
+from hertzchain.io.scopefiles import (
     FORMATS,
     ScopeFileError,
     detect_format,

@@ -19,7 +19,7 @@ import pytest
 
 import hertzchain as hc
 from hertzchain.cli import main
-from hertzchain.importer import TimeZeroWarning, import_experiment
+from hertzchain.io.importer import TimeZeroWarning, import_experiment
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 import scope_files  # noqa: E402

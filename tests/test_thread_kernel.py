@@ -5,13 +5,18 @@ compiler is, its CUDA build where JAX runs on a GPU."""
 import jax
 import numpy as np
 import pytest
+from helpers import (
+    TRANSFORMS,
+    assert_fit_iteration_equals_the_jax_kernels,
+    assert_forces_equal_the_jax_kernels,
+    assert_transform_is_one_call_equal_to_the_jax_kernel,
+    ten_bead_batch,
+)
 
 import hertzchain as hc
 from hertzchain import native
 from hertzchain.batched import solve_batched
 from hertzchain.integrate import Recording
-from test_native import (_TRANSFORMS, _batch, assert_fit_iteration_equals_the_jax_kernels,
-                         assert_forces_equal_the_jax_kernels, assert_transform_is_one_call_equal_to_the_jax_kernel)
 
 
 def _backends():
@@ -54,7 +59,7 @@ CASES = {
 # folding of chains and directions is the host kernel's Python, tested in test_native.py;
 # the tangents by default in `test_fit_iteration_equals_the_jax_kernels`)
 _SLOW_CASES = ("rigid_and_soft_walls", "free_end_preload", "viscous_friction")
-_SLOW_TRANSFORMS = tuple(_TRANSFORMS)
+_SLOW_TRANSFORMS = tuple(TRANSFORMS)
 
 
 def _marked(names, slow):
@@ -67,7 +72,7 @@ def test_forces_and_maxima_agree_with_the_jax_kernel(case, backend):
     thread kernel equal the JAX kernel's to round-off: the same operations in the same
     order, no fused multiply-adds (the sensors' stiff springs amplify round-off a little)."""
     kwargs, books = CASES[case]
-    setup, grid = _batch(**kwargs)
+    setup, grid = ten_bead_batch(**kwargs)
     ours, reference = assert_forces_equal_the_jax_kernels(setup, grid, books=books)
     if books:
         np.testing.assert_allclose(ours.max_force_n, reference.max_force_n, rtol=1e-12)
@@ -75,7 +80,7 @@ def test_forces_and_maxima_agree_with_the_jax_kernel(case, backend):
                                    atol=1e-11 * float(np.max(reference.initial_energy_j)))
 
 
-@pytest.mark.parametrize("transform", _marked(_TRANSFORMS, _SLOW_TRANSFORMS))
+@pytest.mark.parametrize("transform", _marked(TRANSFORMS, _SLOW_TRANSFORMS))
 def test_derivatives_under_vmap_and_jacfwd_are_one_call_equal_to_the_jax_kernel(transform, backend):
     """jacfwd (five directions: damping, friction, impact speed, preload, bead modulus),
     vmap and their compositions through `record_batched` on the thread kernel: one custom

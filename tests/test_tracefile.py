@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import hertzchain as hc
-from hertzchain.tracefile import TraceFile, TraceFileError, read_trace, setup_header, write_trace
+from hertzchain.io.tracefile import TraceFile, TraceFileError, read_trace, setup_header, write_trace
 
 EXAMPLE = textwrap.dedent(
     """\

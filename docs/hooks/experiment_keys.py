@@ -1,6 +1,6 @@
 """mkdocs hook: the reference page of experiment-file keys, `reference/experiment-files.md`,
-made at build time from the key lists the readers check against (`hertzchain.importer`,
-`hertzchain.tracefile`, `fitting.driven_experiment`), so that a key added to a reader without
+made at build time from the key lists the readers check against (`hertzchain.io.importer`,
+`hertzchain.io.tracefile`, `fitting.driven_experiment`), so that a key added to a reader without
 a line here fails the build instead of going undocumented."""
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ from mkdocs.exceptions import PluginError
 from mkdocs.structure.files import File
 
 # Meanings of the keys that are not trace-header keys (those carry their own, in
-# `hertzchain.tracefile.HEADER_KEYS`).
+# `hertzchain.io.tracefile.HEADER_KEYS`).
 IMPACT_MEANINGS = {
     "format": "file format of every file of the experiment: `auto` (from its first rows) or one of "
-              "`hertzchain.scopefiles.FORMATS`",
+              "`hertzchain.io.scopefiles.FORMATS`",
     "time_zero": "`trigger`, a delay (`\"12us\"`), a trigger channel crossing a level (`\"channel:CH3>2.5V\"`), "
                  "optionally plus the delay from that crossing to the impact (`\"channel:CH3>2.5V+40us\"`)",
     "baseline_end_s": "end of the segment from which offsets and noise are taken, s [0: everything before the impact]",
@@ -80,7 +80,7 @@ def _table(keys, meanings, where: str, header_keys=None) -> str:
 
 def page() -> str:
     from fitting import driven_experiment as driven
-    from hertzchain import importer, tracefile
+    from hertzchain.io import importer, tracefile
 
     return "\n\n".join([
         "# Experiment-file keys",
@@ -93,7 +93,7 @@ def page() -> str:
         "the optional `[prior]` (the lab's tolerances, in the syntax of `--prior`: "
         "`bead_youngs = \"203GPa+-4GPa\"`).",
         "### `[chain]`",
-        "The chain, as a trace file's header holds it (`hertzchain.tracefile`); a `[[shot]]` may "
+        "The chain, as a trace file's header holds it (`hertzchain.io.tracefile`); a `[[shot]]` may "
         "repeat any of these keys for itself.",
         _table(importer.CHAIN_KEYS, {}, "[chain]", tracefile.HEADER_KEYS),
         "### `[scope]`",

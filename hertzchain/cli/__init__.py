@@ -1,9 +1,10 @@
 """The `hertzchain` command line: one subcommand per module.
 
-Each subcommand module defines `add_arguments(parser)` and `run(args) -> int`. The
-commands of the `fitting` package (fit, diagnose, design) are listed here too: the command
-line is the one place where the two packages meet; `hertzchain` itself never imports
-`fitting`.
+Each subcommand module defines `add_arguments(parser)` and `run(args) -> int`; the modules
+lie side by side in this package, those of the inference commands (fit, diagnose, design,
+contact) too. The command line is the top layer, the one place where the two packages meet:
+those modules import `fitting`, and only the command that runs is imported; the rest of
+`hertzchain` never imports `fitting`.
 """
 
 from __future__ import annotations
@@ -14,7 +15,13 @@ import os
 import sys
 
 from .. import __version__
-from .errors import EXIT_CODES, input_error_text
+from .errors import (
+    EXIT_CODES,
+    EXIT_INPUT_ERROR,
+    EXIT_NOT_CONVERGED,
+    exit_codes_epilog,
+    input_error_text,
+)
 from .warning_format import command_warnings
 
 COMMANDS = {
@@ -22,13 +29,13 @@ COMMANDS = {
     "analyze": ("hertzchain.cli.analyze", "fit every pulse of trace files (cos^6, speed, restitution)"),
     "synth": ("hertzchain.cli.synth", "write synthetic experiment trace files from any setup"),
     "import": ("hertzchain.cli.import_experiment", "condition a lab's scope files (experiment.toml) into trace files"),
-    "fit": ("fitting.cli.fit", "fit eta, mu, C (and more) to trace files"),
-    "diagnose": ("fitting.cli.diagnose", "find and name the effect a model is missing"),
+    "fit": ("hertzchain.cli.fit", "fit eta, mu, C (and more) to trace files"),
+    "diagnose": ("hertzchain.cli.diagnose", "find and name the effect a model is missing"),
     "reproduce": ("hertzchain.cli.reproduce", "regenerate the paper's figures and numbers"),
     "sweep": ("hertzchain.cli.sweep", "sweep a grid of setups, streamed to disk, resumable"),
     "sensitivity": ("hertzchain.cli.sensitivity", "exact sensitivities of observables to parameters"),
-    "design": ("fitting.cli.design", "predicted uncertainties and optimal experiment plans"),
-    "contact": ("fitting.cli.contact", "calibrate the elastic-plastic contact law on force-approach curves"),
+    "design": ("hertzchain.cli.design", "predicted uncertainties and optimal experiment plans"),
+    "contact": ("hertzchain.cli.contact", "calibrate the elastic-plastic contact law on force-approach curves"),
     "kernel": ("hertzchain.cli.kernel", "build the fused C++ kernel for this machine (once) and check it"),
 }
 
@@ -38,6 +45,9 @@ COMMANDS = {
 # the cores exposed in each process, the two-process distributed sweep's table differed in
 # its last digits from the one-process table (tests/test_sweep.py).
 CORES_AS_DEVICES = ("fit",)
+
+# The exit statuses, importable from here as from their old home `fitting.cli`.
+__all__ = ["COMMANDS", "EXIT_CODES", "EXIT_INPUT_ERROR", "EXIT_NOT_CONVERGED", "exit_codes_epilog", "main"]
 
 
 def expose_cpu_cores() -> None:

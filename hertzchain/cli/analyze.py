@@ -13,7 +13,7 @@ restitution law $1 - \\epsilon = C_vF^{1/6} + C_s/F$.
 Writes `pulses.csv` (one row per pulse), `analysis.json` (rows, per-file results, fits,
 definitions) and PNGs: each file's traces with the fitted pulses, speed and duration
 against amplitude with the theory, and restitution against force. The folder is written as a
-whole and replaces the previous run's (`hertzchain.atomic.output_folder`).
+whole and replaces the previous run's (`hertzchain.io.atomic.output_folder`).
 """
 
 from __future__ import annotations
@@ -32,9 +32,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .. import pulses, sensor, theory  # noqa: E402
-from ..atomic import file_stem, json_ready, output_folder, save_figure, write_json, write_text  # noqa: E402
-from ..importer import expand_sources  # noqa: E402
-from ..tracefile import TraceFile, read_trace  # noqa: E402
+from ..io.atomic import file_stem, json_ready, output_folder, save_figure, write_json, write_text  # noqa: E402
+from ..io.importer import expand_sources  # noqa: E402
+from ..io.tracefile import TraceFile, read_trace  # noqa: E402
 
 # Shots whose measured striker velocities differ by less than this fraction are repeats
 # of one setting when no nominal velocity is given (a drop height is set to about 1 %).

@@ -5,6 +5,11 @@ from __future__ import annotations
 
 import errno
 
+# Exit statuses of the fitting commands (fit, diagnose, design, contact); every command
+# answers EXIT_INPUT_ERROR to an input error.
+EXIT_INPUT_ERROR = 2
+EXIT_NOT_CONVERGED = 3
+
 EXIT_CODES = """exit status:
   0  done (fit: converged)
   2  bad input: an option, a file that cannot be read or parsed, an output folder that
@@ -14,6 +19,13 @@ EXIT_CODES = """exit status:
      finite (their rows have result_finite = 0)
   4  fit --posterior --strict: the posterior's diagnostics fail; kernel: a library could not
      be built (the compiler's message is printed; those runs use the JAX kernel)"""
+
+
+def exit_codes_epilog(not_converged: str) -> str:
+    """The `--help` epilog listing a command's exit statuses; `not_converged`: what status 3
+    means for it."""
+    return (f"exit status: 0 done; {EXIT_INPUT_ERROR} bad input (the message names the field and the fix); "
+            f"{EXIT_NOT_CONVERGED} {not_converged} (the results are written, and say which fits did not converge)")
 
 
 def input_error_text(error: Exception) -> str:

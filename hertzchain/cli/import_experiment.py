@@ -1,13 +1,13 @@
 """`hertzchain import experiment.toml --out DIR`: a lab's scope files as trace files.
 
-Reads the experiment file (`hertzchain.importer`: chain, scope settings, channels with
+Reads the experiment file (`hertzchain.io.importer`: chain, scope settings, channels with
 their sensitivities and coupling, shots and their files), conditions every shot (offset,
 volts to newtons, noise, time zero, clipping, each step recorded as `x_import_*` header
 keys) and writes `DIR/<shot>.csv` per shot, a plot of each, and `import.json` listing the
 files with each channel's offset, noise and clipped samples, and each shot's time zero with
 its check against the pulse's arrivals (`importer.check_time_zero`). Nothing is written unless
 every shot imports; the folder is written as a whole and replaces the previous run's
-(`hertzchain.atomic.output_folder`). `fit`, `diagnose`, `analyze` and `design` also take the
+(`hertzchain.io.atomic.output_folder`). `fit`, `diagnose`, `analyze` and `design` also take the
 experiment file directly (imported in memory).
 """
 
@@ -24,9 +24,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..atomic import file_stem, output_folder, save_figure, write_json  # noqa: E402
-from ..importer import import_experiment  # noqa: E402
-from ..tracefile import write_trace  # noqa: E402
+from ..io.atomic import file_stem, output_folder, save_figure, write_json  # noqa: E402
+from ..io.importer import import_experiment  # noqa: E402
+from ..io.tracefile import write_trace  # noqa: E402
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import sensitivity as S
-from ..atomic import save_figure, write_csv, write_json, write_text
-from ..tracefile import setup_header
+from ..io.atomic import save_figure, write_csv, write_json, write_text
+from ..io.tracefile import setup_header
 from ..units import parse_quantity
 from .setup_options import add_run_arguments, add_setup_arguments, setup_from_args
 

@@ -3,7 +3,7 @@
 Each value of the chain comes from the first of: an option giving it (`--bead-youngs
 110GPa`), a material named by an option (`--bead-material brass`), the `[chain]` table of a
 setup file (`--config setup.toml`: the keys and units of an experiment file, see
-`hertzchain.importer`), `ChainSetup`'s default (the paper's chain). `chain_from_args`
+`hertzchain.io.importer`), `ChainSetup`'s default (the paper's chain). `chain_from_args`
 returns the setup and where each value came from.
 """
 
@@ -15,10 +15,10 @@ import math
 from pathlib import Path
 
 from ..chain import PLASTIC_LAWS, ChainSetup
-from ..importer import load_chain
+from ..io.importer import load_chain
+from ..io.tracefile import REDUNDANT_TOLERANCE
 from ..materials import BEAD_STEEL, Material, material
 from ..sweep import default_contacts
-from ..tracefile import REDUNDANT_TOLERANCE
 from ..units import format_si, parse_field, parse_quantity
 from ..validation import check_plausible
 

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 
 from .. import plotting
-from ..atomic import save_figure, write_json
+from ..io.atomic import save_figure, write_json
 from ..native import kernel_record
 from ..integrate import simulate
-from ..summary import run_summary
-from ..tracefile import TraceFile, setup_header, validate_header, write_trace
+from ..io.summary import run_summary
+from ..io.tracefile import TraceFile, setup_header, validate_header, write_trace
 from ..validation import check_simulation_size
 from .setup_options import add_run_arguments, add_setup_arguments, chain_from_args, run_options
 

@@ -23,10 +23,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..acquisition import Acquisition, record_simulation  # noqa: E402
-from ..atomic import save_figure, write_json  # noqa: E402
 from ..integrate import simulate  # noqa: E402
+from ..io.atomic import save_figure, write_json  # noqa: E402
+from ..io.tracefile import validate_header, write_trace  # noqa: E402
 from ..progress import Progress  # noqa: E402
-from ..tracefile import validate_header, write_trace  # noqa: E402
 from ..units import parse_quantity  # noqa: E402
 from .setup_options import add_run_arguments, add_setup_arguments, run_options, setup_from_args  # noqa: E402
 

@@ -1,4 +1,4 @@
-"""The lock-in grid of a driven chain on a fused host kernel (`hertzchain/driven_kernel.cc`).
+"""The lock-in grid of a driven chain on a fused host kernel (`hertzchain/kernels/csrc/driven_kernel.cc`).
 
 `lockin_grid` advances every (frequency, drive) run through all of its steps with
 `kernel.step`, one `lax.scan` whose every step is a few passes of XLA's loops over the

@@ -12,8 +12,8 @@ import math
 import numpy as np
 
 from .. import theory
-from ..atomic import json_ready
 from ..chain import ChainSetup
+from ..io.atomic import json_ready
 from .constants import PAPER, PAPER_C_S, PAPER_C_V
 from .experiments import (
     DURATION_CONTACT,

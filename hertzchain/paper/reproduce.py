@@ -20,7 +20,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..atomic import save_figure, write_csv, write_json, write_text
+from ..io.atomic import save_figure, write_csv, write_json, write_text
 from ..progress import Progress
 from . import experiments, figures
 from .experiments import FAR_CONTACT, FULL_PLAN, QUICK_PLAN, SENSOR_BEAD, Plan

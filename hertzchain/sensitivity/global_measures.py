@@ -9,8 +9,8 @@ from collections.abc import Mapping, Sequence
 import jax.numpy as jnp
 import numpy as np
 
-from ..atomic import json_ready
 from ..chain import ChainSetup
+from ..io.atomic import json_ready
 from ..parameters import parameter_values
 from .jacobian import n_values, resolve_mode
 from .local import prepare

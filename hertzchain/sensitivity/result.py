@@ -14,7 +14,7 @@ import dataclasses
 
 import numpy as np
 
-from ..atomic import json_ready
+from ..io.atomic import json_ready
 from ..parameters import PARAMETERS
 from ..timegrid import TimeGrid
 

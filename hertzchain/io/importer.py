@@ -4,7 +4,7 @@ A lab keeps, for a series of shots, the chain it built, how the scope was set, w
 scope channel measured and with which sensitivity, and which files belong to which shot.
 That is the experiment file::
 
-    [chain]                     # the trace header's keys (see hertzchain.tracefile)
+    [chain]                     # the trace header's keys (see hertzchain.io.tracefile)
     n_beads = 21
     bead_radius_m = 0.013
     bead_density_kg_m3 = 7780
@@ -15,7 +15,7 @@ That is the experiment file::
     striker_mass_kg = 0.0716    # and/or striker_radius_m, if they agree
 
     [scope]
-    format = "tek-csv"          # or "auto"; hertzchain.scopefiles.FORMATS lists them
+    format = "tek-csv"          # or "auto"; hertzchain.io.scopefiles.FORMATS lists them
     time_zero = "trigger"       # or a delay in s ("12us"), or "channel:CH3>2.5V" / "channel:CH3<-1V",
                                 # or "channel:CH3>2.5V+40us" (a light gate 40 us before the impact)
 
@@ -48,7 +48,7 @@ unit):
   limits, when the file does not state them), `invert` (a sensor wired with the opposite
   sign).
 - `[[shot]]`: `SHOT_KEYS`: also `label` (a plain name, not a path: the shot's trace file is
-  `<label>.csv`, named by `hertzchain.atomic.file_stem`), `nominal_velocity_m_s` (shots at
+  `<label>.csv`, named by `hertzchain.io.atomic.file_stem`), `nominal_velocity_m_s` (shots at
   the same nominal velocity are repeats, see `hertzchain analyze`), and any `[chain]` key
   that differs for this shot (another wall, say). A scope file outside the experiment file's
   folder may be named, but the content of such a file is never quoted in an error.
@@ -81,11 +81,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import conditioning
+from .. import conditioning
+from ..units import parse_field, parse_quantity
 from .atomic import file_stem
 from .scopefiles import FORMATS, ScopeFileError, merge_waveforms, read_waveforms
 from .tracefile import FORMAT, HEADER_KEYS, TraceFile, TraceFileError, format_rows, write_trace
-from .units import parse_field, parse_quantity
 
 # Plausible sensitivities, V/N: from a 0.1 mV/N load cell to a 10 V/N amplified sensor.
 SENSITIVITY_RANGE_V_PER_N = (1e-4, 10.0)

@@ -1,9 +1,9 @@
 """`hertzchain fit FILE... --params eta,mu,C`: fit parameters to trace files.
 
-The chain of each file is described by its header (see `hertzchain.tracefile`); the
+The chain of each file is described by its header (see `hertzchain.io.tracefile`); the
 command fits the chosen parameters and writes `fit.json`, CSV tables and PNG plots
 (`fitting.report`) into `--out`, written as a whole: a temporary folder beside it replaces
-the previous run's folder when the command ends (`hertzchain.atomic.output_folder`).
+the previous run's folder when the command ends (`hertzchain.io.atomic.output_folder`).
 `--prior` (and an experiment file's `[prior]` table) states a lab's tolerances
 (`fitting.priors`): each frees its parameter and the optimum is the MAP point.
 `--posterior` then samples the posterior by NUTS (`fitting.posterior`) and writes
@@ -29,22 +29,22 @@ import time
 import warnings
 from pathlib import Path
 
-from hertzchain.atomic import output_folder, write_json
-from hertzchain.units import parse_quantity
+from ..io.atomic import output_folder, write_json
+from ..units import parse_quantity
 
-from hertzchain.importer import experiment_priors
+from ..io.importer import experiment_priors
 
-from ..compilation_cache import enable_compilation_cache, jax_cache_on
-from ..data import load_experiments
-from ..effects import PREFIX as EFFECT_PREFIX
-from ..fit import FitWarning, fit
-from ..model import STEPS_PER_CONTACT, ForwardModel
-from ..parameters import REGISTRY, get_spec, parse_parameter_list
-from ..posterior import PosteriorWarning, sample_posterior
-from ..posterior_report import write_posterior_report
-from ..priors import parse_priors
-from ..report import summary_text, write_report
-from ..uncertainty import COVARIANCES
+from fitting.compilation_cache import enable_compilation_cache, jax_cache_on
+from fitting.data import load_experiments
+from fitting.effects import PREFIX as EFFECT_PREFIX
+from fitting.fit import FitWarning, fit
+from fitting.model import STEPS_PER_CONTACT, ForwardModel
+from fitting.parameters import REGISTRY, get_spec, parse_parameter_list
+from fitting.posterior import PosteriorWarning, sample_posterior
+from fitting.posterior_report import write_posterior_report
+from fitting.priors import parse_priors
+from fitting.report import summary_text, write_report
+from fitting.uncertainty import COVARIANCES
 
 
 def _assignments(text: str | None, option: str) -> dict:
@@ -145,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
     forward = ForwardModel(steps_per_contact=args.steps_per_contact)
     noise = _noise_std_n(args.noise_std)
     # driven experiment files (lock-in sweeps of a driven chain) have their own fit
-    from ..driven_cli import is_driven_run, run_fit as run_driven_fit
+    from .driven_experiments import is_driven_run, run_fit as run_driven_fit
 
     driven = is_driven_run(args.files, args.data_dir)
     with output_folder(args.out, "fit", "fit.json") as out:

@@ -52,9 +52,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..chain import ChainSetup
+from ..validation import RULES, check_plausible
 from .atomic import write_text
-from .chain import ChainSetup
-from .validation import RULES, check_plausible
 
 FORMAT = "hertzchain-trace/1"
 # Redundant header values (a mass and the density and radius it follows from) must agree to

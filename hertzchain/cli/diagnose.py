@@ -4,7 +4,7 @@ chain model is missing (see `fitting.diagnosis`).
 Writes `DIR/diagnosis.json` (`missing_effects` in the order found, `steps` with
 `gap_before`/`gap_after`, `converged` and `unconverged_fits`), `diagnosis.md`, `gaps.csv`,
 `gap.png` and overlay PNGs; the folder is written as a whole and replaces the previous run's
-(`hertzchain.atomic.output_folder`). Exits 3 when a fit the result rests on (a named effect's
+(`hertzchain.io.atomic.output_folder`). Exits 3 when a fit the result rests on (a named effect's
 refit, the fit adding it, the final fit) reached no optimum, as `hertzchain fit` does.
 """
 
@@ -17,9 +17,9 @@ from pathlib import Path
 
 from fitting.effects import EFFECT_NAMES
 from fitting.model import STEPS_PER_CONTACT, ForwardModel
-from hertzchain.atomic import output_folder
+from ..io.atomic import output_folder
 
-from . import EXIT_NOT_CONVERGED, exit_codes_epilog
+from .errors import EXIT_NOT_CONVERGED, exit_codes_epilog
 
 
 def _names(text: str) -> list[str]:
@@ -57,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from fitting.compilation_cache import enable_compilation_cache
-    from fitting.driven_cli import is_driven_run, run_diagnose as run_driven_diagnose
+    from .driven_experiments import is_driven_run, run_diagnose as run_driven_diagnose
 
     enable_compilation_cache(not args.no_compile_cache)
     if args.max_effects < 0:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .chain import LAW_ATTRIBUTES, ChainSetup
-from .timegrid import choose_time_grid, shortest_contact_time_s
-from .traces import Traces
+from ..chain import LAW_ATTRIBUTES, ChainSetup
+from ..timegrid import choose_time_grid, shortest_contact_time_s
+from ..traces import Traces
 
 
 def _plain(value):

@@ -1,8 +1,8 @@
 """`hertzchain fit` and `hertzchain diagnose` on driven experiment files (`kind = "driven"`).
 
-`fitting/cli/fit.py` and `fitting/cli/diagnose.py` hand their arguments here when every file
-given is a driven experiment; the options that only trace fits have are refused by name when
-given, so that nothing the user asked for is silently dropped.
+`hertzchain/cli/fit.py` and `hertzchain/cli/diagnose.py` hand their arguments here when every
+file given is a driven experiment; the options that only trace fits have are refused by name
+when given, so that nothing the user asked for is silently dropped.
 """
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ import math
 import sys
 from pathlib import Path
 
-from hertzchain.units import format_measured
+from fitting.driven_experiment import is_driven_experiment, load_driven_experiment
 
-from .driven_experiment import is_driven_experiment, load_driven_experiment
+from ..units import format_measured
 
 # Defaults of the trace-fit options: a driven run accepts an option only at its default.
 _FIT_DEFAULTS = {"multistart": 1, "profile": "", "start": None, "fixed": None, "channels": None,
@@ -50,8 +50,8 @@ def _one_experiment(args):
 def run_fit(args, out) -> int:
     """The driven branch of `hertzchain fit`, written into the folder `out` (exit 0 converged, 3 not
     converged)."""
-    from .driven import PARAMETERS, fit_driven
-    from .driven_report import report_data, write_driven_report
+    from fitting.driven import PARAMETERS, fit_driven
+    from fitting.driven_report import report_data, write_driven_report
 
     _refuse(args, _FIT_DEFAULTS, "fit")
     free = DEFAULT_FREE
@@ -84,7 +84,7 @@ def run_fit(args, out) -> int:
 def run_diagnose(args, out) -> int:
     """The driven branch of `hertzchain diagnose`, written into the folder `out` (exit 0
     converged, 3 not converged)."""
-    from .driven_diagnosis import diagnose_driven, write_driven_diagnosis
+    from fitting.driven_diagnosis import diagnose_driven, write_driven_diagnosis
 
     _refuse(args, _DIAGNOSE_DEFAULTS, "diagnose")
     experiment = _one_experiment(args)

@@ -20,13 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hertzchain.atomic import save_figure, write_json, write_text
-from hertzchain.cli.setup_options import add_setup_arguments, chain_from_args
-from hertzchain.units import parse_quantity
-from hertzchain.validation import yield_notice
-
-from ..data import load_experiments
-from ..design import (
+from fitting.data import load_experiments
+from fitting.design import (
     CRITERIA,
     NUISANCES,
     design,
@@ -35,7 +30,12 @@ from ..design import (
     plan_experiments,
     plot_design,
 )
-from ..parameters import REGISTRY, parse_parameter_list
+from fitting.parameters import REGISTRY, parse_parameter_list
+
+from ..io.atomic import save_figure, write_json, write_text
+from ..units import parse_quantity
+from ..validation import yield_notice
+from .setup_options import add_setup_arguments, chain_from_args
 
 
 def _names(text: str | None) -> tuple[str, ...]:

@@ -9,7 +9,7 @@ Each file is read as it is (`.mat` with `Fexternal` [s, m, N] or `fdK` [m, N]; C
 once per file, a materials-table name; `--youngs`, `--poisson`, `--yield-stress`,
 `--rate-constant` replace its constants (or stand for it). Writes `contact.json`, one
 `<stem>.csv` per file, `contact.png` and `residuals.png` into `--out`, written as a whole (the
-previous run's folder is replaced; `hertzchain.atomic.output_folder`).
+previous run's folder is replaced; `hertzchain.io.atomic.output_folder`).
 
 By default the law is rate-independent apart from its dynamic yield stress, with the
 hardness of its fully plastic branch at 2.84 sigma_Y; `--fit-rate-constant` and
@@ -39,13 +39,13 @@ import dataclasses
 import math
 import sys
 
-from hertzchain.atomic import output_folder
-from hertzchain.materials import Material, material
-from hertzchain.units import parse_quantity
+from ..io.atomic import output_folder
+from ..materials import Material, material
+from ..units import parse_quantity
 
-from ..compilation_cache import enable_compilation_cache
-from . import EXIT_NOT_CONVERGED, exit_codes_epilog
-from ..contact_calibration import GEOMETRIES, MAX_TIME_SHIFT_S, OFFSETS, ContactGeometry, calibrate, read_curve, write_outputs
+from fitting.compilation_cache import enable_compilation_cache
+from .errors import EXIT_NOT_CONVERGED, exit_codes_epilog
+from fitting.contact_calibration import GEOMETRIES, MAX_TIME_SHIFT_S, OFFSETS, ContactGeometry, calibrate, read_curve, write_outputs
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

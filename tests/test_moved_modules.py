@@ -1,0 +1,43 @@
+"""Module paths that moved stay importable for one release, as the module at the new path,
+with a `DeprecationWarning` naming it (`hertzchain._moved`)."""
+
+import importlib
+import importlib.machinery
+import sys
+
+import pytest
+
+from hertzchain._moved import MOVED
+
+
+@pytest.mark.parametrize("old_name", sorted(MOVED))
+def test_an_old_path_is_the_module_at_its_new_path_with_a_warning(old_name):
+    new_name = MOVED[old_name]
+    sys.modules.pop(old_name, None)
+    with pytest.warns(DeprecationWarning, match=f"`{old_name}` moved to `{new_name}`") as record:
+        __import__(old_name)  # an import statement's call: no frame between it and this line
+    assert sys.modules[old_name] is importlib.import_module(new_name)
+    # attributed to the line that imported the old path, not to the import machinery
+    assert [w.filename for w in record if str(w.message).startswith(f"`{old_name}` moved")] == [__file__]
+
+
+def test_no_file_is_left_at_an_old_path():
+    for old_name in MOVED:
+        parent_name, _, _ = old_name.rpartition(".")
+        if parent_name in MOVED:
+            continue  # below a package that moved: its modules are found at the new path
+        parent = importlib.import_module(parent_name)
+        assert importlib.machinery.PathFinder.find_spec(old_name, parent.__path__) is None, old_name
+
+
+def test_below_a_package_that_moved_only_the_moved_modules_are_found():
+    importlib.import_module("hertzchain.cli.errors")
+    with pytest.raises(ModuleNotFoundError, match="fitting.cli.errors"):
+        importlib.import_module("fitting.cli.errors")
+
+
+def test_the_exit_statuses_keep_their_old_home():
+    from fitting.cli import EXIT_INPUT_ERROR, EXIT_NOT_CONVERGED, exit_codes_epilog
+
+    assert (EXIT_INPUT_ERROR, EXIT_NOT_CONVERGED) == (2, 3)
+    assert exit_codes_epilog("x").startswith("exit status: 0 done; 2 bad input")
