@@ -99,7 +99,8 @@ def run_joint_fit(args, out, experiment) -> int:
         where = "shared" if p["shared"] else "per run"
         value = p["value"][0] if isinstance(p["value"], list) else p["value"]
         stderr = p["stderr"][0] if isinstance(p["stderr"], list) else p["stderr"]
-        print(f"{label} ({where}) = {format_measured(value, math.nan if stderr is None else stderr, p['unit'])}")
+        open_ = "" if p["determined"] else " (not determined by the data)"
+        print(f"{label} ({where}) = {format_measured(value, math.nan if stderr is None else stderr, p['unit'])}{open_}")
     for m in data["measurements"]:
         print(_measurement_line(m))
     print(f"{data['status']['message']}; wrote fit.json to {args.out} ({result.elapsed_s:.0f} s)")

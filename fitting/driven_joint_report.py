@@ -16,6 +16,8 @@ from hertzchain.driven.linear import normal_modes
 from .driven_joint import DRIVE_SCALE, JointFit, _leaf, _threshold_data
 from .driven_report import bending
 
+# A constant whose log factor's standard error is above this is reported as not determined.
+DETERMINED_LOG_STDERR = 0.5
 _UNITS = (("_n_m1p5", "N/m^1.5"), ("_per_s", "1/s"), ("_kg", "kg"), ("_n", "N"), ("_s", "s"), ("_m", "m"))
 
 
@@ -46,6 +48,8 @@ def _parameters(fit: JointFit) -> dict:
             "value": value, "stderr": (np.asarray(value) * fit.stderr[k]).tolist() if isinstance(value, list)
             else float(value * fit.stderr[k]),
             "factor_on_start": float(scale), "factor_stderr": float(error),
+            # the data fix the factor to better than x/ e^0.5 = 1.65, or they leave it open
+            "determined": bool(fit.stderr[k] < DETERMINED_LOG_STDERR),
         }
         if p.name == DRIVE_SCALE:
             u = run.drive_uncertainty
@@ -174,7 +178,9 @@ def report_data(fit: JointFit, *, data_dir) -> dict:
             "correlation": {"labels": list(fit.labels), "matrix": cov.correlation.tolist()},
         },
         "start": {"bending_alone": {label: float(v) for label, v in zip(fit.start.labels, fit.start.x)},
-                  "converged": fit.start.converged},
+                  "converged": fit.start.converged, "bending_misfit_median": float(np.median(fit.start.misfit)),
+                  "why": "the bending run fitted alone (fitting.driven.fit_driven): the joint fit's start, and what "
+                         "its constants predict for the other runs (bending_alone_* in the threshold entries)"},
         "elapsed_s": fit.elapsed_s,
     })
 

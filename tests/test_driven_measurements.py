@@ -149,3 +149,16 @@ def test_one_run_has_one_calibration(tmp_path):
         load_driven_experiment(toml, tmp_path / "data")
     with pytest.raises(SweeperFileError, match="positive calibration"):
         read_tongue(*(tmp_path / "data" / n for n in names), run="r", drive_m_per_v=0.0)
+
+
+def test_diagnose_and_params_refuse_a_file_of_measurements(tmp_path, capsys):
+    from hertzchain.cli import main
+
+    names = synthetic_tongue(tmp_path / "data", [0.032, 0.06])
+    toml = _experiment(tmp_path, "tongue", *names)
+    data = str(tmp_path / "data")
+    assert main(["diagnose", str(toml), "--data-dir", data, "--out", str(tmp_path / "d")]) == 2
+    assert "takes one bending sweep (a [sweep] table)" in capsys.readouterr().err
+    assert main(["fit", str(toml), "--data-dir", data, "--params", "drive_scale", "--out", str(tmp_path / "f")]) == 2
+    assert "names what it fits in its [fit] table" in capsys.readouterr().err
+    assert not (tmp_path / "f").exists() and not (tmp_path / "d").exists()
