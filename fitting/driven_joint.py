@@ -295,9 +295,9 @@ class JointModel:
 
 def _settings(experiment):
     m = experiment.model
-    return dict(bead=experiment.sensor_bead, quantity=experiment.quantity, harmonics=(1.0,),
-                ramp_periods=m["ramp_periods"], hold_periods=m["hold_periods"],
-                window_periods=m["window_periods"], steps_per_period=m["steps_per_period"])
+    return {"bead": experiment.sensor_bead, "quantity": experiment.quantity, "harmonics": (1.0,),
+            "ramp_periods": m["ramp_periods"], "hold_periods": m["hold_periods"],
+            "window_periods": m["window_periods"], "steps_per_period": m["steps_per_period"]}
 
 
 def _steps(experiment) -> int:
@@ -352,7 +352,12 @@ def start_values(experiment: DrivenExperiment, *, max_steps: int, progress: bool
     return chain, {m.run: (scale if m.run == bending[0].run else 1.0) for m in experiment.measurements}, first
 
 
-def scan_threshold_runs(model: JointModel, x, grid=np.geomspace(0.25, 4.0, 17), scales=np.geomspace(0.2, 5.0, 41),
+# The start's precompression factors and drive scales tried for a run of thresholds only.
+START_PRECOMPRESSIONS = tuple(np.geomspace(0.25, 4.0, 17))
+START_SCALES = tuple(np.geomspace(0.2, 5.0, 41))
+
+
+def scan_threshold_runs(model: JointModel, x, grid=START_PRECOMPRESSIONS, scales=START_SCALES,
                         progress=False) -> np.ndarray:
     """`x` with each run that holds only thresholds at its best precompression factor of `grid`
     and drive scale of `scales` (scored by its threshold residuals and the scale's prior): the
@@ -443,7 +448,7 @@ def fit_joint(experiment: DrivenExperiment, *, max_steps: int = 100, progress: b
     n_bending = sum(int(m.fit_mask.sum()) * m.data.sweep.drive_amplitudes_m.size
                     for m in experiment.measurements if m.kind == "bending")
     n_effective = n_bending * model.bending_weight ** 2 + (r.size - n_bending)
-    dof = max(int(round(n_effective)) - len(columns), 1)
+    dof = max(round(n_effective) - len(columns), 1)
     cov = covariance_from_jacobian(jac, list(labels), chi2=chi2, dof=dof, scale="residual")
     message = ("converged: no step lowers chi^2 by the optimum test's tolerance" if result.converged else
                f"not converged in {result.steps} steps (raise --max-steps)")

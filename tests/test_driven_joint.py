@@ -72,7 +72,7 @@ def test_joint_jacobian_matches_finite_differences():
     model = JointModel(experiment, chain, parameters, {"bend": 1.0, "tongue": 1.0}, 0.3)
     x = np.array([0.02, -0.05, 0.01, math.log(0.09 / 0.138), 0.03, -0.02])
     columns = list(range(x.size))
-    r, jac = model.linearize(x, columns)
+    _, jac = model.linearize(x, columns)
     h = 1e-4  # the thresholds' roots are polished to 1e-6 relative: steps well above that
     for k in columns:
         step = np.zeros(x.size)

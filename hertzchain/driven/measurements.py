@@ -32,8 +32,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .sweeper_files import (LockinSweep, ScopeShots, SweeperFileError, SweeperTable, lockin_sweep,
-                            read_scope_shots, read_sweeper_table)
+from .sweeper_files import (
+    LockinSweep,
+    ScopeShots,
+    SweeperFileError,
+    SweeperTable,
+    lockin_sweep,
+    read_scope_shots,
+    read_sweeper_table,
+)
 
 SUBHARMONIC_RULE = 0.1
 FUNDAMENTAL = "Signal Amplitude_0"

@@ -180,10 +180,10 @@ def period_doubling_onsets(chain: DrivenChain, frequencies_hz, *, lowest_amplitu
                     reasons[i] = f"no period doubling up to {highest_amplitude_m:.4g} m"
             else:
                 hi[i] = trial[i]
-            if bracketed[i] or g[i] <= 0:
-                if abs(hi[i] - lo[i]) <= rtol * lo[i] or abs(g[i]) < 1e-12:
-                    lo[i], g_lo[i], slope_lo[i], z_lo[:, i] = trial[i], g[i], slope[i], z[:, i]
-                    reasons[i] = "crossed"
+            converged = abs(hi[i] - lo[i]) <= rtol * lo[i] or abs(g[i]) < 1e-12
+            if (bracketed[i] or g[i] <= 0) and converged:
+                lo[i], g_lo[i], slope_lo[i], z_lo[:, i] = trial[i], g[i], slope[i], z[:, i]
+                reasons[i] = "crossed"
     for i, reason in enumerate(reasons):
         if not reason:
             reasons[i] = f"not converged in {max_evaluations} evaluations"
