@@ -130,7 +130,8 @@ def _measurement_line(m: dict) -> str:
         return (f"loop ({m['run']}, {m['frequency_hz']:.0f} Hz): f/2 going up measured at "
                 f"{_nm(m['measured_onset_up_m'])}, model {_nm(m['model_onset_up_m'])} (the bending run's constants "
                 f"alone: {_nm(m['bending_alone_onset_up_m'])}); coming down it persists to "
-                f"{_nm(m['measured_last_down_m'])} (not modelled)")
+                f"{_nm(m['measured_last_down_m'])}, in the model's loop (time-stepped, not fitted) to "
+                f"{_nm(m['model_loop']['last_down_m'])}")
     return (f"scope ({m['run']}): f/2 in {m['records_with_subharmonic']} of {m['records']} records, from "
             f"{_nm(m['onset_up_m'])} going up (a check, not fitted)")
 

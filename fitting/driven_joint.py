@@ -32,7 +32,9 @@ Residuals, each whitened by what is known of its noise:
 
 The loop's disappearance coming down and the scope records are read and reported, not fitted:
 the disappearance is where the period-2 branch ends (a fold the continuation here does not
-follow), and the scope records measure the same onset as the loop's lock-in.
+follow; the report runs the lab's loop on the model by time stepping instead,
+`hertzchain.driven.thresholds.emulate_loop`), and the scope records measure the same onset as
+the loop's lock-in.
 
 The optimiser is `fitting.fit.least_squares` (Levenberg-Marquardt of optimistix, its test of
 an optimum); standard errors `fitting.uncertainty.covariance_from_jacobian` on the whitened

@@ -12,6 +12,7 @@ import numpy as np
 
 from hertzchain.atomic import json_ready, write_json
 from hertzchain.driven.linear import normal_modes
+from hertzchain.driven.thresholds import emulate_loop
 
 from .driven_joint import DRIVE_SCALE, JointFit, _leaf, _threshold_data
 from .driven_report import bending
@@ -119,13 +120,26 @@ def _thresholds(fit: JointFit, run) -> list[dict]:
                      "measured_onset_up_m": float(data[0]), "model_onset_up_m": float(model[0]),
                      "model_search": reasons[0], "bending_alone_onset_up_m": float(alone[0]),
                      "measured_last_down_m": m.data.last_down_m, "measured_gone_down_m": m.data.gone_down_m,
-                     "model_disappearance_down": "not computed: the end of the period-2 branch (a fold) is not "
-                                                 "followed by the continuation; not fitted"}
+                     "model_loop": _emulated(fit, run, m, fit.x),
+                     "bending_alone_loop": _emulated(fit, run, m, start),
+                     "loop_how": "the lab's loop on the model by time stepping (hertzchain.driven.thresholds."
+                                 "emulate_loop: each step held 0.25 s, lock-in at f and f/2): reported, not fitted"}
             if math.isfinite(model[0]):
                 entry["onset_model_over_measured"] = float(model[0] / data[0])
         entry["amplitudes"] = "nominal: the run's lock-in volts x its file calibration; the model's divided by the run's drive scale"
         out.append(entry)
     return out
+
+
+def _emulated(fit: JointFit, run, m, x) -> dict:
+    """The loop `m` run on the model at `x` (nominal amplitudes: the true ones / the run's scale)."""
+    scale = fit.model.run_scale(run, x)
+    loop = emulate_loop(fit.model.run_chain(run, x), m.data.frequency_hz, m.data.drive_amplitudes_m * scale,
+                        bead=fit.model.experiment.sensor_bead, steps_per_period=int(fit.model.experiment.model[
+                            "steps_per_period"]))
+    return {"onset_up_m": loop.onset_up_m / scale, "last_down_m": loop.last_down_m / scale,
+            "gone_down_m": loop.gone_down_m / scale, "periods_per_step": loop.periods_per_level,
+            "subharmonic_over_fundamental": (loop.subharmonic_m_s / loop.fundamental_m_s).tolist()}
 
 
 def _tip(frequencies, onsets) -> dict:

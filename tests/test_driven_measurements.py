@@ -162,3 +162,12 @@ def test_diagnose_and_params_refuse_a_file_of_measurements(tmp_path, capsys):
     assert main(["fit", str(toml), "--data-dir", data, "--params", "drive_scale", "--out", str(tmp_path / "f")]) == 2
     assert "names what it fits in its [fit] table" in capsys.readouterr().err
     assert not (tmp_path / "f").exists() and not (tmp_path / "d").exists()
+
+
+def test_loop_thresholds_of_a_hysteresis_loop():
+    from hertzchain.driven.measurements import loop_thresholds
+
+    drives = np.r_[1.0:6.0, 6.0, 5.0:0.0:-1.0]  # 1..5, 6, 5..1
+    present = np.array([0, 0, 0, 1, 1, 1, 1, 1, 1, 0, 0], bool)
+    assert loop_thresholds(drives, present) == (4.0, 3.0, 2.0)
+    assert np.isnan(loop_thresholds(drives, np.zeros(11, bool))[0])

@@ -84,3 +84,18 @@ def test_onset_derivative_matches_finite_differences():
 def test_search_bounds_are_checked():
     with pytest.raises(ValueError, match="lowest_amplitude_m"):
         period_doubling_onsets(fitted_bead(), [7900.0], lowest_amplitude_m=5e-8, highest_amplitude_m=1e-8)
+
+
+@pytest.mark.slow
+def test_emulated_loop_doubles_just_past_the_floquet_threshold():
+    """Time stepping through the lab's loop (0.25 s a step) against the Floquet threshold: f/2 is
+    absent at every step below it and present from the first step above it (the multiplier lifts
+    rounding to the rule's level within the hold), and at 7900 Hz it ends where it began."""
+    from hertzchain.driven.thresholds import emulate_loop
+
+    chain = fitted_bead()
+    threshold = onsets(chain).amplitude_m[1]
+    up = np.arange(4.0, 25.1, 1.5) * 1e-9
+    loop = emulate_loop(chain, FREQUENCIES[1], np.r_[up, up[-2::-1]])
+    assert loop.onset_up_m == up[up > threshold][0]
+    assert loop.gone_down_m == up[up < threshold][-1]

@@ -212,6 +212,22 @@ def read_tongue(amplitude_file, subharmonic_file, *, run: str, drive_m_per_v: fl
                   float(np.median(np.diff(drives))), float(drive_m_per_v), str(fundamental.path))
 
 
+def loop_thresholds(drive_amplitudes_m, present) -> tuple[float, float, float]:
+    """(onset going up, last amplitude with f/2 coming down, first without it) of a sweep up to
+    its highest step and back, from where f/2 is `present` (S,) (NaN where there is none)."""
+    drives = np.asarray(drive_amplitudes_m, dtype=float)
+    present = np.asarray(present, dtype=bool)
+    turn = int(np.argmax(drives))
+    up, down = present[:turn + 1], present[turn:]
+    onset = drives[np.argmax(up)] if up.any() else np.nan
+    last, gone = np.nan, np.nan
+    if down[0]:
+        end = int(np.argmin(down)) if not down.all() else down.size
+        last = drives[turn + end - 1]
+        gone = drives[turn + end] if end < down.size else np.nan
+    return float(onset), float(last), float(gone)
+
+
 def read_loop(amplitude_file, subharmonic_file, *, run: str, drive_m_per_v: float,
               rule: float = SUBHARMONIC_RULE) -> Loop:
     """An up/down loop from its f and f/2 lock-in files, onset and disappearance by `rule`."""
@@ -222,16 +238,8 @@ def read_loop(amplitude_file, subharmonic_file, *, run: str, drive_m_per_v: floa
     turn = int(np.argmax(drives))
     if turn == drives.size - 1 or np.any(np.diff(drives[:turn + 1]) <= 0) or np.any(np.diff(drives[turn:]) >= 0):
         raise SweeperFileError(f"{_describe(fundamental)}: a loop rises to one highest step, then falls.")
-    present = subharmonic_present(f1, f2, rule)
-    up, down = present[:turn + 1], present[turn:]
-    onset = drives[np.argmax(up)] if up.any() else np.nan
-    last, gone = np.nan, np.nan
-    if down[0]:
-        end = int(np.argmin(down)) if not down.all() else down.size
-        last = drives[turn + end - 1]
-        gone = drives[turn + end] if end < down.size else np.nan
-    return Loop(run, float(fundamental.column_values[0]), drives, f1, f2, turn, float(onset), float(last),
-                float(gone), float(np.median(np.abs(np.diff(drives)))), float(drive_m_per_v), str(fundamental.path))
+    onset, last, gone = loop_thresholds(drives, subharmonic_present(f1, f2, rule))
+    return Loop(run, float(fundamental.column_values[0]), drives, f1, f2, turn, onset, last, gone, float(np.median(np.abs(np.diff(drives)))), float(drive_m_per_v), str(fundamental.path))
 
 
 def spectral_amplitude(time_s, signals, frequency_hz) -> np.ndarray:

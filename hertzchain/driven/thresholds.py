@@ -23,6 +23,9 @@ The threshold's derivative with respect to the chain's constants follows from th
 function theorem, $d a^*/d\\theta = -g_\\theta / g_a$ (`onset_tangents`): one more
 Jacobian-vector product per direction, at the converged orbit (a Newton step from a fixed
 point carries the orbit's own derivative, $-(M - I)^{-1} \\partial P/\\partial\\theta$).
+
+`emulate_loop` runs the lab's loop instead, stepping the amplitude up and down by time
+stepping: where f/2 appears going up and where the period-2 response ends coming down.
 """
 
 from __future__ import annotations
@@ -32,10 +35,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import kernel
+from . import kernel, measurements
 from .chain import DrivenChain
 from .floquet import period_map
-from .schedule import HarmonicSchedule, _levels, check_readout
+from .schedule import HarmonicSchedule, _levels, check_readout, lockin_schedule
 
 # A polished orbit whose period map misses it by more than this (relative) is lost: the
 # continuation jumped (a fold of the period-1 branch, or contact loss too abrupt to follow).
@@ -211,3 +214,38 @@ def onset_tangents(chain: DrivenChain, onsets: DoublingOnsets, tangents: DrivenC
                                jnp.asarray(onsets.orbit_state), onsets.steps_per_period, onsets.newton_steps)
     slope = np.where(found, onsets.margin_slope_per_m, 1.0)
     return np.where(found, -np.asarray(g_theta) / slope, 0.0)
+
+
+class LoopEmulation(eqx.Module):
+    """The lab's amplitude loop run on the model (`emulate_loop`): `drive_amplitudes_m` (S,) the
+    steps, `fundamental_m_s`, `subharmonic_m_s` (S,) the lock-in RMS at f and f/2 at the end of
+    each, `onset_up_m`, `last_down_m`, `gone_down_m` by the lab's f/2 rule
+    (`measurements.loop_thresholds`; NaN where there is none), `periods_per_level`."""
+
+    drive_amplitudes_m: np.ndarray
+    fundamental_m_s: np.ndarray
+    subharmonic_m_s: np.ndarray
+    onset_up_m: float
+    last_down_m: float
+    gone_down_m: float
+    periods_per_level: int
+
+
+def emulate_loop(chain: DrivenChain, frequency_hz: float, amplitudes_m, *, seconds_per_level: float = 0.25,
+                 bead: int = 1, steps_per_period: int = 48, ramp_periods: int = 25, window_periods: int = 4,
+                 rule: float = measurements.SUBHARMONIC_RULE) -> LoopEmulation:
+    """Step the drive through `amplitudes_m` (S,) (m; up then down, as the lab's sweeper) at
+    `frequency_hz`, each level held `seconds_per_level` (the sweeper's 0.25 s between steps,
+    whole periods), and read `bead`'s velocity by lock-in at f and f/2 at the end of each level
+    (`lockin_schedule`). The f/2 response grows only from what rounding leaves at f/2, so it
+    shows once the multiplier's growth over a level lifts it above the rule: past the Floquet
+    threshold by the margin the hold allows (the lab's noise seeds it too). The period-2 branch
+    it reaches is followed down to where it ends: the model's hysteresis, by time stepping."""
+    amplitudes = np.asarray(amplitudes_m, dtype=float)
+    periods = max(round(seconds_per_level * frequency_hz), window_periods)
+    schedule = HarmonicSchedule.levels(float(frequency_hz), amplitudes, steps_per_period=steps_per_period,
+                                       ramp_periods=ramp_periods, periods_per_level=periods)
+    reading = lockin_schedule(chain, schedule, bead=bead, harmonics=(1.0, 0.5), window_periods=window_periods)
+    rms = np.asarray(reading.rms)[:, :, 0]
+    onset, last, gone = measurements.loop_thresholds(amplitudes, measurements.subharmonic_present(rms[0], rms[1], rule))
+    return LoopEmulation(amplitudes, rms[0], rms[1], onset, last, gone, periods)
