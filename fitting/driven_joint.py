@@ -189,7 +189,7 @@ class JointModel:
 
     def linearize(self, x, columns):
         x = self.clip(x)
-        blocks, jacobians = [], []
+        blocks, jacobians, priors = [], [], set()
         for run in self.runs:
             for m in run.measurements:
                 if m.kind == "bending":
@@ -198,7 +198,8 @@ class JointModel:
             if any(m.kind in THRESHOLD_KINDS for m in run.measurements):
                 r, j = self._thresholds(run, x, columns)
                 blocks.append(r), jacobians.append(j)
-            if run.scale_column is not None and run.drive_uncertainty > 0:
+            if run.scale_column is not None and run.drive_uncertainty > 0 and run.scale_column not in priors:
+                priors.add(run.scale_column)  # a drive scale shared by runs has one prior
                 width = math.log1p(run.drive_uncertainty)
                 prior = np.array([math.log(self.run_scale(run, x)) / width])
                 j = np.zeros((1, len(columns)))

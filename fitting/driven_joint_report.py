@@ -14,7 +14,7 @@ from hertzchain.atomic import json_ready, write_json
 from hertzchain.driven.linear import normal_modes
 from hertzchain.driven.thresholds import emulate_loop
 
-from .driven_joint import DRIVE_SCALE, JointFit, _leaf, _threshold_data
+from .driven_joint import DRIVE_SCALE, JointFit, _leaf, _threshold_data, chain_fields
 from .driven_report import bending
 
 # A constant whose log factor's standard error is above this is reported as not determined.
@@ -176,6 +176,7 @@ def report_data(fit: JointFit, *, data_dir) -> dict:
     return json_ready({
         "experiment": str(model.experiment.path), "label": model.experiment.label, "data_dir": str(data_dir),
         "kinds": [m.kind for m in model.experiment.measurements],
+        "model": {"chain": type(model.start_chain).__name__, "fields": chain_fields(model.start_chain)},
         "status": {"converged": fit.converged, "message": fit.message, "steps": fit.steps, "chi2": fit.chi2,
                    "dof": fit.dof, "reduced_chi2": fit.chi2 / fit.dof},
         "shared": [p.name for p in model.parameters if p.run is None],
@@ -186,6 +187,9 @@ def report_data(fit: JointFit, *, data_dir) -> dict:
         "uncertainty": {
             "method": "Gauss-Newton covariance (fitting.uncertainty.covariance_from_jacobian) of the whitened "
                       "residuals, scaled by chi^2/(n_effective - p); stderr of the log factors, so relative",
+            "run_to_run": "the per-run constants carry what differs between runs; the shared constants' errors "
+                          "are scaled by the joint misfit, which holds how far the runs disagree under one set of "
+                          "shared constants",
             "bending_weight": model.bending_weight, "bending_lag1_autocorrelation": fit.rho,
             "threshold_sigma_log": model.sigma,
             "weak_directions": [{"relative_singular_value": s, "components": c} for s, c in cov.weak_directions],
