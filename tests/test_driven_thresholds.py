@@ -25,6 +25,7 @@ def onsets(chain):
     return period_doubling_onsets(chain, FREQUENCIES, lowest_amplitude_m=5e-9, highest_amplitude_m=100e-9)
 
 
+@pytest.mark.slow  # ~15 s: the compilation of the nested forward passes
 def test_onset_matches_the_independent_model():
     found = onsets(fitted_bead())
     assert list(found.found) == [True, True, False]
