@@ -3,7 +3,8 @@
     python examples/lydon2015/reproduce.py --data-root ../shared/data/real [--out examples/lydon2015/results]
         [--only NAME ...]
 
-runs `hertzchain fit` and `hertzchain diagnose` on the single- and two-bead bending files,
+runs `hertzchain fit` and `hertzchain diagnose` on the single- and two-bead bending files, the
+joint fit of the single bead's bending, tongue and loop,
 and the 2014 band-edge script, each into its own folder under `--out`, and writes
 `summary.json`: the acceptance numbers of each, the wall time of each command (with the
 machine's load average at the start: timings from a loaded machine are marked so) and the
@@ -29,6 +30,7 @@ HERE = Path(__file__).resolve().parent
 JOBS = {
     "single_bead_fit": ("fit", HERE / "single_bead_bending.toml"),
     "two_bead_fit": ("fit", HERE / "two_bead_bending.toml"),
+    "single_bead_joint": ("fit", HERE / "single_bead_joint.toml"),
     "single_bead_diagnosis": ("diagnose", HERE / "single_bead_bending.toml"),
     "two_bead_diagnosis": ("diagnose", HERE / "two_bead_bending.toml"),
 }

@@ -54,13 +54,15 @@ def run_fit(args, out) -> int:
     from fitting.driven_report import report_data, write_driven_report
 
     _refuse(args, _FIT_DEFAULTS, "fit")
+    experiment = _one_experiment(args)
+    if experiment.measurements:
+        return run_joint_fit(args, out, experiment)
     free = DEFAULT_FREE
     if args.params != "eta,mu,C":  # the trace fit's default: not asked for
         free = tuple(p.strip() for p in args.params.split(",") if p.strip())
         unknown = [p for p in free if p not in PARAMETERS]
         if unknown:
             raise ValueError(f"--params: {', '.join(unknown)} not driven parameters; valid: {', '.join(PARAMETERS)}.")
-    experiment = _one_experiment(args)
     result = fit_driven(experiment, free=free, max_steps=args.max_steps, progress=not args.quiet)
     write_driven_report(result, out, data_dir=args.data_dir, plots=not args.no_plots)
     data = report_data(result, data_dir=args.data_dir)
@@ -81,6 +83,59 @@ def run_fit(args, out) -> int:
     return 0
 
 
+def run_joint_fit(args, out, experiment) -> int:
+    """`hertzchain fit` on a file of `[[measurement]]` tables: every measurement fitted together,
+    the constants its `[fit]` table names shared or per run (exit 0 converged, 3 not)."""
+    from .driven_joint import fit_joint
+    from .driven_joint_report import report_data, write_joint_report
+
+    if args.params != "eta,mu,C":
+        raise ValueError("--params: a file of [[measurement]] tables names what it fits in its [fit] table "
+                         "(shared = [...], per_run = [...]); leave --params out.")
+    result = fit_joint(experiment, max_steps=args.max_steps, progress=not args.quiet)
+    write_joint_report(result, out, data_dir=args.data_dir)
+    data = report_data(result, data_dir=args.data_dir)
+    for label, p in data["params"].items():
+        where = "shared" if p["shared"] else "per run"
+        value = p["value"][0] if isinstance(p["value"], list) else p["value"]
+        stderr = p["stderr"][0] if isinstance(p["stderr"], list) else p["stderr"]
+        open_ = "" if p["determined"] else " (not determined by the data)"
+        print(f"{label} ({where}) = {format_measured(value, math.nan if stderr is None else stderr, p['unit'])}{open_}")
+    for m in data["measurements"]:
+        print(_measurement_line(m))
+    print(f"{data['status']['message']}; wrote fit.json to {args.out} ({result.elapsed_s:.0f} s)")
+    if not result.converged:
+        print("hertzchain fit: error: the optimiser did not reach an optimum; raise --max-steps.", file=sys.stderr)
+        return 3
+    return 0
+
+
+def _nm(value) -> str:
+    return "none" if value is None or not math.isfinite(value) else f"{value * 1e9:.1f} nm"
+
+
+def _measurement_line(m: dict) -> str:
+    if m["kind"] == "bending":
+        return (f"bending ({m['run']}): misfit median {100 * m['misfit']['median']:.2f} %, shift measured "
+                f"{100 * m['measured']['shift']:.2f} %, model {100 * m['model']['shift']:.2f} %")
+    if m["kind"] == "tongue":
+        data, model = m["measured_tip"], m["model_tip"]
+        at = f" at {model['frequency_hz']:.0f} Hz" if model["frequency_hz"] else ""
+        alone = m["bending_alone_tip"]
+        alone_at = f" at {alone['frequency_hz']:.0f} Hz" if alone["frequency_hz"] else ""
+        return (f"tongue ({m['run']}): tip measured {_nm(data['amplitude_m'])} at {data['frequency_hz']:.0f} Hz, "
+                f"model {_nm(model['amplitude_m'])}{at} (the bending run's constants alone: "
+                f"{_nm(alone['amplitude_m'])}{alone_at})")
+    if m["kind"] == "loop":
+        return (f"loop ({m['run']}, {m['frequency_hz']:.0f} Hz): f/2 going up measured at "
+                f"{_nm(m['measured_onset_up_m'])}, model {_nm(m['model_onset_up_m'])} (the bending run's constants "
+                f"alone: {_nm(m['bending_alone_onset_up_m'])}); coming down it persists to "
+                f"{_nm(m['measured_last_down_m'])}, in the model's loop (time-stepped, not fitted) to "
+                f"{_nm(m['model_loop']['last_down_m'])}")
+    return (f"scope ({m['run']}): f/2 in {m['records_with_subharmonic']} of {m['records']} records, from "
+            f"{_nm(m['onset_up_m'])} going up (a check, not fitted)")
+
+
 def run_diagnose(args, out) -> int:
     """The driven branch of `hertzchain diagnose`, written into the folder `out` (exit 0
     converged, 3 not converged)."""
@@ -88,6 +143,9 @@ def run_diagnose(args, out) -> int:
 
     _refuse(args, _DIAGNOSE_DEFAULTS, "diagnose")
     experiment = _one_experiment(args)
+    if experiment.measurements:
+        raise ValueError(f"{experiment.path}: `hertzchain diagnose` takes one bending sweep (a [sweep] table); "
+                         "fit a file of [[measurement]] tables with `hertzchain fit`.")
     diagnosis = diagnose_driven(experiment, max_effects=args.max_effects, min_share=args.min_share,
                                 progress=not args.quiet)
     paths = write_driven_diagnosis(diagnosis, out)

@@ -71,7 +71,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--params", default="eta,mu,C",
         help="comma-separated parameters to fit [eta,mu,C]; valid: "
-        + ", ".join(name for name in REGISTRY if not name.startswith(EFFECT_PREFIX)),
+        + ", ".join(name for name in REGISTRY if not name.startswith(EFFECT_PREFIX))
+        + ". A driven experiment (kind = \"driven\") with one [sweep]: linear_resonance_hz, precompression_n, "
+        "damping_rate_per_s, drive_scale, eta_s [the first four]; one of [[measurement]] tables (bending, tongue, "
+        "loop, scope) names its shared and per-run constants in its [fit] table instead (any positive "
+        "DrivenChain field, e.g. contact_kappa_n_m1p5, and drive_scale)",
     )
     parser.add_argument("--out", default="out/fit", help="output folder [out/fit]")
     parser.add_argument("--multistart", type=int, default=1, help="starts run as one batch [1]")
