@@ -37,7 +37,7 @@ def write_outputs(report: dict, curves, out_dir, *, title: str = "") -> dict:
     """Write `contact.json`, one `<stem>.csv` per curve (time_s, approach_m, force_measured_n,
     force_model_n, force_fitted_n), `contact.png` (data and laws) and `residuals.png`.
     Returns the JSON written (without the series)."""
-    from hertzchain import atomic
+    from hertzchain.io import atomic
     from hertzchain.plotting import plt
 
     out = Path(out_dir)

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hertzchain.atomic import json_ready, save_figure, write_csv, write_json, write_text
+from hertzchain.io.atomic import json_ready, save_figure, write_csv, write_json, write_text
 from hertzchain.native import kernel_record
 
 from .driven import DrivenLayout, DrivenModel, chain_at, linear_start, nominal_modes_hz, scan_precompression

@@ -97,8 +97,8 @@ from hertzchain.contact import kappa_sphere_flat, kappa_sphere_sphere
 from hertzchain.driven import measurements as kinds
 from hertzchain.driven.sweeper_files import (LockinSweep, SweeperFileError, SweeperTable, lockin_sweep,
                                              read_sweeper_table)
-from hertzchain.importer import ExperimentFileError
-from hertzchain.importer import quantity_of_key
+from hertzchain.io.importer import ExperimentFileError
+from hertzchain.io.importer import quantity_of_key
 
 KIND = "driven"
 TOP_KEYS = ("kind", "label", "chain", "drive", "sensor", "sweep", "model", "measurement", "fit")

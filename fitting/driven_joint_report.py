@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hertzchain.atomic import json_ready, write_json
+from hertzchain.io.atomic import json_ready, write_json
 from hertzchain.driven.linear import normal_modes
 from hertzchain.driven.thresholds import emulate_loop
 

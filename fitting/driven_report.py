@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hertzchain.atomic import json_ready, save_figure, write_csv, write_json
+from hertzchain.io.atomic import json_ready, save_figure, write_csv, write_json
 from hertzchain.native import kernel_record
 
 from .driven import UNITS, DrivenFit, DrivenLayout, chain_at, nominal_modes_hz

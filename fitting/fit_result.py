@@ -10,8 +10,8 @@ import math
 import numpy as np
 
 from hertzchain import contact
-from hertzchain.atomic import json_ready
-from hertzchain.importer import DITHER_STEPS
+from hertzchain.io.atomic import json_ready
+from hertzchain.io.importer import DITHER_STEPS
 from hertzchain.theory import DISCRETE_SPEED_FACTOR
 
 from .model import Problem

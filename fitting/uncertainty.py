@@ -16,7 +16,7 @@ covariance is $s^2 (J^T J)^{-1}$. Two choices of $s^2$:
   themselves, summed over each channel's series up to a lag of the impact's duration in
   samples (`correlated_score_covariance`). It holds where the residuals are correlated
   from sample to sample, as a converter's error is for a slowly moving signal when the
-  analogue noise is below half a step (`hertzchain.importer.DITHER_STEPS`); for white
+  analogue noise is below half a step (`hertzchain.io.importer.DITHER_STEPS`); for white
   residuals it equals `"residual"` up to its own sampling noise.
 
 `"auto"` (default) uses `"correlated"` where a fitted channel was recorded with analogue

@@ -41,3 +41,18 @@ def test_the_exit_statuses_keep_their_old_home():
 
     assert (EXIT_INPUT_ERROR, EXIT_NOT_CONVERGED) == (2, 3)
     assert exit_codes_epilog("x").startswith("exit status: 0 done; 2 bad input")
+
+
+def test_the_packages_import_no_old_path_themselves():
+    """Every module of both packages, imported in a fresh process with the old paths'
+    warning an error: the code itself uses only the new paths."""
+    import subprocess
+
+    code = ("import importlib, pkgutil, hertzchain, fitting\n"
+            "for package in (hertzchain, fitting):\n"
+            "    for module in pkgutil.walk_packages(package.__path__, package.__name__ + '.'):\n"
+            "        if not module.name.endswith('__main__'):\n"
+            "            importlib.import_module(module.name)\n")
+    run = subprocess.run([sys.executable, "-W", "error::DeprecationWarning", "-c", code], capture_output=True,
+                         text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]

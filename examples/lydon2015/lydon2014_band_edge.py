@@ -20,7 +20,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hertzchain.atomic import save_figure, write_csv, write_json  # noqa: E402
+from hertzchain.io.atomic import save_figure, write_csv, write_json  # noqa: E402
 from hertzchain.driven import DrivenChain  # noqa: E402
 from hertzchain.driven.linear import monatomic_band_edge_hz, normal_modes  # noqa: E402
 

@@ -22,7 +22,7 @@ import sys
 import time
 from pathlib import Path
 
-from hertzchain.atomic import write_json
+from hertzchain.io.atomic import write_json
 
 HERE = Path(__file__).resolve().parent
 

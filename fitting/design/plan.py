@@ -11,10 +11,10 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from hertzchain.atomic import json_ready
+from hertzchain.io.atomic import json_ready
 from hertzchain.chain import ChainSetup
 from hertzchain.covariance import gauss_newton_covariance, information_rows
-from hertzchain.tracefile import TraceFile, setup_header
+from hertzchain.io.tracefile import TraceFile, setup_header
 
 from ..data import Experiment, as_experiments, make_experiment
 from ..fit import make_problem

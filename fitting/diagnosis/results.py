@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from hertzchain.atomic import json_ready
+from hertzchain.io.atomic import json_ready
 
 from ..model import Problem
 

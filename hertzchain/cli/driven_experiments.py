@@ -86,8 +86,8 @@ def run_fit(args, out) -> int:
 def run_joint_fit(args, out, experiment) -> int:
     """`hertzchain fit` on a file of `[[measurement]]` tables: every measurement fitted together,
     the constants its `[fit]` table names shared or per run (exit 0 converged, 3 not)."""
-    from .driven_joint import fit_joint
-    from .driven_joint_report import report_data, write_joint_report
+    from fitting.driven_joint import fit_joint
+    from fitting.driven_joint_report import report_data, write_joint_report
 
     if args.params != "eta,mu,C":
         raise ValueError("--params: a file of [[measurement]] tables names what it fits in its [fit] table "

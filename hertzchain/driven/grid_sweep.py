@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
-from ..atomic import save_figure, write_json
+from ..io.atomic import save_figure, write_json
 from ..progress import Progress
 from ..sweep import _read_parquet, _write_parquet, _write_table_csv
 from . import fused
