@@ -93,8 +93,8 @@ BATCH_CASES = {
 
 
 @pytest.mark.parametrize("case", [
-    # (the plastic case's compiles take half a minute; its C++ library is held to the JAX
-    # kernel in the default suite below)
+    # (the plastic case's compiles take half a minute: with `-m slow`, as the test of its C++
+    # library below)
     pytest.param(case, marks=pytest.mark.slow) if case == "plastic_dashpot" else case for case in sorted(BATCH_CASES)])
 def test_batched_kernel_runs_compliant_sensors_as_solve_does(case):
     """`record_batched` with `compliant_sensors` (the brass case on the C++ sensor library, the
@@ -173,9 +173,9 @@ KERNEL_CASES = {
 
 @pytest.mark.skipif(not native.available(), reason=f"no native kernel: {native.unavailable_reason()}")
 @pytest.mark.parametrize("case", [
-    # (the damped and frictional case is also held to `solve` by the test above: slow here,
-    # as the others; the yielding one, on a law's own sensor library, in the default suite)
-    pytest.param(case, marks=pytest.mark.slow) if case != "plastic" else case for case in sorted(KERNEL_CASES)])
+    # (every case with `-m slow`: default-suite time on 2 cores; the damped and frictional
+    # one's C++ sensor library is held to `solve` by the test above)
+    pytest.param(case, marks=pytest.mark.slow) for case in sorted(KERNEL_CASES)])
 def test_cpp_kernel_runs_compliant_sensors_as_the_jax_kernel(case):
     """The C++ sensor library of the case's law (`native.run_full(..., sensors=)`, what
     `record_batched` runs on the CPU) against the JAX kernel, 9 chains (three blocks of 4, the

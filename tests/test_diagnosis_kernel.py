@@ -83,6 +83,7 @@ def test_twin_on_the_kernel_equals_the_full_model_at_zero_compliance_and_dashpot
     assert np.all(j_ref[:, coupling] == 0.0) and np.all(j[:, coupling] == 0.0)
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; `pytest -m slow` runs it
 def test_dashpot_twin_on_the_kernel_equals_the_full_model_at_zero_compliance(brass_files):
     """The twin with the dashpot effect (the C++ dashpot library) against the full model at
     a dashpot of 0.3 N s/m, the sensors' coupling 0 (Hertz contacts): residuals to 1e-12 and
@@ -96,6 +97,7 @@ def test_dashpot_twin_on_the_kernel_equals_the_full_model_at_zero_compliance(bra
     _assert_twin_equals(rigid, compliant, x, ("sensor_coupling", "yield_softening"))
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; `pytest -m slow` runs it (test_compliant_sensor holds the sensor kernels to solve)
 def test_compliant_sensors_on_the_kernel_equal_solve(brass_files):
     """The full model with compliant sensors (coupling 0.5, f0 = 183 kHz), extra damping, a
     dashpot and a preload half seen, on the C++ kernel's sensor library, against the same

@@ -93,7 +93,9 @@ FIT_LAWS = {
 }
 
 
-@pytest.mark.parametrize("law", list(FIT_LAWS))
+# Jackson-Green with `-m slow` (default-suite time; test_contact_plasticity holds its batched runs to solve)
+@pytest.mark.parametrize("law", [pytest.param(law, marks=pytest.mark.slow) if law == "jackson_green" else law
+                                 for law in FIT_LAWS])
 def test_batched_kernel_and_solve_give_the_same_model_and_jacobian(law):
     """Two files (their own striker velocities and offsets): the fit's fast path
     (`record_batched`, the experiments on the SIMD axis, one tangent per local parameter

@@ -75,6 +75,7 @@ def test_a_fit_at_its_optimum_says_so_at_once(kinked_files, default_fit):
     assert abs(again.chi2 - result.chi2) < fit_module.OPTIMUM_TOLERANCE
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; `pytest -m slow` runs it
 def test_the_steps_compiled_without_xla_passes_give_the_same_fit(kinked_files, default_fit):
     # The fit of `default_fit` ran with the steps `problem.simulates_natively()` chose; the
     # other compilation must reach the same optimum by the same steps (only XLA's

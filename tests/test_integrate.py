@@ -133,6 +133,7 @@ def test_viscous_damping_broadens_and_decays_the_pulse_along_the_chain():
     assert broadening[2] > 1.04  # the paper's Fig. 2b: several per cent at these amplitudes
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; `pytest -m slow` runs it (the batched kernel's tests hold vmap to single runs too)
 def test_vmapped_batch_equals_runs_one_by_one():
     setup = hc.ChainSetup(10, eta_s=1e-6)
     velocities, walls = [0.1, 0.4, 1.0], [5e9, np.inf]

@@ -163,6 +163,7 @@ def test_clipped_samples_are_left_out_of_the_fit_with_a_warning(preloaded):
     assert float(np.sum(r**2) / problem.n_fitted) == pytest.approx(1.0, abs=0.15)
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; `pytest -m slow` runs it
 def test_simulate_and_design_plans_read_a_preload_as_the_coupling_says(tmp_path):
     from fitting.design import plan_experiments
     from hertzchain.cli import main

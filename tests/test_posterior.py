@@ -182,6 +182,7 @@ def test_sampler_gradient_on_the_cpp_kernel_equals_reverse_mode_through_the_jax_
         np.testing.assert_allclose(np.asarray(gradients[k]), np.asarray(gradient), rtol=1e-8)
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; `pytest -m slow` runs it (the draw-for-draw test below starts from the same state)
 def test_compiled_sampler_start_equals_numpyros_eager_start(noise_only):
     """`_run_chains` starts its chains with `_nuts`'s `init` (NumPyro's functional NUTS),
     vectorised and compiled; on a real potential (C++ kernel's tangents, interpolation, gains,

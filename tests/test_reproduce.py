@@ -177,6 +177,7 @@ def test_plan_and_batch_inputs_are_checked():
         batch.stack_setups([])
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; `pytest -m slow` runs it
 def test_batch_of_setups_equals_single_runs():
     setups = [hc.ChainSetup(5, striker_velocity_m_s=0.2, wall_youngs_pa=5e9, wall_poisson=0.35),
               hc.ChainSetup(5, striker_velocity_m_s=0.3, eta_s=2e-6)]
