@@ -86,9 +86,12 @@ def floquet_multipliers(chain: DrivenChain, frequencies_hz, amplitudes_m, *, ste
 
 
 def period_map(chain: DrivenChain, frequency_hz, amplitude_m, steps_per_period: int,
-               unroll: int = kernel.DEFAULT_UNROLL):
+               unroll: int = kernel.DEFAULT_UNROLL, contact_history_m=None):
     """$P$: the state (2n, B) (displacements then velocities, from the static equilibrium)
-    one drive period later, at constant amplitude, starting at phase 0 (traceable)."""
+    one drive period later, at constant amplitude, starting at phase 0 (traceable). A
+    contact law with a history (`laws.Thornton`, ...) starts every period from
+    `contact_history_m` (n + 1, B), m, the largest overlaps the run reached: a seated
+    contact, whose history the orbit no longer changes, is a parameter of $P$, not a state."""
     p = kernel.kernel_params(chain)
     n = chain.n_beads
     dt = 1.0 / (frequency_hz * steps_per_period)
@@ -97,7 +100,8 @@ def period_map(chain: DrivenChain, frequency_hz, amplitude_m, steps_per_period: 
     def advance(z):
         x, v = z[:n], z[n:]
         u, u_dot = drive(jnp.asarray(0))
-        state = kernel.State(x, v, kernel.contact_accel(p, kernel.contact_forces(p, x, v, u, u_dot)))
+        force = kernel.contact_forces(p, x, v, u, u_dot, contact_history_m)
+        state = kernel.State(x, v, kernel.contact_accel(p, force), contact_history_m)
         state, _ = kernel.advance(p, state, dt, drive, jnp.arange(1, steps_per_period + 1), unroll=unroll)
         return jnp.concatenate([state.displacement_m, state.velocity_m_s])
 
@@ -110,7 +114,7 @@ def _monodromy(chain, frequency_hz, amplitude_m, steps_per_period, ramp_periods,
                                 max(hold_periods, 1), 0)
     _, _, state = _levels(chain, schedule, steps_per_period, lambda s, u, u_dot: u, unroll)
     z = jnp.concatenate([state.displacement_m, state.velocity_m_s])
-    advance = period_map(chain, frequency_hz, amplitude_m, steps_per_period, unroll)
+    advance = period_map(chain, frequency_hz, amplitude_m, steps_per_period, unroll, state.contact_history_m)
     size = z.shape[0]
 
     def linearise(z):

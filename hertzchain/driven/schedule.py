@@ -148,7 +148,7 @@ def readout(chain: DrivenChain, quantity: str, bead: int, contact: int | None):
         p = kernel.kernel_params(chain)
 
         def record(s, u, u_dot):
-            return kernel.contact_forces(p, s.displacement_m, s.velocity_m_s, u, u_dot)[contact]
+            return kernel.contact_forces(p, s.displacement_m, s.velocity_m_s, u, u_dot, s.contact_history_m)[contact]
 
         return record
     field = "velocity_m_s" if quantity == "velocity" else "displacement_m"
@@ -249,7 +249,7 @@ def _recorder(p, beads, contacts):
     picked = np.asarray(contacts, dtype=int)
 
     def record(s, u, u_dot):
-        force = kernel.contact_forces(p, s.displacement_m, s.velocity_m_s, u, u_dot)
+        force = kernel.contact_forces(p, s.displacement_m, s.velocity_m_s, u, u_dot, s.contact_history_m)
         return u, s.displacement_m[rows], s.velocity_m_s[rows], force[picked]
 
     return record
