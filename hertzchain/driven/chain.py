@@ -339,7 +339,7 @@ def _check_law_parameters(chain_laws, n_contacts: int) -> None:
 def _check_law_constants(chain: DrivenChain) -> None:
     """ValueError where the contact law reads a constant the chain does not have."""
     law = chain.contact_law
-    while hasattr(law, "law"):  # a law wrapping another (series elements): what the inner one reads
+    while isinstance(law, laws.AbstractInSeries):  # what the inner law reads
         law = law.law
     needed = {laws.Thornton: ("contact_yield_force_n",),
               laws.JacksonGreen: ("contact_yield_force_n", "contact_reduced_radius_m", "contact_poisson",
