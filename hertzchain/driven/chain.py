@@ -349,6 +349,14 @@ def _check_law_constants(chain: DrivenChain) -> None:
         raise ValueError(f"contact_law: {type(law).__name__} reads {', '.join(missing)}; give them (inf: a contact "
                          "that never yields), or build the chain with DrivenChain.from_materials(..., "
                          "bead_yield_stress_pa=...).")
+    leaves = jax.tree_util.tree_leaves((chain.precompression_n, chain.contact_constants()))
+    if law.has_history and all(_is_concrete(leaf) for leaf in leaves):
+        with jax.ensure_compile_time_eval():
+            above = np.asarray(chain.static_force_n() > law.yield_force_n(chain.contact_constants()))
+        if np.any(above):
+            raise ValueError(f"precompression_n: the static force of contact(s) {np.flatnonzero(above).tolist()} is "
+                             f"above the yield force of {type(law).__name__}; the static state is the elastic "
+                             "(Hertz) one, so give a preload below yield (or a larger yield force).")
     for dissipation in chain.dissipation:
         if isinstance(dissipation, laws.Viscoelastic):
             _check_concrete_nonnegative("eta_s", dissipation.eta_s, "s")
