@@ -60,6 +60,9 @@ class DrivenChain(eqx.Module):
       None, and `yield_stress_pa`: () or None: what the elastic-plastic laws read
       (`laws.Thornton`: the yield force, N; `laws.JacksonGreen`: reduced radius, m, Poisson
       ratio and yield stress, Pa); `from_materials` fills them from `bead_yield_stress_pa`.
+    - `support_friction`: micro-slip friction at every bead's supports
+      (`laws.IwanSupport`, parameters scalar or (n,)), or None (default: no support force
+      but the static one of unequal preloads).
 
     `eta_s` (s) is the shorthand of the `Viscoelastic` law's coefficient (a keyword of the
     constructor and a read-only property). Build one from material constants with
@@ -78,10 +81,11 @@ class DrivenChain(eqx.Module):
     contact_reduced_radius_m: jax.Array | None
     contact_poisson: jax.Array | None
     yield_stress_pa: jax.Array | None
+    support_friction: laws.IwanSupport | None
 
     def __init__(self, bead_mass_kg, contact_kappa_n_m1p5, precompression_n, damping_rate_per_s, eta_s=None, *,
                  contact_law: laws.AbstractContactLaw | None = None, dissipation=None, contact_yield_force_n=None,
-                 contact_reduced_radius_m=None, contact_poisson=None, yield_stress_pa=None):
+                 contact_reduced_radius_m=None, contact_poisson=None, yield_stress_pa=None, support_friction=None):
         require_float64("DrivenChain")
         self.bead_mass_kg = jnp.atleast_1d(jnp.asarray(bead_mass_kg, dtype=jnp.float64))
         n = self.bead_mass_kg.shape[0]
@@ -90,6 +94,7 @@ class DrivenChain(eqx.Module):
         self.damping_rate_per_s = jnp.broadcast_to(jnp.asarray(damping_rate_per_s, dtype=jnp.float64), (n,))
         self.contact_law = laws.Hertz() if contact_law is None else contact_law
         self.dissipation = _dissipation(dissipation, eta_s)
+        self.support_friction = support_friction
         optional = {"contact_yield_force_n": contact_yield_force_n, "contact_reduced_radius_m": contact_reduced_radius_m,
                     "contact_poisson": contact_poisson, "yield_stress_pa": yield_stress_pa}
         for name, value in optional.items():
@@ -113,6 +118,10 @@ class DrivenChain(eqx.Module):
             if value is not None and value.shape not in ((), (n + 1,)):
                 raise ValueError(f"{name}: expected one value per contact ({n + 1}), got shape {value.shape}.")
         _check_law_parameters((self.contact_law, *self.dissipation), n + 1)
+        if support_friction is not None:
+            if not isinstance(support_friction, laws.IwanSupport):
+                raise ValueError(f"support_friction: expected a hertzchain.laws.IwanSupport, got {support_friction!r}.")
+            _check_law_parameters((support_friction,), n)
         _check_concrete_positive("bead_mass_kg", self.bead_mass_kg, "kg")
         _check_concrete_positive("contact_kappa_n_m1p5", self.contact_kappa_n_m1p5, "N/m^1.5")
         _check_concrete_positive("precompression_n", self.precompression_n, "N")
@@ -147,9 +156,11 @@ class DrivenChain(eqx.Module):
     @property
     def runs_on_fused_kernel(self) -> bool:
         """Whether the fused host kernel (`hertzchain.driven.fused`) has this chain's physics:
-        Hertz contacts, at most Kuwabara-Kono damping, one precompression of all contacts.
+        Hertz contacts, at most Kuwabara-Kono damping, one precompression of all contacts,
+        no support friction.
         Other chains run the JAX kernel (the results say which ran)."""
         return (type(self.contact_law) is laws.Hertz and self.precompression_n.ndim == 0
+                and self.support_friction is None
                 and all(type(law) is laws.Viscoelastic and jnp.ndim(law.eta_s) == 0 for law in self.dissipation)
                 and len(self.dissipation) <= 1)
 
@@ -256,6 +267,8 @@ class DrivenChain(eqx.Module):
             out["contact_law"] = _describe_law(self.contact_law)
         if [type(law) for law in self.dissipation] != [laws.Viscoelastic]:
             out["dissipation"] = [_describe_law(law) for law in self.dissipation]
+        if self.support_friction is not None:
+            out["support_friction"] = _describe_law(self.support_friction)
         for name in ("contact_yield_force_n", "contact_reduced_radius_m", "contact_poisson", "yield_stress_pa"):
             if getattr(self, name) is not None:
                 out[name] = np.asarray(getattr(self, name)).tolist()
@@ -328,12 +341,14 @@ def _dissipation(dissipation, eta_s) -> tuple[laws.AbstractDissipation, ...]:
 
 
 def _check_law_parameters(chain_laws, n_contacts: int) -> None:
-    """ValueError where a law's array parameter is neither one value nor one per contact."""
+    """ValueError where a law's array parameter is neither one value nor one per contact
+    (one per bead for the supports' law, `n_contacts` = n)."""
     for law in chain_laws:
         for leaf in jax.tree_util.tree_leaves(law):
             if jnp.shape(leaf) not in ((), (n_contacts,)):
-                raise ValueError(f"{type(law).__name__}: every parameter must be one value or one per contact "
-                                 f"({n_contacts},), got shape {jnp.shape(leaf)}.")
+                raise ValueError(f"{type(law).__name__}: every parameter must be one value or one per "
+                                 f"{'bead' if isinstance(law, laws.IwanSupport) else 'contact'} ({n_contacts},), got "
+                                 f"shape {jnp.shape(leaf)}.")
 
 
 def _check_law_constants(chain: DrivenChain) -> None:

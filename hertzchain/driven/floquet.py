@@ -74,6 +74,9 @@ def floquet_multipliers(chain: DrivenChain, frequencies_hz, amplitudes_m, *, ste
     check_readout(chain, 1, "velocity", (1.0,), 1, max(hold_periods, 1), steps_per_period, f)
     if np.any(f <= 0) or np.any(a < 0) or not np.all(np.isfinite(f) & np.isfinite(a)):
         raise ValueError("frequencies_hz must be > 0 Hz and amplitudes_m >= 0 m (finite).")
+    if chain.support_friction is not None:
+        raise ValueError("floquet_multipliers: the supports' friction sliders are state the period map in (x, v) "
+                         "leaves out (and slip makes it non-smooth); run lockin_schedule instead.")
     if int(newton_steps) != newton_steps or newton_steps < 0:
         raise ValueError(f"newton_steps: expected a whole number >= 0, got {newton_steps}.")
     monodromy, orbit, residual = _monodromy(chain.for_kernel(), jnp.asarray(f), jnp.asarray(a), int(steps_per_period), int(ramp_periods),

@@ -6,12 +6,14 @@ may differ in their time step (each run's own `dt_s`, a (B,) array), in the driv
 displacement and in nothing else: the chain's constants are shared, (n, 1) columns.
 
 One step of length $\\Delta t$ with $h = \\Delta t/2$, $f$ the acceleration
-$(F_{i-1} - F_i + S_i)/m_i$ by the contact forces and the supports' static force, and
+$(F_{i-1} - F_i + S_i + F^{fr}_i)/m_i$ by the contact forces, the supports' static force and
+their friction, and
 $\\gamma$ the beads' viscous damping rate:
 
     v_half = v + h (f - gamma v)
     x'     = x + dt v_half
-    H'     = the contact law's history after the move (the largest overlap so far)
+    H'     = the contact law's history after the move (the largest overlap so far), and
+             the supports' friction sliders after it (`laws.IwanSupport`)
     f'     = contact forces at x' and H', the driver at its new position u', the contact
              damping at the predicted velocity v_half + h (f - gamma v) (as `integrate.verlet_step`)
     v'     = (v_half + h f') / (1 + h gamma)
@@ -49,18 +51,21 @@ class KernelParams(NamedTuple):
     constants: laws.ContactConstants  # (n + 1, 1) columns
     dissipation: tuple[laws.AbstractDissipation, ...]  # parameters as (n + 1, 1) columns
     support_force_n: jax.Array | None  # (n, 1) the supports' static force; None: none (one preload)
+    support_friction: laws.IwanSupport | None  # parameters as (n, 1) columns; None: none
 
 
 class State(NamedTuple):
     """B runs' state at a step: displacements from the static equilibrium (m), velocities
-    (m/s) and the acceleration by the contacts and supports $(F_{i-1} - F_i + S_i)/m_i$
+    (m/s) and the acceleration by the contacts and supports $(F_{i-1} - F_i + S_i + F^{fr}_i)/m_i$
     (m/s^2), each (n, B); and the contact law's history, the largest overlap of every
-    contact so far (n + 1, B), m (None for laws without one)."""
+    contact so far (n + 1, B), m (None for laws without one); the supports' friction sliders
+    (E, n, B), m (`laws.IwanSupport`; None without)."""
 
     displacement_m: jax.Array
     velocity_m_s: jax.Array
     contact_accel_m_s2: jax.Array
     contact_history_m: jax.Array | None = None
+    support_slider_m: jax.Array | None = None
 
 
 def _columns(tree):
@@ -83,6 +88,7 @@ def kernel_params(chain: DrivenChain) -> KernelParams:
         constants=_columns(chain.contact_constants()),
         dissipation=_columns(chain.dissipation),
         support_force_n=support,
+        support_friction=None if chain.support_friction is None else _columns(chain.support_friction),
     )
 
 
@@ -108,12 +114,14 @@ def contact_forces(p: KernelParams, x, v, drive_m, drive_m_s, history_m=None) ->
     return laws.total_force(elastic, overlap, rate, p.kappa_n_m1p5, p.dissipation)
 
 
-def contact_accel(p: KernelParams, force_n) -> jax.Array:
-    """Acceleration of every bead by its two contacts and its supports' static force, (n,
-    B), m/s^2."""
+def contact_accel(p: KernelParams, force_n, x=None, slider_m=None) -> jax.Array:
+    """Acceleration of every bead by its two contacts and its supports (their static force,
+    and their friction at displacements x (n, B) with sliders `slider_m`), (n, B), m/s^2."""
     net = force_n[:-1] - force_n[1:]
     if p.support_force_n is not None:
         net = net + p.support_force_n
+    if slider_m is not None:
+        net = net + p.support_friction.force(x, slider_m)
     return net * p.inv_mass_per_kg
 
 
@@ -127,7 +135,9 @@ def static_state(p: KernelParams, runs: jax.Array) -> State:
     history = None
     if p.contact_law.has_history:
         history = p.contact_law.initial_state(contact_overlaps(p, zeros, rest))
-    return State(zeros, zeros, contact_accel(p, contact_forces(p, zeros, zeros, rest, rest, history)), history)
+    slider = None if p.support_friction is None else p.support_friction.initial_state(zeros)
+    accel = contact_accel(p, contact_forces(p, zeros, zeros, rest, rest, history), zeros, slider)
+    return State(zeros, zeros, accel, history, slider)
 
 
 def step(p: KernelParams, state: State, dt_s, drive_m, drive_m_s) -> State:
@@ -135,16 +145,18 @@ def step(p: KernelParams, state: State, dt_s, drive_m, drive_m_s) -> State:
     scalar step, s; `drive_m`, `drive_m_s`: the driver's displacement and velocity at the
     end of the step, (B,), m and m/s."""
     h = 0.5 * dt_s
-    x, v, f, history = state
+    x, v, f, history, slider = state
     kick = h * (f - p.damping_rate_per_s * v)
     v_half = v + kick
     x = x + dt_s * v_half
     if history is not None:
         history = p.contact_law.update_state(history, contact_overlaps(p, x, drive_m))
+    if slider is not None:
+        slider = p.support_friction.update_state(slider, x)
     force = contact_forces(p, x, v_half + kick, drive_m, drive_m_s, history)
-    f = contact_accel(p, force)
+    f = contact_accel(p, force, x, slider)
     v = (v_half + h * f) / (1.0 + h * p.damping_rate_per_s)
-    return State(x, v, f, history)
+    return State(x, v, f, history, slider)
 
 
 DriveFn = Callable[[jax.Array], tuple[jax.Array, jax.Array]]

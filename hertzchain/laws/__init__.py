@@ -4,7 +4,8 @@ A chain's contacts follow one contact law (`Hertz`, `PowerLaw`, `Thornton`,
 `JacksonGreen`, and a law in series with a layer: `SeriesCompliance`, `RoughContact`;
 subclasses of `AbstractContactLaw`) and any number of dissipation laws
 (`Viscoelastic`, `Dashpot`, ...: subclasses of `AbstractDissipation`), given to
-`hertzchain.ChainSetup` as `contact_law=` and `dissipation=`. Every kernel evaluates the
+`hertzchain.ChainSetup` as `contact_law=` and `dissipation=`; a driven chain's beads may
+also sit on supports with micro-slip friction (`IwanSupport`). Every kernel evaluates the
 same methods; `registry` is the one table from a law type to its native counterpart.
 """
 
@@ -24,3 +25,4 @@ from .plastic import Thornton as Thornton
 from .rough import RoughContact as RoughContact
 from .series import AbstractInSeries as AbstractInSeries
 from .series import SeriesCompliance as SeriesCompliance
+from .support_friction import IwanSupport as IwanSupport
