@@ -38,6 +38,7 @@ import numpy as np
 
 from .. import contact, laws
 from ..precision import require_float64
+from .drive import RayleighStroke
 
 class DrivenChain(eqx.Module):
     """The physical constants of a driven, precompressed chain of n beads (all traceable).
@@ -63,6 +64,8 @@ class DrivenChain(eqx.Module):
     - `support_friction`: micro-slip friction at every bead's supports
       (`laws.IwanSupport`, parameters scalar or (n,)), or None (default: no support force
       but the static one of unequal preloads).
+    - `drive_stroke`: the driver's amplitude-dependent stroke (`drive.RayleighStroke`), or
+      None (default: the face moves by the nominal amplitude, $a\\cos\\theta$).
 
     `eta_s` (s) is the shorthand of the `Viscoelastic` law's coefficient (a keyword of the
     constructor and a read-only property). Build one from material constants with
@@ -82,10 +85,12 @@ class DrivenChain(eqx.Module):
     contact_poisson: jax.Array | None
     yield_stress_pa: jax.Array | None
     support_friction: laws.IwanSupport | None
+    drive_stroke: RayleighStroke | None
 
     def __init__(self, bead_mass_kg, contact_kappa_n_m1p5, precompression_n, damping_rate_per_s, eta_s=None, *,
                  contact_law: laws.AbstractContactLaw | None = None, dissipation=None, contact_yield_force_n=None,
-                 contact_reduced_radius_m=None, contact_poisson=None, yield_stress_pa=None, support_friction=None):
+                 contact_reduced_radius_m=None, contact_poisson=None, yield_stress_pa=None, support_friction=None,
+                 drive_stroke: RayleighStroke | None = None):
         require_float64("DrivenChain")
         self.bead_mass_kg = jnp.atleast_1d(jnp.asarray(bead_mass_kg, dtype=jnp.float64))
         n = self.bead_mass_kg.shape[0]
@@ -95,6 +100,9 @@ class DrivenChain(eqx.Module):
         self.contact_law = laws.Hertz() if contact_law is None else contact_law
         self.dissipation = _dissipation(dissipation, eta_s)
         self.support_friction = support_friction
+        self.drive_stroke = drive_stroke
+        if drive_stroke is not None and not isinstance(drive_stroke, RayleighStroke):
+            raise ValueError(f"drive_stroke: expected a hertzchain.driven.drive.RayleighStroke, got {drive_stroke!r}.")
         optional = {"contact_yield_force_n": contact_yield_force_n, "contact_reduced_radius_m": contact_reduced_radius_m,
                     "contact_poisson": contact_poisson, "yield_stress_pa": yield_stress_pa}
         for name, value in optional.items():
@@ -157,10 +165,10 @@ class DrivenChain(eqx.Module):
     def runs_on_fused_kernel(self) -> bool:
         """Whether the fused host kernel (`hertzchain.driven.fused`) has this chain's physics:
         Hertz contacts, at most Kuwabara-Kono damping, one precompression of all contacts,
-        no support friction.
+        no support friction, the nominal stroke.
         Other chains run the JAX kernel (the results say which ran)."""
         return (type(self.contact_law) is laws.Hertz and self.precompression_n.ndim == 0
-                and self.support_friction is None
+                and self.support_friction is None and self.drive_stroke is None
                 and all(type(law) is laws.Viscoelastic and jnp.ndim(law.eta_s) == 0 for law in self.dissipation)
                 and len(self.dissipation) <= 1)
 
@@ -267,8 +275,9 @@ class DrivenChain(eqx.Module):
             out["contact_law"] = _describe_law(self.contact_law)
         if [type(law) for law in self.dissipation] != [laws.Viscoelastic]:
             out["dissipation"] = [_describe_law(law) for law in self.dissipation]
-        if self.support_friction is not None:
-            out["support_friction"] = _describe_law(self.support_friction)
+        for name in ("support_friction", "drive_stroke"):
+            if getattr(self, name) is not None:
+                out[name] = _describe_law(getattr(self, name))
         for name in ("contact_yield_force_n", "contact_reduced_radius_m", "contact_poisson", "yield_stress_pa"):
             if getattr(self, name) is not None:
                 out[name] = np.asarray(getattr(self, name)).tolist()

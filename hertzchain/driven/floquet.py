@@ -98,7 +98,8 @@ def period_map(chain: DrivenChain, frequency_hz, amplitude_m, steps_per_period: 
     p = kernel.kernel_params(chain)
     n = chain.n_beads
     dt = 1.0 / (frequency_hz * steps_per_period)
-    drive = drives.harmonic_segment(frequency_hz, dt, steps_per_period, amplitude_m, amplitude_m, 0)
+    drive = drives.harmonic_segment(frequency_hz, dt, steps_per_period, amplitude_m, amplitude_m, 0,
+                                    stroke=chain.drive_stroke)
 
     def advance(z):
         x, v = z[:n], z[n:]

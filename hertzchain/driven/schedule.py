@@ -97,7 +97,8 @@ def _levels(chain: DrivenChain, schedule: HarmonicSchedule, window_steps: int, r
         dt = 1.0 / (frequency * n)
         steps = periods * n
         window = steps if window_steps is None else window_steps
-        drive = drives.harmonic_segment(frequency, dt, n, from_amplitude, to_amplitude, ramp_periods * n)
+        drive = drives.harmonic_segment(frequency, dt, n, from_amplitude, to_amplitude, ramp_periods * n,
+                                        stroke=chain.drive_stroke)
         state, _ = kernel.advance(p, state, dt, drive, jnp.arange(1, steps - window + 1), unroll=unroll)
         first = steps - window + 1
         state, records = kernel.advance_sampled(p, state, dt, drive, first, window // every_steps, every_steps,
