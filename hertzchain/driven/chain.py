@@ -101,40 +101,11 @@ class DrivenChain(eqx.Module):
         self.dissipation = _dissipation(dissipation, eta_s)
         self.support_friction = support_friction
         self.drive_stroke = drive_stroke
-        if drive_stroke is not None and not isinstance(drive_stroke, RayleighStroke):
-            raise ValueError(f"drive_stroke: expected a hertzchain.driven.drive.RayleighStroke, got {drive_stroke!r}.")
         optional = {"contact_yield_force_n": contact_yield_force_n, "contact_reduced_radius_m": contact_reduced_radius_m,
                     "contact_poisson": contact_poisson, "yield_stress_pa": yield_stress_pa}
         for name, value in optional.items():
             setattr(self, name, None if value is None else jnp.asarray(value, dtype=jnp.float64))
-        if self.bead_mass_kg.ndim != 1 or n < 1:
-            raise ValueError(f"bead_mass_kg: expected an (n,) array of bead masses in kg, got shape "
-                             f"{self.bead_mass_kg.shape}.")
-        if self.contact_kappa_n_m1p5.shape != (n + 1,):
-            raise ValueError(
-                f"contact_kappa_n_m1p5: expected {n + 1} stiffnesses (driver, {n - 1} between beads, "
-                f"wall) for {n} beads, got shape {self.contact_kappa_n_m1p5.shape}."
-            )
-        if self.precompression_n.shape not in ((), (n + 1,)):
-            raise ValueError(f"precompression_n: expected one static force in N, or one per contact ({n + 1}), got "
-                             f"shape {self.precompression_n.shape}.")
-        if not isinstance(self.contact_law, laws.AbstractContactLaw):
-            raise ValueError(f"contact_law: expected a hertzchain.laws contact law (e.g. laws.Hertz(), "
-                             f"laws.PowerLaw(1.6)), got {self.contact_law!r}.")
-        for name in ("contact_yield_force_n", "contact_reduced_radius_m", "contact_poisson"):
-            value = getattr(self, name)
-            if value is not None and value.shape not in ((), (n + 1,)):
-                raise ValueError(f"{name}: expected one value per contact ({n + 1}), got shape {value.shape}.")
-        _check_law_parameters((self.contact_law, *self.dissipation), n + 1)
-        if support_friction is not None:
-            if not isinstance(support_friction, laws.IwanSupport):
-                raise ValueError(f"support_friction: expected a hertzchain.laws.IwanSupport, got {support_friction!r}.")
-            _check_law_parameters((support_friction,), n)
-        _check_concrete_positive("bead_mass_kg", self.bead_mass_kg, "kg")
-        _check_concrete_positive("contact_kappa_n_m1p5", self.contact_kappa_n_m1p5, "N/m^1.5")
-        _check_concrete_positive("precompression_n", self.precompression_n, "N")
-        _check_concrete_nonnegative("damping_rate_per_s", self.damping_rate_per_s, "1/s")
-        _check_law_constants(self)
+        _check_fields(self)
 
     @property
     def eta_s(self) -> jax.Array:
@@ -221,18 +192,9 @@ class DrivenChain(eqx.Module):
                                               bead_poisson)
         n = int(n_beads)
         kappa = jnp.concatenate([jnp.atleast_1d(driver), jnp.full((n - 1,), between), jnp.atleast_1d(wall)])
-        plastic = {}
-        if bead_yield_stress_pa is not None:
-            bead_theta = contact.theta(bead_youngs_pa, bead_poisson)
-            face_theta = contact.theta(jnp.asarray([driver_youngs_pa] + [bead_youngs_pa] * (n - 1) + [wall_youngs_pa]),
-                                       jnp.asarray([driver_poisson] + [bead_poisson] * (n - 1) + [wall_poisson]))
-            face_radius = jnp.asarray([np.inf] + [1.0] * (n - 1) + [np.inf]) * radius
-            plastic = dict(
-                contact_yield_force_n=contact.yield_force(bead_yield_stress_pa, radius, bead_theta, face_radius,
-                                                          face_theta),
-                contact_reduced_radius_m=1.0 / (1.0 / radius + 1.0 / face_radius),
-                contact_poisson=jnp.full((n + 1,), bead_poisson, dtype=jnp.float64),
-                yield_stress_pa=bead_yield_stress_pa)
+        plastic = {} if bead_yield_stress_pa is None else _yield_constants(
+            n, radius, bead_youngs_pa, bead_poisson, driver_youngs_pa, driver_poisson, wall_youngs_pa, wall_poisson,
+            bead_yield_stress_pa)
         return cls(
             bead_mass_kg=jnp.full((n,), bead_mass_kg, dtype=jnp.float64),
             contact_kappa_n_m1p5=kappa,
@@ -268,20 +230,7 @@ class DrivenChain(eqx.Module):
         """The chain as JSON-ready numbers (a sweep folder's manifest): the arrays, `eta_s`
         and, where they are not the defaults, the laws (type name and parameters) and the
         yield constants."""
-        out = {name: np.asarray(getattr(self, name)).tolist()
-               for name in ("bead_mass_kg", "contact_kappa_n_m1p5", "precompression_n", "damping_rate_per_s")}
-        out["eta_s"] = np.asarray(self.eta_s).tolist()
-        if type(self.contact_law) is not laws.Hertz:
-            out["contact_law"] = _describe_law(self.contact_law)
-        if [type(law) for law in self.dissipation] != [laws.Viscoelastic]:
-            out["dissipation"] = [_describe_law(law) for law in self.dissipation]
-        for name in ("support_friction", "drive_stroke"):
-            if getattr(self, name) is not None:
-                out[name] = _describe_law(getattr(self, name))
-        for name in ("contact_yield_force_n", "contact_reduced_radius_m", "contact_poisson", "yield_stress_pa"):
-            if getattr(self, name) is not None:
-                out[name] = np.asarray(getattr(self, name)).tolist()
-        return out
+        return _describe_chain(self)
 
     def highest_frequency_bound_hz(self) -> jax.Array:
         """An upper bound on the chain's highest linear mode frequency about the static state,
@@ -289,6 +238,58 @@ class DrivenChain(eqx.Module):
         k = self.contact_stiffness_n_m()
         # operators and methods only: the same code on NumPy leaves (checks of concrete inputs)
         return (2.0 * (k[:-1] + k[1:]) / self.bead_mass_kg).max() ** 0.5 / (2.0 * np.pi)
+
+
+def _check_fields(chain: DrivenChain) -> None:
+    """ValueError naming the field for a chain that cannot be run (shapes, signs, the laws'
+    parameters and constants)."""
+    n = chain.bead_mass_kg.shape[0]
+    if chain.bead_mass_kg.ndim != 1 or n < 1:
+        raise ValueError(f"bead_mass_kg: expected an (n,) array of bead masses in kg, got shape "
+                         f"{chain.bead_mass_kg.shape}.")
+    if chain.contact_kappa_n_m1p5.shape != (n + 1,):
+        raise ValueError(
+            f"contact_kappa_n_m1p5: expected {n + 1} stiffnesses (driver, {n - 1} between beads, "
+            f"wall) for {n} beads, got shape {chain.contact_kappa_n_m1p5.shape}."
+        )
+    if chain.precompression_n.shape not in ((), (n + 1,)):
+        raise ValueError(f"precompression_n: expected one static force in N, or one per contact ({n + 1}), got "
+                         f"shape {chain.precompression_n.shape}.")
+    if not isinstance(chain.contact_law, laws.AbstractContactLaw):
+        raise ValueError(f"contact_law: expected a hertzchain.laws contact law (e.g. laws.Hertz(), "
+                         f"laws.PowerLaw(1.6)), got {chain.contact_law!r}.")
+    for name in ("contact_yield_force_n", "contact_reduced_radius_m", "contact_poisson"):
+        value = getattr(chain, name)
+        if value is not None and value.shape not in ((), (n + 1,)):
+            raise ValueError(f"{name}: expected one value per contact ({n + 1}), got shape {value.shape}.")
+    _check_law_parameters((chain.contact_law, *chain.dissipation), n + 1)
+    if chain.support_friction is not None:
+        if not isinstance(chain.support_friction, laws.IwanSupport):
+            raise ValueError(f"support_friction: expected a hertzchain.laws.IwanSupport, got {chain.support_friction!r}.")
+        _check_law_parameters((chain.support_friction,), n)
+    if chain.drive_stroke is not None and not isinstance(chain.drive_stroke, RayleighStroke):
+        raise ValueError(f"drive_stroke: expected a hertzchain.driven.RayleighStroke, got {chain.drive_stroke!r}.")
+    _check_concrete_positive("bead_mass_kg", chain.bead_mass_kg, "kg")
+    _check_concrete_positive("contact_kappa_n_m1p5", chain.contact_kappa_n_m1p5, "N/m^1.5")
+    _check_concrete_positive("precompression_n", chain.precompression_n, "N")
+    _check_concrete_nonnegative("damping_rate_per_s", chain.damping_rate_per_s, "1/s")
+    _check_law_constants(chain)
+
+
+def _yield_constants(n, radius, bead_youngs_pa, bead_poisson, driver_youngs_pa, driver_poisson, wall_youngs_pa,
+                     wall_poisson, bead_yield_stress_pa) -> dict:
+    """`from_materials`' constants of the elastic-plastic laws: the paper's mean-pressure
+    yield force of every contact (N), the reduced radii (m), the beads' Poisson ratio and the
+    yield stress (Pa)."""
+    bead_theta = contact.theta(bead_youngs_pa, bead_poisson)
+    face_theta = contact.theta(jnp.asarray([driver_youngs_pa] + [bead_youngs_pa] * (n - 1) + [wall_youngs_pa]),
+                               jnp.asarray([driver_poisson] + [bead_poisson] * (n - 1) + [wall_poisson]))
+    face_radius = jnp.asarray([np.inf] + [1.0] * (n - 1) + [np.inf]) * radius
+    return dict(contact_yield_force_n=contact.yield_force(bead_yield_stress_pa, radius, bead_theta, face_radius,
+                                                          face_theta),
+                contact_reduced_radius_m=1.0 / (1.0 / radius + 1.0 / face_radius),
+                contact_poisson=jnp.full((n + 1,), bead_poisson, dtype=jnp.float64),
+                yield_stress_pa=bead_yield_stress_pa)
 
 
 def _is_concrete(value) -> bool:
@@ -303,6 +304,23 @@ def _check_concrete_positive(name: str, value, unit: str) -> None:
 def _check_concrete_nonnegative(name: str, value, unit: str) -> None:
     if _is_concrete(value) and not (np.all(np.asarray(value) >= 0.0) and np.all(np.isfinite(np.asarray(value)))):
         raise ValueError(f"{name}: every value must be finite and >= 0 ({unit}), got {np.asarray(value)}.")
+
+
+def _describe_chain(chain: DrivenChain) -> dict:
+    out = {name: np.asarray(getattr(chain, name)).tolist()
+           for name in ("bead_mass_kg", "contact_kappa_n_m1p5", "precompression_n", "damping_rate_per_s")}
+    out["eta_s"] = np.asarray(chain.eta_s).tolist()
+    if type(chain.contact_law) is not laws.Hertz:
+        out["contact_law"] = _describe_law(chain.contact_law)
+    if [type(law) for law in chain.dissipation] != [laws.Viscoelastic]:
+        out["dissipation"] = [_describe_law(law) for law in chain.dissipation]
+    for name in ("support_friction", "drive_stroke"):
+        if getattr(chain, name) is not None:
+            out[name] = _describe_law(getattr(chain, name))
+    for name in ("contact_yield_force_n", "contact_reduced_radius_m", "contact_poisson", "yield_stress_pa"):
+        if getattr(chain, name) is not None:
+            out[name] = np.asarray(getattr(chain, name)).tolist()
+    return out
 
 
 def _describe_law(law) -> dict:
