@@ -36,6 +36,7 @@ def test_rayleigh_drive_harmonics_follow_the_loops_fourier_series():
     np.testing.assert_allclose(u_dot[1:-1][smooth], central[smooth], atol=1e-4 * np.max(np.abs(u_dot)))
 
 
+@pytest.mark.slow
 def test_linear_chain_responds_to_the_rayleigh_fundamental():
     # at 0.1 nm the bead is linear: its lock-in at f scales with the drive's fundamental,
     # |1 + r a - i (4 / 3 pi) r a| times the nominal stroke's (r a = 0.1)

@@ -71,7 +71,9 @@ CASES = {
 }
 
 
-@pytest.mark.parametrize("case", sorted(CASES))
+@pytest.mark.parametrize("case", [
+    pytest.param("power_law_dashpot", marks=pytest.mark.slow), "velocity_squared",
+    pytest.param("preload_per_contact", marks=pytest.mark.slow)])
 def test_kernel_trajectory_matches_an_independent_integrator(case):
     options, elastic, damping, preload = CASES[case]
     gamma = 300.0
@@ -146,13 +148,14 @@ def test_thornton_contact_carries_its_history_through_the_run():
     np.testing.assert_allclose(force[1], KAPPA[1] * np.maximum(wall, 0) ** 1.5, rtol=1e-10, atol=1e-9)
 
 
-def test_lockin_grid_says_which_kernel_ran():
-    chain = DrivenChain(MASS[:1], KAPPA[:2], 4.5, 2000.0)
-    options = dict(harmonics=(1.0,), ramp_periods=2, hold_periods=2, window_periods=2, steps_per_period=32)
-    assert lockin_grid(chain, [3600.0], [1e-9], kernel="jax", **options).kernel == "jax"
+def test_which_kernel_runs_a_chain():
+    # the fused kernel has Hertz, Kuwabara-Kono and one preload only (a grid's `kernel` says
+    # which ran: tests/test_driven_series_laws.py)
+    assert DrivenChain(MASS[:1], KAPPA[:2], 4.5, 2000.0, 1e-7).runs_on_fused_kernel
     squared = DrivenChain(MASS[:1], KAPPA[:2], 4.5, 2000.0, dissipation=(laws.VelocitySquared(1e3),))
-    assert lockin_grid(squared, [3600.0], [1e-9], **options).kernel == "jax"
     assert not squared.runs_on_fused_kernel
+    tiny = dict(harmonics=(1.0,), ramp_periods=1, hold_periods=2, window_periods=2, steps_per_period=16)
+    assert lockin_grid(squared, [3600.0], [1e-9], **tiny).kernel == "jax"
     assert squared.describe()["dissipation"] == [{"type": "VelocitySquared", "c_n_s2_m2": 1e3}]
     per_contact = DrivenChain(MASS[:1], KAPPA[:2], jnp.asarray([4.5, 4.5]), 2000.0)
     assert not per_contact.runs_on_fused_kernel
