@@ -147,3 +147,16 @@ def test_driven_bead_with_a_cap_spring_responds_linearly_on_the_jax_kernel():
     w = 2 * np.pi * f_res
     linear = k0 * 1e-10 / np.abs(k0 + k_hertz - mass * w**2 + 1j * w * mass * 2000.0) * w / np.sqrt(2.0)
     assert float(grid.rms[0, 0, 0]) == pytest.approx(linear, rel=5e-3)
+
+
+@pytest.mark.slow
+def test_series_layers_run_in_impact_chains_with_closed_energy_books():
+    import hertzchain as hc
+
+    hertz = hc.simulate(hc.ChainSetup(3))
+    for law in (laws.SeriesCompliance(laws.Hertz(), 1e-8), laws.RoughContact(laws.Hertz(), 5e-8, 0.5)):
+        traces = hc.simulate(hc.ChainSetup(3, contact_law=law))
+        error = np.max(np.abs(np.asarray(traces.energy_error_j))) / float(traces.initial_energy_j)
+        assert error < 1e-4  # the layer's stored energy is in the books
+        if isinstance(law, laws.SeriesCompliance):  # a 1e8 N/m spring in every contact: a far lower peak
+            assert float(np.max(np.asarray(traces.max_force_n))) < 0.8 * float(np.max(np.asarray(hertz.max_force_n)))
