@@ -14,6 +14,7 @@ displacement at harmonics of the drive, differentiable in forward mode:
 """
 
 from .chain import DrivenChain as DrivenChain
+from .drive import RayleighStroke as RayleighStroke
 from .floquet import Floquet as Floquet
 from .floquet import floquet_multipliers as floquet_multipliers
 from .floquet import period_doubling_threshold as period_doubling_threshold
@@ -43,6 +44,7 @@ __all__ = [
     "LockIn",
     "LockinGrid",
     "LockinSweepResult",
+    "RayleighStroke",
     "ScheduleLockin",
     "SteadyLockin",
     "chirp",

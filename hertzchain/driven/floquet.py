@@ -74,6 +74,9 @@ def floquet_multipliers(chain: DrivenChain, frequencies_hz, amplitudes_m, *, ste
     check_readout(chain, 1, "velocity", (1.0,), 1, max(hold_periods, 1), steps_per_period, f)
     if np.any(f <= 0) or np.any(a < 0) or not np.all(np.isfinite(f) & np.isfinite(a)):
         raise ValueError("frequencies_hz must be > 0 Hz and amplitudes_m >= 0 m (finite).")
+    if chain.support_friction is not None:
+        raise ValueError("floquet_multipliers: the supports' friction sliders are state the period map in (x, v) "
+                         "leaves out (and slip makes it non-smooth); run lockin_schedule instead.")
     if int(newton_steps) != newton_steps or newton_steps < 0:
         raise ValueError(f"newton_steps: expected a whole number >= 0, got {newton_steps}.")
     monodromy, orbit, residual = _monodromy(chain.for_kernel(), jnp.asarray(f), jnp.asarray(a), int(steps_per_period), int(ramp_periods),
@@ -86,18 +89,23 @@ def floquet_multipliers(chain: DrivenChain, frequencies_hz, amplitudes_m, *, ste
 
 
 def period_map(chain: DrivenChain, frequency_hz, amplitude_m, steps_per_period: int,
-               unroll: int = kernel.DEFAULT_UNROLL):
+               unroll: int = kernel.DEFAULT_UNROLL, contact_history_m=None):
     """$P$: the state (2n, B) (displacements then velocities, from the static equilibrium)
-    one drive period later, at constant amplitude, starting at phase 0 (traceable)."""
+    one drive period later, at constant amplitude, starting at phase 0 (traceable). A
+    contact law with a history (`laws.Thornton`, ...) starts every period from
+    `contact_history_m` (n + 1, B), m, the largest overlaps the run reached: a seated
+    contact, whose history the orbit no longer changes, is a parameter of $P$, not a state."""
     p = kernel.kernel_params(chain)
     n = chain.n_beads
     dt = 1.0 / (frequency_hz * steps_per_period)
-    drive = drives.harmonic_segment(frequency_hz, dt, steps_per_period, amplitude_m, amplitude_m, 0)
+    drive = drives.harmonic_segment(frequency_hz, dt, steps_per_period, amplitude_m, amplitude_m, 0,
+                                    stroke=chain.drive_stroke)
 
     def advance(z):
         x, v = z[:n], z[n:]
         u, u_dot = drive(jnp.asarray(0))
-        state = kernel.State(x, v, kernel.contact_accel(p, kernel.contact_forces(p, x, v, u, u_dot)))
+        force = kernel.contact_forces(p, x, v, u, u_dot, contact_history_m)
+        state = kernel.State(x, v, kernel.contact_accel(p, force), contact_history_m)
         state, _ = kernel.advance(p, state, dt, drive, jnp.arange(1, steps_per_period + 1), unroll=unroll)
         return jnp.concatenate([state.displacement_m, state.velocity_m_s])
 
@@ -110,7 +118,7 @@ def _monodromy(chain, frequency_hz, amplitude_m, steps_per_period, ramp_periods,
                                 max(hold_periods, 1), 0)
     _, _, state = _levels(chain, schedule, steps_per_period, lambda s, u, u_dot: u, unroll)
     z = jnp.concatenate([state.displacement_m, state.velocity_m_s])
-    advance = period_map(chain, frequency_hz, amplitude_m, steps_per_period, unroll)
+    advance = period_map(chain, frequency_hz, amplitude_m, steps_per_period, unroll, state.contact_history_m)
     size = z.shape[0]
 
     def linearise(z):

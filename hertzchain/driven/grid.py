@@ -59,6 +59,8 @@ class LockinGrid(AbstractReading):
     - `complex_amplitude`: (n_harmonics, F, A) $A e^{i\\varphi}$ ($A = \\sqrt2$ RMS).
     - `frequencies_hz` (F,), `drive_amplitudes_m` (A,): the grid.
     - `harmonics`, `quantity`, `bead`, `contact`: what was demodulated (static).
+    - `kernel`: which kernel ran (static): "fused" (`hertzchain.driven.fused`) or "jax";
+      None where it was not recorded (a grid read back from a sweep folder).
     """
 
     complex_amplitude: jax.Array
@@ -68,6 +70,7 @@ class LockinGrid(AbstractReading):
     quantity: str = eqx.field(static=True)
     bead: int = eqx.field(static=True)
     contact: int | None = eqx.field(static=True, default=None)
+    kernel: str | None = eqx.field(static=True, default=None)
 
 
 def lockin_grid(
@@ -108,8 +111,9 @@ def lockin_grid(
     - `unroll`: steps per scan iteration of the JAX kernel (speed only).
     - `kernel`: "auto" (default) runs the fused host kernel (`hertzchain.driven.fused`:
       the same numbers to round-off, forward-mode derivatives in the same call) where it
-      can (on the CPU, a bead's velocity or displacement, a C++ compiler at hand), else the
-      JAX kernel; "jax" always the JAX kernel (reverse mode needs it).
+      can (on the CPU, a bead's velocity or displacement, a C++ compiler at hand, and the
+      chain's laws those it has: `DrivenChain.runs_on_fused_kernel`), else the JAX kernel;
+      "jax" always the JAX kernel (reverse mode needs it). `LockinGrid.kernel` says which ran.
 
     **Returns:** `LockinGrid` with `.rms` and `.phase_rad` of shape (n_harmonics, F, A).
     """
@@ -122,7 +126,7 @@ def lockin_grid(
     return _lockin_grid(chain.for_kernel(), jnp.asarray(frequencies_hz, dtype=jnp.float64),
                         jnp.asarray(drive_amplitudes_m, dtype=jnp.float64), int(bead), quantity, harmonics,
                         int(ramp_periods), int(hold_periods), int(window_periods), int(steps_per_period), int(unroll),
-                        contact, kernel == "auto" and fused.runs(quantity))
+                        contact, kernel == "auto" and fused.runs(quantity) and chain.runs_on_fused_kernel)
 
 
 @eqx.filter_jit
@@ -143,6 +147,7 @@ def _lockin_grid(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harm
         quantity=quantity,
         bead=bead,
         contact=contact,
+        kernel="fused" if on_fused_kernel else "jax",
     )
 
 

@@ -108,7 +108,7 @@ def run_lockin_sweep(
                "contact": None if contact is None else int(contact)}
     manifest = {
         "format": LOCKIN_SWEEP_FORMAT,
-        "chain": {name: np.asarray(getattr(chain, name)).tolist() for name in chain.__dataclass_fields__},
+        "chain": chain.describe(),
         "frequencies_hz": frequencies.tolist(),
         "drive_amplitudes_m": amplitudes.tolist(),
         "options": options,
@@ -132,7 +132,8 @@ def run_lockin_sweep(
         todo = todo[: max(0, int(max_chunks))]
     bar = Progress(sum(min((i + 1) * chunk_size, n_runs) - i * chunk_size for i in todo), "lock-in sweep (runs)") \
         if progress and todo else None
-    on_fused_kernel = fused.runs(quantity) and all(d.platform == "cpu" for d in devices)
+    on_fused_kernel = (fused.runs(quantity) and chain.runs_on_fused_kernel
+                       and all(d.platform == "cpu" for d in devices))
     evaluate = _chunk_function(tuple(devices) if len(devices) > 1 else None, on_fused_kernel)
     chain = chain.for_kernel()
     settings = tuple((name, tuple(value) if isinstance(value, list) else value) for name, value in options.items())

@@ -5,18 +5,23 @@ operation of a step is one vector instruction over runs (as in `hertzchain.batch
 may differ in their time step (each run's own `dt_s`, a (B,) array), in the driver's
 displacement and in nothing else: the chain's constants are shared, (n, 1) columns.
 
-One step of length $\\Delta t$ with $h = \\Delta t/2$, $f$ the contact forces' acceleration
-$(F_{i-1} - F_i)/m_i$ and $\\gamma$ the beads' viscous damping rate:
+One step of length $\\Delta t$ with $h = \\Delta t/2$, $f$ the acceleration
+$(F_{i-1} - F_i + S_i + F^{fr}_i)/m_i$ by the contact forces, the supports' static force and
+their friction, and
+$\\gamma$ the beads' viscous damping rate:
 
     v_half = v + h (f - gamma v)
     x'     = x + dt v_half
-    f'     = contact forces at x', the driver at its new position u', the contact damping
-             at the predicted velocity v_half + h (f - gamma v) (as `integrate.verlet_step`)
+    H'     = the contact law's history after the move (the largest overlap so far), and
+             the supports' friction sliders after it (`laws.IwanSupport`)
+    f'     = contact forces at x' and H', the driver at its new position u', the contact
+             damping at the predicted velocity v_half + h (f - gamma v) (as `integrate.verlet_step`)
     v'     = (v_half + h f') / (1 + h gamma)
 
 The drag $-\\gamma v$ is treated by the trapezoidal rule (implicit, solved in closed form):
-the scheme stays symmetric, second order and stable for any damping. The contact laws are
-`hertzchain.laws`' `Hertz` and `Viscoelastic` (Kuwabara-Kono), their sum clipped at zero.
+the scheme stays symmetric, second order and stable for any damping. The contact forces are
+the chain's laws (`DrivenChain.contact_law` and `.dissipation`, `hertzchain.laws`), their
+sum clipped at zero, each law's parameters as (n + 1, 1) columns over the contacts.
 """
 
 from __future__ import annotations
@@ -41,46 +46,83 @@ class KernelParams(NamedTuple):
     damping_rate_per_s: jax.Array  # (n, 1)
     kappa_n_m1p5: jax.Array  # (n + 1, 1)
     static_overlap_m: jax.Array  # (n + 1, 1)
-    eta_s: jax.Array | None  # (); None: no contact damping (compiled without it)
+    eta_s: jax.Array | None  # () Kuwabara-Kono time where that is the only dissipation law (the fused kernel's)
+    contact_law: laws.AbstractContactLaw  # parameters as (n + 1, 1) columns
+    constants: laws.ContactConstants  # (n + 1, 1) columns
+    dissipation: tuple[laws.AbstractDissipation, ...]  # parameters as (n + 1, 1) columns
+    support_force_n: jax.Array | None  # (n, 1) the supports' static force; None: none (one preload)
+    support_friction: laws.IwanSupport | None  # parameters as (n, 1) columns; None: none
 
 
 class State(NamedTuple):
     """B runs' state at a step: displacements from the static equilibrium (m), velocities
-    (m/s) and the contact forces' acceleration $(F_{i-1} - F_i)/m_i$ (m/s^2), each (n, B)."""
+    (m/s) and the acceleration by the contacts and supports $(F_{i-1} - F_i + S_i + F^{fr}_i)/m_i$
+    (m/s^2), each (n, B); and the contact law's history, the largest overlap of every
+    contact so far (n + 1, B), m (None for laws without one); the supports' friction sliders
+    (E, n, B), m (`laws.IwanSupport`; None without)."""
 
     displacement_m: jax.Array
     velocity_m_s: jax.Array
     contact_accel_m_s2: jax.Array
+    contact_history_m: jax.Array | None = None
+    support_slider_m: jax.Array | None = None
+
+
+def _columns(tree):
+    """`tree` (a law, constants) with every (rows,) array leaf as a (rows, 1) column."""
+    return jax.tree_util.tree_map(lambda leaf: leaf[:, None] if jnp.ndim(leaf) == 1 else leaf, tree)
 
 
 def kernel_params(chain: DrivenChain) -> KernelParams:
     """The chain's constants as (rows, 1) columns."""
+    viscous = [law for law in chain.dissipation if type(law) is laws.Viscoelastic]
+    only_viscous = len(viscous) == len(chain.dissipation) == 1
+    support = None if chain.precompression_n.ndim == 0 else chain.support_force_n()[:, None]
     return KernelParams(
         inv_mass_per_kg=(1.0 / chain.bead_mass_kg)[:, None],
         damping_rate_per_s=chain.damping_rate_per_s[:, None],
         kappa_n_m1p5=chain.contact_kappa_n_m1p5[:, None],
         static_overlap_m=chain.static_overlap_m()[:, None],
-        eta_s=chain.eta_s,
+        eta_s=viscous[0].eta_s if only_viscous else None,
+        contact_law=_columns(chain.contact_law),
+        constants=_columns(chain.contact_constants()),
+        dissipation=_columns(chain.dissipation),
+        support_force_n=support,
+        support_friction=None if chain.support_friction is None else _columns(chain.support_friction),
     )
 
 
-def contact_forces(p: KernelParams, x, v, drive_m, drive_m_s) -> jax.Array:
-    """Total force of every contact (n + 1, B), N (compression positive), from the beads'
-    displacements x and velocities v (n, B) and the driver's displacement and velocity (B,)."""
+def contact_overlaps(p: KernelParams, x, drive_m) -> jax.Array:
+    """Overlap of every contact (n + 1, B), m, from the beads' displacements x (n, B) and
+    the driver's displacement (B,)."""
     zero = jnp.zeros_like(x[:1])
-    front = jnp.concatenate([drive_m[None] + zero, x])
-    back = jnp.concatenate([x, zero])
-    overlap = p.static_overlap_m + front - back
-    elastic = laws.Hertz().force(overlap, None, laws.ContactConstants(p.kappa_n_m1p5))
-    if p.eta_s is None:
+    return p.static_overlap_m + jnp.concatenate([drive_m[None] + zero, x]) - jnp.concatenate([x, zero])
+
+
+def contact_forces(p: KernelParams, x, v, drive_m, drive_m_s, history_m=None) -> jax.Array:
+    """Total force of every contact (n + 1, B), N (compression positive), from the beads'
+    displacements x and velocities v (n, B), the driver's displacement and velocity (B,)
+    and the contact law's history (n + 1, B; None: the overlaps themselves, a first
+    loading, and for laws without a history unused)."""
+    overlap = contact_overlaps(p, x, drive_m)
+    history = p.contact_law.initial_state(overlap) if history_m is None else history_m
+    elastic = p.contact_law.force(overlap, history, p.constants)
+    if not p.dissipation:
         return elastic
+    zero = jnp.zeros_like(x[:1])
     rate = jnp.concatenate([drive_m_s[None] + zero, v]) - jnp.concatenate([v, zero])
-    return laws.total_force(elastic, overlap, rate, p.kappa_n_m1p5, (laws.Viscoelastic(p.eta_s),))
+    return laws.total_force(elastic, overlap, rate, p.kappa_n_m1p5, p.dissipation)
 
 
-def contact_accel(p: KernelParams, force_n) -> jax.Array:
-    """Acceleration of every bead by its two contacts, (n, B), m/s^2."""
-    return (force_n[:-1] - force_n[1:]) * p.inv_mass_per_kg
+def contact_accel(p: KernelParams, force_n, x=None, slider_m=None) -> jax.Array:
+    """Acceleration of every bead by its two contacts and its supports (their static force,
+    and their friction at displacements x (n, B) with sliders `slider_m`), (n, B), m/s^2."""
+    net = force_n[:-1] - force_n[1:]
+    if p.support_force_n is not None:
+        net = net + p.support_force_n
+    if slider_m is not None:
+        net = net + p.support_friction.force(x, slider_m)
+    return net * p.inv_mass_per_kg
 
 
 def static_state(p: KernelParams, runs: jax.Array) -> State:
@@ -90,7 +132,12 @@ def static_state(p: KernelParams, runs: jax.Array) -> State:
     n = p.inv_mass_per_kg.shape[0]
     rest = 0.0 * jnp.asarray(runs, dtype=jnp.float64)
     zeros = jnp.zeros((n, 1), dtype=jnp.float64) + rest
-    return State(zeros, zeros, contact_accel(p, contact_forces(p, zeros, zeros, rest, rest)))
+    history = None
+    if p.contact_law.has_history:
+        history = p.contact_law.initial_state(contact_overlaps(p, zeros, rest))
+    slider = None if p.support_friction is None else p.support_friction.initial_state(zeros)
+    accel = contact_accel(p, contact_forces(p, zeros, zeros, rest, rest, history), zeros, slider)
+    return State(zeros, zeros, accel, history, slider)
 
 
 def step(p: KernelParams, state: State, dt_s, drive_m, drive_m_s) -> State:
@@ -98,14 +145,18 @@ def step(p: KernelParams, state: State, dt_s, drive_m, drive_m_s) -> State:
     scalar step, s; `drive_m`, `drive_m_s`: the driver's displacement and velocity at the
     end of the step, (B,), m and m/s."""
     h = 0.5 * dt_s
-    x, v, f = state
+    x, v, f, history, slider = state
     kick = h * (f - p.damping_rate_per_s * v)
     v_half = v + kick
     x = x + dt_s * v_half
-    force = contact_forces(p, x, v_half + kick, drive_m, drive_m_s)
-    f = contact_accel(p, force)
+    if history is not None:
+        history = p.contact_law.update_state(history, contact_overlaps(p, x, drive_m))
+    if slider is not None:
+        slider = p.support_friction.update_state(slider, x)
+    force = contact_forces(p, x, v_half + kick, drive_m, drive_m_s, history)
+    f = contact_accel(p, force, x, slider)
     v = (v_half + h * f) / (1.0 + h * p.damping_rate_per_s)
-    return State(x, v, f)
+    return State(x, v, f, history, slider)
 
 
 DriveFn = Callable[[jax.Array], tuple[jax.Array, jax.Array]]

@@ -97,7 +97,8 @@ def _levels(chain: DrivenChain, schedule: HarmonicSchedule, window_steps: int, r
         dt = 1.0 / (frequency * n)
         steps = periods * n
         window = steps if window_steps is None else window_steps
-        drive = drives.harmonic_segment(frequency, dt, n, from_amplitude, to_amplitude, ramp_periods * n)
+        drive = drives.harmonic_segment(frequency, dt, n, from_amplitude, to_amplitude, ramp_periods * n,
+                                        stroke=chain.drive_stroke)
         state, _ = kernel.advance(p, state, dt, drive, jnp.arange(1, steps - window + 1), unroll=unroll)
         first = steps - window + 1
         state, records = kernel.advance_sampled(p, state, dt, drive, first, window // every_steps, every_steps,
@@ -148,7 +149,7 @@ def readout(chain: DrivenChain, quantity: str, bead: int, contact: int | None):
         p = kernel.kernel_params(chain)
 
         def record(s, u, u_dot):
-            return kernel.contact_forces(p, s.displacement_m, s.velocity_m_s, u, u_dot)[contact]
+            return kernel.contact_forces(p, s.displacement_m, s.velocity_m_s, u, u_dot, s.contact_history_m)[contact]
 
         return record
     field = "velocity_m_s" if quantity == "velocity" else "displacement_m"
@@ -249,7 +250,7 @@ def _recorder(p, beads, contacts):
     picked = np.asarray(contacts, dtype=int)
 
     def record(s, u, u_dot):
-        force = kernel.contact_forces(p, s.displacement_m, s.velocity_m_s, u, u_dot)
+        force = kernel.contact_forces(p, s.displacement_m, s.velocity_m_s, u, u_dot, s.contact_history_m)
         return u, s.displacement_m[rows], s.velocity_m_s[rows], force[picked]
 
     return record

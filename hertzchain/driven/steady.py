@@ -69,7 +69,8 @@ def _until_steady(chain, frequencies_hz, drive_amplitudes_m, rtol, bead, quantit
     p = kernel.kernel_params(chain)
     n = steps_per_period
     dt = 1.0 / (frequency * n)
-    drive = drives.harmonic_segment(frequency, dt, n, 0.0 * amplitude, amplitude, ramp_periods * n)
+    drive = drives.harmonic_segment(frequency, dt, n, 0.0 * amplitude, amplitude, ramp_periods * n,
+                                    stroke=chain.drive_stroke)
     state, _ = kernel.advance(p, kernel.static_state(p, frequency), dt, drive, jnp.arange(1, ramp_periods * n + 1),
                               unroll=unroll)
     record = readout(chain, quantity, bead, contact)

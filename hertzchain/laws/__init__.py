@@ -1,9 +1,11 @@
 """Contact and dissipation laws as types.
 
 A chain's contacts follow one contact law (`Hertz`, `PowerLaw`, `Thornton`,
-`JacksonGreen`: subclasses of `AbstractContactLaw`) and any number of dissipation laws
+`JacksonGreen`, and a law in series with a layer: `SeriesCompliance`, `RoughContact`;
+subclasses of `AbstractContactLaw`) and any number of dissipation laws
 (`Viscoelastic`, `Dashpot`, ...: subclasses of `AbstractDissipation`), given to
-`hertzchain.ChainSetup` as `contact_law=` and `dissipation=`. Every kernel evaluates the
+`hertzchain.ChainSetup` as `contact_law=` and `dissipation=`; a driven chain's beads may
+also sit on supports with micro-slip friction (`IwanSupport`). Every kernel evaluates the
 same methods; `registry` is the one table from a law type to its native counterpart.
 """
 
@@ -20,3 +22,7 @@ from .elastic import Hertz as Hertz
 from .elastic import PowerLaw as PowerLaw
 from .plastic import JacksonGreen as JacksonGreen
 from .plastic import Thornton as Thornton
+from .rough import RoughContact as RoughContact
+from .series import AbstractInSeries as AbstractInSeries
+from .series import SeriesCompliance as SeriesCompliance
+from .support_friction import IwanSupport as IwanSupport

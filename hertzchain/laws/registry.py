@@ -12,6 +12,8 @@ from .contact_law import AbstractContactLaw
 from .dissipation import AbstractDissipation, Dashpot, VelocitySquared, Viscoelastic
 from .elastic import Hertz, PowerLaw
 from .plastic import JacksonGreen, Thornton
+from .rough import RoughContact
+from .series import SeriesCompliance
 
 NATIVE_NAMES: dict[type, str | None] = {
     Hertz: "hertz",
@@ -21,6 +23,8 @@ NATIVE_NAMES: dict[type, str | None] = {
     Viscoelastic: "viscous",
     Dashpot: "dashpot",
     VelocitySquared: None,
+    SeriesCompliance: None,
+    RoughContact: None,
 }
 
 

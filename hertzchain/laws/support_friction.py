@@ -1,0 +1,87 @@
+"""Friction at a bead's supports with micro-slip: an Iwan element acting on its displacement.
+
+A bead resting on supports (rods, a V-groove) is held by friction at the points it touches
+them. As the bead moves, the edges of those contacts slip first and the centres later
+(Mindlin-Deresiewicz micro-slip): a force that is a stiff spring at the smallest motion,
+grows less than linearly, and saturates at the Coulomb force once all slips. Iwan's model
+(J. Appl. Mech. 33, 893, 1966) writes it as E Jenkins elements in parallel, each a spring
+$K/E$ in series with a slider that slips when its spring's stretch exceeds $\\phi_j$, here
+spread uniformly over $(0, \\phi_{max}]$ (the midpoints $\\phi_j = (j - \\tfrac12)\\phi_{max}/E$).
+Element j's slider position $s_j$ is its history: after a move to x, $s_j$ follows just
+enough that $|x - s_j| \\le \\phi_j$. The force on the bead is
+
+$F = -\\frac{K}{E}\\sum_j (x - s_j)$ (N, resisting the displacement from where it stuck).
+
+On first loading $F = -K(x - x^2/2\\phi_{max})$ up to full slip at $x = \\phi_{max}$, where it is
+the Coulomb force $F_s = K\\phi_{max}/2$. A cycle of amplitude A follows Masing's rule and
+dissipates $W = \\sum_j 4\\frac{K}{E}\\phi_j(A - \\phi_j)_+$, which for many elements is
+$\\tfrac23 K A^3/\\phi_{max}$ below full slip (the $A^3$ law of micro-slip) and
+$4F_sA - \\tfrac43 K\\phi_{max}^2$ above it, Coulomb's $4F_sA$ for $A \\gg \\phi_{max}$.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+
+class IwanSupport(eqx.Module):
+    """Micro-slip friction at the supports of every bead (see the module docstring).
+
+    **Arguments:**
+
+    - `stiffness_n_m`: K, the stiffness of the supports before anything slips, N/m (> 0).
+    - `slip_displacement_m`: $\\phi_{max}$, the displacement at which all of the contact
+      slips, m (> 0); the Coulomb force is $K\\phi_{max}/2$.
+    - `elements`: E, the number of Jenkins elements (static, default 16).
+
+    K and $\\phi_{max}$ are one value for every bead or, in a `DrivenChain`, (n,) one per bead.
+    """
+
+    stiffness_n_m: jax.Array
+    slip_displacement_m: jax.Array
+    elements: int = eqx.field(static=True)
+
+    def __init__(self, stiffness_n_m, slip_displacement_m, elements: int = 16):
+        self.stiffness_n_m = jnp.asarray(stiffness_n_m, dtype=jnp.float64)
+        self.slip_displacement_m = jnp.asarray(slip_displacement_m, dtype=jnp.float64)
+        if int(elements) != elements or elements < 1:
+            raise ValueError(f"IwanSupport: elements must be a whole number >= 1, got {elements}.")
+        self.elements = int(elements)
+
+    def __check_init__(self):
+        for name, value, unit in (("stiffness_n_m", self.stiffness_n_m, "N/m"),
+                                  ("slip_displacement_m", self.slip_displacement_m, "m")):
+            if not isinstance(value, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(value) & (value > 0.0))):
+                raise ValueError(f"IwanSupport: {name} must be finite and > 0 ({unit}), got {value}.")
+
+    @property
+    def coulomb_force_n(self) -> jax.Array:
+        """The force of full slip, $F_s = K\\phi_{max}/2$, N."""
+        return 0.5 * self.stiffness_n_m * self.slip_displacement_m
+
+    def _slip_at(self, displacement_m):
+        """$\\phi_j$ (E, ...) broadcasting with the displacements, m."""
+        fraction = (jnp.arange(self.elements) + 0.5) / self.elements
+        fraction = fraction.reshape((self.elements,) + (1,) * jnp.ndim(displacement_m))
+        return fraction * self.slip_displacement_m
+
+    def initial_state(self, displacement_m):
+        """Every slider where the bead is at rest: (E, ...) slider positions, m."""
+        return jnp.broadcast_to(displacement_m, (self.elements,) + jnp.shape(displacement_m)) + 0.0
+
+    def update_state(self, slider_m, displacement_m):
+        """The sliders after a move to `displacement_m`: each follows just enough that its
+        spring's stretch stays within $\\pm\\phi_j$, m."""
+        limit = self._slip_at(displacement_m)
+        stretch = jnp.clip(displacement_m - slider_m, -limit, limit)
+        return displacement_m - stretch
+
+    def force(self, displacement_m, slider_m):
+        """The supports' force on the bead, N (negative for a bead displaced to +x)."""
+        return -(self.stiffness_n_m / self.elements) * jnp.sum(displacement_m - slider_m, axis=0)
+
+    def energy(self, displacement_m, slider_m):
+        """Energy stored in the elements' springs, J."""
+        return 0.5 * (self.stiffness_n_m / self.elements) * jnp.sum((displacement_m - slider_m) ** 2, axis=0)
