@@ -15,11 +15,11 @@ from fitting.driven_experiment import is_driven_experiment, load_driven_experime
 
 from ..units import format_measured
 
-# Defaults of the trace-fit options: a driven run accepts an option only at its default.
-_FIT_DEFAULTS = {"multistart": 1, "profile": "", "start": None, "fixed": None, "channels": None,
-                 "noise_std": None, "covariance": "auto", "prior": [], "posterior": False}
-_DIAGNOSE_DEFAULTS = {"model": "base", "free": "", "nuisances": "striker_velocity,time_offset",
-                      "candidates": "", "channels": ""}
+# The options of `fit` and `diagnose` that only trace files take: a driven run accepts each only at
+# the command's own default (read from its parser, `_defaults`).
+_TRACE_FIT_OPTIONS = ("multistart", "profile", "start", "fixed", "channels", "noise_std", "covariance", "prior",
+                      "posterior")
+_TRACE_DIAGNOSE_OPTIONS = ("model", "free", "nuisances", "candidates", "channels")
 DEFAULT_FREE = ("linear_resonance_hz", "precompression_n", "damping_rate_per_s", "drive_scale")
 
 
@@ -34,7 +34,18 @@ def is_driven_run(files, data_dir=None) -> bool:
     return bool(driven) and all(driven)
 
 
-def _refuse(args, defaults, command):
+def _defaults(command: str, names) -> dict:
+    """The defaults of `hertzchain COMMAND`'s options `names`, as its parser sets them."""
+    import argparse
+    import importlib
+
+    parser = argparse.ArgumentParser()
+    importlib.import_module(f"hertzchain.cli.{command}").add_arguments(parser)
+    return {name: parser.get_default(name) for name in names}
+
+
+def _refuse(args, names, command):
+    defaults = _defaults(command, names)
     given = [name for name, default in defaults.items() if getattr(args, name, default) != default]
     if given:
         options = ", ".join("--" + name.replace("_", "-") for name in given)
@@ -53,12 +64,12 @@ def run_fit(args, out) -> int:
     from fitting.driven import PARAMETERS, fit_driven
     from fitting.driven_report import report_data, write_driven_report
 
-    _refuse(args, _FIT_DEFAULTS, "fit")
+    _refuse(args, _TRACE_FIT_OPTIONS, "fit")
     experiment = _one_experiment(args)
     if experiment.measurements:
         return run_joint_fit(args, out, experiment)
     free = DEFAULT_FREE
-    if args.params != "eta,mu,C":  # the trace fit's default: not asked for
+    if args.params != _defaults("fit", ("params",))["params"]:  # the trace fit's default: not asked for
         free = tuple(p.strip() for p in args.params.split(",") if p.strip())
         unknown = [p for p in free if p not in PARAMETERS]
         if unknown:
@@ -89,7 +100,7 @@ def run_joint_fit(args, out, experiment) -> int:
     from fitting.driven_joint import fit_joint
     from fitting.driven_joint_report import report_data, write_joint_report
 
-    if args.params != "eta,mu,C":
+    if args.params != _defaults("fit", ("params",))["params"]:
         raise ValueError("--params: a file of [[measurement]] tables names what it fits in its [fit] table "
                          "(shared = [...], per_run = [...]); leave --params out.")
     result = fit_joint(experiment, max_steps=args.max_steps, progress=not args.quiet)
@@ -141,7 +152,7 @@ def run_diagnose(args, out) -> int:
     converged, 3 not converged)."""
     from fitting.driven_diagnosis import diagnose_driven, write_driven_diagnosis
 
-    _refuse(args, _DIAGNOSE_DEFAULTS, "diagnose")
+    _refuse(args, _TRACE_DIAGNOSE_OPTIONS, "diagnose")
     experiment = _one_experiment(args)
     if experiment.measurements:
         raise ValueError(f"{experiment.path}: `hertzchain diagnose` takes one bending sweep (a [sweep] table); "
