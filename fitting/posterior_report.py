@@ -33,6 +33,8 @@ from hertzchain.io.atomic import (  # noqa: E402
     write_text,
 )
 
+from hertzchain.units import format_measured  # noqa: E402
+
 from .posterior import PosteriorResult, posterior_predictive  # noqa: E402
 
 # pairs and traces show the global parameters (per-file nuisances would make a wall of panels)
@@ -80,7 +82,7 @@ def _markdown(result: PosteriorResult) -> str:
     lines += ["", "Priors:", ""]
     for label, prior in result.priors.items():
         if prior["kind"] == "normal":
-            lines.append(f"- {label}: normal {prior['centre']:.6g} +- {prior['sd']:.3g} {prior['unit']}")
+            lines.append(f"- {label}: normal, {format_measured(prior['centre'], prior['sd'], prior['unit'])}")
         else:
             lines.append(f"- {label}: flat on [{prior['low']:.6g}, {prior['high']:.6g}] {prior['unit']}")
     if result.warnings:

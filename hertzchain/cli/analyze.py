@@ -408,7 +408,7 @@ def _analyze(args: argparse.Namespace, out: Path) -> None:
         )
         result["velocity_law"] = law._asdict()
         print(
-            f"velocity law: C = {law.velocity_constant:.2f} +- {law.velocity_constant_stderr:.2g} "
+            f"velocity law: C = {law.velocity_constant:.2f} ± {law.velocity_constant_stderr:.2g} "
             f"(m/s)/N^(1/6) from {law.n_points} file(s)"
         )
     points = [p for s in summaries for p in s["restitution"]]
@@ -474,7 +474,7 @@ def _repeat_line(row) -> str:
         elif row[f"{name}_sd"] is None:
             parts.append(f"{label} {row[f'{name}_mean']:.4g} {unit} (measured in one shot only)")
         else:
-            parts.append(f"{label} {row[f'{name}_mean']:.4g} +- {row[f'{name}_sd']:.2g} {unit}")
+            parts.append(f"{label} {row[f'{name}_mean']:.4g} ± {row[f'{name}_sd']:.2g} {unit}")
     return f"{row['n_shots']} shots at {row['velocity_m_s']:.4g} m/s: {', '.join(parts)} (shot-to-shot sd)"
 
 

@@ -193,10 +193,10 @@ def run(args: argparse.Namespace) -> int:
     figure = plot_design(recommended or result, baseline=result if recommended else None)
     save_figure(figure, out / "design.png", dpi=120)
     for p in result.params:
-        line = (f"  {p}: {result.values[p]:.6g} {result.units[p]} +- {result.stderr[p]:.3g} "
+        line = (f"  {p}: {result.values[p]:.6g} {result.units[p]} ± {result.stderr[p]:.3g} "
                 f"({100 * result.relative_stderr[p]:.3g} %)")
         if recommended is not None:
-            line += (f" -> recommended plan +- {recommended.stderr[p]:.3g} "
+            line += (f" -> recommended plan ± {recommended.stderr[p]:.3g} "
                      f"({100 * recommended.relative_stderr[p]:.3g} %)")
         print(line)
     print(f"wrote {out / 'design.json'}, {out / 'design.csv'}, {out / 'design.png'}")
