@@ -335,6 +335,20 @@ def check_simulation_size(setup, options: dict) -> None:
                                      n_samples=grid.n_samples, n_steps=grid.n_steps))
 
 
+def check_batch_size(setup, *, n_runs: int, n_runs_in_memory: int, n_channels: int, t_end_s: float,
+                     sample_interval_s: float, dt_s: float | None = None, confirm_option: str = "--yes") -> None:
+    """`check_run_size` of `n_runs` runs of `setup`'s chain (`n_runs_in_memory` at once), each
+    recording `n_channels` channels every `sample_interval_s` (s) up to `t_end_s` (s): the
+    guard of the commands that run many shots (synth, sensitivity)."""
+    from .timegrid import choose_time_grid
+
+    grid = choose_time_grid(setup, t_end_s=t_end_s, sample_interval_s=sample_interval_s, dt_s=dt_s)
+    n_bodies = setup.n_beads + 1 + len(setup.sensor_beads)
+    check_run_size(estimate_run_size(n_runs_in_memory=max(1, min(n_runs, n_runs_in_memory)), n_runs=n_runs,
+                                     n_bodies=n_bodies, n_channels=n_channels, n_samples=grid.n_samples,
+                                     n_steps=grid.n_steps), confirm_option=confirm_option)
+
+
 # -- yield -----------------------------------------------------------------------------------
 
 def yield_velocity_m_s(setup) -> float:

@@ -128,6 +128,13 @@ def test_cli_refuses_implausible_and_oversized_runs(tmp_path, capsys):
                      "--grid", "eta_s=0:1e-6:10000", "--out", str(out)]) == 2
     assert "add --yes" in capsys.readouterr().err  # 1e8 runs: their table alone exceeds the memory
     assert not out.exists()
+    # the commands that run many shots: synth (one file a velocity) and sensitivity (tangents)
+    assert cli_main(["synth", "--n-beads", "5", "--t-end", "1e3", "--out", str(out)]) == 2
+    assert "add --yes" in capsys.readouterr().err
+    assert cli_main(["sensitivity", "--n-beads", "5", "--params", "eta", "--observables", "wall_peak",
+                     "--t-end", "1e3", "--out", str(out)]) == 2
+    assert "add --yes" in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_yield_velocity_is_where_the_hertz_collision_reaches_the_yield_force():

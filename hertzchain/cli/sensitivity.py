@@ -4,6 +4,7 @@ at one setup, over a swept grid of setups, or averaged over a parameter box (glo
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ from .. import sensitivity as S
 from ..io.atomic import save_figure, write_csv, write_json, write_text
 from ..io.tracefile import setup_header
 from ..units import parse_quantity
+from ..validation import check_batch_size
 from .setup_options import add_run_arguments, add_setup_arguments, setup_from_args
 
 
@@ -36,6 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--steps-per-contact", type=int, default=200,
                        help="Verlet steps per shortest contact time [200]")
     group.add_argument("--out", default="out/sensitivity", help="output folder [out/sensitivity]")
+    group.add_argument("--yes", action="store_true",
+                       help="run even when the runs need more memory than is available or more than 1e10 "
+                       "bead-steps")
     sweep = parser.add_argument_group("sweep (outer product of the given values)")
     sweep.add_argument("--sweep-velocities", help="impact velocities (m/s), e.g. 0.05,0.1,0.3,1")
     sweep.add_argument("--sweep-wall-youngs", help="wall moduli (Pa), e.g. 3e9,45e9,203e9")
@@ -129,6 +134,11 @@ def run(args: argparse.Namespace) -> int:
     axes, box = _sweep_axes(args), _box(args)
     if axes and box:
         raise ValueError("give either sweep options or --box (a global study), not both.")
+    if not args.yes:
+        # every run records the chain's contacts with one tangent per parameter (forward mode)
+        n_runs = args.global_samples if box else math.prod(len(v) for v in axes.values()) if axes else 1
+        check_batch_size(setup, n_runs=n_runs, n_runs_in_memory=args.chunk_size,
+                         n_channels=(1 + len(args.params)) * (setup.n_beads + 2), **options)
     header = {"setup": setup_header(setup)}
     if box:
         print(f"global sensitivity over {', '.join(box)} ({args.global_samples} samples) ...", flush=True)

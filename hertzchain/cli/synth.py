@@ -28,6 +28,7 @@ from ..io.atomic import save_figure, write_json  # noqa: E402
 from ..io.tracefile import validate_header, write_trace  # noqa: E402
 from ..progress import Progress  # noqa: E402
 from ..units import parse_quantity  # noqa: E402
+from ..validation import check_batch_size  # noqa: E402
 from .setup_options import add_run_arguments, add_setup_arguments, run_options, setup_from_args  # noqa: E402
 
 TRUTH_FIELDS = (
@@ -93,6 +94,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--pre-trigger", type=int, default=0, help="samples recorded before the trigger [0]"
     )
     parser.add_argument("--out", default="out/synth", help="output folder [out/synth]")
+    parser.add_argument("--yes", action="store_true",
+                        help="run even when the shots need more memory than is available or more than 1e10 "
+                        "bead-steps")
 
 
 def _plot(trace, path: Path) -> None:
@@ -128,6 +132,9 @@ def run(args: argparse.Namespace) -> int:
     record_length = int(round(options["t_end_s"] / interval)) + args.pre_trigger
     # Simulate past the record's end by the trigger offset (jitter up to 6 sigma).
     t_sim = options["t_end_s"] + max(delay, 0.0) + 6.0 * jitter + interval
+    if not args.yes:
+        check_batch_size(base, n_runs=len(velocities), n_runs_in_memory=1, n_channels=len(options["contacts"]) + 2,
+                         t_end_s=t_sim, sample_interval_s=interval / args.oversample, dt_s=options["dt_s"])
     out = Path(args.out)
     progress = Progress(len(velocities), "synth (files)")
     listing = []
