@@ -46,7 +46,6 @@ barrier.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import itertools
 import json
@@ -62,6 +61,7 @@ from .batched import BatchedTraces, solve_batched
 from .chain import ChainSetup
 from .integrate import Recording
 from .io.atomic import atomic_path, save_figure, write_csv, write_json
+from .io.setup_record import canonical, setup_record
 from .native import kernel_record
 from .progress import Progress
 from .timegrid import DEFAULT_STEPS_PER_CONTACT, choose_time_grid
@@ -205,59 +205,6 @@ def default_chunk_size(spec: SweepSpec, n_samples: int, n_devices: int) -> int:
     return n_devices * math.ceil(size / n_devices)
 
 
-def _record(value):
-    """A JSON-ready, canonical form of a setup value: arrays as numbers or lists, non-finite
-    numbers as strings, equinox modules as their class name and fields (recursively)."""
-    import equinox as eqx
-
-    if isinstance(value, eqx.Module):
-        return {"class": type(value).__name__,
-                **{f.name: _record(getattr(value, f.name)) for f in dataclasses.fields(value)}}
-    if isinstance(value, (bool, np.bool_, str)) or value is None:
-        return value.item() if isinstance(value, np.bool_) else value
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (tuple, list)):
-        return [_record(v) for v in value]
-    if isinstance(value, dict):
-        return {str(k): _record(v) for k, v in value.items()}
-    array = np.asarray(value, dtype=float)
-    numbers = [x if math.isfinite(x) else str(x) for x in array.ravel().tolist()]
-    return numbers[0] if array.ndim == 0 else numbers
-
-
-# The laws' coefficients that ChainSetup names as attributes (`law_attributes`), as options and
-# grids name them: (field holding the law, index in a sequence or None, the law's field, name).
-_NAMED_COEFFICIENTS = (
-    ("dissipation", 0, "eta_s", "eta_s"),
-    ("dissipation", 1, "gamma_n_s_m", "dashpot_n_s_m"),
-    ("contact_law", None, "exponent", "contact_exponent"),
-    ("contact_law", None, "reference_overlap_m", "exponent_reference_overlap_m"),
-)
-
-
-def setup_record(setup: ChainSetup) -> dict:
-    """Every field of a (non-batched) setup, by name, in a canonical JSON-ready form: a field
-    added to `ChainSetup` (or a law object inside it) is covered without naming it here.
-
-    The coefficients that `ChainSetup` names (`eta_s`, `dashpot_n_s_m`, a power law's
-    `contact_exponent`) stand under those names, as grids and options give them; every other
-    law stands under its class name with its fields (`contact_law.class`,
-    `dissipation.VelocitySquared.c_n_s2_m2`), so a difference is named to the coefficient."""
-    record = _record(setup)
-    laws_given = record["dissipation"]
-    for holder, index, field, name in _NAMED_COEFFICIENTS:
-        law = record[holder] if index is None else laws_given[index]
-        if field in law:
-            record[name] = law.pop(field)
-    others: dict = {}
-    for law in laws_given[2:]:
-        name = law.pop("class")
-        others[name if name not in others else f"{name}#{sum(k.split('#')[0] == name for k in others) + 1}"] = law
-    record["dissipation"] = others
-    return record
-
-
 def sha256_of(record) -> str:
     """SHA-256 (hex) of the canonical JSON serialisation of `record` (sorted keys)."""
     text = json.dumps(record, sort_keys=True, separators=(",", ":"), allow_nan=False)
@@ -270,7 +217,7 @@ def _manifest(spec: SweepSpec, chunk_size: int, n_chunks: int, grid) -> dict:
         "format": SWEEP_FORMAT,
         "setup": setup,
         "setup_sha256": sha256_of(setup),
-        "grid": {name: _record(np.asarray(v, float)) for name, v in spec.grid.items()},
+        "grid": {name: canonical(np.asarray(v, float)) for name, v in spec.grid.items()},
         "t_end_s": spec.t_end_s,
         "sample_interval_s": spec.sample_interval_s,
         "dt_s_requested": spec.dt_s,

@@ -46,7 +46,7 @@ def test_simulate_contact_law_options(tmp_path):
 
     hertz = run("hertz")
     plastic = run("plastic", "--plasticity", "jackson_green")
-    assert plastic["setup"]["plasticity"] and plastic["setup"]["plastic_law"] == "jackson_green"
+    assert plastic["setup"]["contact_law"]["class"] == "JacksonGreen"
     assert plastic["energy_balance"]["dissipated_plastic_j"] > 0.05 * plastic["energy_balance"]["initial_energy_j"]
     assert plastic["peak_force_n"]["wall"] < 0.9 * hertz["peak_force_n"]["wall"]
     other = run("other", "--contact-exponent", "1.7", "--dashpot", "5Ns/m")

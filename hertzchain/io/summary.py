@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..chain import LAW_ATTRIBUTES, ChainSetup
+from ..chain import ChainSetup
 from ..timegrid import choose_time_grid, shortest_contact_time_s
 from ..traces import Traces
+from .setup_record import setup_record
 
 
 def _plain(value):
@@ -18,23 +19,10 @@ def _plain(value):
 
 
 def setup_dict(setup: ChainSetup) -> dict:
-    """All fields of a setup as JSON-ready values (SI units, named as the fields)."""
-    values = {
-        "n_beads": setup.n_beads,
-        "end": setup.end,
-        "sensor_beads": list(setup.sensor_beads),
-        "plasticity": setup.plasticity,
-        "plastic_law": setup.plastic_law,
-        "contact_law": type(setup.contact_law).__name__,
-        "dissipation": {type(law).__name__: {field: _plain(getattr(law, field)) for field in law.__dataclass_fields__}
-                        for law in setup.dissipation},
-    }
-    for name in (*ChainSetup.__dataclass_fields__, *LAW_ATTRIBUTES):
-        if name not in values:
-            values[name] = _plain(getattr(setup, name))
-    values["bead_mass_kg"] = _plain(setup.bead_mass_kg)
-    values["striker_mass_kg"] = _plain(setup.striker_mass_kg)
-    return values
+    """Every field of a setup (`setup_record`: SI units, named as the fields, laws as their
+    class and fields) and the masses derived from them, kg."""
+    return {**setup_record(setup), "bead_mass_kg": _plain(setup.bead_mass_kg),
+            "striker_mass_kg": _plain(setup.striker_mass_kg)}
 
 
 def run_summary(setup: ChainSetup, traces: Traces, options: dict) -> dict:
