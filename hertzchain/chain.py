@@ -24,17 +24,13 @@ from .materials import BEAD_STEEL
 from .validation import check_setup, check_values
 
 ENDS = ("wall", "free")
-PLASTIC_LAWS = ("thornton", "jackson_green")
+PLASTIC_LAWS = laws.registry.PLASTIC_LAW_NAMES
 # Keywords of `ChainSetup` that `contact_law=` replaces (kept for one release).
 DEPRECATED_LAW_KEYWORDS = ("plasticity", "plastic_law", "power_law", "contact_exponent",
                            "exponent_reference_overlap_m")
 # The law coefficients a setup exposes as attributes (`ChainSetup.eta_s`, ...): sweepable,
 # fittable and written to result files as before.
 LAW_ATTRIBUTES = ("eta_s", "dashpot_n_s_m", "contact_exponent", "exponent_reference_overlap_m")
-
-
-def _is_concrete(x) -> bool:
-    return not isinstance(x, jax.core.Tracer)
 
 
 def _as_float(value, name: str):
@@ -50,24 +46,8 @@ def _contact_law(contact_law, old: dict) -> laws.AbstractContactLaw:
     if old:
         if contact_law is not None:
             raise ValueError(f"Give contact_law only: {', '.join(old)} are its former spelling.")
-        plastic_law = old.get("plastic_law", "thornton")
-        if plastic_law not in PLASTIC_LAWS:
-            raise ValueError(f"plastic_law must be one of {PLASTIC_LAWS}, got {plastic_law!r}.")
-        exponent = _as_float(old.get("contact_exponent", 1.5), "contact_exponent")
-        reference = _as_float(old.get("exponent_reference_overlap_m", 1e-5), "exponent_reference_overlap_m")
-        power_law = old.get("power_law")
-        if power_law is None:
-            power_law = _is_concrete(exponent) and bool(np.any(np.asarray(exponent) != 1.5))
-        plastic = bool(old.get("plasticity", False))
-        if power_law and plastic:
-            raise ValueError("contact_exponent != 1.5 (power_law) and plasticity=True cannot be combined: "
-                             "the elastic-plastic law is built on Hertz contacts.")
-        if plastic:
-            contact_law = laws.JacksonGreen() if plastic_law == "jackson_green" else laws.Thornton()
-        elif power_law:
-            contact_law = laws.PowerLaw(exponent, reference)
-        else:
-            contact_law = laws.Hertz()
+        contact_law = laws.contact_law_from_keywords(**{name: value for name, value in old.items()
+                                                        if value is not None})
         replacement = type(contact_law).__name__
         warnings.warn(f"ChainSetup({'=..., '.join(old)}=...) is deprecated: pass "
                       f"contact_law=hertzchain.laws.{replacement}(...) instead.", DeprecationWarning, stacklevel=3)

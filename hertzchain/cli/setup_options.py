@@ -14,7 +14,8 @@ import dataclasses
 import math
 from pathlib import Path
 
-from ..chain import PLASTIC_LAWS, ChainSetup
+from .. import laws
+from ..chain import DEPRECATED_LAW_KEYWORDS, PLASTIC_LAWS, ChainSetup
 from ..io.importer import load_chain
 from ..io.tracefile import REDUNDANT_TOLERANCE
 from ..materials import BEAD_STEEL, Material, material
@@ -246,6 +247,13 @@ def chain_from_args(args: argparse.Namespace) -> ChainChoice:
     if args.plasticity:
         take({"plasticity": True, "plastic_law": args.plasticity}, "--plasticity")
     n_beads = values.pop("n_beads", 21)
+    # the law's keyword spelling (options and setup files) becomes its law object
+    spelled = {name: values.pop(name) for name in DEPRECATED_LAW_KEYWORDS if name in values}
+    if spelled:
+        try:
+            values["contact_law"] = laws.contact_law_from_keywords(**spelled)
+        except ValueError as error:
+            raise ValueError(f"{', '.join(sorted({sources[name] for name in spelled}))}: {error}") from None
     setup = ChainSetup(n_beads, sensor_beads=args.sensor_beads, **values)
     return ChainChoice(setup, sources, materials)
 

@@ -26,3 +26,4 @@ from .rough import RoughContact as RoughContact
 from .series import AbstractInSeries as AbstractInSeries
 from .series import SeriesCompliance as SeriesCompliance
 from .support_friction import IwanSupport as IwanSupport
+from .registry import contact_law_from_keywords as contact_law_from_keywords

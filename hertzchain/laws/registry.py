@@ -8,6 +8,10 @@ says which kernel ran).
 
 from __future__ import annotations
 
+import jax
+import jax.numpy as jnp
+import numpy as np
+
 from .contact_law import AbstractContactLaw
 from .dissipation import AbstractDissipation, Dashpot, VelocitySquared, Viscoelastic
 from .elastic import Hertz, PowerLaw
@@ -49,3 +53,36 @@ def contact_law_named(name: str) -> type[AbstractContactLaw]:
 def runs_natively(contact_law: AbstractContactLaw, dissipation=()) -> bool:
     """Whether the native kernels have every law of a chain."""
     return all(native_name(law) is not None for law in (contact_law, *dissipation))
+
+
+# The elastic-plastic laws by the names the command line and experiment files give them.
+PLASTIC_LAW_NAMES = ("thornton", "jackson_green")
+
+
+def contact_law_from_keywords(*, plasticity: bool = False, plastic_law: str = "thornton", power_law=None,
+                              contact_exponent=1.5, exponent_reference_overlap_m=1e-5) -> AbstractContactLaw:
+    """The contact law that the keyword spelling of the command line and of setup files
+    describes: elastic-plastic (`plasticity`, `plastic_law` one of `PLASTIC_LAW_NAMES`), a
+    power law of exponent `contact_exponent` equal to Hertz's at `exponent_reference_overlap_m`
+    (m; `power_law` None: wherever the exponent is not 1.5), else Hertz's."""
+    if plastic_law not in PLASTIC_LAW_NAMES:
+        raise ValueError(f"plastic_law must be one of {PLASTIC_LAW_NAMES}, got {plastic_law!r}.")
+    exponent = _as_float(contact_exponent, "contact_exponent")
+    reference = _as_float(exponent_reference_overlap_m, "exponent_reference_overlap_m")
+    if power_law is None:
+        power_law = not isinstance(exponent, jax.core.Tracer) and bool(np.any(np.asarray(exponent) != 1.5))
+    if power_law and plasticity:
+        raise ValueError("contact_exponent != 1.5 (power_law) and plasticity=True cannot be combined: "
+                         "the elastic-plastic law is built on Hertz contacts.")
+    if plasticity:
+        return contact_law_named(plastic_law)()
+    if power_law:
+        return PowerLaw(exponent, reference)
+    return Hertz()
+
+
+def _as_float(value, name: str):
+    try:
+        return jnp.asarray(value, dtype=jnp.float64)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name} must be a number (SI units), got {value!r}.") from error
