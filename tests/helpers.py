@@ -204,3 +204,18 @@ def assert_fit_iteration_equals_the_jax_kernels(monkeypatch) -> None:
         scale = np.max(np.abs(jac_jax[:, column]))
         np.testing.assert_allclose(jac[:, column], jac_jax[:, column], rtol=0, atol=1e-9 * scale + 1e-300,
                                    err_msg=label)
+
+
+# The [chain], [drive] and [sensor] tables of a driven experiment file: one bead between two
+# sphere-flat contacts of the Lydon et al. apparatus (the measurement tables follow).
+DRIVEN_EXPERIMENT_HEAD = """kind = "driven"
+[chain]
+n_beads = 1
+bead_mass_kg = 0.028
+contact_kappa_n_m1p5 = [1.38e10, 1.38e10]
+precompression_n = 4.5
+[drive]
+calibration_m_per_v = 7.517e-7
+[sensor]
+calibration_m_s_per_v = 0.02125
+"""

@@ -10,6 +10,7 @@ import pytest
 from fitting.driven_experiment import DrivenExperimentError, load_driven_experiment
 from hertzchain.driven.measurements import read_loop, read_scope, read_tongue, spectral_amplitude
 from hertzchain.driven.sweeper_files import SweeperFileError
+from helpers import DRIVEN_EXPERIMENT_HEAD
 
 LYDON_2015 = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" / "lydon-2015"
 TONGUE = "SingleBead/BifurcationTongue/SingleBeadBif Signal Amplitude_{}2013Jul3_9h28m45s.txt"
@@ -86,17 +87,7 @@ def test_spectral_amplitude_of_two_cosines():
     np.testing.assert_allclose(spectral_amplitude(t, signal[:, None], f / 2), [0.05], rtol=2e-2)
 
 
-EXPERIMENT = """kind = "driven"
-[chain]
-n_beads = 1
-bead_mass_kg = 0.028
-contact_kappa_n_m1p5 = [1.4e10, 1.4e10]
-precompression_n = 4.5
-[drive]
-calibration_m_per_v = 7.517e-7
-[sensor]
-calibration_m_s_per_v = 0.02125
-[[measurement]]
+EXPERIMENT = DRIVEN_EXPERIMENT_HEAD + """[[measurement]]
 kind = "KIND"
 run = "RUN"
 amplitude_file = "A"

@@ -19,6 +19,7 @@ from hertzchain.cli import main
 from hertzchain.cli.errors import input_error_text
 from hertzchain.io.importer import ExperimentFileError, load_experiment
 from hertzchain.io.tracefile import TraceFile, TraceFileError, read_trace, setup_header, write_trace
+from helpers import DRIVEN_EXPERIMENT_HEAD
 
 LYDON_2015 = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" / "lydon-2015"
 TONGUE = "SingleBead/BifurcationTongue/SingleBeadBif Signal Amplitude_02013Jul3_9h28m45s.txt"
@@ -111,17 +112,7 @@ def test_content_of_a_file_outside_the_experiments_folder_is_not_shown(tmp_path,
 
 
 # --- a measurement of one kind is not read as another ------------------------------------------
-DRIVEN = """kind = "driven"
-[chain]
-n_beads = 1
-bead_mass_kg = 0.028
-contact_kappa_n_m1p5 = [1.38e10, 1.38e10]
-precompression_n = 4.5
-[drive]
-calibration_m_per_v = 7.517e-7
-[sensor]
-calibration_m_s_per_v = 0.02125
-[sweep]
+DRIVEN = DRIVEN_EXPERIMENT_HEAD + """[sweep]
 amplitude_file = "FILE"
 """
 
