@@ -30,7 +30,7 @@ from fitting.effects import nominal_yield_forces_n
 from fitting.hidden import truth_fields
 from hertzchain.acquisition import Acquisition, acquire
 from hertzchain.io.tracefile import TraceFile, format_rows, setup_header
-from hertzchain.materials import BRASS
+from hertzchain.materials import BEAD_STEEL, BRASS, GLASS
 from hertzchain.reference import simulate_reference
 from hertzchain.sensor import sensor_signal
 
@@ -42,6 +42,13 @@ SETUPS = {
                   fields=dict(bead_radius_m=5e-3, bead_density_kg_m3=BRASS.density_kg_m3,
                               bead_youngs_pa=BRASS.youngs_pa, bead_poisson=BRASS.poisson,
                               striker_radius_m=3e-3)),
+    # 12 glass beads of 6 mm struck by a steel ball of 4 mm (the stopping rule's third setup)
+    "glass": dict(n_beads=12, contacts=(4, 8), velocities_m_s=(0.05, 0.15, 0.5, 1.0, 1.5), record_s=0.8e-3,
+                  reference_overlap_m=3e-6,
+                  fields=dict(bead_radius_m=6e-3, bead_density_kg_m3=GLASS.density_kg_m3,
+                              bead_youngs_pa=GLASS.youngs_pa, bead_poisson=GLASS.poisson, striker_radius_m=4e-3,
+                              striker_density_kg_m3=BEAD_STEEL.density_kg_m3,
+                              striker_youngs_pa=BEAD_STEEL.youngs_pa, striker_poisson=BEAD_STEEL.poisson)),
 }
 # Hidden strengths (SI); plasticity's is the yield force as a share of the largest force any
 # bead-bead contact of the data set reaches elastically; contact_exponent's law equals
@@ -89,9 +96,12 @@ def true_strength(setup_name: str, effect: str) -> float:
     return value
 
 
-def hidden_records(setup_name: str, hidden=(), *, code_path: str = "diffrax", seed: int = 0) -> list[TraceFile]:
-    """Records of `setup_name` ("paper" or "brass") with the `hidden` effects (identifiers of
-    `fitting.effects`, strengths `STRENGTHS`) from `code_path` ("diffrax" or "verlet")."""
+def hidden_records(setup_name: str, hidden=(), *, code_path: str = "diffrax", seed: int = 0,
+                   noise_fraction: float = 0.005, velocities_m_s=None) -> list[TraceFile]:
+    """Records of `setup_name` (a key of `SETUPS`) with the `hidden` effects (identifiers of
+    `fitting.effects`, strengths `STRENGTHS`) from `code_path` ("diffrax" or "verlet"), with
+    noise of `noise_fraction` of each channel's peak, at the setup's impact velocities (or
+    `velocities_m_s`, m/s)."""
     if code_path not in ("diffrax", "verlet"):
         raise ValueError(f"code_path must be 'diffrax' or 'verlet', got {code_path!r}.")
     spec = SETUPS[setup_name]
@@ -101,7 +111,7 @@ def hidden_records(setup_name: str, hidden=(), *, code_path: str = "diffrax", se
     contacts = spec["contacts"]
     simulated = tuple(sorted(set(contacts) | ({k - 1 for k in contacts} if sensor else set())))
     files = []
-    for k, velocity in enumerate(spec["velocities_m_s"]):
+    for k, velocity in enumerate(spec["velocities_m_s"] if velocities_m_s is None else velocities_m_s):
         truth = hc.ChainSetup(spec["n_beads"], striker_velocity_m_s=velocity, **fields)
         nominal = hc.ChainSetup(spec["n_beads"], striker_velocity_m_s=velocity, **spec["fields"])
         if code_path == "diffrax" and not truth.plasticity:
@@ -120,7 +130,7 @@ def hidden_records(setup_name: str, hidden=(), *, code_path: str = "diffrax", se
                     jnp.asarray(time), jnp.asarray(run.forces_n[f"contact_{c}"]),
                     jnp.asarray(run.forces_n[f"contact_{c - 1}"]), beta=beta, f0_hz=f0_hz))
         rest = float(truth.precompression_n)
-        noise = {n: 0.005 * float(np.max(f) - rest) for n, f in forces.items()}
+        noise = {n: noise_fraction * float(np.max(f) - rest) for n, f in forces.items()}
         setting = Acquisition(sample_interval_s=2e-6, noise_std_n=noise, bits=11, coupling="ac")
         record = acquire(time, forces, setting, seed=1000 * seed + k, static_n=rest)
         header = setup_header(nominal)  # the nominal chain; the true impact velocity
