@@ -353,9 +353,11 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
 // kick, with sensor springs, static overlaps and external forces of a preload (zeros where
 // there are none: adding 0 changes no bit). kViscous and kFriction select the physics at
 // compile time; kTangent adds forward-mode tangents: the derivatives of every state variable
-// along `directions` tangent directions of the inputs, carried through the same loop with
-// the derivative rules JAX applies to the JAX kernel (`jax.jvp` of it), so that the two
-// agree to round-off.
+// along `directions` tangent directions of the inputs, carried through the same loop: the
+// partial derivatives of every contact's force, friction kick and largest overlap are those
+// laws of `chain_laws.h` run on dual numbers once per step (the rules JAX's jvp applies to
+// the JAX kernel), and each direction's tangent their sum over the inputs' tangents, so that
+// the two kernels agree to round-off.
 //   state0 (3 (bodies + 1), B): x, v, a; parameters (rows, 1 or B); eta, friction (1, 1 or B).
 //   Tangents: every input with a leading direction axis, (D, rows, B) or (1, rows, B); results:
 //   the traces (B, n_samples), then their tangents (D, B, n_samples), from one run.
