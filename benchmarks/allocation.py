@@ -8,7 +8,7 @@ of 1 us, eta = 2 us, mu = 0.19, three forces every step: 61 MB of traces a run),
 `--runs` times in a fresh process for each setting (`HERTZCHAIN_MALLOC_TUNING` = 1, 0), and
 the Numba baseline of `benchmarks/baselines.py` (the default allocator) likewise, twice each,
 interleaved: each run's bead-steps/s and minor page faults (`getrusage`). Writes
-`DIR/allocation.json`.
+`DIR/latest.json`.
 """
 
 from __future__ import annotations
@@ -70,8 +70,8 @@ def worker(runs: int, impl: str) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="benchmarks/results", help="output folder [benchmarks/results]")
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", default="benchmarks/results/allocation", help="output folder [benchmarks/results/allocation]")
     parser.add_argument("--runs", type=int, default=16, help="timed runs per setting [16]")
     parser.add_argument("--worker", choices=("hertzchain", "numba"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -98,7 +98,7 @@ def main(argv=None) -> int:
     sys.path.insert(0, str(HERE.parent))
     from hertzchain.atomic import write_json
 
-    write_json(out / "allocation.json", results)
+    write_json(out / "latest.json", results)
     return 0
 
 

@@ -1,41 +1,42 @@
-"""Check that every measured figure quoted in README.md and benchmarks/README.md is stored.
+"""Check that every measured figure quoted in the project's documents cites the stored result
+it comes from, and equals that result at its printed precision.
 
-The rule (for everyone who writes in these two files):
+The rule (for everyone who writes in README.md, benchmarks/README.md and docs/):
 
-1. **What is checked.** Prose only: fenced code blocks and `inline code` are commands and
-   their inputs, and are skipped. In prose, a *figure* is a number written with
-   - a unit of wall time: ``s``, ``min``, ``h`` (e.g. "176 s", "about 15 min");
-   - a ratio mark: ``×`` or an ``x`` right after the number ("1.5×", "22x"; not a product
-     such as "22 × 512", whose × is followed by a number);
-   - a throughput: a unit ending in ``/s`` other than a speed ("2.2e10 bead-steps/s",
-     "2.1 ESS/s"; not m/s);
-   - ``ms``, ``µs``/``us`` or ``%`` *when its sentence speaks of computing time*: it holds
-     one of `TIMING_WORDS` ("0.57 ms per chain", "the gradient costs 12 % more"). Elsewhere
-     these units are physics (η = 2 µs, 0.5 % noise) and are inputs or asserted by tests.
-2. **Where it must be.** In a committed result file: any ``.json``, ``.csv`` or ``.md`` under
-   a ``results`` folder of the repository (`RESULT_DIRS`), made by a committed script. A
-   figure is found when a stored value *of the same kind* rounds to it at its printed
-   precision ("176 s" is any stored time in [175.5, 176.5) s; "0.57 ms" any in [0.565,
-   0.575) ms). Kinds come from the stored value's name: a JSON key (the innermost of its
-   path that names a kind: ``timings_s: {total: 572.1}`` is a time) or CSV column ending in
-   ``_s``/``_ms``/``_us``/``_min`` or naming ``seconds``/``time``/``wall`` is a time; one
-   naming ``ratio``, ``speedup``, ``factor``, ``over`` or ending in ``_x`` a ratio; one
-   ending in ``_per_s``/``flop_s``/``per_second`` or naming ``throughput`` a throughput; a
-   number written with its unit in a stored Markdown or text file ("176 s", "1.5×") has
-   that unit's kind, and so does a Markdown table cell under a header that names the unit
-   ("wall (s)", "ratio", "×"). A percentage is found as a stored ratio, fraction or
-   percentage (value/100 or value).
-3. **Exceptions** are listed in `ALLOWED`: (file, figure as written, why) for figures that
-   are inputs or definitions in a timing sentence (a timeout, a target from the issue
-   tracker). Keep it short; a measured figure never goes there.
-4. **Debt.** `UNSTORED` names the measured figures that were in benchmarks/README.md before
-   this check existed and have no result file (profiling notes of earlier work). They are
-   reported, not failed; an entry whose figure is gone from the text fails the check, so
-   the list only shrinks. Nothing is added to it: rerun and store, or reword.
+1. **What is a figure.** Prose only: fenced code blocks and `inline code` are commands and
+   their inputs, and are skipped. In prose, a *measured figure* is a number written with
+   - a unit of wall time: ``s``, ``min``, ``h`` ("176 s", "about 15 min");
+   - a throughput: a unit ending in ``/s`` other than a speed ("2.2e10 bead-steps/s");
+   - ``ms``, ``µs``/``us``, ``%`` or a ratio mark (``×``, or an ``x`` right after the number:
+     "1.5×", "22x"; not a product such as "22 × 512") *when its sentence speaks of computing
+     time* (it holds one of `TIMING_WORDS`: "0.57 ms per chain", "1.5× faster"). Elsewhere
+     these are physics (η = 2 µs, 0.5 % noise, a yield stress 0.72× the published one):
+     inputs, or results that the tests and the reproduction pages' own result files hold.
+   A range of one unit ("14–19 s", "−6.2 … +26.9 %") is one figure of two numbers. A number
+   right after ``=`` is a setting, one right after ``±`` an uncertainty: neither is a
+   figure of its own ("η = 2 µs per contact", "−2.4 ± 1.7 µs").
+2. **Its source.** Each measured figure is followed by a footnote reference, ``6.8 s[^fit]``,
+   whose definition names the stored value as ``path#key`` in inline code::
 
-Run ``python benchmarks/check_readme_figures.py``: it lists every figure not found, with
-file and line, and exits 1 if there is one; `tests/test_readme_figures.py` runs it in the
-default test suite.
+       [^fit]: `benchmarks/results/fit_bench/latest.json#cases.paper.cold.wall_s`
+
+   ``path`` is relative to the repository's root. ``key`` is the value's path in a JSON file
+   (keys joined by ``.``, list positions as numbers), ``ROW.COLUMN`` in a CSV file (data row
+   from 0, column by its header) or ``LN`` (line N) in any other text file. A definition may
+   name several values (a range's two ends): each number of the figure must then be one of
+   them. Any figure with a footnote is checked this way, whatever its unit ("1357 MPa[^y]").
+3. **Equal at its printed precision.** The stored value, converted to the figure's unit,
+   must lie within half a unit of the figure's last printed digit ("6.8 s" holds 6.75–6.85 s).
+   The stored value's unit comes from its key: the innermost key that names one (``_s``,
+   ``_ms``, ``_us``, ``_min``, ``_h``; ``timings_s: {total: ...}`` is in seconds); a key that
+   names none holds the figure's own unit. A percentage matches a stored fraction (× 100) or
+   a stored percentage. On a text line any number written there may match.
+4. **Exceptions** are listed in `ALLOWED`: (file, figure as written, why), for figures in a
+   timing sentence that are inputs or definitions (a timeout, a target). A measured figure
+   never goes there.
+
+Run ``python benchmarks/check_readme_figures.py``: it lists every problem with file and line
+and exits 1 if there is one; `tests/test_readme_figures.py` runs it in the default suite.
 """
 
 from __future__ import annotations
@@ -49,211 +50,218 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCUMENTS = ("README.md", "benchmarks/README.md")
-RESULT_DIRS = ("benchmarks/results", "examples/lydon2015/results")
-TIMING_WORDS = ("took", "takes", "take ", "taking", "ran ", "runs in", "run in", "median", "wall", "per chain",
+DOCUMENTS = ("README.md", "benchmarks/README.md", "docs/**/*.md")
+TIMING_WORDS = ("took", "takes", "take ", "taking", "ran ", "runs in", "run in", "wall time", "wall-clock", "per chain",
                 "per step", "per draw", "per iteration", "per fit", "per call", "per evaluation", "faster",
-                "slower", "speed-up", "speedup", "throughput", "compil", "overhead", "timing", "timed")
+                "slower", "speed-up", "speedup", "'s speed", "throughput", "compil", "overhead", "timing", "timed",
+                "costs", "cost of")
 # Figures that are not measurements although written in a timing sentence.
-ALLOWED: tuple[tuple[str, str, str], ...] = (
-    ("benchmarks/README.md", "1.5 µs", "η of the gradient benchmark's loss, an input"),
-    ("benchmarks/README.md", "120 s", "the diagnosis's time target (issue tracker), not a measurement"),
-)
-_NO_FILE = "measured in earlier profiling work; no result file: rerun and store, or reword"
-# Measured figures without a result file, from before this check (rule 4): only shrinks.
-UNSTORED: tuple[tuple[str, str, str], ...] = tuple(("benchmarks/README.md", figure, _NO_FILE) for figure in (
-    "1.11e9 bead-steps/s", "30 %", "8.4e8 bead-steps/s", "0.29 µs", "2.1×", "3.0×", "16 µs", "12 µs", "7 µs",
-    "4.5×", "2.7 µs", "17 µs", "10 µs", "34×", "0.95 s", "115 GFLOP/s", "5.4×", "7.7e8 bead-steps/s",
-    "3.50×", "3.53×", "6.7 s", "268 ms"))
+ALLOWED: tuple[tuple[str, str, str], ...] = ()
 
-TIME_S = {"s": 1.0, "min": 60.0, "h": 3600.0, "ms": 1e-3, "µs": 1e-6, "us": 1e-6}
-_NUMBER = r"(\d+(?:,\d{3})*(?:\.\d+)?(?:e[-+]?\d+)?)"
-_FIGURE = re.compile(r"(?<![×\d.])\s?" + _NUMBER + r"\s?(min|ms|µs|us|s|h|×(?!\s?\d)|x(?![\d ])|%|(?!(?:k|c|m|µ)?m/s)[A-Za-z][A-Za-z-]*/s)(?![A-Za-z0-9²/])")
-_STORED = re.compile(r"(-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?)\s?(min|ms|µs|us|s|h|×|x|%|[A-Za-z][A-Za-z-]*/s)?(?![A-Za-z0-9])")
+TIME_UNITS = {"s": 1.0, "min": 60.0, "h": 3600.0, "ms": 1e-3, "µs": 1e-6, "us": 1e-6}
+_NUMBER = r"[-−+]?\d+(?:,\d{3})*(?:\.\d+)?(?:e[-+]?\d+)?"
+_MEASURED_UNIT = r"min|ms|µs|us|s|h|×(?!\s?\d)|x(?![\d ])|%|(?!(?:k|c|m|µ)?m/s)[A-Za-z][A-Za-z-]*/s"
+_FIGURE = re.compile(
+    r"(?<![\w.×^\-−+])(?P<a>" + _NUMBER + r")(?:\s?(?:–|…|-|to)\s?(?P<b>" + _NUMBER + r"))?"
+    r"(?:\s?(?P<unit>" + _MEASURED_UNIT + r"))?(?![A-Za-z0-9²/])(?P<cite>\[\^[^\]\s]+\])?")
+_DEFINITION = re.compile(r"^\[\^([^\]\s]+)\]:\s*(.*)$")
+_SOURCE = re.compile(r"`([^`#\s]+)#([^`\s]+)`")
+_KEY_UNITS = (("_ms", 1e-3), ("_us", 1e-6), ("_min", 60.0), ("_h", 3600.0), ("_s", 1.0))
 
 
-def _kind_of_name(name: str) -> tuple[str, float] | None:
-    """(kind, factor to SI) that a stored value's key or column name gives it, or None."""
-    name = name.strip().lower()
-    for suffix, factor in (("_ms", 1e-3), ("_us", 1e-6), ("_min", 60.0), ("(ms)", 1e-3), ("[ms]", 1e-3),
-                           ("(us)", 1e-6), ("(µs)", 1e-6), ("(min)", 60.0)):
-        if name.endswith(suffix):
-            return "time", factor
-    if name.endswith(("_per_s", "flop_s", "/s", "per_second")) or "throughput" in name:
-        return "throughput", 1.0
-    if name.endswith(("_s", "(s)", "[s]", " s")) or any(w in name for w in ("seconds", "time", "wall")):
-        return "time", 1.0
-    if name.endswith(("_x", "×")) or any(w in name for w in ("ratio", "speedup", "speed-up", "factor", "over", "×")):
-        return "ratio", 1.0
-    if any(w in name for w in ("fraction", "share", "percent", "rate", "efficiency", "misfit")):
-        return "fraction", 1.0
-    return None
-
-
-def _unit_kind(unit: str | None) -> tuple[str, float] | None:
-    if not unit:
-        return None
-    if unit in TIME_S:
-        return "time", TIME_S[unit]
-    if unit in ("×", "x"):
-        return "ratio", 1.0
-    if unit == "%":
-        return "fraction", 0.01
-    if unit.endswith("/s"):
-        return "throughput", 1.0
-    return None
-
-
-def _walk_json(node, path, out):
-    if isinstance(node, dict):
-        for key, value in node.items():
-            _walk_json(value, (*path, str(key)), out)
-    elif isinstance(node, list):
-        for value in node:
-            _walk_json(value, path, out)
-    elif isinstance(node, (int, float)) and not isinstance(node, bool) and math.isfinite(node):
-        kind = next((k for k in map(_kind_of_name, reversed(path)) if k), None)
-        if kind:
-            out.append((kind[0], float(node) * kind[1]))
-    elif isinstance(node, str):
-        _text_values(node, out)
-
-
-def _text_values(text: str, out) -> None:
-    for match in _STORED.finditer(text):
-        kind = _unit_kind(match.group(2))
-        if kind:
-            out.append((kind[0], float(match.group(1)) * kind[1]))
-
-
-def _table_values(text: str, out) -> None:
-    """Markdown tables: each numeric cell takes the kind its column's header names."""
-    header = None
-    for line in text.splitlines():
-        if not line.strip().startswith("|"):
-            header = None
-            continue
-        cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if header is None:
-            header = cells
-            continue
-        if all(re.fullmatch(r":?-+:?", c) for c in cells if c):
-            continue
-        for name, cell in zip(header, cells):
-            kind = _kind_of_name(name)
-            for part in cell.split(" / "):  # a cell may list the runs of one case: "a / b / c"
-                number = re.fullmatch(r"\**(-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?)\**", part.replace("×", "").strip())
-                if kind and number:
-                    out.append((kind[0], float(number.group(1)) * kind[1]))
-
-
-def stored_values(root: Path = ROOT) -> list[tuple[str, float]]:
-    """(kind, SI value) of every stored figure in the result folders."""
-    out: list[tuple[str, float]] = []
-    for folder in RESULT_DIRS:
-        for path in sorted((root / folder).rglob("*")):
-            if not path.is_file() or path.suffix not in (".json", ".csv", ".md"):
-                continue
-            text = path.read_text(errors="replace")
-            if path.suffix == ".json":
-                try:
-                    _walk_json(json.loads(text), (), out)
-                except json.JSONDecodeError:
-                    _text_values(text, out)
-            elif path.suffix == ".csv":
-                rows = list(csv.reader(io.StringIO(text)))
-                header = rows[0] if rows else []
-                kinds = [_kind_of_name(h) for h in header]
-                for row in rows[1:]:
-                    for kind, cell in zip(kinds, row):
-                        try:
-                            value = float(cell)
-                        except ValueError:
-                            continue
-                        if kind and math.isfinite(value):
-                            out.append((kind[0], value * kind[1]))
-            else:
-                _text_values(text, out)
-                _table_values(text, out)
-    return out
+def documents(root: Path = ROOT) -> list[Path]:
+    """The checked documents that exist under `root`."""
+    found = []
+    for pattern in DOCUMENTS:
+        found.extend(sorted(root.glob(pattern)))
+    return [path for path in found if path.is_file()]
 
 
 def _prose(text: str):
-    """(line number, sentence) of the prose: code blocks and inline code removed."""
-    in_code = False
+    """(line number, line) of the prose: code blocks removed, inline code blanked (an inline
+    span may run over a line break, as Markdown allows)."""
+    in_code = in_inline = False
     for number, line in enumerate(text.splitlines(), start=1):
-        if line.lstrip().startswith("```"):
+        if line.lstrip().startswith(("```", "~~~")) and not in_inline:
             in_code = not in_code
             continue
-        if not in_code:
-            yield number, re.sub(r"`[^`]*`", " ", line)
+        if in_code:
+            continue
+        if not line.strip():
+            in_inline = False  # a span never crosses a paragraph
+        kept = []
+        for char in line:
+            if char == "`":
+                in_inline = not in_inline
+                kept.append(" ")
+            else:
+                kept.append(" " if in_inline else char)
+        yield number, "".join(kept)
+
+
+def footnotes(text: str) -> dict[str, list[tuple[str, str]]]:
+    """Footnote name -> the (path, key) sources its definition names."""
+    notes = {}
+    for line in text.splitlines():
+        match = _DEFINITION.match(line.strip())
+        if match:
+            notes[match.group(1)] = _SOURCE.findall(match.group(2))
+    return notes
+
+
+def _decimals(written: str) -> int:
+    mantissa, _, exponent = written.lower().partition("e")
+    return (len(mantissa.split(".")[1]) if "." in mantissa else 0) - int(exponent or 0)
+
+
+def _number(written: str) -> float:
+    return float(written.replace("−", "-").replace(",", ""))
 
 
 def figures(text: str):
-    """(line, figure as written, kind, SI value, printed decimals) of every checked figure."""
-    for number, line in _prose(text):
-        for sentence in re.split(r"(?<=[.;:])\s+", line):
+    """(line, figure as written, numbers as written, unit, footnote name or None, measured)
+    of every number with a unit of rule 1 or a footnote."""
+    for line_number, line in _prose(text):
+        if _DEFINITION.match(line.strip()):
+            continue
+        for sentence in re.split(r"(?<=[.;:])\s+(?=[A-Z(*])", line):
             timing = any(word in sentence.lower() for word in TIMING_WORDS)
             for match in _FIGURE.finditer(sentence):
-                digits, unit = match.group(1).replace(",", ""), match.group(2)
-                if unit in ("ms", "µs", "us", "%") and not timing:
+                unit, cite = match.group("unit"), match.group("cite")
+                setting = sentence[:match.start()].rstrip().endswith(("=", "±"))
+                measured = unit is not None and not setting and (unit in ("s", "min", "h") or unit.endswith("/s")
+                                                                 or timing)
+                if not (measured or cite):
                     continue
-                kind = _unit_kind(unit)
-                if kind is None:
-                    continue
-                mantissa, _, exponent = digits.partition("e")
-                decimals = (len(mantissa.split(".")[1]) if "." in mantissa else 0) - int(exponent or 0)
-                yield number, match.group(0).strip(), kind[0], float(digits), kind[1], decimals
+                numbers = [n for n in (match.group("a"), match.group("b")) if n]
+                written = match.group(0).strip()
+                if cite:
+                    written = written[: -len(cite)].strip()
+                yield line_number, written, numbers, unit, cite[2:-1] if cite else None, measured
 
 
-def _found(value, factor, decimals, kind, stored) -> bool:
-    kinds = ("fraction", "ratio") if kind == "fraction" else (kind,)
-    for stored_kind, si in stored:
-        if stored_kind not in kinds:
+def _resolve_json(node, parts: list[str]):
+    """The value at a dotted key path (keys may hold dots themselves), with the keys used."""
+    if not parts:
+        return node, []
+    if isinstance(node, list):
+        try:
+            return _resolve_json(node[int(parts[0])], parts[1:])
+        except (ValueError, IndexError):
+            raise KeyError(parts[0]) from None
+    if isinstance(node, dict):
+        for size in range(len(parts), 0, -1):
+            key = ".".join(parts[:size])
+            if key in node:
+                value, used = _resolve_json(node[key], parts[size:])
+                return value, [key, *used]
+    raise KeyError(parts[0])
+
+
+def _unit_of_keys(keys: list[str]) -> float | None:
+    """Seconds per unit of a stored time, from the innermost key that names one."""
+    for key in reversed(keys):
+        name = key.lower()
+        for suffix, factor in _KEY_UNITS:
+            if name.endswith(suffix) and not name.endswith(("_per_s", "/s")):
+                return factor
+    return None
+
+
+def stored(root: Path, path: str, key: str) -> tuple[list[float], float | None]:
+    """(candidate values, seconds per unit or None) stored in `path` at `key`; raises
+    FileNotFoundError or KeyError with the reason."""
+    file = root / path
+    if not file.is_file():
+        raise FileNotFoundError(f"{path} does not exist")
+    text = file.read_text(errors="replace")
+    if file.suffix == ".json":
+        value, used = _resolve_json(json.loads(text), key.split("."))
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise KeyError(f"{key} holds {type(value).__name__}, not a number")
+        return [float(value)], _unit_of_keys(used)
+    if file.suffix == ".csv":
+        row, _, column = key.partition(".")
+        rows = list(csv.DictReader(io.StringIO(text)))
+        try:
+            cell = rows[int(row)][column]
+        except (ValueError, IndexError, KeyError):
+            raise KeyError(f"no row {row}, column {column!r}") from None
+        try:
+            return [float(cell)], _unit_of_keys([column])
+        except (TypeError, ValueError):
+            raise KeyError(f"{key} holds {cell!r}, not a number") from None
+    match = re.fullmatch(r"L(\d+)", key)
+    lines = text.splitlines()
+    if not match or not 1 <= int(match.group(1)) <= len(lines):
+        raise KeyError(f"{key} is not a line of the file (write L1 … L{len(lines)})")
+    values = [float(v) for v in re.findall(r"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?", lines[int(match.group(1)) - 1])]
+    return values, None
+
+
+def _equal(written: str, unit: str | None, values: list[float], seconds_per_unit: float | None) -> bool:
+    """Whether one of `values` rounds to the figure `written` (rule 3)."""
+    figure, half = _number(written), 0.5 * 10.0 ** -_decimals(written)
+    for value in values:
+        if not math.isfinite(value):
             continue
-        for scale in ((factor, 1.0) if kind == "fraction" else (factor,)):
-            if round(si / scale, decimals) == round(value, decimals):
-                return True
+        scaled = [value]
+        if unit in TIME_UNITS and seconds_per_unit is not None:
+            scaled = [value * seconds_per_unit / TIME_UNITS[unit]]
+        elif unit == "%":
+            scaled = [value, 100.0 * value]
+        if any(abs(v - figure) <= half * (1 + 1e-9) + 1e-12 * abs(figure) for v in scaled):
+            return True
     return False
 
 
-def missing(root: Path = ROOT, allowed=ALLOWED, unstored=UNSTORED) -> tuple[list[str], list[str]]:
-    """('file:line: figure' of every checked figure not found in a stored result, and of
-    those among them listed in `UNSTORED`); a listed figure no longer in its file is a
-    problem too."""
-    stored = stored_values(root)
-    by_kind = {}
-    for kind, si in stored:
-        by_kind.setdefault(kind, []).append((kind, si))
-    allowed = {(f, text) for f, text, _ in allowed}
-    debt = {(f, text) for f, text, _ in unstored}
-    problems, listed, seen = [], [], set()
-    for document in DOCUMENTS:
-        text = (root / document).read_text()
-        for line, written, kind, value, factor, decimals in figures(text):
+def problems(root: Path = ROOT, allowed=ALLOWED) -> list[str]:
+    """'file:line: figure: what is wrong' for every figure that breaks the rule."""
+    allowed = {(f, written) for f, written, _ in allowed}
+    found, seen = [], set()
+    for path in documents(root):
+        document = path.relative_to(root).as_posix()
+        text = path.read_text()
+        notes = footnotes(text)
+        for line, written, numbers, unit, cite, measured in figures(text):
             seen.add((document, written))
-            if (document, written) in allowed:
+            where = f"{document}:{line}: {written}"
+            if cite is None:
+                if (document, written) not in allowed:
+                    found.append(f"{where}: cites no source (add a footnote naming `path#key`)")
                 continue
-            pool = by_kind.get(kind, []) + (by_kind.get("ratio", []) if kind == "fraction" else [])
-            if not _found(value, factor, decimals, kind, pool):
-                where = f"{document}:{line}: {written} ({kind})"
-                if (document, written) in debt:
-                    listed.append(where + " is listed in UNSTORED")
-                else:
-                    problems.append(where + " is in no stored result")
-    for document, written in sorted((allowed | debt) - seen):
-        problems.append(f"{document}: {written} is listed in ALLOWED or UNSTORED but no longer in the text; "
-                        "delete the entry")
-    return problems, listed
+            sources = notes.get(cite)
+            if not sources:
+                found.append(f"{where}: footnote [^{cite}] names no `path#key`")
+                continue
+            values, failure = [], None
+            for source_path, key in sources:
+                try:
+                    values.append(stored(root, source_path, key))
+                except (FileNotFoundError, KeyError, json.JSONDecodeError) as error:
+                    failure = f"{source_path}#{key}: {error}"
+                    break
+            if failure:
+                found.append(f"{where}: {failure}")
+                continue
+            for number in numbers:
+                if not any(_equal(number, unit, v, factor) for v, factor in values):
+                    shown = ", ".join(f"{p}#{k} = {', '.join(f'{x:.6g}' for x in v)}"
+                                      for (p, k), (v, _) in zip(sources, values))
+                    found.append(f"{where}: {number} is not the stored value at its precision ({shown})")
+    for document, written in sorted(allowed - seen):
+        found.append(f"{document}: {written} is listed in ALLOWED but no longer in the text; delete the entry")
+    return found
 
 
 def main() -> int:
-    problems, listed = missing()
-    for line in listed + problems:
+    found = problems()
+    for line in found:
         print(line)
-    print(f"{len(problems)} figure(s) not found in {', '.join(RESULT_DIRS)}" if problems
-          else "every checked figure is in a stored result")
-    return 1 if problems else 0
+    checked = sum(1 for path in documents() for _ in figures(path.read_text()))
+    print(f"{len(found)} problem(s) in {checked} figures" if found
+          else f"every one of {checked} figures cites its stored value")
+    return 1 if found else 0
 
 
 if __name__ == "__main__":

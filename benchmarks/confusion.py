@@ -3,7 +3,7 @@
 For every candidate effect (and for "none" and a few pairs), synthetic trace files are made
 with that effect hidden (`fitting.hidden.hidden_effect_traces`, nominal strengths, noise
 and nuisances drawn per seed), the diagnosis runs from the base model, and the named
-effects are tallied. Writes `confusion.csv`, `confusion.json` and `confusion.md` (with the
+effects are tallied. Writes `latest.csv`, `latest.json` and `latest.md` (with the
 run time of every diagnosis) into `--out`; `confusion_quick.*` with --quick, and
 `confusion_independent_<code path>.*` with --independent.
 
@@ -107,7 +107,7 @@ def table(rows, columns) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="8-bead chain, one seed, no pairs")
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--pairs", action="store_true", help="also hide the two-effect pairs")
@@ -118,7 +118,8 @@ def main(argv=None) -> int:
                         help="data from independent_data.py: --setups, --code-path, two pairs")
     parser.add_argument("--setups", default="paper,brass", help="with --independent [paper,brass]")
     parser.add_argument("--code-path", default="diffrax", choices=("diffrax", "verlet"))
-    parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
+    parser.add_argument("--out", default=None,
+                        help="output folder [benchmarks/results/confusion/<case>: quick, pairs, full or independent_<code path>]")
     args = parser.parse_args(argv)
     n_beads = args.n_beads or (8 if args.quick else 21)
     contacts = (n_beads // 3, 2 * n_beads // 3)
@@ -148,11 +149,11 @@ def main(argv=None) -> int:
                       f"named {', '.join(row['named']) or 'none'} ({row['runtime_s']:.0f} s)", flush=True)
     elapsed = time.perf_counter() - began
     columns = ["none"] + list(EFFECT_NAMES)
-    out = Path(args.out)
-    if args.independent:  # one file set per code path, so the paths' tables sit side by side
-        stem = f"confusion_independent_{args.code_path}"
-    else:
-        stem = "confusion_quick" if args.quick else "confusion"
+    # one folder per case, so the code paths' tables sit side by side
+    case = f"independent_{args.code_path}" if args.independent else \
+        "quick" if args.quick else "pairs" if args.pairs else "full"
+    out = Path(args.out) if args.out else Path(__file__).resolve().parent / "results" / "confusion" / case
+    stem = "latest"
     settings = {"n_beads": n_beads, "contacts": contacts, "velocities_m_s": velocities, "noise_fraction": args.noise,
                 "seeds": args.seeds, "quick": args.quick}
     if args.independent:

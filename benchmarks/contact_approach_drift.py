@@ -68,7 +68,7 @@ def processing_drift(first, second):
 
 
 def main(argv=None) -> int:
-    started = caltech_and_base(argv, __doc__.splitlines()[0], "damping", "contact_rate_terms.py")
+    started = caltech_and_base(argv, __doc__, "damping", "contact_rate_terms.py")
     if started is None:
         return 1
     args, out, curves, base = started

@@ -82,7 +82,7 @@ def stored_report(out, label, script):
 def caltech_arguments(argv, description):
     """(arguments, data folder, output folder, the 15 Caltech curves) of a benchmark on these
     data (`--data`, `--out`, `--reuse`); the curves are None where the data are missing."""
-    parser = argparse.ArgumentParser(description=description)
+    parser = argparse.ArgumentParser(description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data", default=str(DATA))
     parser.add_argument("--out", default="benchmarks/results/contact_burgoyne")
     parser.add_argument("--reuse", action="store_true", help="read runs whose contact.json exists instead of rerunning")
@@ -107,7 +107,7 @@ def caltech_and_base(argv, description, label, script):
 
 
 def main(argv=None) -> int:
-    args, data_dir, out, caltech = caltech_arguments(argv, __doc__.splitlines()[0])
+    args, data_dir, out, caltech = caltech_arguments(argv, __doc__)
     if caltech is None:
         return 1
     runs = {}

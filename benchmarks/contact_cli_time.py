@@ -28,7 +28,7 @@ FLAGS = ["--radius", "3.175mm", "--damping", "--approach-drift"]
 
 
 def main(argv=None) -> int:
-    _, data_dir, out, curves = caltech_arguments(argv, __doc__.splitlines()[0])
+    _, data_dir, out, curves = caltech_arguments(argv, __doc__)
     if curves is None:
         return 1
     files = [str(data_dir / "ExperimentalData" / f"{c.name}.mat") for c in curves]

@@ -95,7 +95,7 @@ def _quartic_floor(approach, force, peak_index, peak):
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data", default=str(DATA))
     parser.add_argument("--out", default="benchmarks/results/contact_burgoyne")
     args = parser.parse_args(argv)

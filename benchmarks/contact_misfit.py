@@ -214,7 +214,7 @@ def _figures(curves, rows, out):
 
 
 def main(argv=None) -> int:
-    started = caltech_and_base(argv, __doc__.splitlines()[0], "damping", "contact_rate_terms.py")
+    started = caltech_and_base(argv, __doc__, "damping", "contact_rate_terms.py")
     if started is None:
         return 1
     args, out, curves, damping = started

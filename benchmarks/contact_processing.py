@@ -77,7 +77,7 @@ def best_alignment(force, record_force):
 
 
 def main(argv=None) -> int:
-    args, data_dir, out, curves = caltech_arguments(argv, __doc__.splitlines()[0])
+    args, data_dir, out, curves = caltech_arguments(argv, __doc__)
     if curves is None:
         return 1
     records = _records(data_dir)

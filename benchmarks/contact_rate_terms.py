@@ -71,7 +71,7 @@ def _span(values, digits=1):
 
 
 def main(argv=None) -> int:
-    started = caltech_and_base(argv, __doc__.splitlines()[0], "published", "contact_burgoyne.py")
+    started = caltech_and_base(argv, __doc__, "published", "contact_burgoyne.py")
     if started is None:
         return 1
     args, out, curves, base = started

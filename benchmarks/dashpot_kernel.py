@@ -104,7 +104,7 @@ def dashpot_jacobian(calls: int) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--label", required=True, help="which build this is (stored with the numbers)")
     parser.add_argument("--out", required=True, help="JSON output")
     parser.add_argument("--calls", type=int, default=30, help="timed calls per measurement [30]")

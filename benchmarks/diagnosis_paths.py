@@ -78,7 +78,7 @@ def _time(problem, x, columns):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "diagnosis_paths"))
     args = parser.parse_args(argv)
     files = hidden_effect_traces((), n_beads=N_BEADS, velocities_m_s=(0.1, 0.2, 0.3, 0.5), contacts=(5, 10, 15),

@@ -1,6 +1,6 @@
 """Time a full single-bead lock-in grid and its Jacobian (Lydon et al. 2015's grid).
 
-    python benchmarks/driven_bench.py --out benchmarks/results/driven_bench.json [--label TEXT]
+    python benchmarks/driven_bench.py --out benchmarks/results/driven_bench/latest.json [--label TEXT]
                                       [--frequencies 341] [--amplitudes 36] [--steps-per-period 64]
 
 The grid: one 19.05 mm, 28 g steel bead between steel faces (Hertz sphere-flat), F0 = 0.133 N,

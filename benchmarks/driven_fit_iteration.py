@@ -32,7 +32,7 @@ X = np.array([2104.99, 4966.86, 0.16747, 685.64, 1.26213, 0.0])
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data-dir", required=True, type=Path, help="the lydon-2015 folder")
     parser.add_argument("--out", required=True, type=Path)
     parser.add_argument("--repeats", type=int, default=3)

@@ -1,6 +1,6 @@
 """Benchmark of the whole `hertzchain fit` command, cold and warm, by phase, on two setups.
 
-    python benchmarks/fit_bench.py [--out benchmarks/results/fit_bench.json] [--traces 10]
+    python benchmarks/fit_bench.py [--out benchmarks/results/fit_bench/latest.json] [--traces 10]
                                    [--cases paper,brass] [--label TEXT]
 
 writes the JSON and a Markdown table beside it (`--table-from JSON` rewrites the table alone).
@@ -170,9 +170,9 @@ def machine_info() -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "fit_bench.json"),
-                        help="JSON output [benchmarks/results/fit_bench.json]")
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "fit_bench" / "latest.json"),
+                        help="JSON output [benchmarks/results/fit_bench/latest.json]")
     parser.add_argument("--traces", type=int, default=10, help="trace files per case [10]")
     parser.add_argument("--cases", default="paper,brass", help="cases to run [paper,brass]")
     parser.add_argument("--label", default="", help="what the machine was doing (e.g. 'quiet', 'loaded')")

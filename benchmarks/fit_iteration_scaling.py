@@ -25,7 +25,7 @@ from run import _time, fit_bench_traces  # noqa: E402  (_time: first call s, med
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", required=True, help="output JSON file")
     parser.add_argument("--traces", default="1,4,5,8,10,16,20,24,40", help="comma-separated trace counts")
     parser.add_argument("--label", default="", help="what this run is (e.g. the commit), stored with it")

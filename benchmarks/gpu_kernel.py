@@ -301,7 +301,7 @@ def item_fit() -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", required=True, help="output JSON file")
     parser.add_argument("--sizes", help="comma-separated chain counts [GPU: 100000; CPU: 256]")
     parser.add_argument("--budget-s", type=float, default=330.0,

@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", required=True, help="output JSON file")
     parser.add_argument("--sizes", help="comma-separated chain counts [GPU: 1e4,1e5,1e6; CPU: 1e3,1e4]")
     parser.add_argument("--chunk", type=int, default=262144, help="chains per device call [262144]")

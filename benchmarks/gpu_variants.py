@@ -82,7 +82,7 @@ def _resource_usage(cache: Path) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", help="output JSON file (needed unless --build-only)")
     parser.add_argument("--size", type=int, default=100_000, help="chains [100000]")
     parser.add_argument("--repeats", type=int, default=5)

@@ -16,8 +16,8 @@ strikers yield the contacts).
    and the law's constant (the exponent n, or the yield stress), `jax.jacfwd` through
    `record_batched` (one kernel run with its tangents on the C++ kernel), both kernels.
 
-    python benchmarks/law_kernel.py --law power_law --out benchmarks/results/power_law_kernel
-    python benchmarks/law_kernel.py --law jackson_green --out benchmarks/results/plastic_kernel
+    python benchmarks/law_kernel.py --law power_law --out benchmarks/results/law_kernel
+    python benchmarks/law_kernel.py --law jackson_green --out benchmarks/results/law_kernel
 """
 
 from __future__ import annotations
@@ -59,7 +59,7 @@ def _timed(calls: dict, repeats: int) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--law", choices=list(LAWS), required=True)
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--repeats", type=int, default=7)
@@ -157,8 +157,8 @@ def main() -> None:
                                          f"{fit_speeds} m/s, contacts 9, 10, wall"},
     } | ({"undamped_sweep_with_books": undamped | {"case": "the sweep without damping and friction"}}
          if undamped else {})
-    args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / f"{args.law}_kernel.json"
+    path = args.out / args.law / "latest.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(".json.partial")
     partial.write_text(json.dumps(result, indent=2))
     os.replace(partial, path)

@@ -11,7 +11,7 @@ and on `solve_stacked` (`solve` under `vmap`, which sweeps of these laws ran bef
 timed cold (first call: tracing and compilation included) and warm (median of three further
 calls), in one process, one after the other. The two must agree: largest difference of the
 recorded forces relative to the largest force, and of the energy books relative to the
-impact energy. Writes `law_sweep.json` and `law_sweep.md`.
+impact energy. Writes `latest.json` and `latest.md`.
 """
 
 from __future__ import annotations
@@ -99,7 +99,7 @@ def markdown_table(result: dict) -> str:
 def main(argv=None) -> int:
     import os
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "law_sweep"),
                         help="output folder [benchmarks/results/law_sweep]")
     parser.add_argument("--speeds", type=int, default=64, help="striker speeds per sweep [64]")
@@ -117,8 +117,8 @@ def main(argv=None) -> int:
               "machine": machine_info()}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "law_sweep.json", result)
-    write_text(out / "law_sweep.md", markdown_table(result))
+    write_json(out / "latest.json", result)
+    write_text(out / "latest.md", markdown_table(result))
     print(markdown_table(result))
     return 0
 

@@ -54,7 +54,7 @@ class _LoadSampler:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--draws", type=int, nargs="+", default=[0, 1, 2, 3],
                         help="noise draws (seeds 4 draw + shot)")
     parser.add_argument("--add", action="store_true", help="keep the draws already stored in --out")

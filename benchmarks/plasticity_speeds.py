@@ -27,7 +27,7 @@ T_END_S = 1.6e-3
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="benchmarks/results/plasticity_speeds")
     args = parser.parse_args(argv)
     out = Path(args.out)

@@ -1,7 +1,7 @@
 """Benchmark of `fitting.posterior`: eta, mu, C with the lab's tolerances on 10 traces of
 the paper's 21-bead chain (the data of `benchmarks/fit_bench.py`).
 
-    python benchmarks/posterior_bench.py [--out posterior_bench.json] [--traces 10]
+    python benchmarks/posterior_bench.py [--out benchmarks/results/posterior_bench/latest.json] [--traces 10]
         [--chains 4] [--warmup 100] [--draws 200]
 
 Measured:
@@ -113,7 +113,7 @@ def benchmark_posterior(n_traces: int = 10, *, chains: int = 4, warmup: int = 10
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="posterior_bench.json", help="JSON output [posterior_bench.json]")
     parser.add_argument("--traces", type=int, default=10, help="number of traces [10]")
     parser.add_argument("--chains", type=int, default=4, help="chains [4]")

@@ -14,9 +14,10 @@ gradient modes and a whole fit.
 
 Every measurement runs in its own process (so peak memory and compile time are its own;
 the hertzchain batch and the plain-JAX baseline run with the CPU's cores as host devices,
-`--xla_force_host_platform_device_count`). Writes `DIR/bench.json`, `DIR/bench.csv` (one row
-per implementation and size), `DIR/throughput.png` (bead-steps/s against batch size) and
-`DIR/table.md` (the table for `benchmarks/README.md`).
+`--xla_force_host_platform_device_count`). Writes `DIR/latest.json`, `DIR/latest.csv` (one row
+per implementation and size), `DIR/latest.png` (bead-steps/s against batch size) and
+`DIR/latest.md` (the table); the stored runs are `benchmarks/results/run/full/` and, with
+`--quick`, `benchmarks/results/run/quick/` (`--avx2`: `run/quick_avx2/`).
 
 The case: the paper's chain (steel beads R = 13 mm, kappa = 1.2e10 N/m^1.5), N beads plus a
 striker of the same steel, a Hertz wall; batches sweep the impact velocity over
@@ -721,8 +722,8 @@ def quick(out: Path) -> dict:
         "fit_iteration": fit,
         "wall_s": time.perf_counter() - start,
     }
-    write_json(out / "quick.json", summary)
-    write_text(out / "quick.md", _quick_table(summary) + "\n")
+    write_json(out / "latest.json", summary)
+    write_text(out / "latest.md", _quick_table(summary) + "\n")
     return summary
 
 
@@ -761,7 +762,7 @@ def _quick_table(summary) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true",
                         help="the headline ratios only (conservative, damped, fit iteration), < 3 min")
     parser.add_argument("--out", help="output folder")
@@ -917,14 +918,14 @@ def main(argv=None) -> int:
         "fit_iteration": fit_iteration,
         "runs": rows,
     }
-    write_json(out / "bench.json", summary)
+    write_json(out / "latest.json", summary)
     columns = ("label", "n_beads", "batch", "steps", "devices", "bead_steps_per_s", "run_s",
                "run_min_s", "run_max_s", "compile_s", "peak_rss_mb", "checksum_wall_max_n")
-    write_text(out / "bench.csv", "\n".join(
+    write_text(out / "latest.csv", "\n".join(
         [",".join(columns)] + [",".join(str(r.get(c, "")) for c in columns) for r in rows]
     ) + "\n")
-    write_text(out / "table.md", _table(rows, machine) + "\n")
-    _plot(rows, out / "throughput.png")
+    write_text(out / "latest.md", _table(rows, machine) + "\n")
+    _plot(rows, out / "latest.png")
     if args.gpu_sweep:
         subprocess.run([sys.executable, str(HERE / "gpu_sweep.py"), "--out", str(out / "gpu_sweep.json")], check=False)
     print(json.dumps({k: summary[k] for k in ("bead_steps_per_s", "hertzchain_over_numba", "hertzchain_over_numba_pairs",

@@ -22,8 +22,8 @@ the import's time-zero check with and without the delay, `hertzchain fit`, and `
 diagnose --free eta,mu,C` on the declared chain and on one whose true wall is softer
 (20 GPa) than declared.
 
-Run (each writes one JSON under benchmarks/results/, with the machine's load noted by the
-caller in the file name; the timings in it are wall times of the whole commands)::
+Run (each writes `benchmarks/results/scope_files/<case>/latest.json`, or with `--label`
+`history/<label>.json` beside it; the timings in it are wall times of the whole commands)::
 
     python benchmarks/scope_files.py --noise --seeds 20
     python benchmarks/scope_files.py --second-lab
@@ -285,20 +285,23 @@ def _header_value(path: Path, key: str) -> str | None:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--noise", action="store_true", help="8-bit AC-coupled Tektronix files, several seeds")
     parser.add_argument("--second-lab", action="store_true", help="Rigol CSV files with a light gate")
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--noise-steps", type=float, default=0.25,
                         help="--noise: analogue noise in converter steps [0.25: a resting record on 1-2 codes]")
-    parser.add_argument("--label", default="", help="appended to the result file names (e.g. the machine)")
+    parser.add_argument("--label", default="", help="store as history/LABEL.json (e.g. the machine) instead of latest.json")
     args = parser.parse_args(argv)
-    suffix = f"_{args.label}" if args.label else ""
+    def result_file(case):
+        folder = RESULTS / "scope_files" / case
+        return folder / "history" / f"{args.label}.json" if args.label else folder / "latest.json"
+
     if args.noise:
-        name = "scope_noise_tek8bit" + ("" if args.noise_steps == 0.25 else f"_noise{args.noise_steps:g}steps")
-        print(json.dumps(noise_check(args.seeds, RESULTS / f"{name}{suffix}.json", args.noise_steps), indent=1))
+        case = "noise" if args.noise_steps == 0.25 else f"noise_{args.noise_steps:g}steps"
+        print(json.dumps(noise_check(args.seeds, result_file(case), args.noise_steps), indent=1))
     if args.second_lab:
-        second_lab(RESULTS / f"scope_second_lab_rigol{suffix}.json")
+        second_lab(result_file("second_lab"))
     return 0
 
 

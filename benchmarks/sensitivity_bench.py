@@ -12,7 +12,7 @@ Run: `python benchmarks/sensitivity_bench.py [--setups 1000] [--small] [--out FI
    2.5 ms records; total wall time (simulating the candidates, the Jacobian by forward mode
    and the search), and the time of the search alone.
 
-Prints the numbers and writes them as JSON (default `benchmarks/results/sensitivity_bench.json`).
+Prints the numbers and writes them as JSON (default `benchmarks/results/sensitivity_bench/latest.json`).
 """
 
 from __future__ import annotations
@@ -109,12 +109,12 @@ def design_benchmark(small: bool) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--setups", type=int, default=1000, help="setups in the sweep [1000]")
     parser.add_argument("--chunk-size", type=int, default=100, help="setups per vmapped call [100]")
     parser.add_argument("--small", action="store_true", help="a quick run (64 setups, small design)")
     parser.add_argument("--skip-design", action="store_true")
-    parser.add_argument("--out", default=str(Path(__file__).parent / "results" / "sensitivity_bench.json"))
+    parser.add_argument("--out", default=str(Path(__file__).parent / "results" / "sensitivity_bench" / "latest.json"))
     args = parser.parse_args()
     n_setups = 64 if args.small else args.setups
     chunk = min(args.chunk_size, 32) if args.small else args.chunk_size

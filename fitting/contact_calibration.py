@@ -65,6 +65,7 @@ import numpy as np
 
 from hertzchain import contact
 from hertzchain.materials import Material
+from hertzchain.native import kernel_record
 
 from .driven import lag1_autocorrelation
 from .fit import least_squares
@@ -139,6 +140,37 @@ class ContactCurve:
     material: Material
 
 
+def _csv_columns(path: Path) -> dict:
+    """A force-approach CSV file as name -> values; refuses, naming the line and the fix, text
+    that is not UTF-8, a ';'-separated file, rows with more or fewer cells than the header and
+    cells that are not numbers (a byte-order mark is ignored)."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not UTF-8 text; save the CSV file as UTF-8.") from None
+    lines = [(number, line) for number, line in enumerate(text.splitlines(), start=1) if line.strip()]
+    if len(lines) < 2:
+        raise ValueError(f"{path}: no data rows under a header (approach_m, force_n, optional time_s).")
+    (first, header_line), rows = lines[0], lines[1:]
+    if ";" in header_line and "," not in header_line:
+        raise ValueError(f"{path}: line {first}: the columns are separated by ';'; separate them by ',' and write "
+                         "decimals with '.' (approach_m,force_n,time_s).")
+    names = [name.strip() for name in next(csv.reader([header_line]))]
+    columns = {name: [] for name in names}
+    for number, line in rows:
+        cells = next(csv.reader([line]))
+        if len(cells) != len(names):
+            decimal = " (is ',' the decimal point? write decimals with '.')" if len(cells) > len(names) else ""
+            raise ValueError(f"{path}: line {number} has {len(cells)} cells for the {len(names)} columns "
+                             f"{','.join(names)}{decimal}.")
+        for name, cell in zip(names, cells):
+            try:
+                columns[name].append(float(cell))
+            except ValueError:
+                raise ValueError(f"{path}: line {number}, column {name}: {cell.strip()!r} is not a number.") from None
+    return columns
+
+
 def _column(table, names, path, required=True):
     for name in names:
         if name in table:
@@ -163,7 +195,12 @@ def read_curve(path, material: Material) -> ContactCurve:
     if path.suffix.lower() == ".mat":
         import scipy.io
 
-        variables = {k: v for k, v in scipy.io.loadmat(path).items() if not k.startswith("__")}
+        try:
+            content = scipy.io.loadmat(path)
+        except (ValueError, TypeError, NotImplementedError, OSError) as error:
+            raise ValueError(f"{path}: not a MATLAB file scipy.io can read ({error}); give a .mat file (v4-v7, "
+                             "not v7.3) with Fexternal or fdK, or a .csv file.") from None
+        variables = {k: v for k, v in content.items() if not k.startswith("__")}
         if "Fexternal" in variables:
             table = np.asarray(variables["Fexternal"], dtype=float)
             if table.ndim != 2 or table.shape[1] != 3:
@@ -179,11 +216,7 @@ def read_curve(path, material: Material) -> ContactCurve:
                 raise ValueError(f"{path}: {key} must be N x 2 (approach m, force N), got shape {table.shape}.")
             time, (approach, force) = None, table.T
     elif path.suffix.lower() == ".csv":
-        with open(path, newline="") as handle:
-            rows = list(csv.DictReader(handle))
-        if not rows:
-            raise ValueError(f"{path}: no data rows under a header (approach_m, force_n, optional time_s).")
-        table = {name.strip(): [float(row[name]) for row in rows] for name in rows[0]}
+        table = _csv_columns(path)
         approach = _column(table, ("approach_m",), path)
         force = _column(table, ("force_n", "force_measured_n"), path)
         time = _column(table, ("time_s",), path, required=False)
@@ -412,8 +445,9 @@ class _Residuals:
 
 
 def _fit_material(pieces, material, kappa, geometry, options):
-    """(values {yield_stress_pa, rate_constant, eta_s}, stderr {...}, converged, per-curve sigma_Y,
-    per-curve shifts (s) and approach drifts (m/s), each a list of (value, standard error))."""
+    """(values {yield_stress_pa, rate_constant, eta_s}, stderr {...}, converged (the joint fit's),
+    per-curve sigma_Y and whether each of those fits converged, per-curve shifts (s) and
+    approach drifts (m/s), each a list of (value, standard error))."""
     n = len(pieces)
     first = len(PARAMETERS)
     start = np.concatenate([[math.log(material.yield_stress_pa), material.yield_rate_constant or 0.0, 0.0,
@@ -440,7 +474,9 @@ def _fit_material(pieces, material, kappa, geometry, options):
     stress = math.exp(x[0])
     # sigma_Y alone per curve; not where it trades off against another constant fitted with it
     traded = options["fit_rate_constant"] or options["fit_hardness_ratio"]
-    singles = [] if traded else [math.exp(solve([i])[1].x[0]) for i in range(n)]
+    single_fits = [] if traded else [solve([i])[1] for i in range(n)]
+    singles = [math.exp(fit.x[0]) for fit in single_fits]
+    singles_converged = [bool(fit.converged) for fit in single_fits]
     scatter = float(np.std(singles, ddof=1) / math.sqrt(len(singles))) if len(singles) > 1 else math.nan
     gauss_newton = stress * float(stderr[0])
     values = {"yield_stress_pa": stress, "rate_constant": float(x[1]), "eta_s": float(x[2]),
@@ -479,7 +515,7 @@ def _fit_material(pieces, material, kappa, geometry, options):
                   for k, (s, _) in enumerate(shifts)]
     drifts = [(float(v), curve_stderr(k, first + n + k) if options["fit_approach_drift"] else None)
               for k, v in enumerate(x[first + n:])]
-    return values, errors, bool(result.converged), singles, shifts, drifts
+    return values, errors, bool(result.converged), singles, singles_converged, shifts, drifts
 
 
 def _piece(curve, approach, peak, rate, timed):
@@ -580,7 +616,9 @@ def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample"
     fit the rate constant C, the hardness ratio h (fitted as ln h) per material with sigma_Y.
 
     **Returns:** a dict: `materials` (per material: given and fitted constants with standard
-    errors, converged flag, per-curve yield stresses) and `curves` (per curve: strain rate,
+    errors, per-curve yield stresses and whether each of those fits converged, `converged`:
+    the joint fit and every per-curve fit reached an optimum, else `unconverged_fits` names
+    them) and `curves` (per curve: strain rate,
     fitted time shift and approach drift with their standard errors, measured peak, peak-force errors at the given
     constants, the fitted ones and with the earlier Thornton law, RMS misfit over the peak,
     unloading secant stiffness 90 -> 50 % of the peak, measured and as ratios). `_series`
@@ -611,16 +649,23 @@ def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample"
         kappa = _kappa(material, geometry)
         if progress:
             progress(f"fitting {name} on {len(members)} curve(s)")
-        values, errors, converged, singles, shifts, drifts = _fit_material(
+        values, errors, converged, singles, singles_converged, shifts, drifts = _fit_material(
             [pieces[i] for i in members], material, kappa, geometry, options)
+        files = [curves[i].name for i in members]
+        # the curves' scatter is an error reported (the larger of it and the joint fit's): a
+        # per-curve fit without an optimum makes that error unfounded
+        unconverged = ([] if converged else ["the joint fit"]) + [
+            f"the fit of {name} alone" for name, ok in zip(files, singles_converged) if not ok]
         given = {"yield_stress_pa": material.yield_stress_pa, "rate_constant": material.yield_rate_constant or 0.0,
                  "eta_s": 0.0, "hardness_ratio": contact.JG_HARDNESS_RATIO}
         report["materials"][name] = {
             "youngs_pa": material.youngs_pa, "poisson": material.poisson, "given": given, "fitted": values,
-            "stderr": errors, "converged": converged,
+            "stderr": errors, "converged": not unconverged, "joint_fit_converged": converged,
+            "unconverged_fits": unconverged,
             "fitted_over_given_yield_stress": values["yield_stress_pa"] / material.yield_stress_pa,
-            "yield_stress_per_curve_pa": dict(zip([curves[i].name for i in members], singles)),
-            "files": [curves[i].name for i in members],
+            "yield_stress_per_curve_pa": dict(zip(files, singles)),
+            "yield_stress_per_curve_converged": dict(zip(files, singles_converged)),
+            "files": files,
         }
         for k, i in enumerate(members):
             report["curves"].append(_curve_report(curves[i], pieces[i], kappa, geometry, given, values,
@@ -705,6 +750,6 @@ def write_outputs(report: dict, curves, out_dir, *, title: str = "") -> dict:
     data["summary"] = summary_table(report)
     data["median_unloading_secant_ratio_fitted"] = median_secant_ratio(report)
     data["median_unloading_secant_ratio_model"] = median_secant_ratio(report, "unloading_secant_ratio_model")
-    data = atomic.json_ready(data)
+    data = atomic.json_ready({**data, "kernel": kernel_record()})
     atomic.write_json(out / "contact.json", data)
     return data

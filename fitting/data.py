@@ -18,6 +18,7 @@ model's change of force since before the impact (`fitting.model`).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import warnings
 from pathlib import Path
 
@@ -151,11 +152,21 @@ def make_experiment(trace: TraceFile, *, label: str | None = None, channels=None
                 DataWarning, stacklevel=3,
             )
     if noise_std_n is not None:
+        if not (np.isfinite(noise_std_n) and noise_std_n > 0):
+            raise FitInputError(f"noise_std_n = {noise_std_n!r}: the noise sigma must be positive and finite (N), "
+                                "e.g. --noise-std 0.02N; leave it out to use the file's or an estimate.")
         noise = {name: float(noise_std_n) for name in channels}
         source = "header"
     elif all(trace.channel_noise_std_n(name) is not None for name in channels):
         noise = {name: float(trace.channel_noise_std_n(name)) for name in channels}
         source = "header"
+        for name, sigma in noise.items():
+            if not (np.isfinite(sigma) and sigma > 0):
+                key = f"noise_std_n_{name}" if f"noise_std_n_{name}" in trace.header else "noise_std_n"
+                raise FitInputError(
+                    f"{where}: header {key} = {sigma!r}: a noise sigma must be positive (N); give the recorded "
+                    "noise, remove the key (the noise is then estimated from the record) or give --noise-std."
+                )
     else:
         noise = {name: estimate_noise_std(trace.channels[name]) for name in channels}
         source = "estimated"
@@ -217,14 +228,33 @@ def as_experiments(sources) -> list[Experiment]:
     return load_experiments(sources)
 
 
+def _refuse_repeats(paths) -> None:
+    """Refuse a file given twice (by the same or another path, or as a byte-for-byte copy): its
+    samples would count twice and every standard error shrink by sqrt(2)."""
+    seen = {}
+    for path in paths:
+        path = Path(path)
+        if not path.is_file():
+            continue
+        key = hashlib.sha256(path.read_bytes()).hexdigest()
+        if key in seen:
+            same = "the same file" if seen[key].resolve() == path.resolve() else "the same content"
+            raise FitInputError(
+                f"{path}: {same} as {seen[key]}, given twice; each record counts once (a repeat would "
+                "shrink every standard error by sqrt(2)): give it once."
+            )
+        seen[key] = path
+
+
 def load_experiments(sources, *, channels=None, noise_std_n=None) -> list[Experiment]:
     """Read trace files (paths) or take `TraceFile`s and check them for fitting.
 
     An experiment file (`.toml`, see `hertzchain.importer`) stands for its shots, imported
     in memory. Labels are the shot labels or file stems, made unique with a suffix when two
-    share one.
+    share one. A file given twice (or a byte-for-byte copy of one) is refused.
     """
     sources = list(sources)
+    _refuse_repeats([s for s in sources if isinstance(s, (str, Path))])
     if any(isinstance(s, (str, Path)) and str(s).lower().endswith(".toml") for s in sources):
         # experiment files (`hertzchain.importer.is_experiment_file`): the scope-file readers
         # and their packages load only when one is given

@@ -30,7 +30,10 @@ and repeat until nothing significant is left.
    parsimony, and the per-bead refit is the costliest step of a diagnosis). The best
    `max_refits` candidates by score are always refitted: a linear score misjudges effects
    with a threshold or a singular onset (plasticity, precompression, friction), whose
-   starts span their physical range instead (`_Search.start_for`).
+   starts span their physical range instead (`_Search.start_for`); so is, whatever its
+   rank, every candidate whose score alone would bring the chi^2 excess into the noise
+   band (the rank orders the refits, it does not drop what a fit of one candidate would
+   find).
 4. **Decide.** A candidate with k strengths is named only if all hold:
    (a) its $\\Delta\\chi^2$ beats the BIC penalty $k\\ln n$;
    (b) it removes at least `min_share` of the excess misfit $\\chi^2 - \\mathrm{dof}$ that
@@ -47,8 +50,13 @@ and repeat until nothing significant is left.
    depends on prior widths of strengths no lab states, while the held-out check asks
    directly whether an effect fitted on some shots predicts the others.
    Among the candidates that pass, the one with the largest held-out gain is named.
-   Nothing is named when the excess is already within the noise band
-   $3\\sqrt{2\\,\\mathrm{dof}}$ or when no candidate passes.
+   Nothing is named when the excess is already within the noise band or when no
+   candidate passes. The band is `NOISE_BAND_SIGMA` standard deviations of $\\chi^2$ for a
+   model that holds: $\\sqrt{2\\,\\mathrm{dof}}$ from the samples' noise, and, for a
+   channel whose noise level was estimated from $m$ samples (the importer's pre-trigger
+   segment, `x_import_<channel>_noise_samples`), the spread that estimate adds: its $n$
+   samples' $\\chi^2$ scale by $\\sigma^2/\\hat\\sigma^2$, of relative variance
+   $2/(m-1)$, so $2n^2/(m-1)$ joins the variance (`_Search.noise_estimate_variance`).
 5. **Iterate**: the named effect joins the model and the search repeats (`max_effects`).
    A **backward check** then refits without each named effect and drops any that no longer
    passes (a) and (b). A **misspecification alarm** is raised when the final excess is
@@ -78,13 +86,14 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from hertzchain import laws
 from hertzchain.atomic import json_ready
 from hertzchain.progress import Progress
 
 from . import effects as fx
 from .data import Experiment, as_experiments
 from .fit import OPTIMUM_TOLERANCE, LeastSquares, initial_values, least_squares, make_problem
-from .locate import describe, locate
+from .locate import describe, estimate_variance, locate, noise_estimate_samples
 from .model import STEPS_PER_CONTACT, Problem, residuals_and_jacobian
 from .parameters import ParameterInstance, get_spec, parse_parameter_list
 from .uncertainty import covariance_choice, covariance_from_jacobian
@@ -368,6 +377,8 @@ class Diagnosis:
     - `indistinguishable`: candidate pairs with |cos| > 0.95 of their projected sensitivities.
     - `misspecification`: True when the final excess misfit is above the noise band.
     - `conclusion`: one paragraph in words.
+    - `unconverged`: the fits the result rests on (named effects' refits, the fits adding
+      them, the final fit) that reached no optimum, in words; empty: `converged`.
     - `problem`, `x_base`, `x_final`: the problem and parameter vectors (predictions, plots).
     """
 
@@ -381,6 +392,7 @@ class Diagnosis:
     dropped_in_backward_check: list
     misspecification: bool
     conclusion: str
+    unconverged: list
     settings: dict
     problem: Problem
     x_base: np.ndarray
@@ -390,9 +402,16 @@ class Diagnosis:
     evaluation_seconds: float = 0.0
     residual_evaluations: int = 0
 
+    @property
+    def converged(self) -> bool:
+        """Whether every fit the result rests on reached an optimum."""
+        return not self.unconverged
+
     def to_json(self) -> dict:
         return json_ready({
             "missing_effects": list(self.missing_effects),
+            "converged": self.converged,
+            "unconverged_fits": list(self.unconverged),
             "steps": [s.to_json() for s in self.steps],
             "base_fit": self.base_fit,
             "final": self.final,
@@ -424,6 +443,16 @@ def parse_model(model: str, n_beads: int) -> list[str]:
         if name not in known:
             raise DiagnosisError(f"model: unknown effect {name!r}; effects: {', '.join(fx.EFFECT_NAMES)}.")
     return parts[1:]
+
+
+def noise_estimate_variance(experiments) -> float:
+    """The variance the noise levels' own estimates add to the chi^2 of a model that holds:
+    a channel's n fitted samples, whitened by a sigma estimated from m samples (the importer's
+    pre-trigger segment, `x_import_<channel>_noise_samples`), have their chi^2 scaled by
+    sigma^2 / sigma_est^2 ~ chi^2(m - 1) / (m - 1), of relative variance 2 / (m - 1): each adds
+    2 n^2 / (m - 1). Noise levels stated in a file (m = 0) add nothing."""
+    return sum(estimate_variance(int(np.sum(e.used(name))), noise_estimate_samples(e, name))
+               for e in experiments for name in e.channels)
 
 
 class _Search:
@@ -511,6 +540,7 @@ class _Search:
         amplitude = [max(float(np.max(e.data(c))) for c in e.channels) for e in self.problem.experiments]
         order = np.argsort(amplitude)
         self.folds = [sorted(order[0::2].tolist()), sorted(order[1::2].tolist())] if len(order) >= 2 else []
+        self.noise_estimate_variance = noise_estimate_variance(self.problem.experiments)
 
     def log(self, text: str):
         if self.report:
@@ -670,8 +700,8 @@ class _Search:
             # a few thousandths to a few hundredths of the critical damping of a contact
             # linearised at the largest observed force
             setup = self.problem.base_setups[0]
-            kappa, mass = float(setup.contact_kappa()[1]), float(setup.bead_mass_kg[0])
-            stiffness = 1.5 * kappa ** (2 / 3) * largest ** (1 / 3)
+            kappa, mass = setup.contact_kappa()[1], float(setup.bead_mass_kg[0])
+            stiffness = float(setup.contact_law.stiffness_at_force(largest, laws.ContactConstants(kappa)))
             critical = 2.0 * math.sqrt(stiffness * mass)
             return [start(share * critical) for share in (0.003, 0.01, 0.03)]
         if effect == "track_friction":
@@ -709,11 +739,14 @@ class _Search:
             return f" precompression: static preload {value['preload_n']:.4g} N, {reading}; share seen {seen:.3g}."
         if effect == "contact_exponent":
             return f" contact_exponent: contacts follow F ~ delta^n with n = {1.5 + value['exponent_shift']:.4g}."
-        if effect == "plasticity" and value["yield_softening"] > 0:
+        if effect in ("plasticity", "wall_compliance"):
             cols = self.columns(effects)
             column = self.effect_columns[effect][0]
             error = float(self.stderr(x, cols, chi2)[cols.index(column)]) if column in cols else math.nan
-            return fx.describe_plasticity(self.problem.base_setups[0], value["yield_softening"], error)
+            if effect == "wall_compliance":
+                return fx.describe_wall(self.problem.base_setups[0], value["wall_softening"], error)
+            if value["yield_softening"] > 0:
+                return fx.describe_plasticity(self.problem.base_setups[0], value["yield_softening"], error)
         return ""
 
     def _nominal_yield_forces(self) -> np.ndarray:
@@ -898,10 +931,11 @@ class _Workflow:
     def dof_of(self, effects) -> int:
         return self.n - len(self.search.columns(effects))
 
-    @staticmethod
-    def band(dof) -> float:
-        """The noise band of the chi^2 excess: NOISE_BAND_SIGMA standard deviations."""
-        return NOISE_BAND_SIGMA * math.sqrt(2 * dof)
+    def band(self, dof) -> float:
+        """The noise band of the chi^2 excess: NOISE_BAND_SIGMA standard deviations of the
+        chi^2 of a model that holds, from the samples' noise (2 dof) and from the noise
+        levels' own estimates (`_Search.noise_estimate_variance`)."""
+        return NOISE_BAND_SIGMA * math.sqrt(2 * dof + self.search.noise_estimate_variance)
 
     def at_noise(self, chi2: float, dof: int, location: dict | None) -> bool:
         """Whether a fit's misfit is at the noise level: its chi^2 excess within the band, and
@@ -909,6 +943,12 @@ class _Workflow:
         `LOCAL_BAND_SIGMA` noise units above the noise."""
         local = max((c["excess_sigma"] for c in (location or {}).get("worst", [])), default=0.0)
         return chi2 - dof <= self.band(dof) and local <= LOCAL_BAND_SIGMA
+
+    def score_reaches_noise(self, name: str, score: float) -> bool:
+        """Whether candidate `name`'s screening score (the chi^2 its linearised or secant step
+        removes) would leave a chi^2 excess within the noise band of the model with it."""
+        dof_c = self.dof_of(self.accepted + [name])
+        return self.chi2 - score - dof_c <= self.band(dof_c)
 
     def explains_to_noise(self, candidate: CandidateResult) -> bool:
         dof_c = self.dof_of(self.accepted + [candidate.effect])
@@ -938,7 +978,9 @@ class _Workflow:
         """Scores and starts of the candidates not in the model (`_Search.screen`); the
         candidates to refit: the best `max_refits` separable ones by score, whatever their
         score (a linear score at "off" misjudges effects with a threshold or a singular
-        onset, see `_Search.start_for`), none when the misfit is at the noise level."""
+        onset, see `_Search.start_for`), and any other whose score alone would bring the
+        misfit into the noise band (`score_reaches_noise`); none when the misfit is at the
+        noise level."""
         search = self.search
         todo = [c for c in search.candidates if c not in self.accepted]
         scores, starts, separable, pairs = search.screen(self.x, self.accepted, todo)
@@ -947,10 +989,17 @@ class _Workflow:
             if pair not in self.pairs_seen:
                 self.pairs_seen.append(pair)
         dof = self.dof_of(self.accepted)
-        worth = [c for c in todo if separable[c]]
-        worth = ([] if self.at_noise(self.chi2, dof, self.location) else
-                 sorted(worth, key=lambda c: -scores[c])[:self.max_refits])
-        return todo, scores, starts, separable, worth
+        if self.at_noise(self.chi2, dof, self.location):
+            return todo, scores, starts, separable, []
+        ranked = sorted((c for c in todo if separable[c]), key=lambda c: -scores[c])
+        # the rank only orders the refits: a candidate whose score alone brings the misfit
+        # into the noise band is what a fit of it alone would find, and is refitted whatever
+        # its rank (a misfit several effects share can rank a single one below others that
+        # each mimic part of it)
+        reaching = [c for c in ranked[self.max_refits:] if self.score_reaches_noise(c, scores[c])]
+        if reaching:
+            search.log("refitted for a score that reaches the noise level: " + ", ".join(reaching))
+        return todo, scores, starts, separable, ranked[:self.max_refits] + reaching
 
     # --- 4. refit -----------------------------------------------------------------------------------
     def refit(self, todo, scores, starts, separable, worth) -> list[CandidateResult]:
@@ -1002,7 +1051,8 @@ class _Workflow:
                     effect=name, n_parameters=k, score_chi2=scores[name],
                     reason="the misfit is already at the noise level" if self.at_noise(self.chi2, dof, self.location)
                     else
-                    f"score {scores[name]:.4g} not among the {self.max_refits} best, which are refitted"))
+                    f"score {scores[name]:.4g} not among the {self.max_refits} best, which are refitted, "
+                    "and short of the noise band"))
         return results
 
     # --- 5. decide, with the held-out check ---------------------------------------------------------
@@ -1021,8 +1071,9 @@ class _Workflow:
         dof = self.dof_of(self.accepted)
         excess = self.chi2 - dof
         at_noise = self.at_noise(self.chi2, dof, self.location)
-        return [self._verdict(c, excess, dof, at_noise) if c.separable and math.isfinite(c.delta_chi2) else c
-                for c in results]
+        judged = [self._verdict(c, excess, dof, at_noise) if c.separable and math.isfinite(c.delta_chi2) else c
+                  for c in results]
+        return judged if at_noise else [self._with_status(c) for c in judged]
 
     def _verdict(self, c: CandidateResult, excess, dof, at_noise) -> CandidateResult:
         """`c` with `passed`, `reason` and `heldout_gain` set by the checks of `heldout_check`."""
@@ -1051,6 +1102,17 @@ class _Workflow:
                     f"held-out chi^2 improves by only {heldout_gain:.4g} (needs {margin:.4g})"))
         return dataclasses.replace(c, heldout_gain=heldout_gain, passed=True,
                                    reason="passes BIC, practical-significance and held-out checks")
+
+    @staticmethod
+    def _with_status(c: CandidateResult) -> CandidateResult:
+        """`c` with its reason saying so when its refit did not converge: it is judged at its
+        last iterate, whose chi^2 is above the optimum's (the fit only descends), so its gain
+        is a lower bound: a pass stands, a rejection may not."""
+        if c.converged is not False:
+            return c
+        verdict = "named on a lower bound of its gain" if c.passed else "the rejection may not stand"
+        return dataclasses.replace(c, reason=f"{c.reason}; its refit did not converge within {c.steps} steps "
+                                             f"({verdict})")
 
     def name(self, passed, results, location):
         """Add the candidate of `passed` with the largest held-out gain to the model, refit."""
@@ -1108,6 +1170,25 @@ class _Workflow:
                 self.x, self.chi2, self.status = x_wo, chi2_wo, _status(result)
 
     # --- 7. report ----------------------------------------------------------------------------------
+    def unconverged_fits(self, named) -> list[str]:
+        """The fits the result rests on that reached no optimum (`fitting.fit`'s test), in
+        words: each named effect's candidate refit (what its verdict judged) and the fit that
+        added it, and the final fit (the values reported)."""
+        notes = []
+        final_is_last = bool(self.steps) and not self.dropped
+        for k, step in enumerate(self.steps):
+            if step.effect not in named:
+                continue
+            winner = next((c for c in step.candidates if c.effect == step.effect), None)
+            if winner is not None and winner.converged is False:
+                notes.append(f"the refit of candidate {step.effect} ({winner.steps} steps)")
+            if step.status.get("converged") is False:
+                final = " (the final fit)" if final_is_last and k == len(self.steps) - 1 else ""
+                notes.append(f"the fit with {step.effect} added{final} ({step.status['steps']} steps)")
+        if not self.status["converged"] and not (final_is_last and self.steps[-1].status.get("converged") is False):
+            notes.append(f"the final fit ({self.status['steps']} steps)")
+        return notes
+
     def conclusion(self, named, final_location) -> tuple[bool, str, list]:
         """(misspecification alarm, the conclusion in words, where the final misfit lies)."""
         search, x, chi2 = self.search, self.x, self.chi2
@@ -1127,11 +1208,21 @@ class _Workflow:
         if alarm:
             local = max((c["excess_sigma"] for c in final_location.get("worst", [])), default=0.0)
             text += (f" MISSPECIFICATION ALARM: the final misfit is still above the noise level ("
-                     f"{excess / math.sqrt(2 * dof):.1f} noise units in all, chi^2/dof = {chi2 / dof:.4g}; "
+                     f"{NOISE_BAND_SIGMA * excess / self.band(dof):.1f} noise units in all, "
+                     f"chi^2/dof = {chi2 / dof:.4g}; "
                      f"{local:.1f} in the worst channel x window cell); the library does not explain "
                      f"it. Largest gaps: {'; '.join(where)}.")
         else:
             text += f" The final misfit is at the noise level (chi^2/dof = {chi2 / dof:.4g})."
+        unconverged = self.unconverged_fits(named)
+        if unconverged:
+            text += (f" NOT CONVERGED: {'; '.join(unconverged)} reached no optimum; the values reported are "
+                     "their last iterate's, and an effect named on such a refit stands on a lower bound of its "
+                     "gain (rerun with the named effects in --model to refit them).")
+        rejected = [c.effect for c in self.last_candidates if c.converged is False]
+        if rejected:
+            text += (f" Refits that did not converge, judged at their last iterate (their rejection may not "
+                     f"stand): {', '.join(rejected)}.")
         if self.not_separable:
             text += (f" Not separable from the free parameters and the named effects: "
                      f"{', '.join(sorted(self.not_separable))} (e.g. a uniform stiffness scale while both striker "
@@ -1158,6 +1249,7 @@ class _Workflow:
         named = [s.effect for s in self.steps if s.effect not in self.dropped]
         final_location = self.locate()
         alarm, text, where = self.conclusion(named, final_location)
+        unconverged = self.unconverged_fits(named)
         base_summary = self.summary(self.x_base, self.chi2_base, parse_model(self.model, search.n_beads),
                                     self.status_base)
         base_summary["location"] = (self.steps[0].location_before if self.steps else self.locate(self.x_base))
@@ -1175,10 +1267,12 @@ class _Workflow:
             dropped_in_backward_check=self.dropped,
             misspecification=bool(alarm),
             conclusion=text,
+            unconverged=unconverged,
             settings={
                 "model": self.model, "free": settings["free"], "nuisances": settings["nuisances"],
                 "candidates": search.candidates, "left_out": search.skipped, "max_effects": settings["max_effects"],
                 "min_share": self.min_share, "noise_band_sigma": NOISE_BAND_SIGMA,
+                "chi2_variance_from_noise_estimates": search.noise_estimate_variance,
                 "bic_penalty_per_parameter": self.penalty, "steps_per_contact": settings["steps_per_contact"],
                 "folds": [[search.problem.experiments[e].label for e in f] for f in search.folds],
             },

@@ -23,9 +23,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from hertzchain.atomic import save_figure, write_csv, write_json, write_text  # noqa: E402
+from hertzchain.units import display_unit, format_measured  # noqa: E402
+from hertzchain.native import kernel_record  # noqa: E402
 
 from .diagnosis import Diagnosis  # noqa: E402
+from .effects import DEFAULT_YIELD_STRESS_PA, PREFIX, fitted_wall_youngs_pa  # noqa: E402
 from .locate import WINDOWS  # noqa: E402
+from .parameters import REGISTRY  # noqa: E402
 
 
 def _fmt(value, digits=4) -> str:
@@ -36,6 +40,62 @@ def _fmt(value, digits=4) -> str:
             return "-"
         return f"{value:.{digits}g}"
     return str(value)
+
+
+def physical_reading(name: str, value: float, stderr, setup) -> str:
+    """A fitted effect strength as the quantity it stands for, in human units with its σ
+    (`wall_softening` -> the wall's modulus in GPa, `yield_softening` -> the yield stress in
+    MPa, `eta_s` -> η in µs); "" for a strength without such a reading. `setup`: the
+    diagnosed files' nominal chain (the first file's)."""
+    stderr = None if stderr is None or not math.isfinite(stderr) else float(stderr)
+
+    def error(scale):  # the standard error of a quantity whose derivative is `scale`
+        return None if stderr is None else abs(scale) * stderr
+
+    short = name[len(PREFIX):] if name.startswith(PREFIX) else name
+    if short == "wall_softening":
+        youngs = fitted_wall_youngs_pa(setup, value)
+        return "wall Young's modulus " + format_measured(youngs, error(youngs), "Pa")
+    if short == "yield_softening":
+        if value <= 0:
+            return "no yield (elastic contacts)"
+        nominal = float(setup.bead_yield_stress_pa)
+        nominal = nominal if math.isfinite(nominal) else DEFAULT_YIELD_STRESS_PA
+        stress = nominal / value
+        return "yield stress " + format_measured(stress, error(stress / value), "Pa")
+    if short == "sensor_rate" and value > 0:
+        f0 = 1e5 / math.sqrt(value)
+        return "sensor resonance f0 " + format_measured(f0, error(0.5 * f0 / value), "Hz")
+    if short in ("eta_s", "preload_n", "dashpot_n_s_m"):
+        quantity = {"eta_s": "η", "preload_n": "preload", "dashpot_n_s_m": "dashpot"}[short]
+        unit = {"eta_s": "s", "preload_n": "N", "dashpot_n_s_m": "N s/m"}[short]
+        return f"{quantity} " + format_measured(value, stderr, unit)
+    return ""
+
+
+def readings(diagnosis: Diagnosis) -> list[str]:
+    """One line per named effect's strength that stands for a quantity (`physical_reading`):
+    `"wall_compliance: wall Young's modulus 20.3 ± 1.2 GPa"`."""
+    setup = diagnosis.problem.base_setups[0]
+    lines = []
+    for step in diagnosis.steps:
+        if step.effect not in diagnosis.missing_effects:
+            continue
+        for name, value in step.values.items():
+            reading = physical_reading(name, value, step.stderr.get(name), setup)
+            if reading:
+                lines.append(f"{step.effect}: {reading}")
+    return lines
+
+
+def _unit(label: str) -> str:
+    """The SI unit of a fitted label (`name`, `name[file]`, an effect's strength with or
+    without its `PREFIX`), "" if not registered."""
+    name = label.split("[", 1)[0]
+    for key in (name, PREFIX + name):
+        if key in REGISTRY:
+            return REGISTRY[key].unit
+    return ""
 
 
 def _stages(diagnosis: Diagnosis):
@@ -62,6 +122,7 @@ def _gap_table(diagnosis: Diagnosis) -> list[str]:
 def markdown(diagnosis: Diagnosis) -> str:
     """The report in Markdown."""
     d = diagnosis
+    setup = d.problem.base_setups[0]
     out = io.StringIO()
     w = out.write
     w("# Diagnosis\n\n")
@@ -70,6 +131,10 @@ def markdown(diagnosis: Diagnosis) -> str:
       + (f"; free {', '.join(d.settings['free'])}" if d.settings["free"] else "") + ".\n\n")
     w(f"**Missing effects (in the order found):** {', '.join(d.missing_effects) or 'none'}\n\n")
     w(d.conclusion + "\n\n")
+    for line in readings(d):
+        w(f"- {line}\n")
+    if readings(d):
+        w("\n")
     w("## Gap before and after each step\n\n")
     w("Gap = reduced chi^2 of the whitened residuals (1 = noise level).\n\n")
     w("| step | effect | gap before | gap after | excess before (sigma) | excess after (sigma) |\n")
@@ -83,9 +148,12 @@ def markdown(diagnosis: Diagnosis) -> str:
     w("\n".join(_gap_table(d)) + "\n\n")
     for k, s in enumerate(d.steps, 1):
         w(f"## Step {k}: {s.effect}\n\n")
-        w("Fitted strengths (SI, 0 = effect off):\n\n| parameter | value | standard error |\n|---|---|---|\n")
+        w("Fitted strengths (0 = effect off) and what they stand for:\n\n"
+          "| parameter | value ± σ | unit | reading |\n|---|---|---|---|\n")
         for name, value in s.values.items():
-            w(f"| {name} | {_fmt(value)} | {_fmt(s.stderr.get(name))} |\n")
+            unit = _unit(name)
+            w(f"| {name} | {format_measured(value, s.stderr.get(name))} | {display_unit(unit)} | "
+              f"{physical_reading(name, value, s.stderr.get(name), setup)} |\n")
         w("\nCandidates at this step:\n\n")
         w(_candidate_table(s.candidates))
         w(f"\n![overlay](overlay_step{k}_{s.effect}.png)\n\n")
@@ -189,7 +257,7 @@ def write_diagnosis_report(diagnosis: Diagnosis, out_dir) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     paths = {"json": out / "diagnosis.json", "markdown": out / "diagnosis.md", "gap_png": out / "gap.png",
              "gaps_csv": out / "gaps.csv"}
-    write_json(paths["json"], diagnosis.to_json())
+    write_json(paths["json"], {**diagnosis.to_json(), "kernel": kernel_record()})
     write_text(paths["markdown"], markdown(diagnosis))
     write_csv(paths["gaps_csv"], GAP_HEADER, _gap_rows(diagnosis))
     fig = _gap_figure(diagnosis)

@@ -7,7 +7,11 @@ given, so that nothing the user asked for is silently dropped.
 
 from __future__ import annotations
 
+import math
 import sys
+from pathlib import Path
+
+from hertzchain.units import format_measured
 
 from .driven_experiment import is_driven_experiment, load_driven_experiment
 
@@ -43,8 +47,9 @@ def _one_experiment(args):
     return load_driven_experiment(args.files[0], args.data_dir)
 
 
-def run_fit(args) -> int:
-    """The driven branch of `hertzchain fit` (exit 0 converged, 3 not converged)."""
+def run_fit(args, out) -> int:
+    """The driven branch of `hertzchain fit`, written into the folder `out` (exit 0 converged, 3 not
+    converged)."""
     from .driven import PARAMETERS, fit_driven
     from .driven_report import report_data, write_driven_report
 
@@ -57,11 +62,12 @@ def run_fit(args) -> int:
             raise ValueError(f"--params: {', '.join(unknown)} not driven parameters; valid: {', '.join(PARAMETERS)}.")
     experiment = _one_experiment(args)
     result = fit_driven(experiment, free=free, max_steps=args.max_steps, progress=not args.quiet)
-    write_driven_report(result, args.out, data_dir=args.data_dir, plots=not args.no_plots)
+    write_driven_report(result, out, data_dir=args.data_dir, plots=not args.no_plots)
     data = report_data(result, data_dir=args.data_dir)
     for name, p in data["params"].items():
         if p["fitted"]:
-            print(f"{name} = {p['value']} +- {p['stderr']} {p['unit']}")
+            stderr = math.nan if p["stderr"] is None else p["stderr"]
+            print(f"{name} = {format_measured(p['value'], stderr, p['unit'])}")
     print(f"misfit: median {100 * data['misfit']['median']:.2f} %, max {100 * data['misfit']['max']:.2f} % of "
           f"each curve's peak; residual lag-1 correlation {result.rho:.3f}")
     for mode in data["bending"]:
@@ -75,16 +81,21 @@ def run_fit(args) -> int:
     return 0
 
 
-def run_diagnose(args) -> int:
-    """The driven branch of `hertzchain diagnose`."""
+def run_diagnose(args, out) -> int:
+    """The driven branch of `hertzchain diagnose`, written into the folder `out` (exit 0
+    converged, 3 not converged)."""
     from .driven_diagnosis import diagnose_driven, write_driven_diagnosis
 
     _refuse(args, _DIAGNOSE_DEFAULTS, "diagnose")
     experiment = _one_experiment(args)
     diagnosis = diagnose_driven(experiment, max_effects=args.max_effects, min_share=args.min_share,
                                 progress=not args.quiet)
-    paths = write_driven_diagnosis(diagnosis, args.out)
+    paths = write_driven_diagnosis(diagnosis, out)
     print(f"missing effects: {', '.join(diagnosis['missing_effects']) or 'none'}")
     print(diagnosis["conclusion"])
-    print(f"report: {paths[0]}")
+    print(f"report: {Path(args.out) / paths[0].name}")
+    if not diagnosis["converged"]:
+        print(f"hertzchain diagnose: error: no optimum reached by {'; '.join(diagnosis['unconverged_fits'])} "
+              "(their values are the last iterate's).", file=sys.stderr)
+        return 3
     return 0

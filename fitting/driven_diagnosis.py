@@ -19,6 +19,12 @@ from where the last round ended and from the data's own start with the precompre
 (as `fit_driven` starts), the lower chi^2 kept: the contacts' fit of an earlier round can end
 where a stiffness and a preload compensate the effect still missing.
 
+Every fit's convergence (`fitting.fit`'s test of an optimum) is kept: a step whose fit
+reached no optimum is judged at its last iterate (the fit only descends, so the share of
+chi^2 it removes is a lower bound: an acceptance stands), and the conclusion and
+`unconverged_fits` name it; `converged` is False when the nominal fit or a named step's
+fit reached none.
+
 Every step records the gap before and after (median over drive levels of the RMS misfit as a
 fraction of each curve's peak), the resonance shift from the lowest to the highest drive, and
 the peak velocity per metre of drive at the top drive over the lowest's (the amplitude-
@@ -35,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from hertzchain.atomic import json_ready, save_figure, write_csv, write_json, write_text
+from hertzchain.native import kernel_record
 
 from .driven import DrivenLayout, DrivenModel, chain_at, linear_start, nominal_modes_hz, scan_precompression
 from .driven_report import bending
@@ -107,7 +114,7 @@ def diagnose_driven(experiment, *, max_effects: int = 3, min_share: float = 0.2,
     x[layout.index("precompression_n")] = experiment.precompression_n
     x[layout.index("drive_scale")] = 1.0
     free = ["damping_rate_per_s"]
-    x, chi2, ok = fit(x, free)
+    x, chi2, nominal_ok = fit(x, free)
     current = state(x, chi2)
     log(f"nominal model (damping fitted): median misfit {100 * current['gap_median']:.1f} % of peak")
     nominal = current
@@ -150,6 +157,7 @@ def diagnose_driven(experiment, *, max_effects: int = 3, min_share: float = 0.2,
             "gap_before": current["gap_median"],
             "gap_after": after["gap_median"],
             "candidates_chi2": {n: t[1] for n, t in trials.items()},
+            "candidates_converged": {n: bool(t[2]) for n, t in trials.items()},
             "before": {k: v for k, v in current.items() if k != "curves"},
             "after": {k: v for k, v in after.items() if k != "curves"},
         }
@@ -177,11 +185,16 @@ def diagnose_driven(experiment, *, max_effects: int = 3, min_share: float = 0.2,
         "static_overlap_m": float(chain_at(experiment, x).static_overlap_m()[0]),
         "bead_amplitude_at_top_drive_peak_m": float(np.sqrt(2) * top.max() / (2 * np.pi * f[np.argmax(top)])),
     }
+    unconverged = ([] if nominal_ok else ["the nominal model's fit"]) + [
+        f"the fit of {step['effect']}" for step in steps if step["accepted"] and not step["converged"]]
     result = {
         "experiment": str(experiment.path),
         "label": experiment.label,
         "fitted_levels": levels,
+        "converged": not unconverged,
+        "unconverged_fits": unconverged,
         "nominal": {k: v for k, v in nominal.items() if k != "curves"},
+        "nominal_converged": bool(nominal_ok),
         "steps": steps,
         "missing_effects": named,
         "final": {k: v for k, v in current.items() if k != "curves"},
@@ -245,6 +258,10 @@ def conclusion(result: dict) -> str:
     ]
     for step in result["steps"]:
         verdict = "named" if step["accepted"] else "not named (too small a share)"
+        if not step["converged"]:
+            verdict += (" on a fit that reached no optimum within the step limit (judged at its last iterate: "
+                        "the share removed is a lower bound, "
+                        + ("the naming stands)" if step["accepted"] else "the rejection may not stand)"))
         after = step["after"]
         line = (
             f"{step['effect']} ({', '.join(step['parameters'])}): {verdict}; it removes "
@@ -266,6 +283,9 @@ def conclusion(result: dict) -> str:
                      f"{'named' if step['accepted'] else 'tried'} for the chi^2 it removes, "
                      f"not for the amplitude dependence.")
         lines.append(line)
+    if not result["converged"]:
+        lines.append(f"NOT CONVERGED: {'; '.join(result['unconverged_fits'])} reached no optimum; the values "
+                     "reported are the last iterate's.")
     model_ratio = final["peak_per_drive_top_over_lowest"][0]
     dependence = (f"the peak velocity per nm of drive at the top drive over the lowest's is {model_ratio:.2f} in "
                   f"the final model (it {_direction(model_ratio)} with the drive) against {data_ratio:.2f} measured "
@@ -301,7 +321,7 @@ def write_driven_diagnosis(result: dict, out_dir) -> list[Path]:
     """`diagnosis.json`, `diagnosis.md`, `gaps.csv` and `diagnosis.png` in `out_dir`."""
     out = Path(out_dir)
     data = {k: v for k, v in result.items() if not k.startswith("_")}
-    write_json(out / "diagnosis.json", json_ready(data))
+    write_json(out / "diagnosis.json", json_ready({**data, "kernel": kernel_record()}))
     text = [f"# Diagnosis: {result['label']}", "", result["conclusion"].replace("\n", "\n\n"), "",
             "| step | effect | accepted | median misfit before | after | shift after | peak/nm top/lowest after |",
             "|---|---|---|---|---|---|---|"]

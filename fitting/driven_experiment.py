@@ -49,13 +49,15 @@ the description can live beside the code and the data stay where the lab keeps t
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import tomllib
 from pathlib import Path
 
 import numpy as np
 
 from hertzchain.contact import kappa_sphere_flat, kappa_sphere_sphere
-from hertzchain.driven.sweeper_files import LockinSweep, SweeperFileError, lockin_sweep, read_sweeper_table
+from hertzchain.driven.sweeper_files import (LockinSweep, SweeperFileError, SweeperTable, lockin_sweep,
+                                             read_sweeper_table)
 from hertzchain.importer import ExperimentFileError
 from hertzchain.importer import quantity_of_key
 
@@ -68,6 +70,21 @@ SENSOR_KEYS = ("bead", "quantity", "calibration_m_s_per_v", "reading")
 SWEEP_KEYS = ("amplitude_file", "exclude_hz")
 MODEL_KEYS = ("ramp_periods", "hold_periods", "window_periods", "steps_per_period")
 MODEL_DEFAULTS = {"ramp_periods": 25, "hold_periods": 35, "window_periods": 4, "steps_per_period": 48}
+
+
+# The sweeper's quantities (the file name's middle, `hertzchain.driven.sweeper_files`).
+AMPLITUDE_QUANTITY = "Signal Amplitude_0"
+QUANTITIES = {
+    "Signal Amplitude_0": "the lock-in R at the drive frequency, V RMS",
+    "Signal Phase_0": "the lock-in phase at the drive frequency, rad",
+    "Signal Amplitude_3": "the lock-in R at half the drive frequency: the f/2 subharmonic",
+    "Signal Phase_3": "the lock-in phase at half the drive frequency",
+    "ScopeMaxAmplitude": "the scope record's maximum",
+    "ScopePkToPk": "the scope record's peak-to-peak",
+    "IntegratedPSDPower": "the total power of the scope record's spectrum",
+    "DriveFreqPower": "the spectrum's power near the drive frequency",
+    "DriveFreqNormalizedPower": "the share of the spectrum's power near the drive frequency",
+}
 
 
 class DrivenExperimentError(ExperimentFileError):
@@ -104,14 +121,26 @@ class DrivenExperiment:
 
 
 def is_driven_experiment(path) -> bool:
-    """Whether `path` is a `.toml` experiment file with `kind = "driven"`."""
+    """Whether `path` is a `.toml` experiment file with `kind = "driven"`.
+
+    **Raises:** `DrivenExperimentError` for a file that is not UTF-8 text, or whose `kind` is not
+    a kind of experiment (the message suggests the closest); an impact experiment has no `kind`.
+    """
     path = Path(path)
     if path.suffix.lower() != ".toml" or not path.is_file():
         return False
     try:
-        return tomllib.loads(path.read_text()).get("kind") == KIND
+        kind = tomllib.loads(path.read_text(encoding="utf-8")).get("kind")
     except tomllib.TOMLDecodeError:
         return False
+    except UnicodeDecodeError:
+        _fail(path, "not UTF-8 text; an experiment file is TOML, saved as UTF-8.")
+    if kind is not None and kind != KIND:
+        close = difflib.get_close_matches(str(kind), [KIND], n=1, cutoff=0.5)
+        hint = f"did you mean kind = \"{close[0]}\"? " if close else ""
+        _fail(path, f"kind = {kind!r} is not a kind of experiment; {hint}a driven experiment says kind = "
+                    f"\"{KIND}\", an impact experiment (scope files of shots) has no kind key.")
+    return kind == KIND
 
 
 def _fail(where, message):
@@ -167,6 +196,29 @@ def _contacts(chain: dict, n: int, where: str) -> np.ndarray:
                              _number(chain, "wall_poisson", where))
     between = kappa_sphere_sphere(radius, youngs, poisson, radius, youngs, poisson)
     return np.array([float(face)] + [float(between)] * (n - 1) + [float(wall)])
+
+
+def _refuse_other_kinds(table: SweeperTable, where: str) -> None:
+    """Refuse a sweeper file that is not a bending sweep's amplitude: a bending sweep varies the
+    frequency (the row variable, swept fastest: `Frequency (Hz)`) at fixed drive amplitudes (the
+    columns, V) and records the lock-in R at the drive frequency (`Signal Amplitude_0`). A
+    period-doubling tongue varies the drive amplitude at fixed frequencies, beside a lock-in at f/2
+    (`Signal Amplitude_3`); its file, read as a bending sweep, holds no resonance to fit."""
+    if table.date and table.quantity.strip() != AMPLITUDE_QUANTITY:
+        what = QUANTITIES.get(table.quantity.strip(), "not the lock-in amplitude at the drive frequency")
+        _fail(where, f"{table.path.name}: the file holds {table.quantity.strip()!r} ({what}); amplitude_file "
+                     f"is the sweeper's {AMPLITUDE_QUANTITY!r} file (the lock-in R at the drive frequency).")
+    if table.row_unit != "Hz":
+        fixed = table.column_values[0] if table.column_values.size == 1 else None
+        at = (f"a fixed frequency of {fixed:g} Hz" if fixed is not None else
+              f"{table.column_values.size} fixed frequencies, {table.column_values.min():g} to "
+              f"{table.column_values.max():g} Hz") if table.column_unit == "Hz" else f"columns in {table.column_unit}"
+        subharmonic = [p.name for p in table.path.parent.glob(f"{table.run} Signal Amplitude_3*")] if table.run else []
+        beside = f" (beside it: {subharmonic[0]}, the lock-in at f/2 of a period-doubling run)" if subharmonic else ""
+        _fail(where, f"{table.path.name} sweeps the {table.row_name.lower() or 'row variable'} ({table.row_unit}) at "
+                     f"{at}{beside}: a drive-amplitude sweep such as a period-doubling tongue, not a bending sweep. "
+                     "amplitude_file must sweep the frequency at fixed drive amplitudes (its first line "
+                     "'Frequency (Hz)', then the drive voltages, e.g. 0.001V).")
 
 
 def load_driven_experiment(path, data_dir) -> DrivenExperiment:
@@ -228,10 +280,16 @@ def load_driven_experiment(path, data_dir) -> DrivenExperiment:
     if "amplitude_file" not in sweep:
         _fail(where, "missing key 'amplitude_file' (the sweeper's 'Signal Amplitude_0' text file, "
                      "relative to --data-dir).")
+    amplitude_file = data_dir / str(sweep["amplitude_file"])
     try:
-        table = read_sweeper_table(data_dir / str(sweep["amplitude_file"]))
+        table = read_sweeper_table(amplitude_file)
+        _refuse_other_kinds(table, where)
         measured = lockin_sweep(table, drive_m_per_v=drive_m_per_v, sensor_m_s_per_v=sensor_m_s_per_v)
     except SweeperFileError as error:
+        if amplitude_file.is_file() and not amplitude_file.resolve().is_relative_to(data_dir.resolve()):
+            # the reader's message may quote the file's lines: not of a file outside the folder named
+            _fail(where, f"amplitude_file {amplitude_file} is not a sweeper text file; it lies outside --data-dir "
+                         f"{data_dir}, so its content is not shown: check the path.")
         _fail(where, str(error))
     mask = np.ones(measured.frequencies_hz.size, bool)
     for band in sweep.get("exclude_hz", []):

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from hertzchain.atomic import json_ready, save_figure, write_csv, write_json
+from hertzchain.native import kernel_record
 
 from .driven import UNITS, DrivenFit, DrivenLayout, chain_at, nominal_modes_hz
 
@@ -133,7 +134,7 @@ def write_driven_report(result: DrivenFit, out_dir, *, data_dir, plots: bool = T
     out = Path(out_dir)
     e = result.experiment
     data = report_data(result, data_dir=data_dir)
-    write_json(out / "fit.json", json_ready(data))
+    write_json(out / "fit.json", json_ready({**data, "kernel": kernel_record()}))
     f = e.sweep.frequencies_hz
     measured = e.sweep.rms_velocity_m_s
     rows = [

@@ -39,10 +39,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from hertzchain.chain import ChainSetup
+from hertzchain import laws
+from hertzchain.chain import DEPRECATED_LAW_KEYWORDS, ChainSetup
 from hertzchain.compliant_sensor import CompliantSensors
 from hertzchain.integrate import Recording, solve
 from hertzchain.sensor import sensor_signal
+from hertzchain.units import format_measured
 
 from .model import ForwardModel, KernelForm
 from .parameters import REGISTRY, ParameterSpec, register_parameter
@@ -53,8 +55,6 @@ _SENSOR_EXACT_BELOW_HZ = 2e6
 _SENSOR_SWITCH_RATE = (SENSOR_REFERENCE_HZ / _SENSOR_EXACT_BELOW_HZ) ** 2
 # Yield stress used by `plasticity` when the header's beads never yield (the paper's 2 GPa).
 DEFAULT_YIELD_STRESS_PA = 2e9
-# The contact law of `plasticity` (`hertzchain.ChainSetup.plastic_law`).
-PLASTIC_LAW = "jackson_green"
 # A rigid nominal wall is represented as this many times stiffer than the beads.
 _RIGID_WALL_FACTOR = 1e3
 PREFIX = "dx_"
@@ -211,12 +211,15 @@ COVERED_BY = {
 
 
 def rebuild_setup(setup: ChainSetup, **changes) -> ChainSetup:
-    """A copy of `setup` with fields replaced, static ones (`plasticity`, `sensor_beads`) included.
+    """A copy of `setup` with fields replaced, static ones (`contact_law`'s type, `sensor_beads`)
+    included; `eta_s` and `dashpot_n_s_m` replace the coefficients of those laws.
 
     Works on traced setups (inside `jit`/`vmap`/`jacfwd`): the constructor's concrete checks
     skip traced values.
     """
     values = {f.name: getattr(setup, f.name) for f in dataclasses.fields(setup)}
+    if any(name in changes for name in DEPRECATED_LAW_KEYWORDS):  # the former spelling of contact_law
+        del values["contact_law"]
     values.update(changes)
     return ChainSetup(setup.n_beads, **values)
 
@@ -256,7 +259,7 @@ def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True,
                   power_law: bool = False) -> ChainSetup:
     """The setup with every effect strength of `extras` applied.
 
-    `plastic`: elastic-plastic contacts, `PLASTIC_LAW` (needed as soon as `yield_softening` > 0);
+    `plastic`: elastic-plastic contacts, `laws.JacksonGreen` (needed as soon as `yield_softening` > 0);
     `False` gives Hertz contacts, the same model where `yield_softening` is 0 (an infinite
     yield force) at a fraction of the cost. `power_law`: power-law contacts of exponent
     3/2 + `exponent_shift`, equal to Hertz at the overlap of `extras["reference_force_n"]`
@@ -276,6 +279,16 @@ def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True,
     softening = extras[p + "yield_softening"]
     yields = softening > 0
     sigma = jnp.where(yields, sigma0 / jnp.where(yields, softening, 1.0), jnp.inf)
+    if plastic and power_law:
+        raise ValueError("apply_effects: plastic and power_law contacts cannot be combined: the elastic-plastic "
+                         "law is built on Hertz contacts.")
+    if plastic:
+        contact_law = laws.JacksonGreen()
+    elif power_law:
+        reference = (extras["reference_force_n"] / setup.contact_kappa()[min(1, n - 1)]) ** (2 / 3)
+        contact_law = laws.PowerLaw(1.5 + extras[p + "exponent_shift"], reference)
+    else:
+        contact_law = laws.Hertz()
     return rebuild_setup(
         setup,
         bead_radius_m=radius,
@@ -287,12 +300,7 @@ def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True,
         wall_youngs_pa=wall,
         precompression_n=setup.precompression_n + extras[p + "preload_n"],
         bead_yield_stress_pa=sigma,
-        plasticity=plastic,
-        plastic_law=PLASTIC_LAW,
-        power_law=power_law,
-        contact_exponent=1.5 + extras[p + "exponent_shift"],
-        exponent_reference_overlap_m=(extras["reference_force_n"] / setup.contact_kappa()[min(1, n - 1)])
-        ** (2 / 3),
+        contact_law=contact_law,
     )
 
 
@@ -411,9 +419,33 @@ def nominal_yield_forces_n(setup: ChainSetup) -> np.ndarray:
     """Every contact's yield force under `plasticity` at yield_softening 1, N: striker-bead,
     bead-bead..., wall (the header's yield stress, else `DEFAULT_YIELD_STRESS_PA`)."""
     stress = float(setup.bead_yield_stress_pa)
-    nominal = rebuild_setup(setup, plastic_law=PLASTIC_LAW,
+    nominal = rebuild_setup(setup, contact_law=laws.JacksonGreen(),
                             bead_yield_stress_pa=stress if math.isfinite(stress) else DEFAULT_YIELD_STRESS_PA)
     return np.asarray(nominal.contact_yield_force_n(), dtype=float)
+
+
+def nominal_wall_youngs_pa(setup: ChainSetup) -> float:
+    """The wall's Young's modulus at wall_softening 0, Pa: the header's, a rigid wall's stand-in
+    (`_RIGID_WALL_FACTOR` times the last bead's) where the header has none."""
+    wall = float(setup.wall_youngs_pa)
+    return wall if math.isfinite(wall) else _RIGID_WALL_FACTOR * float(np.asarray(setup.bead_youngs_pa)[-1])
+
+
+def fitted_wall_youngs_pa(setup: ChainSetup, softening: float) -> float:
+    """The wall's Young's modulus, Pa, that `wall_softening` = `softening` gives the model of
+    `setup`: Y_w = Y_w,nominal e^-w (`nominal_wall_youngs_pa`)."""
+    return nominal_wall_youngs_pa(setup) * math.exp(-softening)
+
+
+def describe_wall(setup: ChainSetup, softening: float, softening_stderr: float) -> str:
+    """The fitted `wall_softening` in words: the wall's Young's modulus (GPa) with its standard
+    error (Y_w = Y_w,header e^-w, so sigma_Y = Y_w sigma_w), against the header's."""
+    nominal = nominal_wall_youngs_pa(setup)
+    wall = fitted_wall_youngs_pa(setup, softening)
+    header = (f"header {nominal / 1e9:.4g} GPa" if math.isfinite(float(setup.wall_youngs_pa))
+              else "header: rigid")
+    return (f" wall_compliance: wall Young's modulus {format_measured(wall, wall * softening_stderr, 'Pa')} "
+            f"({header}).")
 
 
 def describe_plasticity(setup: ChainSetup, softening: float, softening_stderr: float) -> str:

@@ -105,7 +105,13 @@ def make_problem(experiments, params=("eta", "mu", "C"), *, fixed=None,
                 raise ValueError(f"fixed: {name} is not a global setup parameter.")
             if name in names:
                 raise ValueError(f"{name} is both fitted and fixed; choose one.")
+            if not spec.in_bounds(float(value)):
+                raise ValueError(f"fixed {name} = {float(value):g} {spec.unit}".rstrip() + " is outside its range "
+                                 f"({spec.lower:g} to {spec.upper:g} {spec.unit}".rstrip() + f"); give {name} a value "
+                                 "in that range, in SI units or with a unit (e.g. 2us, 5GPa).")
             setup = spec.apply(setup, float(value))
+        if fixed:
+            setup.__check_init__()  # the setup's own checks of its values, which the updates above skip
         base.append(setup)
     if "C" in names:
         bare = [float(bare_speed_constant(s)) for s in base]

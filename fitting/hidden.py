@@ -28,11 +28,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from hertzchain import laws
 from hertzchain.chain import ChainSetup
 from hertzchain.theory import wave_amplitude_n
 from hertzchain.tracefile import TraceFile, setup_header
 
-from .effects import EFFECT_NAMES, PLASTIC_LAW
+from .effects import EFFECT_NAMES
 from .parameters import bare_speed_constant
 from .synthetic import sampled_clean
 
@@ -79,10 +80,9 @@ def truth_fields(nominal: ChainSetup, hidden: dict, rng: np.random.Generator) ->
         elif name == "precompression":
             changes["precompression_n"] = value
         elif name == "contact_exponent":
-            changes["contact_exponent"], changes["exponent_reference_overlap_m"] = value
+            changes["contact_law"] = laws.PowerLaw(*value)
         elif name == "plasticity":
-            changes["plasticity"] = True
-            changes["plastic_law"] = PLASTIC_LAW
+            changes["contact_law"] = laws.JacksonGreen()
             changes["bead_yield_stress_pa"] = value
         elif name == "sensor_dynamics":
             changes["sensor_beta"], changes["sensor_f0_hz"] = value

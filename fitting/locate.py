@@ -3,7 +3,10 @@ amplitude (file) and frequency band.
 
 Every cell reports its number of samples n, $\\chi^2$ (sum of squared whitened residuals),
 $\\chi^2/n$ (1 for a model that explains the data to the noise level), and the excess in
-noise units, $(\\chi^2 - n)/\\sqrt{2n}$ (about N(0, 1) when the residual is white noise).
+noise units, $(\\chi^2 - n)/\\sqrt{2n}$ (about N(0, 1) when the residual is white noise);
+where a channel's noise level was estimated from $m$ samples (`noise_estimate_samples`),
+its $n$ samples' $\\chi^2$ scale by that estimate's error, of relative variance $2/(m-1)$,
+and $2n^2/(m-1)$ joins the variance: $(\\chi^2 - n)/\\sqrt{2n + \\sum 2n^2/(m-1)}$.
 
 Time windows are defined from the model's own prediction of each channel: with $A$ the
 main pulse's peak and $w$ its half-maximum width,
@@ -30,8 +33,21 @@ WINDOWS = ("before", "leading_edge", "peak", "trailing_edge", "after")
 FREQUENCY_BANDS_HZ = ((0.0, 5e3), (5e3, 20e3), (20e3, 60e3), (60e3, 200e3), (200e3, math.inf))
 
 
-def cell(residuals) -> dict:
-    """n, chi2, chi2_per_sample and excess_sigma of a set of whitened residuals."""
+def noise_estimate_samples(experiment, channel: str) -> int:
+    """The number of samples a channel's noise level was estimated from (the importer's
+    pre-trigger segment, `x_import_<channel>_noise_samples`); 0 where the file states it."""
+    return int(experiment.trace.header.get(f"x_import_{channel}_noise_samples", 0) or 0)
+
+
+def estimate_variance(n: int, samples: int) -> float:
+    """The variance a noise level estimated from `samples` samples adds to the chi^2 of `n`
+    residuals it whitens: 2 n^2 / (samples - 1) (0 for a stated noise level)."""
+    return 2.0 * n**2 / (samples - 1) if samples > 1 else 0.0
+
+
+def cell(residuals, noise_estimate_variance: float = 0.0) -> dict:
+    """n, chi2, chi2_per_sample and excess_sigma of a set of whitened residuals;
+    `noise_estimate_variance`: what the noise levels' estimates add to chi^2's variance."""
     r = np.asarray(residuals, dtype=float)
     n = int(r.size)
     chi2 = float(r @ r)
@@ -39,7 +55,7 @@ def cell(residuals) -> dict:
         "n": n,
         "chi2": chi2,
         "chi2_per_sample": chi2 / n if n else math.nan,
-        "excess_sigma": (chi2 - n) / math.sqrt(2 * n) if n else 0.0,
+        "excess_sigma": (chi2 - n) / math.sqrt(2 * n + noise_estimate_variance) if n else 0.0,
     }
 
 
@@ -112,6 +128,7 @@ def locate(problem, x, residuals, predictions=None) -> dict:
         predictions = problem.predictions(np.asarray(x))
     pooled: dict = {}
     pooled_windows: dict = {}
+    window_variance: dict = {}  # channel -> window -> what the noise estimates add
     by_file = []
     band_sum: dict = {}
     band_count: dict = {}
@@ -126,8 +143,11 @@ def locate(problem, x, residuals, predictions=None) -> dict:
             amplitude = max(amplitude, float(np.max(experiment.data(name))))
             pooled.setdefault(name, []).append(res)
             masks = window_masks(predicted[name])
+            samples = noise_estimate_samples(experiment, name)
             for window, mask in masks.items():
                 pooled_windows.setdefault(name, {}).setdefault(window, []).append(res[mask])
+                window_variance.setdefault(name, {}).setdefault(window, 0.0)
+                window_variance[name][window] += estimate_variance(int(np.sum(mask)), samples)
             bands = band_power(res, experiment.trace.sample_interval_s)
             for band, value in bands.items():
                 band_sum.setdefault(name, {}).setdefault(band, 0.0)
@@ -139,7 +159,7 @@ def locate(problem, x, residuals, predictions=None) -> dict:
     by_file.sort(key=lambda item: item["amplitude_n"])
     by_channel = {name: cell(np.concatenate(parts)) for name, parts in pooled.items()}
     by_window = {
-        name: {w: cell(np.concatenate(parts)) for w, parts in windows.items()}
+        name: {w: cell(np.concatenate(parts), window_variance[name][w]) for w, parts in windows.items()}
         for name, windows in pooled_windows.items()
     }
     by_frequency = {

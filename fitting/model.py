@@ -51,8 +51,9 @@ from hertzchain.batched import contact_law, kernel_flags, record_batched
 from hertzchain.chain import ChainSetup
 from hertzchain.compliant_sensor import CompliantSensors
 from hertzchain.integrate import Recording, solve, stack_setups
+from hertzchain.precision import require_float64
 from hertzchain.theory import discrete_fwhm_s, discrete_velocity_constant
-from hertzchain.timegrid import TimeGrid, choose_time_grid, shortest_contact_time_s
+from hertzchain.timegrid import MIN_STEPS_PER_CONTACT, TimeGrid, choose_time_grid, shortest_contact_time_s
 
 from .data import Experiment
 from .parameters import ParameterInstance
@@ -157,6 +158,14 @@ class ForwardModel:
     extras_defaults: dict = dataclasses.field(default_factory=dict)
     kernel: KernelForm | None = None
 
+    def __post_init__(self):
+        if isinstance(self.steps_per_contact, bool) or not isinstance(self.steps_per_contact, (int, np.integer)) or \
+                self.steps_per_contact < MIN_STEPS_PER_CONTACT:
+            raise ValueError(
+                f"steps_per_contact = {self.steps_per_contact!r}: the Verlet solver needs an integer of at least "
+                f"{MIN_STEPS_PER_CONTACT} steps per shortest contact time (default {STEPS_PER_CONTACT}); "
+                f"give --steps-per-contact {STEPS_PER_CONTACT} or leave it out.")
+
 
 @dataclasses.dataclass(frozen=True)
 class _Group:
@@ -223,6 +232,7 @@ class Problem:
     """
 
     def __init__(self, experiments, instances, base_setups, forward: ForwardModel, priors=()):
+        require_float64("the fit's Problem")
         self.experiments: list[Experiment] = list(experiments)
         self.instances: tuple[ParameterInstance, ...] = tuple(instances)
         self.base_setups: list[ChainSetup] = list(base_setups)

@@ -24,10 +24,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hertzchain.atomic import atomic_path, save_figure, write_csv, write_json, write_text  # noqa: E402
+from hertzchain.atomic import atomic_path, file_stem, save_figure, write_csv, write_json, write_text  # noqa: E402
 
 from .posterior import PosteriorResult, posterior_predictive  # noqa: E402
-from .report import _safe  # noqa: E402
 
 # pairs and traces show the global parameters (per-file nuisances would make a wall of panels)
 _MAX_PLOTTED = 8
@@ -36,7 +35,7 @@ _MAX_PLOTTED = 8
 def _inference_data(result: PosteriorResult):
     import arviz as az
 
-    names = {label: _safe(label) for label in result.labels}
+    names = {label: file_stem(label) for label in result.labels}
     posterior = {names[label]: result.draws[..., i] for i, label in enumerate(result.labels)}
     stats = {
         "diverging": result.sample_stats["diverging"].astype(bool),
@@ -185,7 +184,7 @@ def write_posterior_report(result: PosteriorResult, out_dir, *, plots: bool = Tr
         figures = [("posterior_pairs.png", plot_pairs(result)), ("posterior_trace.png", plot_trace(result))]
         for e, bands in enumerate(posterior_predictive(result)):
             label = result.problem.experiments[e].label
-            figures.append((f"posterior_predictive_{_safe(label)}.png", plot_predictive(result, e, bands)))
+            figures.append((f"posterior_predictive_{file_stem(label)}.png", plot_predictive(result, e, bands)))
         for name, figure in figures:
             save_figure(figure, out / name)
             plt.close(figure)

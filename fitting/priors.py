@@ -7,6 +7,11 @@ A prior is written `name=VALUE`, with the parameter's unit and SI prefixes:
   header's, or the parameter's default such as gain 1), absolute or relative width;
 - `eta=0..10us`: uniform on an interval (it narrows the parameter's bounds).
 
+Units: a width or bound written without a unit takes the unit written on the value beside
+it (`203GPa+-4` is 4 GPa, `0..10us` 0 to 10 us); where nothing beside it carries a unit, a
+bare number is SI (`203e9+-4e9`), except a width with no centre (`+-4`) of a parameter that
+has a unit: that is refused, the width must carry its unit (`+-4GPa`) or be relative (`+-2%`).
+
 `name` is a registry name (every instance of it: each file's striker velocity, each
 sensor's gain) or one instance's label (`striker_velocity[run1]`, `sensor_gain[wall]`).
 A parameter with a prior is free: a tolerance is a statement that the value is not known
@@ -32,6 +37,8 @@ from hertzchain.units import parse_quantity
 from .parameters import ParameterInstance, get_spec
 
 _UNIFORM = re.compile(r"^(.+?)\.\.(.+)$")
+# The prefix of the unit a lab writes tolerances in, for the examples of error messages.
+_EXAMPLE_PREFIX = {"Pa": "G", "s": "u", "m": "u", "N": "", "m/s": ""}
 
 
 class PriorError(ValueError):
@@ -81,6 +88,17 @@ def _value(text: str, unit: str, where: str) -> float:
     return parse_quantity(text.strip(), unit, name=where)
 
 
+def _written_unit(text: str) -> str:
+    """The unit written after the number in `text` ("GPa" of "203GPa"; "" for a bare number)."""
+    match = re.match(r"^\s*[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*(.*?)\s*$", text)
+    return match.group(1) if match else ""
+
+
+def _with_unit_of(text: str, other: str) -> str:
+    """`text` with the unit written on `other` when `text` is a bare number (see the module docstring)."""
+    return text + _written_unit(other) if text and not _written_unit(text) else text
+
+
 def parse_prior(text: str) -> Prior:
     """Read `name=203GPa+-4GPa`, `name=+-2%`, `name=1+-0.02` or `name=0..10us`."""
     if "=" not in text:
@@ -94,7 +112,9 @@ def parse_prior(text: str) -> Prior:
     where = f"prior {key}"
     uniform = _UNIFORM.match(value)
     if uniform:
-        low, high = (_value(v, unit, where) for v in uniform.groups())
+        low_text, high_text = (v.strip() for v in uniform.groups())
+        low = _value(_with_unit_of(low_text, high_text), unit, where)
+        high = _value(_with_unit_of(high_text, low_text), unit, where)
         if not low < high:
             raise PriorError(f"{where}: the interval {value!r} needs LOW < HIGH.")
         return Prior(key, "uniform", low=low, high=high, text=text)
@@ -110,6 +130,11 @@ def parse_prior(text: str) -> Prior:
         if not relative > 0:
             raise PriorError(f"{where}: the width {width_text!r} must be positive.")
         return Prior(key, "normal", centre=centre, relative_sd=relative, text=text)
+    if centre_text:
+        width_text = _with_unit_of(width_text, centre_text)
+    elif unit and not _written_unit(width_text):
+        raise PriorError(f"{where}: the width {width_text!r} has no unit; write it with the unit of {key} "
+                         f"(e.g. +-{width_text}{_EXAMPLE_PREFIX.get(unit, '')}{unit}) or relative (+-2%).")
     sd = _value(width_text, unit, where)
     if not sd > 0:
         raise PriorError(f"{where}: the width {width_text!r} must be positive.")

@@ -7,9 +7,10 @@
 - `correlation.csv`: the correlation matrix (and `correlation.png` with `per_trace=True`).
 - `rms.csv`: residual RMS per file and channel (N and in units of the noise sigma).
 - `starts.csv`: every start of the multistart batch: chi^2, converged, steps, values.
-- `residuals_<file>.csv`: time, data, model and residual of every channel.
+- `residuals_<file>.csv`: time (s), data, model and residual (N) of every channel.
 - `fit_summary.png`: every file's channels, data and fitted model, and the whitened residuals
-  (one figure, drawn from at most `SUMMARY_POINTS` points per curve: about a second).
+  (one figure, drawn from at most `SUMMARY_POINTS` points per curve: about a second), with
+  the fitted values and their standard errors (`fitted_lines`) beneath.
 - with `per_trace=True`: `overlay_<file>.png` (fitted model over the data) and
   `residuals_<file>.png` at full resolution (about 1.5 s per file), and `correlation.png`.
 - `profile_<parameter>.png` and `profile_<parameter>.csv` for each profile.
@@ -18,7 +19,6 @@
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
 
 import matplotlib
@@ -27,14 +27,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hertzchain.atomic import save_figure, write_csv, write_json  # noqa: E402
+from hertzchain.atomic import file_stem, save_figure, write_csv, write_json  # noqa: E402
+from hertzchain.units import column_name, display_unit, format_measured  # noqa: E402
+from hertzchain.native import kernel_record  # noqa: E402
 
 # Points per curve of the summary figure (min-max thinned, so peaks stay).
 SUMMARY_POINTS = 1500
-
-
-def _safe(name: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_")
 
 
 def _cell(value) -> str:
@@ -60,7 +58,7 @@ def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False
         write_csv(out / name, header, ([_cell(v) for v in row] for row in rows))
         written.append(out / name)
 
-    write_json(out / "fit.json", result.to_json())
+    write_json(out / "fit.json", {**result.to_json(), "kernel": kernel_record()})
     written.append(out / "fit.json")
     table(
         "params.csv",
@@ -109,15 +107,15 @@ def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False
         for channel in experiment.channels:
             data = experiment.data(channel)
             columns += [data, predicted[channel], data - predicted[channel]]
-            header += [f"data_{channel}", f"model_{channel}", f"residual_{channel}"]
-        path = out / f"residuals_{_safe(experiment.label)}.csv"
+            header += [f"data_{channel}_n", f"model_{channel}_n", f"residual_{channel}_n"]
+        path = out / f"residuals_{file_stem(experiment.label)}.csv"
         line = ",".join(["%.9g"] * len(columns))
         write_csv(path, header, ((line % tuple(row)).split(",") for row in np.column_stack(columns).tolist()))
         written.append(path)
     for label, profile in result.profiles.items():
         table(
-            f"profile_{_safe(label)}.csv",
-            [f"{label}", "delta_chi2", "converged"],
+            f"profile_{file_stem(label)}.csv",
+            [column_name(label, result.units[label]), "delta_chi2", "converged"],
             zip(profile["values"], profile["delta_chi2"], profile["converged"]),
         )
     if plots:
@@ -147,7 +145,11 @@ def _summary_figure(result, predictions, out: Path) -> Path:
     """One figure of the whole fit: per file, data and model of every channel (left) and the
     residuals in units of each channel's sigma (right)."""
     experiments = result.problem.experiments
-    figure, axes = plt.subplots(len(experiments), 2, figsize=(11, 1.6 * len(experiments) + 0.8),
+    values = fitted_lines(result)
+    columns = 3
+    text_rows = -(-len(values) // columns)
+    text_height = 0.16 * text_rows + 0.1
+    figure, axes = plt.subplots(len(experiments), 2, figsize=(11, 1.6 * len(experiments) + 0.8 + text_height),
                                 sharex=True, squeeze=False)
     for row, (experiment, predicted) in enumerate(zip(experiments, predictions)):
         time_us = experiment.time_s * 1e6
@@ -162,14 +164,18 @@ def _summary_figure(result, predictions, out: Path) -> Path:
         axes[row, 0].set_ylabel(f"{experiment.label}\nforce (N)", fontsize=7)
         axes[row, 0].legend(fontsize=6, loc="upper right")
         axes[row, 1].axhspan(-2, 2, color="0.8", alpha=0.5)
-        axes[row, 1].set_ylabel("residual (sigma)", fontsize=7)
-    axes[-1, 0].set_xlabel("time after impact (us)")
-    axes[-1, 1].set_xlabel("time after impact (us)")
-    figure.suptitle(f"fit: chi^2/dof = {result.reduced_chi2:.4g}; data (dots) and model (lines); "
-                    "residuals with the +-2 sigma band", fontsize=9)
+        axes[row, 1].set_ylabel("residual (σ)", fontsize=7)
+    axes[-1, 0].set_xlabel("time after impact (µs)")
+    axes[-1, 1].set_xlabel("time after impact (µs)")
+    figure.suptitle(f"fit: χ²/dof = {result.reduced_chi2:.4g}; data (dots) and model (lines); "
+                    "residuals with the ±2σ band", fontsize=9)
+    height = figure.get_figheight()
+    for k, line in enumerate(values):
+        figure.text(0.02 + (k % columns) / columns, (text_height - 0.05 - 0.16 * (k // columns)) / height,
+                    line.strip(), fontsize=7, va="top", family="monospace")
     # fixed margins: `tight_layout` would draw the 2 x files panels once more only to measure them
-    figure.subplots_adjust(left=0.08, right=0.99, bottom=0.45 / figure.get_figheight(),
-                           top=1.0 - 0.6 / figure.get_figheight(), wspace=0.18, hspace=0.12)
+    figure.subplots_adjust(left=0.08, right=0.99, bottom=(0.45 + text_height) / height,
+                           top=1.0 - 0.6 / height, wspace=0.18, hspace=0.12)
     path = out / "fit_summary.png"
     save_figure(figure, path, dpi=100)
     plt.close(figure)
@@ -183,7 +189,7 @@ def _correlation_figure(result, out: Path) -> Path:
     image = ax.imshow(np.asarray(result.correlation, dtype=float), vmin=-1, vmax=1, cmap="RdBu_r")
     ax.set_xticks(range(p), result.labels, rotation=90, fontsize=7)
     ax.set_yticks(range(p), result.labels, fontsize=7)
-    figure.colorbar(image, ax=ax, label="correlation (1)")
+    figure.colorbar(image, ax=ax, label="correlation (dimensionless)")
     ax.set_title("parameter correlation")
     figure.tight_layout()
     path = out / "correlation.png"
@@ -208,15 +214,15 @@ def _plots(result, predictions, out: Path, per_trace: bool) -> list[Path]:
                 else:
                     sigma = experiment.noise_std_n[channel]
                     ax.plot(time_us, data - predicted[channel], "-", lw=0.6, color="C0")
-                    ax.axhspan(-2 * sigma, 2 * sigma, color="C2", alpha=0.15, label="+-2 sigma noise")
+                    ax.axhspan(-2 * sigma, 2 * sigma, color="C2", alpha=0.15, label="±2σ noise")
                     rms = result.residual_rms[experiment.label][channel]
                     ax.set_ylabel(f"{channel}\nresidual (N)")
-                    ax.set_title(f"RMS {rms:.3g} N ({rms / sigma:.2f} sigma)", fontsize=8, loc="right")
+                    ax.set_title(f"RMS {rms:.3g} N ({rms / sigma:.2f} σ)", fontsize=8, loc="right")
                 ax.legend(fontsize=7, loc="upper right")
-            axes[-1, 0].set_xlabel("time after impact (us)")
+            axes[-1, 0].set_xlabel("time after impact (µs)")
             figure.suptitle(f"{experiment.label}: {'fit' if kind == 'overlay' else 'residuals'}")
             figure.tight_layout()
-            path = out / f"{kind}_{_safe(experiment.label)}.png"
+            path = out / f"{kind}_{file_stem(experiment.label)}.png"
             save_figure(figure, path, dpi=110)
             plt.close(figure)
             written.append(path)
@@ -230,11 +236,11 @@ def _plots(result, predictions, out: Path, per_trace: bool) -> list[Path]:
         for level, name in ((1.0, "68 %"), (3.84, "95 %")):
             ax.axhline(level, ls="--", lw=0.8, color="0.4")
             ax.text(profile["values"][0], level, name, fontsize=7, va="bottom")
-        ax.set_xlabel(f"{label} ({scale or '1'})")
-        ax.set_ylabel("delta chi^2 / s^2 (1)")
+        ax.set_xlabel(f"{label} ({display_unit(scale)})")
+        ax.set_ylabel("Δχ² / s² (dimensionless)")
         ax.set_title(f"profile likelihood of {label}")
         figure.tight_layout()
-        path = out / f"profile_{_safe(label)}.png"
+        path = out / f"profile_{file_stem(label)}.png"
         save_figure(figure, path, dpi=110)
         plt.close(figure)
         written.append(path)
@@ -246,19 +252,33 @@ def result_variance(result) -> float:
     return 1.0 if result.covariance_scale == "noise" else result.reduced_chi2
 
 
+def _why_undetermined(result, label) -> str:
+    return ("the data do not determine it" if math.isinf(result.stderr[label])
+            else "the covariance is not finite at this optimum")
+
+
+def fitted_lines(result) -> list[str]:
+    """One line per fitted value, `name = value ± σ unit` to the digits σ allows (human units:
+    GPa, µs, MPa), then the speed constant C of the fitted chain where C is not fitted itself."""
+    lines = [
+        f"  {label} = " + format_measured(result.values[label], result.stderr[label], result.units[label],
+                                          why=_why_undetermined(result, label))
+        for label in result.labels
+    ]
+    c = result.speed_constant
+    if "C" not in result.labels:
+        lines.append(f"  C (discrete solitary wave) = {format_measured(c['C'], c['C_stderr'], 'm/s N^-1/6')}")
+    return lines
+
+
 def summary_text(result) -> str:
     """A short plain-text table of the fitted values (for the terminal)."""
     lines = [f"fit {'converged' if result.converged else 'did NOT converge'} in {result.n_steps} "
-             f"iterations; chi^2/dof = {result.reduced_chi2:.4g} (covariance: {result.covariance_scale})"]
-    for label in result.labels:
-        value, error = result.values[label], result.stderr[label]
-        unit = result.units[label]
-        lines.append(f"  {label:32s} = {value:.6g} +- {error:.3g} {unit}")
+             f"iterations; χ²/dof = {result.reduced_chi2:.4g} (covariance: {result.covariance_scale})"]
+    lines += fitted_lines(result)
     c = result.speed_constant
-    lines.append(
-        f"  C (discrete solitary wave)       = {c['C']:.6g} +- {c['C_stderr']:.3g} m/s N^-1/6; "
-        f"continuum C_t (1+mu*)^(1/3) = {c['C_continuum']:.6g}; mu* = {c['mu_star']:.4g}"
-    )
+    lines.append(f"  continuum C_t (1+mu*)^(1/3) = {c['C_continuum']:.4g} {display_unit('m/s N^-1/6')}; "
+                 f"mu* = {c['mu_star']:.4g}")
     for text in result.warnings:
         lines.append(f"  warning: {text}")
     return "\n".join(lines)

@@ -27,9 +27,10 @@ It covers everything `ChainSetup` describes: Hertz, power-law and elastic-plasti
 (Thornton's and Jackson-Green's laws, each contact's largest overlap carried in the state),
 embedded sensors (split beads; and, in `record_batched` without the books, in compliance
 form: `hertzchain.compliant_sensor`), rigid/elastic walls and free ends, preload,
-Kuwabara-Kono damping, linear dashpots and track friction; the laws are `forces.elastic_parts` and `contact`'s, the
-general solver's. On the CPU, `solve_batched` runs the same step in a fused C++ kernel
-instead where one covers the physics (`hertzchain.native`, Hertz contacts:
+Kuwabara-Kono damping, linear dashpots, any other dissipation law and track friction; the
+laws are the setup's `hertzchain.laws` objects, the general solver's. On the CPU,
+`solve_batched` runs the same step in a fused C++ kernel instead where one covers the
+physics and has every law (`hertzchain.native`, `laws.registry`; Hertz contacts:
 blocks of chains kept in cache through all their steps; agrees with this module's kernel to
 round-off): the conservative kernel (with or without the books), or the full one for damped
 and frictional chains without the books; `kernel="jax"` keeps this one. `record_batched`
@@ -41,6 +42,7 @@ Parameters that are the same in every chain are passed as one column (`share_uni
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import NamedTuple
 
@@ -50,7 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
-from . import compliant_sensor, contact, forces, native
+from . import compliant_sensor, contact, forces, laws, native
 from .chain import PLASTIC_LAWS, ChainSetup, build_model, internal_contact_index, internal_sensor_index
 from .integrate import Recording, _channel_names, _layout, stack_setups  # noqa: F401
 from .timegrid import TimeGrid
@@ -76,6 +78,8 @@ class BatchedTraces(eqx.Module):
     - `dissipated_j`: (B,) energy dissipated since the impact, J.
     - `energy_error_j`: (B,) initial energy minus final energy minus dissipated energy: the
       integrator's own error, J.
+    - `kernel`: which kernel ran: "jax", or the fused one's physics and backend, e.g.
+      "native full (host)".
     """
 
     time_s: jax.Array
@@ -87,10 +91,13 @@ class BatchedTraces(eqx.Module):
     dissipated_j: jax.Array
     energy_error_j: jax.Array
     channel_names: tuple[str, ...] = eqx.field(static=True, default=())
+    kernel: str = eqx.field(static=True, default="jax")
 
 
-# `forces.ElasticLaw` fields with a value per contact (rows of the kernel's contact arrays);
+# `laws.ContactConstants` fields beyond the stiffness that the kernel arrays hold for laws with
+# a history, and those of them with a value per contact (rows of the kernel's contact arrays);
 # the others have one per chain.
+_CONSTANTS = ("yield_force_n", "reduced_radius_m", "poisson", "yield_stress_pa")
 _PER_CONTACT = ("yield_force_n", "reduced_radius_m", "poisson")
 
 
@@ -113,7 +120,7 @@ class KernelFlags(NamedTuple):
     # conservative chain (laws other than Hertz's, `native.kernel_for`), whose books come in
     # and out in that layout. The JAX kernel keeps the conservative one for those chains: in
     # the full one an undamped Jackson-Green sweep took 18.2 s against 3.9 s
-    # (`benchmarks/results/plastic_kernel/jackson_green_kernel.json`, `jax_full_state`).
+    # (`benchmarks/results/law_kernel/jackson_green/latest.json`, `jax_full_state`).
     full_step: bool = False
     # Beads K (1..N-1) with an embedded sensor in compliance form (`compliant_sensor`; their
     # strengths are `record_batched`'s `compliant_sensors`): the full step only, without the
@@ -153,10 +160,8 @@ def build_model_contacts(setup: ChainSetup) -> range:
 
 
 def contact_law(setup: ChainSetup) -> str:
-    """The law of a setup's contacts, `KernelFlags.law` (its static fields only)."""
-    if setup.plasticity:
-        return setup.plastic_law
-    return "power_law" if setup.power_law else "hertz"
+    """The name of a setup's contact law, `KernelFlags.law` (`laws.registry`)."""
+    return laws.registry.native_name(setup.contact_law)
 
 
 def kernel_flags(setup: ChainSetup, *, switched_on=()) -> KernelFlags:
@@ -171,8 +176,9 @@ def kernel_flags(setup: ChainSetup, *, switched_on=()) -> KernelFlags:
                          "preload.")
     friction = np.asarray(setup.mu) * np.asarray(setup.gravity_m_s2)
     dashpot = "dashpot" in on or bool(np.any(np.asarray(setup.dashpot_n_s_m) != 0.0))
+    others = len(setup.dissipation) > 2  # laws beyond Kuwabara-Kono's and the dashpot: rates needed
     return KernelFlags(
-        viscous=dashpot or "viscous" in on or bool(np.any(np.asarray(setup.eta_s) != 0.0)),
+        viscous=dashpot or others or "viscous" in on or bool(np.any(np.asarray(setup.eta_s) != 0.0)),
         springs=bool(setup.sensor_beads),
         preload="preload" in on or bool(np.any(np.asarray(setup.precompression_n) != 0.0)),
         friction="friction" in on or bool(np.any(friction != 0.0)),
@@ -228,21 +234,26 @@ def _chain_params(setup: ChainSetup) -> dict:
     """Arrays the kernel needs for one chain (vmapped over the batch), in the kernel's
     layout: n_bodies + 1 rows for bodies (the last one is the wall, at rest, or nothing for
     a free end) and n_bodies rows for contacts (the last one is the wall contact, of zero
-    stiffness for a free end); the arrays of the setup's contact law (`_law`) and dashpot."""
-    law = contact_law(setup)
-    model = build_model(setup) if setup.sensor_beads or law != "hertz" else _vector_model(setup)
+    stiffness for a free end); the arrays of the setup's contact law (its fields and, with a
+    history, its constants, each under its own name: `_law`), Kuwabara-Kono's time and the
+    dashpot, and the other dissipation laws ("dissipation", `_dissipation`)."""
+    hertz = isinstance(setup.contact_law, laws.Hertz)
+    model = build_model(setup) if setup.sensor_beads or not hertz else _vector_model(setup)
     external = jnp.zeros_like(model.mass_kg).at[1].add(model.first_bead_force_n)
     external = external.at[-1].add(model.last_body_force_n)
-    shape = forces.elastic_law(model)._asdict() if law != "hertz" else {}
-    laws = {field: value for field, value in shape.items() if value is not None}  # `_law` reads them
-    return laws | {
-        "dashpot": model.dashpot_n_s_m,
+    law = {field.name: getattr(setup.contact_law, field.name) for field in dataclasses.fields(setup.contact_law)}
+    if setup.contact_law.has_history:
+        constants = forces.contact_constants(model)
+        law |= {name: getattr(constants, name) for name in _CONSTANTS}
+    others = {"dissipation": setup.dissipation[2:]} if len(setup.dissipation) > 2 else {}
+    return law | others | {
+        "dashpot": setup.dashpot_n_s_m,
         "mass": model.mass_kg,
         "inv_mass": jnp.concatenate([1.0 / model.mass_kg, jnp.zeros(1)]),
         "kappa": jnp.concatenate([model.kappa, model.wall_kappa[None]]),
         "spring": jnp.concatenate([model.spring_n_m, jnp.zeros(1)]),
         "overlap0": jnp.concatenate([model.overlap0_m, model.wall_overlap0_m[None]]),
-        "eta": model.eta_s,
+        "eta": setup.eta_s,
         "friction": model.friction_decel_m_s2,
         "external": jnp.concatenate([external, jnp.zeros(1)]),
         "first_force": model.first_bead_force_n,
@@ -257,13 +268,22 @@ def _chain_params(setup: ChainSetup) -> dict:
 # k: one elementwise expression of row slices. Contact forces have n_bodies rows.
 
 
-def _law(p, flags: KernelFlags, rows=lambda a: a) -> forces.ElasticLaw:
-    """The contacts' `forces.ElasticLaw` from the kernel arrays (of the rows `rows` picks):
-    the fields `_chain_params` stored under their own names (none for Hertz contacts)."""
-    if flags.law == "hertz":
-        return forces.ElasticLaw()
-    return forces.ElasticLaw(**{field: rows(p[field]) if field in _PER_CONTACT else p[field]
-                                for field in forces.ElasticLaw._fields if field in p})
+def _law(p, flags: KernelFlags, rows=lambda a: a):
+    """The contact law (`flags.law`'s class, `laws.registry`) and its `laws.ContactConstants`
+    (of the contacts `rows` picks) from the kernel arrays `_chain_params` stored."""
+    kind = laws.registry.contact_law_named(flags.law)
+    law = kind(**{field.name: p[field.name] for field in dataclasses.fields(kind)})
+    constants = {name: rows(p[name]) if name in _PER_CONTACT else p[name] for name in _CONSTANTS if name in p}
+    return law, laws.ContactConstants(rows(p["kappa"]), **constants)
+
+
+def _dissipation(p, flags: KernelFlags) -> tuple:
+    """The dissipation laws the kernel compiles in: Kuwabara-Kono's (with `flags.viscous`),
+    the dashpot (with `flags.dashpot`) and every other law of the setup."""
+    if not flags.viscous:
+        return ()
+    return ((laws.Viscoelastic(p["eta"]),) + ((laws.Dashpot(p["dashpot"]),) if flags.dashpot else ())
+            + tuple(p.get("dissipation", ())))
 
 
 def _shortened(p, flags: KernelFlags, amount, values):
@@ -312,15 +332,9 @@ def _forces_at(p, flags: KernelFlags, overlap, rate, rows=lambda a: a, peak=None
     """Total and elastic contact forces, N, at the given overlaps (m), overlap rates (m/s;
     None without damping) and, for plastic laws, largest overlaps so far (m), of the
     contacts that `rows` picks from the parameters."""
-    if flags.law == "hertz":
-        elastic = contact.hertz_force(overlap, rows(p["kappa"]))
-    else:
-        elastic = forces.elastic_parts(_law(p, flags, rows), overlap, peak, rows(p["kappa"]))[0]
-    if flags.viscous:
-        dashpot = p["dashpot"] if flags.dashpot else 0.0
-        elastic, total = contact.contact_force(overlap, rate, rows(p["kappa"]), p["eta"], elastic, dashpot)
-    else:
-        total = elastic
+    law, constants = _law(p, flags, rows)
+    elastic = law.force(overlap, peak, constants)
+    total = laws.total_force(elastic, overlap, rate, constants.kappa_n_m1p5, _dissipation(p, flags))
     if flags.springs:
         spring = contact.spring_force(overlap, rows(p["spring"]))
         elastic, total = elastic + spring, total + spring
@@ -351,7 +365,8 @@ def _energy(p, flags: KernelFlags, x, v, peak=None):
     n = p["mass"].shape[0]
     kinetic = 0.5 * jnp.sum(p["mass"] * v[:n] ** 2, axis=0)
     overlap = _overlaps(p, flags, x)
-    _, elastic, plastic = forces.elastic_parts(_law(p, flags), overlap, peak, p["kappa"])
+    law, constants = _law(p, flags)
+    _, elastic, plastic = law.parts(overlap, peak, constants)
     potential = jnp.sum(elastic, axis=0)
     if flags.springs:
         potential = potential + jnp.sum(contact.spring_potential(overlap, p["spring"]), axis=0)
@@ -450,8 +465,7 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
         work = work + jnp.sum(viscous * h * 0.5 * (v_half + v), axis=0)
         # Chains without damping in a damped batch dissipate nothing, exactly (total - elastic
         # can be an ulp off zero when XLA contracts the force law into fused multiply-adds).
-        damped = (p["eta"] != 0.0) | (p["dashpot"] != 0.0) if flags.dashpot else p["eta"] != 0.0
-        work = jnp.where(damped, work, 0.0)
+        work = jnp.where(laws.is_damped(_dissipation(p, flags)), work, 0.0)
         new["viscous"] = viscous
     if flags.friction:
         new["v"], lost_end = _friction_kick(p, flags, v, h)
@@ -694,6 +708,7 @@ def share_uniform(params: dict) -> dict:
     if params["v0"].shape[-1] == 1:
         return params
     names = sorted(params)
+    names = [name for name in names if isinstance(params[name], jax.Array)]  # (other laws stay per chain)
     uniform = np.asarray(_uniform_columns([params[name] for name in names]))  # one transfer
     shared = {name for name, same in zip(names, uniform) if same and name != "v0"}
     return {name: leaf[..., :1] if name in shared else leaf for name, leaf in params.items()}
@@ -720,6 +735,7 @@ def _assemble(params, batch, flags, grid, rows, names, user, block_steps, device
         dissipated_j=dissipated,
         energy_error_j=initial - kinetic - potential - dissipated,
         channel_names=names,
+        kernel="jax" if fused is None else f"native {fused.physics} ({fused.backend})",
     )
 
 
@@ -787,7 +803,7 @@ def solve_batched(
     if devices is not None:
         padded = len(devices) * math.ceil(padded / len(devices))
     params = share_uniform(kernel_params(setup, pad_to=padded))
-    fused = native.kernel_for(flags, devices) if kernel == "auto" else None
+    fused = native.kernel_for(flags, devices) if kernel == "auto" and _native_laws(setup) else None
     if fused is not None and fused.physics == "full":
         flags = flags._replace(full_step=True)
     return _solve_fast(params, batch, flags, grid, rows, names, user, int(block_steps), devices, fused)
@@ -837,10 +853,16 @@ def record_batched(
     params = _params(setup, None)
     if flags.sensors or compliant_sensors is not None:
         params = _with_compliant_sensors(params, setup, flags, compliant_sensors)
-    fused = native.kernel_for(flags, None) if kernel == "auto" and not flags.ledger else None
+    fused = native.kernel_for(flags, None) if kernel == "auto" and not flags.ledger and _native_laws(setup) else None
     if fused is not None:  # the full kernel carries the tangents, whatever the physics
         fused = fused._replace(physics="full")
     return _assemble(params, batch, flags, grid, rows, names, user, int(block_steps), None, fused)
+
+
+def _native_laws(setup: ChainSetup) -> bool:
+    """Whether the native kernels have every law of the setup (`laws.registry`); where not,
+    the JAX kernel runs (`BatchedTraces.kernel` says so)."""
+    return laws.registry.runs_natively(setup.contact_law, setup.dissipation)
 
 
 def _with_compliant_sensors(params: dict, setup: ChainSetup, flags: KernelFlags, sensors) -> dict:

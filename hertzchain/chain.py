@@ -12,17 +12,25 @@ Job et al.).
 from __future__ import annotations
 
 import math
+import warnings
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import contact
+from . import contact, laws
 from .materials import BEAD_STEEL
+from .validation import check_setup, check_values
 
 ENDS = ("wall", "free")
 PLASTIC_LAWS = ("thornton", "jackson_green")
+# Keywords of `ChainSetup` that `contact_law=` replaces (kept for one release).
+DEPRECATED_LAW_KEYWORDS = ("plasticity", "plastic_law", "power_law", "contact_exponent",
+                           "exponent_reference_overlap_m")
+# The law coefficients a setup exposes as attributes (`ChainSetup.eta_s`, ...): sweepable,
+# fittable and written to result files as before.
+LAW_ATTRIBUTES = ("eta_s", "dashpot_n_s_m", "contact_exponent", "exponent_reference_overlap_m")
 
 
 def _is_concrete(x) -> bool:
@@ -36,15 +44,57 @@ def _as_float(value, name: str):
         raise ValueError(f"{name} must be a number (SI units), got {value!r}.") from error
 
 
-def _check(name: str, value, ok, requirement: str) -> None:
-    """Raise a ValueError naming `name` if a concrete `value` fails `ok(value)`."""
-    if not _is_concrete(value):
-        return
-    array = np.asarray(value, dtype=float)
-    if np.any(np.isnan(array)):
-        raise ValueError(f"{name} contains NaN; give {requirement}.")
-    if not np.all(ok(array)):
-        raise ValueError(f"{name} must be {requirement}, got {array.tolist()}.")
+def _contact_law(contact_law, old: dict) -> laws.AbstractContactLaw:
+    """The setup's contact law: `contact_law`, or the one the deprecated keywords `old`
+    describe (with a `DeprecationWarning`), else Hertz's."""
+    if old:
+        if contact_law is not None:
+            raise ValueError(f"Give contact_law only: {', '.join(old)} are its former spelling.")
+        plastic_law = old.get("plastic_law", "thornton")
+        if plastic_law not in PLASTIC_LAWS:
+            raise ValueError(f"plastic_law must be one of {PLASTIC_LAWS}, got {plastic_law!r}.")
+        exponent = _as_float(old.get("contact_exponent", 1.5), "contact_exponent")
+        reference = _as_float(old.get("exponent_reference_overlap_m", 1e-5), "exponent_reference_overlap_m")
+        power_law = old.get("power_law")
+        if power_law is None:
+            power_law = _is_concrete(exponent) and bool(np.any(np.asarray(exponent) != 1.5))
+        plastic = bool(old.get("plasticity", False))
+        if power_law and plastic:
+            raise ValueError("contact_exponent != 1.5 (power_law) and plasticity=True cannot be combined: "
+                             "the elastic-plastic law is built on Hertz contacts.")
+        if plastic:
+            contact_law = laws.JacksonGreen() if plastic_law == "jackson_green" else laws.Thornton()
+        elif power_law:
+            contact_law = laws.PowerLaw(exponent, reference)
+        else:
+            contact_law = laws.Hertz()
+        replacement = type(contact_law).__name__
+        warnings.warn(f"ChainSetup({'=..., '.join(old)}=...) is deprecated: pass "
+                      f"contact_law=hertzchain.laws.{replacement}(...) instead.", DeprecationWarning, stacklevel=3)
+    if contact_law is None:
+        return laws.Hertz()
+    if not isinstance(contact_law, laws.AbstractContactLaw):
+        raise ValueError(f"contact_law must be a hertzchain.laws contact law (e.g. laws.Hertz(), "
+                         f"laws.PowerLaw(1.6)), got {contact_law!r}.")
+    return contact_law
+
+
+def _dissipation(dissipation, eta_s, dashpot_n_s_m) -> tuple[laws.AbstractDissipation, ...]:
+    """(Viscoelastic, Dashpot, the other laws...) from `dissipation` (a law or a sequence)
+    and the shorthands `eta_s`, `dashpot_n_s_m` (None: not given), which replace the
+    coefficients of those two laws."""
+    given = (dissipation,) if isinstance(dissipation, laws.AbstractDissipation) else tuple(dissipation)
+    for law in given:
+        if not isinstance(law, laws.AbstractDissipation):
+            raise ValueError(f"dissipation must hold hertzchain.laws dissipation laws (e.g. "
+                             f"laws.Viscoelastic(eta_s=1e-6)), got {law!r}.")
+    firsts = []
+    for kind, value, name in ((laws.Viscoelastic, eta_s, "eta_s"), (laws.Dashpot, dashpot_n_s_m, "dashpot_n_s_m")):
+        found = [law for law in given if type(law) is kind]
+        if len(found) > 1:
+            raise ValueError(f"dissipation lists {kind.__name__} {len(found)} times; give it once.")
+        firsts.append(kind(_as_float(value, name)) if value is not None else found[0] if found else kind())
+    return tuple(firsts) + tuple(law for law in given if type(law) not in (laws.Viscoelastic, laws.Dashpot))
 
 
 class ChainSetup(eqx.Module):
@@ -66,21 +116,32 @@ class ChainSetup(eqx.Module):
       derived from it and the radius.
     - `bead_yield_stress_pa`: the beads' yield stress (paper: 2 GPa). It sets each contact's
       yield force (`contact_yield_force_n`: the paper's mean-pressure estimate, or where the
-      `plastic_law` "jackson_green" leaves Hertz), used for the yield check and, with
-      `plasticity=True`, by the elastic-plastic contact law.
-    - `plasticity`: contacts above their yield force deform plastically instead of staying
-      Hertzian; default False (the paper's beads stay elastic).
-    - `plastic_law`: the elastic-plastic law with `plasticity`: `"thornton"` (Thornton 1997,
-      `contact.thornton_contact`, yield at `contact_yield_force_n`) or `"jackson_green"`
-      (`contact.jackson_green_contact`: first yield from the von Mises criterion, hardness
-      2.84 $\\sigma_Y$ when fully plastic, unloading from the flattened contact; it matches
-      measured sphere-sphere curves, the other does not). Give the dynamic yield stress for
-      impacts (`contact.rate_hardened_yield_stress`).
-    - `contact_exponent`, `exponent_reference_overlap_m`: every contact (wall included)
-      follows $F = \\kappa\\,\\delta_r^{3/2}(\\delta/\\delta_r)^n$ (`contact.power_law_force`) with
-      n = `contact_exponent` instead of Hertz's 3/2; it equals the Hertz force at the
-      reference overlap $\\delta_r$ (m, default 10 um). `power_law` (static) switches that law
-      on; by default it is on when `contact_exponent` differs from 1.5. Not with `plasticity`.
+      contact law `laws.JacksonGreen` leaves Hertz), used for the yield check and by the
+      elastic-plastic contact laws.
+    - `contact_law`: the law of every contact, wall included (`hertzchain.laws`):
+      `laws.Hertz()` (default, the paper's), `laws.PowerLaw(exponent, reference_overlap_m)`
+      ($F = \\kappa\\,\\delta_r^{3/2}(\\delta/\\delta_r)^n$, equal to Hertz at $\\delta_r$),
+      `laws.Thornton()` (Thornton 1997, yield at `contact_yield_force_n`) or
+      `laws.JacksonGreen()` (first yield from the von Mises criterion, hardness 2.84
+      $\\sigma_Y$ when fully plastic, unloading from the flattened contact; it matches
+      measured sphere-sphere curves, Thornton's does not). Give the dynamic yield stress
+      for impacts (`contact.rate_hardened_yield_stress`).
+    - `dissipation`: rate-dependent contact laws (`laws.AbstractDissipation`, one or a
+      sequence), acting at every contact in compression, their sum with the elastic force
+      clipped at 0 (beads do not pull). The setup always holds one `laws.Viscoelastic` and
+      one `laws.Dashpot` (of coefficient 0 where not given) first, then the others.
+    - `eta_s`: shorthand for `laws.Viscoelastic(eta_s)`, the viscoelastic time $\\eta$ of
+      $F_v = \\eta\\kappa\\,\\partial_t\\delta^{3/2}$, s; it replaces the coefficient of a
+      `Viscoelastic` in `dissipation`.
+    - `dashpot_n_s_m`: shorthand for `laws.Dashpot(dashpot_n_s_m)`, a linear dashpot
+      $\\gamma\\dot\\delta$ on the overlap rate while in contact, N s/m (the damping of much
+      of the granular-crystal literature, Herbold & Nesterenko, PRE 75, 021304, 2007); it
+      replaces the coefficient of a `Dashpot` in `dissipation`.
+    - `plasticity`, `plastic_law`, `power_law`, `contact_exponent`,
+      `exponent_reference_overlap_m`: the former spelling of `contact_law` (deprecated,
+      with a `DeprecationWarning`): `plasticity=True` with `plastic_law="thornton"` or
+      `"jackson_green"` is `laws.Thornton()` or `laws.JacksonGreen()`; `contact_exponent`
+      n != 1.5 (or `power_law=True`) is `laws.PowerLaw(n, exponent_reference_overlap_m)`.
     - `striker_radius_m` / `striker_mass_kg`: size of the striker (one of them; default: bead 1's
       radius). `striker_density_kg_m3`, `striker_youngs_pa`, `striker_poisson`: its material
       (default: bead 1's).
@@ -88,11 +149,6 @@ class ChainSetup(eqx.Module):
     - `end`: `"wall"` (flat elastic wall) or `"free"`.
     - `wall_youngs_pa`, `wall_poisson`: the wall's material (default: bead N's);
       `wall_youngs_pa=inf` is a rigid wall.
-    - `eta_s`: viscoelastic time $\\eta$ of $F_v = \\eta\\kappa\\,\\partial_t\\delta^{3/2}$, s
-      (at every contact, striker and wall included).
-    - `dashpot_n_s_m`: a linear dashpot $\\gamma\\dot\\delta$ on the overlap rate while in contact,
-      N s/m (every contact; the total force is clipped at 0 as with `eta_s`): the damping of
-      much of the granular-crystal literature (Herbold & Nesterenko, PRE 75, 021304, 2007).
     - `mu`: friction coefficient of the beads (and striker) on the track, force $\\mu m g$.
     - `mu_star`: thwarted-rotation friction, $\\kappa^* = (1+\\mu^*)\\kappa$ at every contact.
     - `precompression_n`: static force pressing the chain against the wall (or squeezing a
@@ -115,8 +171,8 @@ class ChainSetup(eqx.Module):
     striker_velocity_m_s: jax.Array
     wall_youngs_pa: jax.Array
     wall_poisson: jax.Array
-    eta_s: jax.Array
-    dashpot_n_s_m: jax.Array
+    contact_law: laws.AbstractContactLaw
+    dissipation: tuple[laws.AbstractDissipation, ...]
     mu: jax.Array
     mu_star: jax.Array
     precompression_n: jax.Array
@@ -124,12 +180,7 @@ class ChainSetup(eqx.Module):
     sensor_beta: jax.Array
     sensor_f0_hz: jax.Array
     end: str = eqx.field(static=True)
-    contact_exponent: jax.Array
-    exponent_reference_overlap_m: jax.Array
     sensor_beads: tuple[int, ...] = eqx.field(static=True)
-    plasticity: bool = eqx.field(static=True)
-    power_law: bool = eqx.field(static=True)
-    plastic_law: str = eqx.field(static=True)
 
     def __init__(
         self,
@@ -150,8 +201,10 @@ class ChainSetup(eqx.Module):
         end: str = "wall",
         wall_youngs_pa=None,
         wall_poisson=None,
-        eta_s=0.0,
-        dashpot_n_s_m=0.0,
+        contact_law: laws.AbstractContactLaw | None = None,
+        dissipation=(),
+        eta_s=None,
+        dashpot_n_s_m=None,
         mu=0.0,
         mu_star=0.0,
         precompression_n=0.0,
@@ -159,11 +212,11 @@ class ChainSetup(eqx.Module):
         sensor_beads=(),
         sensor_beta=0.11,
         sensor_f0_hz=85e3,
-        plasticity: bool = False,
-        contact_exponent=1.5,
-        exponent_reference_overlap_m=1e-5,
+        plasticity: bool | None = None,
+        contact_exponent=None,
+        exponent_reference_overlap_m=None,
         power_law: bool | None = None,
-        plastic_law: str = "thornton",
+        plastic_law: str | None = None,
     ):
         if isinstance(n_beads, bool) or not isinstance(n_beads, (int, np.integer)) or n_beads < 1:
             raise ValueError(f"n_beads must be a positive integer, got {n_beads!r}.")
@@ -182,10 +235,10 @@ class ChainSetup(eqx.Module):
             return array
 
         radius = per_bead(bead_radius_m, "bead_radius_m")
-        _check("bead_radius_m", radius, lambda r: np.isfinite(r) & (r > 0), "positive and finite (m)")
+        check_values("bead_radius_m", radius)
         if bead_mass_kg is not None:
             mass = per_bead(bead_mass_kg, "bead_mass_kg")
-            _check("bead_mass_kg", mass, lambda m: np.isfinite(m) & (m > 0), "positive (kg)")
+            check_values("bead_mass_kg", mass)
             density = mass / (4.0 / 3.0 * jnp.pi * radius**3)
         else:
             density = per_bead(bead_density_kg_m3, "bead_density_kg_m3")
@@ -206,7 +259,7 @@ class ChainSetup(eqx.Module):
             raise ValueError("Give striker_mass_kg or striker_radius_m, not both.")
         if striker_mass_kg is not None:
             striker_mass = _as_float(striker_mass_kg, "striker_mass_kg")
-            _check("striker_mass_kg", striker_mass, lambda m: m > 0, "positive (kg)")
+            check_values("striker_mass_kg", striker_mass)
             striker_radius_m = (3.0 * striker_mass / (4.0 * jnp.pi * self.striker_density_kg_m3)) ** (
                 1.0 / 3.0
             )
@@ -228,8 +281,7 @@ class ChainSetup(eqx.Module):
         self.wall_poisson = _as_float(
             self.bead_poisson[-1] if wall_poisson is None else wall_poisson, "wall_poisson"
         )
-        self.eta_s = _as_float(eta_s, "eta_s")
-        self.dashpot_n_s_m = _as_float(dashpot_n_s_m, "dashpot_n_s_m")
+        self.dissipation = _dissipation(dissipation, eta_s, dashpot_n_s_m)
         self.mu = _as_float(mu, "mu")
         self.mu_star = _as_float(mu_star, "mu_star")
         self.precompression_n = _as_float(precompression_n, "precompression_n")
@@ -237,51 +289,12 @@ class ChainSetup(eqx.Module):
         self.sensor_beads = tuple(sorted(int(k) for k in sensor_beads))
         self.sensor_beta = _as_float(sensor_beta, "sensor_beta")
         self.sensor_f0_hz = _as_float(sensor_f0_hz, "sensor_f0_hz")
-        self.plasticity = bool(plasticity)
-        if plastic_law not in PLASTIC_LAWS:
-            raise ValueError(f"plastic_law must be one of {PLASTIC_LAWS}, got {plastic_law!r}.")
-        self.plastic_law = plastic_law
-        self.contact_exponent = _as_float(contact_exponent, "contact_exponent")
-        self.exponent_reference_overlap_m = _as_float(exponent_reference_overlap_m, "exponent_reference_overlap_m")
-        if power_law is None:
-            power_law = _is_concrete(self.contact_exponent) and bool(np.any(np.asarray(self.contact_exponent) != 1.5))
-        self.power_law = bool(power_law)
-        if self.power_law and self.plasticity:
-            raise ValueError("contact_exponent != 1.5 (power_law) and plasticity=True cannot be combined: "
-                             "the elastic-plastic law is built on Hertz contacts.")
+        old = dict(plasticity=plasticity, plastic_law=plastic_law, power_law=power_law,
+                   contact_exponent=contact_exponent, exponent_reference_overlap_m=exponent_reference_overlap_m)
+        self.contact_law = _contact_law(contact_law, {k: v for k, v in old.items() if v is not None})
 
     def __check_init__(self):
-        positive_finite = lambda x: np.isfinite(x) & (x > 0)  # noqa: E731
-        poisson_range = lambda x: (x > -1.0) & (x < 0.5)  # noqa: E731
-        _check("bead_density_kg_m3", self.bead_density_kg_m3, positive_finite, "positive (kg/m^3)")
-        _check("bead_youngs_pa", self.bead_youngs_pa, positive_finite, "positive and finite (Pa)")
-        _check("bead_poisson", self.bead_poisson, poisson_range, "in (-1, 0.5)")
-        _check("bead_yield_stress_pa", self.bead_yield_stress_pa, lambda x: x > 0, "positive (Pa)")
-        _check("striker_radius_m", self.striker_radius_m, positive_finite, "positive and finite (m)")
-        _check("striker_density_kg_m3", self.striker_density_kg_m3, positive_finite, "positive")
-        _check("striker_youngs_pa", self.striker_youngs_pa, positive_finite, "positive (Pa)")
-        _check("striker_poisson", self.striker_poisson, poisson_range, "in (-1, 0.5)")
-        _check(
-            "striker_velocity_m_s",
-            self.striker_velocity_m_s,
-            positive_finite,
-            "positive and finite (m/s; the striker moves towards bead 1)",
-        )
-        _check("wall_youngs_pa", self.wall_youngs_pa, lambda x: x > 0, "positive (Pa; inf = rigid)")
-        _check("wall_poisson", self.wall_poisson, poisson_range, "in (-1, 0.5)")
-        _check("eta_s", self.eta_s, lambda x: np.isfinite(x) & (x >= 0), "non-negative (s)")
-        _check("dashpot_n_s_m", self.dashpot_n_s_m, lambda x: np.isfinite(x) & (x >= 0),
-               "non-negative (N s/m)")
-        _check("contact_exponent", self.contact_exponent, lambda x: np.isfinite(x) & (x >= 1.0) & (x <= 3.0),
-               "between 1 and 3 (Hertz: 1.5)")
-        _check("exponent_reference_overlap_m", self.exponent_reference_overlap_m, positive_finite,
-               "positive (m)")
-        _check("mu", self.mu, lambda x: np.isfinite(x) & (x >= 0), "non-negative")
-        _check("mu_star", self.mu_star, lambda x: np.isfinite(x) & (x > -1), "greater than -1")
-        _check(
-            "precompression_n", self.precompression_n, lambda x: np.isfinite(x) & (x >= 0), ">= 0 (N)"
-        )
-        _check("gravity_m_s2", self.gravity_m_s2, lambda x: np.isfinite(x) & (x >= 0), ">= 0 (m/s^2)")
+        check_setup(self)
         for bead in self.sensor_beads:
             if not 1 <= bead <= self.n_beads:
                 raise ValueError(
@@ -289,13 +302,53 @@ class ChainSetup(eqx.Module):
                 )
         if len(set(self.sensor_beads)) != len(self.sensor_beads):
             raise ValueError(f"sensor_beads lists a bead twice: {self.sensor_beads}.")
-        if self.sensor_beads:
-            _check("sensor_beta", self.sensor_beta, lambda x: (x > 0) & (x < 1), "in (0, 1)")
-            _check("sensor_f0_hz", self.sensor_f0_hz, positive_finite, "positive (Hz)")
 
     @property
     def n_beads(self) -> int:
         return self.bead_radius_m.shape[-1]
+
+    @property
+    def law_attributes(self) -> tuple[str, ...]:
+        """The names of `LAW_ATTRIBUTES` that are coefficients of this setup's laws (so
+        `eqx.tree_at(lambda s: s.eta_s, ...)` changes them): `eta_s` and `dashpot_n_s_m`,
+        and with `laws.PowerLaw` its exponent and reference overlap."""
+        return LAW_ATTRIBUTES if self.power_law else LAW_ATTRIBUTES[:2]
+
+    @property
+    def eta_s(self) -> jax.Array:
+        """Viscoelastic time of the setup's `laws.Viscoelastic`, s."""
+        return self.dissipation[0].eta_s
+
+    @property
+    def dashpot_n_s_m(self) -> jax.Array:
+        """Coefficient of the setup's `laws.Dashpot`, N s/m."""
+        return self.dissipation[1].gamma_n_s_m
+
+    @property
+    def plasticity(self) -> bool:
+        """Whether the contact law is elastic-plastic (reads the largest overlap so far)."""
+        return self.contact_law.has_history
+
+    @property
+    def plastic_law(self) -> str:
+        """The elastic-plastic law's name ("thornton" or "jackson_green"; "thornton" for
+        elastic contacts, the former default)."""
+        return self.contact_law.native_name if self.contact_law.has_history else "thornton"
+
+    @property
+    def power_law(self) -> bool:
+        """Whether the contacts follow `laws.PowerLaw`."""
+        return isinstance(self.contact_law, laws.PowerLaw)
+
+    @property
+    def contact_exponent(self) -> jax.Array:
+        """Exponent of the contact law (1.5 unless `laws.PowerLaw`)."""
+        return self.contact_law.exponent if self.power_law else jnp.asarray(1.5)
+
+    @property
+    def exponent_reference_overlap_m(self) -> jax.Array:
+        """Reference overlap of `laws.PowerLaw`, m (its default 10 um for other laws)."""
+        return self.contact_law.reference_overlap_m if self.power_law else jnp.asarray(1e-5)
 
     @property
     def bead_mass_kg(self) -> jax.Array:
@@ -329,15 +382,10 @@ class ChainSetup(eqx.Module):
         )
         return (1.0 + self.mu_star) * bare
 
-    def contact_yield_force_n(self) -> jax.Array:
-        """Yield force of contacts 0..N-1 and of the wall contact (last entry), N: the paper's
-        mean-pressure estimate (`contact.yield_force`), or with `plastic_law="jackson_green"`
-        the force at which that law leaves Hertz (`contact.jackson_green_yield_force`)."""
-        if self.plastic_law == "jackson_green":
-            kappa = jnp.concatenate([self.contact_kappa(), self.wall_kappa()[None]])
-            poisson = jnp.concatenate([self.bead_poisson, self.bead_poisson[-1:]])
-            return contact.jackson_green_yield_force(kappa, self.contact_reduced_radius_m(),
-                                                     self.bead_yield_stress_pa, poisson)
+    def contact_constants(self) -> laws.ContactConstants:
+        """What the chain gives its contacts 0..N-1 and the wall contact (last): Hertz
+        stiffness (N/m^{3/2}), the paper's mean-pressure yield force (`contact.yield_force`,
+        N), reduced radius (m), the Poisson ratio of the bead behind, the yield stress (Pa)."""
         radius = jnp.concatenate([self.striker_radius_m[None], self.bead_radius_m])
         theta = contact.theta(
             jnp.concatenate([self.striker_youngs_pa[None], self.bead_youngs_pa]),
@@ -352,7 +400,20 @@ class ChainSetup(eqx.Module):
             theta[-1],
             theta_b=contact.theta(self.wall_youngs_pa, self.wall_poisson),
         )
-        return jnp.concatenate([beads, wall[None]])
+        return laws.ContactConstants(
+            kappa_n_m1p5=jnp.concatenate([self.contact_kappa(), self.wall_kappa()[None]]),
+            yield_force_n=jnp.concatenate([beads, wall[None]]),
+            reduced_radius_m=self.contact_reduced_radius_m(),
+            poisson=jnp.concatenate([self.bead_poisson, self.bead_poisson[-1:]]),
+            yield_stress_pa=self.bead_yield_stress_pa,
+        )
+
+    def contact_yield_force_n(self) -> jax.Array:
+        """Yield force of contacts 0..N-1 and of the wall contact (last entry), N: the
+        contact law's (`laws.AbstractContactLaw.yield_force_n`): the paper's mean-pressure
+        estimate (`contact.yield_force`), or for `laws.JacksonGreen` the force at which that
+        law leaves Hertz (`contact.jackson_green_yield_force`)."""
+        return self.contact_law.yield_force_n(self.contact_constants())
 
     def contact_reduced_radius_m(self) -> jax.Array:
         """Reduced radius $R^* = RR'/(R+R')$ of contacts 0..N-1 and of the wall contact (last,
@@ -405,20 +466,16 @@ class ChainModel(eqx.Module):
     wall_overlap0_m: jax.Array  # scalar
     yield_force_n: jax.Array  # (n_contacts,) used when plastic
     wall_yield_force_n: jax.Array  # scalar
-    plastic: bool = eqx.field(static=True)  # elastic-plastic contacts instead of Hertz
-    eta_s: jax.Array
-    dashpot_n_s_m: jax.Array  # linear dashpot of every contact in compression
+    contact_law: laws.AbstractContactLaw  # the law of every Hertz contact, wall included
+    dissipation: tuple[laws.AbstractDissipation, ...]  # rate-dependent laws of those contacts
     friction_decel_m_s2: jax.Array  # mu * g
     first_bead_force_n: jax.Array  # external force on bead 1, towards the wall
     last_body_force_n: jax.Array  # external force on the last body (free end only)
     striker_velocity_m_s: jax.Array
     # Embedded sensors in compliance form (`hertzchain.compliant_sensor`): none by default.
     compliant: "CompliantSensorModel | None" = None
-    # Power-law contacts (`contact.power_law_force`): exponent and reference overlap, or None (Hertz).
-    contact_exponent: jax.Array | None = None
-    reference_overlap_m: jax.Array | None = None
-    # `plastic_law="jackson_green"`: reduced radius (m) and Poisson ratio of every internal contact
-    # then the wall (n_contacts + 1,), and the yield stress (Pa); None for Thornton's law.
+    # Elastic-plastic laws: reduced radius (m) and Poisson ratio of every internal contact then
+    # the wall (n_contacts + 1,), and the yield stress (Pa); None for laws without a history.
     reduced_radius_m: jax.Array | None = None
     contact_poisson: jax.Array | None = None
     yield_stress_pa: jax.Array | None = None
@@ -481,13 +538,13 @@ def build_model(setup: ChainSetup) -> ChainModel:
     is_spring = jnp.asarray([link[2] for link in links])
     preload = setup.precompression_n
     safe_kappa = jnp.where(is_spring, 1.0, kappa_all)
-    law = (setup.contact_exponent, setup.exponent_reference_overlap_m) if setup.power_law else (None, None)
-    hertz_overlap = contact.overlap_at_force(preload, safe_kappa, *law)
+    hertz_overlap = setup.contact_law.overlap_at_force(preload, laws.ContactConstants(safe_kappa))
     spring_overlap = preload / jnp.where(is_spring, spring_all, 1.0)
     overlap0 = jnp.where(is_spring, spring_overlap, hertz_overlap).at[0].set(0.0)
     has_wall = setup.end == "wall"
     wall_kappa = setup.wall_kappa() if has_wall else jnp.zeros(())
-    wall_overlap0 = contact.overlap_at_force(preload, setup.wall_kappa(), *law) if has_wall else jnp.zeros(())
+    wall_overlap0 = (setup.contact_law.overlap_at_force(preload, laws.ContactConstants(setup.wall_kappa()))
+                     if has_wall else jnp.zeros(()))
     mass_kg = jnp.stack(masses)
     mass_kg = eqx.error_if(
         mass_kg, ~(jnp.isfinite(mass_kg) & (mass_kg > 0)),
@@ -516,21 +573,18 @@ def build_model(setup: ChainSetup) -> ChainModel:
         wall_overlap0_m=wall_overlap0,
         yield_force_n=jnp.stack([link[3] for link in links]),
         wall_yield_force_n=yield_force[-1],
-        plastic=setup.plasticity,
-        eta_s=setup.eta_s,
-        dashpot_n_s_m=setup.dashpot_n_s_m,
+        contact_law=setup.contact_law,
+        dissipation=setup.dissipation,
         friction_decel_m_s2=setup.mu * setup.gravity_m_s2,
         first_bead_force_n=preload,
         last_body_force_n=jnp.zeros(()) if has_wall else -preload,
         striker_velocity_m_s=setup.striker_velocity_m_s,
-        contact_exponent=law[0],
-        reference_overlap_m=law[1],
-        **(_jackson_green_fields(setup, links) if setup.plasticity and setup.plastic_law == "jackson_green" else {}),
+        **(_plastic_fields(setup, links) if setup.contact_law.has_history else {}),
     )
 
 
-def _jackson_green_fields(setup: ChainSetup, links) -> dict:
-    """The `ChainModel` fields of `plastic_law="jackson_green"`."""
+def _plastic_fields(setup: ChainSetup, links) -> dict:
+    """The `ChainModel` fields of elastic-plastic contact laws."""
     radius = jnp.stack([link[4] for link in links] + [setup.bead_radius_m[-1]])
     poisson = jnp.stack([link[5] for link in links] + [setup.bead_poisson[-1]])
     return {"reduced_radius_m": radius, "contact_poisson": poisson, "yield_stress_pa": setup.bead_yield_stress_pa}

@@ -402,8 +402,9 @@ HC_HD HC_INLINE D ContactDashpot(const K& kappa, const D& dashpot) {
 // plus the spring (kExtras), N. Branch-free (selects only): sqrt(0) = 0 is the root out of
 // contact, as `contact` has it, where elastic = viscous = 0; a dashpot would push there, so
 // with one the total is also 0 out of contact. kDashpot is a compile-time switch: its terms
-// cost every damped run about 17 % (`benchmarks/results/dashpot_in_cpp_kernel_not_kept.md`),
-// so only the runs that have a dashpot carry them.
+// cost every damped run about 17 %
+// (`benchmarks/results/dashpot_kernel/history/dashpot_in_cpp_kernel_not_kept.md`), so only
+// the runs that have a dashpot carry them.
 template <bool kViscous, bool kDashpot, class E, class R, class O, class V, class Kv, class D>
 HC_HD HC_INLINE auto ClippedTotal(const E& elastic, const R& rt, const O& dl, const V& rate, const Kv& kv,
                                   const D& dash) {

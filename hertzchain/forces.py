@@ -12,7 +12,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from . import contact
+from . import contact, laws
 from .chain import ChainModel
 from .compliant_sensor import shortened_by_model
 
@@ -50,60 +50,16 @@ def initial_max_overlap(model: ChainModel):
     return jnp.concatenate([contacts, wall[None]])
 
 
-class ElasticLaw(NamedTuple):
-    """The rate-independent law of every contact, contacts then wall (arrays that broadcast
-    with the overlaps): Hertz where every field is None; power law with `exponent`; elastic-
-    plastic with `yield_force_n` (Thornton's law, or Jackson-Green's with `reduced_radius_m`,
-    `poisson` and `yield_stress_pa`; an infinite yield force or a zero stiffness keeps the
-    contact elastic: sensor springs, a free end)."""
-
-    exponent: jax.Array | None = None
-    reference_overlap_m: jax.Array | None = None
-    yield_force_n: jax.Array | None = None
-    reduced_radius_m: jax.Array | None = None
-    poisson: jax.Array | None = None
-    yield_stress_pa: jax.Array | None = None
-
-
-def elastic_law(model: ChainModel) -> ElasticLaw:
-    """The `ElasticLaw` of a chain model, (n_contacts + 1,) arrays (wall last)."""
-    if model.contact_exponent is not None:
-        return ElasticLaw(exponent=model.contact_exponent, reference_overlap_m=model.reference_overlap_m)
-    if not model.plastic:
-        return ElasticLaw()
-    return ElasticLaw(yield_force_n=jnp.concatenate([model.yield_force_n, model.wall_yield_force_n[None]]),
-                      reduced_radius_m=model.reduced_radius_m, poisson=model.contact_poisson,
-                      yield_stress_pa=model.yield_stress_pa)
-
-
-def elastic_parts(law: ElasticLaw, overlap_m, max_overlap_m, kappa_n_m1p5):
-    """Elastic force (N), stored energy (J) and plastic dissipation so far (J) of contacts at
-    `overlap_m` whose largest overlap so far is `max_overlap_m` (m; read by plastic laws
-    only), elementwise: the one place where a contact's law is chosen, for the general
-    solver (`chain_forces`) and the batched kernel alike."""
-    kappa = kappa_n_m1p5
-    if law.exponent is not None:
-        shape = (kappa, law.exponent, law.reference_overlap_m)
-        return (contact.power_law_force(overlap_m, *shape), contact.power_law_potential(overlap_m, *shape),
-                jnp.zeros_like(overlap_m))
-    hertz = contact.hertz_force(overlap_m, kappa), contact.hertz_potential(overlap_m, kappa)
-    if law.yield_force_n is None:
-        return hertz[0], hertz[1], jnp.zeros_like(overlap_m)
-    plastic = jnp.isfinite(law.yield_force_n)
-    if law.reduced_radius_m is None:
-        safe_yield = jnp.where(plastic, law.yield_force_n, 1.0)
-        force, energy, dissipated = contact.thornton_contact(overlap_m, max_overlap_m, kappa, safe_yield)
-    else:
-        plastic = plastic & (kappa > 0.0)  # a free end has no wall contact
-        safe_kappa = jnp.where(plastic, kappa, 1.0)
-        safe_stress = jnp.where(plastic, law.yield_stress_pa, 1.0)
-        force, energy, dissipated = contact.jackson_green_contact(
-            overlap_m, max_overlap_m, safe_kappa, law.reduced_radius_m, safe_stress, law.poisson)
-    return (
-        jnp.where(plastic, force, hertz[0]),
-        jnp.where(plastic, energy, hertz[1]),
-        jnp.where(plastic, dissipated, 0.0),
-    )
+def contact_constants(model: ChainModel) -> laws.ContactConstants:
+    """What the model gives its contact law, (n_contacts + 1,) arrays (wall last): Hertz
+    stiffness and, for elastic-plastic laws, yield force, reduced radius, Poisson ratio and
+    yield stress (an infinite yield force or a zero stiffness keeps a contact elastic:
+    sensor springs, a free end)."""
+    kappa = jnp.concatenate([model.kappa, model.wall_kappa[None]])
+    if not model.contact_law.has_history:
+        return laws.ContactConstants(kappa)
+    return laws.ContactConstants(kappa, jnp.concatenate([model.yield_force_n, model.wall_yield_force_n[None]]),
+                                 model.reduced_radius_m, model.contact_poisson, model.yield_stress_pa)
 
 
 def _elastic_parts(model: ChainModel, displacement_m, max_overlap_m, sensor_force_n=None):
@@ -111,8 +67,7 @@ def _elastic_parts(model: ChainModel, displacement_m, max_overlap_m, sensor_forc
     contact and of the wall (last)."""
     contacts, wall = overlaps(model, displacement_m, sensor_force_n)
     overlap = jnp.concatenate([contacts, wall[None]])
-    kappa = jnp.concatenate([model.kappa, model.wall_kappa[None]])
-    return (overlap, *elastic_parts(elastic_law(model), overlap, max_overlap_m, kappa))
+    return (overlap, *model.contact_law.parts(overlap, max_overlap_m, contact_constants(model)))
 
 
 def chain_forces(model: ChainModel, displacement_m, velocity_m_s, max_overlap_m=None, sensor_force_n=None,
@@ -131,16 +86,13 @@ def chain_forces(model: ChainModel, displacement_m, velocity_m_s, max_overlap_m=
     rate = velocity_m_s[:-1] - velocity_m_s[1:]
     if model.compliant is not None and sensor_rate_n_s is not None:
         rate = shortened_by_model(model, sensor_rate_n_s, rate)
-    hertz_elastic, hertz_total = contact.contact_force(
-        overlap, rate, model.kappa, model.eta_s, elastic_all[:-1], model.dashpot_n_s_m
-    )
+    hertz_elastic = elastic_all[:-1]
+    hertz_total = laws.total_force(hertz_elastic, overlap, rate, model.kappa, model.dissipation)
     spring = contact.spring_force(overlap, model.spring_n_m)
     contact_total = jnp.where(model.is_spring, spring, hertz_total)
     contact_elastic = jnp.where(model.is_spring, spring, hertz_elastic)
-    wall_elastic, wall_total = contact.contact_force(
-        wall_overlap, velocity_m_s[-1], model.wall_kappa, model.eta_s, elastic_all[-1],
-        model.dashpot_n_s_m,
-    )
+    wall_elastic = elastic_all[-1]
+    wall_total = laws.total_force(wall_elastic, wall_overlap, velocity_m_s[-1], model.wall_kappa, model.dissipation)
     external = jnp.zeros_like(displacement_m)
     external = external.at[1].add(model.first_bead_force_n).at[-1].add(model.last_body_force_n)
     body = _net_force(contact_total, wall_total) + external
@@ -159,7 +111,7 @@ def contact_potentials(model: ChainModel, displacement_m, max_overlap_m=None, se
 
 def plastic_dissipation(model: ChainModel, displacement_m, max_overlap_m, sensor_force_n=None):
     """Energy dissipated by plastic deformation so far, summed over contacts, J."""
-    if not model.plastic:
+    if not model.contact_law.has_history:
         return jnp.zeros(())
     return jnp.sum(_elastic_parts(model, displacement_m, max_overlap_m, sensor_force_n)[3])
 

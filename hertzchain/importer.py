@@ -47,9 +47,11 @@ unit):
   estimated from the pre-trigger segment), `range_v = [low, high]` (the digitiser's
   limits, when the file does not state them), `invert` (a sensor wired with the opposite
   sign).
-- `[[shot]]`: `SHOT_KEYS`: also `label`, `nominal_velocity_m_s` (shots at the same nominal
-  velocity are repeats, see `hertzchain analyze`), and any `[chain]` key that differs for
-  this shot (another wall, say).
+- `[[shot]]`: `SHOT_KEYS`: also `label` (a plain name, not a path: the shot's trace file is
+  `<label>.csv`, named by `hertzchain.atomic.file_stem`), `nominal_velocity_m_s` (shots at
+  the same nominal velocity are repeats, see `hertzchain analyze`), and any `[chain]` key
+  that differs for this shot (another wall, say). A scope file outside the experiment file's
+  folder may be named, but the content of such a file is never quoted in an error.
 - `[prior]` (optional): the lab's tolerances, `name = "TEXT"` in the syntax of
   `fitting.priors` (`bead_youngs = "203GPa+-4GPa"`, `sensor_gain = "+-2%"`); `hertzchain
   fit` uses them as if given with `--prior`.
@@ -61,7 +63,8 @@ pulse's arrivals (`check_time_zero`: a `TimeZeroWarning` that names the delay it
 they put the impact elsewhere); offset removed (the
 notebook's `offset_v`, else the pre-trigger mean); volts to newtons by the sensitivity;
 noise sigma per channel (the notebook's, else the pre-trigger standard deviation with the
-quantisation floor) written as `noise_std_n_<channel>`; samples at the range limit written
+quantisation floor) written as `noise_std_n_<channel>`, with the number of pre-trigger
+samples it was estimated from as `x_import_<channel>_noise_samples` (0: the notebook's); samples at the range limit written
 as `clipped_<channel>` (left out of fits). An `"ac"` channel, and a `"dc"` channel whose
 zero comes from the pre-trigger segment, reads the change of force since before the
 impact: it is listed in `ac_channels`, and the model compares it with that change.
@@ -79,9 +82,10 @@ from pathlib import Path
 import numpy as np
 
 from . import conditioning
+from .atomic import file_stem
 from .scopefiles import FORMATS, ScopeFileError, merge_waveforms, read_waveforms
 from .tracefile import FORMAT, HEADER_KEYS, TraceFile, TraceFileError, format_rows, write_trace
-from .units import parse_quantity
+from .units import parse_field, parse_quantity
 
 # Plausible sensitivities, V/N: from a 0.1 mV/N load cell to a 10 V/N amplified sensor.
 SENSITIVITY_RANGE_V_PER_N = (1e-4, 10.0)
@@ -91,7 +95,7 @@ COUPLINGS = ("ac", "dc")
 # correlated and signal-dependent: the quantisation theorem's white, uniform error model holds
 # for a normal input once its sigma reaches about half a step (Widrow & Kollar, Quantization
 # Noise, 2008, ch. 11), not below. Measured on 8-bit AC-coupled files of a second generator
-# (benchmarks/results/scope_noise_tek8bit_*.json): at 0.25 step the white-noise standard
+# (benchmarks/results/scope_files/noise*/): at 0.25 step the white-noise standard
 # errors were 0.58-0.81 of the spread over seeds, at 1 step 0.85-1.13; the value is the
 # theorem's, not fitted between the two.
 DITHER_STEPS = 0.5
@@ -105,10 +109,6 @@ CHANNEL_KEYS = ("source", "measures", "sensitivity_v_per_n", "coupling", "noise_
 SHOT_KEYS = ("files", "label", "striker_velocity_m_s", "nominal_velocity_m_s", "time_zero") + CHAIN_KEYS
 _TOP_KEYS = ("chain", "scope", "channel", "shot", "prior")
 # Units of keys that may be written as strings with a unit ("13mm").
-_UNITS = {"_m": "m", "_pa": "Pa", "_kg": "kg", "_s": "s", "_hz": "Hz", "_n": "N", "_m_s": "m/s",
-          "_kg_m3": "", "_v": "V"}
-
-
 class TimeZeroWarning(UserWarning):
     """A shot whose pulse arrivals put the impact far from its time zero (see
     `check_time_zero`)."""
@@ -181,9 +181,8 @@ def quantity_of_key(value, key: str, where: str) -> float:
         _fail(where, f"{key} must be a number, got {value!r}.")
     if isinstance(value, (int, float)):
         return float(value)
-    unit = next((u for suffix, u in sorted(_UNITS.items(), key=lambda s: -len(s[0])) if key.endswith(suffix)), "")
     try:
-        return parse_quantity(str(value), unit, name=f"{where}: {key}")
+        return parse_field(key, str(value), where=f"{where}: {key}")
     except ValueError as error:
         raise ExperimentFileError(str(error)) from error
 
@@ -277,21 +276,42 @@ def _channel(table: dict, where: str) -> Channel:
                    invert=bool(table.get("invert", False)), **optional)
 
 
+def _read_document(path: Path) -> dict:
+    try:
+        document = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as error:
+        _fail(str(path), f"not valid TOML ({error}).")
+    except UnicodeDecodeError:
+        _fail(str(path), "not UTF-8 text; an experiment file is TOML, saved as UTF-8.")
+    if "kind" in document:
+        _fail(str(path), f"kind = {document['kind']!r}: an experiment of shots (scope files) has no kind key; a "
+                         "driven experiment (kind = \"driven\", lock-in sweeps) is read by `hertzchain fit` and "
+                         "`hertzchain diagnose` with --data-dir.")
+    _check_keys(document, _TOP_KEYS, str(path))
+    if "chain" not in document:
+        _fail(str(path), "missing [chain] table.")
+    _check_keys(document["chain"], CHAIN_KEYS, f"{path} [chain]")
+    return document
+
+
+def load_chain(path) -> dict:
+    """The `[chain]` table of a TOML file, quantities in SI (`"13mm"` -> 0.013): an experiment
+    file's, or that of a setup file holding only a `[chain]` table (`hertzchain simulate
+    --config`). Keys are those of `CHAIN_KEYS` (and `x_` keys, kept as text); raises
+    `ExperimentFileError` naming the file and the key."""
+    path = Path(path)
+    return _chain_values(_read_document(path)["chain"], f"{path} [chain]")
+
+
 def load_experiment(path) -> ExperimentDescription:
     """Read and check an experiment file; raises `ExperimentFileError` naming what is wrong."""
     path = Path(path)
     where = str(path)
-    try:
-        document = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as error:
-        _fail(where, f"not valid TOML ({error}).")
-    _check_keys(document, _TOP_KEYS, where)
-    for key in ("chain", "channel", "shot"):
+    document = _read_document(path)
+    for key in ("channel", "shot"):
         if key not in document:
-            _fail(where, f"missing [{key}]" + (" table." if key == "chain" else f" entries ([[{key}]])."))
-    chain_table = document["chain"]
-    _check_keys(chain_table, CHAIN_KEYS, f"{where} [chain]")
-    chain = _chain_values(chain_table, f"{where} [chain]")
+            _fail(where, f"missing [{key}] entries ([[{key}]]).")
+    chain = _chain_values(document["chain"], f"{where} [chain]")
     scope = document.get("scope", {})
     _check_keys(scope, SCOPE_KEYS, f"{where} [scope]")
     file_format = str(scope.get("format", "auto"))
@@ -336,9 +356,12 @@ def load_experiment(path) -> ExperimentDescription:
         if missing:
             _fail(at, f"no such file: {', '.join(missing)} (paths are relative to the experiment file).")
         label = str(table.get("label", Path(files[0]).stem))
-        if label in labels:
+        if re.search(r"[/\\]", label) or label.strip().startswith("."):
+            _fail(at, f"label = {label!r} names a path; a label is a plain name (its trace file is "
+                      f"written as <label>.csv in the output folder): write e.g. label = {file_stem(label)!r}.")
+        if file_stem(label) in labels:
             label = f"{label}_{k + 1}"
-        labels.add(label)
+        labels.add(file_stem(label))
         overrides = _chain_values({key: table[key] for key in table if key in CHAIN_KEYS}, at)
         velocity = table.get("striker_velocity_m_s")
         nominal = table.get("nominal_velocity_m_s")
@@ -359,10 +382,17 @@ def load_experiment(path) -> ExperimentDescription:
 
 def _read_shot(description: ExperimentDescription, shot: Shot, where: str):
     parts = []
+    folder = description.path.parent.resolve()
     for file in shot.files:
         try:
             parts.append(read_waveforms(file, description.format))
         except ScopeFileError as error:
+            if not file.resolve().is_relative_to(folder):
+                # the reader's message quotes the file's lines: not of a file outside the experiment's folder
+                raise ExperimentFileError(
+                    f"{where}: {file} is not a scope file of format {description.format!r}; it lies outside the "
+                    f"experiment's folder {folder}, so its content is not shown: check files = [...] of the shot."
+                ) from None
             raise ExperimentFileError(f"{where}: {error}") from error
     try:
         return merge_waveforms(parts, where)
@@ -448,6 +478,7 @@ def condition_shot(description: ExperimentDescription, shot: Shot) -> TraceFile:
                 prefix + "offset_source": "notebook" if channel.offset_v is not None else
                 f"pre-trigger mean of {base.n_samples} samples",
                 prefix + "noise_source": noise_source,
+                prefix + "noise_samples": str(base.n_samples if noise_source == "pre-trigger" else 0),
                 prefix + "quantisation_step_v": "unknown" if step_v is None else repr(step_v),
                 prefix + "range_v": "unknown" if range_v is None else f"{range_v[0]!r};{range_v[1]!r}",
                 prefix + "clipped_samples": str(int(clipped.sum())),
@@ -527,7 +558,7 @@ def write_imported(path, out_dir) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     written = []
     for trace in traces:
-        target = out / f"{trace.header['x_shot']}.csv"
+        target = out / f"{file_stem(trace.header['x_shot'])}.csv"
         write_trace(target, trace)
         written.append(target)
     return written

@@ -59,13 +59,22 @@ from .forces import (
     plastic_dissipation,
     preload_potential,
 )
+from .precision import require_float64
 from .progress import Progress
 from .timegrid import DEFAULT_STEPS_PER_CONTACT, TimeGrid, choose_time_grid
 from .traces import Traces
+from .validation import check_step_stability, check_values
 
 
 class YieldWarning(UserWarning):
-    """A contact force exceeded the yield force of the contact (plastic deformation likely)."""
+    """A contact force exceeded the yield force of the contact (plastic deformation likely).
+
+    `finding` is what happened, without the advice that follows it in the message (the
+    command line gives advice in its own options)."""
+
+    def __init__(self, finding: str, advice: str = ""):
+        super().__init__(f"{finding} {advice}".strip())
+        self.finding = finding
 
 
 class Recording(NamedTuple):
@@ -370,6 +379,7 @@ def solve(setup: ChainSetup, grid: TimeGrid, recording: Recording = Recording(),
     for a setup without `sensor_beads`; their beads are shortened by the sensor force, which
     is not itself recorded (record the bead's two contacts).
     """
+    require_float64("solve")
     model = build_model(setup)
     if compliant_sensors is not None:
         if setup.sensor_beads:
@@ -431,16 +441,17 @@ def check_yield(traces: Traces, on_yield: str = "warn", *, plastic: bool = False
     n_contacts = ratio.shape[-1] - 1
     index = worst[-1]
     name = "the wall contact" if index == n_contacts else f"contact {index}"
-    message = (
+    warning = YieldWarning(
         f"The force at {name} reached {np.asarray(traces.max_force_n)[worst]:.4g} N, above its "
         f"yield force {np.asarray(traces.yield_force_n)[worst]:.4g} N (mean contact pressure "
         "above bead_yield_stress_pa): the contact would deform plastically, which this elastic "
-        "model does not describe. Lower striker_velocity_m_s, model it with plasticity=True, "
-        "or set on_yield='ignore'."
+        "model does not describe.",
+        "Lower striker_velocity_m_s, model it with an elastic-plastic contact law "
+        "(contact_law=hertzchain.laws.JacksonGreen()), or set on_yield='ignore'.",
     )
     if on_yield == "raise":
-        raise ValueError(message)
-    warnings.warn(message, YieldWarning, stacklevel=3)
+        raise ValueError(str(warning))
+    warnings.warn(warning, stacklevel=3)
 
 
 def simulate(
@@ -473,13 +484,18 @@ def simulate(
       then run in chunks.
 
     **Returns:** `Traces`.
+
+    **Raises:** `ValueError` before running when the damping (`eta_s`, `dashpot_n_s_m`) is
+    beyond the stability of the step (`validation.check_step_stability`).
     """
+    require_float64("simulate")
     recording = Recording(tuple(int(k) for k in contacts), bool(record_all))
     _layout(setup, recording)
     grid = choose_time_grid(
         setup, t_end_s=t_end_s, sample_interval_s=sample_interval_s, dt_s=dt_s,
         steps_per_contact=steps_per_contact,
     )
+    check_step_stability(setup, grid.dt_s)
     if progress and grid.n_steps > _PROGRESS_STEPS:
         traces = _solve_with_progress(setup, grid, recording, unroll)
     else:
@@ -498,6 +514,7 @@ def batch_setup(setup: ChainSetup, **values) -> tuple[ChainSetup, tuple[int, ...
     for name in values:
         if not hasattr(setup, name) or name in ("end", "sensor_beads"):
             raise ValueError(f"Cannot sweep over {name!r}: not a numeric field of ChainSetup.")
+        check_values(name, values[name])
     axes = [np.asarray(v, dtype=float).ravel() for v in values.values()]
     shape = tuple(len(a) for a in axes)
     mesh = np.meshgrid(*axes, indexing="ij")
@@ -564,6 +581,7 @@ def simulate_batch(setup: ChainSetup, *, t_end_s: float = 2.5e-3, sample_interva
         batched, t_end_s=t_end_s, sample_interval_s=sample_interval_s, dt_s=dt_s,
         steps_per_contact=steps_per_contact,
     )
+    check_step_stability(batched, grid.dt_s)
     traces = solve_stacked(batched, grid, recording, unroll)
     check_yield(traces, on_yield, plastic=setup.plasticity)
     return jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), traces)

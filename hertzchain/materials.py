@@ -111,9 +111,28 @@ MATERIALS: dict[str, Material] = {
 PAPER_WALL_MATERIALS: tuple[str, ...] = ("plexiglass", "Mg", "Cu", "Si", "Fe", "W")
 
 
+# Common names of catalogue materials: the same material, not another one.
+ALIASES: dict[str, str] = {
+    "steel": "bead_steel",  # the bearing steel (AISI 52100) of most granular-chain beads
+    "PMMA": "plexiglass",
+    "magnesium": "Mg",
+    "copper": "Cu",
+    "silicon": "Si",
+    "iron": "Fe",
+    "tungsten": "W",
+    "teflon": "PTFE",
+}
+
+
 def material(name: str) -> Material:
-    """Look a material up by name (case-insensitive); raises with the valid names."""
+    """Look a material up by name or alias (`ALIASES`), case-insensitive; raises
+    `ValueError` with the known names."""
+    wanted = name.strip().lower()
+    for alias, key in ALIASES.items():
+        if alias.lower() == wanted:
+            wanted = key.lower()
     for key, value in MATERIALS.items():
-        if key.lower() == name.lower():
+        if key.lower() == wanted:
             return value
-    raise ValueError(f"Unknown material {name!r}; known materials: {', '.join(MATERIALS)}.")
+    aliases = ", ".join(f"{alias} = {key}" for alias, key in ALIASES.items())
+    raise ValueError(f"Unknown material {name!r}; known materials: {', '.join(MATERIALS)} (also {aliases}).")

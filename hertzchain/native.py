@@ -48,17 +48,25 @@ The kernel is compiled on first use with the system's C++ compiler against the X
 headers that `jax.ffi.include_dir()` gives, for this machine's instruction set (or the one
 `$HERTZCHAIN_NATIVE_ARCH` names), and kept
 in a cache directory (`$HERTZCHAIN_CACHE`, else `$XDG_CACHE_HOME/hertzchain`, else
-`~/.cache/hertzchain`) keyed by the source, JAX's version and the CPU. Without a compiler
+`~/.cache/hertzchain`) keyed by the source, JAX's version and the CPU, each library with
+its build record beside it (`<library>.json`: its size and SHA-256, written once the library
+is in place). A library is loaded only once it matches its record: one that does not
+(truncated, emptied, changed, or without a record) is named on stderr and built again.
+A library that cannot be built is announced once, with the first line of why, and the runs
+it serves take the JAX kernel; `kernel_record()` names the kernels that computed this
+process's results, for result files. Without a compiler
 (or with `HERTZCHAIN_NATIVE=0`), `available()` is False, says why in `unavailable_reason()`,
 and `solve_batched` runs the JAX kernel.
 """
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
 import ctypes
 import functools
 import hashlib
+import json
 import os
 import platform
 import re
@@ -93,7 +101,8 @@ FULL_TARGET = "hertzchain_chain_full_forward"
 TANGENT_TARGET = "hertzchain_chain_full_tangent"
 BOOKS_TARGET = "hertzchain_chain_full_books"
 # The full kernel with a linear dashpot: its terms compiled in for its runs alone (they cost
-# every damped run ~17 % as a runtime term, `benchmarks/results/dashpot_in_cpp_kernel_not_kept.md`),
+# every damped run ~17 % as a runtime term,
+# `benchmarks/results/dashpot_kernel/history/dashpot_in_cpp_kernel_not_kept.md`),
 # in a library of their own (`-D` DASHPOT_DEFINE) built on first use, so that the main
 # library every run needs does not wait for them (36 s -> 50 s when built into it, 2 cores).
 DASHPOT_DEFINE = "HC_DASHPOT_LIBRARY"
@@ -128,8 +137,8 @@ ARCH_VARIABLE = "HERTZCHAIN_NATIVE_ARCH"
 # under a condition (the slopes of the friction kick and of the clipped force in the
 # tangent run) and leaves those loops scalar; -fno-trapping-math lets it compute both
 # sides and select. The IEEE results are the same (exceptions are never read here). The
-# AVX2 build's fit iteration went from 59.1 to 34.1 ms (`benchmarks/results/
-# epyc-avx512-as-avx2-2cores-quick-malloc/` and `...-quick-trapping/`); the AVX-512 build
+# AVX2 build's fit iteration went from 59.1 to 34.1 ms (`benchmarks/results/run/
+# quick_avx2/history/epyc-avx512-as-avx2-2cores-quick-malloc/` and `...-quick-trapping/`); the AVX-512 build
 # ran its tangents a few per cent slower with it, so it keeps the default.
 UNMASKED_FLAGS = ("-fno-trapping-math",)
 
@@ -143,16 +152,21 @@ def _flags() -> tuple[str, ...]:
     return (f"-march={arch}",) + FLAGS + (() if _has_vector_masks(arch) else UNMASKED_FLAGS)
 
 
-@functools.cache
 def _has_vector_masks(arch: str) -> bool:
     """Whether the C++ compiler targets AVX-512 (masked vector operations) for `-march=arch`
     (its predefined macros); True where there is no compiler (nothing is built then)."""
+    macros = _compiler_macros(arch)
+    return macros is None or "__AVX512F__" in macros
+
+
+@functools.cache
+def _compiler_macros(arch: str) -> str | None:
+    """The C++ compiler's predefined macros for `-march=arch`, or None without a compiler."""
     compiler = _cxx()
     if compiler is None:
-        return True
-    proc = subprocess.run([compiler, f"-march={arch}", "-dM", "-E", "-x", "c++", os.devnull],
-                          capture_output=True, text=True, check=False)
-    return "__AVX512F__" in proc.stdout
+        return None
+    return subprocess.run([compiler, f"-march={arch}", "-dM", "-E", "-x", "c++", os.devnull],
+                          capture_output=True, text=True, check=False).stdout
 
 
 def _cache_dir() -> Path:
@@ -183,9 +197,10 @@ def prune_cache(now: float | None = None) -> tuple[int, int]:
     same kind has superseded: of every stem (source, variant and, for the thread kernels,
     chain length) the newest library stays, and so does every host library this
     installation builds here (`_current_host_libraries`); the others go with their lock
-    files, and so do build folders left over for more than an hour. A library that another
-    installation still uses is built again on its next use. Returns (files deleted, bytes
-    freed)."""
+    files and build records, and so do build folders and half-written build records left
+    over for more than an hour. A
+    library that another installation still uses is built again on its next use. Returns
+    (files deleted, bytes freed)."""
     now = time.time() if now is None else now
     folder = _cache_dir()
     if not folder.is_dir():
@@ -197,7 +212,10 @@ def prune_cache(now: float | None = None) -> tuple[int, int]:
             kinds.setdefault(match["stem"], []).append(path)
     kept = _current_host_libraries() | {max(paths, key=lambda path: path.stat().st_mtime) for paths in kinds.values()}
     doomed = [path for paths in kinds.values() for path in paths if path not in kept]
-    doomed += [path.with_name(path.name + ".lock") for path in doomed]
+    doomed += [path.with_name(path.name + suffix) for path in doomed for suffix in (".lock", ".json")]
+    # build records half-written by a process that was killed (`_write_record`)
+    doomed += [path for path in folder.iterdir() if path.name.startswith(".") and path.name.endswith(".tmp")
+               and path.is_file() and now - path.stat().st_mtime > _STALE_SCRATCH_S]
     scratch = [path for path in folder.iterdir()
                if path.is_dir() and path.name.startswith("tmp") and now - path.stat().st_mtime > _STALE_SCRATCH_S]
     deleted = freed = 0
@@ -249,6 +267,98 @@ def _compile(command_for, path: Path, name: str) -> None:
         if proc.returncode != 0:
             raise RuntimeError(f"compiling {name} failed:\n{proc.stderr[-2000:]}")
         os.replace(partial, path)
+
+
+def _record_path(path: Path) -> Path:
+    """The build record of the library `path`: `<library>.json` beside it."""
+    return path.with_name(path.name + ".json")
+
+
+def _file_digest(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as file:
+        for block in iter(lambda: file.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _write_record(path: Path) -> None:
+    """Record the size (bytes) and SHA-256 of the library `path`, already in place, beside
+    it: written to a temporary file and renamed, so that a reader finds the whole record or
+    none."""
+    record = {"library": path.name, "bytes": path.stat().st_size, "sha256": _file_digest(path)}
+    partial = path.with_name(f".{path.name}.json.{os.getpid()}.tmp")
+    partial.write_text(json.dumps(record))
+    os.replace(partial, _record_path(path))
+
+
+# `_check`'s answer for a library that is not in the cache (built without a word about it)
+_MISSING = "is not built"
+
+
+def _check(path: Path) -> tuple[str | None, str | None]:
+    """Whether the cached library `path` may be loaded: (None, its SHA-256) where it is the
+    file its build recorded (`_write_record`), same size and digest; else (what is wrong,
+    None)."""
+    try:
+        size = path.stat().st_size
+    except FileNotFoundError:
+        return _MISSING, None
+    if size == 0:
+        return "is empty", None
+    try:
+        record = json.loads(_record_path(path).read_text())
+        recorded_size, recorded_digest = int(record["bytes"]), str(record["sha256"])
+    except FileNotFoundError:
+        return "has no build record", None
+    except (OSError, ValueError, KeyError, TypeError):
+        return "has an unreadable build record", None
+    if size != recorded_size:
+        return f"holds {size} bytes where its build wrote {recorded_size} (truncated or changed)", None
+    digest = _file_digest(path)
+    if digest != recorded_digest:
+        return "is not the file its build wrote (its SHA-256 differs)", None
+    return None, digest
+
+
+# How long a library's cold build takes, said when one is compiled: on two idle cores the
+# main library took 110 s and each of the others about 60 s; on a loaded machine many times
+# that (`benchmarks/results/kernel_build/latest.json` stores the load with the times).
+BUILD_TIME_NOTE = "once; 1-2 minutes on two idle cores"
+
+
+def _ensure_built(path: Path, what: str, build, *, announce: bool = True, note: str | None = None) -> str:
+    """Make the library `path` ready to load and return its SHA-256: where it is not in the
+    cache, `build(path)` compiles it (said on stderr when `announce`, with `note` on how long
+    it takes, by default `BUILD_TIME_NOTE`'s); where it is there but
+    does not match its build record (`_check`: truncated, emptied, changed or without a
+    record), that is said in one line on stderr, the file is removed and it is built again.
+    Under the library's build lock (`_build_lock`): of processes that need it at once, one
+    builds and the others use its library."""
+    problem, digest = _check(path)
+    if problem is None:
+        return digest
+    with _build_lock(path):
+        problem, digest = _check(path)  # (another process may have built it meanwhile)
+        if problem is None:
+            return digest
+        if problem != _MISSING:
+            print(f"hertzchain: the cached library {path} {problem}; building it again", file=sys.stderr, flush=True)
+            path.unlink(missing_ok=True)
+            _record_path(path).unlink(missing_ok=True)
+        if announce:
+            note = note or (f"{BUILD_TIME_NOTE}; `hertzchain kernel` builds all the libraries a first fit or "
+                            "diagnosis needs at once")
+            print(f"hertzchain: compiling {what} into {path} ({note})", file=sys.stderr, flush=True)
+        began = time.perf_counter()
+        build(path)
+        _write_record(path)
+        if announce:
+            print(f"hertzchain: {what} built in {time.perf_counter() - began:.0f} s", file=sys.stderr, flush=True)
+        problem, digest = _check(path)
+        if problem is not None:
+            raise RuntimeError(f"the library just built, {path}, {problem}")
+        return digest
 
 
 # The parts of `chain_kernel.cc` (its `HC_PART` values) that are compiled at once, each by its
@@ -306,7 +416,7 @@ def _keep_freed_buffers() -> bool:
     By default glibc maps each such buffer anew and unmaps it when freed, and its own
     adaptive threshold settles only after some runs: every page of the traces is then
     faulted in and zeroed again at each run. Measured on the standard damped case (N = 21,
-    B = 1024, 2500 steps, 2 cores; `benchmarks/results/allocation_2cores/`): about 15
+    B = 1024, 2500 steps, 2 cores; `benchmarks/results/allocation/`): about 15
     thousand page faults per run and 0.90-0.98e9 bead-steps/s, against 3 faults and
     1.27-1.32e9 once freed buffers are reused. Process-wide (malloc has no per-caller
     setting), the memory kept is at most `KEPT_FREE_BYTES`; `HERTZCHAIN_MALLOC_TUNING=0`
@@ -331,24 +441,26 @@ SWITCHED_OFF = "switched off (HERTZCHAIN_NATIVE=0)"
 @functools.cache
 def _load() -> str | None:
     """Build (if needed), load and register the kernel (and tune malloc for its results,
-    `_keep_freed_buffers`): None on success, else why not."""
+    `_keep_freed_buffers`): None on success, else why not (announced once by `_load_library`)."""
     if os.environ.get("HERTZCHAIN_NATIVE", "1") == "0":
         return SWITCHED_OFF
     _keep_freed_buffers()
     try:
-        _load_library((), "the fused chain kernel",
-                      ((TARGET, "HertzChainForward"), (FULL_TARGET, "HertzChainFullForward"),
-                       (TANGENT_TARGET, "HertzChainFullTangent"), (BOOKS_TARGET, "HertzChainFullBooks")))
+        _load_main()
     except (OSError, RuntimeError) as error:
-        # said once (this function's result is cached): a run that silently took the JAX
-        # kernel would be several times slower with nothing to tell why
-        first = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
-        print(f"hertzchain: the fused C++ kernel is not available ({first}); the JAX kernel runs "
-              "instead, several times slower. hertzchain.native.unavailable_reason() gives the "
-              "whole message; HERTZCHAIN_NATIVE=0 chooses the JAX kernel without this notice.",
-              file=sys.stderr, flush=True)
         return str(error)
     return None
+
+
+@functools.cache
+def _load_main() -> Path:
+    """Build (if needed), load and register the main library (`_load_library`): its path."""
+    return _load_library((), "the fused C++ kernel",
+                         ((TARGET, "HertzChainForward"), (FULL_TARGET, "HertzChainFullForward"),
+                          (TANGENT_TARGET, "HertzChainFullTangent"), (BOOKS_TARGET, "HertzChainFullBooks")),
+                         instead="the JAX kernel runs instead, several times slower. "
+                                 "hertzchain.native.unavailable_reason() gives the whole message; "
+                                 "HERTZCHAIN_NATIVE=0 chooses the JAX kernel without this notice")
 
 
 @contextlib.contextmanager
@@ -368,57 +480,151 @@ def _build_lock(path: Path):
             fcntl.flock(lock, fcntl.LOCK_UN)
 
 
-def _load_library(defines: tuple[str, ...], what: str, targets, source: Path = SOURCE) -> None:
-    """Build (if needed) the host kernel `source` with `defines`, load it and register its
-    handler symbols as FFI targets (`targets`: (target, symbol) pairs)."""
+# The libraries this process failed to build or load: path -> why (tried once a process).
+_FAILED: dict[Path, str] = {}
+# The libraries this process loaded: path -> its SHA-256 (verified against its build record).
+_LOADED: dict[Path, str] = {}
+# The libraries whose kernels computed this process's results: file name -> (backend, SHA-256).
+_USED: dict[str, tuple[str, str]] = {}
+# What runs where one of the libraries built on first use cannot be built.
+JAX_INSTEAD = "those runs take the JAX kernel instead, several times slower; `hertzchain kernel --all` shows why in full"
+
+
+def _announce_failure(what: str, error: BaseException | str, instead: str) -> None:
+    """Say on stderr, in one line, that `what` cannot be used, the first line of why and what
+    runs instead."""
+    text = str(error).strip()
+    first = text.splitlines()[0] if text else type(error).__name__
+    print(f"hertzchain: {what} cannot be used ({first}); {instead}.", file=sys.stderr, flush=True)
+
+
+def _load_library(defines: tuple[str, ...], what: str, targets, source: Path = SOURCE, *,
+                  instead: str = JAX_INSTEAD) -> Path:
+    """Build (if needed, `_ensure_built`) the host kernel `source` with `defines`, load it
+    once it matches its build record and register its handler symbols as FFI targets
+    (`targets`: (target, symbol) pairs); returns its path. A library that cannot be built or
+    loaded raises RuntimeError or OSError, said once a process on stderr with the first line
+    of why and `instead` (what runs in its place); later calls raise at once."""
     path = _library_path(defines, source)
-    if not path.exists():
-        with _build_lock(path):
-            if not path.exists():  # (another process may have built it while this one waited)
-                print(f"hertzchain: compiling {what} into {path} (once; under a minute)", file=sys.stderr,
-                      flush=True)
-                _build(path, defines, source)
-    library = ctypes.cdll.LoadLibrary(str(path))
-    for name, symbol in targets:
-        jax.ffi.register_ffi_target(name, jax.ffi.pycapsule(getattr(library, symbol)), platform="cpu")
+    if path in _FAILED:
+        raise RuntimeError(_FAILED[path])
+    if path not in _LOADED:
+        try:
+            digest = _ensure_built(path, what, lambda out: _build(out, defines, source))
+            library = ctypes.cdll.LoadLibrary(str(path))
+        except (OSError, RuntimeError) as error:
+            _FAILED[path] = str(error) or type(error).__name__
+            _announce_failure(what, error, instead)
+            raise
+        for name, symbol in targets:
+            jax.ffi.register_ffi_target(name, jax.ffi.pycapsule(getattr(library, symbol)), platform="cpu")
+        _LOADED[path] = digest
+    return path
+
+
+def note_use(path: Path, backend: str = "host") -> None:
+    """Record that the kernels of the loaded library `path` ran on `backend` ("host",
+    "cuda", "emulated") in this process (`kernel_record`)."""
+    _USED[path.name] = (backend, _LOADED[path])
 
 
 @functools.cache
-def _load_dashpot() -> None:
+def _load_dashpot() -> Path:
     """Build (if needed), load and register the dashpot's full kernels (`DASHPOT_DEFINE`)."""
-    _load_library((f"-D{DASHPOT_DEFINE}",), "the fused chain kernel's dashpot runs",
-                  ((DASHPOT_FULL_TARGET, "HertzChainFullForward"), (DASHPOT_TANGENT_TARGET, "HertzChainFullTangent"),
-                   (DASHPOT_BOOKS_TARGET, "HertzChainFullBooks")))
+    return _load_library((f"-D{DASHPOT_DEFINE}",), "the fused chain kernel's dashpot runs",
+                         ((DASHPOT_FULL_TARGET, "HertzChainFullForward"), (DASHPOT_TANGENT_TARGET, "HertzChainFullTangent"),
+                          (DASHPOT_BOOKS_TARGET, "HertzChainFullBooks")))
 
 
 @functools.cache
-def _load_sensors(law: str = "hertz") -> None:
+def _load_sensors(law: str = "hertz") -> Path:
     """Build (if needed), load and register the compliant sensors' full kernels (`SENSOR_DEFINE`)
     on `law`'s contacts."""
     if law == "hertz":
-        _load_library((f"-D{SENSOR_DEFINE}",), "the fused chain kernel's compliant sensors",
-                      ((SENSOR_FULL_TARGET, "HertzChainFullForward"),
-                       (SENSOR_TANGENT_TARGET, "HertzChainFullTangent")))
-        return
-    _load_library((f"-D{LAW_DEFINES[law]}", f"-D{SENSOR_DEFINE}"),
-                  f"the fused chain kernel's compliant sensors on {law}",
-                  ((_law_target("full", law) + "_sensors", "HertzChainFullForward"),
-                   (_law_target("tangent", law) + "_sensors", "HertzChainFullTangent")))
+        return _load_library((f"-D{SENSOR_DEFINE}",), "the fused chain kernel's compliant sensors",
+                             ((SENSOR_FULL_TARGET, "HertzChainFullForward"),
+                              (SENSOR_TANGENT_TARGET, "HertzChainFullTangent")))
+    return _load_library((f"-D{LAW_DEFINES[law]}", f"-D{SENSOR_DEFINE}"),
+                         f"the fused chain kernel's compliant sensors on {law}",
+                         ((_law_target("full", law) + "_sensors", "HertzChainFullForward"),
+                          (_law_target("tangent", law) + "_sensors", "HertzChainFullTangent")))
 
 
-def load_on_demand_libraries():
-    """Build (where not built yet) and load the host libraries otherwise built on first use:
-    the dashpot's (Hertz contacts with a dashpot), the compliant sensors' and each other
-    contact law's (`LAW_DEFINES`, with or without a dashpot). Yields (name, path, seconds) as
-    each is ready."""
-    for name, defines, load in [("dashpot", (f"-D{DASHPOT_DEFINE}",), _load_dashpot),
-                                ("compliant sensors", (f"-D{SENSOR_DEFINE}",), _load_sensors)] + [
-            (law, (f"-D{define}",), functools.partial(_load_law, law)) for law, define in LAW_DEFINES.items()] + [
-            (f"{law} compliant sensors", (f"-D{define}", f"-D{SENSOR_DEFINE}"), functools.partial(_load_sensors, law))
-            for law, define in LAW_DEFINES.items()]:
-        began = time.perf_counter()
-        load()
-        yield name, _library_path(defines, SOURCE), time.perf_counter() - began
+def library_table() -> dict[str, tuple[tuple[str, ...], Path]]:
+    """Every host library, by name: its `-D` macros and source. "chain" is the main library
+    every run needs; the others are built on their first use: the dashpot's (Hertz contacts
+    with a dashpot), the compliant sensors', each other contact law's (`LAW_DEFINES`, with or
+    without a dashpot) and its compliant sensors', and the driven chains' lock-in kernel
+    ("driven", `hertzchain.driven.fused`)."""
+    table = {"chain": ((), SOURCE), "dashpot": ((f"-D{DASHPOT_DEFINE}",), SOURCE),
+             "compliant sensors": ((f"-D{SENSOR_DEFINE}",), SOURCE)}
+    table |= {law: ((f"-D{define}",), SOURCE) for law, define in LAW_DEFINES.items()}
+    table |= {f"{law} compliant sensors": ((f"-D{define}", f"-D{SENSOR_DEFINE}"), SOURCE)
+              for law, define in LAW_DEFINES.items()}
+    table["driven"] = ((), DRIVEN_SOURCE)
+    return table
+
+
+# The libraries a first fit or diagnosis of impact data builds (measured: a diagnosis of a
+# small chain from an empty cache), and a driven fit's; `hertzchain kernel` builds these.
+FIRST_USE_LIBRARIES = ("chain", "dashpot", "compliant sensors", "jackson_green", "power_law",
+                       "jackson_green compliant sensors", "driven")
+
+
+def _load_named(name: str) -> Path:
+    """Load the library `name` (`library_table`), building it where needed: its path."""
+    if name == "chain":
+        return _load_main()
+    if name == "dashpot":
+        return _load_dashpot()
+    if name == "driven":
+        from .driven import fused  # (the driven chains' kernel registers its own targets)
+
+        return fused._library()
+    law, _, sensors = name.partition(" ")
+    if sensors:
+        return _load_sensors("hertz" if law == "compliant" else law)
+    return _load_law(law)
+
+
+def build_libraries(names, jobs: int | None = None):
+    """Build the libraries `names` (`library_table` keys) where they are not in the cache
+    and verified, several at once (one compiler process each, the main library's parts two),
+    then load each. **Arguments:**
+
+    - `names`: which libraries, in the order their builds start (the longest first is best).
+    - `jobs`: how many builds run at once (default: the CPU cores this process may use).
+
+    **Yields** (name, path, seconds, why) as each library is done, in the order they finish:
+    `why` is None where it was built (or already there) and loaded, else the whole message of
+    its failure; seconds from the start of its build (or check) to its end.
+    """
+    table = library_table()
+    unknown = [name for name in names if name not in table]
+    if unknown:
+        raise ValueError(f"unknown kernel libraries {unknown}; known: {', '.join(table)}")
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    began = time.perf_counter()
+
+    def build(name):
+        defines, source = table[name]
+        path = None
+        try:
+            path = _library_path(defines, source)
+            _ensure_built(path, name, lambda out: _build(out, defines, source), announce=False)
+        except (OSError, RuntimeError) as error:
+            return name, path, str(error) or type(error).__name__
+        return name, path, None
+
+    with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, jobs or cores or 1)) as pool:
+        for future in concurrent.futures.as_completed([pool.submit(build, name) for name in names]):
+            name, path, why = future.result()
+            if why is None:
+                try:
+                    _load_named(name)
+                except (OSError, RuntimeError) as error:
+                    why = str(error) or type(error).__name__
+            yield name, path, time.perf_counter() - began, why
 
 
 def _law_target(kind: str, law: str) -> str:
@@ -427,13 +633,13 @@ def _law_target(kind: str, law: str) -> str:
 
 
 @functools.cache
-def _load_law(law: str) -> None:
+def _load_law(law: str) -> Path:
     """Build (if needed), load and register the full kernels of a law other than Hertz's
     (`LAW_DEFINES`)."""
-    _load_library((f"-D{LAW_DEFINES[law]}",), f"the fused chain kernel's {law} runs",
-                  tuple((_law_target(kind, law), symbol) for kind, symbol in (
-                      ("full", "HertzChainFullForward"), ("tangent", "HertzChainFullTangent"),
-                      ("books", "HertzChainFullBooks"))))
+    return _load_library((f"-D{LAW_DEFINES[law]}",), f"the fused chain kernel's {law} runs",
+                         tuple((_law_target(kind, law), symbol) for kind, symbol in (
+                             ("full", "HertzChainFullForward"), ("tangent", "HertzChainFullTangent"),
+                             ("books", "HertzChainFullBooks"))))
 
 
 def available() -> bool:
@@ -457,6 +663,37 @@ def library_path() -> Path:
     return _library_path()
 
 
+def _instruction_set(arch: str) -> str:
+    """The widest vector instructions the C++ compiler targets for `-march=arch`: "avx512",
+    "avx2", "sse2", or the machine's name (`platform.machine()`) elsewhere."""
+    macros = _compiler_macros(arch) or ""
+    for name, macro in (("avx512", "__AVX512F__"), ("avx2", "__AVX2__"), ("sse2", "__SSE2__")):
+        if macro in macros:
+            return name
+    return platform.machine().lower() or "unknown"
+
+
+def kernel_record() -> dict:
+    """Which kernels computed this process's results so far, for result files:
+    `{"name": ..., "libraries": {file: SHA-256}}`, the name "native-<instructions>" for the
+    host's fused kernels (e.g. "native-avx512", "native-avx2"; the `-march` of
+    `HERTZCHAIN_NATIVE_ARCH`), "native-cuda" for the GPU's, "native-emulated" for the GPU
+    kernel run on the host, joined by "+" where several ran; `{"name": "jax"}` where none
+    did (every result then came from the JAX kernel). Where a library could not be built or
+    loaded, its runs took the JAX kernel: "+jax" ends the name, and "not_available" gives
+    each such library's file and the first line of why."""
+    arch = os.environ.get(ARCH_VARIABLE, "native").strip() or "native"
+    names = {"host": f"native-{_instruction_set(arch)}", "cuda": "native-cuda", "emulated": "native-emulated"}
+    backends = sorted({backend for backend, _ in _USED.values()}, key=list(names).index)
+    record = {"name": "+".join([names[backend] for backend in backends] + (["jax"] if _FAILED or not _USED else []))}
+    if _USED:
+        record["libraries"] = {name: digest for name, (_, digest) in sorted(_USED.items())}
+    if _FAILED:
+        record["not_available"] = {path.name: (why.strip().splitlines() or ["unknown"])[0]
+                                   for path, why in sorted(_FAILED.items())}
+    return record
+
+
 class FusedKernel(NamedTuple):
     """A fused kernel: its physics, "conservative" (no damping or friction, books or not) or
     "full" (damping, friction, forward-mode tangents, the recorded forces only), and where
@@ -467,6 +704,22 @@ class FusedKernel(NamedTuple):
     backend: str
 
 
+def _host_library_loads(flags) -> bool:
+    """Whether the host library that runs `flags`' physics (`batched.KernelFlags`) beyond the
+    main library's (compliant sensors, another law, a dashpot) loads; where it cannot be
+    built, that was said once on stderr and those runs take the JAX kernel."""
+    try:
+        if flags.sensors:
+            _load_sensors(flags.law)
+        elif flags.law != "hertz":
+            _load_law(flags.law)
+        elif flags.dashpot:
+            _load_dashpot()
+    except (OSError, RuntimeError):
+        return False
+    return True
+
+
 def kernel_for(flags, devices) -> FusedKernel | None:
     """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
     devices, or None (the JAX kernel: laws other than Hertz's on a GPU, compliant sensors on
@@ -474,15 +727,15 @@ def kernel_for(flags, devices) -> FusedKernel | None:
     of another kind, no compiler)."""
     platforms = {d.platform for d in devices} if devices else {jax.default_backend()}
     if flags.sensors:  # compliant sensors: the host's sensor libraries, no books
-        if flags.ledger or platforms != {"cpu"} or not available():
+        if flags.ledger or platforms != {"cpu"} or not available() or not _host_library_loads(flags):
             return None
         return FusedKernel("full", "host")
     if flags.law != "hertz":  # the full kernel's library of the law (`LAW_DEFINES`), on the host
-        if platforms != {"cpu"} or not available():
+        if platforms != {"cpu"} or not available() or not _host_library_loads(flags):
             return None
         return FusedKernel("full", "host")
     physics = "full" if flags.full_state else "conservative"
-    if platforms == {"cpu"} and available():
+    if platforms == {"cpu"} and available() and _host_library_loads(flags):
         return FusedKernel(physics, "host")
     if flags.full_state and flags.ledger:  # the thread kernels keep no books of the full step
         return None
@@ -556,7 +809,7 @@ def _thread_target(backend: str, rows: int, kind: str) -> str:
 
 
 @functools.cache
-def _thread_library(backend: str, rows: int) -> None:
+def _thread_library(backend: str, rows: int) -> Path:
     reason = thread_unavailable_reason(backend)
     if reason is not None:
         raise RuntimeError(f"the {backend} chain kernel is unavailable: {reason}")
@@ -566,15 +819,16 @@ def _thread_library(backend: str, rows: int) -> None:
                  " ".join(_thread_build_command(backend, rows, Path("-"))).encode(), toolchain.encode()):
         digest.update(part)
     path = _cache_dir() / f"chain_thread-{backend}-r{rows}-{digest.hexdigest()[:16]}.so"
-    if not path.exists():
-        print(f"hertzchain: compiling the {backend} chain kernel for {rows - 1} bodies into {path} (once)",
-              file=sys.stderr, flush=True)
-        _compile(lambda partial: _thread_build_command(backend, rows, partial), path, THREAD_SOURCE.name)
+    _LOADED[path] = _ensure_built(
+        path, f"the {backend} chain kernel for {rows - 1} bodies",
+        lambda out: _compile(lambda partial: _thread_build_command(backend, rows, partial), out, THREAD_SOURCE.name),
+        note="once")
     library = ctypes.cdll.LoadLibrary(str(path))
     platform_name = "CUDA" if backend == "cuda" else "cpu"
     for kind, symbol in _THREAD_SYMBOLS.items():
         jax.ffi.register_ffi_target(f"hertzchain_thread_{backend}_r{rows}_{kind}",
                                     jax.ffi.pycapsule(getattr(library, symbol)), platform=platform_name)
+    return path
 
 
 def _require(backend: str) -> None:
@@ -605,15 +859,19 @@ class _Ffi(NamedTuple):
         if self.backend == "host":  # the library built on first use that holds the handler
             law = next((law for law in LAW_DEFINES if f"_{law}" in kind), "hertz")
             if kind.endswith("_sensors"):
-                _load_sensors(law)
+                path = _load_sensors(law)
             elif kind.endswith("_dashpot"):
-                _load_dashpot()
+                path = _load_dashpot()
             elif law != "hertz":
-                _load_law(law)
+                path = _load_law(law)
+            else:
+                path = _load_main()
+            note_use(path)
             # the host's full kernels take the sensors' beads after the channels (empty without)
             extra = () if kind == "forward" else (np.asarray(beads, dtype=np.int64),)
             return tuple(jax.ffi.ffi_call(_HOST_TARGETS[kind], shapes)(*args, index, *extra, **attrs))
         target = _thread_target(self.backend, int(self.rows), kind.removesuffix("_dashpot"))
+        note_use(_thread_library(self.backend, int(self.rows)), self.backend)
         return tuple(jax.ffi.ffi_call(target, shapes)(*args, channels=index, **attrs))
 
     def traces(self, traces) -> tuple:

@@ -81,7 +81,7 @@ def simulate_reference(
     if setup.plasticity:
         raise ValueError(
             "The reference solver integrates an ODE and cannot follow the history of plastic "
-            "contacts; use hertzchain.simulate for plasticity=True."
+            "contacts; use hertzchain.simulate for elastic-plastic contact laws."
         )
     recording = Recording(tuple(int(k) for k in contacts), bool(record_all))
     _layout(setup, recording)

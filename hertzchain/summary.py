@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .chain import ChainSetup
+from .chain import LAW_ATTRIBUTES, ChainSetup
 from .timegrid import choose_time_grid, shortest_contact_time_s
 from .traces import Traces
 
@@ -25,8 +25,11 @@ def setup_dict(setup: ChainSetup) -> dict:
         "sensor_beads": list(setup.sensor_beads),
         "plasticity": setup.plasticity,
         "plastic_law": setup.plastic_law,
+        "contact_law": type(setup.contact_law).__name__,
+        "dissipation": {type(law).__name__: {field: _plain(getattr(law, field)) for field in law.__dataclass_fields__}
+                        for law in setup.dissipation},
     }
-    for name in ChainSetup.__dataclass_fields__:
+    for name in (*ChainSetup.__dataclass_fields__, *LAW_ATTRIBUTES):
         if name not in values:
             values[name] = _plain(getattr(setup, name))
     values["bead_mass_kg"] = _plain(setup.bead_mass_kg)

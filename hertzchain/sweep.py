@@ -6,10 +6,15 @@ demanding run). Runs are evaluated in chunks of `chunk_size` with `batched.solve
 (the batch on the SIMD axis, split over all local devices), and each finished chunk is
 written at once as its own Parquet file, atomically. The folder holds:
 
-- `manifest.json`: what the sweep is (grid, base setup, run options, chunk size); a sweep
-  restarted into the same folder checks it and computes only the chunks not on disk, so an
-  interrupted sweep resumes without recomputing or corrupting anything;
-- `chunks/chunk_NNNNN.parquet`: one file per finished chunk;
+- `manifest.json`: what the sweep is: every field of the base setup (`setup_record`, walked
+  generically, nested modules as class name and fields), the grid, every run option that
+  changes the physics or the output, the chunk size, and `sweep_sha256`, the SHA-256 of all
+  of it. A sweep restarted into the same folder must have the same manifest: one that
+  differs in anything is refused naming each differing field with both values; otherwise
+  only the chunks not on disk are computed, so an interrupted sweep resumes without
+  recomputing or corrupting anything;
+- `chunks/chunk_NNNNN.parquet`: one file per finished chunk, whose metadata holds the
+  sweep's hash, its index and its runs; a chunk that does not match is refused by name;
 - `sweep.parquet`, `sweep.csv`: the tidy table, one row per run, assembled from the chunks in
   run order once all are done (byte-identical whether or not the sweep was interrupted);
 - `force_ratio.png`, `speed_vs_amplitude.png`: summary plots.
@@ -23,7 +28,13 @@ $2\\tau$ of its main pulse, `pulses.fit_cos6`; NaN where that fit did not conver
 last recorded contact over the difference of their arrival times); `incident_peak_n` (first
 pulse at the last recorded contact); `force_ratio` (wall peak / incident peak);
 `energy_error_rel`, `dissipated_fraction`, `final_energy_fraction` (the energy balance at
-the end, relative to the impact energy).
+the end, relative to the impact energy); `peak_over_yield` (the largest ratio of a contact's
+peak force to its yield force, `ChainSetup.contact_yield_force_n`) and
+`peak_over_yield_contact` (that contact; N: the wall), `result_finite`
+(every peak force and energy finite: a row with false is not a result); then `setup_sha256`
+(the hash of the base setup) and `setup.<field>`, the value of every field of the base
+setup that is not swept and has one value (per-bead arrays of equal beads included), so
+the table says what physics it holds. The Parquet file holds the hashes as metadata too.
 
 Several hosts: start one process per host, call `jax.distributed.initialize(...)` in each
 (the CLI's `--distributed`, with `--coordinator`, `--num-processes`, `--process-id` where the
@@ -35,6 +46,8 @@ barrier.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import itertools
 import json
 import math
@@ -49,11 +62,13 @@ from .atomic import atomic_path, save_figure, write_csv, write_json
 from .batched import BatchedTraces, solve_batched
 from .chain import ChainSetup
 from .integrate import Recording
+from .native import kernel_record
 from .progress import Progress
 from .timegrid import DEFAULT_STEPS_PER_CONTACT, choose_time_grid
-from .tracefile import setup_header
+from .units import parse_quantity, unit_of_field
+from .validation import check_run_size, check_step_stability, check_values, estimate_run_size
 
-SWEEP_FORMAT = "hertzchain-sweep/1"
+SWEEP_FORMAT = "hertzchain-sweep/2"
 # Recorded samples kept in memory per chunk (all channels), bounds the default chunk size.
 _CHUNK_BYTES = 256 * 2**20
 _MAX_CHUNK = 4096
@@ -79,37 +94,46 @@ def sweepable_fields(setup: ChainSetup) -> tuple[str, ...]:
     """Scalar numeric fields of a setup that a sweep can vary."""
     return tuple(
         name
-        for name in setup.__dataclass_fields__
+        for name in (*setup.__dataclass_fields__, *setup.law_attributes)
         if isinstance(getattr(setup, name), jax.Array) and jnp.ndim(getattr(setup, name)) == 0
     )
 
 
 def parse_grid(text: str) -> tuple[str, np.ndarray]:
-    """Parse one grid option `field=values`: a comma list (`3e9,45e9,203e9`), a range
-    `start:stop:count` (linear) or `start:stop:count:log` (log-spaced), SI units."""
+    """Parse one grid option `field=values`: a comma list (`3GPa,45GPa,203GPa`), a range
+    `start:stop:count` (linear) or `start:stop:count:log` (log-spaced). Values are in the
+    unit the field's name carries (`wall_youngs_pa`: Pa, `eta_s`: s), bare numbers SI, unit
+    suffixes accepted (`eta_s=0:3us:4`)."""
     if "=" not in text:
         raise ValueError(f"--grid {text!r}: expected FIELD=VALUES, e.g. striker_velocity_m_s=0.1:1:10:log.")
     name, values = (part.strip() for part in text.split("=", 1))
-    try:
-        if ":" in values:
-            parts = values.split(":")
-            if len(parts) not in (3, 4) or (len(parts) == 4 and parts[3] not in ("log", "lin")):
-                raise ValueError
-            start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
-            if count < 1:
-                raise ValueError
-            if len(parts) == 4 and parts[3] == "log":
-                if start <= 0 or stop <= 0:
-                    raise ValueError
-                array = np.geomspace(start, stop, count)
-            else:
-                array = np.linspace(start, stop, count)
+    unit = unit_of_field(name)
+    shape = (f"--grid {text!r}: values must be a comma list of numbers or start:stop:count[:log], "
+             f"in {unit or 'SI units'} or with a unit suffix (e.g. wall_youngs_pa=3GPa,45GPa, "
+             "eta_s=0:3us:4).")
+
+    def number(part: str) -> float:
+        return parse_quantity(part, unit, name=f"--grid {name}")
+
+    if ":" in values:
+        parts = values.split(":")
+        if len(parts) not in (3, 4) or (len(parts) == 4 and parts[3] not in ("log", "lin")):
+            raise ValueError(shape)
+        start, stop = number(parts[0]), number(parts[1])
+        try:
+            count = int(parts[2])
+        except ValueError:
+            raise ValueError(shape) from None
+        if count < 1:
+            raise ValueError(f"--grid {text!r}: the count must be at least 1, got {count}.")
+        if len(parts) == 4 and parts[3] == "log":
+            if start <= 0 or stop <= 0:
+                raise ValueError(f"--grid {text!r}: a log range needs positive start and stop.")
+            array = np.geomspace(start, stop, count)
         else:
-            array = np.asarray([float(v) for v in values.split(",") if v.strip()])
-    except ValueError as error:
-        raise ValueError(
-            f"--grid {text!r}: values must be a comma list of numbers (SI) or start:stop:count[:log]."
-        ) from error
+            array = np.linspace(start, stop, count)
+    else:
+        array = np.asarray([number(v) for v in values.split(",") if v.strip()])
     if array.size == 0:
         raise ValueError(f"--grid {text!r}: no values.")
     return name, array
@@ -123,8 +147,7 @@ def check_spec(spec: SweepSpec) -> None:
     for name, values in spec.grid.items():
         if name not in allowed:
             raise ValueError(f"Cannot sweep {name!r}: sweepable fields are {', '.join(allowed)}.")
-        if not np.all(np.isfinite(values) | (name == "wall_youngs_pa")):
-            raise ValueError(f"{name}: grid values must be finite numbers, got {list(values)}.")
+        check_values(name, values, where="grid")
     for k in spec.contacts:
         if not 0 <= k < spec.setup.n_beads:
             raise ValueError(f"contacts: contact {k} is not in the chain (0..{spec.setup.n_beads - 1}).")
@@ -169,7 +192,8 @@ def time_grid(spec: SweepSpec):
 
 
 def default_contacts(n_beads: int) -> tuple[int, ...]:
-    """Two contacts at 0.3 N and 0.53 N (the command line's default)."""
+    """The contacts at 0.3 and 0.53 of an `n_beads` chain's length (6 and 11 of 21 beads): the
+    contacts the command line records unless told others."""
     return tuple(sorted({min(max(round(f * n_beads), 0), n_beads - 1) for f in (0.3, 0.53)}))
 
 
@@ -181,19 +205,76 @@ def default_chunk_size(spec: SweepSpec, n_samples: int, n_devices: int) -> int:
     return n_devices * math.ceil(size / n_devices)
 
 
+def _record(value):
+    """A JSON-ready, canonical form of a setup value: arrays as numbers or lists, non-finite
+    numbers as strings, equinox modules as their class name and fields (recursively)."""
+    import equinox as eqx
+
+    if isinstance(value, eqx.Module):
+        return {"class": type(value).__name__,
+                **{f.name: _record(getattr(value, f.name)) for f in dataclasses.fields(value)}}
+    if isinstance(value, (bool, np.bool_, str)) or value is None:
+        return value.item() if isinstance(value, np.bool_) else value
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (tuple, list)):
+        return [_record(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _record(v) for k, v in value.items()}
+    array = np.asarray(value, dtype=float)
+    numbers = [x if math.isfinite(x) else str(x) for x in array.ravel().tolist()]
+    return numbers[0] if array.ndim == 0 else numbers
+
+
+# The laws' coefficients that ChainSetup names as attributes (`law_attributes`), as options and
+# grids name them: (field holding the law, index in a sequence or None, the law's field, name).
+_NAMED_COEFFICIENTS = (
+    ("dissipation", 0, "eta_s", "eta_s"),
+    ("dissipation", 1, "gamma_n_s_m", "dashpot_n_s_m"),
+    ("contact_law", None, "exponent", "contact_exponent"),
+    ("contact_law", None, "reference_overlap_m", "exponent_reference_overlap_m"),
+)
+
+
+def setup_record(setup: ChainSetup) -> dict:
+    """Every field of a (non-batched) setup, by name, in a canonical JSON-ready form: a field
+    added to `ChainSetup` (or a law object inside it) is covered without naming it here.
+
+    The coefficients that `ChainSetup` names (`eta_s`, `dashpot_n_s_m`, a power law's
+    `contact_exponent`) stand under those names, as grids and options give them; every other
+    law stands under its class name with its fields (`contact_law.class`,
+    `dissipation.VelocitySquared.c_n_s2_m2`), so a difference is named to the coefficient."""
+    record = _record(setup)
+    laws_given = record["dissipation"]
+    for holder, index, field, name in _NAMED_COEFFICIENTS:
+        law = record[holder] if index is None else laws_given[index]
+        if field in law:
+            record[name] = law.pop(field)
+    others: dict = {}
+    for law in laws_given[2:]:
+        name = law.pop("class")
+        others[name if name not in others else f"{name}#{sum(k.split('#')[0] == name for k in others) + 1}"] = law
+    record["dissipation"] = others
+    return record
+
+
+def sha256_of(record) -> str:
+    """SHA-256 (hex) of the canonical JSON serialisation of `record` (sorted keys)."""
+    text = json.dumps(record, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
 def _manifest(spec: SweepSpec, chunk_size: int, n_chunks: int, grid) -> dict:
-    header = {k: (v if not isinstance(v, float) or math.isfinite(v) else str(v))
-              for k, v in setup_header(spec.setup).items()}
-    return {
+    setup = setup_record(spec.setup)
+    manifest = {
         "format": SWEEP_FORMAT,
-        "setup": header,
-        "end": spec.setup.end,
-        "sensor_beads": list(spec.setup.sensor_beads),
-        "plasticity": spec.setup.plasticity,
-        "grid": {name: [float(x) if math.isfinite(x) else str(x) for x in np.asarray(v, float)]
-                 for name, v in spec.grid.items()},
+        "setup": setup,
+        "setup_sha256": sha256_of(setup),
+        "grid": {name: _record(np.asarray(v, float)) for name, v in spec.grid.items()},
         "t_end_s": spec.t_end_s,
         "sample_interval_s": spec.sample_interval_s,
+        "dt_s_requested": spec.dt_s,
+        "steps_per_contact": spec.steps_per_contact,
         "dt_s": grid.dt_s,
         "steps_per_sample": grid.steps_per_sample,
         "n_samples": grid.n_samples,
@@ -202,6 +283,81 @@ def _manifest(spec: SweepSpec, chunk_size: int, n_chunks: int, grid) -> dict:
         "chunk_size": chunk_size,
         "n_chunks": n_chunks,
     }
+    return {**manifest, "sweep_sha256": sha256_of(manifest)}
+
+
+def _flat(record, prefix: str = "") -> dict:
+    """Dotted key -> value of a nested record (lists kept whole)."""
+    if isinstance(record, dict):
+        flat = {}
+        for key, value in record.items():
+            flat.update(_flat(value, f"{prefix}{key}."))
+        return flat
+    return {prefix[:-1]: record}
+
+
+def _short(value) -> str:
+    text = json.dumps(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _check_same_sweep(folder: Path, existing: dict, manifest: dict) -> None:
+    """Refuse a folder whose manifest differs from this sweep's, naming every difference."""
+    if existing.get("sweep_sha256") == manifest["sweep_sha256"] and existing == manifest:
+        return
+    old, new = _flat(existing), _flat(json.loads(json.dumps(manifest)))
+    differing = [key for key in sorted(set(old) | set(new))
+                 if key != "sweep_sha256" and key != "setup_sha256" and old.get(key) != new.get(key)]
+    shown = "; ".join(f"{key} = {_short(old.get(key))} there, {_short(new.get(key))} now" for key in differing[:8])
+    more = f" and {len(differing) - 8} more" if len(differing) > 8 else ""
+    raise ValueError(
+        f"{folder} holds a different sweep ({shown}{more}): its results are not this sweep's. "
+        "Give a new folder (--out) or delete this one."
+    )
+
+
+_CHUNK_KEYS = (b"hertzchain.sweep_sha256", b"hertzchain.chunk", b"hertzchain.runs")
+
+
+def _chunk_metadata(sweep_sha256: str, index: int, start: int, stop: int) -> dict:
+    return dict(zip(_CHUNK_KEYS, (sweep_sha256, str(index), f"{start}:{stop}"), strict=True))
+
+
+def _check_chunk(path: Path, sweep_sha256: str, index: int, start: int, stop: int) -> None:
+    """Refuse a chunk file that was not written by this sweep for these runs."""
+    import pyarrow.parquet as pq
+
+    try:
+        metadata = pq.read_schema(path).metadata or {}
+    except (OSError, ValueError) as error:  # pyarrow's errors derive from these
+        raise ValueError(f"{path} cannot be read as a sweep chunk ({error}); delete it and run again.") from error
+    found = {key: metadata.get(key, b"").decode() for key in _CHUNK_KEYS}
+    expected = {key.decode(): value for key, value in _chunk_metadata(sweep_sha256, index, start, stop).items()}
+    if {key.decode(): value for key, value in found.items()} != expected:
+        raise ValueError(
+            f"{path} is not chunk {index} (runs {start}:{stop}) of this sweep (it holds sweep "
+            f"{found[_CHUNK_KEYS[0]][:12] or 'unknown'}, chunk {found[_CHUNK_KEYS[1]] or '?'}, runs "
+            f"{found[_CHUNK_KEYS[2]] or '?'}; this folder's sweep is {sweep_sha256[:12]}): delete it and run "
+            "again to recompute it."
+        )
+
+
+def _constant_columns(record: dict, swept, n_rows: int) -> dict[str, np.ndarray]:
+    """`setup.<field>` columns: every field of the setup record with one value, not swept."""
+    columns = {}
+    for key, value in _flat(record).items():
+        if key in swept or key.endswith(".class") or key == "class":
+            continue
+        if isinstance(value, list):
+            if not value or any(v != value[0] for v in value) or isinstance(value[0], (list, dict)):
+                continue
+            value = value[0]
+        if isinstance(value, str) and value in ("inf", "-inf", "nan"):
+            value = float(value)
+        if value is None:
+            continue
+        columns[f"setup.{key}"] = np.full(n_rows, value)
+    return columns
 
 
 def _contact_positions_m(setup: ChainSetup, contacts) -> np.ndarray:
@@ -260,11 +416,11 @@ def _chunk_path(folder: Path, index: int) -> Path:
     return folder / "chunks" / f"chunk_{index:05d}.parquet"
 
 
-def _write_parquet(path: Path, columns: dict) -> None:
+def _write_parquet(path: Path, columns: dict, metadata: dict | None = None) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    table = pa.table({k: np.asarray(v) for k, v in columns.items()})
+    table = pa.table({k: np.asarray(v) for k, v in columns.items()}, metadata=metadata)
     with atomic_path(path) as temporary:
         pq.write_table(table, temporary)
 
@@ -277,11 +433,16 @@ def _read_parquet(path: Path) -> dict[str, np.ndarray]:
 
 
 def _write_table_csv(path, columns: dict[str, np.ndarray]) -> None:
-    """The table as CSV: integer columns as integers, the others as shortest round-trip floats."""
-    formatted = [
-        [str(int(x)) for x in column] if column.dtype.kind in "iu" else [repr(float(x)) for x in column]
-        for column in columns.values()
-    ]
+    """The table as CSV: integer columns as integers, text as text, the others as shortest
+    round-trip floats."""
+    def text(column):
+        if column.dtype.kind in "iu":
+            return [str(int(x)) for x in column]
+        if column.dtype.kind in "OUS":
+            return [str(x) for x in column]
+        return [repr(float(x)) for x in column]
+
+    formatted = [text(column) for column in columns.values()]
     write_csv(path, list(columns), zip(*formatted, strict=True))
 
 
@@ -298,6 +459,26 @@ class SweepResult(NamedTuple):
     folder: Path
 
 
+def _result_finite(columns: dict) -> np.ndarray:
+    """Rows whose peak forces and energies are all finite."""
+    keys = [k for k in columns if k.startswith("peak_") or k in ("energy_error_rel", "final_energy_fraction")]
+    return np.all(np.stack([np.isfinite(np.asarray(columns[k], dtype=float)) for k in keys]), axis=0)
+
+
+# Yield force of contacts 0..N-1 and the wall of each setup of a batch (one compiled program).
+_yield_forces_n = jax.jit(jax.vmap(ChainSetup.contact_yield_force_n))
+
+
+def _peak_over_yield(setup: ChainSetup, out: BatchedTraces) -> dict[str, np.ndarray]:
+    """`peak_over_yield`, the largest peak force / yield force over the contacts and the wall
+    of each run (batched setup), and `peak_over_yield_contact`, where (N: the wall)."""
+    yield_force = np.asarray(_yield_forces_n(setup))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.nan_to_num(np.asarray(out.max_force_n) / yield_force, nan=0.0)
+    return {"peak_over_yield": np.max(ratio, axis=1),
+            "peak_over_yield_contact": np.argmax(ratio, axis=1).astype(np.int64)}
+
+
 def run_sweep(
     spec: SweepSpec,
     folder,
@@ -308,8 +489,15 @@ def run_sweep(
     distributed: bool = False,
     plots: bool = True,
     progress: bool = True,
+    check_size: bool = True,
 ) -> SweepResult:
     """Run (or resume) a sweep into `folder`.
+
+    Before anything runs: every grid value is checked against `validation.RULES`, the step
+    against the damping of the grid's extreme setups (`validation.check_step_stability`),
+    the folder's manifest against this sweep's (any difference is refused, naming it), the
+    chunks on disk against the manifest, and, with `check_size`, the memory and work of the
+    runs to do (`validation.check_run_size`).
 
     **Arguments:**
 
@@ -321,8 +509,12 @@ def run_sweep(
     - `distributed`: this process is one of several (`jax.distributed.initialize()` has been
       called): it computes every P-th chunk; process 0 assembles the table.
     - `plots`, `progress`: write the summary plots; report progress and ETA on stderr.
+    - `check_size`: refuse a sweep that needs more memory than is available or more work
+      than `validation.MAX_BODY_STEPS` (False: run it anyway).
 
     **Returns:** `SweepResult`.
+
+    **Raises:** `ValueError` for any of the checks above.
     """
     check_spec(spec)
     if not spec.contacts:
@@ -330,35 +522,49 @@ def run_sweep(
     folder = Path(folder)
     devices = list(jax.local_devices() if devices is None else devices)
     grid = time_grid(spec)
+    check_step_stability(_whole_sweep_setup(spec, None), grid.dt_s, where="grid: ")
     if chunk_size is None:
         chunk_size = default_chunk_size(spec, grid.n_samples, len(devices))
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be a positive number of runs, got {chunk_size}.")
     n_chunks = math.ceil(spec.n_runs / chunk_size)
     manifest = _manifest(spec, chunk_size, n_chunks, grid)
+    sweep_sha256 = manifest["sweep_sha256"]
     manifest_path = folder / "manifest.json"
-    if manifest_path.exists():
-        existing = json.loads(manifest_path.read_text())
-        if existing != json.loads(json.dumps(manifest)):
-            differing = sorted(k for k in manifest if existing.get(k) != json.loads(json.dumps(manifest[k])))
-            raise ValueError(
-                f"{folder} holds a different sweep (differs in: {', '.join(differing)}); "
-                "use another output folder or delete this one."
-            )
-    elif not distributed or jax.process_index() == 0:
-        write_json(manifest_path, manifest)
-    inputs = grid_table(spec)
+    existing = json.loads(manifest_path.read_text()) if manifest_path.exists() else None
+    if existing is not None:
+        existing.pop("kernel", None)  # which kernel computed the chunks so far is not what the sweep is
+        _check_same_sweep(folder, existing, manifest)
+
+    def runs(index):
+        return index * chunk_size, min((index + 1) * chunk_size, spec.n_runs)
+
     mine = range(n_chunks)
     if distributed:
         mine = range(jax.process_index(), n_chunks, jax.process_count())
-    todo = [i for i in mine if not _chunk_path(folder, i).exists()]
+    todo = []
+    for i in mine:
+        if _chunk_path(folder, i).exists():
+            _check_chunk(_chunk_path(folder, i), sweep_sha256, i, *runs(i))
+        else:
+            todo.append(i)
     if max_chunks is not None:
         todo = todo[: max(0, int(max_chunks))]
+    sizes = {i: runs(i)[1] - runs(i)[0] for i in todo}
+    if check_size:
+        n_sensors = len(spec.setup.sensor_beads)
+        check_run_size(estimate_run_size(
+            n_runs_in_memory=min(chunk_size, spec.n_runs), n_runs=sum(sizes.values()),
+            n_bodies=spec.setup.n_beads + 1 + n_sensors, n_channels=len(spec.contacts) + n_sensors + 1,
+            n_samples=grid.n_samples, n_steps=grid.n_steps, n_table_values=spec.n_runs * (12 + 4 * len(spec.contacts)),
+        ))
+    if existing is None and (not distributed or jax.process_index() == 0):
+        write_json(manifest_path, manifest)
+    inputs = grid_table(spec)
     recording = Recording(tuple(spec.contacts))
-    sizes = {i: min((i + 1) * chunk_size, spec.n_runs) - i * chunk_size for i in todo}
     bar = Progress(sum(sizes.values()), "sweep (runs)") if progress and todo else None
     for index in todo:
-        start, stop = index * chunk_size, min((index + 1) * chunk_size, spec.n_runs)
+        start, stop = runs(index)
         setup = _batched(spec.setup, inputs, start, stop)
         out = solve_batched(
             setup, grid, recording, devices=devices if len(devices) > 1 else None, pad_to=chunk_size
@@ -366,9 +572,13 @@ def run_sweep(
         columns = {"run": np.arange(start, stop, dtype=np.int64)}
         columns.update({name: values[start:stop] for name, values in inputs.items()})
         columns.update(summarize(spec.setup, spec.contacts, out))
-        _write_parquet(_chunk_path(folder, index), columns)
+        columns.update(_peak_over_yield(setup, out))
+        columns["result_finite"] = _result_finite(columns)
+        _write_parquet(_chunk_path(folder, index), columns, _chunk_metadata(sweep_sha256, index, start, stop))
         if bar:
             bar.advance(stop - start)
+    if todo and (not distributed or jax.process_index() == 0):  # the kernel of this run's chunks
+        write_json(manifest_path, {**manifest, "kernel": kernel_record()})
     if distributed:
         from jax.experimental import multihost_utils
 
@@ -379,13 +589,44 @@ def run_sweep(
     done = sum(_chunk_path(folder, i).exists() for i in range(n_chunks))
     if done < n_chunks:
         return SweepResult(False, done, n_chunks, len(todo), None, folder)
-    parts = [_read_parquet(_chunk_path(folder, i)) for i in range(n_chunks)]
+    parts = []
+    for i in range(n_chunks):
+        _check_chunk(_chunk_path(folder, i), sweep_sha256, i, *runs(i))
+        parts.append(_read_parquet(_chunk_path(folder, i)))
     table = {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
-    _write_parquet(folder / "sweep.parquet", table)
+    n_rows = len(table["run"])
+    table["setup_sha256"] = np.full(n_rows, manifest["setup_sha256"])
+    table.update(_constant_columns(manifest["setup"], set(spec.grid), n_rows))
+    metadata = {b"hertzchain.sweep_sha256": sweep_sha256, b"hertzchain.setup_sha256": manifest["setup_sha256"]}
+    _write_parquet(folder / "sweep.parquet", table, metadata)
     _write_table_csv(folder / "sweep.csv", table)
     if plots:
         plot_sweep(table, folder)
     return SweepResult(True, done, n_chunks, len(todo), table, folder)
+
+
+def nonfinite_runs(table: dict) -> np.ndarray:
+    """Run indices of a sweep table whose result is not finite (`result_finite` false)."""
+    return np.asarray(table["run"])[~np.asarray(table["result_finite"], dtype=bool)]
+
+
+def table_yield_notice(table: dict, setup: ChainSetup) -> str | None:
+    """One line naming the runs of a sweep table whose peak force exceeded a contact's yield
+    force and those contacts, when the contacts are modelled elastic (else None)."""
+    if setup.plasticity or "peak_over_yield" not in table:
+        return None
+    ratio = np.asarray(table["peak_over_yield"], dtype=float)
+    over = ratio > 1.0
+    if not np.any(over):
+        return None
+    where = sorted({int(k) for k in np.asarray(table["peak_over_yield_contact"])[over]})
+    names = ", ".join("the wall" if k == setup.n_beads else f"contact {k}" for k in where)
+    return (
+        f"{int(np.sum(over))} of {ratio.size} runs exceed the yield force of {names} (peak/yield up to "
+        f"{np.max(ratio):.3g}; columns peak_over_yield, peak_over_yield_contact): those contacts deform "
+        "plastically, which the elastic model does not describe; add --plasticity thornton (or jackson_green) "
+        "to model it, or lower the impact velocity."
+    )
 
 
 def read_sweep(folder) -> dict[str, np.ndarray]:
@@ -403,9 +644,7 @@ def plot_sweep(table: dict[str, np.ndarray], folder) -> None:
     folder = Path(folder)
     groups_by = "striker_velocity_m_s" if "striker_velocity_m_s" in table else None
     if "force_ratio" in table:
-        x_name = "wall_youngs_pa" if "wall_youngs_pa" in table else next(
-            k for k in table if k != "run"
-        )
+        x_name = "wall_youngs_pa" if "wall_youngs_pa" in table else _input_names(table)[0]
         fig, ax = plt.subplots(figsize=(6, 4))
         others = [k for k in table if k not in ("run", x_name) and k in _input_names(table)]
         keys = [tuple(table[k][i] for k in others) for i in range(len(table["run"]))]
@@ -444,11 +683,11 @@ def plot_sweep(table: dict[str, np.ndarray], folder) -> None:
 
 _OUTPUT_PREFIXES = ("peak_", "arrival_", "duration_")
 _OUTPUTS = ("speed_m_s", "incident_peak_n", "force_ratio", "energy_error_rel", "dissipated_fraction",
-            "final_energy_fraction")
+            "final_energy_fraction", "result_finite", "setup_sha256")
 
 
 def _input_names(table) -> list[str]:
-    return [k for k in table if k != "run" and k not in _OUTPUTS and not k.startswith(_OUTPUT_PREFIXES)]
+    return [k for k in table if k != "run" and k not in _OUTPUTS and not k.startswith(_OUTPUT_PREFIXES + ("setup.",))]
 
 
 def _unit(name: str) -> str:

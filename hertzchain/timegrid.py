@@ -11,6 +11,7 @@ coarser than 1/20 of the shortest contact time is refused.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -52,14 +53,26 @@ class TimeGrid(NamedTuple):
         return self.steps_per_sample * self.n_samples
 
 
+def _reduced_striker_mass_kg(setup: ChainSetup):
+    bead_mass = setup.bead_mass_kg
+    return setup.striker_mass_kg * bead_mass[0] / (setup.striker_mass_kg + bead_mass[0])
+
+
+def peak_force_estimate_n(setup: ChainSetup):
+    """Largest contact force one (unbatched) setup can produce, N (jnp): 2.5 times the peak
+    of the striker's Hertz collision with bead 1, plus the preload."""
+    kappa = setup.contact_kappa()[0]
+    overlap = (1.25 * _reduced_striker_mass_kg(setup) * setup.striker_velocity_m_s**2 / kappa) ** 0.4
+    return _FORCE_MARGIN * kappa * overlap**1.5 + setup.precompression_n
+
+
 def _contact_times(setup: ChainSetup):
     """Contact-time estimates of one (unbatched) setup, s, as a 1-D array (jnp)."""
     bead_mass = setup.bead_mass_kg
     kappa = setup.contact_kappa()
-    reduced_striker = setup.striker_mass_kg * bead_mass[0] / (setup.striker_mass_kg + bead_mass[0])
+    reduced_striker = _reduced_striker_mass_kg(setup)
     velocity = setup.striker_velocity_m_s
-    overlap = (1.25 * reduced_striker * velocity**2 / kappa[0]) ** 0.4
-    peak = _FORCE_MARGIN * kappa[0] * overlap**1.5 + setup.precompression_n
+    peak = peak_force_estimate_n(setup)
     times = [contact.collision_time(reduced_striker, kappa[0], velocity)]
     loaded = [(0.5 * jnp.min(bead_mass), jnp.max(kappa))]
     if setup.end == "wall":
@@ -80,12 +93,17 @@ def shortest_contact_time_s(setup: ChainSetup) -> float:
     and half the period of any embedded sensor. A batched setup (leading axes on every
     field) gives the minimum over the batch.
     """
-    batch_ndim = jnp.ndim(setup.striker_velocity_m_s)
-    times = _contact_times
-    for _ in range(batch_ndim):
-        times = jax.vmap(times)
     # one compiled program: run op by op, the estimate compiles each of its ~30 operations apart
-    return float(np.min(np.asarray(jax.jit(times)(setup))))
+    return float(np.min(np.asarray(batched_program(_contact_times, jnp.ndim(setup.striker_velocity_m_s))(setup))))
+
+
+@functools.lru_cache(maxsize=None)
+def batched_program(function, batch_ndim: int):
+    """`function` of one setup, vmapped over `batch_ndim` leading axes and jitted: built once
+    per batch rank, so that JAX's cache of compiled programs finds it again."""
+    for _ in range(batch_ndim):
+        function = jax.vmap(function)
+    return jax.jit(function)
 
 
 def _check_resolution(dt_s: float, t_contact_s: float) -> None:

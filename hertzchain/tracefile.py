@@ -13,6 +13,7 @@ A file is a block of `# key = value` header lines followed by a CSV table::
     # striker_mass_kg = 0.0089
     # striker_velocity_m_s = 0.3
     # noise_std_n = 0.37
+    # units: time_s in s; contact_K, sensor_K and wall are forces in N
     time_s,contact_6,contact_11,wall
     2.0e-06,0.22,0.82,0.37
 
@@ -53,6 +54,7 @@ import numpy as np
 
 from .atomic import write_text
 from .chain import ChainSetup
+from .validation import RULES, check_plausible
 
 FORMAT = "hertzchain-trace/1"
 # Redundant header values (a mass and the density and radius it follows from) must agree to
@@ -71,27 +73,28 @@ class _Key:
 
 
 # key -> (type, required, plausible range in SI, meaning). The ranges catch values given in
-# the wrong unit (a radius of 13 "m", a modulus of 203 "Pa").
+# the wrong unit (a radius of 13 "m", a modulus of 203 "Pa"); for the fields of a setup they
+# are those of `validation.RULES`, which is what a header is checked against.
 HEADER_KEYS: dict[str, _Key] = {
     "format": _Key(str, True, meaning=f"must be {FORMAT}"),
     "n_beads": _Key(int, True, 1, 1e6, "number of beads"),
-    "bead_radius_m": _Key(float, True, 1e-5, 1.0, "bead radius, m"),
-    "bead_density_kg_m3": _Key(float, False, 100.0, 3e4, "bead density, kg/m^3 (or bead_mass_kg)"),
-    "bead_mass_kg": _Key(float, False, 1e-9, 1e3, "mass of one bead, kg (or bead_density_kg_m3)"),
-    "bead_youngs_pa": _Key(float, True, 1e6, 2e12, "bead Young's modulus, Pa"),
-    "bead_poisson": _Key(float, True, -1.0, 0.5, "bead Poisson ratio"),
-    "wall_youngs_pa": _Key(float, True, 1e6, math.inf, "wall Young's modulus, Pa (inf: rigid)"),
-    "wall_poisson": _Key(float, True, -1.0, 0.5, "wall Poisson ratio"),
-    "striker_mass_kg": _Key(float, False, 1e-7, 1e3, "striker mass, kg"),
-    "striker_radius_m": _Key(float, False, 1e-5, 1.0, "striker radius, m"),
-    "striker_density_kg_m3": _Key(float, False, 100.0, 3e4, "striker density, kg/m^3"),
-    "striker_youngs_pa": _Key(float, False, 1e6, 2e12, "striker Young's modulus, Pa"),
-    "striker_poisson": _Key(float, False, -1.0, 0.5, "striker Poisson ratio"),
-    "striker_velocity_m_s": _Key(float, False, 1e-6, 100.0, "impact velocity, m/s (> 0)"),
+    "bead_radius_m": _Key(float, True, meaning="bead radius, m"),
+    "bead_density_kg_m3": _Key(float, False, meaning="bead density, kg/m^3 (or bead_mass_kg)"),
+    "bead_mass_kg": _Key(float, False, meaning="mass of one bead, kg (or bead_density_kg_m3)"),
+    "bead_youngs_pa": _Key(float, True, meaning="bead Young's modulus, Pa"),
+    "bead_poisson": _Key(float, True, meaning="bead Poisson ratio"),
+    "wall_youngs_pa": _Key(float, True, meaning="wall Young's modulus, Pa (inf: rigid)"),
+    "wall_poisson": _Key(float, True, meaning="wall Poisson ratio"),
+    "striker_mass_kg": _Key(float, False, meaning="striker mass, kg"),
+    "striker_radius_m": _Key(float, False, meaning="striker radius, m"),
+    "striker_density_kg_m3": _Key(float, False, meaning="striker density, kg/m^3"),
+    "striker_youngs_pa": _Key(float, False, meaning="striker Young's modulus, Pa"),
+    "striker_poisson": _Key(float, False, meaning="striker Poisson ratio"),
+    "striker_velocity_m_s": _Key(float, False, meaning="impact velocity, m/s (> 0)"),
     "noise_std_n": _Key(float, False, 0.0, 1e6, "standard deviation of the additive noise, N"),
-    "precompression_n": _Key(float, False, 0.0, 1e6, "static preload, N"),
-    "sensor_beta": _Key(float, False, 0.0, 1.0, "embedded sensor mass ratio beta"),
-    "sensor_f0_hz": _Key(float, False, 1.0, 1e9, "embedded sensor resonance, Hz"),
+    "precompression_n": _Key(float, False, meaning="static preload, N"),
+    "sensor_beta": _Key(float, False, meaning="embedded sensor mass ratio beta"),
+    "sensor_f0_hz": _Key(float, False, meaning="embedded sensor resonance, Hz"),
     "end": _Key(str, False, meaning="'wall' (default) or 'free'"),
     "ac_channels": _Key(str, False, meaning="channels that do not see a static force, comma-separated"),
 }
@@ -100,6 +103,9 @@ CHANNEL_KEYS: dict[str, _Key] = {
     "noise_std_n_": _Key(float, False, 0.0, 1e6, "noise standard deviation of the channel, N"),
     "clipped_": _Key(str, False, meaning="rows at the digitiser's range limit, e.g. 120-131,140"),
 }
+
+# The comment line before the table that states the columns' units (no "=": not a key).
+UNITS_LINE = "units: time_s in s; contact_K, sensor_K and wall are forces in N"
 
 _HEADER_LINE = re.compile(r"^#\s*([A-Za-z_][A-Za-z0-9_]*)\s*=\s*(.*?)\s*$")
 _CHANNEL = re.compile(r"^(contact|sensor)_(\d+)$")
@@ -310,7 +316,12 @@ def validate_header(header: dict, where: str = "<header>") -> None:
         if spec.kind in (int, float):
             if not isinstance(value, (int, float)) or math.isnan(value):
                 _fail(where, f"{key} must be a number, got {value!r}.")
-            if not spec.low <= value <= spec.high:
+            if key in RULES:
+                try:
+                    check_plausible(key, value)
+                except ValueError as error:
+                    _fail(where, str(error))
+            elif not spec.low <= value <= spec.high:
                 _fail(
                     where,
                     f"{key} = {value!r} is outside the plausible range [{spec.low:g}, {spec.high:g}] "
@@ -380,9 +391,10 @@ def _parse_value(key: str, text: str, where: str):
     try:
         number = float(text)
     except ValueError:
-        _fail(where, f"header {key} = {text!r} is not a number.")
+        decimal = " (write decimals with '.')" if re.fullmatch(r"\s*[-+]?\d+,\d+\s*", text) else ""
+        _fail(where, f"header {key} = {text!r} is not a number{decimal}.")
     if spec.kind is int:
-        if number != int(number):
+        if not math.isfinite(number) or number != int(number):
             _fail(where, f"header {key} must be an integer, got {text!r}.")
         return int(number)
     return number
@@ -391,8 +403,14 @@ def _parse_value(key: str, text: str, where: str):
 def read_trace(path) -> TraceFile:
     """Read and validate a trace file; raises `TraceFileError` saying exactly what is wrong."""
     where = str(path)
-    text = Path(path).read_text()
-    header, table_lines = {}, []
+    raw = Path(path).read_bytes()
+    try:
+        text = raw.decode("utf-8-sig")  # a byte-order mark, as some editors write, is no part of the text
+    except UnicodeDecodeError as error:
+        line = raw[:error.start].count(b"\n") + 1
+        _fail(where, f"line {line}: not UTF-8 text (byte {raw[error.start:error.start + 1]!r}); a trace file is "
+                     "plain text: save it as UTF-8.")
+    header, table_lines, line_numbers = {}, [], []
     for number, line in enumerate(text.splitlines(), start=1):
         if line.startswith("#"):
             match = _HEADER_LINE.match(line)
@@ -404,15 +422,25 @@ def read_trace(path) -> TraceFile:
             continue
         if line.strip():
             table_lines.append(line)
+            line_numbers.append(number)
     if "format" not in header:
         _fail(where, f"not a trace file: no '# format = {FORMAT}' header line.")
     if not table_lines:
         _fail(where, "no table: expected a 'time_s,...' column line and data rows.")
+    if ";" in table_lines[0] and "," not in table_lines[0]:
+        _fail(where, f"line {line_numbers[0]}: the columns are separated by ';'; a trace file separates them "
+                     "by ',' and writes decimals with '.' (time_s,contact_5,...).")
     columns = [name.strip() for name in table_lines[0].split(",")]
     if columns[0] != "time_s":
         _fail(where, f"the first column must be time_s, got {columns[0]!r}.")
     if len(set(columns)) != len(columns):
         _fail(where, f"a column name appears twice: {columns}.")
+    for number, line in zip(line_numbers[1:], table_lines[1:]):
+        cells = line.count(",") + 1
+        if cells != len(columns):
+            decimal = " (is ',' the decimal point? write decimals with '.')" if cells > len(columns) else ""
+            _fail(where, f"line {number} has {cells} values for the {len(columns)} columns "
+                         f"{','.join(columns)}{decimal}; every row holds one value per column.")
     try:
         data = np.genfromtxt(io.StringIO("\n".join(table_lines[1:])), delimiter=",", dtype=float, ndmin=2)
     except ValueError as error:
@@ -437,6 +465,7 @@ def format_trace(trace: TraceFile) -> str:
     keys += [k for k in trace.header if k not in HEADER_KEYS and not k.startswith("x_")]
     keys += sorted(k for k in trace.header if k.startswith("x_"))
     lines = [f"# {key} = {_format_value(trace.header[key])}" for key in keys]
+    lines.append(f"# {UNITS_LINE}")
     names = list(trace.channels)
     lines.append(",".join(["time_s"] + names))
     table = np.column_stack([trace.time_s] + [trace.channels[name] for name in names])

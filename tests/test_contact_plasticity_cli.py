@@ -43,6 +43,9 @@ def test_cli_recovers_the_yield_stress_of_a_csv_curve_and_writes_every_output(tm
     assert rc == 0
     report = json.loads((out / "contact.json").read_text())
     fitted = report["materials"]["given"]["fitted"]["yield_stress_pa"]
+    entry = report["materials"]["given"]
+    assert entry["converged"] and entry["unconverged_fits"] == []
+    assert entry["yield_stress_per_curve_converged"] == {"sphere": True}
     # 3e-5: the command takes the peak time from the force averaged over 1 us (10 samples), this
     # test from the approach itself, so their strain rates (and dynamic yield stresses) differ a little
     assert fitted == pytest.approx(700e6, rel=1e-4)
@@ -58,6 +61,28 @@ def test_cli_recovers_the_yield_stress_of_a_csv_curve_and_writes_every_output(tm
     assert curve["peak_force_error_model"] == pytest.approx(model.max() / curve["peak_force_measured_n"] - 1, rel=1e-6)
     assert curve["peak_force_error_model"] < -0.05
     assert (out / "contact.png").stat().st_size > 0 and (out / "residuals.png").stat().st_size > 0
+
+
+def test_cli_exits_3_and_names_the_fits_that_reached_no_optimum(tmp_path, capsys, monkeypatch):
+    """Fits held to one step from 500 MPa (the curve's truth 700 MPa) reach no optimum: the
+    joint fit and the per-curve fit (whose scatter is a reported error) are named in
+    contact.json and on stderr, and the command exits 3, as `fit` does (the converged run of
+    the test above exits 0 and says so)."""
+    from fitting import contact_calibration
+    from fitting.fit import least_squares
+
+    _write_curve(tmp_path / "a.csv", 700e6, 0.0)
+    monkeypatch.setattr(contact_calibration, "least_squares",
+                        lambda *a, **k: least_squares(*a, **dict(k, max_steps=1)))
+    assert main(["contact", str(tmp_path / "a.csv"), "--youngs", "200GPa", "--poisson", "0.3", "--yield-stress",
+                 "500MPa", "--rate-constant", "0", "--geometry", "sphere-flat", "--radius", "2mm",
+                 "--out", str(tmp_path / "cut")]) == 3
+    captured = capsys.readouterr()
+    assert "(NOT CONVERGED)" in captured.out
+    assert "hertzchain contact: error: no optimum reached by given: the joint fit, the fit of a alone" in captured.err
+    entry = json.loads((tmp_path / "cut" / "contact.json").read_text())["materials"]["given"]
+    assert not entry["converged"] and not entry["joint_fit_converged"]
+    assert entry["yield_stress_per_curve_converged"] == {"a": False}
 
 
 def test_cli_names_the_missing_column_and_a_material_count_that_does_not_fit(tmp_path, capsys):

@@ -73,8 +73,8 @@ def test_04_diagnose(small):
 
 
 @pytest.mark.slow  # a fit and a diagnosis through the simulator: about 2 min of CPU at the small size
-def test_07_scope_files(small):
-    namespace = _run("07_scope_files.py")
+def test_06_scope_files(small):
+    namespace = _run("06_scope_files.py")
     result, truth = namespace["result"], namespace["truth"]
     assert result.converged and result.reduced_chi2 == pytest.approx(1.0, abs=0.15)
     # the stick-slip loss has kinks: mu's local standard error understates its scatter
@@ -82,8 +82,8 @@ def test_07_scope_files(small):
     assert result.values["mu"] == pytest.approx(truth["mu"], rel=0.05)
     diagnosis = namespace["diagnosis"]
     assert set(diagnosis.missing_effects) == {"viscous_damping", "track_friction"}
-    assert (small / "07_scope_files" / "fit" / "fit.json").exists()
-    assert (small / "07_scope_files" / "diagnosis").is_dir()
+    assert (small / "06_scope_files" / "fit" / "fit.json").exists()
+    assert (small / "06_scope_files" / "diagnosis").is_dir()
 
 
 def test_lydon_reproduce_refuses_an_unknown_part(capsys):

@@ -160,7 +160,7 @@ def test_fit_from_scope_files_recovers_the_truth_at_the_information_limit(lab, t
     # the stated noise's standard errors as the Cramer-Rao bound of the same plan predicts;
     # a quarter-step noise leaves the converter's error correlated, so the reported ones come
     # from the residuals' own covariance and are wider (1.4x on average over 20 noise seeds
-    # of a second generator, benchmarks/results/scope_noise_tek8bit_*)
+    # of a second generator, benchmarks/results/scope_files/noise*/)
     assert fit["covariance_scale"] == "correlated" and "below 0.5 of a converter step" in fit["covariance_reason"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", fitting.FitWarning)

@@ -11,7 +11,7 @@ from hertzchain.driven.linear import frequency_response, monatomic_band_edge_hz,
 
 from fitting.driven_band import band_edge_hz, lydon2014_band_edges, power_law
 
-LYDON_2014 = Path("/work/shared/data/real/lydon-2014")
+LYDON_2014 = Path(__file__).resolve().parents[2] / "shared/data/real/lydon-2014"
 MASS, KAPPA = 0.028, 9.7576e9
 
 

@@ -15,7 +15,7 @@ from hertzchain.driven.sweeper_files import (
     read_sweeper_table,
 )
 
-LYDON_2015 = Path("/work/shared/data/real/lydon-2015")
+LYDON_2015 = Path(__file__).resolve().parents[2] / "shared/data/real/lydon-2015"
 needs_data = pytest.mark.skipif(
     not LYDON_2015.is_dir(), reason=f"the Lydon 2015 measurements are not at {LYDON_2015} (read-only lab data)"
 )

@@ -244,9 +244,10 @@ def _diagnosis_result(measured_ratio, step_ratios, precompression_after_n, model
              "gap_median": 0.05, "shift": [-0.05], "peak_per_drive_top_over_lowest": [step_ratios[1]]}
     step = {"effect": "contact_stiffness_and_preload", "parameters": ["linear_resonance_hz", "precompression_n"],
             "accepted": True, "share_of_chi2_removed": 0.8, "gap_before": 0.2, "gap_after": 0.05,
-            "before": nominal, "after": after}
+            "before": nominal, "after": after, "converged": True}
     final = dict(after, peak_per_drive_top_over_lowest=[model_ratio])
     return {"nominal": nominal, "steps": [step], "final": final, "eta_on_final": None,
+            "converged": True, "unconverged_fits": [],
             "eta_probe": {"x": {"eta_s": 1e-6}, "peak_per_drive_top_over_lowest": [probe_ratio]},
             "contact_opening": {"static_overlap_m": 50e-9, "bead_amplitude_at_top_drive_peak_m": 110e-9},
             "measured": {"shift": [-0.06], "peak_per_drive_top_over_lowest": [measured_ratio]}}
@@ -279,3 +280,20 @@ def test_diagnosis_conclusion_states_the_datas_direction_and_values_far_from_the
     # a preload fitted to zero is 0 times the file's, not of the other sign
     text = conclusion(_diagnosis_result(0.90, (1.0, 0.91), 0.0, 0.91, 0.95))
     assert "precompression_n = 0 is 0 times the file's 3" in text and "other sign" not in text
+
+
+def test_diagnosis_conclusion_names_a_step_whose_fit_reached_no_optimum():
+    """A named step on a fit without an optimum is named so (its share a lower bound, the naming
+    standing), and the conclusion ends the steps with the unconverged fits; converged ones are
+    not mentioned."""
+    from fitting.driven_diagnosis import conclusion
+
+    result = _diagnosis_result(0.90, (1.0, 0.91), 3.0, 0.91, 0.95)
+    assert "converge" not in conclusion(result) and "optimum" not in conclusion(result)
+    result["steps"][0]["converged"] = False
+    result["converged"], result["unconverged_fits"] = False, ["the fit of contact_stiffness_and_preload"]
+    text = conclusion(result)
+    assert ("contact_stiffness_and_preload (linear_resonance_hz, precompression_n): named on a fit that reached no "
+            "optimum within the step limit (judged at its last iterate: the share removed is a lower bound, the "
+            "naming stands); it removes 80 %") in text
+    assert "NOT CONVERGED: the fit of contact_stiffness_and_preload reached no optimum" in text

@@ -11,7 +11,7 @@ import pytest
 
 import hertzchain as hc
 from hertzchain.cli import main as cli_main
-from hertzchain.sweep import SweepSpec, parse_grid, read_sweep, run_sweep
+from hertzchain.sweep import SweepSpec, nonfinite_runs, parse_grid, read_sweep, run_sweep
 
 N = 10
 
@@ -55,6 +55,49 @@ def test_interrupted_sweep_resumes_to_the_same_table(tmp_path):
     assert run_sweep(spec, tmp_path / "whole", chunk_size=2, progress=False).computed == 0
     with pytest.raises(ValueError, match="different sweep"):
         run_sweep(spec._replace(t_end_s=1e-3), tmp_path / "whole", chunk_size=2, progress=False)
+    # The finished table says what physics it holds: the base setup's hash and its fields.
+    manifest = json.loads((tmp_path / "whole" / "manifest.json").read_text())
+    assert set(a["setup_sha256"]) == {manifest["setup_sha256"]}
+    assert set(a["setup.eta_s"]) == {0.0} and set(a["setup.bead_radius_m"]) == {0.013}
+    assert "setup.wall_youngs_pa" not in a and "setup.striker_velocity_m_s" not in a  # swept: own columns
+    assert np.all(a["result_finite"]) and np.all(a["peak_over_yield"] > 0)
+
+
+def test_resume_with_other_physics_or_a_foreign_chunk_is_refused(tmp_path):
+    spec = _spec()  # the shapes of the test above: its compiled program is reused
+    first = run_sweep(spec, tmp_path / "a", chunk_size=2, max_chunks=1, progress=False, plots=False)
+    assert first.chunks_done == 1
+    for field, value, shown in (("mu", 0.3, "setup.mu = 0.0 there, 0.3 now"),
+                                ("dashpot_n_s_m", 50.0, "setup.dashpot_n_s_m = 0.0 there, 50.0 now"),
+                                ("contact_law", hc.laws.JacksonGreen(), 'setup.contact_law.class = "Hertz" there, '
+                                                                        '"JacksonGreen" now')):
+        other = spec._replace(setup=hc.ChainSetup(N, **{field: value}))
+        with pytest.raises(ValueError, match=f"holds a different sweep \\({shown}\\).*--out"):
+            run_sweep(other, tmp_path / "a", chunk_size=2, progress=False, plots=False)
+    # A chunk from another sweep, or another chunk of this one, is refused by name.
+    run_sweep(spec._replace(setup=hc.ChainSetup(N, mu=0.3)), tmp_path / "b", chunk_size=2, max_chunks=1,
+              progress=False, plots=False)
+    chunk = tmp_path / "a" / "chunks" / "chunk_00000.parquet"
+    chunk.write_bytes((tmp_path / "b" / "chunks" / "chunk_00000.parquet").read_bytes())
+    with pytest.raises(ValueError, match=r"chunk_00000.parquet is not chunk 0 \(runs 0:2\) of this sweep"):
+        run_sweep(spec, tmp_path / "a", chunk_size=2, progress=False, plots=False)
+
+
+def test_grid_values_are_checked_before_anything_runs(tmp_path):
+    for grid, match in ((dict(eta_s=np.asarray([-1e-6, 1e-6])), r"grid: eta_s must be non-negative"),
+                        (dict(wall_poisson=np.asarray([0.3, 0.7])), r"grid: wall_poisson must be in \(-1, 0.5\)"),
+                        (dict(striker_velocity_m_s=np.asarray([-0.3])), "grid: striker_velocity_m_s must be positive"),
+                        (dict(wall_youngs_pa=np.asarray([0.0])), "grid: wall_youngs_pa must be positive"),
+                        (dict(dashpot_n_s_m=np.asarray([0.0, 1e6])),
+                         r"grid: dashpot_n_s_m = 1e\+06 N s/m is beyond the stability of the time step")):
+        with pytest.raises(ValueError, match=match):
+            run_sweep(_spec(**grid), tmp_path, progress=False)
+    assert not any(tmp_path.iterdir())
+
+
+def test_nonfinite_rows_are_named():
+    table = {"run": np.arange(4), "result_finite": np.asarray([True, False, True, False])}
+    np.testing.assert_array_equal(nonfinite_runs(table), [1, 3])
 
 
 def test_table_physics(tmp_path):
@@ -112,8 +155,10 @@ def test_cli_resume(tmp_path, capsys):
     assert cli_main(args + ["--max-chunks", "1"]) == 0
     assert "1/2 chunks done" in capsys.readouterr().out
     assert cli_main(args) == 0
+    assert "2 of 4 runs exceed the yield force of contact 0" in capsys.readouterr().err  # 1.2 m/s, 2 GPa steel
     table = read_sweep(tmp_path)
     np.testing.assert_array_equal(table["eta_s"], [0.0, 2e-6, 0.0, 2e-6])
+    np.testing.assert_array_equal(table["peak_over_yield"] > 1, [False, False, True, True])
     assert np.all(table["dissipated_fraction"][1::2] > 0.1) and np.all(table["dissipated_fraction"][0::2] == 0)
 
 

@@ -73,7 +73,7 @@ def test_round_trip_of_a_simulated_run(tmp_path):
         (lambda t: t.replace("# noise_std_n", "# noise_sigma"), "unknown header key 'noise_sigma'.*prefix your own keys with 'x_'"),
         (lambda t: t.replace("# bead_radius_m = 0.013", "# bead_radius_m = 13"), "bead_radius_m = 13.0 is outside the plausible range"),
         (lambda t: t.replace("# bead_youngs_pa = 2.03e11", "# bead_youngs_pa = 203"), "bead_youngs_pa = 203.0 is outside"),
-        (lambda t: t.replace("# striker_velocity_m_s = 0.3", "# striker_velocity_m_s = -0.3"), "striker_velocity_m_s = -0.3"),
+        (lambda t: t.replace("# striker_velocity_m_s = 0.3", "# striker_velocity_m_s = -0.3"), "striker_velocity_m_s must be positive and finite .*, got -0.3"),
         (lambda t: t.replace("# bead_poisson = 0.3", "# bead_poisson = abc"), "bead_poisson = 'abc' is not a number"),
         (lambda t: t.replace("contact_11", "contact_25"), "contact_25: contacts run from 0 to 20"),
         (lambda t: t.replace("contact_11", "force_11"), "unknown channel 'force_11'"),

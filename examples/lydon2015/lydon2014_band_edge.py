@@ -43,7 +43,7 @@ CAVEATS = [
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data-dir", required=True, type=Path, help="folder holding Band.mat")
     parser.add_argument("--out", type=Path, default=Path("examples/lydon2015/results/lydon2014_band_edge"))
     args = parser.parse_args(argv)

@@ -42,7 +42,7 @@ def _run(command: list[str]) -> float:
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data-root", required=True, type=Path, help="folder holding lydon-2015/ and lydon-2014/")
     parser.add_argument("--out", type=Path, default=HERE / "results")
     parser.add_argument("--only", action="append", default=[], metavar="NAME",

@@ -8,7 +8,8 @@ Each file is read as it is (`.mat` with `Fexternal` [s, m, N] or `fdK` [m, N]; C
 `approach_m`, `force_n`, optionally `time_s`). `--material` is given once (all files) or
 once per file, a materials-table name; `--youngs`, `--poisson`, `--yield-stress`,
 `--rate-constant` replace its constants (or stand for it). Writes `contact.json`, one
-`<stem>.csv` per file, `contact.png` and `residuals.png` into `--out`.
+`<stem>.csv` per file, `contact.png` and `residuals.png` into `--out`, written as a whole (the
+previous run's folder is replaced; `hertzchain.atomic.output_folder`).
 
 By default the law is rate-independent apart from its dynamic yield stress, with the
 hardness of its fully plastic branch at 2.84 sigma_Y; `--fit-rate-constant` and
@@ -22,6 +23,10 @@ linear drift of each curve's approach record (m/s; the approach of a bar test is
 difference of two integrated gauge records, which a gain mismatch or a baseline error makes
 drift), reported per curve with its sigma.
 
+Exits 3 (as `hertzchain fit` on an unconverged fit) when a material's joint fit or a
+per-curve fit, whose scatter is one of the yield stress's reported errors, reached no
+optimum; `contact.json` names them (`unconverged_fits`, `yield_stress_per_curve_converged`).
+
 Compiled programs are kept in JAX's persistent compilation cache (`fitting.compilation_cache`),
 so that a second calibration of records of the same lengths skips compiling;
 `--no-compile-cache` turns it off.
@@ -31,16 +36,21 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 
+from hertzchain.atomic import output_folder
 from hertzchain.materials import Material, material
 from hertzchain.units import parse_quantity
 
 from ..compilation_cache import enable_compilation_cache
+from . import EXIT_NOT_CONVERGED, exit_codes_epilog
 from ..contact_calibration import GEOMETRIES, MAX_TIME_SHIFT_S, OFFSETS, ContactGeometry, calibrate, read_curve, write_outputs
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = exit_codes_epilog("a material's joint fit or a per-curve fit of its yield stress "
+                                      "reached no optimum")
     parser.add_argument("files", nargs="+", help="force-approach files (.mat Fexternal/fdK, .csv)")
     parser.add_argument("--material", action="append", default=[],
                         help="materials-table name, once for all files or once per file")
@@ -74,11 +84,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="out/contact", help="output folder [out/contact]")
 
 
+# A sphere's radius above this many metres is taken as a value written without its unit.
+MAX_RADIUS_M = 1.0
+
+
 def _length(text, name):
+    """A sphere's radius, m: positive, and below `MAX_RADIUS_M` (a bare number is in m)."""
     try:
-        return parse_quantity(text, "m")
+        value = parse_quantity(text, "m")
     except ValueError as error:
         raise ValueError(f"--{name}: {error}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"--{name} {text}: a radius must be positive, e.g. --{name} 3.175mm.")
+    if value >= MAX_RADIUS_M:
+        raise ValueError(f"--{name} {text}: {value:g} m is not a sphere's radius (a bare number is in m); "
+                         f"did you mean {text.strip()}mm?")
+    return value
 
 
 def _materials(args) -> list[Material]:
@@ -118,20 +139,22 @@ def run(args: argparse.Namespace) -> int:
         max_shift_s = parse_quantity(args.max_shift, "s")
     except ValueError as error:
         raise ValueError(f"--max-shift: {error}") from None
-    report = calibrate(curves, geometry, offset=args.offset, fit_rate_constant=args.fit_rate_constant,
-                       fit_damping=args.damping, fit_time_shift=args.time_shift,
-                       fit_hardness_ratio=args.fit_hardness_ratio, fit_approach_drift=args.approach_drift,
-                       max_shift_s=max_shift_s,
-                       strain_rate_s_given=args.strain_rate,
-                       progress=lambda text: print(text, file=sys.stderr, flush=True))
-    data = write_outputs(report, curves, args.out)
+    with output_folder(args.out, "contact", "contact.json") as out:
+        report = calibrate(curves, geometry, offset=args.offset, fit_rate_constant=args.fit_rate_constant,
+                           fit_damping=args.damping, fit_time_shift=args.time_shift,
+                           fit_hardness_ratio=args.fit_hardness_ratio, fit_approach_drift=args.approach_drift,
+                           max_shift_s=max_shift_s,
+                           strain_rate_s_given=args.strain_rate,
+                           progress=lambda text: print(text, file=sys.stderr, flush=True))
+        data = write_outputs(report, curves, out)
     for name, entry in data["materials"].items():
         fitted, given, errors = entry["fitted"], entry["given"], entry["stderr"]
         print(f"{name}: sigma_Y fitted {fitted['yield_stress_pa'] / 1e6:.0f} +- {errors['yield_stress_pa'] / 1e6:.0f} MPa "
               f"(given {given['yield_stress_pa'] / 1e6:.0f} MPa), rate constant {fitted['rate_constant']:.4g}"
               + (f", damping time {fitted['eta_s'] * 1e6:.3g} us" if args.damping else "")
               + (f", hardness ratio {fitted['hardness_ratio']:.3g} +- {errors['hardness_ratio']:.2g}"
-                 if args.fit_hardness_ratio else ""))
+                 if args.fit_hardness_ratio else "")
+              + ("" if entry["converged"] else " (NOT CONVERGED)"))
     for entry in data["curves"]:
         print(f"  {entry['file']}: peak force {entry['peak_force_measured_n'] / 1e3:.3g} kN, error at given "
               f"constants {100 * entry['peak_force_error_model']:+.1f} %, RMS/peak fitted "
@@ -143,4 +166,10 @@ def run(args: argparse.Namespace) -> int:
                  + (f" +- {entry['approach_drift_stderr_m_s']:.3f}" if entry['approach_drift_stderr_m_s'] is not None
                     else "") + " m/s" if args.approach_drift else ""))
     print(f"wrote contact.json, contact.png, residuals.png and {len(curves)} CSV files to {args.out}")
+    unconverged = [f"{name}: {', '.join(entry['unconverged_fits'])}" for name, entry in data["materials"].items()
+                   if not entry["converged"]]
+    if unconverged:
+        print(f"hertzchain contact: error: no optimum reached by {'; '.join(unconverged)} (their values and "
+              "errors are the last iterate's).", file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     return 0

@@ -15,13 +15,15 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from hertzchain.atomic import save_figure, write_json, write_text
-from hertzchain.cli.setup_options import add_setup_arguments, setup_from_args
+from hertzchain.cli.setup_options import add_setup_arguments, chain_from_args
 from hertzchain.units import parse_quantity
+from hertzchain.validation import yield_notice
 
 from ..data import load_experiments
 from ..design import (
@@ -77,11 +79,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="out/design", help="output folder [out/design]")
 
 
-def _values(args, setup) -> dict:
+def _values(chain) -> dict:
+    setup = chain.setup
     values = {"eta": float(setup.eta_s), "mu": float(setup.mu), "mu_star": float(setup.mu_star)}
-    if args.wall_youngs is not None or args.wall_material:
+    if "wall_youngs_pa" in chain.sources:
         values["wall_youngs"] = float(setup.wall_youngs_pa)
-    if args.wall_poisson is not None or args.wall_material:
+    if "wall_poisson" in chain.sources:
         values["wall_poisson"] = float(setup.wall_poisson)
     if float(setup.precompression_n) > 0:
         values["precompression"] = float(setup.precompression_n)
@@ -107,8 +110,9 @@ def _csv(result, recommended=None) -> str:
 def run(args: argparse.Namespace) -> int:
     params = parse_parameter_list(args.params)
     nuisances = _names(args.nuisances)
-    setup = setup_from_args(args)
-    values = _values(args, setup)
+    chain = chain_from_args(args)
+    setup = chain.setup
+    values = _values(chain)
     noise = parse_quantity(args.noise_std, "N", name="--noise-std")
     interval = parse_quantity(args.sample_interval, "s", name="--sample-interval")
     t_end = parse_quantity(args.t_end, "s", name="--t-end")
@@ -132,6 +136,9 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError("the plan records no channel: give --contacts, --sensors or keep the wall.")
         print(f"simulating the plan: {len(velocities)} shot(s), channels {', '.join(channels)} ...",
               flush=True)
+        notice = yield_notice(setup, velocities, what="the plan's shots")
+        if notice:
+            print(f"hertzchain design: warning: {notice}", file=sys.stderr)
         plan = plan_experiments(setup, velocities, channels=channels, noise_std_n=noise,
                                 sample_interval_s=interval, t_end_s=t_end, coupling=args.coupling)
         baseline_units = [(v, c) for v in velocities for c in channels]
@@ -174,6 +181,9 @@ def run(args: argparse.Namespace) -> int:
         data["optimization"] = optimization.to_json()
         chosen = ", ".join(f"{c} at {v:g} m/s" for v, c in optimization.chosen)
         print(f"  recommended: {chosen}")
+        notice = yield_notice(base, [v for v, _ in optimization.chosen], what="recommended shots")
+        if notice:
+            print(f"hertzchain design: warning: {notice}", file=sys.stderr)
     if args.check_fits:
         check = {"given_plan": fit_scatter(plan, params, values=values, nuisances=nuisances,
                                            n_seeds=args.check_fits).to_json()}

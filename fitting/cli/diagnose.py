@@ -2,7 +2,10 @@
 chain model is missing (see `fitting.diagnosis`).
 
 Writes `DIR/diagnosis.json` (`missing_effects` in the order found, `steps` with
-`gap_before`/`gap_after`), `diagnosis.md`, `gaps.csv`, `gap.png` and overlay PNGs.
+`gap_before`/`gap_after`, `converged` and `unconverged_fits`), `diagnosis.md`, `gaps.csv`,
+`gap.png` and overlay PNGs; the folder is written as a whole and replaces the previous run's
+(`hertzchain.atomic.output_folder`). Exits 3 when a fit the result rests on (a named effect's
+refit, the fit adding it, the final fit) reached no optimum, as `hertzchain fit` does.
 """
 
 from __future__ import annotations
@@ -10,8 +13,13 @@ from __future__ import annotations
 import argparse
 import sys
 
+from pathlib import Path
+
 from fitting.effects import EFFECT_NAMES
-from fitting.model import STEPS_PER_CONTACT
+from fitting.model import STEPS_PER_CONTACT, ForwardModel
+from hertzchain.atomic import output_folder
+
+from . import EXIT_NOT_CONVERGED, exit_codes_epilog
 
 
 def _names(text: str) -> list[str]:
@@ -19,6 +27,8 @@ def _names(text: str) -> list[str]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = exit_codes_epilog("a fit the result rests on (a named effect's refit, the fit adding it, "
+                                      "the final fit; for driven files a named effect's fit) reached no optimum")
     parser.add_argument("files", nargs="+", metavar="FILE",
                         help="trace files (hertzchain-trace/1) or experiment files (.toml)")
     parser.add_argument("--model", default="base",
@@ -50,25 +60,40 @@ def run(args) -> int:
     from fitting.driven_cli import is_driven_run, run_diagnose as run_driven_diagnose
 
     enable_compilation_cache(not args.no_compile_cache)
-    # driven experiment files (lock-in sweeps of a driven chain) have their own diagnosis
-    if is_driven_run(args.files, args.data_dir):
-        return run_driven_diagnose(args)
-    from fitting.data import load_experiments
-    from fitting.diagnosis import diagnose
-    from fitting.diagnosis_report import write_diagnosis_report
-
     if args.max_effects < 0:
         raise ValueError("--max-effects must be >= 0.")
     if not 0 <= args.min_share < 1:
         raise ValueError("--min-share must be in [0, 1).")
+    ForwardModel(steps_per_contact=args.steps_per_contact)  # refuses a step count the solver cannot run
+    # driven experiment files (lock-in sweeps of a driven chain) have their own diagnosis
+    driven = is_driven_run(args.files, args.data_dir)
+    with output_folder(args.out, "diagnose", "diagnosis.json") as out:
+        if driven:
+            return run_driven_diagnose(args, out)
+        return _diagnose(args, out)
+
+
+def _diagnose(args, out: Path) -> int:
+    """The diagnosis of trace files, written into `out` (the temporary of `--out`)."""
+    from fitting.data import load_experiments
+    from fitting.diagnosis import diagnose
+    from fitting.diagnosis_report import readings, write_diagnosis_report
+
     experiments = load_experiments(args.files, channels=_names(args.channels) or None)
     diagnosis = diagnose(
         experiments, model=args.model, free=_names(args.free), nuisances=_names(args.nuisances),
         candidates=_names(args.candidates) or None, max_effects=args.max_effects,
         min_share=args.min_share, steps_per_contact=args.steps_per_contact, progress=not args.quiet,
     )
-    paths = write_diagnosis_report(diagnosis, args.out)
+    paths = write_diagnosis_report(diagnosis, out)
+    final = {key: Path(args.out) / Path(path).name for key, path in paths.items()}
     print(f"missing effects: {', '.join(diagnosis.missing_effects) or 'none'}")
     print(diagnosis.conclusion)
-    print(f"report: {paths['markdown']} (JSON {paths['json']})", file=sys.stderr if args.quiet else sys.stdout)
+    for line in readings(diagnosis):
+        print(f"  {line}")
+    print(f"report: {final['markdown']} (JSON {final['json']})", file=sys.stderr if args.quiet else sys.stdout)
+    if not diagnosis.converged:
+        print(f"hertzchain diagnose: error: no optimum reached by {'; '.join(diagnosis.unconverged)}.",
+              file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     return 0

@@ -2,10 +2,12 @@
 
 The chain of each file is described by its header (see `hertzchain.tracefile`); the
 command fits the chosen parameters and writes `fit.json`, CSV tables and PNG plots
-(`fitting.report`) into `--out`. `--prior` (and an experiment file's `[prior]` table)
-states a lab's tolerances (`fitting.priors`): each frees its parameter and the optimum is
-the MAP point. `--posterior` then samples the posterior by NUTS (`fitting.posterior`) and
-writes `posterior.json`, `posterior.nc`, `draws.csv`, `posterior_summary.md` and plots
+(`fitting.report`) into `--out`, written as a whole: a temporary folder beside it replaces
+the previous run's folder when the command ends (`hertzchain.atomic.output_folder`).
+`--prior` (and an experiment file's `[prior]` table) states a lab's tolerances
+(`fitting.priors`): each frees its parameter and the optimum is the MAP point.
+`--posterior` then samples the posterior by NUTS (`fitting.posterior`) and writes
+`posterior.json`, `posterior.nc`, `draws.csv`, `posterior_summary.md` and plots
 (`fitting.posterior_report`) beside the fit's files. Exit status: 0 converged, 3 not
 converged (the report is still written, marked `"converged": false`), 4 the posterior's
 diagnostics fail and `--strict` was given, 2 bad input.
@@ -21,12 +23,13 @@ or `HERTZCHAIN_NO_COMPILE_CACHE=1` turns that off.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 import warnings
 from pathlib import Path
 
-from hertzchain.atomic import write_json
+from hertzchain.atomic import output_folder, write_json
 from hertzchain.units import parse_quantity
 
 from hertzchain.importer import experiment_priors
@@ -114,20 +117,47 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "are relative to")
 
 
+def _noise_std_n(text: str | None) -> float | None:
+    """`--noise-std` in N, or None; refused unless positive and finite."""
+    if text is None:
+        return None
+    noise = parse_quantity(text, "N", name="--noise-std")
+    if not (math.isfinite(noise) and noise > 0):
+        raise ValueError(f"--noise-std {text}: the noise sigma must be positive (N), e.g. --noise-std 0.02N; "
+                         "leave it out to use the files' noise_std_n headers or an estimate from each record.")
+    return noise
+
+
+def _check_counts(args) -> None:
+    """Refuse counts that cannot be run (before any work starts)."""
+    for option in ("max_steps", "multistart", "chains", "warmup", "draws"):
+        if getattr(args, option) < 1:
+            raise ValueError(f"--{option.replace('_', '-')} {getattr(args, option)}: give a positive integer.")
+
+
 def run(args: argparse.Namespace) -> int:
     began = time.perf_counter()
     enable_compilation_cache(not args.no_compile_cache)
     missing = [f for f in args.files if not Path(f).is_file()]
     if missing:
         raise FileNotFoundError(f"no such trace file: {', '.join(missing)}")
+    _check_counts(args)
+    forward = ForwardModel(steps_per_contact=args.steps_per_contact)
+    noise = _noise_std_n(args.noise_std)
     # driven experiment files (lock-in sweeps of a driven chain) have their own fit
     from ..driven_cli import is_driven_run, run_fit as run_driven_fit
 
-    if is_driven_run(args.files, args.data_dir):
-        return run_driven_fit(args)
+    driven = is_driven_run(args.files, args.data_dir)
+    with output_folder(args.out, "fit", "fit.json") as out:
+        if driven:
+            return run_driven_fit(args, out)
+        return _fit(args, out, began, forward, noise)
+
+
+def _fit(args, out: Path, began: float, forward: ForwardModel, noise: float | None) -> int:
+    """The fit of trace files, written into `out` (the temporary of `--out`)."""
     params = parse_parameter_list(args.params)
     channels = tuple(c.strip() for c in args.channels.split(",") if c.strip()) if args.channels else None
-    noise = parse_quantity(args.noise_std, "N", name="--noise-std") if args.noise_std else None
     experiments = load_experiments(args.files, channels=channels, noise_std_n=noise)
     read = time.perf_counter()
     profile = tuple(p.strip() for p in args.profile.split(",") if p.strip())
@@ -141,16 +171,16 @@ def run(args: argparse.Namespace) -> int:
             experiments, params, start=_assignments(args.start, "--start"),
             fixed=_assignments(args.fixed, "--fixed"), multistart=args.multistart, seed=args.seed,
             max_steps=args.max_steps, covariance="noise" if args.posterior else args.covariance,
-            profile=profile, forward=ForwardModel(steps_per_contact=args.steps_per_contact),
+            profile=profile, forward=forward,
             progress=not args.quiet, throw=False, priors=priors,
         )
     fitted = time.perf_counter()
-    written = write_report(result, args.out, plots=not args.no_plots, per_trace=args.per_trace_plots)
+    written = write_report(result, out, plots=not args.no_plots, per_trace=args.per_trace_plots)
     timings = {"reading_s": read - began, "fit_s": fitted - read, "writing_s": time.perf_counter() - fitted,
                "since_start_s": time.perf_counter() - began, "fit_iterations": result.n_steps,
                "compile_cache": bool(jax_cache_on())}
-    write_json(Path(args.out) / "timings.json", timings)
-    written.append(Path(args.out) / "timings.json")
+    write_json(out / "timings.json", timings)
+    written.append(out / "timings.json")
     print(summary_text(result))
     print(f"wrote {len(written)} files to {args.out} (fit.json, params.csv, plots)")
     if not result.converged:
@@ -167,8 +197,8 @@ def run(args: argparse.Namespace) -> int:
             draws=args.draws, seed=args.seed, adapt_metric=args.adapt_metric,
             progress=not args.quiet, fit_result=result,
         )
-    written = write_posterior_report(posterior, args.out, plots=not args.no_plots)
-    print((Path(args.out) / "posterior_summary.md").read_text())
+    written = write_posterior_report(posterior, out, plots=not args.no_plots)
+    print((out / "posterior_summary.md").read_text())
     print(f"wrote {len(written)} files to {args.out} (posterior.json, posterior.nc, draws.csv, plots)")
     failed = posterior.failed_diagnostics()
     if failed:

@@ -13,6 +13,10 @@ import importlib
 import os
 import sys
 
+from .. import __version__
+from .errors import EXIT_CODES, input_error_text
+from .warning_format import command_warnings
+
 COMMANDS = {
     "simulate": ("hertzchain.cli.simulate", "simulate a chain (default: the paper's) and plot it"),
     "analyze": ("hertzchain.cli.analyze", "fit every pulse of trace files (cos^6, speed, restitution)"),
@@ -62,20 +66,24 @@ def main(argv=None) -> int:
         prog="hertzchain",
         description="Differentiable simulation and fitting of 1-D Hertzian bead chains "
         "(Job, Melo, Sokolow, Sen, PRL 94, 178002, 2005).",
+        epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    parser.add_argument("--version", action="version", version=f"hertzchain {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     chosen = argv[0] if argv and argv[0] in COMMANDS else None
     module = None
     for name, (module_name, help_text) in COMMANDS.items():
-        sub = commands.add_parser(name, help=help_text, description=help_text)
+        sub = commands.add_parser(name, help=help_text, description=help_text, epilog=EXIT_CODES,
+                                  formatter_class=argparse.RawDescriptionHelpFormatter)
         if name == chosen:  # import only the command that runs: start-up stays fast
             module = importlib.import_module(module_name)
             module.add_arguments(sub)
     args = parser.parse_args(argv)
     try:
-        return int(module.run(args) or 0)
-    except (ValueError, FileNotFoundError) as error:  # every input error of the library
-        print(f"hertzchain {args.command}: error: {error}", file=sys.stderr)
+        with command_warnings(args.command):
+            return int(module.run(args) or 0)
+    except (ValueError, OSError) as error:  # every input error of the library, and of the file system
+        print(f"hertzchain {args.command}: error: {input_error_text(error)}", file=sys.stderr)
         return 2
 
 

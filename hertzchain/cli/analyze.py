@@ -12,7 +12,8 @@ restitution law $1 - \\epsilon = C_vF^{1/6} + C_s/F$.
 
 Writes `pulses.csv` (one row per pulse), `analysis.json` (rows, per-file results, fits,
 definitions) and PNGs: each file's traces with the fitted pulses, speed and duration
-against amplitude with the theory, and restitution against force.
+against amplitude with the theory, and restitution against force. The folder is written as a
+whole and replaces the previous run's (`hertzchain.atomic.output_folder`).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .. import pulses, sensor, theory  # noqa: E402
-from ..atomic import json_ready, save_figure, write_json, write_text  # noqa: E402
+from ..atomic import file_stem, json_ready, output_folder, save_figure, write_json, write_text  # noqa: E402
 from ..importer import expand_sources  # noqa: E402
 from ..tracefile import TraceFile, read_trace  # noqa: E402
 
@@ -375,7 +376,14 @@ def _plot_restitution(points, law, path):
 def run(args: argparse.Namespace) -> int:
     if not 0 <= args.threshold < 1:
         raise ValueError(f"--threshold must be in [0, 1), got {args.threshold}.")
-    out = Path(args.out)
+    with output_folder(args.out, "analyze", "analysis.json") as out:
+        _analyze(args, out)
+    print(f"wrote pulses.csv, analysis.json and plots to {args.out}")
+    return 0
+
+
+def _analyze(args: argparse.Namespace, out: Path) -> None:
+    """The analysis of `args.files`, written into `out` (the temporary of `--out`)."""
     all_rows, summaries = [], []
     radius = None
     traces = [source if isinstance(source, TraceFile) else read_trace(source)
@@ -389,7 +397,7 @@ def run(args: argparse.Namespace) -> int:
             np.asarray(trace.time_s),
             plotted,
             summary["file"],
-            out / f"{Path(summary['file']).stem}_pulses.png",
+            out / f"{file_stem(Path(summary['file']).stem)}_pulses.png",
         )
         print(f"{summary['file']}: {len(rows)} pulses" + _file_line(summary))
     result = {"definitions": DEFINITIONS, "files": summaries}
@@ -441,8 +449,6 @@ def run(args: argparse.Namespace) -> int:
     writer.writerows(all_rows)
     write_text(out / "pulses.csv", buffer.getvalue())
     write_json(out / "analysis.json", json_ready(result))
-    print(f"wrote pulses.csv, analysis.json and plots to {out}")
-    return 0
 
 
 def _file_line(summary) -> str:

@@ -6,8 +6,9 @@ volts to newtons, noise, time zero, clipping, each step recorded as `x_import_*`
 keys) and writes `DIR/<shot>.csv` per shot, a plot of each, and `import.json` listing the
 files with each channel's offset, noise and clipped samples, and each shot's time zero with
 its check against the pulse's arrivals (`importer.check_time_zero`). Nothing is written unless
-every shot imports. `fit`, `diagnose`, `analyze` and `design` also take the experiment
-file directly (imported in memory).
+every shot imports; the folder is written as a whole and replaces the previous run's
+(`hertzchain.atomic.output_folder`). `fit`, `diagnose`, `analyze` and `design` also take the
+experiment file directly (imported in memory).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..atomic import save_figure, write_json  # noqa: E402
+from ..atomic import file_stem, output_folder, save_figure, write_json  # noqa: E402
 from ..importer import import_experiment  # noqa: E402
 from ..tracefile import write_trace  # noqa: E402
 
@@ -55,12 +56,19 @@ def _plot(trace, path: Path) -> None:
 def run(args: argparse.Namespace) -> int:
     if not Path(args.experiment).is_file():
         raise FileNotFoundError(f"no such experiment file: {args.experiment}")
-    traces = import_experiment(args.experiment)
-    out = Path(args.out)
+    with output_folder(args.out, "import", "import.json") as out:
+        traces = import_experiment(args.experiment)
+        listing = _write(traces, out, args)
+    print(f"wrote {len(listing)} trace files and import.json to {args.out}")
+    return 0
+
+
+def _write(traces, out: Path, args) -> list:
+    """Each shot's trace file (and plot) and `import.json` in `out`; returns the listing."""
     listing = []
     for trace in traces:
         label = trace.header["x_shot"]
-        path = out / f"{label}.csv"
+        path = out / f"{file_stem(label)}.csv"
         write_trace(path, trace)
         if not args.no_plots:
             _plot(trace, path.with_suffix(".png"))
@@ -91,7 +99,6 @@ def run(args: argparse.Namespace) -> int:
             "time_zero_check": trace.header["x_import_time_zero_check"],
         })
         print(f"{label}: {len(trace.time_s)} samples ({listing[-1]['pre_trigger_samples']} before the "
-              f"impact), channels {', '.join(trace.channels)} -> {path}")
+              f"impact), channels {', '.join(trace.channels)} -> {Path(args.out) / path.name}")
     write_json(out / "import.json", {"experiment": str(args.experiment), "shots": listing})
-    print(f"wrote {len(listing)} trace files and import.json to {out}")
-    return 0
+    return listing

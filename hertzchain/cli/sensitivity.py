@@ -40,13 +40,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sweep.add_argument("--sweep-velocities", help="impact velocities (m/s), e.g. 0.05,0.1,0.3,1")
     sweep.add_argument("--sweep-wall-youngs", help="wall moduli (Pa), e.g. 3e9,45e9,203e9")
     sweep.add_argument("--sweep", action="append", default=[], metavar="PARAM=V1,V2,...",
-                       help="sweep any scalar parameter (SI values); repeatable")
+                       help="sweep any scalar parameter (SI values or with units, e.g. eta=0,1us,2us); "
+                            "repeatable")
     sweep.add_argument("--chunk-size", type=int, default=64, help="setups per vmapped call [64]")
     glob = parser.add_argument_group("global (derivative-based measures over a box)")
     glob.add_argument("--box", action="append", default=[], metavar="PARAM=LOW:HIGH",
-                      help="range of a parameter (SI); repeatable; turns on the global study")
+                      help="range of a parameter (SI or with units, e.g. eta=0:2us); repeatable; turns "
+                           "on the global study")
     glob.add_argument("--global-samples", type=int, default=64, help="Latin-hypercube points [64]")
     glob.add_argument("--seed", type=int, default=0, help="sampling seed [0]")
+
+
+def _unit(name: str) -> str:
+    """The SI unit of a sensitivity parameter ("" for an unknown name: refused later, by name)."""
+    return S.PARAMETERS[name].unit if name in S.PARAMETERS else ""
 
 
 def _values(text: str, unit: str, option: str) -> list[float]:
@@ -65,7 +72,7 @@ def _sweep_axes(args) -> dict[str, list[float]]:
             raise ValueError(f"--sweep {item!r}: expected PARAM=V1,V2,... (SI values).")
         if name.strip() in axes:
             raise ValueError(f"--sweep: {name.strip()} is swept twice.")
-        axes[name.strip()] = [float(v) for v in values.split(",") if v.strip()]
+        axes[name.strip()] = _values(values, _unit(name.strip()), f"--sweep {name.strip()}")
     return axes
 
 
@@ -73,11 +80,13 @@ def _box(args) -> dict[str, tuple[float, float]]:
     box = {}
     for item in args.box:
         name, _, bounds = item.partition("=")
-        low, _, high = bounds.partition(":")
-        try:
-            box[name.strip()] = (float(low), float(high))
-        except ValueError as error:
-            raise ValueError(f"--box {item!r}: expected PARAM=LOW:HIGH in SI units.") from error
+        low, colon, high = bounds.partition(":")
+        if not colon:
+            raise ValueError(f"--box {item!r}: expected PARAM=LOW:HIGH (SI, or with units: "
+                             "wall_youngs=3GPa:203GPa).")
+        unit = _unit(name.strip())
+        box[name.strip()] = (parse_quantity(low, unit, name=f"--box {name.strip()}"),
+                             parse_quantity(high, unit, name=f"--box {name.strip()}"))
     return box
 
 

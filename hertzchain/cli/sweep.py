@@ -3,7 +3,7 @@
 Example::
 
     hertzchain sweep --grid striker_velocity_m_s=0.1:1:10:log \\
-        --grid wall_youngs_pa=3e9,45e9,203e9 --grid eta_s=0,2e-6 --out out/sweep
+        --grid wall_youngs_pa=3GPa,45GPa,203GPa --grid eta_s=0,2us --out out/sweep
 
 Run the same command again after an interruption: finished chunks are kept.
 """
@@ -11,11 +11,13 @@ Run the same command again after an interruption: finished chunks are kept.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
-from ..sweep import SweepSpec, parse_grid, run_sweep
+from ..sweep import SweepSpec, nonfinite_runs, parse_grid, run_sweep, table_yield_notice
 from ..units import parse_quantity
-from .setup_options import add_run_arguments, add_setup_arguments, setup_from_args
+from ..validation import check_plausible
+from .setup_options import add_run_arguments, add_setup_arguments, chain_from_args
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,7 +28,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="FIELD=VALUES",
-        help="a swept ChainSetup field and its values (SI): a comma list, start:stop:count or "
+        help="a swept ChainSetup field and its values, in the unit the field's name carries or with "
+        "a suffix: a comma list (wall_youngs_pa=3GPa,45GPa), start:stop:count (eta_s=0:3us:4) or "
         "start:stop:count:log; repeat for an outer product",
     )
     parser.add_argument("--out", default="out/sweep", help="output folder [out/sweep]")
@@ -44,6 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--num-processes", type=int, help="with --distributed: number of processes P")
     parser.add_argument("--process-id", type=int, help="with --distributed: this process's index, 0..P-1")
     parser.add_argument("--no-plots", action="store_true", help="do not draw the summary plots")
+    parser.add_argument("--yes", action="store_true",
+                        help="run even when the sweep needs more memory than is available or more than 1e10 "
+                        "bead-steps")
 
 
 def start_distributed(args: argparse.Namespace) -> None:
@@ -78,8 +84,11 @@ def run(args: argparse.Namespace) -> int:
     start_distributed(args)
     if not args.grid:
         raise ValueError("give at least one --grid FIELD=VALUES, e.g. --grid striker_velocity_m_s=0.1:1:10:log")
-    setup = setup_from_args(args)
+    chain = chain_from_args(args)
+    setup = chain.setup
     grid = dict(parse_grid(text) for text in args.grid)
+    for name, values in grid.items():
+        check_plausible(name, values, where="--grid")
     spec = SweepSpec(
         setup=setup,
         grid=grid,
@@ -89,6 +98,8 @@ def run(args: argparse.Namespace) -> int:
         contacts=tuple(args.contacts or ()),
     )
     print(f"sweep of {spec.n_runs} runs over {', '.join(grid)} into {args.out}", flush=True)
+    for line in chain.describe(swept=grid):
+        print(line, flush=True)
     result = run_sweep(
         spec,
         Path(args.out),
@@ -96,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
         max_chunks=args.max_chunks,
         distributed=args.distributed,
         plots=not args.no_plots,
+        check_size=not args.yes,
     )
     if args.distributed and jax_process_index() != 0:
         print(f"process {jax_process_index()}: computed {result.computed} chunks; process 0 writes the table.",
@@ -109,4 +121,14 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"wrote {result.folder / 'sweep.csv'} and {result.folder / 'sweep.parquet'} "
           f"({len(result.table['run'])} runs, {result.computed} chunks computed now)")
+    notice = table_yield_notice(result.table, setup)
+    if notice:
+        print(f"hertzchain sweep: warning: {notice}", file=sys.stderr)
+    failed = nonfinite_runs(result.table)
+    if failed.size:
+        shown = ", ".join(str(run) for run in failed[:10]) + (" ..." if failed.size > 10 else "")
+        print(f"hertzchain sweep: error: {failed.size} of {len(result.table['run'])} runs gave non-finite forces "
+              f"or energies (runs {shown}; result_finite = 0 in sweep.csv): not results; narrow the grid or "
+              "give a smaller --dt.", file=sys.stderr)
+        return 3
     return 0

@@ -13,8 +13,8 @@ $\\delta_0 = \\delta_0^0 + u - x_1$, $\\delta_k = \\delta_k^0 + x_k - x_{k+1}$,
 $\\delta_n = \\delta_n^0 + x_n$,
 
 and bead $i$ obeys $m_i\\ddot x_i = F_{i-1} - F_i - m_i\\gamma_i\\dot x_i$, with the contact
-forces of `hertzchain.contact.contact_force` (Hertz, plus Kuwabara-Kono damping of
-coefficient `eta_s`, clipped at zero: the beads can separate) and a viscous drag
+forces of `hertzchain.laws.Hertz` plus `hertzchain.laws.Viscoelastic` (Kuwabara-Kono damping
+of coefficient `eta_s`), clipped at zero (the beads can separate), and a viscous drag
 $-m\\gamma v$ on each bead (the driver and the wall are the frame at rest).
 """
 
@@ -25,7 +25,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import contact
+from .. import contact, laws
+from ..precision import require_float64
 
 
 class DrivenChain(eqx.Module):
@@ -54,6 +55,7 @@ class DrivenChain(eqx.Module):
     eta_s: jax.Array | None
 
     def __init__(self, bead_mass_kg, contact_kappa_n_m1p5, precompression_n, damping_rate_per_s, eta_s=0.0):
+        require_float64("DrivenChain")
         self.bead_mass_kg = jnp.atleast_1d(jnp.asarray(bead_mass_kg, dtype=jnp.float64))
         n = self.bead_mass_kg.shape[0]
         self.contact_kappa_n_m1p5 = jnp.asarray(contact_kappa_n_m1p5, dtype=jnp.float64)
@@ -139,12 +141,13 @@ class DrivenChain(eqx.Module):
 
     def static_overlap_m(self) -> jax.Array:
         """(n + 1,) overlap of every contact at rest, $(F_0/\\kappa_k)^{2/3}$, m."""
-        return contact.overlap_at_force(self.precompression_n, self.contact_kappa_n_m1p5)
+        return laws.Hertz().overlap_at_force(self.precompression_n, laws.ContactConstants(self.contact_kappa_n_m1p5))
 
     def contact_stiffness_n_m(self) -> jax.Array:
-        """(n + 1,) linear stiffness of every contact about the static state,
-        $dF/d\\delta = \\tfrac32\\kappa^{2/3}F_0^{1/3}$, N/m."""
-        return 1.5 * self.contact_kappa_n_m1p5 ** (2.0 / 3.0) * self.precompression_n ** (1.0 / 3.0)
+        """(n + 1,) linear stiffness of every contact about the static state, the Hertz
+        law's tangent stiffness $dF/d\\delta = \\tfrac32\\kappa^{2/3}F_0^{1/3}$, N/m."""
+        constants = laws.ContactConstants(self.contact_kappa_n_m1p5)
+        return laws.Hertz().stiffness_at_force(self.precompression_n, constants)
 
     def highest_frequency_bound_hz(self) -> jax.Array:
         """An upper bound on the chain's highest linear mode frequency about the static state,

@@ -40,16 +40,25 @@ QUANTITIES = ("velocity", "displacement")
 
 @functools.cache
 def _load() -> str | None:
-    """Build (if needed), load and register the kernel: None on success, else why not."""
+    """Build (if needed), load and register the kernel: None on success, else why not (said
+    once on stderr, with what runs instead, by `native._load_library`)."""
     if os.environ.get("HERTZCHAIN_NATIVE", "1") == "0":
         return native.SWITCHED_OFF
     try:
-        native._load_library((), "the driven chains' lock-in kernel",
-                             ((TARGET, "HertzChainDrivenLockin"), (TANGENT_TARGET, "HertzChainDrivenLockinTangent")),
-                             source=SOURCE)
+        _library()
     except (OSError, RuntimeError) as error:
         return str(error)
     return None
+
+
+@functools.cache
+def _library():
+    """Build (if needed), load and register the kernel's library: its path."""
+    return native._load_library(
+        (), "the driven chains' fused lock-in kernel",
+        ((TARGET, "HertzChainDrivenLockin"), (TANGENT_TARGET, "HertzChainDrivenLockinTangent")), source=SOURCE,
+        instead="the JAX kernel runs instead, about 7.5 times slower; hertzchain.driven.fused.unavailable_reason() "
+                "gives the whole message, HERTZCHAIN_NATIVE=0 chooses the JAX kernel without this notice")
 
 
 def unavailable_reason() -> str | None:
@@ -83,6 +92,7 @@ def lockin_sums(p, frequency_hz, amplitude_m, *, steps_per_period: int, ramp_per
     arrays = (p.inv_mass_per_kg, p.damping_rate_per_s, p.kappa_n_m1p5, p.static_overlap_m,
               jnp.reshape(eta, (1, 1)), jnp.asarray(amplitude_m, dtype=jnp.float64)[None], dt[None], omega[None])
     sums = _call(config)(*arrays)
+    native.note_use(_library())
     return (2.0 / window) * jax.lax.complex(sums[0], sums[1])
 
 

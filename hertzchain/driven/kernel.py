@@ -16,7 +16,7 @@ $(F_{i-1} - F_i)/m_i$ and $\\gamma$ the beads' viscous damping rate:
 
 The drag $-\\gamma v$ is treated by the trapezoidal rule (implicit, solved in closed form):
 the scheme stays symmetric, second order and stable for any damping. The contact laws are
-`hertzchain.contact.contact_force` (Hertz plus Kuwabara-Kono, clipped at zero).
+`hertzchain.laws`' `Hertz` and `Viscoelastic` (Kuwabara-Kono), their sum clipped at zero.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .. import contact
+from .. import laws
 from .chain import DrivenChain
 
 # Steps of a `lax.scan` unrolled into one loop iteration (speed only).
@@ -71,10 +71,11 @@ def contact_forces(p: KernelParams, x, v, drive_m, drive_m_s) -> jax.Array:
     front = jnp.concatenate([drive_m[None] + zero, x])
     back = jnp.concatenate([x, zero])
     overlap = p.static_overlap_m + front - back
+    elastic = laws.Hertz().force(overlap, None, laws.ContactConstants(p.kappa_n_m1p5))
     if p.eta_s is None:
-        return contact.hertz_force(overlap, p.kappa_n_m1p5)
+        return elastic
     rate = jnp.concatenate([drive_m_s[None] + zero, v]) - jnp.concatenate([v, zero])
-    return contact.contact_force(overlap, rate, p.kappa_n_m1p5, p.eta_s)[1]
+    return laws.total_force(elastic, overlap, rate, p.kappa_n_m1p5, (laws.Viscoelastic(p.eta_s),))
 
 
 def contact_accel(p: KernelParams, force_n) -> jax.Array:
