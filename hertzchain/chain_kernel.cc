@@ -552,15 +552,17 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     LoadTangent<kLanes>(tin.friction, D, 1, batch, lo, tfr.data(), valid);
     if (kDashpot) LoadTangent<kLanes>(tin.dashpot, D, 1, batch, lo, tdash.data(), valid);
   }
-  // Whether no direction moves this block's inverse masses nor, with kExtras, its preload's
-  // overlaps, springs or external forces (a fit of damping, friction and stiffness): the
-  // sweep's tangent pass then leaves their terms out (products with 0: no value changes)
-  // and reads a third fewer rows.
+  // Whether no direction moves this block's inverse masses and stiffnesses nor, with
+  // kExtras, its preload's overlaps, springs or external forces (a fit of damping, friction
+  // and impact speed): the sweep then seeds neither kappa nor the spring (the dual numbers
+  // carry fewer partials) and its tangent pass leaves their terms out (products with 0: no
+  // value changes) and reads a third fewer rows.
   const auto all_zero = [](const std::vector<double>& rows) {
     return std::all_of(rows.begin(), rows.end(), [](double t) { return t == 0.0; });
   };
   const bool fixed_inputs =
-      kTangent && all_zero(tinv) && (!kExtras || (all_zero(tov0) && all_zero(tspr) && all_zero(text)));
+      kTangent && all_zero(tinv) && all_zero(tkap) &&
+      (!kExtras || (all_zero(tov0) && all_zero(tspr) && all_zero(text)));
   // kSensors: the tangents of the sensors' state and parameters, (D, rows, kLanes), and of
   // the step's half-step rates, predicted rates, compressions, contact forces and cuts
   std::vector<double> tsf(D * ns * kLanes), tsr(D * ns * kLanes), tsd(D * ns * kLanes);
@@ -747,29 +749,39 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   };
   // The force of contact index c at lane j and its partial derivatives by its inputs
   // (`kForceInputs`, into `slopes[q * stride]`): `law_force` run on dual numbers seeded with
-  // each input; c1 the lane's 1.5 eta, dash its chain's dashpot.
-  auto contact_slopes = [&](double dl, double rate, double k, double c1j, double dash, double sp, int64_t c,
-                            int64_t j, double* slopes, int64_t stride) HC_LANES {
+  // each input, kappa and the spring only with `own_tag` (std::true_type: they have
+  // tangents in this block, `fixed_inputs`); c1 the lane's 1.5 eta, dash its chain's dashpot.
+  auto contact_slopes = [&](auto own_tag, double dl, double rate, double k, double c1j, double dash, double sp,
+                            int64_t c, int64_t j, double* slopes, int64_t stride) HC_LANES {
     constexpr int N = kForceInputs;
+    constexpr bool kOwn = decltype(own_tag)::value;
     using hertzchain::SeedIf;
-    const auto kd = hertzchain::Seed<N, kKappaIn>(k);
+    const auto kd = SeedIf<kOwn, N, kKappaIn>(k);
     const auto c1d = SeedIf<kViscous, N, kEtaIn>(c1j);
     const auto total = law_force(hertzchain::Seed<N, kOverlapIn>(dl), SeedIf<kViscous, N, kRateIn>(rate), kd,
                                  c1d * kd, hertzchain::ContactDashpot(kd, SeedIf<kDashpot, N, kDashIn>(dash)),
-                                 SeedIf<kExtras, N, kSpringIn>(sp),
+                                 SeedIf<kExtras && kOwn, N, kSpringIn>(sp),
                                  SeedIf<kPower || kPlastic, N, kLawIn>(law_in(c, j, 0)),
                                  SeedIf<kPower || kPlastic, N, kLawIn + 1>(law_in(c, j, 1)), nullptr);
-    for (int q = 0; q < N; ++q) slopes[q * stride] = hertzchain::Slope(total, q);
+    // the partials `force_tangent` reads: those by the seeded inputs
+    constexpr unsigned kSeeded = 1u << kOverlapIn | (kOwn ? 1u << kKappaIn : 0u) |
+                                 (kViscous ? 1u << kRateIn | 1u << kEtaIn : 0u) | (kDashpot ? 1u << kDashIn : 0u) |
+                                 (kExtras && kOwn ? 1u << kSpringIn : 0u) | (kPower || kPlastic ? 3u << kLawIn : 0u);
+    HC_UNROLL
+    for (int q = 0; q < N; ++q)
+      if (hertzchain::Has(kSeeded, q)) slopes[q * stride] = hertzchain::Slope(total, q);
     return total.v;
   };
   // The tangent of a contact's force along one direction from its partials (`slopes[q *
   // stride]`) and its inputs' tangents: tdl, trate, tk, t15e (1.5 eta's), tdash (the chain's
   // dashpot's), tsp, tlaw0, tlaw1; `spring_tangent` (std::true_type or false_type): whether
-  // the spring's tangent `tsp` can be other than 0
+  // kappa's and the spring's tangents `tk`, `tsp` can be other than 0 (`contact_slopes`'
+  // `own_tag`)
   auto force_tangent = [&](auto spring_tangent, const double* slopes, int64_t stride, double tdl, double trate,
                            double tk, double t15e, double tdash, double tsp, double tlaw0, double tlaw1) HC_LANES {
     constexpr bool kST = decltype(spring_tangent)::value;
-    double t = slopes[kOverlapIn * stride] * tdl + slopes[kKappaIn * stride] * tk;
+    double t = slopes[kOverlapIn * stride] * tdl;
+    if constexpr (kST) t = t + slopes[kKappaIn * stride] * tk;
     if constexpr (kViscous) t = t + slopes[kRateIn * stride] * trate + slopes[kEtaIn * stride] * t15e;
     if constexpr (kDashpot) t = t + slopes[kDashIn * stride] * tdash;
     if constexpr (kExtras && kST) t = t + slopes[kSpringIn * stride] * tsp;
@@ -888,8 +900,9 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         const int64_t sb = kSensors ? back_of[i] : -1, sf_ = kSensors ? front_of[i] : -1;
         // kUK / kUM: kappa and 1.5 eta kappa / the inverse mass of body i are one value
         // for every lane of the row (read once: the same numbers)
-        auto sweep = [&](auto uniform_k_tag, auto uniform_m_tag) HC_LANES {
+        auto sweep = [&](auto uniform_k_tag, auto uniform_m_tag, auto own_tag) HC_LANES {
         constexpr bool kUK = decltype(uniform_k_tag)::value, kUM = decltype(uniform_m_tag)::value;
+        constexpr bool kOwn = decltype(own_tag)::value;
         const double k0 = kap[ri], kv0 = kvis[ri], d0 = kDashpot ? dsh[ri] : 0.0, m0 = inv[ri];
         ForLanes<kLanes>([&](int64_t j) HC_LANES {
           const double kj = kUK ? k0 : kap[ri + j], kvj = kUK ? kv0 : kvis[ri + j];
@@ -916,7 +929,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           double elastic_i;
           double f;
           if constexpr (kTangent)
-            f = contact_slopes(dl, rt_rate, kj, c1[j], dash[j], spr[ri + j], ri + j, j, &force_slopes[j], kLanes);
+            f = contact_slopes(own_tag, dl, rt_rate, kj, c1[j], dash[j], spr[ri + j], ri + j, j, &force_slopes[j],
+                               kLanes);
           else
             f = law_force(dl, rt_rate, kj, kvj, dj, spr[ri + j], law_in(ri + j, j, 0), law_in(ri + j, j, 1),
                           kBooks ? &elastic_i : nullptr);
@@ -952,7 +966,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           }
           a[ri + j] = acc;
           v[ri + j] = vn;
-          if constexpr (kTangent) body[j] = b;  // what the tangent pass needs of this step
+          if constexpr (kTangent && kOwn) body[j] = b;  // what the tangent pass needs of this step
           f_prev[j] = f;
           w_prev[j] = w;
           p_prev[j] = pred;
@@ -986,17 +1000,24 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         }
         using T = std::true_type;
         using F = std::false_type;
-        if (uniform_k[i]) {
-          uniform_m[i] ? sweep(T{}, T{}) : sweep(T{}, F{});
+        auto sweep_own = [&](auto own) HC_LANES {
+          if (uniform_k[i]) {
+            uniform_m[i] ? sweep(T{}, T{}, own) : sweep(T{}, F{}, own);
+          } else {
+            uniform_m[i] ? sweep(F{}, T{}, own) : sweep(F{}, F{}, own);
+          }
+        };
+        if constexpr (kTangent) {
+          fixed_inputs ? sweep_own(F{}) : sweep_own(T{});
         } else {
-          uniform_m[i] ? sweep(F{}, T{}) : sweep(F{}, F{});
+          sweep_own(T{});
         }
         if constexpr (kSensors) {  // contact i's total force: a sensor's next drive
           if (sb >= 0) std::copy(f_prev, f_prev + kLanes, &s_fb[sb * kLanes]);
           if (sf_ >= 0) std::copy(f_prev, f_prev + kLanes, &s_ff[sf_ * kLanes]);
         }
         // the tangent pass; kFixed: the bodies' and contacts' own inputs (inverse masses,
-        // preload, springs, external forces) have no tangent in this block (`fixed_inputs`)
+        // kappa, preload, springs, external forces) have no tangent in this block (`fixed_inputs`)
         auto tangent_pass = [&](auto fixed_tag) HC_LANES {
           constexpr bool kFixed = decltype(fixed_tag)::value;
           for (int64_t d = 0; d < D; ++d) {
@@ -1133,7 +1154,8 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           continue;
         }
         double here[kForceInputs];  // the force's partials (`contact_slopes`)
-        record.slot(0, c)[j] = contact_slopes(dl, rate, kap[ri + j], c1[j], dash[j], spr[ri + j], ri + j, j, here, 1);
+        record.slot(0, c)[j] =
+            contact_slopes(std::true_type{}, dl, rate, kap[ri + j], c1[j], dash[j], spr[ri + j], ri + j, j, here, 1);
         for (int64_t d = 0; d < D; ++d) {
           const int64_t q = d * kLanes + j;
           const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
