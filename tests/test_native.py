@@ -306,13 +306,13 @@ def test_forward_mode_derivatives_equal_jacfwd_through_the_jax_kernel(case):
 
 
 def test_friction_derivatives_with_and_without_loss_equal_the_jax_kernels():
-    """The friction kick's tangent (`KickSlope`, `KickTangent`) in one batch of chains with
-    friction and chains with friction switched on but mu = 0 (beads at rest ahead of the
-    wave: the loss above the speed, or a kept speed of exactly 0): `jax.jacfwd` in damping,
-    friction and impact speed equals it through the JAX kernel, and mu's direction moves the
-    mu = 0 chains not at all. (At a velocity of exactly 0 with no loss, sign(0) = 0 makes
-    the slope 0, as `KickSlope` keeps it; the tangents reaching such a bead are 0 here, so
-    that case is not observable in a chain's traces.)"""
+    """The friction kick's tangent (`chain_laws.h`'s `Kick` on dual numbers) in one batch of
+    chains with friction and chains with friction switched on but mu = 0 (beads at rest
+    ahead of the wave: the loss above the speed, or a kept speed of exactly 0): `jax.jacfwd`
+    in damping, friction and impact speed equals it through the JAX kernel, and mu's
+    direction moves the mu = 0 chains not at all. (At a velocity of exactly 0 with no loss,
+    sign(0) = 0 makes the slope 0, as the dual numbers' `CopySign` keeps it; the tangents
+    reaching such a bead are 0 here, so that case is not observable in a chain's traces.)"""
     import equinox as eqx
     import jax.numpy as jnp
 

@@ -111,9 +111,12 @@ constexpr int64_t kQuarterLanes = 4;
 // `body(j)` for every lane j of a block of kLanes chains, vectorised (the lanes are
 // independent), and for a 64-lane block unrolled in full (see above); narrower blocks are
 // one or a few vectors already (unrolled before vectorisation, the tangent run of an
-// 8-lane block was 4x slower).
+// 8-lane block was 4x slower). The loop and its bodies (`HC_LANES`) are always inlined: the
+// tangent sweep's body, with its contact law on dual numbers, is larger than GCC 12 inlines
+// on its own, and a loop that calls it per lane stays scalar (3.5x the instructions).
+#define HC_LANES __attribute__((always_inline))
 template <int64_t kLanes, class Body>
-inline void ForLanes(const Body& body) {
+HC_LANES inline void ForLanes(const Body& body) {
   if constexpr (kLanes == 64) {
 #pragma GCC ivdep
 #pragma GCC unroll 8
@@ -236,7 +239,7 @@ inline void ConservativeContact(double dt, double h, double* __restrict xi, doub
                                 const double* __restrict e, double* __restrict top,
                                 double* __restrict force_before, double* __restrict record) {
   const double k0 = k[0], m0 = m[0];
-  ForLanes<kLanes>([&](int64_t j) {
+  ForLanes<kLanes>([&](int64_t j) HC_LANES {
     xn[j] = xn[j] + dt * un[j];
     double overlap = kPreload ? (xi[j] - xn[j]) + o[j] : xi[j] - xn[j];
     double force = hertzchain::ElasticForce<kSprings>(overlap, kUniformK ? k0 : k[j], sp[j]);
@@ -350,9 +353,11 @@ void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
 // kick, with sensor springs, static overlaps and external forces of a preload (zeros where
 // there are none: adding 0 changes no bit). kViscous and kFriction select the physics at
 // compile time; kTangent adds forward-mode tangents: the derivatives of every state variable
-// along `directions` tangent directions of the inputs, carried through the same loop with
-// the derivative rules JAX applies to the JAX kernel (`jax.jvp` of it), so that the two
-// agree to round-off.
+// along `directions` tangent directions of the inputs, carried through the same loop: the
+// partial derivatives of every contact's force, friction kick and largest overlap are those
+// laws of `chain_laws.h` run on dual numbers once per step (the rules JAX's jvp applies to
+// the JAX kernel), and each direction's tangent their sum over the inputs' tangents, so that
+// the two kernels agree to round-off.
 //   state0 (3 (bodies + 1), B): x, v, a; parameters (rows, 1 or B); eta, friction (1, 1 or B).
 //   Tangents: every input with a leading direction axis, (D, rows, B) or (1, rows, B); results:
 //   the traces (B, n_samples), then their tangents (D, B, n_samples), from one run.
@@ -403,9 +408,6 @@ struct BooksIO {
   Param mass;
   double* state;
 };
-
-using hertzchain::KickSlope;
-using hertzchain::KickTangent;
 
 // The unloading curve of an elastic-plastic contact (`hertzchain::Unloading`) from its inputs
 // `in`: the largest overlap so far (m), kappa, then the law's own (Thornton: the yield force;
@@ -550,15 +552,17 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     LoadTangent<kLanes>(tin.friction, D, 1, batch, lo, tfr.data(), valid);
     if (kDashpot) LoadTangent<kLanes>(tin.dashpot, D, 1, batch, lo, tdash.data(), valid);
   }
-  // Whether no direction moves this block's inverse masses nor, with kExtras, its preload's
-  // overlaps, springs or external forces (a fit of damping, friction and stiffness): the
-  // sweep's tangent pass then leaves their terms out (products with 0: no value changes)
-  // and reads a third fewer rows.
+  // Whether no direction moves this block's inverse masses and stiffnesses nor, with
+  // kExtras, its preload's overlaps, springs or external forces (a fit of damping, friction
+  // and impact speed): the sweep then seeds neither kappa nor the spring (the dual numbers
+  // carry fewer partials) and its tangent pass leaves their terms out (products with 0: no
+  // value changes) and reads a third fewer rows.
   const auto all_zero = [](const std::vector<double>& rows) {
     return std::all_of(rows.begin(), rows.end(), [](double t) { return t == 0.0; });
   };
   const bool fixed_inputs =
-      kTangent && all_zero(tinv) && (!kExtras || (all_zero(tov0) && all_zero(tspr) && all_zero(text)));
+      kTangent && all_zero(tinv) && all_zero(tkap) &&
+      (!kExtras || (all_zero(tov0) && all_zero(tspr) && all_zero(text)));
   // kSensors: the tangents of the sensors' state and parameters, (D, rows, kLanes), and of
   // the step's half-step rates, predicted rates, compressions, contact forces and cuts
   std::vector<double> tsf(D * ns * kLanes), tsr(D * ns * kLanes), tsd(D * ns * kLanes);
@@ -680,13 +684,19 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   double loss[kLanes];              // mu g dt/2
   double w_prev[kLanes], p_prev[kLanes], f_prev[kLanes];  // body i: kicked half-step and predicted velocity; force before
   double c1[kLanes];                // 1.5 eta
-  // the two friction kicks' slopes (`KickSlope`, `KickTangent`)
-  double sg1[kLanes], m1[kLanes], sg2[kLanes], m2[kLanes];
+  // the two friction kicks' partial derivatives by the velocity kicked and by the loss
+  double kick1_w[kLanes], kick1_loss[kLanes], kick2_w[kLanes], kick2_loss[kLanes];
   double body[kLanes];              // the force on body i
-  struct Linear {                   // a contact's linearisation, per lane (`TangentForce`)
-    double delta[kLanes], rate[kLanes], in[kLanes], positive[kLanes], root[kLanes], half_inv_root[kLanes],
-        kp[kLanes], c3[kLanes], slope[kLanes];
-  } lin;
+  // The inputs of a contact's force in the tangent runs, in the order of its partial
+  // derivatives (`force_slopes`): the overlap (m) and kappa, with damping the rate (m/s) and
+  // 1.5 eta (s), with a dashpot the chain's dashpot (N s/m), with the extras the spring
+  // (N/m), then the law's own two: the power law's exponent and reference overlap (m), an
+  // elastic-plastic contact's residual overlap (m) and unloading stiffness (N/m^1.5).
+  constexpr int kOverlapIn = 0, kKappaIn = 1, kRateIn = 2, kEtaIn = 3;
+  constexpr int kDashIn = kViscous ? 4 : 2, kSpringIn = kDashIn + (kDashpot ? 1 : 0);
+  constexpr int kLawIn = kSpringIn + (kExtras ? 1 : 0);
+  constexpr int kForceInputs = kLawIn + (kPower || kPlastic ? 2 : 0);
+  double force_slopes[kForceInputs * kLanes];  // contact i's, (kForceInputs, kLanes)
   // tangents of w_prev, p_prev, f_prev and per-direction constants (D, kLanes)
   std::vector<double> tw_prev(D * kLanes), tp_prev(D * kLanes), tf_prev(D * kLanes);
   std::vector<double> tloss(D * kLanes), t15eta(D * kLanes);
@@ -699,103 +709,104 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
     t15eta[q] = 1.5 * teta[q];
   }
 
-  // contact.track_friction_kick (`kick`) and contact.contact_force (`total_force`) as
-  // `chain_laws.h` has them (kv = 1.5 eta kappa, computed once per block as JAX rounds it:
-  // (1.5 eta) kappa)
-  const auto kick = [](double w, double loss_j, double* s) { return hertzchain::Kick(w, loss_j, s); };
-  const auto total_force = [](double dl, double rate, double k, double kv, double d, double sp, double* r,
-                              double* sm) {
-    return hertzchain::TotalForce<kViscous, kExtras, kDashpot>(dl, rate, k, kv, d, sp, r, sm);
+  // contact.track_friction_kick (`kick`) as `chain_laws.h` has it, and (`kick_slopes`) with
+  // its partial derivatives by the velocity and the loss (the law run on dual numbers)
+  const auto kick = [](double w, double loss_j) HC_LANES { return hertzchain::Kick(w, loss_j); };
+  const auto kick_slopes = [](double w, double loss_j, double* by_w, double* by_loss) HC_LANES {
+    const auto kicked = hertzchain::Kick(hertzchain::Seed<2, 0>(w), hertzchain::Seed<2, 1>(loss_j));
+    *by_w = hertzchain::Slope(kicked, 0);
+    *by_loss = hertzchain::Slope(kicked, 1);
+    return kicked.v;
   };
-  // the linearisation of contact i at lane j (kept for every direction of the step)
-  auto linearise = [&](Linear& l, int64_t j, double dl, double rate, double k, double kv, double d, double rt,
-                       double sm) {
-    const hertzchain::Linearisation one = hertzchain::Linearise<kDashpot>(dl, rate, k, kv, d, rt, sm);
-    l.delta[j] = one.delta;
-    l.rate[j] = one.rate;
-    l.in[j] = one.in;
-    l.positive[j] = one.positive;
-    l.root[j] = one.root;
-    l.half_inv_root[j] = one.half_inv_root;
-    l.kp[j] = one.kp;
-    l.c3[j] = one.c3;
-    l.slope[j] = one.slope;
-  };
-  // kPlastic: a contact's linearisation about its unloading curve, per lane: s = overlap -
-  // residual, in = [s > 0], s_+, sqrt(s_+), 0.5 / sqrt(s) in contact (JAX's rules for
-  // `contact.hertz_force`), the curve's stiffness
-  struct PlasticLinear {
-    double in[kLanes], positive[kLanes], root[kLanes], half_inv_root[kLanes], kappa[kLanes];
-  };
-  PlasticLinear plin;
-  // The force of a contact at lane j with the chain's law (Hertz's, `total_force`, with
-  // kPower the power law, with kPlastic Hertz about the unloading curve of contact index c):
-  // returns the total; `rt`, `sm` as `TotalForce` gives them, `elastic` the law's force (the
-  // books read it) and, with kTangent, `slopes` the power law's partial derivatives or `pl`
-  // the plastic law's linearisation (computed once per contact and step, for every direction).
-  auto contact_force = [&](double dl, double rate, double k, double kv, double d, double sp, int64_t c, int64_t j,
-                           double* rt, double* sm, double* elastic, hertzchain::PowerLawSlopes* slopes,
-                           PlasticLinear* pl) {
-    if constexpr (kPlastic) {
-      *rt = std::sqrt(dl > 0.0 ? dl : 0.0);
-      const double s = dl - res[c], positive = s > 0.0 ? s : 0.0, root = std::sqrt(positive);
-      *elastic = kpl[c] * positive * root;
-      if constexpr (kTangent) {
-        pl->in[j] = s > 0.0 ? 1.0 : 0.0;
-        pl->positive[j] = positive;
-        pl->root[j] = root;
-        pl->half_inv_root[j] = s > 0.0 ? 0.5 / root : 0.0;
-        pl->kappa[j] = kpl[c];
+  // The force of a contact with the chain's law (`contact.contact_force`: `DampedTotal` about
+  // Hertz's elastic force, with kPower the power law's, with kPlastic Hertz's about the
+  // unloading curve): at overlap dl, rate, kappa k, 1.5 eta kappa kv (computed once per block
+  // as JAX rounds it: (1.5 eta) kappa), dashpot d (`ContactDashpot`), spring sp and the law's
+  // two inputs (`kLawIn`); `elastic`, where given, receives the law's elastic force (the
+  // books read it). Any number types: doubles for the values, duals for the partials.
+  const auto law_force = [](const auto& dl, const auto& rate, const auto& k, const auto& kv, const auto& d,
+                            const auto& sp, const auto& law0, const auto& law1, double* elastic) HC_LANES {
+    const auto positive = hertzchain::PositivePart(dl);
+    const auto rt = hertzchain::RootOfPositive(positive);
+    const auto own = [&]() HC_LANES {
+      if constexpr (kPlastic) {
+        return hertzchain::UnloadingForce(dl, law0, law1);
+      } else if constexpr (kPower) {
+        return hertzchain::PowerLawForce(dl, k, law0, law1);
+      } else {
+        return hertzchain::HertzElastic(k, positive, rt);
       }
-      return hertzchain::DampedTotal<kViscous, kExtras, kDashpot>(*elastic, *rt, dl, rate, kv, d, sp, sm);
-    } else if constexpr (kPower) {
-      *rt = std::sqrt(dl > 0.0 ? dl : 0.0);
-      double ratio, rn;
-      *elastic = hertzchain::PowerLawForce(dl, k, law[j], law[kLanes + j], &ratio, &rn);
-      if constexpr (kTangent) *slopes = hertzchain::PowerLawPartials(dl, k, law[j], law[kLanes + j], ratio, rn);
-      return hertzchain::DampedTotal<kViscous, kExtras, kDashpot>(*elastic, *rt, dl, rate, kv, d, sp, sm);
-    } else {
-      const double f = total_force(dl, rate, k, kv, d, sp, rt, sm);
-      *elastic = k * (dl > 0.0 ? dl : 0.0) * *rt;
-      return f;
-    }
+    }();
+    if (elastic != nullptr) *elastic = hertzchain::Value(own);
+    return hertzchain::DampedTotal<kViscous, kExtras, kDashpot>(own, rt, dl, rate, kv, d, sp);
   };
-  // its tangent along direction d (`hertzchain::TangentForce`; with kPower, `TangentTotal` about
-  // the power law's tangent from `slopes`; with kPlastic, about Hertz's along the unloading
-  // curve of contact i, `pl`, whose residual and stiffness move with the peak and the law's
-  // inputs): c2 = 1.5 eta kappa = kv; `spring_tangent` (std::true_type or false_type): whether
-  // the spring's tangent `tsp` can be other than 0
-  auto tforce = [&](auto spring_tangent, const Linear& l, int64_t j, const hertzchain::PowerLawSlopes& slopes,
-                    const PlasticLinear& pl, int64_t i, int64_t d, double k, double c1j, double c2, double sp,
-                    double tdl, double trate, double tk, double t15e, double td, double tsp) {
+  // the law's two inputs of contact index c, lane j (kPower: the chain's exponent and
+  // reference overlap; kPlastic: the contact's unloading curve; Hertz's law reads none)
+  const auto law_in = [&](int64_t c, int64_t j, int which) HC_LANES {
+    if constexpr (kPlastic) return which == 0 ? res[c] : kpl[c];
+    if constexpr (kPower) return law[which * kLanes + j];
+    return 0.0;
+  };
+  // The force of contact index c at lane j and its partial derivatives by its inputs
+  // (`kForceInputs`, into `slopes[q * stride]`): `law_force` run on dual numbers seeded with
+  // each input, kappa and the spring only with `own_tag` (std::true_type: they have
+  // tangents in this block, `fixed_inputs`); c1 the lane's 1.5 eta, dash its chain's dashpot.
+  auto contact_slopes = [&](auto own_tag, double dl, double rate, double k, double c1j, double dash, double sp,
+                            int64_t c, int64_t j, double* slopes, int64_t stride) HC_LANES {
+    constexpr int N = kForceInputs;
+    constexpr bool kOwn = decltype(own_tag)::value;
+    using hertzchain::SeedIf;
+    const auto kd = SeedIf<kOwn, N, kKappaIn>(k);
+    const auto c1d = SeedIf<kViscous, N, kEtaIn>(c1j);
+    const auto total = law_force(hertzchain::Seed<N, kOverlapIn>(dl), SeedIf<kViscous, N, kRateIn>(rate), kd,
+                                 c1d * kd, hertzchain::ContactDashpot(kd, SeedIf<kDashpot, N, kDashIn>(dash)),
+                                 SeedIf<kExtras && kOwn, N, kSpringIn>(sp),
+                                 SeedIf<kPower || kPlastic, N, kLawIn>(law_in(c, j, 0)),
+                                 SeedIf<kPower || kPlastic, N, kLawIn + 1>(law_in(c, j, 1)), nullptr);
+    // the partials `force_tangent` reads: those by the seeded inputs
+    constexpr unsigned kSeeded = 1u << kOverlapIn | (kOwn ? 1u << kKappaIn : 0u) |
+                                 (kViscous ? 1u << kRateIn | 1u << kEtaIn : 0u) | (kDashpot ? 1u << kDashIn : 0u) |
+                                 (kExtras && kOwn ? 1u << kSpringIn : 0u) | (kPower || kPlastic ? 3u << kLawIn : 0u);
+    HC_UNROLL
+    for (int q = 0; q < N; ++q)
+      if (hertzchain::Has(kSeeded, q)) slopes[q * stride] = hertzchain::Slope(total, q);
+    return total.v;
+  };
+  // The tangent of a contact's force along one direction from its partials (`slopes[q *
+  // stride]`) and its inputs' tangents: tdl, trate, tk, t15e (1.5 eta's), tdash (the chain's
+  // dashpot's), tsp, tlaw0, tlaw1; `spring_tangent` (std::true_type or false_type): whether
+  // kappa's and the spring's tangents `tk`, `tsp` can be other than 0 (`contact_slopes`'
+  // `own_tag`)
+  auto force_tangent = [&](auto spring_tangent, const double* slopes, int64_t stride, double tdl, double trate,
+                           double tk, double t15e, double tdash, double tsp, double tlaw0, double tlaw1) HC_LANES {
     constexpr bool kST = decltype(spring_tangent)::value;
-    const hertzchain::Linearisation one{l.delta[j], l.rate[j],       l.in[j], l.positive[j], l.root[j],
-                                        l.half_inv_root[j], l.kp[j], l.c3[j], l.slope[j]};
+    double t = slopes[kOverlapIn * stride] * tdl;
+    if constexpr (kST) t = t + slopes[kKappaIn * stride] * tk;
+    if constexpr (kViscous) t = t + slopes[kRateIn * stride] * trate + slopes[kEtaIn * stride] * t15e;
+    if constexpr (kDashpot) t = t + slopes[kDashIn * stride] * tdash;
+    if constexpr (kExtras && kST) t = t + slopes[kSpringIn * stride] * tsp;
+    if constexpr (kPower || kPlastic) t = t + slopes[kLawIn * stride] * tlaw0 + slopes[(kLawIn + 1) * stride] * tlaw1;
+    return t;
+  };
+  // the tangents of the law's two inputs of contact i, lane j, along direction d (kPlastic:
+  // the residual overlap's and the stiffness's, through the unloading curve's partials by
+  // the peak, kappa and the law's inputs; kPower: the exponent's and the reference's)
+  auto law_tangents = [&](int64_t i, int64_t j, int64_t d, double* tlaw0, double* tlaw1) HC_LANES {
+    *tlaw0 = *tlaw1 = 0.0;
     if constexpr (kPlastic) {
-      double tres = 0.0, tkpl = 0.0;
       for (int q = 0; q < kInputs; ++q) {
         const double t = plastic_input(q, d, i, j);
-        tres = tres + dres[q * plastic_size + i * kLanes + j] * t;
-        tkpl = tkpl + dkpl[q * plastic_size + i * kLanes + j] * t;
+        *tlaw0 = *tlaw0 + dres[q * plastic_size + i * kLanes + j] * t;
+        *tlaw1 = *tlaw1 + dkpl[q * plastic_size + i * kLanes + j] * t;
       }
-      const double ts = tdl - tres;
-      const double telastic = (tkpl * pl.positive[j] + pl.kappa[j] * (ts * pl.in[j])) * pl.root[j] +
-                              (pl.kappa[j] * pl.positive[j]) * (ts * pl.half_inv_root[j]);
-      return hertzchain::TangentTotal<kViscous, kExtras, kDashpot, kST>(one, telastic, k, c1j, c2, sp, tdl, trate, tk,
-                                                                         t15e, td, tsp);
     } else if constexpr (kPower) {
-      const double telastic = slopes.overlap * tdl + slopes.kappa * tk +
-                              slopes.reference * tlaw[(d * 2 + 1) * kLanes + j] +
-                              slopes.exponent * tlaw[d * 2 * kLanes + j];
-      return hertzchain::TangentTotal<kViscous, kExtras, kDashpot, kST>(one, telastic, k, c1j, c2, sp, tdl, trate, tk,
-                                                                         t15e, td, tsp);
-    } else {
-      return hertzchain::TangentForce<kViscous, kExtras, kDashpot, kST>(one, k, c1j, c2, sp, tdl, trate, tk, t15e, td,
-                                                                         tsp);
+      *tlaw0 = tlaw[d * 2 * kLanes + j];
+      *tlaw1 = tlaw[(d * 2 + 1) * kLanes + j];
     }
   };
-  hertzchain::PowerLawSlopes slopes[kLanes];  // contact i's, lane by lane (kPower and kTangent)
-  double grow[kLanes];   // kPlastic and kTangent: d max(peak, overlap) / d overlap of contact i (1, 1/2 or 0)
+  // kPlastic and kTangent: the partial derivatives of contact i's largest overlap so far,
+  // max(peak, overlap), by the peak before and by the step's overlap (1, 1/2 or 0)
+  double peak_by_old[kLanes], peak_by_overlap[kLanes];
   double fresh[kLanes];  // kPlastic: 1 where contact i's largest overlap grew and its law yields
 
   for (int64_t n = 0; n < n_samples; ++n) {
@@ -862,10 +873,10 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           work1[j] = work2[j] = lost1[j] = lost2[j] = d_prev[j] = 0.0;
         }
         if (kFriction) {
-          double s_first;
-          double raw = w;
-          w = kick(w, loss[j], &s_first);
-          if constexpr (kTangent) KickSlope(raw, s_first, &sg1[j], &m1[j]);
+          if constexpr (kTangent)
+            w = kick_slopes(w, loss[j], &kick1_w[j], &kick1_loss[j]);
+          else
+            w = kick(w, loss[j]);
         }
         x[j] = x[j] + dt * w;
         w_prev[j] = w;
@@ -874,10 +885,10 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
       }
       if (kTangent)
         for (int64_t d = 0; d < D; ++d)
-          ForLanes<kLanes>([&](int64_t j) {
+          ForLanes<kLanes>([&](int64_t j) HC_LANES {
             const int64_t q = d * kLanes + j;
             double tw = tv[d * rows_x * kLanes + j] + h * ta[d * rows_x * kLanes + j];
-            if (kFriction) tw = KickTangent(tw, tloss[q], sg1[j], m1[j]);
+            if (kFriction) tw = kick1_w[j] * tw + kick1_loss[j] * tloss[q];
             tx[d * rows_x * kLanes + j] = tx[d * rows_x * kLanes + j] + dt * tw;
             tw_prev[q] = tw;
             tp_prev[q] = tw + h * ta[d * rows_x * kLanes + j];
@@ -889,16 +900,22 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         const int64_t sb = kSensors ? back_of[i] : -1, sf_ = kSensors ? front_of[i] : -1;
         // kUK / kUM: kappa and 1.5 eta kappa / the inverse mass of body i are one value
         // for every lane of the row (read once: the same numbers)
-        auto sweep = [&](auto uniform_k_tag, auto uniform_m_tag) {
+        auto sweep = [&](auto uniform_k_tag, auto uniform_m_tag, auto own_tag) HC_LANES {
         constexpr bool kUK = decltype(uniform_k_tag)::value, kUM = decltype(uniform_m_tag)::value;
+        constexpr bool kOwn = decltype(own_tag)::value;
         const double k0 = kap[ri], kv0 = kvis[ri], d0 = kDashpot ? dsh[ri] : 0.0, m0 = inv[ri];
-        ForLanes<kLanes>([&](int64_t j) {
+        ForLanes<kLanes>([&](int64_t j) HC_LANES {
           const double kj = kUK ? k0 : kap[ri + j], kvj = kUK ? kv0 : kvis[ri + j];
           const double dj = kDashpot ? (kUK ? d0 : dsh[ri + j]) : 0.0;
           // body i + 1: half kick, friction, drift, predicted velocity
           double w = v[rn + j] + h * a[rn + j];
-          double w_raw = w, s_first = 0.0, s_second = 0.0, rt, sm;
-          if (kFriction) w = kick(w, loss[j], &s_first);
+          double w_raw = w;
+          if (kFriction) {
+            if constexpr (kTangent)
+              w = kick_slopes(w, loss[j], &kick1_w[j], &kick1_loss[j]);
+            else
+              w = kick(w, loss[j]);
+          }
           x[rn + j] = x[rn + j] + dt * w;
           double pred = w + h * a[rn + j];
           // contact i
@@ -910,15 +927,25 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
             rt_rate = rt_rate + cut_rate[ri + j];
           }
           double elastic_i;
-          double f = contact_force(dl, rt_rate, kj, kvj, dj, spr[ri + j], ri + j, j, &rt, &sm, &elastic_i, &slopes[j],
-                                   &plin);
+          double f;
+          if constexpr (kTangent)
+            f = contact_slopes(own_tag, dl, rt_rate, kj, c1[j], dash[j], spr[ri + j], ri + j, j, &force_slopes[j],
+                               kLanes);
+          else
+            f = law_force(dl, rt_rate, kj, kvj, dj, spr[ri + j], law_in(ri + j, j, 0), law_in(ri + j, j, 1),
+                          kBooks ? &elastic_i : nullptr);
           // body i: second half kick, friction
           double b = f_prev[j] - f;
           if constexpr (kExtras) b = b + ext[ri + j];
           double acc = b * (kUM ? m0 : inv[ri + j]);
           double vn = w_prev[j] + h * acc;
           double vn_raw = vn;
-          if (kFriction) vn = kick(vn, loss[j], &s_second);
+          if (kFriction) {
+            if constexpr (kTangent)
+              vn = kick_slopes(vn, loss[j], &kick2_w[j], &kick2_loss[j]);
+            else
+              vn = kick(vn, loss[j]);
+          }
           if constexpr (kBooks) {  // body i's energy terms, contact i's largest force
             if (kViscous) {
               // total - elastic of contact i (springs in both, as `batched` adds them)
@@ -939,14 +966,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           }
           a[ri + j] = acc;
           v[ri + j] = vn;
-          if constexpr (kTangent) {  // what the tangent pass needs of this step
-            if (kFriction) {
-              KickSlope(w_raw, s_first, &sg1[j], &m1[j]);
-              KickSlope(vn_raw, s_second, &sg2[j], &m2[j]);
-            }
-            linearise(lin, j, dl, rt_rate, kj, kvj, dj, rt, sm);
-            body[j] = b;
-          }
+          if constexpr (kTangent && kOwn) body[j] = b;  // what the tangent pass needs of this step
           f_prev[j] = f;
           w_prev[j] = w;
           p_prev[j] = pred;
@@ -958,17 +978,20 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
           // operations, so the same bits), then the unloading curve of the lanes whose
           // overlap grew. The sweep itself then has no branch and vectorises.
           bool grown = false;
-          ForLanes<kLanes>([&](int64_t j) {
+          ForLanes<kLanes>([&](int64_t j) HC_LANES {
             double w = v[rn + j] + h * a[rn + j];
-            double s_kick;
-            if (kFriction) w = kick(w, loss[j], &s_kick);
+            if (kFriction) w = kick(w, loss[j]);
             double dl = x[ri + j] - (x[rn + j] + dt * w);
             if constexpr (kExtras) dl = dl + ov0[ri + j];
             if constexpr (kSensors) dl = dl + cut[ri + j];
             const double old = pk[ri + j];
-            if constexpr (kTangent) grow[j] = dl > old ? 1.0 : dl == old ? 0.5 : 0.0;  // JAX's max rule
+            if constexpr (kTangent) {
+              const auto peak = hertzchain::Max(hertzchain::Seed<2, 0>(old), hertzchain::Seed<2, 1>(dl));
+              peak_by_old[j] = hertzchain::Slope(peak, 0);
+              peak_by_overlap[j] = hertzchain::Slope(peak, 1);
+            }
             fresh[j] = dl > old && yields[ri + j] != 0.0 ? 1.0 : 0.0;
-            pk[ri + j] = dl > old ? dl : old;
+            pk[ri + j] = hertzchain::Max(old, dl);
             grown = grown || fresh[j] != 0.0;
           });
           if (grown)
@@ -977,26 +1000,33 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         }
         using T = std::true_type;
         using F = std::false_type;
-        if (uniform_k[i]) {
-          uniform_m[i] ? sweep(T{}, T{}) : sweep(T{}, F{});
+        auto sweep_own = [&](auto own) HC_LANES {
+          if (uniform_k[i]) {
+            uniform_m[i] ? sweep(T{}, T{}, own) : sweep(T{}, F{}, own);
+          } else {
+            uniform_m[i] ? sweep(F{}, T{}, own) : sweep(F{}, F{}, own);
+          }
+        };
+        if constexpr (kTangent) {
+          fixed_inputs ? sweep_own(F{}) : sweep_own(T{});
         } else {
-          uniform_m[i] ? sweep(F{}, T{}) : sweep(F{}, F{});
+          sweep_own(T{});
         }
         if constexpr (kSensors) {  // contact i's total force: a sensor's next drive
           if (sb >= 0) std::copy(f_prev, f_prev + kLanes, &s_fb[sb * kLanes]);
           if (sf_ >= 0) std::copy(f_prev, f_prev + kLanes, &s_ff[sf_ * kLanes]);
         }
         // the tangent pass; kFixed: the bodies' and contacts' own inputs (inverse masses,
-        // preload, springs, external forces) have no tangent in this block (`fixed_inputs`)
-        auto tangent_pass = [&](auto fixed_tag) {
+        // kappa, preload, springs, external forces) have no tangent in this block (`fixed_inputs`)
+        auto tangent_pass = [&](auto fixed_tag) HC_LANES {
           constexpr bool kFixed = decltype(fixed_tag)::value;
           for (int64_t d = 0; d < D; ++d) {
             const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
             const int64_t tc = (d * contacts + i) * kLanes;
-            ForLanes<kLanes>([&](int64_t j) {
+            ForLanes<kLanes>([&](int64_t j) HC_LANES {
               const int64_t q = d * kLanes + j;
               double tw = tv[tn + j] + h * ta[tn + j];
-              if (kFriction) tw = KickTangent(tw, tloss[q], sg1[j], m1[j]);
+              if (kFriction) tw = kick1_w[j] * tw + kick1_loss[j] * tloss[q];
               tx[tn + j] = tx[tn + j] + dt * tw;
               double tpred = tw + h * ta[tn + j];
               double tdl = tx[ti + j] - tx[tn + j];
@@ -1006,19 +1036,18 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
                 tdl = tdl + tcut[tc + j];
                 trate = trate + tcut_rate[tc + j];
               }
-              if constexpr (kPlastic) {  // the peak's tangent: max(peak, overlap)'s
-                const double tp = tpk[tc + j];
-                tpk[tc + j] = grow[j] == 1.0 ? tdl : grow[j] == 0.5 ? 0.5 * tp + 0.5 * tdl : tp;
-              }
-              double tf = tforce(std::bool_constant<!kFixed>{}, lin, j, slopes[j], plin, i, d, kap[ri + j], c1[j],
-                                 kvis[ri + j], spr[ri + j], tdl, trate, tkap[tc + j], t15eta[q],
-                                 kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, kFixed ? 0.0 : tspr[tc + j]);
+              if constexpr (kPlastic)  // the peak's tangent: max(peak, overlap)'s
+                tpk[tc + j] = peak_by_old[j] * tpk[tc + j] + peak_by_overlap[j] * tdl;
+              double tlaw0, tlaw1;
+              law_tangents(i, j, d, &tlaw0, &tlaw1);
+              double tf = force_tangent(std::bool_constant<!kFixed>{}, &force_slopes[j], kLanes, tdl, trate,
+                                        tkap[tc + j], t15eta[q], tdash[q], kFixed ? 0.0 : tspr[tc + j], tlaw0, tlaw1);
               double tb = tf_prev[q] - tf;
               if constexpr (kExtras && !kFixed) tb = tb + text[ti + j];
               double tacc = tb * inv[ri + j];
               if constexpr (!kFixed) tacc = tacc + body[j] * tinv[ti + j];
               double tvn = tw_prev[q] + h * tacc;
-              if (kFriction) tvn = KickTangent(tvn, tloss[q], sg2[j], m2[j]);
+              if (kFriction) tvn = kick2_w[j] * tvn + kick2_loss[j] * tloss[q];
               ta[ti + j] = tacc;
               tv[ti + j] = tvn;
               tf_prev[q] = tf;
@@ -1043,9 +1072,10 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
         double vn = w_prev[j] + h * acc;
         const double vn_raw = vn;
         if (kFriction) {
-          double s_second;
-          vn = kick(vn, loss[j], &s_second);
-          if constexpr (kTangent) KickSlope(vn_raw, s_second, &sg2[j], &m2[j]);
+          if constexpr (kTangent)
+            vn = kick_slopes(vn, loss[j], &kick2_w[j], &kick2_loss[j]);
+          else
+            vn = kick(vn, loss[j]);
         }
         if constexpr (kBooks) {  // the wall's terms, then the step's dissipation
           if (kViscous) {
@@ -1062,13 +1092,13 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
       }
       if (kTangent)
         for (int64_t d = 0; d < D; ++d)
-          ForLanes<kLanes>([&](int64_t j) {
+          ForLanes<kLanes>([&](int64_t j) HC_LANES {
             const int64_t q = d * kLanes + j, tw_row = (d * rows_x + contacts) * kLanes;
             double tb = tf_prev[q];
             if constexpr (kExtras) tb = tb + text[tw_row + j];
             double tacc = tb * inv[rw + j] + body[j] * tinv[tw_row + j];
             double tvn = tw_prev[q] + h * tacc;
-            if (kFriction) tvn = KickTangent(tvn, tloss[q], sg2[j], m2[j]);
+            if (kFriction) tvn = kick2_w[j] * tvn + kick2_loss[j] * tloss[q];
             ta[tw_row + j] = tacc;
             tv[tw_row + j] = tvn;
           });
@@ -1117,15 +1147,15 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
             rate = rate - sp[front_row(sf_) * kLanes + j] * sr[sf_ * kLanes + j];
           }
         }
-        double rt, sm, elastic;
-        const double dj = kDashpot ? dsh[ri + j] : 0.0;
-        hertzchain::PowerLawSlopes here_slopes;
-        double f = contact_force(dl, rate, kap[ri + j], kvis[ri + j], dj, spr[ri + j], ri + j, j, &rt, &sm, &elastic,
-                                 &here_slopes, &plin);
-        record.slot(0, c)[j] = f;
-        if (!kTangent) continue;
-        Linear here;
-        linearise(here, j, dl, rate, kap[ri + j], kvis[ri + j], dj, rt, sm);
+        if constexpr (!kTangent) {
+          const double dj = kDashpot ? dsh[ri + j] : 0.0;
+          record.slot(0, c)[j] = law_force(dl, rate, kap[ri + j], kvis[ri + j], dj, spr[ri + j], law_in(ri + j, j, 0),
+                                           law_in(ri + j, j, 1), nullptr);
+          continue;
+        }
+        double here[kForceInputs];  // the force's partials (`contact_slopes`)
+        record.slot(0, c)[j] =
+            contact_slopes(std::true_type{}, dl, rate, kap[ri + j], c1[j], dash[j], spr[ri + j], ri + j, j, here, 1);
         for (int64_t d = 0; d < D; ++d) {
           const int64_t q = d * kLanes + j;
           const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
@@ -1144,10 +1174,10 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
             if (sb >= 0) shorten(sb, back_row(sb));
             if (sf_ >= 0) shorten(sf_, front_row(sf_));
           }
-          record.slot(d + 1, c)[j] =
-              tforce(std::true_type{}, here, j, here_slopes, plin, i, d, kap[ri + j], c1[j], kvis[ri + j], spr[ri + j], tdl, trate,
-                     tkap[tc + j],
-                     t15eta[q], kDashpot && kap[ri + j] > 0.0 ? tdash[q] : 0.0, tspr[tc + j]);
+          double tlaw0, tlaw1;
+          law_tangents(i, j, d, &tlaw0, &tlaw1);
+          record.slot(d + 1, c)[j] = force_tangent(std::true_type{}, here, 1, tdl, trate, tkap[tc + j], t15eta[q],
+                                                   tdash[q], tspr[tc + j], tlaw0, tlaw1);
         }
       }
     }

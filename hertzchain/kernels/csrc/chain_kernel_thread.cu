@@ -192,7 +192,8 @@ struct FullArgs {
 // The full step of `chain_kernel.cc`'s RunFullBlock for one chain and (kTangent) one
 // tangent direction `d`: Kuwabara-Kono damping and a linear dashpot (the total force clipped at 0), track
 // friction before the drift and after the second half kick, the preload's and springs'
-// terms (kExtras), and the derivatives JAX's rules give (`hertzchain::TangentForce`).
+// terms (kExtras); the tangents of the kicks and the forces are those laws run on dual
+// numbers along the direction (`hertzchain::Along`).
 template <bool kViscous, bool kFriction, bool kTangent, bool kExtras, bool kDashpot>
 HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
   using namespace hertzchain;
@@ -221,22 +222,30 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
   }
   auto tangent_param = [&](const Tangent& t, int row, int rows) { return t.at(d, row, rows, B, b); };
 
+  // the friction kick of a velocity w and its tangent t along the direction
+  auto kick_tangent = [&](double w, double t) { return Kick(Along(w, t), Along(loss, tloss)).d[0]; };
+  // the tangent of contact i's force at overlap dl and rate, their tangents tdl and trate
+  auto force_tangent = [&](int i, double dl, double rate, double tdl, double trate) {
+    const double k = A.kappa.at(i, b), sp = kExtras ? A.spring.at(i, b) : 0.0;
+    const auto kd = Along(k, tangent_param(A.t_kappa, i, kContacts));
+    const auto dash = ContactDashpot(kd, Along(dashpot, tdashpot));
+    return TotalForce<kViscous, kExtras, kDashpot>(Along(dl, tdl), Along(rate, trate), kd, Along(c1, t15eta) * kd,
+                                                   dash, Along(sp, tangent_param(A.t_spring, i, kContacts)))
+        .d[0];
+  };
+
   for (int64_t n = 0; n < A.n_samples; ++n) {
     for (int64_t s = 0; s < A.steps_per_sample; ++s) {
-      double sg1 = 0.0, m1 = 0.0, sg2 = 0.0, m2 = 0.0;
       // body 0: half kick, friction, drift, predicted velocity
       double w = v[0] + h * a[0];
-      if (kFriction) {
-        double s_first, raw = w;
-        w = Kick(w, loss, &s_first);
-        if (kTangent) KickSlope(raw, s_first, &sg1, &m1);
-      }
+      const double w_first = w;
+      if (kFriction) w = Kick(w, loss);
       x[0] = x[0] + dt * w;
       double w_prev = w, p_prev = w + h * a[0], f_prev = 0.0;
       double tw_prev = 0.0, tp_prev = 0.0, tf_prev = 0.0;
       if (kTangent) {
         double tw = tv[0] + h * ta[0];
-        if (kFriction) tw = KickTangent(tw, tloss, sg1, m1);
+        if (kFriction) tw = kick_tangent(w_first, tw);
         tx[0] = tx[0] + dt * tw;
         tw_prev = tw;
         tp_prev = tw + h * ta[0];
@@ -246,8 +255,8 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
         const int nx = i + 1;
         // body i + 1: half kick, friction, drift, predicted velocity
         double wn = v[nx] + h * a[nx];
-        double w_raw = wn, s_first = 0.0, s_second = 0.0;
-        if (kFriction) wn = Kick(wn, loss, &s_first);
+        const double w_raw = wn;
+        if (kFriction) wn = Kick(wn, loss);
         x[nx] = x[nx] + dt * wn;
         double pred = wn + h * a[nx];
         // contact i
@@ -256,38 +265,30 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
         const double rate = p_prev - pred;
         const double k = A.kappa.at(i, b), kv = c1 * k, sp = kExtras ? A.spring.at(i, b) : 0.0;
         const double dash = ContactDashpot(k, dashpot);
-        double root, sum;
-        double f = TotalForce<kViscous, kExtras, kDashpot>(dl, rate, k, kv, dash, sp, &root, &sum);
+        double f = TotalForce<kViscous, kExtras, kDashpot>(dl, rate, k, kv, dash, sp);
         // body i: second half kick, friction
         double body = f_prev - f;
         if (kExtras) body = body + A.external.at(i, b);
         const double inv = A.inv_mass.at(i, b);
         double acc = body * inv;
         double vn = w_prev + h * acc;
-        double vn_raw = vn;
-        if (kFriction) vn = Kick(vn, loss, &s_second);
+        const double vn_raw = vn;
+        if (kFriction) vn = Kick(vn, loss);
         a[i] = acc;
         v[i] = vn;
         if (kTangent) {
-          if (kFriction) {
-            KickSlope(w_raw, s_first, &sg1, &m1);
-            KickSlope(vn_raw, s_second, &sg2, &m2);
-          }
-          const Linearisation l = Linearise<kDashpot>(dl, rate, k, kv, dash, root, sum);
           double tw = tv[nx] + h * ta[nx];
-          if (kFriction) tw = KickTangent(tw, tloss, sg1, m1);
+          if (kFriction) tw = kick_tangent(w_raw, tw);
           tx[nx] = tx[nx] + dt * tw;
           double tpred = tw + h * ta[nx];
           double tdl = tx[i] - tx[nx];
           if (kExtras) tdl = tdl + tangent_param(A.t_overlap0, i, kContacts);
-          double tf = TangentForce<kViscous, kExtras, kDashpot>(l, k, c1, kv, sp, tdl, tp_prev - tpred,
-                                             tangent_param(A.t_kappa, i, kContacts), t15eta,
-                                             kDashpot && k > 0.0 ? tdashpot : 0.0, tangent_param(A.t_spring, i, kContacts));
+          const double tf = force_tangent(i, dl, rate, tdl, tp_prev - tpred);
           double tb = tf_prev - tf;
           if (kExtras) tb = tb + tangent_param(A.t_external, i, kRows);
           double tacc = tb * inv + body * tangent_param(A.t_inv_mass, i, kRows);
           double tvn = tw_prev + h * tacc;
-          if (kFriction) tvn = KickTangent(tvn, tloss, sg2, m2);
+          if (kFriction) tvn = kick_tangent(vn_raw, tvn);
           ta[i] = tacc;
           tv[i] = tvn;
           tf_prev = tf;
@@ -304,11 +305,8 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
       const double inv = A.inv_mass.at(kContacts, b);
       double acc = body * inv;
       double vn = w_prev + h * acc;
-      if (kFriction) {
-        double s_second, raw = vn;
-        vn = Kick(vn, loss, &s_second);
-        if (kTangent) KickSlope(raw, s_second, &sg2, &m2);
-      }
+      const double vn_raw = vn;
+      if (kFriction) vn = Kick(vn, loss);
       a[kContacts] = acc;
       v[kContacts] = vn;
       if (kTangent) {
@@ -316,7 +314,7 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
         if (kExtras) tb = tb + tangent_param(A.t_external, kContacts, kRows);
         double tacc = tb * inv + body * tangent_param(A.t_inv_mass, kContacts, kRows);
         double tvn = tw_prev + h * tacc;
-        if (kFriction) tvn = KickTangent(tvn, tloss, sg2, m2);
+        if (kFriction) tvn = kick_tangent(vn_raw, tvn);
         ta[kContacts] = tacc;
         tv[kContacts] = tvn;
       }
@@ -332,16 +330,12 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
       const double rate = v[i] - v[i + 1];
       const double k = A.kappa.at(i, b), kv = c1 * k, sp = kExtras ? A.spring.at(i, b) : 0.0;
       const double dash = ContactDashpot(k, dashpot);
-      double root, sum;
-      const double f = TotalForce<kViscous, kExtras, kDashpot>(dl, rate, k, kv, dash, sp, &root, &sum);
+      const double f = TotalForce<kViscous, kExtras, kDashpot>(dl, rate, k, kv, dash, sp);
       double tf = 0.0;
       if (kTangent) {
-        const Linearisation l = Linearise<kDashpot>(dl, rate, k, kv, dash, root, sum);
         double tdl = tx[i] - tx[i + 1];
         if (kExtras) tdl = tdl + tangent_param(A.t_overlap0, i, kContacts);
-        double trate = tv[i] - tv[i + 1];
-        tf = TangentForce<kViscous, kExtras, kDashpot>(l, k, c1, kv, sp, tdl, trate, tangent_param(A.t_kappa, i, kContacts), t15eta,
-                                    kDashpot && k > 0.0 ? tdashpot : 0.0, tangent_param(A.t_spring, i, kContacts));
+        tf = force_tangent(i, dl, rate, tdl, tv[i] - tv[i + 1]);
       }
       for (int c = 0; c < A.channels.count; ++c) {
         if (A.channels.contact[c] != i) continue;

@@ -1,15 +1,30 @@
-// The contact laws of `hertzchain.contact` as the fused kernels apply them, and the
-// derivative rules JAX gives them (for the kernels' forward-mode tangents): one definition
-// for the host kernels (`chain_kernel.cc`) and the one-thread-per-chain kernels
-// (`chain_kernel_thread.cu`, host or CUDA). Operation for operation and in the order of the
-// JAX kernel, so that every kernel agrees with it to round-off
-// (`tests/test_batched.py::test_every_kernel_applies_the_laws_of_contact`).
+// The contact laws of `hertzchain.contact` as the fused kernels apply them: one definition
+// for the host kernels (`chain_kernel.cc`, `driven_kernel.cc`) and the one-thread-per-chain
+// kernels (`chain_kernel_thread.cu`, host or CUDA). Operation for operation and in the order
+// of the JAX kernel, so that every kernel agrees with it to round-off
+// (`tests/test_batched.py::test_every_kernel_applies_the_laws_of_contact`). Every law is
+// written once over its number types: `double` for the values, and `Dual<N, M>` (forward
+// mode, the derivative rules JAX's jvp applies, operation by operation) for the kernels'
+// tangents, which are the same functions run on dual numbers.
 #pragma once
 
 #include <cmath>
 
 #ifndef HC_HD
 #define HC_HD
+#endif
+
+// Every law and every operation on dual numbers inlined where it is used, so that the loops
+// over a block's chains that run them vectorise (a kernel's function is large enough that
+// the compiler's own limits left the laws on duals as calls, and the loops scalar).
+// And the loops over a dual number's components unrolled (they are a handful, known at
+// compile time; a loop left rolled keeps the number in memory).
+#if defined(__CUDACC__)
+#define HC_INLINE __forceinline__
+#define HC_UNROLL _Pragma("unroll")
+#else
+#define HC_INLINE inline __attribute__((always_inline))
+#define HC_UNROLL _Pragma("GCC unroll 16")
 #endif
 
 // On a GPU (one thread per chain) a contact's square root is taken in contact only: out of
@@ -28,8 +43,300 @@
 
 namespace hertzchain {
 
-// sqrt(delta_+) of a positive part delta_+ >= 0, m^0.5
-HC_HD inline double RootOfPositive(double positive) {
+// ---------------------------------------------------------------------------------------
+// Dual numbers: a value and its partial derivatives by N inputs. `M` is the set of inputs
+// the number can depend on (bit k: input k), known at compile time: a seeded input depends
+// on itself alone, and an operation on two numbers on either's inputs, so that no partial
+// that is 0 by construction is ever computed (a contact's force reads six inputs, each of
+// its steps two or three). Components outside M are never read (`Slope` gives 0 for them).
+
+HC_HD constexpr unsigned AllInputs(int n) { return n >= 32 ? ~0u : (1u << n) - 1u; }
+HC_HD constexpr bool Has(unsigned m, int k) { return ((m >> k) & 1u) != 0u; }
+
+template <int N, unsigned M = AllInputs(N)>
+struct Dual {
+  double v;
+  double d[N];
+};
+
+// the partial derivative by input k
+template <int N, unsigned M>
+HC_HD HC_INLINE double Slope(const Dual<N, M>& x, int k) {
+  return Has(M, k) ? x.d[k] : 0.0;
+}
+
+// input k of N at value v, depending on itself alone
+template <int N, int K>
+HC_HD HC_INLINE Dual<N, 1u << K> Seed(double v) {
+  Dual<N, 1u << K> r;
+  r.v = v;
+  r.d[K] = 1.0;
+  return r;
+}
+// `Seed<N, K>(v)` where kIs, else the constant v (an input that is not one in this run)
+template <bool kIs, int N, int K>
+HC_HD HC_INLINE auto SeedIf(double v) {
+  if constexpr (kIs) {
+    return Seed<N, K>(v);
+  } else {
+    return v;
+  }
+}
+// the value v with its tangent t along one direction (forward mode a direction at a time)
+HC_HD HC_INLINE Dual<1, 1u> Along(double v, double t) {
+  Dual<1, 1u> r;
+  r.v = v;
+  r.d[0] = t;
+  return r;
+}
+// input k of N at value v, as a number of every input (`Dual<N>`)
+template <int N>
+HC_HD HC_INLINE Dual<N> Input(double v, int k) {
+  Dual<N> r;
+  r.v = v;
+  HC_UNROLL
+  for (int q = 0; q < N; ++q) r.d[q] = q == k ? 1.0 : 0.0;
+  return r;
+}
+
+// x as a number of the inputs in M2 (a superset of its own)
+template <class To>
+struct Widen;
+template <>
+struct Widen<double> {
+  HC_HD HC_INLINE static double From(double x) { return x; }
+};
+template <int N, unsigned M2>
+struct Widen<Dual<N, M2>> {
+  HC_HD HC_INLINE static Dual<N, M2> From(double x) {
+    Dual<N, M2> r;
+    r.v = x;
+    HC_UNROLL
+    for (int k = 0; k < N; ++k)
+      if (Has(M2, k)) r.d[k] = 0.0;
+    return r;
+  }
+  template <unsigned M>
+  HC_HD HC_INLINE static Dual<N, M2> From(const Dual<N, M>& x) {
+    static_assert((M & ~M2) == 0u, "a number widened to fewer inputs");
+    Dual<N, M2> r;
+    r.v = x.v;
+    HC_UNROLL
+    for (int k = 0; k < N; ++k)
+      if (Has(M2, k)) r.d[k] = Has(M, k) ? x.d[k] : 0.0;
+    return r;
+  }
+};
+
+// the number type of an operation on an A and a B
+template <class A, class B>
+struct Common;
+template <>
+struct Common<double, double> {
+  using type = double;
+};
+template <int N, unsigned A, unsigned B>
+struct Common<Dual<N, A>, Dual<N, B>> {
+  using type = Dual<N, A | B>;
+};
+template <int N, unsigned A>
+struct Common<Dual<N, A>, double> {
+  using type = Dual<N, A>;
+};
+template <int N, unsigned A>
+struct Common<double, Dual<N, A>> {
+  using type = Dual<N, A>;
+};
+
+// `where(c, a, b)`: the value and the derivatives of the branch taken
+template <class A, class B>
+HC_HD HC_INLINE typename Common<A, B>::type Select(bool c, const A& a, const B& b) {
+  using T = typename Common<A, B>::type;
+  return c ? Widen<T>::From(a) : Widen<T>::From(b);
+}
+
+// r = f(x) with f'(x) = slope
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> Chain(double v, double slope, const Dual<N, M>& x) {
+  Dual<N, M> r;
+  r.v = v;
+  HC_UNROLL
+  for (int k = 0; k < N; ++k)
+    if (Has(M, k)) r.d[k] = slope * x.d[k];
+  return r;
+}
+template <int N, unsigned A, unsigned B>
+HC_HD HC_INLINE Dual<N, A | B> operator+(const Dual<N, A>& a, const Dual<N, B>& b) {
+  Dual<N, A | B> r;
+  r.v = a.v + b.v;
+  HC_UNROLL
+  for (int k = 0; k < N; ++k) {
+    if (Has(A, k) && Has(B, k)) r.d[k] = a.d[k] + b.d[k];
+    else if (Has(A, k)) r.d[k] = a.d[k];
+    else if (Has(B, k)) r.d[k] = b.d[k];
+  }
+  return r;
+}
+template <int N, unsigned A, unsigned B>
+HC_HD HC_INLINE Dual<N, A | B> operator-(const Dual<N, A>& a, const Dual<N, B>& b) {
+  Dual<N, A | B> r;
+  r.v = a.v - b.v;
+  HC_UNROLL
+  for (int k = 0; k < N; ++k) {
+    if (Has(A, k) && Has(B, k)) r.d[k] = a.d[k] - b.d[k];
+    else if (Has(A, k)) r.d[k] = a.d[k];
+    else if (Has(B, k)) r.d[k] = -b.d[k];
+  }
+  return r;
+}
+template <int N, unsigned A, unsigned B>
+HC_HD HC_INLINE Dual<N, A | B> operator*(const Dual<N, A>& a, const Dual<N, B>& b) {
+  Dual<N, A | B> r;
+  r.v = a.v * b.v;
+  HC_UNROLL
+  for (int k = 0; k < N; ++k) {
+    if (Has(A, k) && Has(B, k)) r.d[k] = a.d[k] * b.v + a.v * b.d[k];
+    else if (Has(A, k)) r.d[k] = a.d[k] * b.v;
+    else if (Has(B, k)) r.d[k] = a.v * b.d[k];
+  }
+  return r;
+}
+template <int N, unsigned A, unsigned B>
+HC_HD HC_INLINE Dual<N, A | B> operator/(const Dual<N, A>& a, const Dual<N, B>& b) {
+  Dual<N, A | B> r;
+  r.v = a.v / b.v;
+  HC_UNROLL
+  for (int k = 0; k < N; ++k) {
+    if (Has(A, k) && Has(B, k)) r.d[k] = (a.d[k] - r.v * b.d[k]) / b.v;
+    else if (Has(A, k)) r.d[k] = a.d[k] / b.v;
+    else if (Has(B, k)) r.d[k] = -(r.v * b.d[k]) / b.v;
+  }
+  return r;
+}
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> operator-(const Dual<N, M>& a) { return Chain(-a.v, -1.0, a); }
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> operator+(const Dual<N, M>& a, double b) { return Chain(a.v + b, 1.0, a); }
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> operator+(double a, const Dual<N, M>& b) { return Chain(a + b.v, 1.0, b); }
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> operator-(const Dual<N, M>& a, double b) { return Chain(a.v - b, 1.0, a); }
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> operator-(double a, const Dual<N, M>& b) { return Chain(a - b.v, -1.0, b); }
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> operator*(double a, const Dual<N, M>& b) { return Chain(a * b.v, a, b); }
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> operator*(const Dual<N, M>& a, double b) { return Chain(a.v * b, b, a); }
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> operator/(const Dual<N, M>& a, double b) { return Chain(a.v / b, 1.0 / b, a); }
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> operator/(double a, const Dual<N, M>& b) {
+  const double r = a / b.v;
+  Dual<N, M> q;
+  q.v = r;
+  HC_UNROLL
+  for (int k = 0; k < N; ++k)
+    if (Has(M, k)) q.d[k] = -(r * b.d[k]) / b.v;
+  return q;
+}
+
+// the constant v as a number of x's type
+HC_HD HC_INLINE double Like(double, double v) { return v; }
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> Like(const Dual<N, M>&, double v) { return Widen<Dual<N, M>>::From(v); }
+HC_HD HC_INLINE double Value(double x) { return x; }
+template <int N, unsigned M>
+HC_HD HC_INLINE double Value(const Dual<N, M>& x) { return x.v; }
+HC_HD HC_INLINE double Sqrt(double x) { return std::sqrt(x); }
+HC_HD HC_INLINE double Exp(double x) { return std::exp(x); }
+HC_HD HC_INLINE double Pow(double x, double y) { return std::pow(x, y); }
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> Sqrt(const Dual<N, M>& x) {
+  const double r = std::sqrt(x.v);
+  return Chain(r, 0.5 / r, x);
+}
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> Exp(const Dual<N, M>& x) {
+  const double e = std::exp(x.v);
+  return Chain(e, e, x);
+}
+// x^y, y a constant: y x^(y - 1) dx
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> Pow(const Dual<N, M>& x, double y) {
+  return Chain(std::pow(x.v, y), y * std::pow(x.v, y - 1.0), x);
+}
+// x^y (x > 0): y x^(y - 1) dx + log(x) x^y dy
+template <int N, unsigned A, unsigned B>
+HC_HD HC_INLINE Dual<N, A | B> Pow(const Dual<N, A>& x, const Dual<N, B>& y) {
+  Dual<N, A | B> r;
+  r.v = std::pow(x.v, y.v);
+  const double by_x = y.v * std::pow(x.v, y.v - 1.0), by_y = std::log(x.v) * r.v;
+  HC_UNROLL
+  for (int k = 0; k < N; ++k) {
+    if (Has(A, k) && Has(B, k)) r.d[k] = by_x * x.d[k] + by_y * y.d[k];
+    else if (Has(A, k)) r.d[k] = by_x * x.d[k];
+    else if (Has(B, k)) r.d[k] = by_y * y.d[k];
+  }
+  return r;
+}
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> Pow(double x, const Dual<N, M>& y) {
+  const double r = std::pow(x, y.v);
+  return Chain(r, std::log(x) * r, y);
+}
+
+// |x| (slope +1 at 0, as JAX's rule for abs)
+HC_HD HC_INLINE double Abs(double x) { return std::fabs(x); }
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> Abs(const Dual<N, M>& x) { return Chain(std::fabs(x.v), x.v >= 0.0 ? 1.0 : -1.0, x); }
+
+// sign(s) k as copysign(k, s) (one instruction; a k of 0 keeps s's sign): the derivatives
+// sign(s) dk, sign(0) = 0 (JAX's rule for sign(s) k; s's own derivative is 0 almost everywhere)
+// (sign(s) itself as copysign([s != 0], s), and max's slope below as a sum of two masks: no
+// chain of selects, fewer instructions in the tangent runs' friction kicks)
+template <class S>
+HC_HD HC_INLINE double CopySign(double k, const S& s) { return std::copysign(k, Value(s)); }
+template <int N, unsigned M, class S>
+HC_HD HC_INLINE Dual<N, M> CopySign(const Dual<N, M>& k, const S& s) {
+  const double sv = Value(s), sign = std::copysign(sv != 0.0 ? 1.0 : 0.0, sv);
+  return Chain(std::copysign(k.v, sv), sign, k);
+}
+
+// max(s, 0) (JAX's rule for maximum: slope 1/2 at the tie)
+HC_HD HC_INLINE double MaxZero(double s) { return s > 0.0 ? s : 0.0; }
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> MaxZero(const Dual<N, M>& s) {
+  return Chain(s.v > 0.0 ? s.v : 0.0, (s.v > 0.0 ? 1.0 : 0.0) + (s.v == 0.0 ? 0.5 : 0.0), s);
+}
+
+// max(a, b) (JAX's rule for maximum: at the tie half of each's derivative)
+HC_HD HC_INLINE double Max(double a, double b) { return b > a ? b : a; }
+template <int N, unsigned A, unsigned B>
+HC_HD HC_INLINE Dual<N, A | B> Max(const Dual<N, A>& a, const Dual<N, B>& b) {
+  Dual<N, A | B> r;
+  r.v = b.v > a.v ? b.v : a.v;
+  const double wa = b.v > a.v ? 0.0 : b.v == a.v ? 0.5 : 1.0, wb = b.v > a.v ? 1.0 : b.v == a.v ? 0.5 : 0.0;
+  HC_UNROLL
+  for (int k = 0; k < N; ++k) {
+    if (Has(A, k) && Has(B, k)) r.d[k] = wa * a.d[k] + wb * b.d[k];
+    else if (Has(A, k)) r.d[k] = wa * a.d[k];
+    else if (Has(B, k)) r.d[k] = wb * b.d[k];
+  }
+  return r;
+}
+
+// ---------------------------------------------------------------------------------------
+// The laws.
+
+// delta_+ = where(delta > 0, delta, 0), m
+template <class T>
+HC_HD HC_INLINE T PositivePart(const T& overlap) {
+  return Value(overlap) > 0.0 ? overlap : Like(overlap, 0.0);
+}
+
+// sqrt(delta_+) of a positive part delta_+ >= 0, m^0.5 (JAX's rule for sqrt in contact; out
+// of contact delta_+ = 0 has no derivative to carry)
+HC_HD HC_INLINE double RootOfPositive(double positive) {
 #if HC_BRANCH_ON_CONTACT
   if (positive > 0.0) return std::sqrt(positive);
   return 0.0;
@@ -37,173 +344,99 @@ HC_HD inline double RootOfPositive(double positive) {
   return std::sqrt(positive);
 #endif
 }
+template <int N, unsigned M>
+HC_HD HC_INLINE Dual<N, M> RootOfPositive(const Dual<N, M>& positive) {
+  const double r = RootOfPositive(positive.v);
+  return Chain(r, positive.v > 0.0 ? 0.5 / r : 0.0, positive);
+}
 
 // contact.hertz_force: kappa delta_+ sqrt(delta_+), then (kSprings) + spring delta, N
-template <bool kSprings>
-HC_HD inline double ElasticForce(double overlap, double kappa, double spring) {
-  double positive = overlap > 0.0 ? overlap : 0.0;
-  double force = kappa * positive * RootOfPositive(positive);
+template <bool kSprings, class T>
+HC_HD HC_INLINE T ElasticForce(const T& overlap, const T& kappa, const T& spring) {
+  const T positive = PositivePart(overlap);
+  T force = kappa * positive * RootOfPositive(positive);
   if (kSprings) force = force + spring * overlap;
   return force;
 }
 
+// The elastic force of a full step's contact, N, at overlap delta_+ = `positive` with root
+// sqrt(delta_+) = `root`: Hertz's (kappa delta_+) sqrt(delta_+)
+template <class K, class P, class R>
+HC_HD HC_INLINE auto HertzElastic(const K& kappa, const P& positive, const R& root) {
+  return (kappa * positive) * root;
+}
+
 // contact.power_law_force: kappa r^1.5 (delta / r)^n in contact (delta > 0), else 0, N
-// (exponent n, reference overlap r, m); `ratio` = delta / r in contact, else 1 (the double
-// `where` of `contact`), `rn` = ratio^n.
-HC_HD inline double PowerLawForce(double overlap, double kappa, double n, double r, double* ratio, double* rn) {
-  const bool in = overlap > 0.0;
-  *ratio = in ? overlap / r : 1.0;
-  *rn = std::pow(*ratio, n);
-  const double force = kappa * std::pow(r, 1.5) * *rn;
-  return in ? force : 0.0;
+// (exponent n, reference overlap r, m; out of contact the ratio is 1, the double `where` of
+// `contact`)
+template <class O, class K, class E, class R>
+HC_HD HC_INLINE auto PowerLawForce(const O& overlap, const K& kappa, const E& n, const R& r) {
+  const bool in = Value(overlap) > 0.0;
+  const auto ratio = Select(in, overlap / r, 1.0);
+  const auto force = kappa * Pow(r, 1.5) * Pow(ratio, n);
+  return Select(in, force, 0.0);
 }
 
-// The partial derivatives of `PowerLawForce` by overlap, kappa, r and n (as JAX's rules for
-// `/`, `**` and `where` give them: d x^y = y x^(y - 1) dx + log(x) x^y dy), zero out of contact.
-struct PowerLawSlopes {
-  double overlap, kappa, reference, exponent;
-};
-
-HC_HD inline PowerLawSlopes PowerLawPartials(double overlap, double kappa, double n, double r, double ratio,
-                                             double rn) {
-  const double in = overlap > 0.0 ? 1.0 : 0.0;
-  const double rp = std::pow(r, 1.5);
-  const double by_ratio = kappa * rp * (n * std::pow(ratio, n - 1.0));  // d force / d ratio
-  PowerLawSlopes d;
-  d.overlap = in * (by_ratio / r);
-  d.kappa = in * (rp * rn);
-  d.reference = in * (kappa * (1.5 * std::sqrt(r)) * rn - by_ratio * (overlap / (r * r)));
-  d.exponent = in * (kappa * rp * (std::log(ratio) * rn));
-  return d;
+// An elastic-plastic contact's force along its unloading curve (`Unloading`: residual
+// overlap `residual`, m, stiffness `kappa`): Hertz's about the residual overlap, N
+template <class O, class Q, class K>
+HC_HD HC_INLINE auto UnloadingForce(const O& overlap, const Q& residual, const K& kappa) {
+  const auto positive = PositivePart(overlap - residual);
+  return kappa * positive * RootOfPositive(positive);
 }
 
-// d max(s, 0) / ds as JAX's max rule gives it (1/2 at the tie)
-HC_HD inline double MaxSlope(double s) {
-  double tie = s == 0.0 ? 0.5 : 0.0;
-  return s > 0.0 ? 1.0 : tie;
-}
-
-// contact.track_friction_kick: sign(w) max(|w| - loss, 0), m/s, with its speed minus loss s
-// (as copysign: one instruction; at w = 0 the kept speed is 0, of w's sign)
-HC_HD inline double Kick(double w, double loss, double* s) {
-  double speed = std::fabs(w);
-  *s = speed - loss;
-  double kept = *s > 0.0 ? *s : 0.0;
-  return std::copysign(kept, w);
-}
-
-// d kick = sign(w) max'(|w| - loss) (d|w| - d loss) as JAX's rules give it: with pm = +-1
-// the slope of |w| (+1 at 0) and g = sign(w) max'(s) (0, +-1/2 or +-1), (pm t_w - t_loss) g.
-// `KickTangent` computes it as (t_w - sg t_loss) m, with sg = copysign(1, w) and m = max'(s)
-// where w != 0, else 0 (`KickSlope`): the same value (for w < 0, (-t_w - t_loss)(-m) =
-// (t_w + t_loss) m exactly, rounding being symmetric and m a power of 2 or 0; at w = 0 both
-// are a product with 0) from fewer operations per kick: no product of two selects.
-HC_HD inline void KickSlope(double w, double s, double* sg, double* m) {
-  *sg = std::copysign(1.0, w);
-  *m = w != 0.0 ? MaxSlope(s) : 0.0;
-}
-
-// The tangent of a friction kick: t_w the kicked velocity's, t_loss the loss's, (sg, m) its
-// `KickSlope`.
-HC_HD inline double KickTangent(double t_w, double t_loss, double sg, double m) {
-  return (t_w - sg * t_loss) * m;
+// contact.track_friction_kick: sign(w) max(|w| - loss, 0), m/s
+template <class W, class L>
+HC_HD HC_INLINE auto Kick(const W& w, const L& loss) {
+  return CopySign(MaxZero(Abs(w) - loss), w);
 }
 
 // The dashpot a contact applies (`contact.contact_force`): none where there is no contact
 // law (kappa = 0: a free end, a sensor spring), N s/m.
-HC_HD inline double ContactDashpot(double k, double dashpot) { return k > 0.0 ? dashpot : 0.0; }
+template <class K, class D>
+HC_HD HC_INLINE D ContactDashpot(const K& kappa, const D& dashpot) {
+  return Value(kappa) > 0.0 ? dashpot : Like(dashpot, 0.0);
+}
 
 // contact.contact_force (the total, clipped at 0 in contact: Kuwabara-Kono damping with
-// kv = 1.5 eta kappa, and with kDashpot a linear dashpot `dash` = `ContactDashpot`) at
-// overlap dl (m) and rate (m/s), N; the root sqrt(dl_+) and the unclipped sum kept for the
-// linearisation. Branch-free (selects only): sqrt(0) = 0 is the root out of contact, as
-// `contact` has it, where elastic = viscous = 0; a dashpot would push there, so with one the
-// total is also 0 out of contact. kDashpot is a compile-time switch: its terms cost every
-// damped run about 17 % (`benchmarks/results/dashpot_kernel/history/dashpot_in_cpp_kernel_not_kept.md`), so only
+// kv = 1.5 eta kappa, and with kDashpot a linear dashpot `dash` = `ContactDashpot`) about a
+// given elastic force (`elastic`, N) at overlap dl (m; root sqrt(dl_+) `rt`) and rate (m/s),
+// plus the spring (kExtras), N. Branch-free (selects only): sqrt(0) = 0 is the root out of
+// contact, as `contact` has it, where elastic = viscous = 0; a dashpot would push there, so
+// with one the total is also 0 out of contact. kDashpot is a compile-time switch: its terms
+// cost every damped run about 17 %
+// (`benchmarks/results/dashpot_kernel/history/dashpot_in_cpp_kernel_not_kept.md`), so only
 // the runs that have a dashpot carry them.
-// `TotalForce` about a given elastic force (`elastic`, N; the root sqrt(dl_+) `rt`): the
-// damped sum, clipped, plus the spring (kExtras).
-template <bool kViscous, bool kExtras, bool kDashpot>
-HC_HD inline double DampedTotal(double elastic, double rt, double dl, double rate, double kv, double dash,
-                                double sp, double* sum) {
-  double f;
-  if (kViscous) {
-    double viscous = kDashpot ? (kv * rt + dash) * rate : (kv * rt) * rate;
-    double s = elastic + viscous;
-    *sum = s;
-    if (kDashpot)
-      f = dl > 0.0 && s > 0.0 ? s : 0.0;
-    else
-      f = s > 0.0 ? s : 0.0;
+template <bool kViscous, bool kDashpot, class E, class R, class O, class V, class Kv, class D>
+HC_HD HC_INLINE auto ClippedTotal(const E& elastic, const R& rt, const O& dl, const V& rate, const Kv& kv,
+                                  const D& dash) {
+  if constexpr (kViscous && kDashpot) {
+    const auto s = elastic + (kv * rt + dash) * rate;
+    return Select(Value(dl) > 0.0, MaxZero(s), 0.0);
+  } else if constexpr (kViscous) {
+    return MaxZero(elastic + (kv * rt) * rate);
   } else {
-    *sum = elastic;
-    f = elastic;
+    return elastic;
   }
-  if (kExtras) f = f + sp * dl;  // (a spring of 0 adds nothing)
-  return f;
 }
 
-template <bool kViscous, bool kExtras, bool kDashpot>
-HC_HD inline double TotalForce(double dl, double rate, double k, double kv, double dash, double sp, double* root,
-                               double* sum) {
-  double positive = dl > 0.0 ? dl : 0.0;
-  double rt = RootOfPositive(positive);
-  *root = rt;
-  return DampedTotal<kViscous, kExtras, kDashpot>(k * positive * rt, rt, dl, rate, kv, dash, sp, sum);
-}
-
-// A contact's linearisation at overlap delta and rate: in = [delta > 0], positive =
-// delta_+, root = sqrt(delta_+), half_inv_root = 0.5 / root in contact (JAX's sqrt rule)
-// else 0, kp = kappa delta_+, c3 = 1.5 eta kappa root (+ the dashpot with kDashpot: the
-// rate's coefficient), slope = max'(total) in contact else 0.
-struct Linearisation {
-  double delta, rate, in, positive, root, half_inv_root, kp, c3, slope;
-};
-
-template <bool kDashpot>
-HC_HD inline Linearisation Linearise(double dl, double rate, double k, double kv, double dash, double root,
-                                     double sum) {
-  Linearisation l;
-  l.delta = dl;
-  l.rate = rate;
-  l.in = dl > 0.0 ? 1.0 : 0.0;
-  l.positive = dl > 0.0 ? dl : 0.0;
-  l.root = root;
-  l.half_inv_root = dl > 0.0 ? 0.5 / root : 0.0;
-  l.kp = k * l.positive;
-  l.c3 = kDashpot ? kv * root + dash : kv * root;
-  l.slope = dl > 0.0 ? MaxSlope(sum) : 0.0;
-  return l;
-}
-
-// The tangent of `TotalForce` along one direction: c1 = 1.5 eta, c2 = c1 kappa, sp the
-// spring, tdl / trate / tk / t15e (= 1.5 t_eta) / tdash (`ContactDashpot`'s, read with
-// kDashpot only) / tsp the inputs' tangents. The spring's terms are read with kExtras only,
-// as `TotalForce` reads the spring: without them the force does not depend on it; and the
-// spring's own tangent tsp with kSpringTangent only (a caller that knows it is 0 drops
-// tsp delta = 0, which changes no value).
-// `TangentForce` about the elastic force's tangent `telastic` (any law).
-template <bool kViscous, bool kExtras, bool kDashpot, bool kSpringTangent = kExtras>
-HC_HD inline double TangentTotal(const Linearisation& l, double telastic, double k, double c1, double c2, double sp,
-                                 double tdl, double trate, double tk, double t15e, double tdash, double tsp) {
-  double troot = tdl * l.half_inv_root;
-  double tf = telastic;
-  if (kViscous) {
-    double tc3 = (t15e * k + c1 * tk) * l.root + c2 * troot;
-    if (kDashpot) tc3 = tc3 + tdash;
-    tf = (telastic + (tc3 * l.rate + l.c3 * trate)) * l.slope;
+template <bool kViscous, bool kExtras, bool kDashpot, class E, class R, class O, class V, class Kv, class D,
+          class S>
+HC_HD HC_INLINE auto DampedTotal(const E& elastic, const R& rt, const O& dl, const V& rate, const Kv& kv,
+                                 const D& dash, const S& sp) {
+  if constexpr (kExtras) {
+    return ClippedTotal<kViscous, kDashpot>(elastic, rt, dl, rate, kv, dash) + sp * dl;  // (a spring of 0 adds nothing)
+  } else {
+    return ClippedTotal<kViscous, kDashpot>(elastic, rt, dl, rate, kv, dash);
   }
-  if (kExtras) tf = kSpringTangent ? tf + (tsp * l.delta + sp * tdl) : tf + sp * tdl;
-  return tf;
 }
 
-template <bool kViscous, bool kExtras, bool kDashpot, bool kSpringTangent = kExtras>
-HC_HD inline double TangentForce(const Linearisation& l, double k, double c1, double c2, double sp, double tdl,
-                                 double trate, double tk, double t15e, double tdash, double tsp) {
-  double tpositive = tdl * l.in;
-  double troot = tdl * l.half_inv_root;
-  double telastic = (tk * l.positive + k * tpositive) * l.root + l.kp * troot;
-  return TangentTotal<kViscous, kExtras, kDashpot, kSpringTangent>(l, telastic, k, c1, c2, sp, tdl, trate, tk, t15e, tdash, tsp);
+// `DampedTotal` about Hertz's elastic force
+template <bool kViscous, bool kExtras, bool kDashpot, class O, class V, class K, class Kv, class D, class S>
+HC_HD HC_INLINE auto TotalForce(const O& dl, const V& rate, const K& k, const Kv& kv, const D& dash, const S& sp) {
+  const auto positive = PositivePart(dl);
+  const auto rt = RootOfPositive(positive);
+  return DampedTotal<kViscous, kExtras, kDashpot>(HertzElastic(k, positive, rt), rt, dl, rate, kv, dash, sp);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -211,112 +444,8 @@ HC_HD inline double TangentForce(const Linearisation& l, double k, double c1, do
 // overlap so far, `peak`) along a Hertz curve about a residual overlap: force
 // kp (delta - residual)_+^{3/2}, with (residual, kp) functions of the peak and the contact's
 // constants alone (`Unloading`). Below first yield residual = 0 and kp = kappa: Hertz, to the
-// bit. The kernels compute the pair when the peak grows, and the force every step from it.
-// Written once over the number type T: `double` for the values and `Dual<N>` for their
-// partial derivatives by the N inputs (forward mode, the chain rule applied operation by
-// operation as JAX's jvp applies it).
-
-template <int N>
-struct Dual {
-  double v;
-  double d[N];
-};
-
-template <int N>
-HC_HD inline Dual<N> Constant(double v) {
-  Dual<N> r;
-  r.v = v;
-  for (int k = 0; k < N; ++k) r.d[k] = 0.0;
-  return r;
-}
-// input k of N, at value v
-template <int N>
-HC_HD inline Dual<N> Input(double v, int k) {
-  Dual<N> r = Constant<N>(v);
-  r.d[k] = 1.0;
-  return r;
-}
-// r = f(x) with f'(x) = slope
-template <int N>
-HC_HD inline Dual<N> Chain(double v, double slope, const Dual<N>& x) {
-  Dual<N> r;
-  r.v = v;
-  for (int k = 0; k < N; ++k) r.d[k] = slope * x.d[k];
-  return r;
-}
-template <int N>
-HC_HD inline Dual<N> operator+(const Dual<N>& a, const Dual<N>& b) {
-  Dual<N> r;
-  r.v = a.v + b.v;
-  for (int k = 0; k < N; ++k) r.d[k] = a.d[k] + b.d[k];
-  return r;
-}
-template <int N>
-HC_HD inline Dual<N> operator-(const Dual<N>& a, const Dual<N>& b) {
-  Dual<N> r;
-  r.v = a.v - b.v;
-  for (int k = 0; k < N; ++k) r.d[k] = a.d[k] - b.d[k];
-  return r;
-}
-template <int N>
-HC_HD inline Dual<N> operator*(const Dual<N>& a, const Dual<N>& b) {
-  Dual<N> r;
-  r.v = a.v * b.v;
-  for (int k = 0; k < N; ++k) r.d[k] = a.d[k] * b.v + a.v * b.d[k];
-  return r;
-}
-template <int N>
-HC_HD inline Dual<N> operator/(const Dual<N>& a, const Dual<N>& b) {
-  Dual<N> r;
-  r.v = a.v / b.v;
-  for (int k = 0; k < N; ++k) r.d[k] = (a.d[k] - r.v * b.d[k]) / b.v;
-  return r;
-}
-template <int N>
-HC_HD inline Dual<N> operator+(const Dual<N>& a, double b) { return a + Constant<N>(b); }
-template <int N>
-HC_HD inline Dual<N> operator-(double a, const Dual<N>& b) { return Constant<N>(a) - b; }
-template <int N>
-HC_HD inline Dual<N> operator*(double a, const Dual<N>& b) { return Chain(a * b.v, a, b); }
-template <int N>
-HC_HD inline Dual<N> operator*(const Dual<N>& a, double b) { return Chain(a.v * b, b, a); }
-template <int N>
-HC_HD inline Dual<N> operator/(const Dual<N>& a, double b) { return Chain(a.v / b, 1.0 / b, a); }
-
-// the constant v as a number of x's type
-HC_HD inline double Like(double, double v) { return v; }
-template <int N>
-HC_HD inline Dual<N> Like(const Dual<N>&, double v) { return Constant<N>(v); }
-HC_HD inline double Value(double x) { return x; }
-HC_HD inline double Sqrt(double x) { return std::sqrt(x); }
-HC_HD inline double Exp(double x) { return std::exp(x); }
-HC_HD inline double Pow(double x, double y) { return std::pow(x, y); }
-template <int N>
-HC_HD inline double Value(const Dual<N>& x) { return x.v; }
-template <int N>
-HC_HD inline Dual<N> Sqrt(const Dual<N>& x) {
-  const double r = std::sqrt(x.v);
-  return Chain(r, 0.5 / r, x);
-}
-template <int N>
-HC_HD inline Dual<N> Exp(const Dual<N>& x) {
-  const double e = std::exp(x.v);
-  return Chain(e, e, x);
-}
-// x^y, y a constant: y x^(y - 1) dx
-template <int N>
-HC_HD inline Dual<N> Pow(const Dual<N>& x, double y) {
-  return Chain(std::pow(x.v, y), y * std::pow(x.v, y - 1.0), x);
-}
-// x^y (x > 0): y x^(y - 1) dx + log(x) x^y dy
-template <int N>
-HC_HD inline Dual<N> Pow(const Dual<N>& x, const Dual<N>& y) {
-  Dual<N> r;
-  r.v = std::pow(x.v, y.v);
-  const double by_x = y.v * std::pow(x.v, y.v - 1.0), by_y = std::log(x.v) * r.v;
-  for (int k = 0; k < N; ++k) r.d[k] = by_x * x.d[k] + by_y * y.d[k];
-  return r;
-}
+// bit. The kernels compute the pair when the peak grows, and the force every step from it
+// (`UnloadingForce`).
 
 // The unloading curve of an elastic-plastic contact: its residual overlap (m) and stiffness
 // (N/m^{3/2}).
@@ -327,14 +456,14 @@ struct Unloading {
 
 // contact.overlap_at_force: (F / kappa)^{2/3} for F > 0, else 0, m
 template <class T>
-HC_HD inline T HertzOverlap(const T& force, const T& kappa) {
+HC_HD HC_INLINE T HertzOverlap(const T& force, const T& kappa) {
   return Value(force) > 0.0 ? Pow(force / kappa, 2.0 / 3.0) : 0.0 * force;
 }
 
 // contact.thornton_contact's unloading curve after the largest overlap `peak` (m), with
 // Hertz stiffness `kappa` and yield force `yield_force` (N, finite)
 template <class T>
-HC_HD inline Unloading<T> ThorntonUnloading(const T& peak, const T& kappa, const T& yield_force) {
+HC_HD HC_INLINE Unloading<T> ThorntonUnloading(const T& peak, const T& kappa, const T& yield_force) {
   const T yield_overlap = HertzOverlap(yield_force, kappa);
   if (!(Value(peak) > Value(yield_overlap))) return {0.0 * peak, kappa};  // not yielded: Hertz
   const T yield_stiffness = 1.5 * yield_force / yield_overlap;
@@ -352,7 +481,7 @@ constexpr double kJgTransition = 1.9;
 // JG's P / P_c at delta / delta_c = `ratio` with the hardness held at h sigma_Y
 // (contact._jg_loading_ratio)
 template <class T>
-HC_HD inline T JgLoadingRatio(const T& ratio, const T& c, const T& hardness) {
+HC_HD HC_INLINE T JgLoadingRatio(const T& ratio, const T& c, const T& hardness) {
   const T elastic = Exp(-0.25 * Pow(ratio, 5.0 / 12.0)) * Pow(ratio, 1.5);
   const T plastic = 4.0 * hardness / c * (1.0 - Exp(-1.0 * Pow(ratio, 5.0 / 9.0) / 25.0)) * ratio;
   return elastic + plastic;
@@ -362,7 +491,7 @@ HC_HD inline T JgLoadingRatio(const T& ratio, const T& c, const T& hardness) {
 // Hertz stiffness `kappa`, reduced radius `radius` (m), yield stress `stress` (Pa), Poisson
 // ratio `poisson`, hardness ratio `hardness`
 template <class T>
-HC_HD inline Unloading<T> JacksonGreenUnloading(const T& peak, const T& kappa, const T& radius, const T& stress,
+HC_HD HC_INLINE Unloading<T> JacksonGreenUnloading(const T& peak, const T& kappa, const T& radius, const T& stress,
                                                const T& poisson, const T& hardness) {
   const T modulus = 0.75 * kappa / Sqrt(radius);
   const T c = 1.295 * Exp(0.736 * poisson);

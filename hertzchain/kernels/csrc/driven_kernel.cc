@@ -69,19 +69,17 @@ struct Run {
   const double *cos, *sin, *shape, *slope, *reference;
 };
 
-// A contact's linearisation (`hertzchain::Linearisation`), field by field over the lanes of
-// every contact (c, j) at c * kLanes + j, so that the tangents' lane loops vectorise.
-struct Linear {
-  std::vector<double> delta, rate, in, positive, root, half_inv_root, kp, c3, slope;
-  explicit Linear(int64_t size)
-      : delta(size), rate(size), in(size), positive(size), root(size), half_inv_root(size), kp(size), c3(size),
-        slope(size) {}
-  void Set(int64_t q, const hertzchain::Linearisation& l) {
-    delta[q] = l.delta, rate[q] = l.rate, in[q] = l.in, positive[q] = l.positive, root[q] = l.root;
-    half_inv_root[q] = l.half_inv_root, kp[q] = l.kp, c3[q] = l.c3, slope[q] = l.slope;
-  }
-  hertzchain::Linearisation Get(int64_t q) const {
-    return {delta[q], rate[q], in[q], positive[q], root[q], half_inv_root[q], kp[q], c3[q], slope[q]};
+// The inputs of a contact's force, in the order of its partial derivatives (`Slopes`): the
+// overlap (m), kappa, and with damping the rate (m/s) and 1.5 eta (s).
+constexpr int kOverlapIn = 0, kKappaIn = 1, kRateIn = 2, kEtaIn = 3;
+constexpr int ForceInputs(bool viscous) { return viscous ? 4 : 2; }
+
+// The partial derivatives of every contact's force by its inputs, input by input over the
+// lanes of every contact (c, j) at c * kLanes + j, so that the tangents' lane loops vectorise.
+struct Slopes {
+  std::vector<double> by[4];
+  Slopes(int64_t size, int inputs) {
+    for (int k = 0; k < inputs; ++k) by[k].resize(size);
   }
 };
 
@@ -152,21 +150,34 @@ void RunDrivenBlock(const Run& r, int64_t lo, const Inputs& in, const TangentInp
   std::vector<double> x(n * L, 0.0), v(n * L, 0.0), f(n * L), vh(n * L), vp(n * L), kick(n * L), F(c_rows * L);
   std::vector<double> tx(TD * n * L, 0.0), tv(TD * n * L, 0.0), tf(TD * n * L), tvh(TD * n * L), tvp(TD * n * L);
   std::vector<double> tF(c_rows * L);
-  Linear lin(kTangent ? c_rows * L : 0);
+  constexpr int kInputs = ForceInputs(kViscous);
+  Slopes slopes(kTangent ? c_rows * L : 0, kInputs);
   std::vector<double> acc(2 * H * L, 0.0), tacc(TD * 2 * H * L, 0.0);
 
   // contact c of lane j at overlap dl and rate (`contact.contact_force`'s total, or Hertz
-  // without damping), linearised for the tangents
+  // without damping), with kTangent its partial derivatives by its inputs (the law run on
+  // dual numbers seeded with each input: kv = (1.5 eta) kappa as JAX rounds it)
   auto force = [&](int64_t c, int64_t j, double dl, double rate) {
     const int64_t q = c * L + j;
-    double root, sum;
-    F[q] = hertzchain::TotalForce<kViscous, false, false>(dl, rate, k[q], kv[q], 0.0, 0.0, &root, &sum);
-    if (kTangent) lin.Set(q, hertzchain::Linearise<false>(dl, rate, k[q], kv[q], 0.0, root, sum));
+    if constexpr (kTangent) {
+      using hertzchain::Seed;
+      using hertzchain::SeedIf;
+      const auto kd = Seed<kInputs, kKappaIn>(k[q]);
+      const auto total = hertzchain::TotalForce<kViscous, false, false>(
+          Seed<kInputs, kOverlapIn>(dl), SeedIf<kViscous, kInputs, kRateIn>(rate), kd,
+          SeedIf<kViscous, kInputs, kEtaIn>(c1[j]) * kd, 0.0, 0.0);
+      F[q] = total.v;
+      for (int slot = 0; slot < kInputs; ++slot) slopes.by[slot][q] = hertzchain::Slope(total, slot);
+    } else {
+      F[q] = hertzchain::TotalForce<kViscous, false, false>(dl, rate, k[q], kv[q], 0.0, 0.0);
+    }
   };
+  // its tangent along direction d from the partials and the inputs' tangents
   auto tforce = [&](int64_t d, int64_t c, int64_t j, double tdl, double trate) {
     const int64_t q = c * L + j;
-    tF[q] = hertzchain::TangentForce<kViscous, false, false>(lin.Get(q), k[q], c1[j], kv[q], 0.0, tdl, trate,
-                                                      tk[(d * c_rows + c) * L + j], t15e[d * L + j], 0.0, 0.0);
+    double t = slopes.by[kOverlapIn][q] * tdl + slopes.by[kKappaIn][q] * tk[(d * c_rows + c) * L + j];
+    if constexpr (kViscous) t = t + slopes.by[kRateIn][q] * trate + slopes.by[kEtaIn][q] * t15e[d * L + j];
+    tF[q] = t;
   };
   // f = (F_i - F_{i+1}) m_i, and its tangent along direction d
   auto accelerations = [&]() {
