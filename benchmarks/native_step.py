@@ -1,4 +1,4 @@
-"""Instruction counts of the host kernels' step (`hertzchain/chain_kernel.cc`) under callgrind.
+"""Instruction counts of the host kernels' step (`hertzchain/kernels/csrc/chain_kernel.cc`) under callgrind.
 
 Wall-clock timings on a shared machine are noise; the instructions a fixed run executes are
 not. `native_step_driver.cc` runs one block of 8 chains (20 bodies and a wall, 4000 steps,
@@ -57,8 +57,8 @@ def instructions(driver: Path, run: str, scratch: Path) -> tuple[int, str]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--sources", type=Path, default=HERE.parent / "hertzchain",
-                        help="folder holding chain_kernel.cc and its headers (default: this tree's hertzchain/)")
+    parser.add_argument("--sources", type=Path, default=HERE.parent / "hertzchain" / "kernels" / "csrc",
+                        help="folder holding chain_kernel.cc and its headers (default: this tree's hertzchain/kernels/csrc/)")
     parser.add_argument("--label", required=True, help="the key the counts are stored under (e.g. before, after)")
     parser.add_argument("--baseline", default="before", help="the label the ratios are taken against")
     args = parser.parse_args()

@@ -1,4 +1,4 @@
-// A fixed run of the host kernels' blocks (`hertzchain/chain_kernel.cc`), for instruction
+// A fixed run of the host kernels' blocks (`hertzchain/kernels/csrc/chain_kernel.cc`), for instruction
 // counts under callgrind (`benchmarks/native_step.py`): built with HC_PART=0, so that none
 // of the library's FFI handlers is compiled, only the block functions this file calls.
 //   native_step_driver conservative|forward|tangent
