@@ -23,6 +23,10 @@ measurement it was not fitted on that the base does not meet, or moves a predict
 measurement's gap (`log(model / measured)`) at least `NAMED_GAIN` closer than the base. The
 bending run's highest drive levels can be held out too (`held_out_levels`): fitted on the
 lower ones, the candidate predicts them (their median misfit a measurement not fitted on).
+
+`CANDIDATES` run by default; `SLOW_CANDIDATES` (micro-slip at the supports, whose sliders have
+no Floquet multipliers: its thresholds come from the lab's upward sweeps stepped in time,
+`emulate_loop`) only when named.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ import numpy as np
 from hertzchain import laws
 from hertzchain.driven import DrivenChain, RayleighStroke
 from hertzchain.driven.linear import normal_modes
+from hertzchain.driven.thresholds import emulate_loop
 
 from .driven import lag1_autocorrelation
 from .driven_joint import DRIVE_SCALE, JointModel, JointParameter, _leaf, _threshold_data
@@ -56,8 +61,11 @@ NAMED_GAIN = math.log(1.25)
 # Where the base predicts nothing (no period doubling), a candidate improves on it when its
 # prediction is within this (log units: a factor 2) of the data.
 BASE_SILENT_WITHIN = math.log(2.0)
-# Every factor stays within this of its start.
+# Every factor stays within this of its start ...
 FACTOR_LIMIT = 100.0
+# ... the contacts' Hertz constant within this (the start puts the resonance on the data's; a
+# trial step far outside stiffens the chain past what the time step resolves).
+KAPPA_LIMITS = (0.1, 10.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,11 +102,22 @@ CANDIDATES = (
                     lambda c: _replace(c, contact_law=laws.RoughContact(laws.Hertz(), 3e-8, 0.5)),
                     ("contact_law.roughness_m", "contact_law.touch_force_n")),
     DrivenCandidate("velocity_squared_loss", "a contact loss c |v| v (Vergara) besides the viscous drag",
-                    lambda c: _replace(c, dissipation=(laws.VelocitySquared(300.0),)),
+                    lambda c: _replace(c, dissipation=(laws.VelocitySquared(3000.0),)),
                     ("dissipation.0.c_n_s2_m2",)),
     DrivenCandidate("rayleigh_piezo", "a piezo whose stroke grows with its amplitude (Rayleigh law)",
                     lambda c: _replace(c, drive_stroke=RayleighStroke(1e6)), ("drive_stroke.rayleigh_per_m",)),
 )
+# Candidates whose bending fit runs the sliders' JAX kernel under forward derivatives: one
+# Levenberg-Marquardt step of the single bead's 36 levels takes minutes on 2 cores, so they
+# are run only when named (`diagnose_laws(..., candidates=...)`).
+SLOW_CANDIDATES = (
+    DrivenCandidate("micro_slip_supports", "micro-slip friction at the bead's supports (Iwan element)",
+                    lambda c: _replace(c, support_friction=laws.IwanSupport(2e6, 1e-7)),
+                    ("support_friction.stiffness_n_m", "support_friction.slip_displacement_m")),
+)
+# A chain with sliders has no Floquet multipliers (its sliders are state): its thresholds are
+# found by stepping the lab's sweeps in time (`emulate_loop`), the tongue at these frequencies.
+TIME_STEPPED_TONGUE_HZ = (6900.0, 7050.0, 7200.0, 7350.0, 7500.0)
 
 
 def base_chain(experiment, damping_rate_per_s: float = 1500.0) -> DrivenChain:
@@ -141,29 +160,34 @@ class _BoundedModel(JointModel):
         return np.clip(np.asarray(x, dtype=float), *self.bounds)
 
 
-def _lower_levels(m, held_out_levels: int):
-    """The bending measurement `m` without its `held_out_levels` highest drive levels."""
-    if held_out_levels <= 0:
-        return m
+def _fitted_levels(m, held_out_levels: int, level_stride: int):
+    """The bending measurement `m` on the drive levels a fit uses: without its `held_out_levels`
+    highest, then every `level_stride`-th of the rest (its highest kept)."""
     sweep = m.data.sweep
     keep = sweep.drive_amplitudes_m.size - held_out_levels
     if keep < 2:
         raise ValueError(f"held_out_levels={held_out_levels} leaves {keep} of the bending run's "
                          f"{sweep.drive_amplitudes_m.size} drive levels to fit; keep at least 2.")
-    lower = dataclasses.replace(sweep, drive_amplitudes_m=sweep.drive_amplitudes_m[:keep],
-                                rms_velocity_m_s=sweep.rms_velocity_m_s[:, :keep])
+    if level_stride < 1:
+        raise ValueError(f"level_stride must be a whole number >= 1, got {level_stride}.")
+    levels = np.unique(np.r_[np.arange(0, keep, level_stride), keep - 1])
+    if levels.size == sweep.drive_amplitudes_m.size:
+        return m
+    lower = dataclasses.replace(sweep, drive_amplitudes_m=sweep.drive_amplitudes_m[levels],
+                                rms_velocity_m_s=sweep.rms_velocity_m_s[:, levels])
     return dataclasses.replace(m, data=dataclasses.replace(m.data, sweep=lower))
 
 
-def fit_candidate(experiment, candidate: DrivenCandidate, *, held_out_levels: int = 0, max_steps: int = 20,
-                  progress: bool = False) -> dict:
+def fit_candidate(experiment, candidate: DrivenCandidate, *, held_out_levels: int = 0, level_stride: int = 1,
+                  max_steps: int = 20, progress: bool = False) -> dict:
     """Fit `candidate` on the experiment's first bending measurement (less its
-    `held_out_levels` highest drive levels, then predicted) and predict the rest (see the
-    module docstring). **Returns:** a dict of its constants, each measurement's numbers and
+    `held_out_levels` highest drive levels, then predicted; every `level_stride`-th level of
+    the rest) and predict the rest (see the module docstring); the bending's measures are
+    of every level. **Returns:** a dict of its constants, each measurement's numbers and
     gaps, and `elapsed_s`."""
     began = time.perf_counter()
     bending_m = next(m for m in experiment.measurements if m.kind == "bending")
-    alone = dataclasses.replace(experiment, measurements=(_lower_levels(bending_m, held_out_levels),))
+    alone = dataclasses.replace(experiment, measurements=(_fitted_levels(bending_m, held_out_levels, level_stride),))
     measured_bend = bending(experiment.for_bending(bending_m), bending_m.data.sweep.rms_velocity_m_s)[0]
     chain = _tuned(candidate.add(base_chain(experiment)), measured_bend["lowest_drive_peak_hz"])
     shared = ("contact_kappa_n_m1p5", "damping_rate_per_s") + tuple(candidate.free)
@@ -176,9 +200,10 @@ def fit_candidate(experiment, candidate: DrivenCandidate, *, held_out_levels: in
     resid = (unit.bending_curves(run, fitted_m, x0) - measured) / fitted_m.data.sweep.rms_velocity_m_s.max(axis=0)
     rho = min(max(lag1_autocorrelation(resid), 0.0), 0.999)
     low, high = np.full(len(parameters), -math.log(FACTOR_LIMIT)), np.full(len(parameters), math.log(FACTOR_LIMIT))
+    limits = {"contact_kappa_n_m1p5": KAPPA_LIMITS, **candidate.factor_limits}
     for k, p in enumerate(parameters):
-        if p.name in candidate.factor_limits:
-            low[k], high[k] = (math.log(v) for v in candidate.factor_limits[p.name])
+        if p.name in limits:
+            low[k], high[k] = (math.log(v) for v in limits[p.name])
     model = _BoundedModel(alone, chain, parameters, {bending_m.run: 1.0}, math.sqrt((1 - rho) / (1 + rho)),
                           progress, bounds=(low, high))
     result = least_squares(model, x0, list(range(len(parameters))), max_steps=max_steps, bounds=(low, high))
@@ -197,6 +222,7 @@ def fit_candidate(experiment, candidate: DrivenCandidate, *, held_out_levels: in
                        "peak_ratio": mine["peak_per_drive_top_over_lowest"],
                        "measured_peak_ratio": measured_bend["peak_per_drive_top_over_lowest"],
                        "resonance_hz": float(normal_modes(fitted)[0][0]), "held_out_levels": held_out_levels,
+                       "fitted_levels": int(fitted_m.data.sweep.drive_amplitudes_m.size),
                        "held_out_misfit_median": float(np.median(misfit[misfit.size - held_out_levels:]))
                        if held_out_levels else None}}
     out.update(_predictions(experiment, fitted, progress))
@@ -212,8 +238,30 @@ def _constants(chain, shared, drive_scale) -> dict:
     return values
 
 
+def _stepped_onsets(experiment, chain, run) -> np.ndarray:
+    """The onsets going up at each of `run`'s threshold entries (NaN: none) by time stepping the
+    lab's sweeps (`emulate_loop`): the loop's own amplitudes, the tongue's upward amplitudes at
+    `TIME_STEPPED_TONGUE_HZ` (its other frequencies NaN, said in the result)."""
+    onsets = []
+    steps = int(experiment.model["steps_per_period"])
+    for m in run.measurements:
+        if m.kind == "tongue":
+            for f in m.data.frequencies_hz:
+                onset = np.nan
+                if f in TIME_STEPPED_TONGUE_HZ:
+                    onset = emulate_loop(chain, f, m.data.drive_amplitudes_m, bead=experiment.sensor_bead,
+                                         steps_per_period=steps).onset_up_m
+                onsets.append(np.nan if onset is None else onset)
+        elif m.kind == "loop":
+            onset = emulate_loop(chain, m.data.frequency_hz, m.data.drive_amplitudes_m, bead=experiment.sensor_bead,
+                                 steps_per_period=steps).onset_up_m
+            onsets.append(np.nan if onset is None else onset)
+    return np.array(onsets, dtype=float)
+
+
 def _predictions(experiment, chain, progress) -> dict:
-    """The tongue tip and the loop's onset going up of `chain` at each run's calibration."""
+    """The tongue tip and the loop's onset going up of `chain` at each run's calibration
+    (Floquet thresholds; by time stepping for a chain with support sliders)."""
     others = [m for m in experiment.measurements if m.kind in ("tongue", "loop")]
     rest = dataclasses.replace(experiment, measurements=tuple(others))
     predict = JointModel(rest, chain, [], {m.run: 1.0 for m in others}, 1.0)
@@ -222,8 +270,13 @@ def _predictions(experiment, chain, progress) -> dict:
         if progress:
             print(f"  predicting run {run.run}", file=sys.stderr, flush=True)
         rows = _threshold_data(run)
-        _, found = predict.onsets(run, np.zeros(0))
-        model = np.where(found.found, found.amplitude_m, np.nan)
+        if chain.support_friction is None:
+            _, found = predict.onsets(run, np.zeros(0))
+            model, how = np.where(found.found, found.amplitude_m, np.nan), "Floquet threshold (continuation)"
+        else:
+            model = _stepped_onsets(experiment, chain, run)
+            how = (f"the lab's upward sweeps stepped in time (emulate_loop; tongue at {TIME_STEPPED_TONGUE_HZ} Hz "
+                   "only): the sliders have no Floquet multipliers")
         for kind in ("tongue", "loop"):
             picked = [i for i, row in enumerate(rows) if row[4] == kind]
             if not picked:
@@ -234,11 +287,12 @@ def _predictions(experiment, chain, progress) -> dict:
                 (ma, mf), (da, df) = _tip(f, model[picked]), _tip(f, data)
                 out["tongue"] = {"run": run.run, "measured_tip_m": da, "measured_tip_hz": df, "model_tip_m": ma,
                                  "model_tip_hz": mf, "frequencies_hz": f.tolist(), "model_onset_m": model[picked].tolist(),
-                                 "amplitude_gap_log": _gap(ma, da), "frequency_gap": None if mf is None else mf / df - 1}
+                                 "amplitude_gap_log": _gap(ma, da), "frequency_gap": None if mf is None else mf / df - 1,
+                                 "how": how}
             else:
                 ma = float(model[picked][0]) if np.isfinite(model[picked][0]) else None
                 out["loop"] = {"run": run.run, "frequency_hz": float(f[0]), "measured_onset_up_m": float(data[0]),
-                               "model_onset_up_m": ma, "gap_log": _gap(ma, float(data[0]))}
+                               "model_onset_up_m": ma, "gap_log": _gap(ma, float(data[0])), "how": how}
     return out
 
 
@@ -309,8 +363,8 @@ def verdict(entries: list[dict]) -> dict:
             "per_candidate": per, "targets": TARGETS}
 
 
-def diagnose_laws(experiment, candidates=CANDIDATES, *, held_out_levels: int = 0, max_steps: int = 20,
-                  progress: bool = True) -> dict:
+def diagnose_laws(experiment, candidates=CANDIDATES, *, held_out_levels: int = 0, level_stride: int = 1,
+                  max_steps: int = 20, progress: bool = True) -> dict:
     """Fit every candidate on the bending run, predict the rest, and judge (see the module
     docstring). **Returns:** `candidates` (each `fit_candidate`'s dict), `failed` (name and error
     of each candidate whose fit stopped on a refusal of the chain), `verdict`, `elapsed_s`."""
@@ -321,7 +375,7 @@ def diagnose_laws(experiment, candidates=CANDIDATES, *, held_out_levels: int = 0
             print(f"candidate {candidate.name}", file=sys.stderr, flush=True)
         try:
             entries.append(fit_candidate(experiment, candidate, held_out_levels=held_out_levels,
-                                         max_steps=max_steps, progress=progress))
+                                         level_stride=level_stride, max_steps=max_steps, progress=progress))
         except ValueError as error:  # a law the chain refuses at some trial constants: said, not hidden
             failed.append({"name": candidate.name, "mechanism": candidate.mechanism, "error": str(error)})
             if progress:

@@ -80,10 +80,10 @@ def test_numpy_reference_is_the_linear_resonance_at_small_drive():
 
 @pytest.mark.slow
 def test_protocol_names_a_hidden_velocity_squared_loss():
-    """Hidden: c = 3000 N s^2/m^2 (the top drive's peak per nm drops 13 %, the middle one's 4 %). The base and the
+    """Hidden: c = 8000 N s^2/m^2 (the top drive's peak per nm drops 25 %, the middle one's 9 %). The base and the
     exponent, fitted on the two lower levels, miss the top one; the velocity-squared loss
     predicts it and is named best. The candidates: base, contact exponent, velocity-squared."""
-    experiment = experiment_with(3000.0)
+    experiment = experiment_with(8000.0)
     chosen = [c for c in CANDIDATES if c.name in ("hertz_viscous", "contact_exponent", "velocity_squared_loss")]
     result = diagnose_laws(experiment, chosen, held_out_levels=1, max_steps=15, progress=False)
     by_name = {e["name"]: e for e in result["candidates"]}
@@ -91,7 +91,7 @@ def test_protocol_names_a_hidden_velocity_squared_loss():
     assert by_name["velocity_squared_loss"]["bending"]["held_out_misfit_median"] < 0.01
     assert by_name["hertz_viscous"]["bending"]["held_out_misfit_median"] > 0.03
     fitted = by_name["velocity_squared_loss"]["constants"]["dissipation.0.c_n_s2_m2"]
-    assert np.asarray(fitted).ravel()[0] == pytest.approx(3000.0, rel=0.15)
+    assert np.asarray(fitted).ravel()[0] == pytest.approx(8000.0, rel=0.15)
 
 
 def test_verdict_names_only_what_improves_unfitted_measurements():
