@@ -3,7 +3,6 @@ NumPy RK4 of one bead between a driven face and a wall, written here, with a law
 on the lower drive levels, the protocol must name the hidden law by what it predicts for the
 highest level."""
 
-import dataclasses
 import math
 from pathlib import Path
 
