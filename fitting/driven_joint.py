@@ -91,7 +91,7 @@ class JointParameter:
 def _leaf(chain, path: str):
     value = chain
     for part in path.split("."):
-        value = getattr(value, part)
+        value = value[int(part)] if part.isdigit() else getattr(value, part)  # a tuple of laws by index
     return value
 
 

@@ -1,0 +1,384 @@
+"""Candidate laws for a driven experiment, each fitted on its bending run and judged on what it
+predicts for the measurements it was not fitted on.
+
+A **candidate** is the base chain (Hertz contacts, viscous drag on the bead) with one law
+added or replaced (`DrivenCandidate`: a name, the law it adds, the paths of the chain's fields
+it frees, in `fitting.driven_joint`'s addressing). Every candidate is held to the apparatus as
+the lab describes it:
+
+- the **precompression is fixed** at the file's stated value (Lydon: 4.5 N) in every run; a
+  candidate that needs a different static force to fit has to say so by failing;
+- each run's **drive scale** keeps its calibration prior ($\\log s \\sim N(0, \\log(1+u)^2)$,
+  `fitting.driven_joint`); a run that is only predicted is predicted at its calibration
+  (s = 1), and the report gives the scale that would have matched it.
+
+Protocol (`diagnose_laws`): each candidate is fitted (`fitting.fit.least_squares`) on the
+experiment's first bending measurement alone, its free fields plus the contacts' Hertz
+constant, the bead's viscous damping and the bending run's drive scale, the Hertz constant
+started where the chain's linear resonance is the lowest drive's measured peak. Its constants
+then **predict** the tongue (its tip: the lowest period-doubling threshold and its frequency,
+by `hertzchain.driven.thresholds`) and the loop's onset going up. Each measurement is scored
+against `TARGETS`; a candidate is **named** a mechanism only when it meets a target on a
+measurement it was not fitted on that the base does not meet, or moves a predicted
+measurement's gap (`log(model / measured)`) at least `NAMED_GAIN` closer than the base. The
+bending run's highest drive levels can be held out too (`held_out_levels`): fitted on the
+lower ones, the candidate predicts them (their median misfit a measurement not fitted on).
+
+`CANDIDATES` run by default; `SLOW_CANDIDATES` (micro-slip at the supports, whose sliders have
+no Floquet multipliers: its thresholds come from the lab's upward sweeps stepped in time,
+`emulate_loop`) only when named.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+import time
+
+import equinox as eqx
+import numpy as np
+
+from hertzchain import laws
+from hertzchain.driven import DrivenChain, RayleighStroke
+from hertzchain.driven.linear import normal_modes
+from hertzchain.driven.thresholds import emulate_loop
+
+from .driven import lag1_autocorrelation
+from .driven_joint import DRIVE_SCALE, JointModel, JointParameter, _leaf, _threshold_data
+from .driven_report import bending
+from .fit import least_squares
+
+# The issue's targets on the single bead: bending misfit (median over drive levels, fraction of
+# each curve's peak), resonance shift (points), peak velocity per nm top/lowest, and the
+# predicted tongue tip (amplitude, frequency) and loop onset going up (relative).
+TARGETS = {"bending_misfit_median": 0.03, "shift_points": 0.005, "peak_ratio": 0.07,
+           "tongue_tip_amplitude": 0.25, "tongue_tip_frequency": 0.02, "loop_onset_up": 0.25,
+           "held_out_bending_misfit": 0.03}
+PREDICTED = ("tongue_tip_amplitude", "tongue_tip_frequency", "loop_onset_up", "held_out_bending_misfit")
+# A candidate is named when a predicted gap |log(model/measured)| shrinks by this much on the base's.
+NAMED_GAIN = math.log(1.25)
+# Where the base predicts nothing (no period doubling), a candidate improves on it when its
+# prediction is within this (log units: a factor 2) of the data.
+BASE_SILENT_WITHIN = math.log(2.0)
+# Every factor stays within this of its start ...
+FACTOR_LIMIT = 100.0
+# ... the contacts' Hertz constant within this (the start puts the resonance on the data's; a
+# trial step far outside stiffens the chain past what the time step resolves).
+KAPPA_LIMITS = (0.1, 10.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class DrivenCandidate:
+    """One candidate: `name`, `mechanism` (plain words), `add(chain) -> chain` (the base chain
+    with the law in), `free` (paths of the chain's fields it frees, besides the base's),
+    `factor_limits` ({path: (lowest, highest)} factors on its start where the law's range is
+    narrower than `FACTOR_LIMIT`)."""
+
+    name: str
+    mechanism: str
+    add: object
+    free: tuple = ()
+    factor_limits: dict = dataclasses.field(default_factory=dict)
+
+
+def _replace(chain: DrivenChain, **changes) -> DrivenChain:
+    fields = {"contact_law": chain.contact_law, "dissipation": chain.dissipation,
+              "support_friction": chain.support_friction, "drive_stroke": chain.drive_stroke}
+    fields.update(changes)
+    return DrivenChain(chain.bead_mass_kg, chain.contact_kappa_n_m1p5, chain.precompression_n,
+                       chain.damping_rate_per_s, **fields)
+
+
+CANDIDATES = (
+    DrivenCandidate("hertz_viscous", "the base: Hertz contacts, viscous drag", lambda c: c),
+    DrivenCandidate("contact_exponent", "a power-law contact F = c delta^n (n free)",
+                    lambda c: _replace(c, contact_law=laws.PowerLaw(1.5, 1e-6)), ("contact_law.exponent",),
+                    {"contact_law.exponent": (1.0 / 1.5, 3.0 / 1.5)}),  # n in [1, 3]
+    DrivenCandidate("series_compliance", "a linear compliance in series with each contact (piezo cap, fixture)",
+                    lambda c: _replace(c, contact_law=laws.SeriesCompliance(laws.Hertz(), 2e-8)),
+                    ("contact_law.compliance_m_n",)),
+    DrivenCandidate("rough_contact", "a Greenwood-Williamson asperity layer in series (roughness, touch force)",
+                    lambda c: _replace(c, contact_law=laws.RoughContact(laws.Hertz(), 3e-8, 0.5)),
+                    ("contact_law.roughness_m", "contact_law.touch_force_n")),
+    DrivenCandidate("velocity_squared_loss", "a contact loss c |v| v (Vergara) besides the viscous drag",
+                    lambda c: _replace(c, dissipation=(laws.VelocitySquared(3000.0),)),
+                    ("dissipation.0.c_n_s2_m2",)),
+    DrivenCandidate("rayleigh_piezo", "a piezo whose stroke grows with its amplitude (Rayleigh law)",
+                    lambda c: _replace(c, drive_stroke=RayleighStroke(1e6)), ("drive_stroke.rayleigh_per_m",)),
+)
+# Candidates whose bending fit runs the sliders' JAX kernel under forward derivatives: one
+# Levenberg-Marquardt step of the single bead's 36 levels takes minutes on 2 cores, so they
+# are run only when named (`diagnose_laws(..., candidates=...)`).
+SLOW_CANDIDATES = (
+    DrivenCandidate("micro_slip_supports", "micro-slip friction at the bead's supports (Iwan element)",
+                    lambda c: _replace(c, support_friction=laws.IwanSupport(2e6, 1e-7)),
+                    ("support_friction.stiffness_n_m", "support_friction.slip_displacement_m")),
+)
+# A chain with sliders has no Floquet multipliers (its sliders are state): its thresholds are
+# found by stepping the lab's sweeps in time (`emulate_loop`), the tongue at these frequencies.
+TIME_STEPPED_TONGUE_HZ = (6900.0, 7050.0, 7200.0, 7350.0, 7500.0)
+
+
+def base_chain(experiment, damping_rate_per_s: float = 1500.0) -> DrivenChain:
+    """The file's chain at its stated precompression: masses, Hertz constants, viscous drag."""
+    return DrivenChain(experiment.bead_mass_kg, experiment.contact_kappa_n_m1p5, experiment.precompression_n,
+                       damping_rate_per_s)
+
+
+def _tuned(chain: DrivenChain, resonance_hz: float) -> DrivenChain:
+    """`chain` with its Hertz constants scaled so that its linear resonance is `resonance_hz`."""
+    for _ in range(6):
+        ratio = resonance_hz / float(normal_modes(chain)[0][0])
+        chain = _with_kappa(chain, chain.contact_kappa_n_m1p5 * ratio ** 3)
+    return chain
+
+
+def _with_kappa(chain, kappa):
+    return eqx.tree_at(lambda c: c.contact_kappa_n_m1p5, chain, kappa)
+
+
+def _gap(model, measured):
+    return None if model is None or measured is None else float(math.log(model / measured))
+
+
+def _tip(frequencies, onsets):
+    if not np.isfinite(onsets).any():
+        return None, None
+    i = int(np.nanargmin(onsets))
+    return float(onsets[i]), float(frequencies[i])
+
+
+class _BoundedModel(JointModel):
+    """`JointModel` clipping its log factors to a candidate's `bounds` (lower, upper)."""
+
+    def __init__(self, *args, bounds, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.bounds = bounds
+
+    def clip(self, x) -> np.ndarray:
+        return np.clip(np.asarray(x, dtype=float), *self.bounds)
+
+
+def _fitted_levels(m, held_out_levels: int, level_stride: int):
+    """The bending measurement `m` on the drive levels a fit uses: without its `held_out_levels`
+    highest, then every `level_stride`-th of the rest (its highest kept)."""
+    sweep = m.data.sweep
+    keep = sweep.drive_amplitudes_m.size - held_out_levels
+    if keep < 2:
+        raise ValueError(f"held_out_levels={held_out_levels} leaves {keep} of the bending run's "
+                         f"{sweep.drive_amplitudes_m.size} drive levels to fit; keep at least 2.")
+    if level_stride < 1:
+        raise ValueError(f"level_stride must be a whole number >= 1, got {level_stride}.")
+    levels = np.unique(np.r_[np.arange(0, keep, level_stride), keep - 1])
+    if levels.size == sweep.drive_amplitudes_m.size:
+        return m
+    lower = dataclasses.replace(sweep, drive_amplitudes_m=sweep.drive_amplitudes_m[levels],
+                                rms_velocity_m_s=sweep.rms_velocity_m_s[:, levels])
+    return dataclasses.replace(m, data=dataclasses.replace(m.data, sweep=lower))
+
+
+def fit_candidate(experiment, candidate: DrivenCandidate, *, held_out_levels: int = 0, level_stride: int = 1,
+                  max_steps: int = 20, progress: bool = False) -> dict:
+    """Fit `candidate` on the experiment's first bending measurement (less its
+    `held_out_levels` highest drive levels, then predicted; every `level_stride`-th level of
+    the rest) and predict the rest (see the module docstring); the bending's measures are
+    of every level. **Returns:** a dict of its constants, each measurement's numbers and
+    gaps, and `elapsed_s`."""
+    began = time.perf_counter()
+    bending_m = next(m for m in experiment.measurements if m.kind == "bending")
+    alone = dataclasses.replace(experiment, measurements=(_fitted_levels(bending_m, held_out_levels, level_stride),))
+    measured_bend = bending(experiment.for_bending(bending_m), bending_m.data.sweep.rms_velocity_m_s)[0]
+    chain = _tuned(candidate.add(base_chain(experiment)), measured_bend["lowest_drive_peak_hz"])
+    shared = ("contact_kappa_n_m1p5", "damping_rate_per_s") + tuple(candidate.free)
+    parameters = [JointParameter(n, None) for n in shared] + [JointParameter(DRIVE_SCALE, bending_m.run)]
+    unit = JointModel(alone, chain, parameters, {bending_m.run: 1.0}, 1.0)
+    x0 = np.zeros(len(parameters))
+    run = unit.runs[0]
+    fitted_m = run.measurements[0]
+    measured = fitted_m.data.sweep.rms_velocity_m_s[fitted_m.fit_mask]
+    resid = (unit.bending_curves(run, fitted_m, x0) - measured) / fitted_m.data.sweep.rms_velocity_m_s.max(axis=0)
+    rho = min(max(lag1_autocorrelation(resid), 0.0), 0.999)
+    low, high = np.full(len(parameters), -math.log(FACTOR_LIMIT)), np.full(len(parameters), math.log(FACTOR_LIMIT))
+    limits = {"contact_kappa_n_m1p5": KAPPA_LIMITS, **candidate.factor_limits}
+    for k, p in enumerate(parameters):
+        if p.name in limits:
+            low[k], high[k] = (math.log(v) for v in limits[p.name])
+    model = _BoundedModel(alone, chain, parameters, {bending_m.run: 1.0}, math.sqrt((1 - rho) / (1 + rho)),
+                          progress, bounds=(low, high))
+    result = least_squares(model, x0, list(range(len(parameters))), max_steps=max_steps, bounds=(low, high))
+    x = model.clip(result.x)
+    fitted = model.run_chain(run, x)
+    rows = np.arange(bending_m.data.sweep.frequencies_hz.size)
+    curves = model.bending_curves(run, bending_m, x, rows)
+    data = bending_m.data.sweep.rms_velocity_m_s
+    misfit = np.sqrt(np.mean((curves[bending_m.fit_mask] - data[bending_m.fit_mask]) ** 2, axis=0)) / data.max(axis=0)
+    mine = bending(experiment.for_bending(bending_m), curves)[0]
+    out = {"name": candidate.name, "mechanism": candidate.mechanism, "free": list(shared) + [DRIVE_SCALE],
+           "converged": bool(result.converged), "steps": int(result.steps),
+           "constants": _constants(fitted, shared, model.run_scale(run, x)),
+           "bending": {"misfit_median": float(np.median(misfit)), "misfit_max": float(misfit.max()),
+                       "shift": mine["shift"], "measured_shift": measured_bend["shift"],
+                       "peak_ratio": mine["peak_per_drive_top_over_lowest"],
+                       "measured_peak_ratio": measured_bend["peak_per_drive_top_over_lowest"],
+                       "resonance_hz": float(normal_modes(fitted)[0][0]), "held_out_levels": held_out_levels,
+                       "fitted_levels": int(fitted_m.data.sweep.drive_amplitudes_m.size),
+                       "held_out_misfit_median": float(np.median(misfit[misfit.size - held_out_levels:]))
+                       if held_out_levels else None}}
+    out.update(_predictions(experiment, fitted, progress))
+    out["elapsed_s"] = time.perf_counter() - began
+    return out
+
+
+def _constants(chain, shared, drive_scale) -> dict:
+    values = {path: np.asarray(_leaf(chain, path)).tolist() for path in shared}
+    values["precompression_n"] = float(chain.precompression_n)
+    values["static_overlap_m"] = np.asarray(chain.static_overlap_m()).tolist()
+    values[DRIVE_SCALE] = float(drive_scale)
+    return values
+
+
+def _stepped_onsets(experiment, chain, run) -> np.ndarray:
+    """The onsets going up at each of `run`'s threshold entries (NaN: none) by time stepping the
+    lab's sweeps (`emulate_loop`): the loop's own amplitudes, the tongue's upward amplitudes at
+    `TIME_STEPPED_TONGUE_HZ` (its other frequencies NaN, said in the result)."""
+    onsets = []
+    steps = int(experiment.model["steps_per_period"])
+    for m in run.measurements:
+        if m.kind == "tongue":
+            for f in m.data.frequencies_hz:
+                onset = np.nan
+                if f in TIME_STEPPED_TONGUE_HZ:
+                    onset = emulate_loop(chain, f, m.data.drive_amplitudes_m, bead=experiment.sensor_bead,
+                                         steps_per_period=steps).onset_up_m
+                onsets.append(np.nan if onset is None else onset)
+        elif m.kind == "loop":
+            onset = emulate_loop(chain, m.data.frequency_hz, m.data.drive_amplitudes_m, bead=experiment.sensor_bead,
+                                 steps_per_period=steps).onset_up_m
+            onsets.append(np.nan if onset is None else onset)
+    return np.array(onsets, dtype=float)
+
+
+def _predictions(experiment, chain, progress) -> dict:
+    """The tongue tip and the loop's onset going up of `chain` at each run's calibration
+    (Floquet thresholds; by time stepping for a chain with support sliders)."""
+    others = [m for m in experiment.measurements if m.kind in ("tongue", "loop")]
+    rest = dataclasses.replace(experiment, measurements=tuple(others))
+    predict = JointModel(rest, chain, [], {m.run: 1.0 for m in others}, 1.0)
+    out = {}
+    for run in predict.runs:
+        if progress:
+            print(f"  predicting run {run.run}", file=sys.stderr, flush=True)
+        rows = _threshold_data(run)
+        if chain.support_friction is None:
+            _, found = predict.onsets(run, np.zeros(0))
+            model, how = np.where(found.found, found.amplitude_m, np.nan), "Floquet threshold (continuation)"
+        else:
+            model = _stepped_onsets(experiment, chain, run)
+            how = (f"the lab's upward sweeps stepped in time (emulate_loop; tongue at {TIME_STEPPED_TONGUE_HZ} Hz "
+                   "only): the sliders have no Floquet multipliers")
+        for kind in ("tongue", "loop"):
+            picked = [i for i, row in enumerate(rows) if row[4] == kind]
+            if not picked:
+                continue
+            f = np.array([rows[i][0] for i in picked])
+            data = np.array([rows[i][1] for i in picked])
+            if kind == "tongue":
+                (ma, mf), (da, df) = _tip(f, model[picked]), _tip(f, data)
+                out["tongue"] = {"run": run.run, "measured_tip_m": da, "measured_tip_hz": df, "model_tip_m": ma,
+                                 "model_tip_hz": mf, "frequencies_hz": f.tolist(), "model_onset_m": model[picked].tolist(),
+                                 "amplitude_gap_log": _gap(ma, da), "frequency_gap": None if mf is None else mf / df - 1,
+                                 "how": how}
+            else:
+                ma = float(model[picked][0]) if np.isfinite(model[picked][0]) else None
+                out["loop"] = {"run": run.run, "frequency_hz": float(f[0]), "measured_onset_up_m": float(data[0]),
+                               "model_onset_up_m": ma, "gap_log": _gap(ma, float(data[0])), "how": how}
+    return out
+
+
+def scores(entry: dict) -> dict:
+    """Each target's measurement of `entry` (a `fit_candidate` result): {name: (value, met)}."""
+    b, t, loop = entry["bending"], entry.get("tongue", {}), entry.get("loop", {})
+
+    def within(gap, tol):
+        return gap is not None and abs(gap) <= tol
+
+    tip = t.get("amplitude_gap_log")
+    onset = loop.get("gap_log")
+    return {
+        "bending_misfit_median": (b["misfit_median"], b["misfit_median"] <= TARGETS["bending_misfit_median"]),
+        "shift_points": (b["shift"] - b["measured_shift"],
+                         abs(b["shift"] - b["measured_shift"]) <= TARGETS["shift_points"]),
+        "peak_ratio": (b["peak_ratio"], abs(b["peak_ratio"] - b["measured_peak_ratio"]) <= TARGETS["peak_ratio"]),
+        "tongue_tip_amplitude": (None if tip is None else math.exp(tip),
+                                 within(None if tip is None else math.expm1(tip), TARGETS["tongue_tip_amplitude"])),
+        "tongue_tip_frequency": (t.get("frequency_gap"), within(t.get("frequency_gap"), TARGETS["tongue_tip_frequency"])),
+        "loop_onset_up": (None if onset is None else math.exp(onset),
+                          within(None if onset is None else math.expm1(onset), TARGETS["loop_onset_up"])),
+        "held_out_bending_misfit": (b.get("held_out_misfit_median"), b.get("held_out_misfit_median") is not None
+                                    and b["held_out_misfit_median"] <= TARGETS["held_out_bending_misfit"]),
+    }
+
+
+def _distances(entry) -> dict:
+    """How far each predicted measurement of `entry` is from its data, >= 0 and in log units
+    (|log(model / measured)|; the held-out bending's log misfit), None where nothing was
+    predicted (no period doubling found, no held-out levels)."""
+    t, loop, b = entry.get("tongue", {}), entry.get("loop", {}), entry["bending"]
+
+    def size(gap):
+        return None if gap is None else abs(gap)
+
+    return {"tongue_tip_amplitude": size(t.get("amplitude_gap_log")), "loop_onset_up": size(loop.get("gap_log")),
+            "tongue_tip_frequency": None if t.get("frequency_gap") is None else abs(math.log1p(t["frequency_gap"])),
+            "held_out_bending_misfit": None if b.get("held_out_misfit_median") is None
+            else math.log(b["held_out_misfit_median"])}
+
+
+def verdict(entries: list[dict]) -> dict:
+    """Which candidates are named (see the module docstring), and per candidate which targets it
+    meets and which not, against the base (the first entry). `best`: of the named, the one
+    whose predicted measurements lie closest to the data in all (sum of `_distances`)."""
+    base = entries[0]
+    base_scores, base_distance = scores(base), _distances(base)
+    per, named, closeness = {}, [], {}
+    for entry in entries:
+        s, distance = scores(entry), _distances(entry)
+        explains = [k for k, (_, met) in s.items() if met]
+        improves = []
+        for k in PREDICTED:
+            d, d0 = distance.get(k), base_distance.get(k)
+            if d is None:
+                continue
+            newly_met = s[k][1] and not base_scores[k][1]
+            if newly_met or (d0 is None and d <= BASE_SILENT_WITHIN) or (d0 is not None and d0 - d >= NAMED_GAIN):
+                improves.append(k)
+        per[entry["name"]] = {"explains": explains, "does_not_explain": [k for k in s if k not in explains],
+                              "improves_unfitted_over_base": improves,
+                              "values": {k: v for k, (v, _) in s.items()}}
+        if entry is not base and improves:
+            named.append(entry["name"])
+            closeness[entry["name"]] = sum(d for d in distance.values() if d is not None)
+    return {"named": named, "best": min(closeness, key=closeness.get) if closeness else None,
+            "per_candidate": per, "targets": TARGETS}
+
+
+def diagnose_laws(experiment, candidates=CANDIDATES, *, held_out_levels: int = 0, level_stride: int = 1,
+                  max_steps: int = 20, progress: bool = True) -> dict:
+    """Fit every candidate on the bending run, predict the rest, and judge (see the module
+    docstring). **Returns:** `candidates` (each `fit_candidate`'s dict), `failed` (name and error
+    of each candidate whose fit stopped on a refusal of the chain), `verdict`, `elapsed_s`."""
+    began = time.perf_counter()
+    entries, failed = [], []
+    for candidate in candidates:
+        if progress:
+            print(f"candidate {candidate.name}", file=sys.stderr, flush=True)
+        try:
+            entries.append(fit_candidate(experiment, candidate, held_out_levels=held_out_levels,
+                                         level_stride=level_stride, max_steps=max_steps, progress=progress))
+        except ValueError as error:  # a law the chain refuses at some trial constants: said, not hidden
+            failed.append({"name": candidate.name, "mechanism": candidate.mechanism, "error": str(error)})
+            if progress:
+                print(f"  {candidate.name} failed: {error}", file=sys.stderr, flush=True)
+    return {"experiment": str(experiment.path), "candidates": entries, "failed": failed, "verdict": verdict(entries),
+            "elapsed_s": time.perf_counter() - began}
