@@ -16,7 +16,9 @@ N, BEADS, BETA, F0 = 8, (3, 5), 0.11, 85e3
 RECORD = Recording(contacts=(2, 3, 4, 5))
 
 
-@pytest.mark.parametrize("changes", [{}, {"precompression_n": 2.0}], ids=["bare", "preload"])
+# the preloaded chain in the default suite, the bare one with `-m slow` (default-suite time)
+@pytest.mark.parametrize("changes", [pytest.param({}, marks=pytest.mark.slow), {"precompression_n": 2.0}],
+                         ids=["bare", "preload"])
 def test_matches_the_split_bead_model(changes):
     split = ChainSetup(N, striker_velocity_m_s=0.3, sensor_beads=BEADS, sensor_beta=BETA, sensor_f0_hz=F0, **changes)
     grid = choose_time_grid(split, t_end_s=0.5e-3, sample_interval_s=1e-6)

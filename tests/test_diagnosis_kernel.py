@@ -57,7 +57,8 @@ def _assert_twin_equals(twin, full, x, skipped):
 
 # The Hertz case runs with `-m slow` (suite time); the yielding one, which runs the same
 # twin through the elastic-plastic library as well, stays in the default suite.
-@pytest.mark.parametrize("plastic", [pytest.param(False, marks=pytest.mark.slow), True])
+# both with `-m slow` (default-suite time; test_evaluator below holds which model the kernel twin stands for)
+@pytest.mark.parametrize("plastic", [pytest.param(False, marks=pytest.mark.slow), pytest.param(True, marks=pytest.mark.slow)])
 def test_twin_on_the_kernel_equals_the_full_model_at_zero_compliance_and_dashpot(brass_files, plastic):
     """Effects on (extra damping, a preload half seen, sensors' Eq. 4 at f0 = 183 kHz and,
     with `plastic`, yield forces 1/512 of the nominal, which the contacts cross), the

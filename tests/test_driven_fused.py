@@ -71,10 +71,10 @@ def test_a_grid_without_a_ramp_equals_the_jax_kernel():
     assert _relative(lockin_grid(chain, FREQUENCIES_HZ, DRIVES_M, **kw).complex_amplitude, reference) < 1e-12
 
 
-# the one-bead chain in the default suite; three beads whose contacts open with `-m slow` (suite time;
-# their values are held to the JAX kernel by the grid test above)
-@pytest.mark.parametrize("name", ["one_bead_undamped_contacts",
-                                  pytest.param("three_beads_opening_contacts", marks=pytest.mark.slow)])
+# with `-m slow` (suite time): the values are held to the JAX kernel by the grid test above, the
+# derivatives by the JVP and vmap-of-jacfwd tests below
+@pytest.mark.parametrize("name", [pytest.param(name, marks=pytest.mark.slow)
+                                  for name in ("one_bead_undamped_contacts", "three_beads_opening_contacts")])
 def test_jacobians_equal_jacfwd_through_the_jax_kernel(name):
     """`jax.jacfwd` in every field of the chain (masses, stiffnesses, precompression,
     damping, eta), in the frequencies (each run's step and angular frequency) and in the

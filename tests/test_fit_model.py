@@ -93,8 +93,9 @@ FIT_LAWS = {
 }
 
 
-# Jackson-Green with `-m slow` (default-suite time; test_contact_plasticity holds its batched runs to solve)
-@pytest.mark.parametrize("law", [pytest.param(law, marks=pytest.mark.slow) if law == "jackson_green" else law
+# the laws other than Hertz's with `-m slow` (default-suite time; test_contact_plasticity and
+# test_power_law_contact hold their batched runs to solve)
+@pytest.mark.parametrize("law", [pytest.param(law, marks=pytest.mark.slow) if law != "hertz" else law
                                  for law in FIT_LAWS])
 def test_batched_kernel_and_solve_give_the_same_model_and_jacobian(law):
     """Two files (their own striker velocities and offsets): the fit's fast path

@@ -52,6 +52,7 @@ def default_fit(kinked_files):
     return result, list(_Recorder.chi2)
 
 
+@pytest.mark.slow  # default-suite time; benchmarks/stopping_rule.py holds the rule on a second code path
 def test_stops_soon_after_chi2_is_final_at_the_tight_fits_values(kinked_files, default_fit):
     result, history = default_fit
     assert result.converged, result.message

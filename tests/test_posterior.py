@@ -65,6 +65,7 @@ def noise_only(brass_traces):
                                 progress=False)
 
 
+@pytest.mark.slow  # the noise-only posterior (its sampling, about 30 s on 2 cores) with `-m slow`: default-suite time
 def test_noise_only_posterior_is_the_optimum_with_cramer_rao_widths(noise_only, brass_traces):
     result = noise_only
     assert result.fit.converged and result.fit.reduced_chi2 < 1.2
@@ -127,6 +128,7 @@ def _potentials(fit_result):
     return problem, _potential(problem, constants, z_hat, chol), plain_with
 
 
+@pytest.mark.slow  # the noise-only posterior (its sampling, about 30 s on 2 cores) with `-m slow`: default-suite time
 def test_potential_gradient_matches_reverse_mode_and_central_differences(noise_only):
     """The sampler's forward-mode gradient against jax.grad of the same potential written
     without the sampler's custom rule (reverse mode through the residuals), and against
@@ -152,6 +154,7 @@ def test_potential_gradient_matches_reverse_mode_and_central_differences(noise_o
         np.testing.assert_allclose(np.asarray(gradients[k]), np.asarray(jax.grad(plain)(batch[k])), rtol=1e-8)
 
 
+@pytest.mark.slow  # the noise-only posterior (its sampling, about 30 s on 2 cores) with `-m slow`: default-suite time
 def test_sampler_gradient_on_the_cpp_kernel_equals_reverse_mode_through_the_jax_kernel(noise_only, monkeypatch):
     """The gradient NUTS takes (forward mode: the C++ kernel's tangents, all the chains and
     directions in one kernel run) against `jax.grad` of the same potential through the JAX
@@ -252,6 +255,7 @@ def test_laplace_comparison_flags_a_skewed_marginal():
     assert out["b"]["upper_ratio"] == pytest.approx(2.3 / 1.6448536, rel=1e-6)
 
 
+@pytest.mark.slow  # the noise-only posterior (its sampling, about 30 s on 2 cores) with `-m slow`: default-suite time
 def test_report_files_are_whole_and_agree(noise_only, tmp_path):
     from fitting.posterior_report import write_posterior_report
 
@@ -424,7 +428,8 @@ def test_posterior_intervals_are_calibrated_over_data_drawn_from_the_prior():
 
 # vectorised chains (what `posterior` runs) in the default suite; one chain with an adapted
 # metric (`adapt_metric`, not the default) with `-m slow` (suite time)
-@pytest.mark.parametrize("chains", [pytest.param(1, marks=pytest.mark.slow), 3])
+# one chain in the default suite, three (the chains in lockstep) with `-m slow`: default-suite time
+@pytest.mark.parametrize("chains", [1, pytest.param(3, marks=pytest.mark.slow)])
 def test_chains_driven_here_are_numpyros_mcmc_draw_for_draw(chains):
     """`_run_chains` calls NumPyro's NUTS kernel itself (a compiled `init`, one compiled
     iteration for warmup and draws, the chains in lockstep); its tree sizes and divergences
