@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 import time
 
 import equinox as eqx
@@ -43,6 +42,7 @@ from hertzchain import laws
 from hertzchain.driven import DrivenChain, RayleighStroke
 from hertzchain.driven.linear import normal_modes
 from hertzchain.driven.thresholds import emulate_loop
+from hertzchain.progress import Progress
 
 from .driven import lag1_autocorrelation
 from .driven_joint import DRIVE_SCALE, JointModel, JointParameter, _leaf, _threshold_data
@@ -266,9 +266,10 @@ def _predictions(experiment, chain, progress) -> dict:
     rest = dataclasses.replace(experiment, measurements=tuple(others))
     predict = JointModel(rest, chain, [], {m.run: 1.0 for m in others}, 1.0)
     out = {}
+    report = Progress(None, "candidate laws: predictions") if progress else None
     for run in predict.runs:
-        if progress:
-            print(f"  predicting run {run.run}", file=sys.stderr, flush=True)
+        if report is not None:
+            report.note(f"run {run.run}")
         rows = _threshold_data(run)
         if chain.support_friction is None:
             _, found = predict.onsets(run, np.zeros(0))
@@ -370,15 +371,16 @@ def diagnose_laws(experiment, candidates=CANDIDATES, *, held_out_levels: int = 0
     of each candidate whose fit stopped on a refusal of the chain), `verdict`, `elapsed_s`."""
     began = time.perf_counter()
     entries, failed = [], []
+    report = Progress(None, "candidate laws") if progress else None
     for candidate in candidates:
-        if progress:
-            print(f"candidate {candidate.name}", file=sys.stderr, flush=True)
+        if report is not None:
+            report.note(f"candidate {candidate.name}")
         try:
             entries.append(fit_candidate(experiment, candidate, held_out_levels=held_out_levels,
                                          level_stride=level_stride, max_steps=max_steps, progress=progress))
         except ValueError as error:  # a law the chain refuses at some trial constants: said, not hidden
             failed.append({"name": candidate.name, "mechanism": candidate.mechanism, "error": str(error)})
-            if progress:
-                print(f"  {candidate.name} failed: {error}", file=sys.stderr, flush=True)
+            if report is not None:
+                report.note(f"{candidate.name} failed: {error}")
     return {"experiment": str(experiment.path), "candidates": entries, "failed": failed, "verdict": verdict(entries),
             "elapsed_s": time.perf_counter() - began}

@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 import time
 
 import equinox as eqx
@@ -56,6 +55,7 @@ import numpy as np
 
 from hertzchain.driven import DrivenChain, lockin_grid
 from hertzchain.driven.thresholds import onset_tangents, period_doubling_onsets
+from hertzchain.progress import Progress
 
 from .driven import NOMINAL_SCALE, chain_at, fit_driven, lag1_autocorrelation
 from .driven_experiment import DrivenExperiment, DrivenExperimentError
@@ -162,7 +162,8 @@ class JointModel:
     def __init__(self, experiment: DrivenExperiment, start_chain: DrivenChain, parameters: list, start_scales: dict,
                  bending_weight: float, progress: bool = False):
         self.experiment, self.start_chain, self.parameters = experiment, start_chain, parameters
-        self.bending_weight, self.progress = bending_weight, progress
+        self.bending_weight = bending_weight
+        self.report = Progress(None, "joint fit") if progress else None
         self.sigma = threshold_sigma(experiment.measurements)
         self.runs = []
         for run in dict.fromkeys(m.run for m in experiment.measurements):
@@ -171,7 +172,7 @@ class JointModel:
             scale = [i for i, p in enumerate(parameters) if p.name == DRIVE_SCALE and p.run in (None, run)]
             self.runs.append(RunModel(run, ms, tuple(parameters[i].name for i in columns), columns,
                                       scale[0] if scale else None, start_scales[run], ms[0].drive_uncertainty))
-        self.evaluations, self.began = 0, time.perf_counter()
+        self.evaluations = 0
         self.last_onsets = {}
 
     def run_chain(self, run: RunModel, x) -> DrivenChain:
@@ -208,9 +209,8 @@ class JointModel:
                 blocks.append(prior), jacobians.append(j)
         r = np.concatenate(blocks)
         self.evaluations += 1
-        if self.progress and columns:
-            print(f"  evaluation {self.evaluations}: chi^2 {r @ r:.4g}, {time.perf_counter() - self.began:.0f} s",
-                  file=sys.stderr, flush=True)
+        if self.report is not None and columns:
+            self.report.note(f"evaluation {self.evaluations}: chi^2 {r @ r:.4g}")
         return r, np.concatenate(jacobians)
 
     # --- bending -----------------------------------------------------------------------------
@@ -346,7 +346,7 @@ def start_values(experiment: DrivenExperiment, *, max_steps: int, progress: bool
                                     "add a [[measurement]] of kind \"bending\".")
     single = experiment.for_bending(bending[0])
     if progress:
-        print(f"start: the bending run {bending[0].run} alone", file=sys.stderr, flush=True)
+        Progress(None, "joint fit").note(f"start: the bending run {bending[0].run} alone")
     first = fit_driven(single, max_steps=max_steps, progress=progress)
     chain = chain_at(single, first.x)
     chain = DrivenChain(chain.bead_mass_kg, chain.contact_kappa_n_m1p5, chain.precompression_n,
@@ -368,6 +368,7 @@ def scan_threshold_runs(model: JointModel, x, grid=START_PRECOMPRESSIONS, scales
     too deep or too wide is told from none at all only with both. The thresholds are of the
     chain alone, so each precompression costs one search, each scale none."""
     x = np.array(x, dtype=float)
+    report = Progress(None, "joint fit: start") if progress else None
     for run in model.runs:
         if any(m.kind == "bending" for m in run.measurements) or \
                 not any(m.kind in THRESHOLD_KINDS for m in run.measurements):
@@ -388,15 +389,15 @@ def scan_threshold_runs(model: JointModel, x, grid=START_PRECOMPRESSIONS, scales
                 chi2 = float(r @ r) + (math.log(run.start_scale * scale) / width) ** 2
                 if chi2 < best_chi2:
                     best, best_chi2 = (trial[column[0]] if column else None, math.log(scale)), chi2
-            if progress:
-                print(f"  start: run {run.run}, precompression x {factor:.3g}: {int(found.found.sum())} of "
-                      f"{found.found.size} thresholds found", file=sys.stderr, flush=True)
+            if report is not None:
+                report.note(f"run {run.run}, precompression x {factor:.3g}: {int(found.found.sum())} of "
+                            f"{found.found.size} thresholds found")
         if column:
             x[column[0]] = best[0]
         if run.scale_column is not None:
             x[run.scale_column] = best[1]
-        if progress:
-            print(f"  start: run {run.run}: chi^2 {best_chi2:.4g}", file=sys.stderr, flush=True)
+        if report is not None:
+            report.note(f"run {run.run}: chi^2 {best_chi2:.4g}")
     return x
 
 
@@ -440,8 +441,8 @@ def fit_joint(experiment: DrivenExperiment, *, max_steps: int = 100, progress: b
                 rho = max(rho, min(max(lag1_autocorrelation(resid), 0.0), 0.999))
     model = JointModel(experiment, chain, parameters, scales, math.sqrt((1 - rho) / (1 + rho)), progress)
     x = scan_threshold_runs(model, x, progress=progress)
-    if progress:
-        print(f"fitting {', '.join(labels)} jointly ...", file=sys.stderr, flush=True)
+    if model.report is not None:
+        model.report.note(f"fitting {', '.join(labels)} jointly ...")
     columns = list(range(len(parameters)))
     bound = np.full(len(columns), math.log(FACTOR_LIMIT))
     result = least_squares(model, x, columns, max_steps=max_steps, bounds=(-bound, bound))

@@ -10,9 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hertzchain.io.atomic import json_ready, write_json
 from hertzchain.driven.linear import normal_modes
+from hertzchain.driven.measurements import loop_thresholds
 from hertzchain.driven.thresholds import emulate_loop
+from hertzchain.io.atomic import json_ready, write_json
 
 from .driven_joint import DRIVE_SCALE, JointFit, _leaf, _threshold_data, chain_fields
 from .driven_report import bending
@@ -151,11 +152,9 @@ def _tip(frequencies, onsets) -> dict:
 
 def _scope(m) -> dict:
     present = np.asarray(m.data.subharmonic_present)
-    amplitudes = m.data.drive_amplitudes_m
-    turn = int(np.argmax(amplitudes))
-    up = present[:turn + 1]
+    onset = loop_thresholds(m.data.drive_amplitudes_m, present)[0]
     return {"kind": "scope", "run": m.run, "files": list(m.files), "frequency_hz": m.data.frequency_hz,
-            "onset_up_m": float(amplitudes[np.argmax(up)]) if up.any() else None,
+            "onset_up_m": onset if np.isfinite(onset) else None,
             "records_with_subharmonic": int(present.sum()), "records": int(present.size),
             "fitted": False, "why": "a check: the records measure the same onset as the run's lock-in loop"}
 
