@@ -174,7 +174,7 @@ def test_fast_path_uses_the_force_laws_of_solve(case):
     compressed and separated states (plastic contacts: loading and unloading below larger
     overlaps reached before), are those of `forces.chain_forces` (same contact-law
     functions of `contact`, so the forces are bit-identical)."""
-    from hertzchain import batched, forces
+    from hertzchain import batched, batched_step, forces
 
     setup, _ = _batch(**CASES[case])
     flags = batched.kernel_flags(setup)
@@ -186,12 +186,12 @@ def test_fast_path_uses_the_force_laws_of_solve(case):
     v = rng.normal(scale=0.3, size=(n_bodies, 4))
     wall = np.zeros((1, 4))
     xw, vw = np.concatenate([x, wall]), np.concatenate([v, wall])
-    overlap = np.asarray(batched._overlaps(params, flags, xw))
+    overlap = np.asarray(batched_step._overlaps(params, flags, xw))
     peak = np.where(rng.random(overlap.shape) < 0.5, overlap, np.maximum(overlap, 0.0) + 3e-6 * rng.random(overlap.shape))
     peak = peak if flags.plastic else None
-    total, elastic = batched._contact_forces(params, flags, xw, vw, peak=peak)
-    body = batched._body_force(total, params["external"])[:n_bodies]
-    kinetic, potential, plastic = batched._energy(params, flags, xw, vw, peak)
+    total, elastic = batched_step._contact_forces(params, flags, xw, vw, peak=peak)
+    body = batched_step._body_force(total, params["external"])[:n_bodies]
+    kinetic, potential, plastic = batched_step._energy(params, flags, xw, vw, peak)
     for i, model in enumerate(models):
         max_overlap = None if peak is None else jnp.asarray(peak[:, i])
         ref = forces.chain_forces(model, jnp.asarray(x[:, i]), jnp.asarray(v[:, i]), max_overlap)
