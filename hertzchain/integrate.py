@@ -454,6 +454,17 @@ def check_yield(traces: Traces, on_yield: str = "warn", *, plastic: bool = False
     warnings.warn(warning, stacklevel=3)
 
 
+def _run_plan(setup: ChainSetup, run_setup: ChainSetup, contacts, record_all: bool, **grid_options):
+    """The recording and time grid of a run of `run_setup` (`setup`, or its batch), checked
+    before anything runs: the contacts exist in `setup`, and the step is stable for the
+    damping of every chain of `run_setup`."""
+    recording = Recording(tuple(int(k) for k in contacts), bool(record_all))
+    _layout(setup, recording)
+    grid = choose_time_grid(run_setup, **grid_options)
+    check_step_stability(run_setup, grid.dt_s)
+    return recording, grid
+
+
 def simulate(
     setup: ChainSetup,
     *,
@@ -489,13 +500,9 @@ def simulate(
     beyond the stability of the step (`validation.check_step_stability`).
     """
     require_float64("simulate")
-    recording = Recording(tuple(int(k) for k in contacts), bool(record_all))
-    _layout(setup, recording)
-    grid = choose_time_grid(
-        setup, t_end_s=t_end_s, sample_interval_s=sample_interval_s, dt_s=dt_s,
-        steps_per_contact=steps_per_contact,
-    )
-    check_step_stability(setup, grid.dt_s)
+    recording, grid = _run_plan(setup, setup, contacts, record_all, t_end_s=t_end_s,
+                                sample_interval_s=sample_interval_s, dt_s=dt_s,
+                                steps_per_contact=steps_per_contact)
     if progress and grid.n_steps > _PROGRESS_STEPS:
         traces = _solve_with_progress(setup, grid, recording, unroll)
     else:
@@ -575,13 +582,9 @@ def simulate_batch(setup: ChainSetup, *, t_end_s: float = 2.5e-3, sample_interva
     for the most demanding element, is used for all.
     """
     batched, shape = batch_setup(setup, **sweep)
-    recording = Recording(tuple(int(k) for k in contacts), bool(record_all))
-    _layout(setup, recording)
-    grid = choose_time_grid(
-        batched, t_end_s=t_end_s, sample_interval_s=sample_interval_s, dt_s=dt_s,
-        steps_per_contact=steps_per_contact,
-    )
-    check_step_stability(batched, grid.dt_s)
+    recording, grid = _run_plan(setup, batched, contacts, record_all, t_end_s=t_end_s,
+                                sample_interval_s=sample_interval_s, dt_s=dt_s,
+                                steps_per_contact=steps_per_contact)
     traces = solve_stacked(batched, grid, recording, unroll)
     check_yield(traces, on_yield, plastic=setup.plasticity)
     return jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), traces)
