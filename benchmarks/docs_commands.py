@@ -173,7 +173,8 @@ def check_all(root: Path = ROOT) -> list[dict]:
 # --- the newcomer's path ------------------------------------------------------------------------
 
 # (page the command is copied from, the command as written there); run in order, in one
-# scratch folder. The sweep and the diagnosis are the docs' own, at their sizes.
+# scratch folder. The sweep and the diagnosis are the docs' own, at their sizes; the fit is
+# README.md's, with the previous name `eta` (read with a warning).
 NEWCOMER = (
     ("README.md", "hertzchain kernel"),
     ("README.md", "hertzchain simulate --eta 2us --wall-youngs 5GPa --contacts 6,11 --out out/simulate"),
@@ -181,7 +182,7 @@ NEWCOMER = (
      "--grid wall_youngs_pa=3e9,45e9,203e9 --grid eta_s=0,2e-6 --out out/sweep")),
     ("README.md", ("hertzchain synth --velocities 0.05,0.1,0.3 --contacts 6,11 --eta 2us --mu 0.19 "
      "--noise-fraction 0.005 --bits 8 --out out/synth")),
-    ("docs/how-to/fit.md", "hertzchain fit out/synth/*.csv --params eta_s,mu,C --out out/fit"),
+    ("README.md", "hertzchain fit out/synth/*.csv --params eta,mu,C --out out/fit"),
     ("README.md", "hertzchain diagnose out/synth/*.csv --out out/diagnose"),
     ("docs/how-to/experiment-files.md", "hertzchain import experiment.toml --out out/import"),
     ("docs/how-to/experiment-files.md", "hertzchain analyze experiment.toml --out out/analyze"),
@@ -191,8 +192,9 @@ NEWCOMER = (
      "--material steel_440C --radius 3.175mm --damping --out out/contact")),
 )
 
-# The scope channels of the import step: the synth traces' wall and contact 6 in volts.
-_SENSITIVITY_V_PER_N = {"wall": 0.1124, "contact_6": 0.05}
+# The sensitivities of the import step's scope channels (the synth traces' wall, then their
+# first recorded contact), V/N.
+_SENSITIVITIES_V_PER_N = (0.1124, 0.05)
 
 
 def write_scope_lab(folder: Path) -> None:
@@ -201,20 +203,23 @@ def write_scope_lab(folder: Path) -> None:
     from hertzchain.io.tracefile import read_trace
 
     traces = sorted((folder / "out" / "synth").glob("*.csv"))
-    header = read_trace(traces[0]).header
+    first = read_trace(traces[0])
+    header = first.header
+    recorded = ["wall"] + [c for c in first.channels if c.startswith("contact_")][:1]
+    sensitivity = dict(zip(recorded, _SENSITIVITIES_V_PER_N))
     chain = {key: header[key] for key in ("n_beads", "bead_radius_m", "bead_density_kg_m3", "bead_youngs_pa",
                                           "bead_poisson", "wall_youngs_pa", "wall_poisson", "striker_mass_kg")}
     text = "[chain]\n" + "".join(f"{key} = {json.dumps(value)}\n" for key, value in chain.items())
     text += '\n[scope]\nformat = "csv"\ntime_zero = "trigger"\n'
-    for k, (channel, sensitivity) in enumerate(_SENSITIVITY_V_PER_N.items(), start=1):
-        text += (f'\n[[channel]]\nsource = "CH{k}"\nmeasures = "{channel}"\nsensitivity_v_per_n = {sensitivity}\n'
+    for k, (channel, volts_per_n) in enumerate(sensitivity.items(), start=1):
+        text += (f'\n[[channel]]\nsource = "CH{k}"\nmeasures = "{channel}"\nsensitivity_v_per_n = {volts_per_n}\n'
                  'coupling = "dc"\n')
     for number, path in enumerate(traces, start=1):
         trace = read_trace(path)
         name = f"shot{number}.csv"
-        lines = ["time_s," + ",".join(f"CH{k}" for k in range(1, len(_SENSITIVITY_V_PER_N) + 1))]
+        lines = ["time_s," + ",".join(f"CH{k}" for k in range(1, len(sensitivity) + 1))]
         for i, t in enumerate(trace.time_s):
-            volts = [trace.channels[c][i] * s for c, s in _SENSITIVITY_V_PER_N.items()]
+            volts = [trace.channels[c][i] * s for c, s in sensitivity.items()]
             lines.append(f"{t:.9g}," + ",".join(f"{v:.6g}" for v in volts))
         (folder / name).write_text("\n".join(lines) + "\n")
         text += f'\n[[shot]]\nfiles = ["{name}"]\nstriker_velocity_m_s = {trace.header["striker_velocity_m_s"]}\n'
