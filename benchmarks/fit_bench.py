@@ -43,6 +43,8 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from fitting.parameters import public_label
+
 TRUTH = {"eta": 2e-6, "mu": 0.19, "mu_star": 0.02}
 BRASS_TRUTH = {"eta": 1e-6, "mu": 0.1, "mu_star": 0.02}
 
@@ -109,8 +111,8 @@ def run_command(paths, out: Path, cache: Path) -> dict:
               **{f"fit_{k}": v for k, v in report["timings_s"].items()}, "writing_s": timings["writing_s"]}
     return {"wall_s": wall, "phases_s": phases, "iterations": report["n_steps"], "converged": report["converged"],
             "reduced_chi2": report["reduced_chi2"],
-            "values": {k: report["params"][k]["value"] for k in ("eta", "mu", "C")},
-            "stderr": {k: report["params"][k]["stderr"] for k in ("eta", "mu", "C")}}
+            "values": {k: report["params"][public_label(k)]["value"] for k in ("eta", "mu", "C")},
+            "stderr": {k: report["params"][public_label(k)]["stderr"] for k in ("eta", "mu", "C")}}
 
 
 def benchmark_case(name: str, n_traces: int = 10) -> dict:

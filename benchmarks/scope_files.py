@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 import hertzchain as hc
+from fitting.parameters import public_label
 from hertzchain.acquisition import Acquisition, acquire
 from hertzchain.io.atomic import json_ready, write_json
 from hertzchain.materials import BEAD_STEEL, BRASS
@@ -182,15 +183,15 @@ def noise_check(seeds: int, out: Path, noise_steps: float = 0.25) -> dict:
                     files.append(name)
                 text += f"\n[[shot]]\nfiles = {json.dumps(files)}\nstriker_velocity_m_s = {velocity}\n"
             (folder / "experiment.toml").write_text(text)
-            run = hertzchain("fit", "experiment.toml", "--params", "eta,mu,C", "--no-plots", "--quiet",
+            run = hertzchain("fit", "experiment.toml", "--params", "eta_s,mu,C", "--no-plots", "--quiet",
                              "--out", "fit", cwd=folder)
             fit = json.loads((folder / "fit" / "fit.json").read_text()) if (folder / "fit" / "fit.json").exists() else {}
         row = {"seed": seed, **run}
         if fit:
             row |= {"reduced_chi2": fit.get("reduced_chi2"), "covariance": fit.get("covariance_scale"),
-                    "values": {p: fit["params"][p]["value"] for p in ("eta", "mu", "C")},
-                    "stderr": {p: fit["params"][p]["stderr"] for p in ("eta", "mu", "C")},
-                    "stderr_stated_noise": {p: fit["params"][p].get("stderr_stated_noise") for p in ("eta", "mu", "C")}}
+                    "values": {p: fit["params"][public_label(p)]["value"] for p in ("eta", "mu", "C")},
+                    "stderr": {p: fit["params"][public_label(p)]["stderr"] for p in ("eta", "mu", "C")},
+                    "stderr_stated_noise": {p: fit["params"][public_label(p)].get("stderr_stated_noise") for p in ("eta", "mu", "C")}}
         rows.append(row)
         print(f"seed {seed}: exit {run['exit_status']}, chi2/dof {row.get('reduced_chi2')}, "
               f"{run['wall_s']:.0f} s", flush=True)
@@ -254,12 +255,12 @@ def second_lab(out: Path) -> dict:
                      "import": hertzchain("import", "experiment.toml", "--out", "i1", "--no-plots", cwd=folder)}
             imported = sorted((folder / "i1").glob("*.csv"))
             entry["time_zero_check"] = [_header_value(p, "x_import_time_zero_check") for p in imported]
-            entry["fit"] = hertzchain("fit", "experiment.toml", "--params", "eta,mu,C", "--no-plots", "--quiet",
+            entry["fit"] = hertzchain("fit", "experiment.toml", "--params", "eta_s,mu,C", "--no-plots", "--quiet",
                                       "--out", "fit", cwd=folder)
             if (folder / "fit" / "fit.json").exists():
                 fit = json.loads((folder / "fit" / "fit.json").read_text())
                 entry["fit"] |= {"reduced_chi2": fit.get("reduced_chi2"),
-                                 "params": {p: {k: fit["params"][p][k] for k in ("value", "stderr")}
+                                 "params": {p: {k: fit["params"][public_label(p)][k] for k in ("value", "stderr")}
                                             for p in ("eta", "mu", "C")}}
             entry["diagnose"] = hertzchain("diagnose", "experiment.toml", "--free", "eta,mu,C", "--quiet",
                                            "--out", "diagnosis", cwd=folder)

@@ -15,7 +15,7 @@ from hertzchain.io.importer import DITHER_STEPS
 from hertzchain.theory import DISCRETE_SPEED_FACTOR
 
 from .model import Problem
-from .parameters import CONTINUUM_SPEED_FACTOR, bare_speed_constant
+from .parameters import CONTINUUM_SPEED_FACTOR, bare_speed_constant, public_label
 from .uncertainty import Covariance, noise_band
 
 
@@ -26,7 +26,9 @@ class FitResult:
 
     **Fields:**
 
-    - `labels`: names of the fitted numbers (`eta`, `striker_velocity[run1]`, ...).
+    - `labels`: names of the fitted numbers, registry spelling (`eta`, `striker_velocity[run1]`,
+      ...); `to_json` and the reports write each as a user names it
+      (`fitting.parameters.public_label`: `eta_s`, `striker_velocity_m_s[run1]`).
     - `values`, `stderr`: label -> value / standard error in SI units (stderr inf when the
       data cannot determine it).
     - `units`: label -> SI unit.
@@ -95,9 +97,10 @@ class FitResult:
         return [{name: model[part] for name, part in parts.items()} for parts in problem.residual_slices()]
 
     def to_json(self) -> dict:
-        """A JSON-ready dict (SI units; non-finite numbers as null)."""
+        """A JSON-ready dict (SI units; non-finite numbers as null; parameters by their public
+        names, `fitting.parameters.public_label`)."""
         params = {
-            label: {"value": json_ready(self.values[label]), "stderr": json_ready(self.stderr[label]),
+            public_label(label): {"value": json_ready(self.values[label]), "stderr": json_ready(self.stderr[label]),
                     "stderr_stated_noise": json_ready(self.stderr_stated_noise.get(label, self.stderr[label])),
                     "unit": self.units[label]}
             for label in self.labels
@@ -110,7 +113,7 @@ class FitResult:
         return {
             "params": params,
             "correlation": {
-                "names": list(self.labels),
+                "names": [public_label(label) for label in self.labels],
                 "matrix": [[json_ready(c) for c in row] for row in np.asarray(self.correlation)],
             },
             "covariance_scale": self.covariance_scale,
@@ -129,8 +132,8 @@ class FitResult:
             "n_steps": int(self.n_steps),
             "starts": [
                 {
-                    "start": {k: json_ready(v) for k, v in s["start"].items()},
-                    "final": {k: json_ready(v) for k, v in s["final"].items()},
+                    "start": {public_label(k): json_ready(v) for k, v in s["start"].items()},
+                    "final": {public_label(k): json_ready(v) for k, v in s["final"].items()},
                     "chi2": json_ready(s["chi2"]),
                     "converged": bool(s["converged"]),
                     "steps": int(s["steps"]),
@@ -144,7 +147,7 @@ class FitResult:
                 "condition_number": json_ready(self.identifiability["condition_number"]),
             },
             "profiles": {
-                label: {
+                public_label(label): {
                     "values": [json_ready(v) for v in p["values"]],
                     "delta_chi2": [json_ready(v) for v in p["delta_chi2"]],
                     "converged": [bool(v) for v in p["converged"]],

@@ -36,6 +36,17 @@ Kinds (what a value acts on):
 - `"extra"`: a value handed to a custom forward model in its `extras` dict (model
   switches for effects the core solver does not have; see `fitting.model.ForwardModel`).
 
+Names: each parameter has one name a user sees (`ParameterSpec.public_name`: command-line
+options, experiment files, `fit.json`, reports, plots), the unit-suffixed spelling of the
+`ChainSetup` field it sets (`eta_s`, `wall_youngs_pa`, `striker_velocity_m_s`,
+`precompression_n`, `bead_youngs_pa`, `bead_radius_m`, and `time_offset_s`); dimensionless
+ones keep theirs (`mu`, `mu_star`, `wall_poisson`, `gain`, `sensor_gain`), and so does `C`,
+the paper's symbol of the speed constant in $v = C F_m^{1/6}$, whose unit (m/s N^-1/6) no
+suffix spells readably (every output states it in its unit column). The registry keys
+(`ParameterSpec.name`: `eta`, `wall_youngs`, ...) are the internal names; `resolve_name`
+maps either spelling to the key (the short one, the previous public name, with a one-line
+`ParameterNameWarning`), `public_label` maps a key or an instance label to what a user sees.
+
 Add parameters with `register_parameter`.
 """
 
@@ -43,7 +54,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Callable
+import warnings
+from collections.abc import Callable
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -70,7 +82,9 @@ class ParameterSpec:
 
     **Fields:**
 
-    - `name`: the name used on the command line and in reports.
+    - `name`: the registry key, the name internal code uses (`eta`, `wall_youngs`).
+    - `public_name`: the one name a user sees and writes (command line, experiment files,
+      fit.json, reports): `eta_s`, `wall_youngs_pa` (default: `name`).
     - `unit`: SI unit of the value (`""` if dimensionless).
     - `scope`: `"global"`, `"experiment"` or `"channel"`.
     - `space`: `"log"` (positive values, optimised in log), `"asinh"` (non-negative values
@@ -102,8 +116,11 @@ class ParameterSpec:
     default: float = float("nan")
     description: str = ""
     stage: int = 0
+    public_name: str = ""
 
     def __post_init__(self):
+        if not self.public_name:
+            object.__setattr__(self, "public_name", self.name)
         if self.scope not in SCOPES:
             raise ValueError(f"ParameterSpec {self.name}: scope must be one of {SCOPES}.")
         if self.space not in SPACES:
@@ -188,17 +205,67 @@ def _read_wall_youngs(setup: ChainSetup) -> float:
 REGISTRY: dict[str, ParameterSpec] = {}
 
 
+# public name -> registry key, for the names that differ
+_KEY_OF_PUBLIC: dict[str, str] = {}
+
+
+class ParameterNameWarning(FutureWarning):
+    """A parameter written with its previous name (`eta` for `eta_s`): accepted for one
+    release; the message says the name to write."""
+
+
 def register_parameter(spec: ParameterSpec, *, replace: bool = False) -> ParameterSpec:
     """Add a parameter to the registry (e.g. the strength of a new model effect)."""
-    if spec.name in REGISTRY and not replace:
+    taken = spec.name in REGISTRY or spec.public_name in _KEY_OF_PUBLIC
+    if taken and not replace:
         raise ValueError(f"A parameter named {spec.name!r} is already registered.")
     REGISTRY[spec.name] = spec
+    if spec.public_name != spec.name:
+        _KEY_OF_PUBLIC[spec.public_name] = spec.name
     return spec
+
+
+def public_names() -> tuple[str, ...]:
+    """The names a user writes, one per registered parameter, in registry order."""
+    return tuple(spec.public_name for spec in REGISTRY.values())
+
+
+def resolve_name(name: str, *, where: str | None = None) -> str:
+    """The registry key of the parameter a user named `name`, written either way: its public
+    name (`wall_youngs_pa`) or its previous, short one (`wall_youngs`). `where` is the option
+    or file it was written in (`--fixed`): given, a previous name warns once, one line
+    (`ParameterNameWarning`), with the name to write. An unknown name raises a ValueError
+    listing the public names."""
+    if name in _KEY_OF_PUBLIC:
+        return _KEY_OF_PUBLIC[name]
+    if name not in REGISTRY:
+        raise ValueError(f"Unknown parameter {name!r}{f' in {where}' if where else ''}. "
+                         f"Fittable parameters: {', '.join(public_names())}.")
+    public = REGISTRY[name].public_name
+    if where is not None and public != name:
+        warnings.warn(f"{where}: {name!r} is now called {public!r}; write {public} (the old name is "
+                      "accepted until the next release).", ParameterNameWarning, stacklevel=2)
+    return name
+
+
+def resolve_label(label: str, *, where: str | None = None) -> str:
+    """`resolve_name` of a label's parameter, the instance kept: `striker_velocity_m_s[run1]`
+    -> `striker_velocity[run1]`."""
+    base, bracket, rest = label.partition("[")
+    return resolve_name(base.strip(), where=where) + bracket + rest
+
+
+def public_label(label: str) -> str:
+    """What a user sees for a registry key or instance label: `eta` -> `eta_s`,
+    `striker_velocity[run1]` -> `striker_velocity_m_s[run1]`; other names unchanged."""
+    base, bracket, rest = label.partition("[")
+    spec = REGISTRY.get(base)
+    return (spec.public_name if spec is not None else base) + bracket + rest
 
 
 for _spec in (
     ParameterSpec(
-        "eta", "s", "global", "asinh", 0.0, 1e-3, scale=1e-8, apply=_apply("eta"),
+        "eta", "s", "global", "asinh", 0.0, 1e-3, public_name="eta_s", scale=1e-8, apply=_apply("eta"),
         read=_read("eta"),
         description="viscoelastic time eta of F_v = eta kappa d(delta^3/2)/dt (s)",
     ),
@@ -219,7 +286,7 @@ for _spec in (
         description="thwarted-rotation friction, kappa* = (1+mu*) kappa (same physics as C)",
     ),
     ParameterSpec(
-        "wall_youngs", "Pa", "global", "log", 1e6, 1e13, apply=_apply("wall_youngs"),
+        "wall_youngs", "Pa", "global", "log", 1e6, 1e13, public_name="wall_youngs_pa", apply=_apply("wall_youngs"),
         read=_read_wall_youngs, description="Young's modulus of the wall (Pa)",
     ),
     ParameterSpec(
@@ -228,29 +295,29 @@ for _spec in (
         description="Poisson ratio of the wall",
     ),
     ParameterSpec(
-        "precompression", "N", "global", "asinh", 0.0, 1e4, scale=1e-3,
+        "precompression", "N", "global", "asinh", 0.0, 1e4, public_name="precompression_n", scale=1e-3,
         apply=_apply("precompression"),
         read=_read("precompression"), description="static preload pressing the chain (N)",
     ),
     ParameterSpec(
-        "bead_youngs", "Pa", "global", "log", 1e6, 1e13, apply=_apply("bead_youngs"),
+        "bead_youngs", "Pa", "global", "log", 1e6, 1e13, public_name="bead_youngs_pa", apply=_apply("bead_youngs"),
         read=_read("bead_youngs"),
         description="Young's modulus of the chain's beads (Pa; all beads scaled together, the "
         "striker keeps its own)",
     ),
     ParameterSpec(
-        "bead_radius", "m", "global", "log", 1e-5, 1.0, apply=_apply("bead_radius"),
+        "bead_radius", "m", "global", "log", 1e-5, 1.0, public_name="bead_radius_m", apply=_apply("bead_radius"),
         read=_read("bead_radius"),
         description="radius of the chain's beads (m; all beads scaled together at their density, "
         "so the mass follows R^3; the striker keeps its own)",
     ),
     ParameterSpec(
-        "striker_velocity", "m/s", "experiment", "log", 1e-4, 50.0,
+        "striker_velocity", "m/s", "experiment", "log", 1e-4, 50.0, public_name="striker_velocity_m_s",
         apply=_apply("striker_velocity"), read=_read("striker_velocity"),
         description="impact velocity of each file (m/s)",
     ),
     ParameterSpec(
-        "time_offset", "s", "experiment", "linear", -5e-5, 5e-5, kind="time_offset", scale=1e-6,
+        "time_offset", "s", "experiment", "linear", -5e-5, 5e-5, public_name="time_offset_s", kind="time_offset", scale=1e-6,
         default=0.0,
         description="trigger delay of each file: the data clock reads time_offset at the impact (s)",
     ),
@@ -271,32 +338,31 @@ EXCLUSIVE = ((("C", "mu_star"), "the same stiffness scale"), (("gain", "sensor_g
 
 
 def get_spec(name: str) -> ParameterSpec:
-    """The registered parameter `name`; an unknown name raises a ValueError listing all."""
-    if name not in REGISTRY:
-        raise ValueError(
-            f"Unknown parameter {name!r}. Fittable parameters: {', '.join(REGISTRY)}."
-        )
-    return REGISTRY[name]
+    """The registered parameter `name` (registry key or public name); an unknown name raises a
+    ValueError listing all."""
+    return REGISTRY[resolve_name(name)]
 
 
-def parse_parameter_list(text_or_names) -> tuple[str, ...]:
-    """Parse `"eta,mu,C"` (or a sequence of names) into checked, de-duplicated names."""
+def parse_parameter_list(text_or_names, *, where: str | None = None) -> tuple[str, ...]:
+    """Parse `"eta_s,mu,C"` (or a sequence of names, either spelling) into checked,
+    de-duplicated registry keys; `where` as in `resolve_name`."""
     if isinstance(text_or_names, str):
         names = [part.strip() for part in text_or_names.split(",") if part.strip()]
     else:
         names = [str(part).strip() for part in text_or_names]
     if not names:
-        raise ValueError("No parameters to fit: give at least one, e.g. eta,mu,C.")
+        raise ValueError(f"No parameters to fit{f' in {where}' if where else ''}: give at least one, "
+                         "e.g. eta_s,mu,C.")
     seen = []
-    for name in names:
-        get_spec(name)
+    for written in names:
+        name = resolve_name(written, where=where)
         if name not in seen:
             seen.append(name)
     for group, quantity in EXCLUSIVE:
         chosen = [name for name in group if name in seen]
         if len(chosen) > 1:
             raise ValueError(
-                f"Parameters {' and '.join(chosen)} describe {quantity}; fit only one."
+                f"Parameters {' and '.join(map(public_label, chosen))} describe {quantity}; fit only one."
             )
     return tuple(seen)
 

@@ -2,18 +2,19 @@
 
 A prior is written `name=VALUE`, with the parameter's unit and SI prefixes:
 
-- `bead_youngs=203GPa+-4GPa`: normal, centre 203 GPa, standard deviation 4 GPa;
-- `sensor_gain=+-2%`, `bead_radius=+-62.5um`: normal around the nominal value (the trace
+- `bead_youngs_pa=203GPa+-4GPa`: normal, centre 203 GPa, standard deviation 4 GPa;
+- `sensor_gain=+-2%`, `bead_radius_m=+-62.5um`: normal around the nominal value (the trace
   header's, or the parameter's default such as gain 1), absolute or relative width;
-- `eta=0..10us`: uniform on an interval (it narrows the parameter's bounds).
+- `eta_s=0..10us`: uniform on an interval (it narrows the parameter's bounds).
 
 Units: a width or bound written without a unit takes the unit written on the value beside
 it (`203GPa+-4` is 4 GPa, `0..10us` 0 to 10 us); where nothing beside it carries a unit, a
 bare number is SI (`203e9+-4e9`), except a width with no centre (`+-4`) of a parameter that
 has a unit: that is refused, the width must carry its unit (`+-4GPa`) or be relative (`+-2%`).
 
-`name` is a registry name (every instance of it: each file's striker velocity, each
-sensor's gain) or one instance's label (`striker_velocity[run1]`, `sensor_gain[wall]`).
+`name` is a parameter's name (every instance of it: each file's striker velocity, each
+sensor's gain) or one instance's label (`striker_velocity_m_s[run1]`, `sensor_gain[wall]`),
+written as `fitting.parameters.resolve_name` reads it (a previous name warns).
 A parameter with a prior is free: a tolerance is a statement that the value is not known
 exactly. A parameter without a prior has a flat prior on its registry bounds (positive
 where physics says so: moduli, C, gains; non-negative eta, mu).
@@ -34,7 +35,7 @@ import re
 
 from hertzchain.units import parse_quantity
 
-from .parameters import ParameterInstance, get_spec
+from .parameters import ParameterInstance, get_spec, public_label, resolve_label
 
 _UNIFORM = re.compile(r"^(.+?)\.\.(.+)$")
 # The prefix of the unit a lab writes tolerances in, for the examples of error messages.
@@ -51,7 +52,7 @@ class Prior:
 
     **Fields:**
 
-    - `key`: registry name (every instance) or an instance label.
+    - `key`: registry name (every instance) or an instance label (registry spelling).
     - `kind`: `"normal"` or `"uniform"`.
     - `centre`: centre of a normal (None: each instance's nominal value).
     - `sd`: absolute standard deviation of a normal, or None.
@@ -99,17 +100,19 @@ def _with_unit_of(text: str, other: str) -> str:
     return text + _written_unit(other) if text and not _written_unit(text) else text
 
 
-def parse_prior(text: str) -> Prior:
-    """Read `name=203GPa+-4GPa`, `name=+-2%`, `name=1+-0.02` or `name=0..10us`."""
+def parse_prior(text: str, *, source: str | None = None) -> Prior:
+    """Read `name=203GPa+-4GPa`, `name=+-2%`, `name=1+-0.02` or `name=0..10us`; `source`: the
+    option or file it was written in (`--prior`), named where a previous name warns."""
     if "=" not in text:
         raise PriorError(
             f"prior {text!r}: expected name=VALUE+-SD, name=+-SD%, or name=LOW..HIGH "
-            "(e.g. bead_youngs=203GPa+-4GPa, sensor_gain=+-2%)."
+            "(e.g. bead_youngs_pa=203GPa+-4GPa, sensor_gain=+-2%)."
         )
-    key, value = (part.strip() for part in text.split("=", 1))
+    written, value = (part.strip() for part in text.split("=", 1))
+    key = resolve_label(written, where=source)
     spec = get_spec(key.split("[", 1)[0])
     unit = spec.unit if spec.unit in ("s", "Pa", "N", "m/s", "m") else ""
-    where = f"prior {key}"
+    where = f"prior {public_label(key)}"
     uniform = _UNIFORM.match(value)
     if uniform:
         low_text, high_text = (v.strip() for v in uniform.groups())
@@ -133,7 +136,7 @@ def parse_prior(text: str) -> Prior:
     if centre_text:
         width_text = _with_unit_of(width_text, centre_text)
     elif unit and not _written_unit(width_text):
-        raise PriorError(f"{where}: the width {width_text!r} has no unit; write it with the unit of {key} "
+        raise PriorError(f"{where}: the width {width_text!r} has no unit; write it with the unit of {written} "
                          f"(e.g. +-{width_text}{_EXAMPLE_PREFIX.get(unit, '')}{unit}) or relative (+-2%).")
     sd = _value(width_text, unit, where)
     if not sd > 0:
@@ -141,13 +144,15 @@ def parse_prior(text: str) -> Prior:
     return Prior(key, "normal", centre=centre, sd=sd, text=text)
 
 
-def parse_priors(texts) -> tuple[Prior, ...]:
-    """Parse several priors; a parameter given twice is an error naming both."""
-    priors = tuple(p if isinstance(p, Prior) else parse_prior(p) for p in texts or ())
+def parse_priors(texts, *, source: str | None = None) -> tuple[Prior, ...]:
+    """Parse several priors (`source` as in `parse_prior`); a parameter given twice, in either
+    spelling, is an error naming both."""
+    priors = tuple(p if isinstance(p, Prior) else parse_prior(p, source=source) for p in texts or ())
     seen = {}
     for prior in priors:
         if prior.key in seen:
-            raise PriorError(f"two priors for {prior.key}: {seen[prior.key]!r} and {prior.text!r}; keep one.")
+            raise PriorError(f"two priors for {public_label(prior.key)}: {seen[prior.key]!r} and {prior.text!r}; "
+                             "keep one.")
         seen[prior.key] = prior.text
     return priors
 
@@ -176,8 +181,8 @@ def apply_priors(priors, instances, nominal) -> tuple[list[ParameterInstance], t
         matched = [i for i, inst in enumerate(instances) if _matches(prior, inst)]
         if not matched:
             raise PriorError(
-                f"prior {prior.key}: no fitted parameter has this name or label; "
-                f"fitted: {', '.join(inst.label for inst in instances)}."
+                f"prior {public_label(prior.key)}: no fitted parameter has this name or label; "
+                f"fitted: {', '.join(public_label(inst.label) for inst in instances)}."
             )
         for i in matched:
             inst = instances[i]
@@ -188,16 +193,16 @@ def apply_priors(priors, instances, nominal) -> tuple[list[ParameterInstance], t
             centre = prior.centre if prior.centre is not None else float(nominal[i])
             if not math.isfinite(centre):
                 raise PriorError(
-                    f"prior {prior.key}: {inst.label} has no nominal value; write the centre "
-                    f"(e.g. {prior.name}=VALUE+-SD)."
+                    f"prior {public_label(prior.key)}: {public_label(inst.label)} has no nominal value; write the centre "
+                    f"(e.g. {public_label(prior.name)}=VALUE+-SD)."
                 )
             sd = prior.sd if prior.sd is not None else abs(centre) * prior.relative_sd
             if not sd > 0:
-                raise PriorError(f"prior {prior.key}: a relative width around {centre:g} is zero; give it absolute.")
+                raise PriorError(f"prior {public_label(prior.key)}: a relative width around {centre:g} is zero; give it absolute.")
             if not inst.spec.in_bounds(centre):
                 raise PriorError(
-                    f"prior {prior.key}: centre {centre:g} {inst.spec.unit} is outside the bounds "
-                    f"({inst.spec.lower:g}, {inst.spec.upper:g}) of {inst.label}."
+                    f"prior {public_label(prior.key)}: centre {centre:g} {inst.spec.unit} is outside the bounds "
+                    f"({inst.spec.lower:g}, {inst.spec.upper:g}) of {public_label(inst.label)}."
                 )
             rows[i] = NormalRow(i, centre, sd)
     return instances, tuple(rows[i] for i in sorted(rows))
@@ -208,16 +213,16 @@ def _narrowed(spec, prior: Prior):
     if spec.space == "asinh":
         if low != 0:
             raise PriorError(
-                f"prior {prior.key}: {spec.name} may be zero, so its interval must start at 0 "
-                f"(write {spec.name}=0..{prior.high:g})."
+                f"prior {public_label(prior.key)}: {spec.public_name} may be zero, so its interval must start at 0 "
+                f"(write {spec.public_name}=0..{prior.high:g})."
             )
     elif not (spec.lower <= low and high <= spec.upper):
         raise PriorError(
-            f"prior {prior.key}: {low:g}..{high:g} is not inside the bounds "
-            f"({spec.lower:g}, {spec.upper:g}) of {spec.name}."
+            f"prior {public_label(prior.key)}: {low:g}..{high:g} is not inside the bounds "
+            f"({spec.lower:g}, {spec.upper:g}) of {spec.public_name}."
         )
     if high > spec.upper:
-        raise PriorError(f"prior {prior.key}: {high:g} is above the bound {spec.upper:g} of {spec.name}.")
+        raise PriorError(f"prior {public_label(prior.key)}: {high:g} is above the bound {spec.upper:g} of {spec.public_name}.")
     return dataclasses.replace(spec, lower=low, upper=high)
 
 

@@ -4,6 +4,9 @@
 
 - `fit.json`: everything in `FitResult.to_json()` (SI units).
 - `params.csv`: label, value, standard error, relative error, unit.
+
+Parameters are named as a user names them (`fitting.parameters.public_label`: `eta_s`,
+`wall_youngs_pa`, `striker_velocity_m_s[run1]`) in every file and figure.
 - `correlation.csv`: the correlation matrix (and `correlation.png` with `per_trace=True`).
 - `rms.csv`: residual RMS per file and channel (N and in units of the noise sigma).
 - `starts.csv`: every start of the multistart batch: chi^2, converged, steps, values.
@@ -24,12 +27,14 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from hertzchain.io.atomic import file_stem, save_figure, write_csv, write_json  # noqa: E402
-from hertzchain.units import column_name, display_unit, format_measured  # noqa: E402
-from hertzchain.native import kernel_record  # noqa: E402
+from hertzchain.io.atomic import file_stem, save_figure, write_csv, write_json
+from hertzchain.native import kernel_record
+from hertzchain.units import column_name, display_unit, format_measured
+
+from .parameters import public_label
 
 # Points per curve of the summary figure (min-max thinned, so peaks stay).
 SUMMARY_POINTS = 1500
@@ -53,6 +58,7 @@ def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = []
+    shown = [public_label(label) for label in result.labels]
 
     def table(name, header, rows):
         write_csv(out / name, header, ([_cell(v) for v in row] for row in rows))
@@ -64,7 +70,7 @@ def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False
         "params.csv",
         ["parameter", "value", "stderr", "relative_stderr", "unit"],
         [
-            [label, result.values[label], result.stderr[label],
+            [public_label(label), result.values[label], result.stderr[label],
              result.stderr[label] / abs(result.values[label]) if result.values[label] else math.nan,
              result.units[label]]
             for label in result.labels
@@ -77,8 +83,8 @@ def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False
     )
     table(
         "correlation.csv",
-        ["parameter"] + list(result.labels),
-        [[label] + list(row) for label, row in zip(result.labels, np.asarray(result.correlation))],
+        ["parameter"] + shown,
+        [[label] + list(row) for label, row in zip(shown, np.asarray(result.correlation))],
     )
     rows = []
     for experiment in result.problem.experiments:
@@ -92,7 +98,7 @@ def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False
     table(
         "starts.csv",
         ["start", "chi2", "converged", "steps", "agrees_with_best"]
-        + [f"start_{label}" for label in result.labels] + [f"final_{label}" for label in result.labels],
+        + [f"start_{label}" for label in shown] + [f"final_{label}" for label in shown],
         [
             [k, s["chi2"], s["converged"], s["steps"], s["agrees_with_best"]]
             + [s["start"][label] for label in result.labels]
@@ -114,8 +120,8 @@ def write_report(result, out_dir, *, plots: bool = True, per_trace: bool = False
         written.append(path)
     for label, profile in result.profiles.items():
         table(
-            f"profile_{file_stem(label)}.csv",
-            [column_name(label, result.units[label]), "delta_chi2", "converged"],
+            f"profile_{file_stem(public_label(label))}.csv",
+            [column_name(public_label(label), result.units[label]), "delta_chi2", "converged"],
             zip(profile["values"], profile["delta_chi2"], profile["converged"]),
         )
     if plots:
@@ -129,7 +135,7 @@ def _thinned(time, *curves, points: int = SUMMARY_POINTS):
     n = len(time)
     if n <= points:
         return (time,) + curves
-    block = int(math.ceil(2 * n / points))
+    block = math.ceil(2 * n / points)
     first = np.asarray(curves[0], dtype=float)
     rows = -(-n // block)
     # the last block is padded with its own last sample, which never displaces a true extreme
@@ -185,10 +191,11 @@ def _summary_figure(result, predictions, out: Path) -> Path:
 def _correlation_figure(result, out: Path) -> Path:
     """The fitted parameters' correlation matrix as an image."""
     p = len(result.labels)
+    shown = [public_label(label) for label in result.labels]
     figure, ax = plt.subplots(figsize=(1.2 + 0.5 * p, 1.0 + 0.5 * p))
     image = ax.imshow(np.asarray(result.correlation, dtype=float), vmin=-1, vmax=1, cmap="RdBu_r")
-    ax.set_xticks(range(p), result.labels, rotation=90, fontsize=7)
-    ax.set_yticks(range(p), result.labels, fontsize=7)
+    ax.set_xticks(range(p), shown, rotation=90, fontsize=7)
+    ax.set_yticks(range(p), shown, fontsize=7)
     figure.colorbar(image, ax=ax, label="correlation (dimensionless)")
     ax.set_title("parameter correlation")
     figure.tight_layout()
@@ -236,11 +243,11 @@ def _plots(result, predictions, out: Path, per_trace: bool) -> list[Path]:
         for level, name in ((1.0, "68 %"), (3.84, "95 %")):
             ax.axhline(level, ls="--", lw=0.8, color="0.4")
             ax.text(profile["values"][0], level, name, fontsize=7, va="bottom")
-        ax.set_xlabel(f"{label} ({display_unit(scale)})")
+        ax.set_xlabel(f"{public_label(label)} ({display_unit(scale)})")
         ax.set_ylabel("Δχ² / s² (dimensionless)")
-        ax.set_title(f"profile likelihood of {label}")
+        ax.set_title(f"profile likelihood of {public_label(label)}")
         figure.tight_layout()
-        path = out / f"profile_{file_stem(label)}.png"
+        path = out / f"profile_{file_stem(public_label(label))}.png"
         save_figure(figure, path, dpi=110)
         plt.close(figure)
         written.append(path)
@@ -261,7 +268,7 @@ def fitted_lines(result) -> list[str]:
     """One line per fitted value, `name = value ± σ unit` to the digits σ allows (human units:
     GPa, µs, MPa), then the speed constant C of the fitted chain where C is not fitted itself."""
     lines = [
-        f"  {label} = " + format_measured(result.values[label], result.stderr[label], result.units[label],
+        f"  {public_label(label)} = " + format_measured(result.values[label], result.stderr[label], result.units[label],
                                           why=_why_undetermined(result, label))
         for label in result.labels
     ]
@@ -273,8 +280,8 @@ def fitted_lines(result) -> list[str]:
 
 def summary_text(result) -> str:
     """A short plain-text table of the fitted values (for the terminal)."""
-    lines = [f"fit {'converged' if result.converged else 'did NOT converge'} in {result.n_steps} "
-             f"iterations; χ²/dof = {result.reduced_chi2:.4g} (covariance: {result.covariance_scale})"]
+    lines = [(f"fit {'converged' if result.converged else 'did NOT converge'} in {result.n_steps} "
+             f"iterations; χ²/dof = {result.reduced_chi2:.4g} (covariance: {result.covariance_scale})")]
     lines += fitted_lines(result)
     c = result.speed_constant
     lines.append(f"  continuum C_t (1+mu*)^(1/3) = {c['C_continuum']:.4g} {display_unit('m/s N^-1/6')}; "

@@ -304,21 +304,28 @@ def estimate_run_size(*, n_runs_in_memory: int, n_runs: int, n_bodies: int, n_ch
     return RunSize(samples + state + table, float(n_runs) * n_steps * n_bodies)
 
 
-def check_run_size(size: RunSize, *, confirm_option: str = "--yes", memory_bytes: int | None = None) -> None:
+# What a command that simulates a setup of its options can change to make a run smaller.
+_SMALLER_MEMORY = ("shorten --t-end, raise --sample-interval, record fewer --contacts or use fewer beads "
+                   "(a sweep: a smaller --chunk-size)")
+_SMALLER_STEPS = "shorten --t-end, use fewer beads or grid values"
+
+
+def check_run_size(size: RunSize, *, confirm_option: str = "--yes", memory_bytes: int | None = None,
+                   smaller: tuple[str, str] = (_SMALLER_MEMORY, _SMALLER_STEPS), what: str = "this run") -> None:
     """Raise `ValueError` (one line naming the option that changes it, or `confirm_option`)
-    when `size` needs more memory than is available or more than `MAX_BODY_STEPS`."""
+    when `size` needs more memory than is available or more than `MAX_BODY_STEPS`.
+    `smaller`: what the command's user can change to need less memory, and fewer steps;
+    `what`: the work the message speaks of."""
     available = available_memory_bytes() if memory_bytes is None else memory_bytes
     if available is not None and size.memory_bytes > available:
         raise ValueError(
-            f"this run needs about {size.memory_bytes / 2**30:.3g} GiB for its recorded samples, more than the "
-            f"{available / 2**30:.3g} GiB available: shorten --t-end, raise --sample-interval, record fewer "
-            f"--contacts or use fewer beads (a sweep: a smaller --chunk-size), or add {confirm_option}."
+            f"{what} needs about {size.memory_bytes / 2**30:.3g} GiB for its recorded samples, more than the "
+            f"{available / 2**30:.3g} GiB available: {smaller[0]}, or add {confirm_option}."
         )
     if size.body_steps > MAX_BODY_STEPS:
         raise ValueError(
-            f"this run takes {size.body_steps:.3g} bead-steps (steps x beads x runs), above the limit of "
-            f"{MAX_BODY_STEPS:.0e}: shorten --t-end, use fewer beads or grid values, or add {confirm_option} "
-            "to run it anyway."
+            f"{what} takes {size.body_steps:.3g} bead-steps (steps x beads x runs), above the limit of "
+            f"{MAX_BODY_STEPS:.0e}: {smaller[1]}, or add {confirm_option} to run it anyway."
         )
 
 

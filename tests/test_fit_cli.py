@@ -33,15 +33,15 @@ def trace_files(tmp_path_factory):
 def test_fit_command_writes_the_report(trace_files, tmp_path, capsys):
     paths, c_true = trace_files
     out = tmp_path / "fit"
-    code = main(["fit", *paths, "--params", "eta,mu,C", "--out", str(out), "--multistart", "2",
-                 "--profile", "eta", "--quiet", "--per-trace-plots"])
+    code = main(["fit", *paths, "--params", "eta_s,mu,C", "--out", str(out), "--multistart", "2",
+                 "--profile", "eta_s", "--quiet", "--per-trace-plots"])
     assert code == 0
     report = json.loads((out / "fit.json").read_text())
     params = report["params"]
-    truth = {"eta": TRUTH["eta"], "mu": TRUTH["mu"], "C": c_true}
+    truth = {"eta_s": TRUTH["eta"], "mu": TRUTH["mu"], "C": c_true}
     for name, value in truth.items():
         assert abs(params[name]["value"] - value) < 3 * params[name]["stderr"], name
-    assert report["correlation"]["names"] == ["eta", "mu", "C"]
+    assert report["correlation"]["names"] == ["eta_s", "mu", "C"]
     assert len(report["correlation"]["matrix"]) == 3
     assert set(report["residual_rms_n"]) == {"shot0", "shot1"}
     assert report["converged"] is True
@@ -49,7 +49,7 @@ def test_fit_command_writes_the_report(trace_files, tmp_path, capsys):
     assert report["covariance_scale"] == "noise" and "within" in report["covariance_reason"]
     low_band, high_band = report["noise_band_reduced_chi2"]
     assert low_band < report["reduced_chi2"] < high_band
-    assert report["profiles"]["eta"]["all_converged"] is True
+    assert report["profiles"]["eta_s"]["all_converged"] is True
     assert len(report["starts"]) == 2
     # the speed constant: discrete value and the continuum one, C_t (1+mu*)^(1/3)
     speed = report["speed_constant"]
@@ -60,26 +60,26 @@ def test_fit_command_writes_the_report(trace_files, tmp_path, capsys):
     c_0 = float(bare_speed_constant(setup))
     assert speed["C_continuum"] == pytest.approx(c_t * speed["C"] / c_0, rel=1e-9)
     assert speed["C_continuum"] == pytest.approx(198.92 * 1.01 ** (1 / 3), rel=2e-3)
-    low, high = report["profiles"]["eta"]["interval_95"]
+    low, high = report["profiles"]["eta_s"]["interval_95"]
     assert low < TRUTH["eta"] < high
     for name in ("params.csv", "correlation.csv", "rms.csv", "starts.csv", "residuals_shot0.csv",
-                 "overlay_shot0.png", "residuals_shot1.png", "correlation.png", "profile_eta.png",
+                 "overlay_shot0.png", "residuals_shot1.png", "correlation.png", "profile_eta_s.png",
                  "fit_summary.png"):
         assert (out / name).is_file(), name
     printed = capsys.readouterr().out
-    assert "eta" in printed and "converged" in printed
+    assert "eta_s = " in printed and "converged" in printed
 
 
 def test_fit_command_rejects_unknown_parameters(trace_files, capsys):
     paths, _ = trace_files
-    assert main(["fit", paths[0], "--params", "eta,viscosity"]) == 2
+    assert main(["fit", paths[0], "--params", "eta_s,viscosity"]) == 2
     error = capsys.readouterr().err
-    assert "Unknown parameter 'viscosity'" in error and "wall_youngs" in error
+    assert "Unknown parameter 'viscosity'" in error and "wall_youngs_pa" in error
 
 
 def test_fit_help_lists_the_parameters_not_the_effect_strengths(capsys):
     with pytest.raises(SystemExit):
         main(["fit", "--help"])
     text = capsys.readouterr().out
-    assert "wall_youngs" in text and "striker_velocity" in text
+    assert "wall_youngs_pa" in text and "striker_velocity_m_s" in text
     assert "dx_" not in text

@@ -34,7 +34,7 @@ def test_required_parameters_are_registered():
 
 
 def test_unknown_name_lists_the_valid_ones():
-    with pytest.raises(ValueError, match="Unknown parameter 'etaa'.*eta, mu, C"):
+    with pytest.raises(ValueError, match="Unknown parameter 'etaa'.*eta_s, mu, C"):
         parse_parameter_list("eta,etaa")
 
 

@@ -199,7 +199,7 @@ def test_a_noise_sigma_of_zero_in_a_header_is_refused(tmp_path):
 
 
 def test_fixed_values_outside_their_range_are_refused(trace, tmp_path, capsys):
-    _refused(["fit", trace, "--params", "eta,C", "--fixed", "mu=-1", "--out", str(tmp_path / "out"), "--quiet"],
+    _refused(["fit", trace, "--params", "eta_s,C", "--fixed", "mu=-1", "--out", str(tmp_path / "out"), "--quiet"],
              capsys, "fixed mu = -1 is outside its range (0 to 3)")
 
 

@@ -287,7 +287,7 @@ def test_command_line_posterior_is_strict_about_too_few_draws(brass_traces, tmp_
     path = tmp_path / "shot.csv"
     write_trace(path, brass_traces[1])
     out = tmp_path / "out"
-    base = ["fit", str(path), "--params", "eta", "--quiet", "--no-plots", "--out", str(out)]
+    base = ["fit", str(path), "--params", "eta_s", "--quiet", "--no-plots", "--out", str(out)]
     assert main(base + ["--posterior", "--covariance", "residual"]) == 2
     # 2 x 20 draws cannot reach an ESS of 400: a loud failure, exit 4 with --strict
     code = main(base + ["--posterior", "--chains", "2", "--warmup", "20", "--draws", "20", "--strict",
@@ -318,7 +318,7 @@ def test_command_line_posterior_splits_chains_over_the_cpu_cores(brass_traces, n
         write_trace(paths[-1], trace)
     out = tmp_path / "out"
     env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
-    command = [sys.executable, "-m", "hertzchain", "fit", *map(str, paths), "--params", "eta,C", "--quiet",
+    command = [sys.executable, "-m", "hertzchain", "fit", *map(str, paths), "--params", "eta_s,C", "--quiet",
                "--no-plots", "--out", str(out), "--posterior", "--chains", "2", "--warmup", "80",
                "--draws", "150", "--seed", "5"]
     proc = subprocess.run(command, capture_output=True, text=True, env=env, timeout=600)

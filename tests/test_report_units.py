@@ -56,9 +56,9 @@ def test_the_fit_summary_prints_significant_digits_and_no_nan():
         warnings=[],
     )
     lines = summary_text(result).splitlines()
-    assert lines[1] == "  eta = 2.000 ± 0.013 µs"
-    assert lines[2] == "  wall_youngs = 20.31 GPa (σ not determined: the data do not determine it)"
-    assert lines[3] == ("  striker_velocity[shot1] = 0.3001 m/s "
+    assert lines[1] == "  eta_s = 2.000 ± 0.013 µs"
+    assert lines[2] == "  wall_youngs_pa = 20.31 GPa (σ not determined: the data do not determine it)"
+    assert lines[3] == ("  striker_velocity_m_s[shot1] = 0.3001 m/s "
                         "(σ not determined: the covariance is not finite at this optimum)")
     assert lines[4] == "  C (discrete solitary wave) = 301.23 ± 0.46 m/s N^-1/6"
     assert "nan" not in summary_text(result) and "+-" not in summary_text(result)

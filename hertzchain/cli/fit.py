@@ -1,11 +1,14 @@
-"""`hertzchain fit FILE... --params eta,mu,C`: fit parameters to trace files.
+"""`hertzchain fit FILE... --params eta_s,mu,C`: fit parameters to trace files.
 
 The chain of each file is described by its header (see `hertzchain.io.tracefile`); the
 command fits the chosen parameters and writes `fit.json`, CSV tables and PNG plots
 (`fitting.report`) into `--out`, written as a whole: a temporary folder beside it replaces
 the previous run's folder when the command ends (`hertzchain.io.atomic.output_folder`).
 `--prior` (and an experiment file's `[prior]` table) states a lab's tolerances
-(`fitting.priors`): each frees its parameter and the optimum is the MAP point.
+(`fitting.priors`): each frees its parameter and the optimum is the MAP point. Parameters
+are named as everywhere a user sees them (`fitting.parameters.public_names`: `eta_s`,
+`wall_youngs_pa`, `striker_velocity_m_s[run1]`, `mu`, `C`); a previous short name (`eta`,
+`wall_youngs`) still works for one release, with a one-line warning.
 `--posterior` then samples the posterior by NUTS (`fitting.posterior`) and writes
 `posterior.json`, `posterior.nc`, `draws.csv`, `posterior_summary.md` and plots
 (`fitting.posterior_report`) beside the fit's files. Exit status: 0 converged, 3 not
@@ -29,26 +32,29 @@ import time
 import warnings
 from pathlib import Path
 
-from ..io.atomic import output_folder, write_json
-from ..units import parse_quantity
-
-from ..io.importer import experiment_priors
-
 from fitting.compilation_cache import enable_compilation_cache, jax_cache_on
 from fitting.data import load_experiments
 from fitting.effects import PREFIX as EFFECT_PREFIX
 from fitting.fit import FitWarning, fit
+from fitting.forward_model import time_step_s
 from fitting.model import STEPS_PER_CONTACT, ForwardModel
-from fitting.parameters import REGISTRY, get_spec, parse_parameter_list
+from fitting.parameters import build_instances, get_spec, parse_parameter_list, public_label, public_names, resolve_label
 from fitting.posterior import PosteriorWarning, sample_posterior
 from fitting.posterior_report import write_posterior_report
-from fitting.priors import parse_priors
+from fitting.priors import parse_priors, prior_names
 from fitting.report import summary_text, write_report
 from fitting.uncertainty import COVARIANCES
 
+from ..io.atomic import output_folder, write_json
+from ..timegrid import choose_time_grid
+from ..validation import RunSize, check_run_size, estimate_run_size
+from ..io.importer import experiment_priors
+from ..units import parse_quantity
+
 
 def _assignments(text: str | None, option: str) -> dict:
-    """Parse 'eta=2us,mu=0.19' into {name: SI value} (units by the parameter's unit)."""
+    """Parse 'eta_s=2us,mu=0.19' into {registry label: SI value} (units by the parameter's
+    unit; either spelling of a name, `fitting.parameters.resolve_label`)."""
     values = {}
     if not text:
         return values
@@ -57,11 +63,11 @@ def _assignments(text: str | None, option: str) -> dict:
             continue
         if "=" not in part:
             raise ValueError(f"{option}: expected name=value pairs, got {part!r}.")
-        name, value = (s.strip() for s in part.split("=", 1))
-        base = name.split("[", 1)[0]
-        spec = get_spec(base)
+        written, value = (s.strip() for s in part.split("=", 1))
+        name = resolve_label(written, where=option)
+        spec = get_spec(name.split("[", 1)[0])
         unit = spec.unit if spec.unit in ("s", "Pa", "N", "m/s") else ""
-        values[name] = parse_quantity(value, unit, name=f"{option} {name}")
+        values[name] = parse_quantity(value, unit, name=f"{option} {written}")
     return values
 
 
@@ -69,9 +75,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("files", nargs="+", metavar="FILE",
                         help="trace files (hertzchain-trace/1) or experiment files (.toml)")
     parser.add_argument(
-        "--params", default="eta,mu,C",
-        help="comma-separated parameters to fit [eta,mu,C]; valid: "
-        + ", ".join(name for name in REGISTRY if not name.startswith(EFFECT_PREFIX))
+        "--params", default="eta_s,mu,C",
+        help="comma-separated parameters to fit [eta_s,mu,C]; valid: "
+        + ", ".join(name for name in public_names() if not name.startswith(EFFECT_PREFIX))
         + ". A driven experiment (kind = \"driven\") with one [sweep]: linear_resonance_hz, precompression_n, "
         "damping_rate_per_s, drive_scale, eta_s [the first four]; one of [[measurement]] tables (bending, tongue, "
         "loop, scope) names its shared and per-run constants in its [fit] table instead (any positive "
@@ -80,9 +86,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="out/fit", help="output folder [out/fit]")
     parser.add_argument("--multistart", type=int, default=1, help="starts run as one batch [1]")
     parser.add_argument("--seed", type=int, default=0, help="seed of the spread starts [0]")
-    parser.add_argument("--profile", default="", help="parameters to profile, e.g. eta,mu")
-    parser.add_argument("--start", help="start values, e.g. eta=2us,mu=0.1 [from the data]")
-    parser.add_argument("--fixed", help="hold global parameters at values, e.g. mu=0.19,wall_youngs=5GPa")
+    parser.add_argument("--profile", default="", help="parameters to profile, e.g. eta_s,mu")
+    parser.add_argument("--start", help="start values, e.g. eta_s=2us,mu=0.1 [from the data]")
+    parser.add_argument("--fixed", help="hold global parameters at values, e.g. mu=0.19,wall_youngs_pa=5GPa")
     parser.add_argument("--channels", help="channels to fit, e.g. contact_6,wall [all]")
     parser.add_argument("--noise-std", help="noise sigma of every channel (N) [header, else estimated]")
     parser.add_argument(
@@ -97,8 +103,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--prior", action="append", default=[], metavar="NAME=VALUE",
-        help="a tolerance, e.g. bead_youngs=203GPa+-4GPa, sensor_gain=+-2%%, bead_radius=+-62.5um, "
-        "eta=0..10us (repeat the option; frees the parameter)",
+        help="a tolerance, e.g. bead_youngs_pa=203GPa+-4GPa, sensor_gain=+-2%%, bead_radius_m=+-62.5um, "
+        "eta_s=0..10us (repeat the option; frees the parameter)",
     )
     parser.add_argument("--posterior", action="store_true",
                         help="sample the posterior by NUTS after the fit (posterior.json, draws, plots)")
@@ -116,6 +122,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-compile-cache", action="store_true",
                         help="do not keep compiled code between runs (default: kept in $HERTZCHAIN_CACHE/jax, "
                         "~/.cache/hertzchain/jax; also off with HERTZCHAIN_NO_COMPILE_CACHE=1)")
+    parser.add_argument("--yes", action="store_true",
+                        help="fit even when one iteration (the model and its derivatives for every file and "
+                        "start) needs more memory than is available or more than 1e10 bead-steps")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     parser.add_argument("--data-dir", help="driven experiments (kind = \"driven\"): the folder their sweep files "
                         "are relative to")
@@ -139,6 +148,31 @@ def _check_counts(args) -> None:
             raise ValueError(f"--{option.replace('_', '-')} {getattr(args, option)}: give a positive integer.")
 
 
+def check_fit_size(experiments, n_free: int, *, multistart: int, steps_per_contact: int,
+                   memory_bytes: int | None = None) -> None:
+    """Refuse, before the first simulation, a fit whose one iteration cannot run here: every
+    file simulated at the fit's time step (`fitting.forward_model.time_step_s`) with
+    `n_free` forward-mode derivatives, for each of `multistart` starts at once; its recorded
+    channels (with their derivatives) must fit in the memory available (`memory_bytes`,
+    default the machine's) and its bead-steps stay below `validation.MAX_BODY_STEPS`
+    (`validation.check_run_size`). One line names the options that shrink it and `--yes`."""
+    memory, body_steps = 0.0, 0.0
+    for experiment in experiments:
+        setup = experiment.trace.setup()
+        times = experiment.time_s
+        interval = float(times[1] - times[0]) if len(times) > 1 else float(times[-1])
+        grid = choose_time_grid(setup, t_end_s=float(times[-1]), sample_interval_s=interval,
+                                dt_s=time_step_s(setup, interval, steps_per_contact=steps_per_contact))
+        size = estimate_run_size(n_runs_in_memory=multistart, n_runs=multistart,
+                                 n_bodies=setup.n_beads + 1 + len(setup.sensor_beads),
+                                 n_channels=len(experiment.channels) * (1 + n_free), n_samples=grid.n_samples,
+                                 n_steps=grid.n_steps * (1 + n_free))
+        memory, body_steps = memory + size.memory_bytes, body_steps + size.body_steps
+    check_run_size(RunSize(memory, body_steps), memory_bytes=memory_bytes, what="one iteration of this fit",
+                   smaller=("fit fewer files, --channels or a smaller --multistart",
+                            "fit fewer files or parameters, lower --steps-per-contact or --multistart"))
+
+
 def run(args: argparse.Namespace) -> int:
     began = time.perf_counter()
     enable_compilation_cache(not args.no_compile_cache)
@@ -149,7 +183,8 @@ def run(args: argparse.Namespace) -> int:
     forward = ForwardModel(steps_per_contact=args.steps_per_contact)
     noise = _noise_std_n(args.noise_std)
     # driven experiment files (lock-in sweeps of a driven chain) have their own fit
-    from .driven_experiments import is_driven_run, run_fit as run_driven_fit
+    from .driven_experiments import is_driven_run
+    from .driven_experiments import run_fit as run_driven_fit
 
     driven = is_driven_run(args.files, args.data_dir)
     with output_folder(args.out, "fit", "fit.json") as out:
@@ -160,15 +195,20 @@ def run(args: argparse.Namespace) -> int:
 
 def _fit(args, out: Path, began: float, forward: ForwardModel, noise: float | None) -> int:
     """The fit of trace files, written into `out` (the temporary of `--out`)."""
-    params = parse_parameter_list(args.params)
+    params = parse_parameter_list(args.params, where="--params")
     channels = tuple(c.strip() for c in args.channels.split(",") if c.strip()) if args.channels else None
     experiments = load_experiments(args.files, channels=channels, noise_std_n=noise)
     read = time.perf_counter()
-    profile = tuple(p.strip() for p in args.profile.split(",") if p.strip())
-    priors = parse_priors(list(experiment_priors(args.files)) + list(args.prior))
+    profile = tuple(resolve_label(p.strip(), where="--profile") for p in args.profile.split(",") if p.strip())
+    priors = parse_priors(parse_priors(experiment_priors(args.files), source="an experiment file's [prior]")
+                          + parse_priors(args.prior, source="--prior"))  # once more: one prior per parameter
     if args.posterior and args.covariance == "residual":
         raise ValueError("--posterior samples the likelihood of the stated noise; use --covariance auto or noise.")
-    print(f"fitting {', '.join(params)} to {len(experiments)} file(s) ...", flush=True)
+    if not args.yes:
+        free = build_instances(parse_parameter_list(params + prior_names(priors)), experiments)
+        check_fit_size(experiments, len(free),
+                       multistart=args.multistart, steps_per_contact=args.steps_per_contact)
+    print(f"fitting {', '.join(map(public_label, params))} to {len(experiments)} file(s) ...", flush=True)
     with warnings.catch_warnings():  # the summary below and fit.json carry every warning
         warnings.simplefilter("ignore", FitWarning)
         result = fit(

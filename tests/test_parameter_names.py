@@ -1,0 +1,128 @@
+"""One name per quantity: a fitted parameter is written and shown by its unit-suffixed name
+(`eta_s`, `wall_youngs_pa`), the previous short name still read, with a one-line warning."""
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from fitting.parameters import (
+    REGISTRY,
+    ParameterNameWarning,
+    parse_parameter_list,
+    public_label,
+    public_names,
+    resolve_label,
+    resolve_name,
+)
+from fitting.priors import PriorError, parse_priors
+from fitting.synthetic import synthetic_traces
+from hertzchain.chain import ChainSetup
+from hertzchain.cli import main
+from hertzchain.cli.warning_format import command_warnings
+from hertzchain.io.tracefile import write_trace
+from hertzchain.parameters import PARAMETERS
+
+WALL_PA = 20e9  # the hidden soft wall of the data below (the beads' header says nothing else)
+OLD_NAMES = ("eta", "wall_youngs", "striker_velocity", "precompression", "bead_youngs", "bead_radius",
+             "time_offset")
+
+
+def test_each_setup_parameter_is_named_as_the_setup_field_it_sets():
+    # the public name of a fitted setup quantity is the ChainSetup field its setter writes
+    fields = {"eta": "eta_s", "mu": "mu", "mu_star": "mu_star", "wall_youngs": "wall_youngs_pa",
+              "wall_poisson": "wall_poisson", "precompression": "precompression_n",
+              "bead_youngs": "bead_youngs_pa", "bead_radius": "bead_radius_m",
+              "striker_velocity": "striker_velocity_m_s"}
+    setup = ChainSetup(4)
+    for key, field in fields.items():
+        assert REGISTRY[key].public_name == field
+        changed = PARAMETERS[key].set(setup, 1.5 * float(np.atleast_1d(getattr(setup, field))[0]) + 0.1)
+        assert not np.allclose(np.asarray(getattr(changed, field)), np.asarray(getattr(setup, field))), key
+    assert REGISTRY["C"].public_name == "C" and REGISTRY["time_offset"].public_name == "time_offset_s"
+    assert not set(OLD_NAMES) & set(public_names())
+
+
+def test_both_spellings_resolve_and_only_the_old_one_warns_where_a_user_wrote_it():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert resolve_name("wall_youngs_pa", where="--params") == "wall_youngs"
+        assert resolve_name("wall_youngs") == "wall_youngs"  # internal use: silent
+        assert resolve_label("striker_velocity_m_s[run1]", where="--fixed") == "striker_velocity[run1]"
+    with pytest.warns(ParameterNameWarning) as caught:
+        assert parse_parameter_list("eta,mu,C", where="--params") == ("eta", "mu", "C")
+    assert len(caught) == 1
+    message = str(caught[0].message)
+    assert message == ("--params: 'eta' is now called 'eta_s'; write eta_s (the old name is accepted until the "
+                       "next release).")
+    assert parse_parameter_list("eta_s,eta,mu") == ("eta", "mu")
+    assert public_label("striker_velocity[run1]") == "striker_velocity_m_s[run1]"
+    assert public_label("gain[run1:wall]") == "gain[run1:wall]" and public_label("C") == "C"
+    with pytest.raises(ValueError, match=r"Unknown parameter 'eta_us' in --params\. Fittable parameters: "
+                                         r"eta_s, mu, C, mu_star, wall_youngs_pa"):
+        parse_parameter_list("eta_us", where="--params")
+
+
+def test_a_prior_in_either_spelling_is_the_same_prior_and_twice_is_refused():
+    new, = parse_priors(["bead_youngs_pa=203GPa+-4GPa"], source="--prior")
+    with pytest.warns(ParameterNameWarning, match="'bead_youngs' is now called 'bead_youngs_pa'"):
+        old, = parse_priors(["bead_youngs=203GPa+-4GPa"], source="--prior")
+    assert (new.key, new.centre, new.sd) == (old.key, old.centre, old.sd) == ("bead_youngs", 203e9, 4e9)
+    with pytest.raises(PriorError, match="two priors for eta_s"):
+        parse_priors(["eta=0..10us", "eta_s=0..5us"])
+
+
+@pytest.fixture(scope="module")
+def soft_wall_traces(tmp_path_factory):
+    """Two shots of a 6-bead chain on a 20 GPa wall (the default beads and striker), 0.3 % noise."""
+    folder = tmp_path_factory.mktemp("soft_wall")
+    setups = [ChainSetup(6, striker_velocity_m_s=v, eta_s=1e-6, mu=0.0, wall_youngs_pa=WALL_PA) for v in (0.2, 0.4)]
+    clean = synthetic_traces(setups, t_end_s=0.25e-3)
+    sigma = [0.003 * max(np.max(c) for c in trace.channels.values()) for trace in clean]
+    paths = []
+    for k, trace in enumerate(synthetic_traces(setups, t_end_s=0.25e-3, noise_std_n=sigma, seed=5)):
+        paths.append(tmp_path_factory.getbasetemp() / f"shot{k}.csv")
+        write_trace(paths[-1], trace)
+    return [str(p) for p in paths], folder
+
+
+def _fit(paths, out, params, fixed, start):
+    return main(["fit", *paths, "--params", params, "--fixed", fixed, "--start", start, "--out", str(out),
+                 "--quiet", "--no-plots"])
+
+
+def test_old_and_new_spellings_give_the_same_fit_and_the_report_speaks_the_new(soft_wall_traces, tmp_path, capsys):
+    paths, _ = soft_wall_traces
+    assert _fit(paths, tmp_path / "new", "wall_youngs_pa,mu", "eta_s=1us", "wall_youngs_pa=60GPa") == 0
+    new_out, new_err = capsys.readouterr()
+    assert "warning" not in new_err
+    with pytest.warns(ParameterNameWarning) as caught:
+        assert _fit(paths, tmp_path / "old", "wall_youngs,mu", "eta=1us", "wall_youngs=60GPa") == 0
+    capsys.readouterr()
+    # one warning per old name, naming the option it was written in; on the terminal one line each
+    assert [str(w.message).split(";")[0] for w in caught] == [
+        "--params: 'wall_youngs' is now called 'wall_youngs_pa'",
+        "--start: 'wall_youngs' is now called 'wall_youngs_pa'", "--fixed: 'eta' is now called 'eta_s'"]
+    with command_warnings("fit"):
+        line = warnings.formatwarning(caught[2].message, ParameterNameWarning, "fit.py", 1)
+    assert line == ("hertzchain fit: warning: --fixed: 'eta' is now called 'eta_s'; write eta_s (the old name is "
+                    "accepted until the next release).\n")
+    new = json.loads((tmp_path / "new" / "fit.json").read_text())
+    old = json.loads((tmp_path / "old" / "fit.json").read_text())
+    assert new["params"] == old["params"] and new["chi2"] == old["chi2"]
+    assert list(new["params"]) == ["wall_youngs_pa", "mu", "C"] and new["correlation"]["names"] == ["wall_youngs_pa", "mu"]
+    wall = new["params"]["wall_youngs_pa"]
+    assert new["converged"] and wall["unit"] == "Pa"
+    assert abs(wall["value"] - WALL_PA) < 3 * wall["stderr"] and wall["stderr"] < 0.05 * WALL_PA
+    assert set(new["starts"][0]["final"]) == {"wall_youngs_pa", "mu"}
+    # the terminal and the tables: the new names, the modulus in GPa with its sigma
+    line = next(text for text in new_out.splitlines() if text.strip().startswith("wall_youngs_pa = "))
+    assert line.strip().endswith("GPa") and " ± " in line
+    shown, sigma = (float(part.split()[0]) for part in line.split("=")[1].split("±"))
+    assert shown == pytest.approx(wall["value"] / 1e9, rel=0.01) and sigma == pytest.approx(wall["stderr"] / 1e9, rel=0.1)
+    table = (tmp_path / "new" / "params.csv").read_text()
+    starts = (tmp_path / "new" / "starts.csv").read_text().splitlines()[0]
+    assert table.splitlines()[1].startswith("wall_youngs_pa,") and "final_wall_youngs_pa" in starts
+    for text in (table, starts, json.dumps(new["params"]), new_out):
+        assert "wall_youngs," not in text and "'wall_youngs'" not in text
