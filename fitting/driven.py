@@ -19,7 +19,7 @@ sensed bead's RMS velocity at the drive frequency over whole periods. Its parame
 
 Residuals are (model - measured) / each curve's peak, over every frequency the experiment
 file does not exclude and every drive level, divided by `NOMINAL_SCALE` so that the
-optimiser's tolerance (`fitting.fit.least_squares`, Levenberg-Marquardt of optimistix) is in
+optimiser's tolerance (`fitting.least_squares`, Levenberg-Marquardt of optimistix) is in
 sensible units. Standard errors: the Gauss-Newton covariance scaled by the residual variance
 and inflated for the residuals' correlation along frequency: with $\\rho$ the lag-1
 autocorrelation of the residuals within each curve (pooled), the effective number of
@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 import time
 
 import equinox as eqx
@@ -41,9 +40,12 @@ import numpy as np
 
 from hertzchain.driven import DrivenChain, lockin_grid
 from hertzchain.driven.linear import frequency_response, normal_modes
+from hertzchain.native import kernel_record
+from hertzchain.peaks import frequency_response_peaks
+from hertzchain.progress import Progress
 
 from .driven_experiment import DrivenExperiment
-from .fit import least_squares
+from .least_squares import least_squares
 from .uncertainty import covariance_from_jacobian
 
 # Residuals (fractions of a curve's peak) are divided by this before the optimiser sees them,
@@ -74,7 +76,7 @@ class DrivenLayout:
     names: tuple
 
     @classmethod
-    def for_beads(cls, n_beads: int) -> "DrivenLayout":
+    def for_beads(cls, n_beads: int) -> DrivenLayout:
         if n_beads not in (1, 2):
             raise ValueError(f"n_beads = {n_beads}: driven fits parametrise the modes of one or two beads.")
         modes = ["linear_resonance_hz"] if n_beads == 1 else [f"linear_resonance_hz[{j}]" for j in (1, 2)]
@@ -133,18 +135,19 @@ def nominal_modes_hz(experiment: DrivenExperiment) -> np.ndarray:
 @dataclasses.dataclass
 class DrivenModel:
     """Residuals of one driven experiment and their Jacobian (the `model` of
-    `fitting.fit.least_squares`), on the fitted frequencies x all drive levels.
+    `fitting.least_squares`), on the fitted frequencies x all drive levels.
 
     `rows`: indices of the frequencies used (default: the file's fit mask), `levels`: the
     drive levels used (default all). Each evaluation is one batched `lockin_grid` run, and
     with the Jacobian one more that carries every column in forward mode (on the CPU both are
-    calls of the fused kernel, `hertzchain.driven.fused`).
+    calls of the fused kernel, `hertzchain.driven.fused`). `progress`: a
+    `hertzchain.progress.Progress` noting each linearisation's median misfit, or None.
     """
 
     experiment: DrivenExperiment
     rows: np.ndarray | None = None
     levels: np.ndarray | None = None
-    progress: bool = False
+    progress: Progress | None = None
 
     def __post_init__(self):
         check_layout(self.experiment)
@@ -158,7 +161,6 @@ class DrivenModel:
         self.frequencies = jnp.asarray(e.sweep.frequencies_hz[self.rows])
         self.drives = jnp.asarray(e.sweep.drive_amplitudes_m[self.levels])
         self.evaluations = 0
-        self.began = time.perf_counter()
 
     def clip(self, x) -> np.ndarray:
         return np.maximum(np.asarray(x, dtype=float), self.layout.lower())
@@ -179,18 +181,17 @@ class DrivenModel:
         r = ((np.asarray(value) - self.measured) / self.peaks).ravel() / NOMINAL_SCALE
         jac = (np.asarray(tangents) / self.peaks).reshape(len(columns), -1).T / NOMINAL_SCALE
         self.evaluations += 1
-        if self.progress:
+        if self.progress is not None:
             misfit = np.median(np.sqrt(np.mean((r.reshape(self.measured.shape) * NOMINAL_SCALE) ** 2, axis=0)))
-            print(f"  evaluation {self.evaluations}: median misfit {100 * misfit:.2f} % of peak, "
-                  f"{time.perf_counter() - self.began:.0f} s", file=sys.stderr, flush=True)
+            self.progress.note(f"evaluation {self.evaluations}: median misfit {100 * misfit:.2f} % of peak")
         return r, jac
 
 
 def _settings(experiment):
     m = experiment.model
-    return dict(bead=experiment.sensor_bead, quantity=experiment.quantity, harmonics=(1.0,),
-                ramp_periods=m["ramp_periods"], hold_periods=m["hold_periods"],
-                window_periods=m["window_periods"], steps_per_period=m["steps_per_period"])
+    return {"bead": experiment.sensor_bead, "quantity": experiment.quantity, "harmonics": (1.0,),
+                "ramp_periods": m["ramp_periods"], "hold_periods": m["hold_periods"],
+                "window_periods": m["window_periods"], "steps_per_period": m["steps_per_period"]}
 
 
 def _scale_index(experiment):
@@ -240,7 +241,10 @@ def linear_start(experiment: DrivenExperiment) -> np.ndarray:
     sweep = experiment.sweep
     f = sweep.frequencies_hz[experiment.fit_mask]  # the excluded frequencies left out
     curve = sweep.rms_velocity_m_s[experiment.fit_mask, 0]
-    modes = _curve_peaks(f, curve, experiment.n_beads)
+    try:
+        modes = frequency_response_peaks(f, curve, experiment.n_beads)
+    except ValueError as error:
+        raise ValueError(f"{experiment.path}: the lowest drive's curve: {error}") from None
     first = int(np.argmin(np.abs(f - modes[0])))
     half = curve[first] / math.sqrt(2)
     lo, hi = first, first
@@ -261,17 +265,6 @@ def linear_start(experiment: DrivenExperiment) -> np.ndarray:
     return x
 
 
-def _curve_peaks(frequencies, curve, count) -> np.ndarray:
-    """The `count` highest local maxima of a curve, ascending in frequency."""
-    from scipy.signal import find_peaks
-
-    peaks, props = find_peaks(curve, prominence=0.05 * curve.max())
-    if peaks.size < count:
-        raise ValueError(f"the lowest drive's curve shows {peaks.size} resonance peaks; the chain has {count} modes.")
-    best = peaks[np.argsort(props["prominences"])[-count:]]
-    return np.sort(frequencies[best])
-
-
 # --- results -----------------------------------------------------------------------------------
 def lag1_autocorrelation(residuals) -> float:
     """Pooled lag-1 autocorrelation of residuals (frequencies, levels) along frequency."""
@@ -282,10 +275,16 @@ def lag1_autocorrelation(residuals) -> float:
 
 @dataclasses.dataclass
 class DrivenFit:
-    """A fitted driven experiment: `labels`, `x` (p,), `stderr` (p,) (NaN where held),
-    `free` (indices fitted), `converged`, `steps`, `rho` (lag-1 correlation), `n_effective`,
-    `model_curves` and `measured` (F, A) m/s RMS on every frequency, `misfit` (A,) RMS of
-    (model - measured) over each curve's fitted frequencies / its peak, `elapsed_s`."""
+    """A fitted driven experiment, with the status keys of every fit (`fitting.fit_result.FitResult`'s).
+
+    **Fields:** `labels`, `x` (p,), `stderr` (p,) (NaN where held), `free` (indices fitted);
+    `converged` (the shared test of an optimum, `fitting.optimum`) and `message`; `steps`
+    (optimiser iterations, both grids); `chi2`, `dof`, `reduced_chi2` of the residuals the
+    optimiser saw (fractions of each curve's peak / `NOMINAL_SCALE`, every point); `rho` (their
+    lag-1 correlation along frequency), `n_effective`; `correlation` of the fitted columns;
+    `model_curves` (F, A) m/s RMS on every frequency; `misfit` (A,) RMS of (model - measured)
+    over each curve's fitted frequencies / its peak; `kernel` (`hertzchain.native.kernel_record`:
+    which kernel computed the curves); `elapsed_s`."""
 
     experiment: DrivenExperiment
     labels: tuple
@@ -293,12 +292,17 @@ class DrivenFit:
     stderr: np.ndarray
     free: list
     converged: bool
+    message: str
     steps: int
+    chi2: float
+    dof: int
+    reduced_chi2: float
     rho: float
     n_effective: float
     correlation: np.ndarray
     model_curves: np.ndarray
     misfit: np.ndarray
+    kernel: dict
     elapsed_s: float
 
 
@@ -310,13 +314,15 @@ def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "pr
     Starts from `x_start` (default: `linear_start`, then the best of `precompression_grid`
     (N) on the coarse grid, when the precompression is free). With 14 drive levels or
     more the fit runs first on a coarse grid (`COARSE_ROW_STRIDE`, `COARSE_LEVEL_STRIDE`),
-    then on every point from there. `max_steps` optimiser iterations per stage (the fitting
+    then on every point from there, by the shared least squares (`fitting.least_squares`) and
+    its test of an optimum. `max_steps` optimiser iterations per stage (the fitting
     commands' default, `--max-steps`); each costs one batched grid run and its forward-mode
     tangents. The two-bead sweep of `examples/lydon2015` takes 31 on the coarse grid and 64 on
     every point, where each step lowers chi^2 by under 1 % (30 stopped at chi^2 1713, the
-    optimum's is 1562).
+    optimum's is 1562). `progress`: notes on stderr (`hertzchain.progress.Progress`).
     """
     began = time.perf_counter()
+    report = Progress(None, "driven fit") if progress else None
     layout = DrivenLayout.for_beads(experiment.n_beads)
     for name in free:
         if name not in PARAMETERS:
@@ -324,11 +330,10 @@ def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "pr
     columns = [i for i, n in enumerate(layout.names) if n in free]
     x = linear_start(experiment) if x_start is None else np.array(x_start, dtype=float)
     if x_start is None and "precompression_n" in free:
-        x = scan_precompression(experiment, x, precompression_grid, progress=progress)
-    model = DrivenModel(experiment, progress=progress)
-    if progress:
-        print(f"fitting {', '.join(layout.labels[c] for c in columns)} to {model.measured.size} points ...",
-              file=sys.stderr, flush=True)
+        x = scan_precompression(experiment, x, precompression_grid, progress=report)
+    model = DrivenModel(experiment, progress=report)
+    if report is not None:
+        report.note(f"fitting {', '.join(layout.labels[c] for c in columns)} to {model.measured.size} points")
     # on every point, the optimiser stops when no step gains a third of a standard error: 0.1 in
     # chi^2 of independent points of unit variance is 0.1 s^2 (1 + rho)/(1 - rho) in chi^2 of these
     # residuals, which are fractions of each curve's peak (variance s^2: no noise level is known)
@@ -346,11 +351,11 @@ def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "pr
     # every point first (one linearisation), where the coarse grid's optimum would lead away
     if x_start is not None and least_squares(model, x, columns, max_steps=0, weights=every_point,
                                              tolerance=variance_and_tolerance(x)[1]).converged:
-        return finish_fit(model, x, columns, True, 0, began)
+        return finish_fit(model, x, columns, True, 0, max_steps, began)
     steps = 0
     if model.levels.size >= 2 * COARSE_LEVEL_STRIDE:  # first on a coarse grid: a twentieth of the cost
         coarse = DrivenModel(experiment, rows=model.rows[::COARSE_ROW_STRIDE], levels=model.levels[::COARSE_LEVEL_STRIDE],
-                             progress=progress)
+                             progress=report)
         first = least_squares(coarse, x, columns, max_steps=max_steps, extrapolate=True)
         x, steps = coarse.clip(first.x), first.steps
     variance = np.inf
@@ -361,12 +366,13 @@ def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "pr
         result = least_squares(model, x, columns, max_steps=max_steps, extrapolate=True, tolerance=tolerance,
                                weights=every_point)
         x, steps = model.clip(result.x), steps + result.steps
-    return finish_fit(model, x, columns, result.converged, steps, began)
+    return finish_fit(model, x, columns, result.converged, steps, max_steps, began)
 
 
-def scan_precompression(experiment, x, grid=None, *, progress=False) -> np.ndarray:
+def scan_precompression(experiment, x, grid=None, *, progress: Progress | None = None) -> np.ndarray:
     """`x` with the precompression set to the best of `grid` (N; default 12 values from 0.01 to
-    10 N), each scored on the coarse grid of `fit_driven` with the other parameters at `x`."""
+    10 N), each scored on the coarse grid of `fit_driven` with the other parameters at `x`;
+    `progress`: a `Progress` noting each value's chi^2, or None."""
     layout = DrivenLayout.for_beads(experiment.n_beads)
     grid = np.geomspace(0.01, 10.0, 12) if grid is None else np.asarray(grid, dtype=float)
     rows = np.nonzero(experiment.fit_mask)[0][::COARSE_ROW_STRIDE]
@@ -378,15 +384,16 @@ def scan_precompression(experiment, x, grid=None, *, progress=False) -> np.ndarr
         trial[layout.index("precompression_n")] = value
         r = model.residuals(trial)
         chi2 = float(r @ r)
-        if progress:
-            print(f"  start: F0 = {value:.3g} N, chi^2 = {chi2:.4g}", file=sys.stderr, flush=True)
+        if progress is not None:
+            progress.note(f"start: F0 = {value:.3g} N, chi^2 = {chi2:.4g}")
         if chi2 < best_chi2:
             best, best_chi2 = trial, chi2
     return best
 
 
-def finish_fit(model: DrivenModel, x, columns, converged, steps, began) -> DrivenFit:
-    """Standard errors (inflated for correlated residuals), curves on every frequency, misfits."""
+def finish_fit(model: DrivenModel, x, columns, converged, steps, max_steps, began) -> DrivenFit:
+    """Status, standard errors (inflated for correlated residuals), curves on every frequency,
+    misfits. `max_steps`: the limit the optimiser ran under (for the message)."""
     experiment = model.experiment
     x = model.clip(x)
     r, jac = model.linearize(x, columns)
@@ -396,7 +403,8 @@ def finish_fit(model: DrivenModel, x, columns, converged, steps, began) -> Drive
     rho = min(max(lag1_autocorrelation(resid), 0.0), 0.999)
     inflation = (1 + rho) / (1 - rho)
     labels = DrivenLayout.for_beads(experiment.n_beads).labels
-    cov = covariance_from_jacobian(jac, [labels[c] for c in columns], chi2=chi2 * inflation, dof=n - p,
+    dof = n - p
+    cov = covariance_from_jacobian(jac, [labels[c] for c in columns], chi2=chi2 * inflation, dof=dof,
                                    scale="residual")
     stderr = np.full(x.size, np.nan)
     stderr[columns] = cov.stderr
@@ -405,5 +413,9 @@ def finish_fit(model: DrivenModel, x, columns, converged, steps, began) -> Drive
     measured = experiment.sweep.rms_velocity_m_s
     fitted = experiment.fit_mask
     misfit = np.sqrt(np.mean((curves[fitted] - measured[fitted]) ** 2, axis=0)) / measured.max(axis=0)
-    return DrivenFit(experiment, labels, x, stderr, list(columns), bool(converged), int(steps), rho,
-                     n * (1 - rho) / (1 + rho), cov.correlation, curves, misfit, time.perf_counter() - began)
+    message = "converged" if converged else (
+        f"no optimum reached within {max_steps} steps per stage (chi^2 = {chi2:.6g} after {int(steps)} steps, "
+        "and a step still lowers it by more than the test's tolerance); raise --max-steps or fit fewer parameters.")
+    return DrivenFit(experiment, labels, x, stderr, list(columns), bool(converged), message, int(steps), chi2, dof,
+                     chi2 / dof if dof > 0 else math.nan, rho, n * (1 - rho) / (1 + rho), cov.correlation, curves,
+                     misfit, kernel_record(), time.perf_counter() - began)

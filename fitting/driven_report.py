@@ -3,12 +3,13 @@ and the measures of resonance bending both the report and the diagnosis quote (`
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
 
 from hertzchain.io.atomic import json_ready, save_figure, write_csv, write_json
-from hertzchain.native import kernel_record
+from hertzchain.peaks import frequency_response_peaks
 
 from .driven import UNITS, DrivenFit, DrivenLayout, chain_at, nominal_modes_hz
 
@@ -19,12 +20,10 @@ def mode_windows(experiment, n_modes: int) -> list[np.ndarray]:
     f = experiment.sweep.frequencies_hz
     if n_modes == 1:
         return [np.ones(f.size, bool)]
-    from .driven import _curve_peaks
-
     mask = experiment.fit_mask
-    peaks = _curve_peaks(f[mask], experiment.sweep.rms_velocity_m_s[mask, 0], n_modes)
+    peaks = frequency_response_peaks(f[mask], experiment.sweep.rms_velocity_m_s[mask, 0], n_modes)
     edges = np.concatenate([[-np.inf], 0.5 * (peaks[1:] + peaks[:-1]), [np.inf]])
-    return [(f > lo) & (f <= hi) for lo, hi in zip(edges[:-1], edges[1:])]
+    return [(f > lo) & (f <= hi) for lo, hi in itertools.pairwise(edges)]
 
 
 def bending(experiment, curves) -> list[dict]:
@@ -123,7 +122,12 @@ def report_data(result: DrivenFit, *, data_dir) -> dict:
         "excluded_hz": e.sweep.frequencies_hz[~e.fit_mask],
         "model_settings": e.model,
         "converged": result.converged,
-        "steps": result.steps,
+        "message": result.message,
+        "n_steps": result.steps,
+        "chi2": result.chi2,
+        "dof": result.dof,
+        "reduced_chi2": result.reduced_chi2,
+        "kernel": result.kernel,
         "elapsed_s": result.elapsed_s,
     }
 
@@ -134,7 +138,7 @@ def write_driven_report(result: DrivenFit, out_dir, *, data_dir, plots: bool = T
     out = Path(out_dir)
     e = result.experiment
     data = report_data(result, data_dir=data_dir)
-    write_json(out / "fit.json", json_ready({**data, "kernel": kernel_record()}))
+    write_json(out / "fit.json", json_ready(data))
     f = e.sweep.frequencies_hz
     measured = e.sweep.rms_velocity_m_s
     rows = [

@@ -7,6 +7,7 @@
 | the samples of the first pulse (windows, starting points) | `first_run` |
 | the first pulse of a measured, noisy trace | `measured_first_peak` |
 | every pulse of one trace, labelled in time order | `find_pulses` (noise level: `estimate_noise_std_n`) |
+| the resonances of a measured frequency response (a lock-in sweep's curve) | `frequency_response_peaks` |
 
 The simulated-trace finders are written in `jax.numpy` (batches along leading axes); the
 others work on concrete NumPy arrays (they decide how many samples or pulses there are).
@@ -15,6 +16,7 @@ others work on concrete NumPy arrays (they decide how many samples or pulses the
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import NamedTuple
 
@@ -51,7 +53,7 @@ def refine_peak(time_s, force_n, index=None):
     if index is None:
         index = jnp.argmax(force_n, axis=-1)
     index = jnp.clip(jnp.asarray(index), 1, n - 2)
-    take = lambda offset: jnp.take_along_axis(force_n, (index + offset)[..., None], axis=-1)[..., 0]  # noqa: E731
+    take = lambda offset: jnp.take_along_axis(force_n, (index + offset)[..., None], axis=-1)[..., 0]
     left, middle, right = take(-1), take(0), take(1)
     curvature = left - 2.0 * middle + right
     safe = jnp.where(curvature < 0.0, curvature, -1.0)
@@ -205,7 +207,7 @@ def find_pulses(time_s, force_n, *, channel="contact", min_fraction=0.05, noise_
         return []
     peaks = _merge_shallow(force, list(peaks), level)
     bounds = [int(np.argmax(force[: peaks[0]] >= level)) if peaks[0] > 0 else 0]
-    for a, b in zip(peaks[:-1], peaks[1:]):
+    for a, b in itertools.pairwise(peaks):
         bounds.append(int(a + np.argmin(force[a : b + 1])))
     after = force[peaks[-1] :] < level
     bounds.append(int(peaks[-1] + np.argmax(after)) if np.any(after) else len(force) - 1)
@@ -244,3 +246,30 @@ def _merge_shallow(force, peaks, level):
                 merged = True
                 break
     return np.asarray(peaks, dtype=int)
+
+
+# ----------------------------------------------------------------------------------------
+# Resonances of a frequency response
+
+# A local maximum of a frequency response counts as a resonance when it stands out of its
+# surroundings by this fraction of the curve's maximum (`frequency_response_peaks`).
+RESONANCE_PROMINENCE = 0.05
+
+
+def frequency_response_peaks(frequencies_hz, response, count: int, *,
+                             prominence_fraction: float = RESONANCE_PROMINENCE) -> np.ndarray:
+    """The frequencies (Hz, ascending) of the `count` most prominent local maxima of a
+    frequency response `response` (F,) sampled at `frequencies_hz` (F,) (any positive
+    quantity: a lock-in's RMS velocity, m/s), among those whose prominence is at least
+    `prominence_fraction` of the curve's maximum.
+
+    **Raises:** `ValueError` when fewer than `count` such peaks exist, naming how many."""
+    from scipy.signal import find_peaks
+
+    response = np.asarray(response, dtype=float)
+    peaks, props = find_peaks(response, prominence=prominence_fraction * response.max())
+    if peaks.size < count:
+        raise ValueError(f"the frequency response shows {peaks.size} resonance peaks standing out by "
+                         f"{100 * prominence_fraction:g} % of its maximum; {count} were expected (one per mode).")
+    best = peaks[np.argsort(props["prominences"])[-count:]]
+    return np.sort(np.asarray(frequencies_hz, dtype=float)[best])

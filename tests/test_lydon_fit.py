@@ -3,16 +3,20 @@ one-bead Hertz chain integrated by scipy's DOP853 with the same drive protocol (
 amplitude ramp, hold, lock-in over whole periods), demodulated here; and the experiment-file
 and command-line checks."""
 
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from hertzchain.driven.sweeper_files import LockinSweep
-
 from fitting.driven import DrivenLayout, fit_driven, lag1_autocorrelation
-from fitting.driven_experiment import DrivenExperiment, DrivenExperimentError, load_driven_experiment
+from fitting.driven_experiment import (
+    DrivenExperiment,
+    DrivenExperimentError,
+    load_driven_experiment,
+)
+from hertzchain.driven.sweeper_files import LockinSweep
 
 RAMP, HOLD, WINDOW = 12, 28, 4
 
@@ -22,7 +26,6 @@ def _scipy_lockin(mass_kg, kappa, precompression_n, gamma, frequencies_hz, drive
     (contacts kappa[0], kappa[1], Hertz, separable), every (f, a) run integrated at once."""
     f = np.repeat(frequencies_hz, drives_m.size)
     a = np.tile(drives_m, frequencies_hz.size)
-    w = 2 * np.pi * f
     delta0 = (precompression_n / np.asarray(kappa)) ** (2 / 3)
     runs = f.size
     periods = RAMP + HOLD
@@ -177,19 +180,24 @@ def test_experiment_file_needs_the_data_dir(tmp_path):
         load_driven_experiment(_write(tmp_path, GOOD), None)
 
 
+def _driven_and_trace_files(tmp_path):
+    """(a driven experiment file, its data folder, a trace file) for the command-line checks."""
+    data = tmp_path / "data"
+    data.mkdir()
+    rows = ["Frequency (Hz)\t0.001V"] + [f"{3000 + 5 * i}\t1e-3" for i in range(20)]
+    (data / "run Signal Amplitude_02013Jul3_10h29m15s.txt").write_text("\n".join(rows) + "\n")
+    trace = tmp_path / "trace.csv"
+    trace.write_text("# format = hertzchain-trace/1\ntime_s,wall\n0,0\n")
+    return _write(tmp_path, GOOD), data, trace
+
+
 def test_command_line_refuses_what_a_driven_fit_cannot_use(tmp_path, capsys):
     """`hertzchain fit/diagnose` dispatch on the file's kind; trace-fit options given for a
     driven file, a driven file mixed with a trace file, and --data-dir for trace files are
     refused by name (exit status 2), nothing silently dropped."""
     from hertzchain.cli import main
 
-    data = tmp_path / "data"
-    data.mkdir()
-    rows = ["Frequency (Hz)\t0.001V"] + [f"{3000 + 5 * i}\t1e-3" for i in range(20)]
-    (data / "run Signal Amplitude_02013Jul3_10h29m15s.txt").write_text("\n".join(rows) + "\n")
-    toml = _write(tmp_path, GOOD)
-    trace = tmp_path / "trace.csv"
-    trace.write_text("# format = hertzchain-trace/1\ntime_s,wall\n0,0\n")
+    toml, data, trace = _driven_and_trace_files(tmp_path)
     cases = [
         (["fit", str(toml), "--data-dir", str(data), "--posterior"], "--posterior"),
         (["fit", str(toml), "--data-dir", str(data), "--params", "eta"], "not driven parameters"),
@@ -203,97 +211,68 @@ def test_command_line_refuses_what_a_driven_fit_cannot_use(tmp_path, capsys):
         assert message in capsys.readouterr().err, argv
 
 
-def test_diagnosis_names_what_a_scipy_simulated_bead_hides():
-    """The driven diagnosis (`fitting.driven_diagnosis`) on the scipy bead above: its contacts
-    are 2.6 kHz at F0 = 0.1 N where the file says Hertz 1e10 N/m^1.5 at 1 N (3.4 kHz), and the
-    drive is 1.15 x its calibration; there is no contact loss. It must name the contacts and
-    preload first, then the drive calibration (whose fit must leave the valley where the first
-    round's stiffness and preload compensated it: measured 13.2 % -> 0.4 % of a peak), and not
-    the Kuwabara-Kono loss, with the resonance, damping and drive scale near the truth. The
-    precompression is not asserted: with these drives the bead bends the resonance by less
-    than a frequency bin, and the diagnosis's short fits (25 steps on the lock-in grid) leave it
-    where the curves no longer tell (`fit_driven` recovers it, the test above)."""
-    from fitting.driven_diagnosis import diagnose_driven
-
-    mass, f_lin, f0, gamma, scale = 0.015, 2600.0, 0.1, 1200.0, 1.15
-    k_each = mass * (2 * np.pi * f_lin) ** 2 / 2
-    kappa = np.full(2, (k_each / (1.5 * f0 ** (1 / 3))) ** 1.5)
-    frequencies = np.linspace(2200.0, 2850.0, 40)
-    drives = np.array([0.5e-9, 2.0e-9, 4.0e-9])
-    experiment = _experiment(mass, frequencies, drives, _scipy_lockin(mass, kappa, f0, gamma, frequencies,
-                                                                       scale * drives))
-    result = diagnose_driven(experiment, level_stride=1, progress=False)
-    assert result["missing_effects"] == ["contact_stiffness_and_preload", "drive_calibration"]
-    first, second = result["steps"][:2]
-    assert first["share_of_chi2_removed"] > 0.9 and second["share_of_chi2_removed"] > 0.9
-    assert not result["steps"][2]["accepted"]
-    final = second["after"]["x"]
-    assert final["linear_resonance_hz"] == pytest.approx(f_lin, rel=3e-3)
-    assert final["damping_rate_per_s"] == pytest.approx(gamma, rel=2e-2)
-    assert final["drive_scale"] == pytest.approx(scale, rel=1e-2)
-    assert second["after"]["gap_median"] < 0.01
+def _candidate(name, *, held_out, median, converged=True, tongue_tip=None):
+    """A `fit_candidate` result with the numbers the verdict and the conclusion read (no
+    simulation): bending measures, the held-out levels' misfit, optionally a tongue tip."""
+    entry = {"name": name, "mechanism": f"the law {name}", "converged": converged, "steps": 7,
+             "bending": {"misfit_median": median, "shift": -0.06, "measured_shift": -0.074, "peak_ratio": 0.88,
+                         "measured_peak_ratio": 0.70, "held_out_misfit_median": held_out, "held_out_levels": 4}}
+    if tongue_tip is not None:
+        entry["tongue"] = {"amplitude_gap_log": math.log(tongue_tip), "frequency_gap": 0.01}
+    return entry
 
 
-def _diagnosis_result(measured_ratio, step_ratios, precompression_after_n, model_ratio, probe_ratio):
-    """A `diagnose_driven` result with the numbers the conclusion reads (no simulation): one
-    step freeing the contacts, its top-over-lowest peak-per-drive ratio going
-    step_ratios[0] -> step_ratios[1]; the file's precompression 3 N."""
-    nominal = {"x": {"linear_resonance_hz": 3000.0, "precompression_n": 3.0, "eta_s": 0.0},
-               "gap_median": 0.2, "shift": [0.0], "peak_per_drive_top_over_lowest": [step_ratios[0]]}
-    after = {"x": {"linear_resonance_hz": 2500.0, "precompression_n": precompression_after_n, "eta_s": 0.0},
-             "gap_median": 0.05, "shift": [-0.05], "peak_per_drive_top_over_lowest": [step_ratios[1]]}
-    step = {"effect": "contact_stiffness_and_preload", "parameters": ["linear_resonance_hz", "precompression_n"],
-            "accepted": True, "share_of_chi2_removed": 0.8, "gap_before": 0.2, "gap_after": 0.05,
-            "before": nominal, "after": after, "converged": True}
-    final = dict(after, peak_per_drive_top_over_lowest=[model_ratio])
-    return {"nominal": nominal, "steps": [step], "final": final, "eta_on_final": None,
-            "converged": True, "unconverged_fits": [],
-            "eta_probe": {"x": {"eta_s": 1e-6}, "peak_per_drive_top_over_lowest": [probe_ratio]},
-            "contact_opening": {"static_overlap_m": 50e-9, "bead_amplitude_at_top_drive_peak_m": 110e-9},
-            "measured": {"shift": [-0.06], "peak_per_drive_top_over_lowest": [measured_ratio]}}
+def test_driven_diagnosis_conclusion_says_what_each_candidate_explains_in_numbers():
+    """The conclusion of the candidate protocol (`fitting.driven_diagnosis.finished`) on hand-made
+    entries: the named candidate and why, every candidate's measurements with their numbers
+    and targets, measurements the experiment does not hold left out (a bending-only file has
+    no tongue), and an unconverged fit and a failed one named, `converged` False."""
+    from fitting.driven_candidates import verdict
+    from fitting.driven_diagnosis import finished
+
+    entries = [_candidate("hertz_viscous", held_out=0.10, median=0.05),
+               _candidate("fits_better", held_out=0.095, median=0.01),
+               _candidate("predicts", held_out=0.02, median=0.04, converged=False)]
+    result = {"experiment": "e.toml", "candidates": entries, "verdict": verdict(entries), "elapsed_s": 1.0,
+              "failed": [{"name": "rough_contact", "mechanism": "asperities", "error": "kappa must be > 0"}]}
+    done = finished(result, ["bending"], {"held_out_levels": 4, "level_stride": 4, "max_steps": 20})
+    text = done["conclusion"]
+    assert "Named: predicts (closest to the data on the predicted measurements: predicts)" in text
+    assert "the bending run's top 4 drive levels." in text
+    line = next(t for t in text.splitlines() if t.startswith("predicts "))
+    assert "NOT CONVERGED after 7 steps" in line
+    assert "explains held-out drive levels' misfit (median, predicted) 2.00 % of each curve's peak (target <= 3 %)" \
+        in line
+    assert "Does not explain bending misfit (median over drive levels) 4.00 % of each curve's peak (target <= 3 %)" \
+        in line and "peak velocity per nm of drive, top over lowest 0.880 (target within 0.07" in line
+    assert "Better than the base on: held_out_bending_misfit" in line
+    assert "tongue" not in text.split("drive levels.", 1)[1]  # no tongue in the file: not listed as missed
+    assert not done["converged"]
+    assert done["unconverged_fits"] == ["the fit of predicts (7 steps)",
+                                        "the fit of rough_contact (stopped: kappa must be > 0)"]
+    assert text.splitlines()[-1].startswith("NOT CONVERGED: the fit of predicts (7 steps); the fit of rough_contact")
+    # a tongue the experiment holds and a candidate predicts no period doubling for: said so
+    entries = [_candidate("hertz_viscous", held_out=0.10, median=0.05, tongue_tip=0.31)]
+    entries[0]["tongue"]["amplitude_gap_log"] = None
+    result = {"experiment": "e.toml", "candidates": entries, "verdict": verdict(entries), "elapsed_s": 1.0,
+              "failed": []}
+    text = finished(result, ["bending", "tongue"], {"held_out_levels": 4})["conclusion"]
+    assert "No mechanism named" in text
+    assert "tongue tip amplitude, model / data: none predicted" in text
 
 
-def test_diagnosis_conclusion_states_the_datas_direction_and_values_far_from_the_file():
-    """The conclusion names a fitted constant 10 times or more from the file's value with both
-    values, a step that moves the amplitude dependence away from the data, and says which way
-    the measured response per nm of drive goes: a gain (ratio > 1) is not called a loss."""
-    from fitting.driven_diagnosis import FAR_FROM_FILE, conclusion
+def test_driven_diagnosis_options_are_refused_where_they_do_not_apply(tmp_path, capsys):
+    """`hertzchain diagnose` on a driven file refuses the trace diagnosis's options and an unknown
+    candidate law by name; on trace files it refuses the driven protocol's knobs (exit 2)."""
+    from hertzchain.cli import main
 
-    # data whose response per nm grows with the drive (Lydon's two beads: 1.13); the step takes
-    # the preload to 8.7e5 times the file's and the ratio from 1.00 to 0.76
-    text = conclusion(_diagnosis_result(1.13, (1.0, 0.76), 2.6e6, 0.70, 0.78))
-    assert "precompression_n = 2.6e+06 is 8.7e+05 times the file's 3" in text
-    assert "linear_resonance_hz = 2500 is" not in text  # 0.83 times the file's: not named
-    assert "from 1.00 to 0.76, away from the measured 1.13" in text
-    assert "0.70 in the final model (it falls with the drive) against 1.13 measured (it grows)" in text
-    assert "measured loss" not in text and "needs another mechanism" not in text
-    assert "contacts open for part of each cycle, while the measured response per nm of drive grows" in text
-    # a loss in the data (the single bead: 0.70) that contact damping pushes away from
-    text = conclusion(_diagnosis_result(0.70, (1.0, 0.88), 3.0 / (FAR_FROM_FILE * 1.01), 0.88, 0.92))
-    assert "is 0.099 times the file's 3" in text
-    assert "away from the measured" not in text  # 1.00 -> 0.88 goes towards 0.70
-    assert "(it falls)" in text and "needs another mechanism" in text
-    # a preload just inside the factor is not named; an explained dependence says so
-    text = conclusion(_diagnosis_result(0.90, (1.0, 0.91), 3.0 / (0.99 * FAR_FROM_FILE), 0.91, 0.95))
-    assert "Far from the file" not in text
-    assert text.splitlines()[-1].startswith("The amplitude dependence of the response is explained")
-    # a preload fitted to zero is 0 times the file's, not of the other sign
-    text = conclusion(_diagnosis_result(0.90, (1.0, 0.91), 0.0, 0.91, 0.95))
-    assert "precompression_n = 0 is 0 times the file's 3" in text and "other sign" not in text
-
-
-def test_diagnosis_conclusion_names_a_step_whose_fit_reached_no_optimum():
-    """A named step on a fit without an optimum is named so (its share a lower bound, the naming
-    standing), and the conclusion ends the steps with the unconverged fits; converged ones are
-    not mentioned."""
-    from fitting.driven_diagnosis import conclusion
-
-    result = _diagnosis_result(0.90, (1.0, 0.91), 3.0, 0.91, 0.95)
-    assert "converge" not in conclusion(result) and "optimum" not in conclusion(result)
-    result["steps"][0]["converged"] = False
-    result["converged"], result["unconverged_fits"] = False, ["the fit of contact_stiffness_and_preload"]
-    text = conclusion(result)
-    assert ("contact_stiffness_and_preload (linear_resonance_hz, precompression_n): named on a fit that reached no "
-            "optimum within the step limit (judged at its last iterate: the share removed is a lower bound, the "
-            "naming stands); it removes 80 %") in text
-    assert "NOT CONVERGED: the fit of contact_stiffness_and_preload reached no optimum" in text
+    toml, data, trace = _driven_and_trace_files(tmp_path)
+    cases = [
+        (["diagnose", str(toml), "--data-dir", str(data), "--min-share", "0.5"], "--min-share"),
+        (["diagnose", str(toml), "--data-dir", str(data), "--candidates", "magic"], "not driven candidate laws"),
+        (["diagnose", str(toml), "--data-dir", str(data), "--held-out-levels", "0"], "--held-out-levels 0"),
+        (["diagnose", str(trace), "--level-stride", "2"], "--level-stride: not available for trace files"),
+    ]
+    for argv, message in cases:
+        assert main(argv + ["--out", str(tmp_path / "out")]) == 2, argv
+        assert message in capsys.readouterr().err, argv

@@ -26,3 +26,18 @@ def test_first_run_bounds_the_first_pulse_only():
     # above 0.1 x max (0.2 is not above 0.2): the first run is samples 2..3, peak at 2
     assert peaks.first_run(values, 0.1) == (2, 4, 2)
     assert peaks.first_run(values, 1.0) is None
+
+
+def test_frequency_response_peaks_are_the_modes_of_two_oscillators():
+    """The response of two damped modes (2.1 and 4.97 kHz, velocity |w/(w_k^2 - w^2 + i g w)|, whose
+    maximum is at w_k)
+    sampled every 5 Hz: the two peaks within a bin of the modes' damped maxima, ascending; a
+    third asked for is refused naming how many there are."""
+    f = np.arange(1500.0, 6000.0, 5.0)
+    w = 2 * np.pi * f
+    modes, damping = 2 * np.pi * np.array([2100.0, 4970.0]), 700.0
+    response = sum(np.abs(w * 1e9 / (m**2 - w**2 + 1j * damping * w)) for m in modes)
+    found = peaks.frequency_response_peaks(f, response, 2)
+    np.testing.assert_allclose(found, [2100.0, 4970.0], atol=5.0)
+    with pytest.raises(ValueError, match="shows 2 resonance peaks"):
+        peaks.frequency_response_peaks(f, response, 3)

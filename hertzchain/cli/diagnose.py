@@ -1,6 +1,13 @@
 """`hertzchain diagnose FILE... [--model base] [--out DIR (default out/diagnose)]`: find, name and add the effects a
 chain model is missing (see `fitting.diagnosis`).
 
+A driven experiment file (`kind = "driven"`: a bending `[sweep]`, or `[[measurement]]` tables of
+bending, tongue, loop and scope runs; `docs/how-to/driven-measurements.md`) runs the candidate-law
+protocol instead (`fitting.driven_diagnosis`): each candidate law fitted on the bending run, named
+only where it predicts a measurement it was not fitted on (the held-out top drive levels, the
+tongue's tip, the loop's onset) better than the base. `--candidates` names driven candidates
+there; `--held-out-levels`, `--level-stride` and `--max-steps` are its cost knobs.
+
 Writes `DIR/diagnosis.json` (`missing_effects` in the order found, `steps` with
 `gap_before`/`gap_after`, `converged` and `unconverged_fits`), `diagnosis.md`, `gaps.csv`,
 `gap.png` and overlay PNGs; the folder is written as a whole and replaces the previous run's
@@ -12,13 +19,18 @@ from __future__ import annotations
 
 import argparse
 import sys
-
 from pathlib import Path
 
+from fitting.driven_candidates import CANDIDATES, SLOW_CANDIDATES
+from fitting.driven_diagnosis import (
+    DEFAULT_HELD_OUT_LEVELS,
+    DEFAULT_LEVEL_STRIDE,
+    DEFAULT_MAX_STEPS,
+)
 from fitting.effects import EFFECT_NAMES
 from fitting.model import STEPS_PER_CONTACT, ForwardModel
-from ..io.atomic import output_folder
 
+from ..io.atomic import output_folder
 from .errors import EXIT_NOT_CONVERGED, exit_codes_epilog
 
 
@@ -28,7 +40,7 @@ def _names(text: str) -> list[str]:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.epilog = exit_codes_epilog("a fit the result rests on (a named effect's refit, the fit adding it, "
-                                      "the final fit; for driven files a named effect's fit) reached no optimum")
+                                      "the final fit; for driven files a candidate law's fit) reached no optimum")
     parser.add_argument("files", nargs="+", metavar="FILE",
                         help="trace files (hertzchain-trace/1) or experiment files (.toml)")
     parser.add_argument("--model", default="base",
@@ -39,7 +51,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--nuisances", default="striker_velocity,time_offset",
                         help="per-file/per-channel nuisances (default striker_velocity,time_offset; add gain "
                         "for uncalibrated channels)")
-    parser.add_argument("--candidates", default="", help="effects to consider (default: all)")
+    parser.add_argument("--candidates", default="",
+                        help="effects to consider (default: all); driven files: candidate laws, of "
+                        f"{', '.join(c.name for c in CANDIDATES + SLOW_CANDIDATES)} (default: all but "
+                        f"{', '.join(c.name for c in SLOW_CANDIDATES)}, whose sliders run the slow JAX kernel)")
     parser.add_argument("--channels", default="", help="channels to use (default: all of each file)")
     parser.add_argument("--max-effects", type=int, default=3, help="most effects to add (default 3)")
     parser.add_argument("--min-share", type=float, default=0.2,
@@ -50,6 +65,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
     parser.add_argument("--data-dir", help="driven experiments (kind = \"driven\"): the folder their sweep files "
                         "are relative to")
+    parser.add_argument("--held-out-levels", type=int, default=DEFAULT_HELD_OUT_LEVELS,
+                        help="driven files: the bending run's top drive levels each candidate is not fitted on "
+                        f"and predicts (default {DEFAULT_HELD_OUT_LEVELS}; at least 1)")
+    parser.add_argument("--level-stride", type=int, default=DEFAULT_LEVEL_STRIDE,
+                        help="driven files: each candidate's bending fit uses every k-th of the other drive "
+                        f"levels (default {DEFAULT_LEVEL_STRIDE}: the single bead's bending, tongue and loop "
+                        "with the default candidates within 10 minutes on 2 cores; 1 fits every level)")
+    parser.add_argument("--max-steps", type=int, default=DEFAULT_MAX_STEPS,
+                        help=f"driven files: optimiser iterations per candidate (default {DEFAULT_MAX_STEPS})")
     parser.add_argument("--no-compile-cache", action="store_true",
                         help="do not keep compiled code between runs (default: kept in $HERTZCHAIN_CACHE/jax, "
                         "~/.cache/hertzchain/jax; also off with HERTZCHAIN_NO_COMPILE_CACHE=1)")
@@ -57,7 +81,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from fitting.compilation_cache import enable_compilation_cache
-    from .driven_experiments import is_driven_run, run_diagnose as run_driven_diagnose
+
+    from .driven_experiments import is_driven_run, refuse_driven_diagnose_options
+    from .driven_experiments import run_diagnose as run_driven_diagnose
 
     enable_compilation_cache(not args.no_compile_cache)
     if args.max_effects < 0:
@@ -65,8 +91,10 @@ def run(args) -> int:
     if not 0 <= args.min_share < 1:
         raise ValueError("--min-share must be in [0, 1).")
     ForwardModel(steps_per_contact=args.steps_per_contact)  # refuses a step count the solver cannot run
-    # driven experiment files (lock-in sweeps of a driven chain) have their own diagnosis
+    # driven experiment files run the candidate-law protocol
     driven = is_driven_run(args.files, args.data_dir)
+    if not driven:
+        refuse_driven_diagnose_options(args)
     with output_folder(args.out, "diagnose", "diagnosis.json") as out:
         if driven:
             return run_driven_diagnose(args, out)

@@ -2,7 +2,9 @@
 
 `hertzchain/cli/fit.py` and `hertzchain/cli/diagnose.py` hand their arguments here when every
 file given is a driven experiment; the options that only trace fits have are refused by name
-when given, so that nothing the user asked for is silently dropped.
+when given (and the driven diagnosis's own options for trace files), so that nothing the user
+asked for is silently dropped. The keys of a driven experiment file:
+`docs/how-to/driven-measurements.md`.
 """
 
 from __future__ import annotations
@@ -14,12 +16,15 @@ from pathlib import Path
 from fitting.driven_experiment import is_driven_experiment, load_driven_experiment
 
 from ..units import format_measured
+from .errors import EXIT_NOT_CONVERGED
 
 # The options of `fit` and `diagnose` that only trace files take: a driven run accepts each only at
 # the command's own default (read from its parser, `_defaults`).
 _TRACE_FIT_OPTIONS = ("multistart", "profile", "start", "fixed", "channels", "noise_std", "covariance", "prior",
                       "posterior")
-_TRACE_DIAGNOSE_OPTIONS = ("model", "free", "nuisances", "candidates", "channels")
+_TRACE_DIAGNOSE_OPTIONS = ("model", "free", "nuisances", "channels", "max_effects", "min_share", "steps_per_contact")
+# The options of `diagnose` that only driven files take (the candidate protocol's cost knobs).
+DRIVEN_DIAGNOSE_OPTIONS = ("held_out_levels", "level_stride", "max_steps")
 DEFAULT_FREE = ("linear_resonance_hz", "precompression_n", "damping_rate_per_s", "drive_scale")
 
 
@@ -44,12 +49,19 @@ def _defaults(command: str, names) -> dict:
     return {name: parser.get_default(name) for name in names}
 
 
-def _refuse(args, names, command):
+def _refuse(args, names, command, *, kind="driven experiments"):
+    """Refuse the options `names` of `hertzchain COMMAND` given at other than their defaults,
+    as not available for `kind`."""
     defaults = _defaults(command, names)
     given = [name for name, default in defaults.items() if getattr(args, name, default) != default]
     if given:
         options = ", ".join("--" + name.replace("_", "-") for name in given)
-        raise ValueError(f"{options}: not available for driven experiments in `hertzchain {command}`; leave them out.")
+        raise ValueError(f"{options}: not available for {kind} in `hertzchain {command}`; leave them out.")
+
+
+def refuse_driven_diagnose_options(args) -> None:
+    """`hertzchain diagnose` on trace files: refuse the driven protocol's options by name."""
+    _refuse(args, DRIVEN_DIAGNOSE_OPTIONS, "diagnose", kind="trace files")
 
 
 def _one_experiment(args):
@@ -78,9 +90,12 @@ def run_fit(args, out) -> int:
     write_driven_report(result, out, data_dir=args.data_dir, plots=not args.no_plots)
     data = report_data(result, data_dir=args.data_dir)
     for name, p in data["params"].items():
-        if p["fitted"]:
-            stderr = math.nan if p["stderr"] is None else p["stderr"]
-            print(f"{name} = {format_measured(p['value'], stderr, p['unit'])}")
+        if not p["fitted"]:
+            continue
+        values, errors = (p[key] if isinstance(p[key], list) else [p[key]] for key in ("value", "stderr"))
+        for k, (value, stderr) in enumerate(zip(values, errors)):  # one per mode where the parameter has several
+            label = name if len(values) == 1 else f"{name}[{k + 1}]"
+            print(f"{label} = {format_measured(value, math.nan if stderr is None else stderr, p['unit'])}")
     print(f"misfit: median {100 * data['misfit']['median']:.2f} %, max {100 * data['misfit']['max']:.2f} % of "
           f"each curve's peak; residual lag-1 correlation {result.rho:.3f}")
     for mode in data["bending"]:
@@ -88,9 +103,11 @@ def run_fit(args, out) -> int:
               f"model {100 * mode['model']['shift']:.2f} %")
     print(f"wrote fit.json, curves.csv{'' if args.no_plots else ', fit.png'} to {args.out} "
           f"({result.elapsed_s:.0f} s)")
+    print(f"{result.message}; chi^2/dof {result.reduced_chi2:.4g} ({result.steps} steps, kernel "
+          f"{result.kernel['name']})")
     if not result.converged:
-        print("hertzchain fit: error: the optimiser did not reach an optimum; raise --max-steps.", file=sys.stderr)
-        return 3
+        print(f"hertzchain fit: error: {result.message}", file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     return 0
 
 
@@ -148,23 +165,29 @@ def _measurement_line(m: dict) -> str:
 
 
 def run_diagnose(args, out) -> int:
-    """The driven branch of `hertzchain diagnose`, written into the folder `out` (exit 0
-    converged, 3 not converged)."""
-    from fitting.driven_diagnosis import diagnose_driven, write_driven_diagnosis
+    """The driven branch of `hertzchain diagnose`: the candidate-law protocol
+    (`fitting.driven_diagnosis.diagnose_experiment`) on one experiment file, bending-only or of
+    `[[measurement]]` tables, written into the folder `out` (exit 0 converged, 3 a candidate's
+    fit did not converge)."""
+    from fitting.driven_diagnosis import (
+        candidates_named,
+        diagnose_experiment,
+        write_driven_diagnosis,
+    )
 
     _refuse(args, _TRACE_DIAGNOSE_OPTIONS, "diagnose")
+    candidates = candidates_named([n.strip() for n in args.candidates.split(",") if n.strip()])
     experiment = _one_experiment(args)
-    if experiment.measurements:
-        raise ValueError(f"{experiment.path}: `hertzchain diagnose` takes one bending sweep (a [sweep] table); "
-                         "fit a file of [[measurement]] tables with `hertzchain fit`.")
-    diagnosis = diagnose_driven(experiment, max_effects=args.max_effects, min_share=args.min_share,
-                                progress=not args.quiet)
+    diagnosis = diagnose_experiment(experiment, candidates, held_out_levels=args.held_out_levels,
+                                    level_stride=args.level_stride, max_steps=args.max_steps,
+                                    progress=not args.quiet)
     paths = write_driven_diagnosis(diagnosis, out)
-    print(f"missing effects: {', '.join(diagnosis['missing_effects']) or 'none'}")
+    print(f"named: {', '.join(diagnosis['verdict']['named']) or 'none'}")
     print(diagnosis["conclusion"])
-    print(f"report: {Path(args.out) / paths[0].name}")
+    print(f"report: {Path(args.out) / paths[1].name} (JSON {Path(args.out) / paths[0].name}; "
+          f"{diagnosis['elapsed_s']:.0f} s)")
     if not diagnosis["converged"]:
         print(f"hertzchain diagnose: error: no optimum reached by {'; '.join(diagnosis['unconverged_fits'])} "
-              "(their values are the last iterate's).", file=sys.stderr)
-        return 3
+              "(their values are the last iterate's; raise --max-steps).", file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     return 0
