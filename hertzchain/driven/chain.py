@@ -38,7 +38,7 @@ import numpy as np
 
 from .. import contact, laws
 from ..precision import require_float64
-from .drive import RayleighStroke
+from .drive import DRIVE_STROKES, ActuatorMode, RayleighStroke
 
 
 class DrivenChain(eqx.Module):
@@ -65,8 +65,9 @@ class DrivenChain(eqx.Module):
     - `support_friction`: micro-slip friction at every bead's supports
       (`laws.IwanSupport`, parameters scalar or (n,)), or None (default: no support force
       but the static one of unequal preloads).
-    - `drive_stroke`: the driver's amplitude-dependent stroke (`drive.RayleighStroke`), or
-      None (default: the face moves by the nominal amplitude, $a\\cos\\theta$).
+    - `drive_stroke`: the driver's stroke law (`drive.RayleighStroke`: growing with amplitude;
+      `drive.ActuatorMode`: through one mode of the actuator), or None (default: the face
+      moves by the nominal amplitude, $a\\cos\\theta$).
 
     `eta_s` (s) is the shorthand of the `Viscoelastic` law's coefficient (a keyword of the
     constructor and a read-only property). Build one from material constants with
@@ -86,12 +87,12 @@ class DrivenChain(eqx.Module):
     contact_poisson: jax.Array | None
     yield_stress_pa: jax.Array | None
     support_friction: laws.IwanSupport | None
-    drive_stroke: RayleighStroke | None
+    drive_stroke: RayleighStroke | ActuatorMode | None
 
     def __init__(self, bead_mass_kg, contact_kappa_n_m1p5, precompression_n, damping_rate_per_s, eta_s=None, *,
                  contact_law: laws.AbstractContactLaw | None = None, dissipation=None, contact_yield_force_n=None,
                  contact_reduced_radius_m=None, contact_poisson=None, yield_stress_pa=None, support_friction=None,
-                 drive_stroke: RayleighStroke | None = None):
+                 drive_stroke: RayleighStroke | ActuatorMode | None = None):
         require_float64("DrivenChain")
         self.bead_mass_kg = jnp.atleast_1d(jnp.asarray(bead_mass_kg, dtype=jnp.float64))
         n = self.bead_mass_kg.shape[0]
@@ -278,8 +279,9 @@ def _check_fields(chain: DrivenChain) -> None:
         if not isinstance(chain.support_friction, laws.IwanSupport):
             raise ValueError(f"support_friction: expected a hertzchain.laws.IwanSupport, got {chain.support_friction!r}.")
         _check_law_parameters((chain.support_friction,), n)
-    if chain.drive_stroke is not None and not isinstance(chain.drive_stroke, RayleighStroke):
-        raise ValueError(f"drive_stroke: expected a hertzchain.driven.RayleighStroke, got {chain.drive_stroke!r}.")
+    if chain.drive_stroke is not None and not isinstance(chain.drive_stroke, DRIVE_STROKES):
+        raise ValueError(f"drive_stroke: expected a hertzchain.driven.RayleighStroke or ActuatorMode, "
+                         f"got {chain.drive_stroke!r}.")
     _check_concrete_positive("bead_mass_kg", chain.bead_mass_kg, "kg")
     _check_concrete_positive("contact_kappa_n_m1p5", chain.contact_kappa_n_m1p5, "N/m^1.5")
     _check_concrete_positive("precompression_n", chain.precompression_n, "N")
