@@ -40,7 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from hertzchain import laws
-from hertzchain.driven import DrivenChain, RayleighStroke
+from hertzchain.driven import ActuatorMode, DrivenChain, RayleighStroke
 from hertzchain.driven.linear import normal_modes
 from hertzchain.driven.measurements import tongue_fundamental
 from hertzchain.driven.thresholds import emulate_loop
@@ -112,20 +112,20 @@ CANDIDATES = (
     DrivenCandidate("rayleigh_piezo", "a piezo whose stroke grows with its amplitude (Rayleigh law)",
                     lambda c: _replace(c, drive_stroke=RayleighStroke(1e6)), ("drive_stroke.rayleigh_per_m",)),
 )
-# Candidates whose contacts' static force is free, one per run (`fit_candidate_jointly`: fitted
-# on the bending and the tongue together): the rest of the stated 4.5 N carried by a load path
+# Candidates whose contacts' static force is free (`fit_candidate_jointly`: fitted on the
+# bending and the tongue together, one static force for both runs): the rest of the stated 4.5 N carried by a load path
 # in parallel with the bead (the fixture), which a prescribed face motion does not feel.
 FREE_PRELOAD_START_N = 0.15  # near the bending run fitted alone (single_bead_joint/fit.json#start.bending_alone)
 FREE_PRELOAD_CANDIDATES = (
-    DrivenCandidate("free_preload", "Hertz contacts and viscous drag, the contacts' static force free per run",
+    DrivenCandidate("free_preload", "Hertz contacts and viscous drag, the contacts' static force free",
                     lambda c: c, ("precompression_n",)),
-    DrivenCandidate("free_preload_velocity_squared", "free static force per run and a contact loss c |v| v",
+    DrivenCandidate("free_preload_velocity_squared", "free static force and a contact loss c |v| v",
                     lambda c: _replace(c, dissipation=(laws.VelocitySquared(3000.0),)),
                     ("precompression_n", "dissipation.0.c_n_s2_m2")),
-    DrivenCandidate("free_preload_contact_exponent", "free static force per run and a power-law contact (n free)",
+    DrivenCandidate("free_preload_contact_exponent", "free static force and a power-law contact (n free)",
                     lambda c: _replace(c, contact_law=laws.PowerLaw(1.5, 1e-7)),
                     ("precompression_n", "contact_law.exponent"), {"contact_law.exponent": (1.0 / 1.5, 3.0 / 1.5)}),
-    DrivenCandidate("free_preload_rayleigh_piezo", "free static force per run and a Rayleigh piezo",
+    DrivenCandidate("free_preload_rayleigh_piezo", "free static force and a Rayleigh piezo",
                     lambda c: _replace(c, drive_stroke=RayleighStroke(1e6)),
                     ("precompression_n", "drive_stroke.rayleigh_per_m")),
 )
@@ -155,6 +155,11 @@ SLOW_CANDIDATES = (
     DrivenCandidate("micro_slip_rayleigh_piezo", "micro-slip supports and a piezo whose stroke grows with amplitude",
                     lambda c: _micro_slip(c, drive_stroke=RayleighStroke(1e6)),
                     MICRO_SLIP + ("drive_stroke.rayleigh_per_m",)),
+    DrivenCandidate("micro_slip_actuator_mode",
+                    "micro-slip supports and a drive that reaches its stroke through one actuator/fixture mode",
+                    lambda c: _micro_slip(c, drive_stroke=ActuatorMode(9000.0, 0.3)),
+                    MICRO_SLIP + ("drive_stroke.mode_hz", "drive_stroke.damping_ratio"),
+                    {"drive_stroke.mode_hz": (0.5, 3.0)}),  # 4.5-27 kHz: above the bending sweep's 4.7 kHz
 )
 # A chain with sliders has no Floquet multipliers (its sliders are state): its thresholds are
 # found by stepping the lab's sweeps in time (`emulate_loop`), the tongue at these frequencies.
@@ -190,7 +195,7 @@ def _tip(frequencies, onsets):
     return float(onsets[i]), float(frequencies[i])
 
 
-class _BoundedModel(JointModel):
+class BoundedJointModel(JointModel):
     """`JointModel` clipping its log factors to a candidate's `bounds` (lower, upper); the
     bending blocks of the runs in `weights` ({run: weight}) weighted by their own `weight` per
     (model - measured) / peak instead of the bending run's."""
@@ -211,7 +216,7 @@ class _BoundedModel(JointModel):
         return r * factor, j * factor
 
 
-def _fitted_levels(m, held_out_levels: int, level_stride: int):
+def fitted_levels(m, held_out_levels: int, level_stride: int):
     """The bending measurement `m` on the drive levels a fit uses: without its `held_out_levels`
     highest, then every `level_stride`-th of the rest (its highest kept)."""
     sweep = m.data.sweep
@@ -238,7 +243,7 @@ def fit_candidate(experiment, candidate: DrivenCandidate, *, held_out_levels: in
     gaps, and `elapsed_s`."""
     began = time.perf_counter()
     bending_m = next(m for m in experiment.measurements if m.kind == "bending")
-    alone = dataclasses.replace(experiment, measurements=(_fitted_levels(bending_m, held_out_levels, level_stride),))
+    alone = dataclasses.replace(experiment, measurements=(fitted_levels(bending_m, held_out_levels, level_stride),))
     measured_bend = bending(experiment.for_bending(bending_m), bending_m.data.sweep.rms_velocity_m_s)[0]
     chain = _tuned(candidate.add(base_chain(experiment)), measured_bend["lowest_drive_peak_hz"])
     shared = ("contact_kappa_n_m1p5", "damping_rate_per_s") + tuple(candidate.free)
@@ -255,7 +260,7 @@ def fit_candidate(experiment, candidate: DrivenCandidate, *, held_out_levels: in
     for k, p in enumerate(parameters):
         if p.name in limits:
             low[k], high[k] = (math.log(v) for v in limits[p.name])
-    model = _BoundedModel(alone, chain, parameters, {bending_m.run: 1.0}, math.sqrt((1 - rho) / (1 + rho)),
+    model = BoundedJointModel(alone, chain, parameters, {bending_m.run: 1.0}, math.sqrt((1 - rho) / (1 + rho)),
                           progress, bounds=(low, high))
     result = least_squares(model, x0, list(range(len(parameters))), max_steps=max_steps, bounds=(low, high))
     x = model.clip(result.x)
@@ -263,9 +268,9 @@ def fit_candidate(experiment, candidate: DrivenCandidate, *, held_out_levels: in
     out = {"name": candidate.name, "mechanism": candidate.mechanism, "free": list(shared) + [DRIVE_SCALE],
            "converged": bool(result.converged), "steps": int(result.steps),
            "constants": _constants(fitted, shared, model.run_scale(run, x)),
-           "bending": _bending_summary(experiment, model, run, bending_m, x, held_out_levels,
+           "bending": bending_summary(experiment, model, run, bending_m, x, held_out_levels,
                                        int(fitted_m.data.sweep.drive_amplitudes_m.size))}
-    out.update(_predictions(experiment, fitted, progress))
+    out.update(predict_thresholds(experiment, fitted, progress))
     out["elapsed_s"] = time.perf_counter() - began
     return out
 
@@ -298,9 +303,11 @@ def fit_candidate_jointly(experiment, candidate: DrivenCandidate, *, held_out_le
 
     The tongue run enters by its thresholds (Floquet, `fitting.driven_joint.JointModel`) and by
     its fundamental below every onset (`hertzchain.driven.measurements.tongue_fundamental`),
-    which measures that run's true drive: each run has its own drive scale (calibration prior)
-    and, where the candidate frees `precompression_n`, its own precompression (started at
-    `FREE_PRELOAD_START_N`); everything else is shared. The loop (the next day, the tongue's
+    which measures that run's true drive: each run has its own drive scale (calibration prior);
+    everything else is shared, a freed `precompression_n` too (started at
+    `FREE_PRELOAD_START_N`): the same apparatus an hour apart, stated at the same 4.5 N. (Free
+    per run, the fit escapes to a tongue run of resonance ~2.2 kHz and drive scale ~4, where the
+    fundamental's drive scale and resonance trade off and the model has no tongue at all.) The loop (the next day, the tongue's
     calibration) is predicted at the tongue run's constants and drive scale. A chain with support
     sliders has no Floquet multipliers and is refused. **Returns:** `fit_candidate`'s dict with
     `fitted_on` (["bending", "tongue"]), `tongue_run` (its constants) and `tongue_fundamental`
@@ -314,18 +321,16 @@ def fit_candidate_jointly(experiment, candidate: DrivenCandidate, *, held_out_le
     if start.support_friction is not None:
         raise ValueError(f"{candidate.name}: a chain with support sliders has no Floquet thresholds to fit; "
                          "use fit_candidate (bending alone, the tongue stepped in time).")
-    per_run = ("precompression_n",) if "precompression_n" in candidate.free else ()
-    if per_run:
+    if "precompression_n" in candidate.free:
         start = eqx.tree_at(lambda c: c.precompression_n, start, jnp.asarray(FREE_PRELOAD_START_N))
     measured_bend = bending(experiment.for_bending(bending_m), bending_m.data.sweep.rms_velocity_m_s)[0]
     chain = _tuned(start, measured_bend["lowest_drive_peak_hz"])
     fundamental = _tongue_fundamental_measurement(tongue_m, bending_m.data.sweep.sensor_m_s_per_v)
-    fitted_bend = _fitted_levels(bending_m, held_out_levels, level_stride)
+    fitted_bend = fitted_levels(bending_m, held_out_levels, level_stride)
     joint = dataclasses.replace(experiment, measurements=(fitted_bend, tongue_m, fundamental))
-    shared = ("contact_kappa_n_m1p5", "damping_rate_per_s") + tuple(p for p in candidate.free if p not in per_run)
+    shared = ("contact_kappa_n_m1p5", "damping_rate_per_s") + tuple(candidate.free)
     runs = (bending_m.run, tongue_m.run)
-    parameters = ([JointParameter(n, None) for n in shared] + [JointParameter(n, r) for n in per_run for r in runs]
-                  + [JointParameter(DRIVE_SCALE, r) for r in runs])
+    parameters = [JointParameter(n, None) for n in shared] + [JointParameter(DRIVE_SCALE, r) for r in runs]
     scales = dict.fromkeys(runs, 1.0)
     unit = JointModel(joint, chain, parameters, scales, 1.0)
     x0 = np.zeros(len(parameters))
@@ -340,7 +345,7 @@ def fit_candidate_jointly(experiment, candidate: DrivenCandidate, *, held_out_le
             low[k], high[k] = (math.log(v) for v in limits[p.name])
     points = int(fundamental.fit_mask.sum()) * TONGUE_FUNDAMENTAL_LEVELS
     weight = 1.0 / (TONGUE_FUNDAMENTAL_SIGMA * math.sqrt(points / TONGUE_FUNDAMENTAL_LEVELS))
-    model = _BoundedModel(joint, chain, parameters, scales, math.sqrt((1 - rho) / (1 + rho)), progress,
+    model = BoundedJointModel(joint, chain, parameters, scales, math.sqrt((1 - rho) / (1 + rho)), progress,
                           bounds=(low, high), weights={tongue_m.run: weight})
     result = least_squares(model, x0, list(range(len(parameters))), max_steps=max_steps, bounds=(low, high))
     x = model.clip(result.x)
@@ -349,20 +354,20 @@ def fit_candidate_jointly(experiment, candidate: DrivenCandidate, *, held_out_le
            "free": [p.label for p in parameters], "converged": bool(result.converged), "steps": int(result.steps),
            "constants": _constants(model.run_chain(bend_run, x), shared, model.run_scale(bend_run, x)),
            "tongue_run": _constants(model.run_chain(tongue_run, x), shared, model.run_scale(tongue_run, x)),
-           "bending": _bending_summary(experiment, model, bend_run, bending_m, x, held_out_levels,
+           "bending": bending_summary(experiment, model, bend_run, bending_m, x, held_out_levels,
                                        int(fitted_bend.data.sweep.drive_amplitudes_m.size))}
     out["tongue_run"]["resonance_hz"] = float(normal_modes(model.run_chain(tongue_run, x))[0][0])
-    fund = _bending_summary(joint, model, tongue_run, fundamental, x, 0, TONGUE_FUNDAMENTAL_LEVELS)
+    fund = bending_summary(joint, model, tongue_run, fundamental, x, 0, TONGUE_FUNDAMENTAL_LEVELS)
     out["tongue_fundamental"] = {"misfit_median": fund["misfit_median"], "misfit_max": fund["misfit_max"],
                                  "excluded_hz": [list(b) for b in TONGUE_FIXTURE_FEATURES_HZ]}
-    out.update(_predictions(experiment, model.run_chain(tongue_run, x), progress, model.run_scale(tongue_run, x)))
+    out.update(predict_thresholds(experiment, model.run_chain(tongue_run, x), progress, model.run_scale(tongue_run, x)))
     out["tongue"]["how"] += "; fitted (thresholds and sub-threshold fundamental), at the fitted drive scale"
     out["loop"]["how"] += "; predicted at the tongue run's constants and drive scale"
     out["elapsed_s"] = time.perf_counter() - began
     return out
 
 
-def _bending_summary(experiment, model, run, bending_m, x, held_out_levels: int, fitted_levels: int) -> dict:
+def bending_summary(experiment, model, run, bending_m, x, held_out_levels: int, fitted_level_count: int) -> dict:
     """The bending measurement `bending_m` of `model`'s `run` at `x`, every frequency and drive
     level: misfit (median, max, fraction of each curve's peak), shift, peak per nm top/lowest,
     each beside the data's, the linear resonance, the held-out levels' median misfit."""
@@ -377,7 +382,7 @@ def _bending_summary(experiment, model, run, bending_m, x, held_out_levels: int,
             "peak_ratio": mine["peak_per_drive_top_over_lowest"],
             "measured_peak_ratio": measured["peak_per_drive_top_over_lowest"],
             "resonance_hz": float(normal_modes(model.run_chain(run, x))[0][0]), "held_out_levels": held_out_levels,
-            "fitted_levels": fitted_levels,
+            "fitted_levels": fitted_level_count,
             "held_out_misfit_median": float(np.median(misfit[misfit.size - held_out_levels:]))
             if held_out_levels else None}
 
@@ -411,7 +416,7 @@ def _stepped_onsets(experiment, chain, run) -> np.ndarray:
     return np.array(onsets, dtype=float)
 
 
-def _predictions(experiment, chain, progress, drive_scale: float = 1.0, kinds=("tongue", "loop")) -> dict:
+def predict_thresholds(experiment, chain, progress, drive_scale: float = 1.0, kinds=("tongue", "loop")) -> dict:
     """The tongue tip and the loop's onset going up of `chain` (the measurements of `kinds`) at
     each run's calibration times `drive_scale` (Floquet thresholds; by time stepping for a chain
     with support sliders), in nominal amplitude."""
