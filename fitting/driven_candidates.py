@@ -395,7 +395,7 @@ def _constants(chain, shared, drive_scale) -> dict:
     return values
 
 
-def _stepped_onsets(experiment, chain, run) -> np.ndarray:
+def _stepped_onsets(experiment, chain, run, tongue_hz=TIME_STEPPED_TONGUE_HZ) -> np.ndarray:
     """The onsets going up at each of `run`'s threshold entries (NaN: none) by time stepping the
     lab's sweeps (`emulate_loop`): the loop's own amplitudes, the tongue's upward amplitudes at
     `TIME_STEPPED_TONGUE_HZ` (its other frequencies NaN, said in the result)."""
@@ -405,7 +405,7 @@ def _stepped_onsets(experiment, chain, run) -> np.ndarray:
         if m.kind == "tongue":
             for f in m.data.frequencies_hz:
                 onset = np.nan
-                if f in TIME_STEPPED_TONGUE_HZ:
+                if f in tongue_hz:
                     onset = emulate_loop(chain, f, m.data.drive_amplitudes_m, bead=experiment.sensor_bead,
                                          steps_per_period=steps).onset_up_m
                 onsets.append(np.nan if onset is None else onset)
@@ -416,10 +416,11 @@ def _stepped_onsets(experiment, chain, run) -> np.ndarray:
     return np.array(onsets, dtype=float)
 
 
-def predict_thresholds(experiment, chain, progress, drive_scale: float = 1.0, kinds=("tongue", "loop")) -> dict:
+def predict_thresholds(experiment, chain, progress, drive_scale: float = 1.0, kinds=("tongue", "loop"),
+                       tongue_hz=TIME_STEPPED_TONGUE_HZ) -> dict:
     """The tongue tip and the loop's onset going up of `chain` (the measurements of `kinds`) at
     each run's calibration times `drive_scale` (Floquet thresholds; by time stepping for a chain
-    with support sliders), in nominal amplitude."""
+    with support sliders, the tongue at `tongue_hz` only), in nominal amplitude."""
     others = [m for m in experiment.measurements if m.kind in kinds]
     rest = dataclasses.replace(experiment, measurements=tuple(others))
     predict = JointModel(rest, chain, [], {m.run: 1.0 for m in others}, 1.0)
@@ -433,8 +434,8 @@ def predict_thresholds(experiment, chain, progress, drive_scale: float = 1.0, ki
             _, found = predict.onsets(run, np.zeros(0))
             model, how = np.where(found.found, found.amplitude_m, np.nan), "Floquet threshold (continuation)"
         else:
-            model = _stepped_onsets(experiment, chain, run)
-            how = (f"the lab's upward sweeps stepped in time (emulate_loop; tongue at {TIME_STEPPED_TONGUE_HZ} Hz "
+            model = _stepped_onsets(experiment, chain, run, tongue_hz)
+            how = (f"the lab's upward sweeps stepped in time (emulate_loop; tongue at {tuple(tongue_hz)} Hz "
                    "only): the sliders have no Floquet multipliers")
         model = model / drive_scale
         for kind in ("tongue", "loop"):

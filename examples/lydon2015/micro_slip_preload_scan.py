@@ -34,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fitting.driven_candidates import (
+    TIME_STEPPED_TONGUE_HZ,
     BoundedJointModel,
     bending_summary,
     fitted_levels,
@@ -67,6 +68,14 @@ def chain_at(constants: dict, precompression_n: float) -> DrivenChain:
     return chain
 
 
+def measured_drive_scale(folder: Path, resonance_hz: float) -> float:
+    """The tongue run's drive scale its sub-threshold fundamental gives for a linear resonance
+    `resonance_hz` (`drive_response.json#runs.tongue.by_resonance`, interpolated in log f0)."""
+    rows = json.loads((folder / "drive_response.json").read_text())["runs"]["tongue"]["by_resonance"]
+    f0 = np.log([r["resonance_hz"] for r in rows])
+    return float(np.exp(np.interp(math.log(resonance_hz), f0, np.log([r["drive_scale"] for r in rows]))))
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data-dir", required=True)
@@ -75,6 +84,11 @@ def main(argv=None) -> None:
     parser.add_argument("--tongue-run-preloads", type=float, nargs="*", default=[],
                         help="N: predict the tongue and the loop with the Hertz constant of the chain at the first of "
                         "--preloads (the bending run's) and the tongue run's own static force, each of these")
+    parser.add_argument("--tongue-hz", type=float, nargs="+", default=list(TIME_STEPPED_TONGUE_HZ),
+                        help="the tongue's frequencies stepped in time (of the measured ones)")
+    parser.add_argument("--measured-drive-scale", action="store_true",
+                        help="predict the tongue run at the drive scale its own fundamental measures at the chain's "
+                        "resonance (drive_response.json, interpolated in log f0) instead of the calibration")
     parser.add_argument("--name", default="micro_slip_preload_scan")
     args = parser.parse_args(argv)
     began, load = time.perf_counter(), os.getloadavg()
@@ -106,9 +120,11 @@ def main(argv=None) -> None:
     bending_chain = chain_at(constants, args.preloads[0])
     for force in args.tongue_run_preloads:  # the same apparatus (Hertz constant, supports), its own static force
         chain = eqx.tree_at(lambda c: c.precompression_n, bending_chain, jnp.asarray(float(force)))
+        f0 = float(normal_modes(chain)[0][0])
+        scale = measured_drive_scale(out_dir, f0) if args.measured_drive_scale else 1.0
         row = {"tongue_run_precompression_n": force, "bending_run_precompression_n": args.preloads[0],
-               "static_overlap_m": float(chain.static_overlap_m()[0]), "resonance_hz": float(normal_modes(chain)[0][0])}
-        row.update(predict_thresholds(experiment, chain, False))
+               "static_overlap_m": float(chain.static_overlap_m()[0]), "resonance_hz": f0, "drive_scale": scale}
+        row.update(predict_thresholds(experiment, chain, False, scale, tongue_hz=tuple(args.tongue_hz)))
         tongue_rows.append(row)
         print(f"tongue run at {force:g} N: f0 {row['resonance_hz']:.0f} Hz, tip {row['tongue']['model_tip_m']} "
               f"at {row['tongue']['model_tip_hz']}, loop {row['loop']['model_onset_up_m']}", flush=True)
