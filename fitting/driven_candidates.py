@@ -6,8 +6,10 @@ added or replaced (`DrivenCandidate`: a name, the law it adds, the paths of the 
 it frees, in `fitting.driven_joint`'s addressing). Every candidate is held to the apparatus as
 the lab describes it:
 
-- the **precompression is fixed** at the file's stated value (Lydon: 4.5 N) in every run; a
-  candidate that needs a different static force to fit has to say so by failing;
+- the **precompression is fixed** at the file's stated value (Lydon: 4.5 N) in every run,
+  unless the candidate frees it (`precompression_n` in `free`): then the rest of the stated
+  force is carried by a load path in parallel with the bead (the fixture), which a
+  prescribed face motion does not feel;
 - each run's **drive scale** keeps its calibration prior ($\\log s \\sim N(0, \\log(1+u)^2)$,
   `fitting.driven_joint`); a run that is only predicted is predicted at its calibration
   (s = 1), and the report gives the scale that would have matched it.
@@ -24,9 +26,14 @@ measurement's gap (`log(model / measured)`) at least `NAMED_GAIN` closer than th
 bending run's highest drive levels can be held out too (`held_out_levels`): fitted on the
 lower ones, the candidate predicts them (their median misfit a measurement not fitted on).
 
-`CANDIDATES` run by default; `SLOW_CANDIDATES` (micro-slip at the supports, whose sliders have
-no Floquet multipliers: its thresholds come from the lab's upward sweeps stepped in time,
-`emulate_loop`) only when named.
+`fit_candidate_jointly` fits a candidate on the bending and the tongue together (the tongue's
+thresholds and its fundamental below every onset, which measures that run's true drive) and
+predicts the loop; the verdict names no candidate for a measurement it was fitted on.
+
+`CANDIDATES` run by default; `SLOW_CANDIDATES` (micro-slip at the supports alone and in pairs
+with a free static force, a velocity-squared loss, a Rayleigh piezo or an actuator mode; their
+sliders have no Floquet multipliers, so their thresholds come from the lab's upward sweeps
+stepped in time, `emulate_loop`) only when named; `FREE_PRELOAD_CANDIDATES` for the joint fit.
 """
 
 from __future__ import annotations
@@ -216,6 +223,26 @@ class BoundedJointModel(JointModel):
         return r * factor, j * factor
 
 
+def _bounded_model(experiment, chain, parameters, scales, candidate, progress, weights=None) -> BoundedJointModel:
+    """The candidate's model of `experiment` (its first measurement the bending run's): the
+    bending weighted by $\\sqrt{(1 - \\rho)/(1 + \\rho)}$, $\\rho$ its residuals' lag-1 correlation
+    at the start, every factor within `FACTOR_LIMIT` (the Hertz constant `KAPPA_LIMITS`, the
+    candidate's `factor_limits`) of its start."""
+    unit = JointModel(experiment, chain, parameters, scales, 1.0)
+    run, bend = unit.runs[0], experiment.measurements[0]
+    measured = bend.data.sweep.rms_velocity_m_s[bend.fit_mask]
+    x0 = np.zeros(len(parameters))
+    resid = (unit.bending_curves(run, bend, x0) - measured) / bend.data.sweep.rms_velocity_m_s.max(axis=0)
+    rho = min(max(lag1_autocorrelation(resid), 0.0), 0.999)
+    low, high = np.full(len(parameters), -math.log(FACTOR_LIMIT)), np.full(len(parameters), math.log(FACTOR_LIMIT))
+    limits = {"contact_kappa_n_m1p5": KAPPA_LIMITS, **candidate.factor_limits}
+    for k, p in enumerate(parameters):
+        if p.name in limits:
+            low[k], high[k] = (math.log(v) for v in limits[p.name])
+    return BoundedJointModel(experiment, chain, parameters, scales, math.sqrt((1 - rho) / (1 + rho)), progress,
+                             bounds=(low, high), weights=weights)
+
+
 def fitted_levels(m, held_out_levels: int, level_stride: int):
     """The bending measurement `m` on the drive levels a fit uses: without its `held_out_levels`
     highest, then every `level_stride`-th of the rest (its highest kept)."""
@@ -248,21 +275,11 @@ def fit_candidate(experiment, candidate: DrivenCandidate, *, held_out_levels: in
     chain = _tuned(candidate.add(base_chain(experiment)), measured_bend["lowest_drive_peak_hz"])
     shared = ("contact_kappa_n_m1p5", "damping_rate_per_s") + tuple(candidate.free)
     parameters = [JointParameter(n, None) for n in shared] + [JointParameter(DRIVE_SCALE, bending_m.run)]
-    unit = JointModel(alone, chain, parameters, {bending_m.run: 1.0}, 1.0)
+    fitted_m = alone.measurements[0]
+    model = _bounded_model(alone, chain, parameters, {bending_m.run: 1.0}, candidate, progress)
     x0 = np.zeros(len(parameters))
-    run = unit.runs[0]
-    fitted_m = run.measurements[0]
-    measured = fitted_m.data.sweep.rms_velocity_m_s[fitted_m.fit_mask]
-    resid = (unit.bending_curves(run, fitted_m, x0) - measured) / fitted_m.data.sweep.rms_velocity_m_s.max(axis=0)
-    rho = min(max(lag1_autocorrelation(resid), 0.0), 0.999)
-    low, high = np.full(len(parameters), -math.log(FACTOR_LIMIT)), np.full(len(parameters), math.log(FACTOR_LIMIT))
-    limits = {"contact_kappa_n_m1p5": KAPPA_LIMITS, **candidate.factor_limits}
-    for k, p in enumerate(parameters):
-        if p.name in limits:
-            low[k], high[k] = (math.log(v) for v in limits[p.name])
-    model = BoundedJointModel(alone, chain, parameters, {bending_m.run: 1.0}, math.sqrt((1 - rho) / (1 + rho)),
-                          progress, bounds=(low, high))
-    result = least_squares(model, x0, list(range(len(parameters))), max_steps=max_steps, bounds=(low, high))
+    run = model.runs[0]
+    result = least_squares(model, x0, list(range(len(parameters))), max_steps=max_steps, bounds=model.bounds)
     x = model.clip(result.x)
     fitted = model.run_chain(run, x)
     out = {"name": candidate.name, "mechanism": candidate.mechanism, "free": list(shared) + [DRIVE_SCALE],
@@ -332,22 +349,11 @@ def fit_candidate_jointly(experiment, candidate: DrivenCandidate, *, held_out_le
     runs = (bending_m.run, tongue_m.run)
     parameters = [JointParameter(n, None) for n in shared] + [JointParameter(DRIVE_SCALE, r) for r in runs]
     scales = dict.fromkeys(runs, 1.0)
-    unit = JointModel(joint, chain, parameters, scales, 1.0)
-    x0 = np.zeros(len(parameters))
-    first = unit.runs[0]
-    measured = fitted_bend.data.sweep.rms_velocity_m_s[fitted_bend.fit_mask]
-    resid = (unit.bending_curves(first, fitted_bend, x0) - measured) / fitted_bend.data.sweep.rms_velocity_m_s.max(axis=0)
-    rho = min(max(lag1_autocorrelation(resid), 0.0), 0.999)
-    low, high = np.full(len(parameters), -math.log(FACTOR_LIMIT)), np.full(len(parameters), math.log(FACTOR_LIMIT))
-    limits = {"contact_kappa_n_m1p5": KAPPA_LIMITS, **candidate.factor_limits}
-    for k, p in enumerate(parameters):
-        if p.name in limits:
-            low[k], high[k] = (math.log(v) for v in limits[p.name])
     points = int(fundamental.fit_mask.sum()) * TONGUE_FUNDAMENTAL_LEVELS
     weight = 1.0 / (TONGUE_FUNDAMENTAL_SIGMA * math.sqrt(points / TONGUE_FUNDAMENTAL_LEVELS))
-    model = BoundedJointModel(joint, chain, parameters, scales, math.sqrt((1 - rho) / (1 + rho)), progress,
-                          bounds=(low, high), weights={tongue_m.run: weight})
-    result = least_squares(model, x0, list(range(len(parameters))), max_steps=max_steps, bounds=(low, high))
+    model = _bounded_model(joint, chain, parameters, scales, candidate, progress, {tongue_m.run: weight})
+    x0 = np.zeros(len(parameters))
+    result = least_squares(model, x0, list(range(len(parameters))), max_steps=max_steps, bounds=model.bounds)
     x = model.clip(result.x)
     bend_run, tongue_run = model.runs
     out = {"name": candidate.name, "mechanism": candidate.mechanism, "fitted_on": ["bending", "tongue"],

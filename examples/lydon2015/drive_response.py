@@ -22,19 +22,16 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
-import resource
-import time
 import tomllib
 from pathlib import Path
 
 import numpy as np
+from run_record import started, write_stamped  # this folder's helper
 from scipy.optimize import least_squares
 
 from fitting.driven_experiment import load_driven_experiment
 from hertzchain.driven import DrivenChain
 from hertzchain.driven.linear import frequency_response
-from hertzchain.io.atomic import json_ready, write_json
 
 HERE = Path(__file__).resolve().parent
 # the bending run fitted alone (`single_bead_joint/fit.json#start.bending_alone`): the damping
@@ -82,7 +79,7 @@ def main(argv=None) -> None:
     parser.add_argument("--data-dir", required=True)
     parser.add_argument("--out", default=str(HERE / "results" / "single_bead_diagnosis_laws"))
     args = parser.parse_args(argv)
-    began, load = time.perf_counter(), os.getloadavg()
+    start = started()
     path = HERE / "single_bead_joint.toml"
     experiment = load_driven_experiment(path, args.data_dir)
     calibration = tomllib.loads(path.read_text())["sensor"]["calibration_m_s_per_v"]  # m/s per lock-in volt
@@ -122,11 +119,7 @@ def main(argv=None) -> None:
                                    "by_resonance": [{"resonance_hz": f0, "drive_scale": float(v / linear_velocity_rms(
                                        [m.data.frequency_hz], f0, 2 * zeta * 2 * math.pi * f0, mass, a)[0])}
                                        for f0 in TONGUE_RESONANCES_HZ]}
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    out.update({"elapsed_s": time.perf_counter() - began, "load_average_at_start": list(load),
-                "cpu_s": usage.ru_utime + usage.ru_stime})
-    Path(args.out).mkdir(parents=True, exist_ok=True)
-    write_json(Path(args.out) / "drive_response.json", json_ready(out))
+    write_stamped(Path(args.out) / "drive_response.json", out, start)
 
 
 if __name__ == "__main__":

@@ -24,14 +24,12 @@ import argparse
 import dataclasses
 import json
 import math
-import os
-import resource
-import time
 from pathlib import Path
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from run_record import started, write_stamped  # this folder's helper
 
 from fitting.driven_candidates import (
     TIME_STEPPED_TONGUE_HZ,
@@ -46,7 +44,6 @@ from fitting.driven_joint import DRIVE_SCALE, JointParameter
 from hertzchain import laws
 from hertzchain.driven import DrivenChain
 from hertzchain.driven.linear import normal_modes
-from hertzchain.io.atomic import json_ready, write_json
 
 HERE = Path(__file__).resolve().parent
 SOURCE = "micro_slip_free_preload.json"
@@ -91,7 +88,7 @@ def main(argv=None) -> None:
                         "resonance (drive_response.json, interpolated in log f0) instead of the calibration")
     parser.add_argument("--name", default="micro_slip_preload_scan")
     args = parser.parse_args(argv)
-    began, load = time.perf_counter(), os.getloadavg()
+    start = started()
     out_dir = Path(args.out)
     source = json.loads((out_dir / SOURCE).read_text())
     entry = next(c for c in source["candidates"] if c["name"] == "micro_slip_free_preload")
@@ -128,12 +125,9 @@ def main(argv=None) -> None:
         tongue_rows.append(row)
         print(f"tongue run at {force:g} N: f0 {row['resonance_hz']:.0f} Hz, tip {row['tongue']['model_tip_m']} "
               f"at {row['tongue']['model_tip_hz']}, loop {row['loop']['model_onset_up_m']}", flush=True)
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    write_json(out_dir / f"{args.name}.json", json_ready({
+    write_stamped(out_dir / f"{args.name}.json", {
         "why": __doc__.splitlines()[0], "source": f"{SOURCE}#candidates.1.constants", "rows": rows,
-        "tongue_run_rows": tongue_rows,
-        "bending_levels": "every 7th drive level (6), every frequency", "elapsed_s": time.perf_counter() - began,
-        "load_average_at_start": list(load), "cpu_s": usage.ru_utime + usage.ru_stime}))
+        "tongue_run_rows": tongue_rows, "bending_levels": "every 7th drive level (6), every frequency"}, start)
 
 
 if __name__ == "__main__":

@@ -23,18 +23,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import resource
-import time
 from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
+from run_record import started, write_stamped  # this folder's helper
 
 from hertzchain import laws
 from hertzchain.driven import DrivenChain
 from hertzchain.driven.linear import frequency_response, normal_modes
-from hertzchain.io.atomic import json_ready, write_json
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
@@ -53,9 +50,9 @@ def _chains() -> dict:
                                                           / float(normal_modes(low)[0][0])) ** 3,
                       alone["precompression_n"], alone["damping_rate_per_s"])
     return {
-        "hertz_4.5N": (DrivenChain([0.028], base["contact_kappa_n_m1p5"], 4.5, base["damping_rate_per_s"]),
+        "hertz_4p5N": (DrivenChain([0.028], base["contact_kappa_n_m1p5"], 4.5, base["damping_rate_per_s"]),
                        "single_bead_diagnosis_laws/micro_slip.json#candidates.0.constants"),
-        "micro_slip_4.5N": (DrivenChain([0.028], micro["contact_kappa_n_m1p5"], 4.5, micro["damping_rate_per_s"],
+        "micro_slip_4p5N": (DrivenChain([0.028], micro["contact_kappa_n_m1p5"], 4.5, micro["damping_rate_per_s"],
                                         support_friction=laws.IwanSupport(
                                             micro["support_friction.stiffness_n_m"],
                                             micro["support_friction.slip_displacement_m"], elements=64)),
@@ -102,7 +99,7 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(RESULTS / "single_bead_diagnosis_laws"))
     args = parser.parse_args(argv)
-    began, load = time.perf_counter(), os.getloadavg()
+    start = started()
     out = {"why": __doc__.splitlines()[0], "drive_hz": DRIVE_HZ, "chains": {}}
     for name, (chain, source) in _chains().items():
         f0 = float(normal_modes(chain)[0][0])
@@ -120,11 +117,7 @@ def main(argv=None) -> None:
                                "static_overlap_m": float(np.asarray(chain.static_overlap_m())[0]),
                                "max_supports_epsilon_1": max(r["supports_epsilon_1"] for r in rows),
                                "rows": rows}
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    out.update({"elapsed_s": time.perf_counter() - began, "load_average_at_start": list(load),
-                "cpu_s": usage.ru_utime + usage.ru_stime})
-    Path(args.out).mkdir(parents=True, exist_ok=True)
-    write_json(Path(args.out) / "stiffness_modulation.json", json_ready(out))
+    write_stamped(Path(args.out) / "stiffness_modulation.json", out, start)
 
 
 if __name__ == "__main__":
