@@ -104,3 +104,31 @@ def test_verdict_names_only_what_improves_unfitted_measurements():
     assert result["named"] == ["predicts"]
     assert result["best"] == "predicts"
     assert "held_out_bending_misfit" in result["per_candidate"]["predicts"]["improves_unfitted_over_base"]
+
+
+def test_verdict_does_not_name_a_candidate_for_a_measurement_it_was_fitted_on():
+    """A candidate fitted on the tongue that lands on its tip is not named for it; the same
+    tip predicted (not fitted) is."""
+    def entry(name, tip_gap, fitted_on=("bending",)):
+        return {"name": name, "fitted_on": list(fitted_on),
+                "bending": {"misfit_median": 0.05, "shift": 0.0, "measured_shift": 0.0, "peak_ratio": 1.0,
+                            "measured_peak_ratio": 1.0, "held_out_misfit_median": None},
+                "tongue": {"amplitude_gap_log": tip_gap, "frequency_gap": 0.0}}
+    result = verdict([entry("base", None), entry("fitted", 0.01, ("bending", "tongue")), entry("predicted", 0.01)])
+    assert result["named"] == ["predicted"]
+    assert result["per_candidate"]["fitted"]["improves_unfitted_over_base"] == []
+
+
+def test_tongue_fundamental_is_a_sweep_of_the_levels_below_every_onset():
+    from hertzchain.driven.measurements import Tongue, tongue_fundamental
+
+    frequencies = np.array([6300.0, 7200.0, 8000.0])
+    drives = np.array([15e-9, 17e-9, 20e-9, 40e-9])
+    volts = np.arange(12.0).reshape(4, 3) * 1e-3
+    tongue = Tongue("run", frequencies, drives, volts, 0 * volts, np.array([np.nan, 40e-9, 45e-9]), 2.3e-9,
+                    7.5e-7, "file")
+    sweep = tongue_fundamental(tongue, sensor_m_s_per_v=0.02125, levels=3).sweep
+    np.testing.assert_array_equal(sweep.drive_amplitudes_m, drives[:3])
+    np.testing.assert_allclose(sweep.rms_velocity_m_s, volts[:3].T * 0.02125)  # (F, A), m/s
+    with pytest.raises(ValueError, match="at or above its lowest onset"):
+        tongue_fundamental(tongue, sensor_m_s_per_v=0.02125, levels=4)

@@ -9,7 +9,9 @@ at the stated 4.5 N and the drive scale at its calibration prior, and predicts t
 candidate's constants, measurements, gaps, the verdict, the load average at the start and the
 wall time) and `diagnosis.png` (each target's measured value beside every candidate's);
 `--plot-only` redraws the figure from the stored JSON. The micro-slip candidate (slow: its
-sliders run the JAX kernel) is run on its own, `--only micro_slip_supports --name micro_slip`.
+sliders run the JAX kernel) is run on its own, `--only micro_slip_supports --name micro_slip`;
+the pairs likewise. `--with-tongue` fits the free-preload candidates on the bending and the
+tongue together (its fundamental below onset and its thresholds) and predicts the loop.
 """
 
 from __future__ import annotations
@@ -21,7 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
-from fitting.driven_candidates import CANDIDATES, SLOW_CANDIDATES, diagnose_laws, scores
+from fitting.driven_candidates import (
+    CANDIDATES,
+    FREE_PRELOAD_CANDIDATES,
+    SLOW_CANDIDATES,
+    diagnose_laws,
+    fit_candidate,
+    fit_candidate_jointly,
+    scores,
+)
 from fitting.driven_experiment import load_driven_experiment
 from hertzchain.io.atomic import json_ready, save_figure, write_json
 
@@ -71,6 +81,8 @@ def main(argv=None) -> None:
     parser.add_argument("--plot-only", action="store_true", help="redraw NAME.png from the stored NAME.json")
     parser.add_argument("--only", nargs="*", help="candidate names (default: every one of CANDIDATES; the base "
                         "is always fitted; SLOW_CANDIDATES only when named)")
+    parser.add_argument("--with-tongue", action="store_true", help="fit FREE_PRELOAD_CANDIDATES (or --only of them) "
+                        "on the bending and the tongue together (fit_candidate_jointly), predict the loop")
     args = parser.parse_args(argv)
     out = Path(args.out)
     if args.plot_only:
@@ -78,12 +90,17 @@ def main(argv=None) -> None:
         return
     load = os.getloadavg()[0]
     experiment = load_driven_experiment(HERE / "single_bead_joint.toml", args.data_dir)
-    chosen = [c for c in CANDIDATES + SLOW_CANDIDATES if (c in CANDIDATES and not args.only)
-              or c.name in (args.only or ()) or c.name == CANDIDATES[0].name]
-    result = diagnose_laws(experiment, chosen, level_stride=args.level_stride, max_steps=args.max_steps)
+    if args.with_tongue:
+        chosen = [c for c in FREE_PRELOAD_CANDIDATES if not args.only or c.name in args.only
+                  or c is FREE_PRELOAD_CANDIDATES[0]]
+    else:
+        chosen = [c for c in CANDIDATES + SLOW_CANDIDATES if (c in CANDIDATES and not args.only)
+                  or c.name in (args.only or ()) or c.name == CANDIDATES[0].name]
+    result = diagnose_laws(experiment, chosen, level_stride=args.level_stride, max_steps=args.max_steps,
+                           fit=fit_candidate_jointly if args.with_tongue else fit_candidate)
     result["load_average_at_start"] = load
     result["arguments"] = {"max_steps": args.max_steps, "level_stride": args.level_stride, "only": args.only,
-                           "name": args.name}
+                           "name": args.name, "with_tongue": args.with_tongue}
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / f"{args.name}.json", json_ready(result))
     plot(result, out / f"{args.name}.png")

@@ -14,6 +14,7 @@ displacement at harmonics of the drive, differentiable in forward mode:
 """
 
 from .chain import DrivenChain as DrivenChain
+from .drive import ActuatorMode as ActuatorMode
 from .drive import RayleighStroke as RayleighStroke
 from .floquet import Floquet as Floquet
 from .floquet import floquet_multipliers as floquet_multipliers
@@ -37,6 +38,7 @@ from .steady import SteadyLockin as SteadyLockin
 from .steady import lockin_until_steady as lockin_until_steady
 
 __all__ = [
+    "ActuatorMode",
     "DrivenChain",
     "DrivenTraces",
     "Floquet",

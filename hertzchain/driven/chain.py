@@ -38,7 +38,8 @@ import numpy as np
 
 from .. import contact, laws
 from ..precision import require_float64
-from .drive import RayleighStroke
+from .drive import DRIVE_STROKES, ActuatorMode, RayleighStroke
+
 
 class DrivenChain(eqx.Module):
     """The physical constants of a driven, precompressed chain of n beads (all traceable).
@@ -64,8 +65,9 @@ class DrivenChain(eqx.Module):
     - `support_friction`: micro-slip friction at every bead's supports
       (`laws.IwanSupport`, parameters scalar or (n,)), or None (default: no support force
       but the static one of unequal preloads).
-    - `drive_stroke`: the driver's amplitude-dependent stroke (`drive.RayleighStroke`), or
-      None (default: the face moves by the nominal amplitude, $a\\cos\\theta$).
+    - `drive_stroke`: the driver's stroke law (`drive.RayleighStroke`: growing with amplitude;
+      `drive.ActuatorMode`: through one mode of the actuator), or None (default: the face
+      moves by the nominal amplitude, $a\\cos\\theta$).
 
     `eta_s` (s) is the shorthand of the `Viscoelastic` law's coefficient (a keyword of the
     constructor and a read-only property). Build one from material constants with
@@ -85,12 +87,12 @@ class DrivenChain(eqx.Module):
     contact_poisson: jax.Array | None
     yield_stress_pa: jax.Array | None
     support_friction: laws.IwanSupport | None
-    drive_stroke: RayleighStroke | None
+    drive_stroke: RayleighStroke | ActuatorMode | None
 
     def __init__(self, bead_mass_kg, contact_kappa_n_m1p5, precompression_n, damping_rate_per_s, eta_s=None, *,
                  contact_law: laws.AbstractContactLaw | None = None, dissipation=None, contact_yield_force_n=None,
                  contact_reduced_radius_m=None, contact_poisson=None, yield_stress_pa=None, support_friction=None,
-                 drive_stroke: RayleighStroke | None = None):
+                 drive_stroke: RayleighStroke | ActuatorMode | None = None):
         require_float64("DrivenChain")
         self.bead_mass_kg = jnp.atleast_1d(jnp.asarray(bead_mass_kg, dtype=jnp.float64))
         n = self.bead_mass_kg.shape[0]
@@ -226,6 +228,15 @@ class DrivenChain(eqx.Module):
         law's `stiffness_at_force` (Hertz: $dF/d\\delta = \\tfrac32\\kappa^{2/3}F_0^{1/3}$), N/m."""
         return self.contact_law.stiffness_at_force(self.static_force_n(), self.contact_constants())
 
+    def support_stiffness_n_m(self) -> jax.Array:
+        """(n,) linear stiffness of every bead's supports about the static state, N/m: the
+        micro-slip supports' stiffness before anything slips (`laws.IwanSupport`'s K; every
+        slider sticks under an infinitesimal motion), zeros without support friction."""
+        # operators only: the same code on NumPy leaves (`highest_frequency_bound_hz`)
+        if self.support_friction is None:
+            return 0.0 * self.bead_mass_kg
+        return self.support_friction.stiffness_n_m + 0.0 * self.bead_mass_kg
+
     def describe(self) -> dict:
         """The chain as JSON-ready numbers (a sweep folder's manifest): the arrays, `eta_s`
         and, where they are not the defaults, the laws (type name and parameters) and the
@@ -234,10 +245,11 @@ class DrivenChain(eqx.Module):
 
     def highest_frequency_bound_hz(self) -> jax.Array:
         """An upper bound on the chain's highest linear mode frequency about the static state,
-        Hz (Gershgorin's bound on $M^{-1}K$: $\\omega^2 \\le \\max_i 2(k_{i-1} + k_i)/m_i$)."""
+        Hz (Gershgorin's bound on $M^{-1}K$: $\\omega^2 \\le \\max_i (2(k_{i-1} + k_i) + k_{s,i})/m_i$,
+        $k_s$ the supports' stiffness)."""
         k = self.contact_stiffness_n_m()
         # operators and methods only: the same code on NumPy leaves (checks of concrete inputs)
-        return (2.0 * (k[:-1] + k[1:]) / self.bead_mass_kg).max() ** 0.5 / (2.0 * np.pi)
+        return ((2.0 * (k[:-1] + k[1:]) + self.support_stiffness_n_m()) / self.bead_mass_kg).max() ** 0.5 / (2.0 * np.pi)
 
 
 def _check_fields(chain: DrivenChain) -> None:
@@ -256,7 +268,7 @@ def _check_fields(chain: DrivenChain) -> None:
         raise ValueError(f"precompression_n: expected one static force in N, or one per contact ({n + 1}), got "
                          f"shape {chain.precompression_n.shape}.")
     if not isinstance(chain.contact_law, laws.AbstractContactLaw):
-        raise ValueError(f"contact_law: expected a hertzchain.laws contact law (e.g. laws.Hertz(), "
+        raise ValueError(f"contact_law: expected a hertzchain.laws contact law (e.g. laws.Hertz(), "  # noqa: TRY004 (bad input is a ValueError here)
                          f"laws.PowerLaw(1.6)), got {chain.contact_law!r}.")
     for name in ("contact_yield_force_n", "contact_reduced_radius_m", "contact_poisson"):
         value = getattr(chain, name)
@@ -267,8 +279,9 @@ def _check_fields(chain: DrivenChain) -> None:
         if not isinstance(chain.support_friction, laws.IwanSupport):
             raise ValueError(f"support_friction: expected a hertzchain.laws.IwanSupport, got {chain.support_friction!r}.")
         _check_law_parameters((chain.support_friction,), n)
-    if chain.drive_stroke is not None and not isinstance(chain.drive_stroke, RayleighStroke):
-        raise ValueError(f"drive_stroke: expected a hertzchain.driven.RayleighStroke, got {chain.drive_stroke!r}.")
+    if chain.drive_stroke is not None and not isinstance(chain.drive_stroke, DRIVE_STROKES):
+        raise ValueError(f"drive_stroke: expected a hertzchain.driven.RayleighStroke or ActuatorMode, "
+                         f"got {chain.drive_stroke!r}.")
     _check_concrete_positive("bead_mass_kg", chain.bead_mass_kg, "kg")
     _check_concrete_positive("contact_kappa_n_m1p5", chain.contact_kappa_n_m1p5, "N/m^1.5")
     _check_concrete_positive("precompression_n", chain.precompression_n, "N")
@@ -285,11 +298,11 @@ def _yield_constants(n, radius, bead_youngs_pa, bead_poisson, driver_youngs_pa, 
     face_theta = contact.theta(jnp.asarray([driver_youngs_pa] + [bead_youngs_pa] * (n - 1) + [wall_youngs_pa]),
                                jnp.asarray([driver_poisson] + [bead_poisson] * (n - 1) + [wall_poisson]))
     face_radius = jnp.asarray([np.inf] + [1.0] * (n - 1) + [np.inf]) * radius
-    return dict(contact_yield_force_n=contact.yield_force(bead_yield_stress_pa, radius, bead_theta, face_radius,
+    return {"contact_yield_force_n": contact.yield_force(bead_yield_stress_pa, radius, bead_theta, face_radius,
                                                           face_theta),
-                contact_reduced_radius_m=1.0 / (1.0 / radius + 1.0 / face_radius),
-                contact_poisson=jnp.full((n + 1,), bead_poisson, dtype=jnp.float64),
-                yield_stress_pa=bead_yield_stress_pa)
+                "contact_reduced_radius_m": 1.0 / (1.0 / radius + 1.0 / face_radius),
+                "contact_poisson": jnp.full((n + 1,), bead_poisson, dtype=jnp.float64),
+                "yield_stress_pa": bead_yield_stress_pa}
 
 
 def _is_concrete(value) -> bool:
@@ -352,7 +365,7 @@ def _dissipation(dissipation, eta_s) -> tuple[laws.AbstractDissipation, ...]:
         given = tuple(dissipation)
     for law in given:
         if not isinstance(law, laws.AbstractDissipation):
-            raise ValueError(f"dissipation: expected hertzchain.laws dissipation laws (e.g. "
+            raise ValueError(f"dissipation: expected hertzchain.laws dissipation laws (e.g. "  # noqa: TRY004 (bad input is a ValueError here)
                              f"laws.Viscoelastic(eta_s=1e-6), laws.VelocitySquared(0.5)), got {law!r}.")
     kinds = [type(law) for law in given]
     for kind in set(kinds):

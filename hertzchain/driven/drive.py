@@ -9,8 +9,10 @@ amplitude moves between levels along the quintic smooth step
 $S(s) = 10s^3 - 15s^4 + 6s^5$ (zero slope and curvature at both ends), so the drive has
 no kink and the chain is not kicked.
 
-The driver's stroke per volt may itself depend on the amplitude: `RayleighStroke` is a
-piezo whose $d_{33}$ follows Rayleigh's law (given to `DrivenChain` as `drive_stroke`).
+The driver's stroke per volt may itself depend on the amplitude or the frequency (given to
+`DrivenChain` as `drive_stroke`): `RayleighStroke` is a piezo whose $d_{33}$ follows
+Rayleigh's law, `ActuatorMode` a face that reaches the calibrated stroke through one mode of
+the actuator and its fixture.
 """
 
 from __future__ import annotations
@@ -60,6 +62,55 @@ class RayleighStroke(eqx.Module):
         return displacement, velocity
 
 
+class ActuatorMode(eqx.Module):
+    """A driver whose face reaches the calibrated stroke through one mode of the actuator and
+    its fixture (the stack's mass on its own stiffness, the fixture's first mode): the face
+    follows the small-signal stroke through the one-mode transfer function
+
+    $H(f) = 1 / (1 - (f/f_a)^2 + 2i\\zeta_a f/f_a)$,
+
+    normalised to the calibration at low frequency ($H(0) = 1$): for a nominal amplitude a (m)
+    and drive phase $\\theta$ the face moves by $u = a|H|\\cos(\\theta - \\varphi)$, $\\varphi =
+    \\arg(1 - (f/f_a)^2 + 2i\\zeta_a f/f_a)$ its lag. $|H| = 1/(2\\zeta_a)$ at $f_a$ and falls as
+    $(f_a/f)^2$ above it. The face's motion is prescribed: the bead's reaction on the actuator
+    is left out (a stack far heavier and stiffer than the bead's contacts). While the amplitude
+    ramps, the envelope is taken as quasi-static.
+
+    **Arguments:** `mode_hz`: $f_a$, the mode's frequency, Hz (> 0); `damping_ratio`:
+    $\\zeta_a$ (> 0).
+    """
+
+    mode_hz: jax.Array
+    damping_ratio: jax.Array
+
+    def __init__(self, mode_hz, damping_ratio):
+        self.mode_hz = jnp.asarray(mode_hz, dtype=jnp.float64)
+        self.damping_ratio = jnp.asarray(damping_ratio, dtype=jnp.float64)
+
+    def __check_init__(self):
+        for name, value, unit in (("mode_hz", self.mode_hz, "Hz"), ("damping_ratio", self.damping_ratio, "1")):
+            if not isinstance(value, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(value) & (value > 0.0))):
+                raise ValueError(f"ActuatorMode: {name} must be finite and > 0 ({unit}), got {value}.")
+
+    def transfer(self, frequency_hz):
+        """$H(f)$ at `frequency_hz` (Hz): (real part, imaginary part), face over nominal stroke."""
+        r = jnp.asarray(frequency_hz) / self.mode_hz
+        real, imaginary = 1.0 - r**2, 2.0 * self.damping_ratio * r
+        size = real**2 + imaginary**2
+        return real / size, -imaginary / size
+
+    def motion(self, amplitude_m, amplitude_rate_m_s, omega_rad_s, cos, sin):
+        """The face's displacement (m) and velocity (m/s) at the phase of `cos`, `sin`, for
+        the nominal amplitude (m) changing at `amplitude_rate_m_s` (m/s), drive at `omega_rad_s`."""
+        real, imaginary = self.transfer(omega_rad_s / (2.0 * jnp.pi))
+        shape = real * cos - imaginary * sin  # Re[H e^{i theta}]
+        slope = -real * sin - imaginary * cos  # its derivative in theta
+        return amplitude_m * shape, amplitude_rate_m_s * shape + amplitude_m * omega_rad_s * slope
+
+
+# The stroke laws a `DrivenChain` takes as `drive_stroke` (each with `motion`).
+DRIVE_STROKES = (RayleighStroke, ActuatorMode)
+
 
 def smooth_step(s):
     """$S(s) = 10s^3 - 15s^4 + 6s^5$ on $s$ clipped to [0, 1], and $dS/ds$ (0 outside)."""
@@ -71,14 +122,14 @@ def smooth_step(s):
 
 
 def harmonic_segment(frequency_hz, dt_s, steps_per_period: int, from_amplitude_m, to_amplitude_m,
-                     ramp_steps: int, first_step: int = 0, stroke: RayleighStroke | None = None):
+                     ramp_steps: int, first_step: int = 0, stroke=None):
     """The driver's motion through one segment of a harmonic drive, as a function of the
     global step index j (the step's end point, j > `first_step`).
 
     **Arguments:** `frequency_hz`, `dt_s` (= 1/(f N)), `from_amplitude_m`, `to_amplitude_m`:
     (B,) or scalars, Hz, s, m; the amplitude moves from the first to the second value over
     `ramp_steps` steps after `first_step` (0: at once) along `smooth_step`, then holds.
-    `stroke`: the piezo's amplitude-dependent stroke (`RayleighStroke`; None: $a\\cos\\theta$).
+    `stroke`: the driver's stroke law (one of `DRIVE_STROKES`; None: $a\\cos\\theta$).
 
     **Returns:** `drive(j) -> (u_m, u_m_s)`: displacement (m) and velocity (m/s).
     """

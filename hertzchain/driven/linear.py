@@ -6,7 +6,9 @@ $k = dF/d\\delta|_{\\delta_0} = \\tfrac32\\kappa^{2/3}F_0^{1/3}$
 (`DrivenChain.contact_stiffness_n_m`). A chain of n beads between a driven
 face (contact 0) and a wall (contact n) then has the stiffness matrix K (n, n), tridiagonal,
 the mass matrix M = diag(m) and the viscous matrix C = diag(m gamma) (a force $-m\\gamma v$ on
-each bead), and:
+each bead). Micro-slip supports (`laws.IwanSupport`) add their stiffness before anything slips
+to each bead's diagonal entry (`DrivenChain.support_stiffness_n_m`: under an infinitesimal
+motion every slider sticks); the linear model then holds below the supports' slip, and:
 
 - `normal_modes`: $K v = \\omega^2 M v$ (face and wall held), frequencies in Hz and mass-normalised
   shapes;
@@ -29,22 +31,24 @@ import jax.numpy as jnp
 from .chain import DrivenChain
 
 
-def stiffness_matrix(contact_stiffness_n_m):
+def stiffness_matrix(contact_stiffness_n_m, support_stiffness_n_m=0.0):
     """K (n, n), N/m, of n beads joined by n + 1 springs (`contact_stiffness_n_m` (n+1,):
-    0 = driven face-bead 1, K = bead K-K+1, n = bead n-wall), face and wall held."""
+    0 = driven face-bead 1, K = bead K-K+1, n = bead n-wall), face and wall held, each bead
+    also held to ground by `support_stiffness_n_m` (scalar or (n,), N/m; default none)."""
     k = jnp.asarray(contact_stiffness_n_m, dtype=float)
-    diagonal = k[:-1] + k[1:]
+    diagonal = k[:-1] + k[1:] + jnp.asarray(support_stiffness_n_m, dtype=float)
     off = -k[1:-1]
     return jnp.diag(diagonal) + jnp.diag(off, 1) + jnp.diag(off, -1)
 
 
 def normal_modes(chain: DrivenChain):
-    """Normal modes of the linearised `chain`, face and wall held.
+    """Normal modes of the linearised `chain`, face and wall held (the supports' stiffness
+    included).
 
     **Returns:** `(frequencies_hz (n,), shapes (n, n))`, ascending; column j of `shapes` is
     mode j, normalised so that shapes.T M shapes = 1 (m in units of sqrt(kg)^-1).
     """
-    stiffness = stiffness_matrix(chain.contact_stiffness_n_m())
+    stiffness = stiffness_matrix(chain.contact_stiffness_n_m(), chain.support_stiffness_n_m())
     scale = 1.0 / jnp.sqrt(chain.bead_mass_kg)
     omega2, vectors = jnp.linalg.eigh(scale[:, None] * stiffness * scale[None, :])
     return jnp.sqrt(jnp.maximum(omega2, 0.0)) / (2 * jnp.pi), scale[:, None] * vectors
@@ -52,7 +56,7 @@ def normal_modes(chain: DrivenChain):
 
 def frequency_response(chain: DrivenChain, frequencies_hz):
     """Steady response of the linearised `chain` to the face moving as $u\\,e^{i\\omega t}$ at
-    `frequencies_hz` (F,), with the chain's viscous damping ($-m\\gamma v$ on each bead; its
+    `frequencies_hz` (F,), with the supports' stiffness and the chain's viscous damping ($-m\\gamma v$ on each bead; its
     Kuwabara-Kono `eta_s` is not part of the linear model).
 
     **Returns:** `(displacement, contact_force)`: complex (F, n) bead displacements per metre
@@ -61,7 +65,7 @@ def frequency_response(chain: DrivenChain, frequencies_hz):
     """
     mass = chain.bead_mass_kg
     k = chain.contact_stiffness_n_m()
-    stiffness = stiffness_matrix(k)
+    stiffness = stiffness_matrix(k, chain.support_stiffness_n_m())
     damping = chain.damping_rate_per_s * mass
     omega = 2 * jnp.pi * jnp.asarray(frequencies_hz, dtype=float)
     load = jnp.zeros(mass.shape, complex).at[0].set(k[0])

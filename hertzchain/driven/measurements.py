@@ -212,6 +212,27 @@ def read_tongue(amplitude_file, subharmonic_file, *, run: str, drive_m_per_v: fl
                   float(np.median(np.diff(drives))), float(drive_m_per_v), str(fundamental.path))
 
 
+def tongue_fundamental(tongue: Tongue, *, sensor_m_s_per_v: float, levels: int = 3) -> Bending:
+    """The tongue's lock-in at f on its `levels` lowest drive amplitudes as a frequency sweep at
+    fixed drives: a `Bending` of the tongue run (RMS velocity, m/s, with `sensor_m_s_per_v`,
+    (m/s)/V). Far above the chain's resonance the bead's response there is linear and measures
+    the drive's true amplitude at the tongue's frequencies.
+
+    **Raises:** `ValueError` when a chosen level is at or above an onset (its fundamental would
+    mix in the period-doubled motion): choose fewer `levels`."""
+    levels = int(levels)
+    onsets = tongue.onset_m[np.isfinite(tongue.onset_m)]
+    if levels < 1 or levels > tongue.drive_amplitudes_m.size:
+        raise ValueError(f"levels: expected 1..{tongue.drive_amplitudes_m.size} drive levels, got {levels}.")
+    if onsets.size and tongue.drive_amplitudes_m[levels - 1] >= onsets.min():
+        raise ValueError(f"levels: the tongue's level {levels} ({tongue.drive_amplitudes_m[levels - 1]:.3g} m) is at "
+                         f"or above its lowest onset ({onsets.min():.3g} m); choose fewer levels.")
+    sweep = LockinSweep(np.asarray(tongue.frequencies_hz, dtype=float), np.asarray(tongue.drive_amplitudes_m[:levels]),
+                        np.asarray(tongue.fundamental_v[:levels], dtype=float).T * sensor_m_s_per_v,
+                        tongue.drive_m_per_v, float(sensor_m_s_per_v), tongue.source)
+    return Bending(tongue.run, sweep)
+
+
 def loop_thresholds(drive_amplitudes_m, present) -> tuple[float, float, float]:
     """(onset going up, last amplitude with f/2 coming down, first without it) of a sweep up to
     its highest step and back, from where f/2 is `present` (S,) (NaN where there is none)."""
