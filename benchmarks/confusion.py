@@ -18,19 +18,21 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import jax  # noqa: E402
-from fitting.diagnosis import diagnose  # noqa: E402
-from fitting.effects import EFFECT_NAMES, nominal_yield_forces_n  # noqa: E402
-from fitting.hidden import hidden_effect_traces  # noqa: E402
-import hertzchain as hc  # noqa: E402
-from independent_data import SETUPS, hidden_records, true_strength  # noqa: E402
-from hertzchain.io.atomic import write_csv, write_json, write_text  # noqa: E402
+import jax
+from independent_data import SETUPS, hidden_records, true_strength
+
+import hertzchain as hc
+from fitting.diagnosis import diagnose
+from fitting.effects import EFFECT_NAMES, nominal_yield_forces_n
+from fitting.hidden import hidden_effect_traces
+from hertzchain.io.atomic import write_csv, write_json, write_text
 
 PAIRS = (("viscous_damping", "wall_compliance"), ("track_friction", "sensor_dynamics"),
          ("viscous_damping", "track_friction"))
@@ -60,8 +62,9 @@ def run_case(hidden, seed, *, n_beads=None, noise_fraction=None, contacts=None, 
                                      noise_fraction=noise_fraction, seed=seed)
     else:
         files = hidden_records(setup, hidden, code_path=code_path, seed=seed)
-    began = time.perf_counter()
+    began, cpu = time.perf_counter(), time.process_time()
     result = diagnose(files, progress=False)
+    cpu = time.process_time() - cpu
     jax.clear_caches()  # each diagnosis compiles its own models: free them before the next
     return {
         "hidden": list(hidden),
@@ -78,6 +81,8 @@ def run_case(hidden, seed, *, n_beads=None, noise_fraction=None, contacts=None, 
         "refitted": [[c.effect for c in candidates if c.separable and c.chi2 == c.chi2]
                      for candidates in [s.candidates for s in result.steps] + [result.last_candidates]],
         "runtime_s": time.perf_counter() - began,
+        "cpu_s": cpu,  # the process's CPU time (every thread's): what a load on the machine leaves as it was
+        "loadavg": list(os.getloadavg()),
     } | ({"strengths": {step.effect: {"true": true_strength(setup, step.effect) if step.effect in hidden else None,
                                       "fitted": recovered(setup, step.effect, step.values)}
                         for step in result.steps}} if setup else {})

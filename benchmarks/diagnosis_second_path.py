@@ -16,34 +16,42 @@ chain, its wall brass at 110 GPa):
   strength). With an infinite yield force the NumPy generator is checked against the diffrax
   reference on the elastic chain (`elastic_check`).
 
-    python benchmarks/diagnosis_second_path.py [--cases wall,plasticity] [--out DIR]
+    python benchmarks/diagnosis_second_path.py [--cases wall,plasticity] [--out DIR] [--profile]
 
 Writes `DIR/latest.json` (default `benchmarks/results/diagnosis_second_path`): per case the
 effects named, the alarm, the convergence, the wall modulus or yield stress read, the run time
-(`runtime_s`, the diagnosis from the records made), with the machine's load average.
+(`runtime_s`, the diagnosis from the records made; `cpu_s`, its process CPU time; `loadavg`, the
+1, 5 and 15 min load averages at its end), with the machine's load average. `--profile` writes
+`DIR/profile.json` instead: per case where the diagnosis's seconds go (cProfile's cumulative
+time of its stages and of the evaluator, JAX's compilations counted by event), nothing else.
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
 import math
 import os
+import pstats
 import sys
 import time
+from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import hertzchain as hc  # noqa: E402
-from fitting.diagnosis import diagnose  # noqa: E402
-from hertzchain.acquisition import Acquisition, acquire  # noqa: E402
-from hertzchain.io.atomic import json_ready, write_json  # noqa: E402
-from hertzchain.chain import build_model  # noqa: E402
-from hertzchain.reference import simulate_reference  # noqa: E402
-from hertzchain.io.tracefile import TraceFile, setup_header  # noqa: E402
-from independent_data import SETUPS, hidden_records, true_strength  # noqa: E402
+import jax
+from independent_data import SETUPS, hidden_records, true_strength
+
+import hertzchain as hc
+from fitting.diagnosis import diagnose
+from hertzchain.acquisition import Acquisition, acquire
+from hertzchain.chain import build_model
+from hertzchain.io.atomic import json_ready, write_json
+from hertzchain.io.tracefile import TraceFile, setup_header
+from hertzchain.reference import simulate_reference
 
 SETUP = "brass"
 WALL_YOUNGS_PA = 20e9
@@ -83,7 +91,7 @@ def thornton_chain(setups, t_end_s: float, contacts, yield_forces_n=None):
     v[:, 0] = [float(s.striker_velocity_m_s) for s in setups]
     max_overlap = np.zeros((shots, kappa.size))
     dt = VERLET_STEP_S
-    n_samples = int(round(t_end_s / (dt * RECORD_EVERY)))
+    n_samples = round(t_end_s / (dt * RECORD_EVERY))
     wanted = list(contacts) + [kappa.size - 1]
     record = np.zeros((n_samples, shots, len(wanted)))
 
@@ -112,9 +120,11 @@ def thornton_chain(setups, t_end_s: float, contacts, yield_forces_n=None):
     return time_s, {name: record[:, :, i].T for i, name in enumerate(names)}
 
 
-def _records(runs, spec, label, seed):
-    """`TraceFile`s of the brass chain's shots from (time, {channel: force}) runs, acquired as
-    `independent_data.hidden_records` does; the header is the nominal chain."""
+def records(runs, spec, label, seed, code_path="numpy_thornton_verlet"):
+    """`TraceFile`s of a chain's shots (`spec`: `n_beads`, `velocities_m_s`, `fields` as in
+    `independent_data.SETUPS`) from (time s, {channel: force N}) runs, acquired as
+    `independent_data.hidden_records` does (0.5 % noise, 11 bits, 2 us, piezo channels); the
+    header is the nominal chain, with the hidden effects `label` and the `code_path` noted."""
     files = []
     for k, (velocity, (time_s, forces)) in enumerate(zip(spec["velocities_m_s"], runs)):
         nominal = hc.ChainSetup(spec["n_beads"], striker_velocity_m_s=velocity, **spec["fields"])
@@ -126,7 +136,7 @@ def _records(runs, spec, label, seed):
         for name in record.channels:
             header[f"noise_std_n_{name}"] = record.noise_std_n[name]
         header["x_hidden_effects"] = label
-        header["x_code_path"] = "numpy_thornton_verlet"
+        header["x_code_path"] = code_path
         files.append(TraceFile(header, record.time_s, record.channels, path=f"{SETUP}_{velocity:g}"))
     return files
 
@@ -142,7 +152,7 @@ def thornton_records(seed: int = 0):
               for v in spec["velocities_m_s"]]
     time_s, forces = thornton_chain(setups, spec["record_s"], spec["contacts"], forces_y)
     runs = [(time_s, {n: f[k] for n, f in forces.items()}) for k in range(len(setups))]
-    return _records(runs, spec, "plasticity (Thornton)", seed), forces_y
+    return records(runs, spec, "plasticity (Thornton)", seed), forces_y
 
 
 def elastic_check() -> float:
@@ -150,7 +160,7 @@ def elastic_check() -> float:
     the fastest shot, over the largest force of each channel."""
     spec = SETUPS[SETUP]
     setup = hc.ChainSetup(spec["n_beads"], striker_velocity_m_s=max(spec["velocities_m_s"]), **spec["fields"])
-    time_s, forces = thornton_chain([setup], spec["record_s"], spec["contacts"])
+    _, forces = thornton_chain([setup], spec["record_s"], spec["contacts"])
     reference = simulate_reference(setup, t_end_s=spec["record_s"], sample_interval_s=0.25e-6,
                                    contacts=spec["contacts"], rtol=1e-9)
     worst = 0.0
@@ -181,10 +191,71 @@ def _summary(diagnosis, began: float) -> dict:
     return out
 
 
+# The stages of a diagnosis and the evaluations under them, as (module path, function): the
+# profile reports each one's cumulative time and calls (nested: a refit's time holds its fits').
+PROFILED = (
+    ("fitting/diagnosis/workflow.py", "base_fit"), ("fitting/diagnosis/workflow.py", "locate"),
+    ("fitting/diagnosis/workflow.py", "screen"), ("fitting/diagnosis/workflow.py", "refit"),
+    ("fitting/diagnosis/workflow.py", "heldout_check"), ("fitting/diagnosis/verdict.py", "name"),
+    ("fitting/diagnosis/workflow.py", "backward_check"), ("fitting/diagnosis/report.py", "report"),
+    ("fitting/diagnosis/screening.py", "screen"), ("fitting/diagnosis/refits.py", "refit"),
+    ("fitting/diagnosis/refits.py", "fit"), ("fitting/diagnosis/refits.py", "stderr"),
+    ("fitting/diagnosis/heldout.py", "heldout_chi2"), ("fitting/diagnosis/evaluator.py", "__call__"),
+    ("fitting/diagnosis/evaluator.py", "residuals"), ("fitting/model.py", "__init__"),
+)
+
+
+def profiled_diagnosis(files) -> tuple:
+    """`diagnose(files)` under cProfile timed by the process's CPU time (every thread's, the
+    compiler's included; a load on the machine leaves it nearly unchanged, where it stretches
+    wall times), with JAX's compile events summed: (diagnosis, breakdown): wall and CPU seconds,
+    per stage of `PROFILED` its cumulative CPU seconds and calls, per JAX duration event
+    (tracing, lowering, backend compilation) its count and wall seconds, the backend
+    compilations also by compiled function, and the evaluator's counters (Jacobians, residual
+    evaluations, their wall seconds). The native kernels' builds (a first run on a machine)
+    run in child processes, outside the CPU time."""
+    events = defaultdict(lambda: [0, 0.0])
+    compiled = defaultdict(lambda: [0, 0.0])
+
+    def listen(event, duration, fun_name=None, **_):
+        events[event][0] += 1
+        events[event][1] += duration
+        if event.endswith("backend_compile_duration"):
+            compiled[str(fun_name)][0] += 1
+            compiled[str(fun_name)][1] += duration
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    profiler = cProfile.Profile(timer=time.process_time)
+    began, cpu = time.perf_counter(), time.process_time()
+    try:
+        diagnosis = profiler.runcall(diagnose, files, progress=True)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    wall, cpu = time.perf_counter() - began, time.process_time() - cpu
+    stats = pstats.Stats(profiler).stats
+    stages = {}
+    for path, function in PROFILED:
+        hits = [(nc, ct) for (file, _, name), (_, nc, _, ct, _) in stats.items()
+                if file.endswith(path) and name == function]
+        if hits:
+            stages[f"{path}:{function}"] = {"calls": sum(h[0] for h in hits), "cumulative_cpu_s": sum(h[1] for h in hits)}
+    breakdown = {
+        "wall_s": wall, "cpu_s": cpu, "loadavg": list(os.getloadavg()), "stages": stages,
+        "jax_events": {name: {"count": n, "wall_s": t} for name, (n, t) in sorted(events.items())
+                       if name.startswith("/jax/core/compile")},
+        "backend_compilations": {name: {"count": n, "wall_s": t}
+                                 for name, (n, t) in sorted(compiled.items(), key=lambda item: -item[1][1])},
+        "evaluator": {"jacobians": diagnosis.evaluations, "residual_evaluations": diagnosis.residual_evaluations,
+                      "wall_s": diagnosis.evaluation_seconds},
+    }
+    return diagnosis, breakdown
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", default="wall,plasticity")
     parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results/diagnosis_second_path"))
+    parser.add_argument("--profile", action="store_true", help="write DIR/profile.json: where the seconds go")
     args = parser.parse_args(argv)
     cases = [c.strip() for c in args.cases.split(",") if c.strip()]
     results = {"setup": {SETUP: {k: v for k, v in SETUPS[SETUP].items() if k != "fields"}},
@@ -206,16 +277,26 @@ def main(argv=None) -> int:
         else:
             raise SystemExit(f"--cases: unknown case {case!r} (wall, plasticity)")
         entry["data_s"] = made - began
-        diagnosis = diagnose(files, progress=True)
+        cpu = time.process_time()
+        if args.profile:
+            diagnosis, entry["profile"] = profiled_diagnosis(files)
+        else:
+            diagnosis = diagnose(files, progress=True)
         entry.update(_summary(diagnosis, made))
+        entry["cpu_s"] = time.process_time() - cpu  # every thread of the process; not the kernel builds
+        entry["loadavg"] = list(os.getloadavg())
         entry["correct"] = entry["named"] == entry["expected"]
         results["cases"][case] = entry
         print(f"{case}: named {entry['named']} (alarm {entry['alarm']}, converged {entry['converged']}) "
               f"in {entry['runtime_s']:.0f} s", flush=True)
     results["load_average_1min_at_end"] = os.getloadavg()[0]
+    results["conditions"] = (
+        f"measured on {os.cpu_count()} cores, shared: 1-min load average {results['load_average_1min_at_start']:.1f} "
+        f"at the start, {results['load_average_1min_at_end']:.1f} at the end (each case's `loadavg` at its end); "
+        "wall times (`runtime_s`, `diagnosis_s`) are under that load, `cpu_s` is the process's CPU time")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "latest.json", json_ready(results))
+    write_json(out / ("profile.json" if args.profile else "latest.json"), json_ready(results))
     return 0 if all(e["correct"] for e in results["cases"].values()) else 1
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -223,7 +224,7 @@ def test_least_squares_frees_columns_and_weights_rows():
 
 
 # --- the workflow -------------------------------------------------------------------------------------
-SHORT = dict(n_beads=6, contacts=(2, 4), velocities_m_s=(0.03, 0.1, 0.3, 0.6), sample_interval_s=1e-6)
+SHORT = {"n_beads": 6, "contacts": (2, 4), "velocities_m_s": (0.03, 0.1, 0.3, 0.6), "sample_interval_s": 1e-6}
 
 
 def _gap_at_noise(diagnosis):
@@ -363,8 +364,8 @@ def _exponent_traces(exponent, *, n_beads=6, velocities=(0.05, 0.15, 0.4), noise
             rec["wall"].append(wall)
         channels = {name: np.asarray(values) for name, values in rec.items()}
         sigma = noise_fraction * max(float(np.max(c)) for c in channels.values())
-        for name in channels:
-            channels[name] = channels[name] + sigma * rng.standard_normal(n_samples)
+        for name, values in channels.items():
+            channels[name] = values + sigma * rng.standard_normal(n_samples)
         header = setup_header(ChainSetup(n_beads, striker_velocity_m_s=v0))
         header["noise_std_n"] = sigma
         files.append(TraceFile(header=header, time_s=dt * every * np.arange(1, n_samples + 1), channels=channels,
@@ -438,11 +439,11 @@ class _CountingSearch:
     strength, 1000 residuals, no folds (no held-out check), no law to interpret."""
 
     n_beads = 6
-    folds: list = []
+    folds: ClassVar[list] = []
     noise_estimate_variance = 0.0
-    effect_columns = {"viscous_damping": [2], "track_friction": [3]}
+    effect_columns: ClassVar = {"viscous_damping": [2], "track_friction": [3]}
 
-    class problem:  # noqa: N801
+    class problem:
         n_fitted = 1000
 
     def columns(self, effects):
@@ -571,9 +572,9 @@ def test_noise_band_with_estimated_noise_no_alarm_when_the_model_holds_an_alarm_
     friction hidden too and no candidate for it, the alarm is raised."""
     from hertzchain.materials import BRASS
 
-    brass = dict(n_beads=9, contacts=(3, 6), velocities_m_s=(0.05, 0.2, 0.6, 1.2), sample_interval_s=1e-6,
-                 bead_radius_m=5e-3, bead_density_kg_m3=BRASS.density_kg_m3, bead_youngs_pa=BRASS.youngs_pa,
-                 bead_poisson=BRASS.poisson)
+    brass = {"n_beads": 9, "contacts": (3, 6), "velocities_m_s": (0.05, 0.2, 0.6, 1.2), "sample_interval_s": 1e-6,
+             "bead_radius_m": 5e-3, "bead_density_kg_m3": BRASS.density_kg_m3, "bead_youngs_pa": BRASS.youngs_pa,
+             "bead_poisson": BRASS.poisson}
     held = _estimated_noise(hidden_effect_traces({"viscous_damping": 1.5e-6}, seed=21, noise_fraction=0.004,
                                                  **brass), 250, seed=22)
     result = diagnose(held, candidates=("viscous_damping", "track_friction"), max_effects=2, progress=False)
@@ -591,8 +592,8 @@ def test_a_candidate_whose_score_reaches_the_noise_band_is_refitted_whatever_its
     from fitting.diagnosis import _Workflow
 
     class Screening(_CountingSearch):
-        candidates = ["a", "b", "c", "d", "e"]
-        effect_columns = {name: [2 + k] for k, name in enumerate(candidates)}
+        candidates: ClassVar = ["a", "b", "c", "d", "e"]
+        effect_columns: ClassVar = {name: [2 + k] for k, name in enumerate(candidates)}
 
         def screen(self, x, effects, names):
             scores = {"a": 2900.0, "b": 2800.0, "c": 2700.0, "d": 2000.0, "e": 1000.0}
@@ -603,3 +604,32 @@ def test_a_candidate_whose_score_reaches_the_noise_band_is_refitted_whatever_its
     assert run.screen()[4] == ["a", "b", "c", "d"]
     run.chi2 = 3200.0  # now "d" would leave 203 above its dof: outside the band
     assert run.screen()[4] == ["a", "b", "c"]
+
+
+def test_a_round_at_the_noise_level_screens_nothing_and_refits_nothing():
+    """At the noise level (chi^2 1000 on 993 dof: an excess of 7 in a band of 3 sqrt(2 x 993)
+    = 134) the round neither screens (the screen would rank what is not refitted) nor refits:
+    every candidate is reported as not screened, with a NaN score, none passes; above the band
+    (chi^2 1200) the screen runs and ranks."""
+    from fitting.diagnosis import _Workflow
+
+    class Screening(_CountingSearch):
+        def __init__(self):
+            self.candidates = ["a", "b", "c"]
+            self.effect_columns = {name: [2 + k] for k, name in enumerate(self.candidates)}
+            self.screened = 0
+
+        def screen(self, x, effects, names):
+            self.screened += 1
+            return {n: 100.0 for n in names}, {n: [x] for n in names}, {n: True for n in names}, []
+
+    search = Screening()
+    run = _Workflow(search, "base", min_share=0.2, max_refits=3, progress=False)
+    run.x, run.chi2, run.location = np.zeros(5), 1000.0, {"worst": []}
+    todo, scores, starts, separable, worth = run.screen()
+    assert search.screened == 0 and worth == [] and all(math.isnan(scores[c]) for c in todo)
+    results = run.heldout_check(run.refit(todo, scores, starts, separable, worth))
+    assert [c.effect for c in results] == ["a", "b", "c"] and not any(c.passed for c in results)
+    assert all(c.converged is None and "not screened" in c.reason for c in results)
+    run.chi2 = 1200.0
+    assert run.screen()[4] == ["a", "b", "c"] and search.screened == 1

@@ -141,3 +141,43 @@ def test_evaluator_takes_the_twin_only_where_it_is_exact():
     x[0] = 0.0  # a dashpot, rigid sensors
     assert evaluate.problem_at(x) is law_dashpot and evaluate.problem_at(x, [5]) is law_dashpot
     assert evaluate.problem_at(x, [0]) is law
+
+
+def test_evaluator_residuals_and_predictions_come_from_one_compiled_model(brass_files):
+    """The evaluator's residuals, (model - data) / sigma from its model vector, equal the
+    problem's own whitened residuals to round-off at several points, its predictions equal
+    `Problem.predictions`, and all of them run one compilation of the model vector: the
+    residuals, the predictions (`locate`'s windows) and new points reuse it."""
+    import jax
+
+    problem, x = _problem(brass_files, plastic=False, compliant_sensors=False, dashpot=False)
+    compiled = []
+
+    def listen(event, duration, fun_name=None, **_):
+        if event.endswith("backend_compile_duration") and "_model_vector" in str(fun_name):
+            compiled.append(fun_name)
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        evaluate = _Evaluator(problem)
+        points = [x]
+        for label, value in (("eta", 1e-6), ("eta_s", 2e-6)):  # the header's damping, the effect's
+            points.append(x.copy())
+            points[-1][problem.labels.index(label)] = value
+        residuals = [evaluate.residuals(p) for p in points]
+        predictions = [evaluate.predictions(p) for p in points[:2]]
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert len(compiled) == 1, compiled
+    data, sigma = problem.data_vector(), problem.sigma_vector()
+    assert np.all(np.isfinite(sigma))  # every sample fitted: the model is data + sigma r
+    for k, (point, r) in enumerate(zip(points, residuals)):
+        reference = np.asarray(problem.residuals(point))
+        assert np.max(np.abs(r - reference)) <= 1e-12 * np.max(np.abs(reference))
+        if k < len(predictions):
+            model = data + sigma * reference
+            for predicted, slices in zip(predictions[k], problem.residual_slices()):
+                assert predicted.keys() == slices.keys()
+                for name, part in slices.items():
+                    np.testing.assert_allclose(predicted[name], model[part], rtol=0, atol=1e-9 * np.max(np.abs(model)))
+    assert np.max(np.abs(residuals[1] - residuals[0])) > 1e-3 * np.max(np.abs(residuals[0]))  # the points differ

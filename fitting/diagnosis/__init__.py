@@ -33,7 +33,8 @@ and repeat until nothing significant is left.
    starts span their physical range instead (`_Search.start_for`); so is, whatever its
    rank, every candidate whose score alone would bring the chi^2 excess into the noise
    band (the rank orders the refits, it does not drop what a fit of one candidate would
-   find).
+   find). A round whose misfit is already at the noise level refits nothing, and screens
+   nothing either (the scores would rank what is not needed).
 4. **Decide.** A candidate with k strengths is named only if all hold:
    (a) its $\\Delta\\chi^2$ beats the BIC penalty $k\\ln n$;
    (b) it removes at least `min_share` of the excess misfit $\\chi^2 - \\mathrm{dof}$ that
@@ -67,7 +68,9 @@ All fits share one compiled forward model and Jacobian (every candidate strength
 parameter of it, held at 0 when off), so the whole diagnosis compiles the simulator once,
 twice when `plasticity` is tried: points where its strength is 0 run on Hertz contacts, the
 same model there at a quarter of the cost of the elastic-plastic contact law (`_Evaluator`,
-which also computes only the Jacobian columns a fit frees and caches recent points). The
+which also computes only the Jacobian columns a fit frees, caches recent points, and takes
+the residuals and the predictions `locate` reads from one compiled model vector per variant
+of the law: compilation, not simulation, is most of a diagnosis's time). The
 fits are `fitting.fit`'s Levenberg-Marquardt (`fitting.fit.least_squares`: optimistix with
 the fit's termination and test of an optimum) on the evaluator's residuals, with columns
 freed or held, rows weighted in or out (the time windows of `bead_dispersion`) and points

@@ -61,7 +61,8 @@ class _Workflow(_Verdict, _Report):
     def locate(self, x=None) -> dict:
         """Where the fit `x` (default the current one) misses: `fitting.locate`."""
         x = self.x if x is None else x
-        return locate(self.search.problem, x, self.search.evaluate.residuals(x))
+        evaluate = self.search.evaluate
+        return locate(self.search.problem, x, evaluate.residuals(x), evaluate.predictions(x))
 
     # --- 3. screen ----------------------------------------------------------------------------------
     def screen(self):
@@ -69,18 +70,23 @@ class _Workflow(_Verdict, _Report):
         candidates to refit: the best `max_refits` separable ones by score, whatever their
         score (a linear score at "off" misjudges effects with a threshold or a singular
         onset, see `_Search.start_for`), and any other whose score alone would bring the
-        misfit into the noise band (`score_reaches_noise`); none when the misfit is at the
-        noise level."""
+        misfit into the noise band (`score_reaches_noise`). None when the misfit is at the
+        noise level, and then nothing is screened (scores NaN): the screen only ranks what is
+        refitted, and it costs a Jacobian of every candidate's strengths and their secants, on
+        every variant of the contact law and the sensors they switch on, each variant its own
+        compilation (measured on the 15-bead brass chain: a fifth of a diagnosis that names
+        plasticity). Candidates found not separable in earlier rounds stay reported."""
         search = self.search
         todo = [c for c in search.candidates if c not in self.accepted]
+        dof = self.dof_of(self.accepted)
+        if self.at_noise(self.chi2, dof, self.location):
+            search.log("the misfit is at the noise level: no candidate screened")
+            return todo, {c: math.nan for c in todo}, {}, {c: True for c in todo}, []
         scores, starts, separable, pairs = search.screen(self.x, self.accepted, todo)
         search.log("screened " + ", ".join(f"{c} {scores[c]:.3g}" for c in todo))
         for pair in pairs:
             if pair not in self.pairs_seen:
                 self.pairs_seen.append(pair)
-        dof = self.dof_of(self.accepted)
-        if self.at_noise(self.chi2, dof, self.location):
-            return todo, scores, starts, separable, []
         ranked = sorted((c for c in todo if separable[c]), key=lambda c: -scores[c])
         # the rank only orders the refits: a candidate whose score alone brings the misfit
         # into the noise band is what a fit of it alone would find, and is refitted whatever
@@ -139,7 +145,8 @@ class _Workflow(_Verdict, _Report):
             else:
                 results.append(CandidateResult(
                     effect=name, n_parameters=k, score_chi2=scores[name],
-                    reason="the misfit is already at the noise level" if self.at_noise(self.chi2, dof, self.location)
+                    reason="the misfit is already at the noise level (not screened)"
+                    if self.at_noise(self.chi2, dof, self.location)
                     else
                     f"score {scores[name]:.4g} not among the {self.max_refits} best, which are refitted, "
                     "and short of the noise band"))
