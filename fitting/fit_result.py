@@ -15,7 +15,7 @@ from hertzchain.io.importer import DITHER_STEPS
 from hertzchain.theory import DISCRETE_SPEED_FACTOR
 
 from .model import Problem
-from .parameters import CONTINUUM_SPEED_FACTOR, bare_speed_constant, public_label
+from .parameters import CONTINUUM_SPEED_FACTOR, LabelledValues, bare_speed_constant, public_label
 from .uncertainty import Covariance, noise_band
 
 
@@ -30,7 +30,8 @@ class FitResult:
       ...); `to_json` and the reports write each as a user names it
       (`fitting.parameters.public_label`: `eta_s`, `striker_velocity_m_s[run1]`).
     - `values`, `stderr`: label -> value / standard error in SI units (stderr inf when the
-      data cannot determine it).
+      data cannot determine it); read by either spelling (`values["eta_s"]` is
+      `values["eta"]`: `fitting.parameters.LabelledValues`).
     - `units`: label -> SI unit.
     - `correlation`: (p, p) correlation matrix in `labels` order; `covariance` likewise.
     - `covariance_scale`: "noise" (sigma known), "residual" (scaled by chi^2/dof) or
@@ -82,6 +83,11 @@ class FitResult:
     timings: dict = dataclasses.field(default_factory=dict)
     stderr_stated_noise: dict = dataclasses.field(default_factory=dict)
     residuals: np.ndarray | None = None
+
+    def __post_init__(self):
+        for field in ("values", "stderr", "units", "stderr_stated_noise", "profiles"):
+            if isinstance(getattr(self, field), dict):
+                setattr(self, field, LabelledValues(getattr(self, field)))
 
     def predictions(self) -> list[dict]:
         """Fitted model of every channel on the data's time axis, per file (N).

@@ -255,6 +255,29 @@ def resolve_label(label: str, *, where: str | None = None) -> str:
     return resolve_name(base.strip(), where=where) + bracket + rest
 
 
+class LabelledValues(dict):
+    """label -> value (a fit's values, errors, units), read by either spelling of a
+    parameter: `values["eta_s"]` and `values["eta"]` are the same entry, as are
+    `striker_velocity_m_s[run1]` and `striker_velocity[run1]`. Keys are stored in registry
+    spelling (`FitResult.labels`); iteration and `to_json` are unchanged."""
+
+    def _key(self, label):
+        if not isinstance(label, str) or dict.__contains__(self, label):
+            return label
+        base, bracket, rest = label.partition("[")
+        key = _KEY_OF_PUBLIC.get(base.strip())
+        return label if key is None else key + bracket + rest
+
+    def __getitem__(self, label):
+        return dict.__getitem__(self, self._key(label))
+
+    def __contains__(self, label) -> bool:
+        return dict.__contains__(self, self._key(label))
+
+    def get(self, label, default=None):
+        return dict.get(self, self._key(label), default)
+
+
 def public_label(label: str) -> str:
     """What a user sees for a registry key or instance label: `eta` -> `eta_s`,
     `striker_velocity[run1]` -> `striker_velocity_m_s[run1]`; other names unchanged."""

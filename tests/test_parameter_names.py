@@ -126,3 +126,18 @@ def test_old_and_new_spellings_give_the_same_fit_and_the_report_speaks_the_new(s
     assert table.splitlines()[1].startswith("wall_youngs_pa,") and "final_wall_youngs_pa" in starts
     for text in (table, starts, json.dumps(new["params"]), new_out):
         assert "wall_youngs," not in text and "'wall_youngs'" not in text
+
+
+def test_a_fits_values_read_by_either_spelling():
+    """`FitResult.values` and its siblings are keyed in registry spelling; the public name
+    (and an instance label in it) reads the same entry, and unknown names still fail."""
+    from fitting.parameters import LabelledValues
+
+    values = LabelledValues({"eta": 2e-6, "striker_velocity[run1]": 0.3, "mu": 0.19})
+    assert values["eta_s"] == values["eta"] == 2e-6
+    assert values["striker_velocity_m_s[run1]"] == 0.3
+    assert "wall_youngs_pa" not in values and "eta_s" in values
+    assert values.get("precompression_n", "absent") == "absent"
+    assert list(values) == ["eta", "striker_velocity[run1]", "mu"]
+    with pytest.raises(KeyError):
+        values["eta_ms"]
