@@ -1,6 +1,7 @@
 """The driven diagnosis on bending data made by a second code path with a law hidden: a NumPy RK4
 of one bead between a driven face and a wall (`tests/helpers.driven_bead_lockin`), its contacts
-a power law of another exponent than Hertz's, or Hertz in series with a spring. Fitted on the lower drive levels
+a power law of another exponent than Hertz's, Hertz in series with a spring, or Hertz with
+micro-slip friction at the bead's supports (an Iwan element). Fitted on the lower drive levels
 at the stated precompression, the protocol (`fitting.driven_diagnosis.diagnose_experiment`,
 which runs `fitting.driven_candidates.diagnose_laws`) must name the hidden law by what it
 predicts for the top level, and recover its constant.
@@ -122,3 +123,20 @@ def test_protocol_names_a_hidden_series_compliance():
     assert by_name["series_compliance"]["bending"]["held_out_misfit_median"] < 0.01
     fitted = np.asarray(by_name["series_compliance"]["constants"]["contact_law.compliance_m_n"]).ravel()[0]
     assert fitted == pytest.approx(SERIES_COMPLIANCE, rel=0.15)
+@pytest.mark.slow  # minutes: the sliders run the JAX kernel; the default suite's protocol check is the exponent's
+def test_protocol_names_hidden_micro_slip_at_the_supports():
+    """Hidden: Hertz contacts and an Iwan support, K = 20 % of the contacts' 2 k, full slip at
+    40 nm (the top drive's swing slips most of it): a loss that grows with amplitude below full
+    slip and a softening (data: peak per nm top/lowest 0.77, resonance -4.0 %). The base misses
+    the held-out top level by 12 % of its peak, the micro-slip candidate by 3.8 % (measured); it
+    is named and finds the slip displacement within 25 % (measured 3.35e-8 m: the RK4 bead's
+    sliders move after each step, the library's within it). Candidates: base, micro-slip."""
+    k = 1.5 * F0 / OVERLAP
+    support_k, slip = 0.4 * k, 4e-8
+    experiment = _experiment(lambda d: HERTZ_KAPPA * np.maximum(d, 0.0) ** 1.5, 2 * k + support_k,
+                             iwan_support(support_k, slip))
+    result = _diagnose(experiment, _named("micro_slip_supports"), max_steps=12)
+    by_name = {e["name"]: e for e in result["candidates"]}
+    assert result["verdict"]["named"] == ["micro_slip_supports"]
+    fitted = np.asarray(by_name["micro_slip_supports"]["constants"]["support_friction.slip_displacement_m"]).ravel()[0]
+    assert fitted == pytest.approx(slip, rel=0.25)
