@@ -97,12 +97,17 @@ def diagnose_experiment(experiment: DrivenExperiment, candidates=CANDIDATES, *,
 
     **Returns:** `diagnose_laws`'s dict with `converged`, `unconverged_fits`, `measurements`
     (the kinds the file holds), `settings` (the knobs), `conclusion` (plain words) and `run`
-    (load averages, the process's CPU seconds) added."""
+    (load averages, the process's CPU seconds) added. **Raises:** `ValueError` for an
+    experiment without a bending measurement, or fewer than one held-out level."""
     if held_out_levels < 1:
         raise ValueError(f"--held-out-levels {held_out_levels}: give at least 1; the held-out drive levels are "
                          "the measurement every candidate predicts.")
     load = os.getloadavg()[0]
     experiment = with_measurements(experiment)
+    if not any(m.kind == "bending" for m in experiment.measurements):
+        raise ValueError(f"{experiment.path}: the driven diagnosis fits each candidate law on a bending measurement "
+                         "and predicts the others; add a [[measurement]] of kind \"bending\" (a frequency sweep of "
+                         "the same apparatus).")
     result = diagnose_laws(experiment, candidates, held_out_levels=held_out_levels, level_stride=level_stride,
                            max_steps=max_steps, progress=progress)
     result = finished(result, [m.kind for m in experiment.measurements],
