@@ -174,7 +174,7 @@ def assert_transform_is_one_call_equal_to_the_jax_kernel(transform: str, targets
     grid = hc.choose_time_grid(base, t_end_s=0.3e-3, sample_interval_s=2e-6)
     q = jnp.asarray([2e-6, 0.19, 1.0, 1.0, 1.0])
     qs = q * jnp.asarray([[1.0] * 5, [1.3, 0.7, 1.1, 0.5, 1.02], [0.6, 1.2, 0.9, 1.5, 0.98]])
-    run = lambda kernel: jax.jit(lambda q, qs: TRANSFORMS[transform](  # noqa: E731
+    run = lambda kernel: jax.jit(lambda q, qs: TRANSFORMS[transform](
         lambda p: recorded_forces(base, grid, p, kernel), q, qs))
     hlo = run("auto").lower(q, qs).as_text()
     assert hlo.count(targets(transform)) == 1 and "while" not in hlo
@@ -219,3 +219,70 @@ calibration_m_per_v = 7.517e-7
 [sensor]
 calibration_m_s_per_v = 0.02125
 """
+
+
+def driven_bead_lockin(frequencies_hz, drives_m, *, mass_kg, contact_force, static_overlap_m, damping_rate_per_s,
+                       support=None, ramp_periods=25, hold_periods=35, window_periods=4, steps_per_period=48):
+    """RMS velocity (m/s) at the drive frequency of one bead between a driven face and a wall,
+    (F, A), by a fixed-step NumPy RK4 written here (a second code path to
+    `hertzchain.driven.lockin_grid`): every (frequency, drive) run at once from rest at the
+    static equilibrium, the face's amplitude rising along the quintic smooth step over
+    `ramp_periods` periods, held `hold_periods`, the bead's velocity demodulated at the drive
+    frequency over the last `window_periods`.
+
+    `contact_force(overlap_m)` (N, NumPy, vectorised) is the law of both contacts, each at
+    `static_overlap_m` at rest; viscous drag -m gamma v on the bead. `support`: None, or
+    (force(x, state), update(x, state), state at rest (x = 0)) of a force on the bead that
+    depends on its displacement x and a history state (an Iwan element's sliders), the state
+    updated after each step (operator splitting, first order in the step)."""
+    f = np.asarray(frequencies_hz, float)[:, None]
+    a = np.asarray(drives_m, float)[None, :]
+    omega = 2 * np.pi * f
+    dt = 1.0 / (f * steps_per_period)
+
+    def face(t):
+        s = np.clip(t * f / ramp_periods, 0.0, 1.0)
+        return a * s**3 * (10 - 15 * s + 6 * s**2) * np.cos(omega * t)
+
+    state = None if support is None else support[2](np.zeros(np.broadcast(f, a).shape))
+
+    def rate(t, y):  # y = (displacement, velocity) stacked
+        x, v = y
+        push = contact_force(static_overlap_m + face(t) - x) - contact_force(static_overlap_m + x)
+        if support is not None:
+            push = push + support[0](x, state)
+        return np.stack([v, push / mass_kg - damping_rate_per_s * v])
+
+    y = np.zeros((2,) + np.broadcast(f, a).shape)
+    t = np.zeros_like(f)
+    total = (ramp_periods + hold_periods) * steps_per_period
+    window = window_periods * steps_per_period
+    phasor = np.zeros(y.shape[1:], dtype=complex)
+    for step in range(total):
+        slopes = [rate(t, y)]
+        for fraction in (0.5, 0.5, 1.0):
+            slopes.append(rate(t + fraction * dt, y + fraction * dt * slopes[-1]))
+        y = y + dt * (slopes[0] + 2 * slopes[1] + 2 * slopes[2] + slopes[3]) / 6
+        t = t + dt
+        if support is not None:
+            state = support[1](y[0], state)
+        if step >= total - window:
+            phasor += y[1] * np.exp(-1j * omega * t)
+    return np.abs(phasor) * 2 / window / math.sqrt(2)
+
+
+def iwan_support(stiffness_n_m, slip_displacement_m, elements=16):
+    """An Iwan element (Iwan 1966) for `driven_bead_lockin`'s `support`: `elements` springs of
+    K/E, each in series with a slider that slips where its stretch exceeds phi_j = (j - 1/2)
+    phi_max / E; force -(K/E) sum_j (x - s_j). Written here from the paper, in NumPy."""
+    limits = (np.arange(elements) + 0.5) / elements * slip_displacement_m
+
+    def force(x, sliders):
+        return -(stiffness_n_m / elements) * np.sum(x[None] - sliders, axis=0)
+
+    def update(x, sliders):
+        stretch = np.clip(x[None] - sliders, -limits.reshape((-1,) + (1,) * x.ndim),
+                          limits.reshape((-1,) + (1,) * x.ndim))
+        return x[None] - stretch
+
+    return force, update, lambda x: np.broadcast_to(x, (elements,) + x.shape).copy()

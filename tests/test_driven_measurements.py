@@ -6,11 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import DRIVEN_EXPERIMENT_HEAD
 
 from fitting.driven_experiment import DrivenExperimentError, load_driven_experiment
 from hertzchain.driven.measurements import read_loop, read_scope, read_tongue, spectral_amplitude
 from hertzchain.driven.sweeper_files import SweeperFileError
-from helpers import DRIVEN_EXPERIMENT_HEAD
 
 LYDON_2015 = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" / "lydon-2015"
 TONGUE = "SingleBead/BifurcationTongue/SingleBeadBif Signal Amplitude_{}2013Jul3_9h28m45s.txt"
@@ -149,7 +149,7 @@ def test_diagnose_and_params_refuse_a_file_of_measurements(tmp_path, capsys):
     toml = _experiment(tmp_path, "tongue", *names)
     data = str(tmp_path / "data")
     assert main(["diagnose", str(toml), "--data-dir", data, "--out", str(tmp_path / "d")]) == 2
-    assert "takes one bending sweep (a [sweep] table)" in capsys.readouterr().err
+    assert "add a [[measurement]] of kind \"bending\"" in capsys.readouterr().err
     assert main(["fit", str(toml), "--data-dir", data, "--params", "drive_scale", "--out", str(tmp_path / "f")]) == 2
     assert "names what it fits in its [fit] table" in capsys.readouterr().err
     assert not (tmp_path / "f").exists() and not (tmp_path / "d").exists()
