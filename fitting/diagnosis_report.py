@@ -19,17 +19,17 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from hertzchain.io.atomic import save_figure, write_csv, write_json, write_text  # noqa: E402
-from hertzchain.units import display_unit, format_measured  # noqa: E402
-from hertzchain.native import kernel_record  # noqa: E402
+from hertzchain.io.atomic import save_figure, write_csv, write_json, write_text
+from hertzchain.native import kernel_record
+from hertzchain.units import display_unit, format_measured
 
-from .diagnosis import Diagnosis  # noqa: E402
-from .effects import DEFAULT_YIELD_STRESS_PA, PREFIX, fitted_wall_youngs_pa  # noqa: E402
-from .locate import WINDOWS  # noqa: E402
-from .parameters import REGISTRY  # noqa: E402
+from .diagnosis import Diagnosis
+from .effects import DEFAULT_YIELD_STRESS_PA, PREFIX, fitted_wall_youngs_pa
+from .locate import WINDOWS
+from .parameters import REGISTRY
 
 
 def _fmt(value, digits=4) -> str:
@@ -52,7 +52,7 @@ def physical_reading(name: str, value: float, stderr, setup) -> str:
     def error(scale):  # the standard error of a quantity whose derivative is `scale`
         return None if stderr is None else abs(scale) * stderr
 
-    short = name[len(PREFIX):] if name.startswith(PREFIX) else name
+    short = name.removeprefix(PREFIX)
     if short == "wall_softening":
         youngs = fitted_wall_youngs_pa(setup, value)
         return "wall Young's modulus " + format_measured(youngs, error(youngs), "Pa")
@@ -189,8 +189,8 @@ def _candidate_table(candidates) -> str:
 
 def _overlay(diagnosis: Diagnosis, x_old, x_new, title: str):
     problem = diagnosis.problem
-    old = problem.predictions(x_old)
-    new = problem.predictions(x_new) if x_new is not None else None
+    old = diagnosis.predictions(x_old)
+    new = diagnosis.predictions(x_new) if x_new is not None else None
     experiments = problem.experiments
     n_channels = max(len(e.channels) for e in experiments)
     fig, axes = plt.subplots(len(experiments), n_channels, figsize=(4 * n_channels, 2.4 * len(experiments)),

@@ -254,7 +254,18 @@ def test_names_hidden_viscous_damping_on_a_short_chain(viscous_short):
 
 
 def test_report_files(viscous_short, tmp_path):
-    paths = write_diagnosis_report(viscous_short, tmp_path)
+    compiled = []  # the overlays' predictions: the diagnosis's compiled models, not the full one
+
+    def listen(event, duration, fun_name=None, **_):
+        if event.endswith("backend_compile_duration") and "model_vector" in str(fun_name):
+            compiled.append(fun_name)
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        paths = write_diagnosis_report(viscous_short, tmp_path)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert compiled == [], compiled
     payload = json.loads(paths["json"].read_text())
     assert payload["missing_effects"] == ["viscous_damping"]
     step = payload["steps"][0]

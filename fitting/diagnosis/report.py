@@ -60,6 +60,7 @@ class _Report:
                 "folds": [[search.problem.experiments[e].label for e in f] for f in search.folds],
             },
             problem=search.problem,
+            predictions=search.evaluate.predictions,
             x_base=self.x_base,
             x_final=self.x,
             elapsed_s=time.perf_counter() - began,

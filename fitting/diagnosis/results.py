@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -96,6 +97,10 @@ class Diagnosis:
     - `unconverged`: the fits the result rests on (named effects' refits, the fits adding
       them, the final fit) that reached no optimum, in words; empty: `converged`.
     - `problem`, `x_base`, `x_final`: the problem and parameter vectors (predictions, plots).
+    - `predictions`: x -> the model per experiment, channel -> values on the data's times (N),
+      as `Problem.predictions` gives them, on the cheapest equivalent model the diagnosis
+      compiled (`_Evaluator.predictions`; the problem's own is the full model with every
+      variant of the law on, a compilation of its own).
     """
 
     missing_effects: list
@@ -111,6 +116,7 @@ class Diagnosis:
     unconverged: list
     settings: dict
     problem: Problem
+    predictions: Callable
     x_base: np.ndarray
     x_final: np.ndarray
     elapsed_s: float
