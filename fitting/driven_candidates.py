@@ -120,8 +120,9 @@ CANDIDATES = (
                     lambda c: _replace(c, drive_stroke=RayleighStroke(1e6)), ("drive_stroke.rayleigh_per_m",)),
 )
 # Candidates whose contacts' static force is free (`fit_candidate_jointly`: fitted on the
-# bending and the tongue together, one static force for both runs): the rest of the stated 4.5 N carried by a load path
-# in parallel with the bead (the fixture), which a prescribed face motion does not feel.
+# bending and the tongue together, one static force for both runs): the rest of the stated
+# 4.5 N carried by a load path in parallel with the bead (the fixture), which a prescribed
+# face motion does not feel.
 FREE_PRELOAD_START_N = 0.15  # near the bending run fitted alone (single_bead_joint/fit.json#start.bending_alone)
 FREE_PRELOAD_CANDIDATES = (
     DrivenCandidate("free_preload", "Hertz contacts and viscous drag, the contacts' static force free",
