@@ -29,6 +29,19 @@ HC_LANES inline double FullBlock<C>::KickSlopes(double w, double loss_j, double*
   return kicked.v;
 }
 
+// The friction kick of a velocity w (m/s) by the lane's loss (m/s): `Kick`, with kTangent
+// its partials by w and by the loss into by_w, by_loss; w itself without friction
+template <class C>
+HC_LANES inline double FullBlock<C>::FrictionKick(double w, double loss_j, double* by_w, double* by_loss) {
+  if constexpr (!kFriction) {
+    return w;
+  } else if constexpr (kTangent) {
+    return KickSlopes(w, loss_j, by_w, by_loss);
+  } else {
+    return KickOf(w, loss_j);
+  }
+}
+
 // The force of a contact with the chain's law (`contact.contact_force`: `DampedTotal` about
 // Hertz's elastic force, with kPower the power law's, with kPlastic Hertz's about the
 // unloading curve): at overlap dl, rate, kappa k, 1.5 eta kappa kv (computed once per block
@@ -248,12 +261,7 @@ HC_LANES inline void FullBlock<C>::FirstBody(StepSize t, Lanes& __restrict l) {
       l.raw_prev[j] = w;
       l.work1[j] = l.work2[j] = l.lost1[j] = l.lost2[j] = l.d_prev[j] = 0.0;
     }
-    if (kFriction) {
-      if constexpr (kTangent)
-        w = KickSlopes(w, l.loss[j], &l.kick1_w[j], &l.kick1_loss[j]);
-      else
-        w = KickOf(w, l.loss[j]);
-    }
+    w = FrictionKick(w, l.loss[j], &l.kick1_w[j], &l.kick1_loss[j]);
     x[j] = x[j] + dt * w;
     l.w_prev[j] = w;
     l.p_prev[j] = w + h * a[j];
@@ -319,12 +327,7 @@ HC_LANES inline void FullBlock<C>::Sweep(int64_t i, StepSize t, Lanes& __restric
     // body i + 1: half kick, friction, drift, predicted velocity
     double w = v[rn + j] + h * a[rn + j];
     double w_raw = w;
-    if (kFriction) {
-      if constexpr (kTangent)
-        w = KickSlopes(w, l.loss[j], &l.kick1_w[j], &l.kick1_loss[j]);
-      else
-        w = KickOf(w, l.loss[j]);
-    }
+    w = FrictionKick(w, l.loss[j], &l.kick1_w[j], &l.kick1_loss[j]);
     x[rn + j] = x[rn + j] + dt * w;
     double pred = w + h * a[rn + j];
     // contact i
@@ -348,12 +351,7 @@ HC_LANES inline void FullBlock<C>::Sweep(int64_t i, StepSize t, Lanes& __restric
     double acc = b * (kUM ? m0 : inv[ri + j]);
     double vn = l.w_prev[j] + h * acc;
     double vn_raw = vn;
-    if (kFriction) {
-      if constexpr (kTangent)
-        vn = KickSlopes(vn, l.loss[j], &l.kick2_w[j], &l.kick2_loss[j]);
-      else
-        vn = KickOf(vn, l.loss[j]);
-    }
+    vn = FrictionKick(vn, l.loss[j], &l.kick2_w[j], &l.kick2_loss[j]);
     if constexpr (kBooks) {  // body i's energy terms, contact i's largest force
       if (kViscous) {
         // total - elastic of contact i (springs in both, as `batched` adds them)
@@ -450,12 +448,7 @@ HC_LANES inline void FullBlock<C>::Wall(StepSize t, Lanes& __restrict l) {
     double acc = b * inv[rw + j];
     double vn = l.w_prev[j] + h * acc;
     const double vn_raw = vn;
-    if (kFriction) {
-      if constexpr (kTangent)
-        vn = KickSlopes(vn, l.loss[j], &l.kick2_w[j], &l.kick2_loss[j]);
-      else
-        vn = KickOf(vn, l.loss[j]);
-    }
+    vn = FrictionKick(vn, l.loss[j], &l.kick2_w[j], &l.kick2_loss[j]);
     if constexpr (kBooks) {  // the wall's terms, then the step's dissipation
       if (kViscous) {
         l.work1[j] = l.work1[j] + vis[rw + j] * h * 0.5 * (v[rw + j] + l.raw_prev[j]);
