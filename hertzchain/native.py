@@ -96,7 +96,7 @@ SOURCE = CSRC / "chain_kernel.cc"
 DRIVEN_SOURCE = CSRC / "driven_kernel.cc"
 LAWS = CSRC / "chain_laws.h"  # the laws both kernels include
 FFI_ARGS = CSRC / "chain_ffi.h"  # their handlers' argument lists
-BLOCKS = CSRC / "chain_blocks.h"  # the host kernels' layouts and threads
+HEADERS = tuple(sorted(CSRC.glob("*.h")))  # every header a host kernel's build may read
 TARGET = "hertzchain_chain_forward"
 FULL_TARGET = "hertzchain_chain_full_forward"
 TANGENT_TARGET = "hertzchain_chain_full_tangent"
@@ -247,7 +247,7 @@ def _library_path(defines: tuple[str, ...] = (), source: Path = SOURCE) -> Path:
     """Where the host library built from `source` with `defines` is kept, keyed by everything
     its build reads."""
     digest = hashlib.sha256()
-    for part in (source.read_bytes(), LAWS.read_bytes(), FFI_ARGS.read_bytes(), BLOCKS.read_bytes(),
+    for part in (source.read_bytes(), *(header.read_bytes() for header in HEADERS),
                  jax.__version__.encode(), " ".join(_flags() + defines).encode(), _cpu_key().encode()):
         digest.update(part)
     variant = "".join("-" + d.removeprefix("-DHC_").removesuffix("_LIBRARY").lower() for d in defines)
@@ -815,7 +815,7 @@ def _thread_library(backend: str, rows: int) -> Path:
     if reason is not None:
         raise RuntimeError(f"the {backend} chain kernel is unavailable: {reason}")
     digest = hashlib.sha256()
-    toolchain = subprocess.run([_nvcc(), "--version"], capture_output=True, text=True).stdout if backend == "cuda" else _cpu_key()
+    toolchain = subprocess.run([_nvcc(), "--version"], capture_output=True, text=True, check=False).stdout if backend == "cuda" else _cpu_key()
     for part in (THREAD_SOURCE.read_bytes(), LAWS.read_bytes(), FFI_ARGS.read_bytes(), jax.__version__.encode(),
                  " ".join(_thread_build_command(backend, rows, Path("-"))).encode(), toolchain.encode()):
         digest.update(part)
@@ -909,8 +909,8 @@ def run(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
 def _conservative_call(config):
     """The conservative kernel for one configuration as a function of its arrays."""
     dt_s, steps_per_sample, n_samples, channels, preload, springs, books, backend = config
-    attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample), preload=np.int64(preload),
-                 springs=np.int64(springs), books=np.int64(books))
+    attrs = {"dt": np.float64(dt_s), "steps_per_sample": np.int64(steps_per_sample), "preload": np.int64(preload),
+             "springs": np.int64(springs), "books": np.int64(books)}
     index = np.asarray(channels, dtype=np.int64)
 
     @jax.custom_batching.custom_vmap
@@ -1031,8 +1031,8 @@ def run_full_books(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_sam
         raise ValueError("run_full_books: a dashpot needs viscous=True (the kernel's rates come with the damping).")
     _check_law(law, "host", "run_full_books")
     args = _full_args(p, state0, preload, springs, dashpot, law, "host") + (p["mass"],)
-    attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample), viscous=np.int64(viscous),
-                 friction=np.int64(friction), extras=np.int64(preload or springs), dashpot=np.int64(dashpot))
+    attrs = {"dt": np.float64(dt_s), "steps_per_sample": np.int64(steps_per_sample), "viscous": np.int64(viscous),
+             "friction": np.int64(friction), "extras": np.int64(preload or springs), "dashpot": np.int64(dashpot)}
     call = _Ffi("host", p["inv_mass"].shape[-2], n_samples)
     shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + call.trace_shapes(state0, len(channels))
     index = np.asarray(channels, dtype=np.int64)
@@ -1053,8 +1053,8 @@ def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool, law
     """The full kernels' arrays: the state, then the eight parameter arrays (zeros for the
     physics a run does not have) and, for the host kernels, the law's (`_law_array`) and the
     compliant sensors' (`_sensor_array`)."""
-    width = lambda leaf: leaf.shape[-1]  # noqa: E731
-    zeros = lambda leaf: jax.numpy.zeros_like(leaf)  # noqa: E731
+    width = lambda leaf: leaf.shape[-1]
+    zeros = lambda leaf: jax.numpy.zeros_like(leaf)
     return (
         state0,
         p["inv_mass"],
@@ -1109,9 +1109,9 @@ def _full_call(config):
     if dashpot and not viscous:
         raise ValueError("run_full: a dashpot needs viscous=True (the kernel's rates come with the damping).")
     # dashpot: the kernel with the dashpot's terms compiled in (`DASHPOT_DEFINE`)
-    attrs = dict(dt=np.float64(dt_s), steps_per_sample=np.int64(steps_per_sample),
-                 viscous=np.int64(viscous), friction=np.int64(friction), extras=np.int64(extras),
-                 dashpot=np.int64(dashpot))
+    attrs = {"dt": np.float64(dt_s), "steps_per_sample": np.int64(steps_per_sample),
+             "viscous": np.int64(viscous), "friction": np.int64(friction), "extras": np.int64(extras),
+             "dashpot": np.int64(dashpot)}
     index = np.asarray(channels, dtype=np.int64)
     # the state, the eight parameter arrays (host: and the law's and the sensors')
     n_args = 11 if backend == "host" else 9
