@@ -96,7 +96,6 @@ SOURCE = CSRC / "chain_kernel.cc"
 DRIVEN_SOURCE = CSRC / "driven_kernel.cc"
 LAWS = CSRC / "chain_laws.h"  # the laws both kernels include
 FFI_ARGS = CSRC / "chain_ffi.h"  # their handlers' argument lists
-HEADERS = tuple(sorted(CSRC.glob("*.h")))  # every header a host kernel's build may read
 TARGET = "hertzchain_chain_forward"
 FULL_TARGET = "hertzchain_chain_full_forward"
 TANGENT_TARGET = "hertzchain_chain_full_tangent"
@@ -247,7 +246,8 @@ def _library_path(defines: tuple[str, ...] = (), source: Path = SOURCE) -> Path:
     """Where the host library built from `source` with `defines` is kept, keyed by everything
     its build reads."""
     digest = hashlib.sha256()
-    for part in (source.read_bytes(), *(header.read_bytes() for header in HEADERS),
+    headers = sorted(source.parent.glob("*.h"))  # every header beside the source: any it may include
+    for part in (source.read_bytes(), *(header.read_bytes() for header in headers),
                  jax.__version__.encode(), " ".join(_flags() + defines).encode(), _cpu_key().encode()):
         digest.update(part)
     variant = "".join("-" + d.removeprefix("-DHC_").removesuffix("_LIBRARY").lower() for d in defines)

@@ -96,7 +96,7 @@ def _truncated_cache(tmp_path) -> tuple[Path, Path]:
 def _run_on(good: Path, damaged: Path, *command):
     env = dict(os.environ, HERTZCHAIN_CACHE=str(damaged.parent))
     env.pop("HERTZCHAIN_NATIVE", None)
-    done = subprocess.run([sys.executable, "-c", _SCRIPT, str(good), *command], capture_output=True, text=True,
+    done = subprocess.run([sys.executable, "-c", _SCRIPT, str(good), *command], capture_output=True, text=True, check=False,
                           env=env, timeout=600)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
     assert done.stderr.count("holds 800000 bytes where its build wrote") == 1 and "building it again" in done.stderr
@@ -194,3 +194,22 @@ def test_kernel_record_names_the_libraries_that_ran(monkeypatch):
     native._FAILED[Path("/c/chain_kernel-dashpot-b.so")] = "compiling chain_kernel.cc failed:\nwhy"
     assert native.kernel_record()["name"] == "native-avx2+native-emulated+jax"  # the dashpot's runs: JAX
     assert native.kernel_record()["not_available"] == {"chain_kernel-dashpot-b.so": "compiling chain_kernel.cc failed:"}
+
+
+def test_a_change_to_any_header_beside_the_source_names_a_new_library(tmp_path):
+    """The cached library's name digests every header in the kernels' source folder, so that
+    a change to any of them (the laws, the lanes, the step's phases, ...) builds a new one
+    instead of loading a library built from the old code; nothing is compiled here."""
+    folder = tmp_path / "csrc"
+    shutil.copytree(native.CSRC, folder)
+    source = folder / native.SOURCE.name
+    before = native._library_path((), source)
+    assert before == native._library_path((), source)  # the name is a function of the files
+    headers = sorted(folder.glob("*.h"))
+    assert {h.name for h in headers} >= {"chain_laws.h", "chain_step.h", "chain_full_block.h", "chain_lanes.h"}
+    for header in headers:
+        text = header.read_bytes()
+        header.write_bytes(text + b"\n")
+        assert native._library_path((), source) != before, header.name
+        header.write_bytes(text)
+    assert native._library_path((), source) == before
