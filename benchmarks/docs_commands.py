@@ -42,6 +42,8 @@ import time
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
@@ -195,6 +197,8 @@ NEWCOMER = (
 # The sensitivities of the import step's scope channels (the synth traces' wall, then their
 # first recorded contact), V/N.
 _SENSITIVITIES_V_PER_N = (0.1124, 0.05)
+# Samples the stand-in scope records before the trigger.
+_PRE_TRIGGER_SAMPLES = 100
 
 
 def write_scope_lab(folder: Path) -> None:
@@ -214,10 +218,16 @@ def write_scope_lab(folder: Path) -> None:
     for k, (channel, volts_per_n) in enumerate(sensitivity.items(), start=1):
         text += (f'\n[[channel]]\nsource = "CH{k}"\nmeasures = "{channel}"\nsensitivity_v_per_n = {volts_per_n}\n'
                  'coupling = "dc"\n')
+    noise = np.random.default_rng(0)
     for number, path in enumerate(traces, start=1):
         trace = read_trace(path)
         name = f"shot{number}.csv"
         lines = ["time_s," + ",".join(f"CH{k}" for k in range(1, len(sensitivity) + 1))]
+        # a scope's pre-trigger segment: the channels' noise (the header's sigma) before the impact
+        interval = float(trace.time_s[1] - trace.time_s[0])
+        for i in range(-_PRE_TRIGGER_SAMPLES, 1):  # up to t = 0, one interval before the first sample
+            volts = [noise.normal(0.0, trace.channel_noise_std_n(c) or 0.0) * s for c, s in sensitivity.items()]
+            lines.append(f"{i * interval:.9g}," + ",".join(f"{v:.6g}" for v in volts))
         for i, t in enumerate(trace.time_s):
             volts = [trace.channels[c][i] * s for c, s in sensitivity.items()]
             lines.append(f"{t:.9g}," + ",".join(f"{v:.6g}" for v in volts))
@@ -226,19 +236,26 @@ def write_scope_lab(folder: Path) -> None:
     (folder / "experiment.toml").write_text(text)
 
 
-def run_newcomer(out: Path) -> dict:
-    """The newcomer's path in a fresh HOME and scratch folder; the record of every step."""
-    scratch = Path(tempfile.mkdtemp(prefix="hertzchain-newcomer-"))
+def run_newcomer(out: Path, *, again: Path | None = None, words: tuple[str, ...] = ()) -> dict:
+    """The newcomer's path in a fresh HOME and scratch folder; the record of every step.
+    `again`: an earlier run's scratch folder, in which the steps whose command contains one of
+    `words` run again (their records replace the earlier ones in latest.json)."""
+    scratch = again or Path(tempfile.mkdtemp(prefix="hertzchain-newcomer-"))
     home, work = scratch / "home", scratch / "checkout"
-    home.mkdir()
-    work.mkdir()
-    (work / "examples").symlink_to(ROOT / "examples")
-    (scratch / "shared").symlink_to(ROOT.parent / "shared" if (ROOT.parent / "shared").exists() else Path("/work/shared"))
+    if again is None:
+        home.mkdir()
+        work.mkdir()
+        (work / "examples").symlink_to(ROOT / "examples")
+        (scratch / "shared").symlink_to(ROOT.parent / "shared")
     env = {k: v for k, v in os.environ.items() if not k.startswith("HERTZCHAIN")}
     env |= {"HOME": str(home), "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
     record = {"scratch": str(scratch), "fresh_home": True, "cpus": os.cpu_count(), "steps": []}
+    if again is not None:
+        record = json.loads((out / "latest.json").read_text())["newcomer"]
     for page, command in NEWCOMER:
-        if " import " in command and not (work / "experiment.toml").exists():
+        if again is not None and not any(word in command for word in words):
+            continue
+        if " import " in command and (again is not None or not (work / "experiment.toml").exists()):
             write_scope_lab(work)
         argv = [sys.executable, "-m", "hertzchain", *shlex.split(command)[1:]]
         argv = [str(p) for a in argv for p in (sorted(work.glob(a)) if "*" in a else [a])]
@@ -248,12 +265,14 @@ def run_newcomer(out: Path) -> dict:
         wall = time.perf_counter() - began
         cpu_after = resource.getrusage(resource.RUSAGE_CHILDREN)
         output = (done.stdout + done.stderr).strip().splitlines()
+        record["steps"] = [step for step in record["steps"] if step["command"] != command]
         record["steps"].append({
             "page": page, "command": command, "exit_status": done.returncode, "wall_s_under_load": round(wall, 1),
             "cpu_s": round(cpu_after.ru_utime + cpu_after.ru_stime - cpu_before.ru_utime - cpu_before.ru_stime, 1),
             "load_average_1min_before": round(load_before, 2), "load_average_1min_after": round(os.getloadavg()[0], 2),
             "output_tail": output[-4:]})
         print(f"{done.returncode:3d} {wall:7.1f} s  {command}", flush=True)
+        record["steps"].sort(key=lambda step: [c for _, c in NEWCOMER].index(step["command"]))
         _write(out, {"newcomer": record})
     return record
 
@@ -272,6 +291,10 @@ def main(argv=None) -> int:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--check", action="store_true", help="parse every command of the docs (the default)")
     parser.add_argument("--run", action="store_true", help="run the newcomer's path in a fresh HOME")
+    parser.add_argument("--again", type=Path, metavar="SCRATCH",
+                        help="with --run: run again, in an earlier run's scratch folder, the steps whose command "
+                        "holds one of --steps")
+    parser.add_argument("--steps", default="", help="with --again: comma-separated words, e.g. import,analyze")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "docs_commands",
                         help="folder of latest.json [benchmarks/results/docs_commands]")
     args = parser.parse_args(argv)
@@ -288,7 +311,7 @@ def main(argv=None) -> int:
         _write(args.out, {"parse": {"commands": len(rows), "failed": failed, "previous_names": previous,
                                     "rows": rows}})
     if args.run:
-        run_newcomer(args.out)
+        run_newcomer(args.out, again=args.again, words=tuple(w for w in args.steps.split(",") if w))
     return 1 if failed else 0
 
 
