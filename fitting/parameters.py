@@ -286,6 +286,11 @@ def public_label(label: str) -> str:
     return (spec.public_name if spec is not None else base) + bracket + rest
 
 
+def public_keys(values: dict) -> dict:
+    """`values` (label -> anything) keyed by what a user sees (`public_label`), for files."""
+    return {public_label(label): value for label, value in values.items()}
+
+
 for _spec in (
     ParameterSpec(
         "eta", "s", "global", "asinh", 0.0, 1e-3, public_name="eta_s", scale=1e-8, apply=_apply("eta"),

@@ -141,3 +141,19 @@ def test_a_fits_values_read_by_either_spelling():
     assert list(values) == ["eta", "striker_velocity[run1]", "mu"]
     with pytest.raises(KeyError):
         values["eta_ms"]
+
+
+def test_diagnosis_files_name_parameters_as_a_user_writes_them():
+    """A diagnosis writes its candidates' and fits' values by the public names
+    (`wall_youngs_pa`, `striker_velocity_m_s[shot1]`); effect strengths keep theirs."""
+    from fitting.diagnosis.results import CandidateResult, _public_fit
+
+    candidate = CandidateResult(effect="wall_compliance", n_parameters=1, score_chi2=12.0, values={"wall_youngs": 2e10, "wall_softening": 2.3},
+                                stderr={"wall_youngs": 1.7e7})
+    record = candidate.to_json()
+    assert record["values"] == {"wall_youngs_pa": 2e10, "wall_softening": 2.3}
+    assert record["stderr"] == {"wall_youngs_pa": 1.7e7}
+    summary = _public_fit({"chi2": 10.0, "values": {"striker_velocity[shot1]": 0.3, "eta": 1e-6},
+                           "stderr": {"eta": 1e-8}})
+    assert summary == {"chi2": 10.0, "values": {"striker_velocity_m_s[shot1]": 0.3, "eta_s": 1e-6},
+                       "stderr": {"eta_s": 1e-8}}

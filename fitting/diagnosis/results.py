@@ -11,6 +11,7 @@ import numpy as np
 from hertzchain.io.atomic import json_ready
 
 from ..model import Problem
+from ..parameters import public_keys
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -38,7 +39,9 @@ class CandidateResult:
 
     def to_json(self) -> dict:
         fields = (f.name for f in dataclasses.fields(self) if f.name != "x")
-        return json_ready({name: getattr(self, name) for name in fields})
+        record = {name: getattr(self, name) for name in fields}
+        record["values"], record["stderr"] = public_keys(self.values), public_keys(self.stderr)
+        return json_ready(record)
 
 
 @dataclasses.dataclass
@@ -72,7 +75,7 @@ class Step:
             "chi2_after": self.chi2_after,
             "dof_before": self.dof_before,
             "dof_after": self.dof_after,
-            "fitted": {k: {"value": self.values[k], "stderr": self.stderr.get(k)} for k in self.values},
+            "fitted": public_keys({k: {"value": self.values[k], "stderr": self.stderr.get(k)} for k in self.values}),
             "candidates": [c.to_json() for c in self.candidates],
             "location_before": self.location_before,
             "location_after": self.location_after,
@@ -135,8 +138,8 @@ class Diagnosis:
             "converged": self.converged,
             "unconverged_fits": list(self.unconverged),
             "steps": [s.to_json() for s in self.steps],
-            "base_fit": self.base_fit,
-            "final": self.final,
+            "base_fit": _public_fit(self.base_fit),
+            "final": _public_fit(self.final),
             "last_candidates": [c.to_json() for c in self.last_candidates],
             "not_separable": self.not_separable,
             "indistinguishable": self.indistinguishable,
@@ -150,3 +153,9 @@ class Diagnosis:
             "residual_evaluations": self.residual_evaluations,
             "model_seconds": self.evaluation_seconds,
         })
+
+
+def _public_fit(summary: dict) -> dict:
+    """A fit's summary (`_Report.summary`) with its values and errors keyed by the names a
+    user sees (`fitting.parameters.public_label`)."""
+    return {key: public_keys(value) if key in ("values", "stderr") else value for key, value in summary.items()}
