@@ -267,7 +267,7 @@ struct FullBlock {
 
   // The laws as the step applies them (`chain_step.h`)
   HC_LANES static double KickOf(double w, double loss_j) { return Kick(w, loss_j); }
-  HC_LANES static double KickSlopes(double w, double loss_j, double* by_w, double* by_loss);
+  HC_LANES static double KickWithPartials(double w, double loss_j, double* by_w, double* by_loss);
   HC_LANES static double FrictionKick(double w, double loss_j, double* by_w, double* by_loss);
   template <class O, class R, class K, class Kv, class Dd, class S, class L0, class L1>
   HC_LANES static auto LawForce(const O& dl, const R& rate, const K& k, const Kv& kv, const Dd& d, const S& sp,

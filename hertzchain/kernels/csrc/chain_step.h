@@ -22,7 +22,7 @@ namespace hertzchain {
 // contact.track_friction_kick with its partial derivatives by the velocity and the loss (the
 // law run on dual numbers)
 template <class C>
-HC_LANES inline double FullBlock<C>::KickSlopes(double w, double loss_j, double* by_w, double* by_loss) {
+HC_LANES inline double FullBlock<C>::KickWithPartials(double w, double loss_j, double* by_w, double* by_loss) {
   const auto kicked = hertzchain::Kick(hertzchain::Seed<2, 0>(w), hertzchain::Seed<2, 1>(loss_j));
   *by_w = hertzchain::Slope(kicked, 0);
   *by_loss = hertzchain::Slope(kicked, 1);
@@ -36,7 +36,7 @@ HC_LANES inline double FullBlock<C>::FrictionKick(double w, double loss_j, doubl
   if constexpr (!kFriction) {
     return w;
   } else if constexpr (kTangent) {
-    return KickSlopes(w, loss_j, by_w, by_loss);
+    return KickWithPartials(w, loss_j, by_w, by_loss);
   } else {
     return KickOf(w, loss_j);
   }
