@@ -93,4 +93,4 @@ def test_lydon_reproduce_refuses_an_unknown_part(capsys):
         reproduce["main"](["--data-root", "nowhere", "--only", "two_beads_diagnosis"])
     assert stop.value.code == 2
     err = capsys.readouterr().err
-    assert "unknown two_beads_diagnosis" in err and "two_bead_diagnosis" in err and "lydon2014_band_edge" in err
+    assert "unknown two_beads_diagnosis" in err and "two_bead_bending_diagnosis" in err and "lydon2014_band_edge" in err

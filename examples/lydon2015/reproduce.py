@@ -3,8 +3,9 @@
     python examples/lydon2015/reproduce.py --data-root ../shared/data/real [--out examples/lydon2015/results]
         [--only NAME ...]
 
-runs `hertzchain fit` and `hertzchain diagnose` on the single- and two-bead bending files, the
-joint fit of the single bead's bending, tongue and loop,
+runs `hertzchain fit` on the single- and two-bead bending files and on the joint file of the
+single bead's bending, tongue and loop, `hertzchain diagnose` on the joint file and on the
+two-bead bending file,
 and the 2014 band-edge script, each into its own folder under `--out`, and writes
 `summary.json`: the acceptance numbers of each, the wall time of each command (with the
 machine's load average at the start: timings from a loaded machine are marked so) and the
@@ -31,8 +32,8 @@ JOBS = {
     "single_bead_fit": ("fit", HERE / "single_bead_bending.toml"),
     "two_bead_fit": ("fit", HERE / "two_bead_bending.toml"),
     "single_bead_joint": ("fit", HERE / "single_bead_joint.toml"),
-    "single_bead_diagnosis": ("diagnose", HERE / "single_bead_bending.toml"),
-    "two_bead_diagnosis": ("diagnose", HERE / "two_bead_bending.toml"),
+    "single_bead_joint_diagnosis": ("diagnose", HERE / "single_bead_joint.toml"),
+    "two_bead_bending_diagnosis": ("diagnose", HERE / "two_bead_bending.toml"),
 }
 
 
