@@ -61,7 +61,7 @@ def test_friction_from_a_high_amplitude_trace_alone_is_flagged(one_file):
 
 
 def test_unknown_parameter_and_bad_start_are_refused(one_file):
-    with pytest.raises(ValueError, match="Fittable parameters: eta, mu, C"):
+    with pytest.raises(ValueError, match="Fittable parameters: eta_s, mu, C"):
         fitting.fit(one_file, ("eta", "viscosity"))
     with pytest.raises(ValueError, match="outside its bounds"):
         fitting.fit(one_file, ("mu",), start={"mu": -0.1}, progress=False)
