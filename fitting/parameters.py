@@ -248,11 +248,17 @@ def resolve_name(name: str, *, where: str | None = None) -> str:
     return name
 
 
+def _relabel(label: str, rename: Callable[[str], str]) -> str:
+    """`label` with its parameter's name renamed, the instance kept:
+    `striker_velocity[run1]` -> `rename("striker_velocity") + "[run1]"`."""
+    name, bracket, instance = label.partition("[")
+    return rename(name.strip()) + bracket + instance
+
+
 def resolve_label(label: str, *, where: str | None = None) -> str:
     """`resolve_name` of a label's parameter, the instance kept: `striker_velocity_m_s[run1]`
     -> `striker_velocity[run1]`."""
-    base, bracket, rest = label.partition("[")
-    return resolve_name(base.strip(), where=where) + bracket + rest
+    return _relabel(label, lambda name: resolve_name(name, where=where))
 
 
 class LabelledValues(dict):
@@ -264,9 +270,7 @@ class LabelledValues(dict):
     def _key(self, label):
         if not isinstance(label, str) or dict.__contains__(self, label):
             return label
-        base, bracket, rest = label.partition("[")
-        key = _KEY_OF_PUBLIC.get(base.strip())
-        return label if key is None else key + bracket + rest
+        return _relabel(label, lambda name: _KEY_OF_PUBLIC.get(name, name))
 
     def __getitem__(self, label):
         return dict.__getitem__(self, self._key(label))
@@ -281,9 +285,7 @@ class LabelledValues(dict):
 def public_label(label: str) -> str:
     """What a user sees for a registry key or instance label: `eta` -> `eta_s`,
     `striker_velocity[run1]` -> `striker_velocity_m_s[run1]`; other names unchanged."""
-    base, bracket, rest = label.partition("[")
-    spec = REGISTRY.get(base)
-    return (spec.public_name if spec is not None else base) + bracket + rest
+    return _relabel(label, lambda name: REGISTRY[name].public_name if name in REGISTRY else name)
 
 
 def public_keys(values: dict) -> dict:
