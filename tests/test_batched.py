@@ -168,7 +168,14 @@ def test_sharded_over_host_devices_matches_one_device(physics):
     assert result["dissipated_diff"] <= 1e-14 * result["energy"]
 
 
-@pytest.mark.parametrize("case", list(CASES))
+# the elastic, Thornton and Jackson-Green-with-dashpot cases in the default suite, the others
+# with `-m slow` (default-suite time: `test_matches_solve_to_round_off` holds every quick case's
+# whole run to `solve`)
+FORCE_LAW_CASES = ("elastic", "thornton", "jackson_green_dashpot")
+
+
+@pytest.mark.parametrize("case", [c if c in FORCE_LAW_CASES else pytest.param(c, marks=pytest.mark.slow)
+                                  for c in CASES])
 def test_fast_path_uses_the_force_laws_of_solve(case):
     """The fast path's contact forces, body forces and energies, evaluated on random
     compressed and separated states (plastic contacts: loading and unloading below larger
@@ -215,6 +222,7 @@ def test_fast_path_uses_the_force_laws_of_solve(case):
         np.testing.assert_allclose(kinetic[i], 0.5 * float(jnp.sum(model.mass_kg * v[:, i] ** 2)), rtol=1e-14)
 
 
+@pytest.mark.slow  # default-suite time; `test_solve_batched_without_books_records_the_same_forces` keeps the claim
 def test_kernel_without_books_records_the_same_forces():
     """`ledger=False` (what fits run) drops the maxima and the energy books, not the physics:
     the recorded forces of the JAX kernel are bit-identical, the books NaN (the C++ kernel

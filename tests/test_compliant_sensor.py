@@ -95,9 +95,11 @@ BATCH_CASES = {
 
 
 @pytest.mark.parametrize("case", [
-    # (the plastic case's compiles take half a minute: with `-m slow`, as the test of its C++
-    # library below)
-    pytest.param(case, marks=pytest.mark.slow) if case == "plastic_dashpot" else case for case in sorted(BATCH_CASES)])
+    # (both with `-m slow`, default-suite time: the plastic case's compiles take half a minute,
+    # as the test of its C++ library below; test_batched.py's
+    # `test_matches_solve_to_round_off[sensors_preload_viscous]` and `[jackson_green_sensors_preload_viscous]`
+    # hold compliant sensors on the batched kernel to `solve` in the default suite)
+    pytest.param(case, marks=pytest.mark.slow) for case in sorted(BATCH_CASES)])
 def test_batched_kernel_runs_compliant_sensors_as_solve_does(case):
     """`record_batched` with `compliant_sensors` (the brass case on the C++ sensor library, the
     plastic one on the JAX kernel, whose C++ library the slow test below holds to it) against `solve`, chain by

@@ -168,6 +168,8 @@ def test_rejects_an_unknown_plastic_law():
         hc.ChainSetup(3, plasticity=True, plastic_law="tabor")
 
 
+@pytest.mark.slow  # default-suite time; test_batched.py's `test_matches_solve_to_round_off[jackson_green_*]`
+# hold Jackson-Green chains on the batched kernel to `solve`
 def test_solve_batched_gives_solve_for_jackson_green_contacts():
     from hertzchain.batched import stack_setups
 

@@ -151,6 +151,8 @@ print(json.dumps(out))
 """
 
 
+@pytest.mark.slow  # default-suite time; a chain's numbers do not depend on its block in the default suite
+# (`test_chains_do_not_depend_on_their_neighbours_in_a_block`, `test_full_kernel_chains_do_not_depend_on_their_neighbours`)
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: the blocks run on one thread anyway")
 def test_threads_give_the_one_thread_numbers():
     """150 chains (blocks of 64, 8 and single chains) run with the blocks spread over every
@@ -276,8 +278,12 @@ def test_books_of_a_mixed_batch_keep_each_chains_own_numbers():
 # the dashpot library); the main library's tangents in eta, mu and C stay held to the JAX
 # kernel's by `test_fit_residuals_and_jacobian_equal_the_jax_kernels` and
 # `tests/test_fit_model.py`. The other two run with `-m slow` (suite time).
-@pytest.mark.parametrize("case", [pytest.param("viscous_friction", marks=pytest.mark.slow), "viscous_friction_dashpot",
-                                  pytest.param("sensors_preload_viscous_friction", marks=pytest.mark.slow)])
+# every case with `-m slow` (default-suite time on 2 cores): the C++ kernel's tangents are held
+# to `jax.jacfwd` through the JAX kernel in the default suite by
+# `test_friction_derivatives_with_and_without_loss_equal_the_jax_kernels` (damping, friction,
+# impact speed) and `test_fit_residuals_and_jacobian_equal_the_jax_kernels` (a fit's Jacobian)
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) for c in
+                                  ("viscous_friction", "viscous_friction_dashpot", "sensors_preload_viscous_friction")])
 def test_forward_mode_derivatives_equal_jacfwd_through_the_jax_kernel(case):
     """`jax.jacfwd` through `record_batched` on the C++ kernel (its own tangents, five or six
     directions in one run: damping, friction, impact speed, preload, bead modulus, dashpot)
@@ -339,6 +345,8 @@ def test_friction_derivatives_with_and_without_loss_equal_the_jax_kernels():
     np.testing.assert_array_equal(jac[:, np.asarray(mu) == 0.0, :, 1], 0.0)  # mu = 0 moves nothing
 
 
+@pytest.mark.slow  # default-suite time; the power-law library's values against `solve`: test_batched.py's
+# `test_matches_solve_to_round_off[power_law_free_end]`
 def test_power_law_runs_on_the_full_kernel_equal_to_the_jax_kernel():
     """Power-law contacts (n = 1.6) run the full C++ kernel's power-law library: a damped,
     frictional sweep with the books and a conservative run without them equal the JAX
@@ -439,9 +447,11 @@ def test_elastic_plastic_contacts_run_on_the_full_kernel_equal_to_the_jax_kernel
 
 # `jacfwd` alone is `test_forward_mode_derivatives_equal_jacfwd_through_the_jax_kernel`'s
 # (its values; the one call is held by the compositions here), and `vmap` of `vmap` of
-# `jacfwd` composes the rules the others check one level deep: both in the slow suite.
+# `jacfwd` composes the rules the others check one level deep: both in the slow suite, and so
+# is `vmap` of `jacfwd` (default-suite time: `jacfwd` of `vmap` keeps the composition).
 @pytest.mark.parametrize("transform", [pytest.param(t, marks=pytest.mark.slow)
-                                       if t in ("jacfwd", "vmap_of_vmap_of_jacfwd") else t for t in TRANSFORMS])
+                                       if t in ("jacfwd", "vmap_of_jacfwd", "vmap_of_vmap_of_jacfwd") else t
+                                       for t in TRANSFORMS])
 def test_vmap_and_jacfwd_are_one_kernel_run_equal_to_the_jax_kernel(transform):
     """A vmapped batch of parameter vectors (the case of a batch of fits), `jacfwd`, and
     their compositions: one run of the C++ kernel each (the mapped chains join its batch,

@@ -76,6 +76,7 @@ def test_fit_cos6_errors_cover_the_truth():
     np.testing.assert_allclose(known.tau_stderr_s, fit.tau_stderr_s[:5], rtol=0.25)
 
 
+@pytest.mark.slow  # default-suite time on 2 cores
 def test_fit_cos6_on_a_slice_equals_the_fit_over_the_whole_trace(monkeypatch):
     """Concrete traces are fitted on the slice that holds every lobe (`pulses._slice_length`);
     under `jit` (traced values) the fit reads the whole trace. Both give the same fit: lobes at
