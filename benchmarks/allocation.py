@@ -32,7 +32,7 @@ def worker(runs: int, impl: str) -> dict:
     jax.config.update("jax_enable_x64", True)
     sys.path.insert(0, str(HERE.parent))
     sys.path.insert(0, str(HERE))
-    import run as bench
+    import run_workers as bench
 
     from hertzchain import native
     from hertzchain.batched import solve_batched

@@ -21,7 +21,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from run import _time, fit_bench_traces  # noqa: E402  (_time: first call s, median s, min s, max s, result)
+from run_workers import _time, fit_bench_traces  # noqa: E402  (_time: first call s, median s, min s, max s, result)
 
 
 def main(argv=None) -> int:

@@ -72,7 +72,7 @@ def main() -> None:
     import numpy as np
 
     sys.path.insert(0, str(HERE))
-    from run import DAMPED_ETA_S, DAMPED_MU, DT_S
+    from run_workers import DAMPED_ETA_S, DAMPED_MU, DT_S
 
     import hertzchain as hc
     from hertzchain import batched, native

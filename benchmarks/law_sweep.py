@@ -53,7 +53,7 @@ def benchmark_law(name: str, speeds: int) -> dict:
     def general():
         return jax.block_until_ready(solve_stacked(setup, grid, recording))
 
-    from run import _time  # (first call, median, min, max of the repeats, result)
+    from run_workers import _time  # (first call, median, min, max of the repeats, result)
 
     fast_cold, fast_warm, _, _, fast = _time(batched, 3)
     slow_cold, slow_warm, _, _, slow = _time(general, 3)

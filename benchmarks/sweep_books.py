@@ -47,7 +47,7 @@ def in_process(repeats: int) -> dict:
     import numpy as np
 
     sys.path.insert(0, str(HERE))
-    from run import DAMPED_ETA_S, DAMPED_MU, _case
+    from run_workers import DAMPED_ETA_S, DAMPED_MU, _case
 
     import hertzchain as hc
     from hertzchain import native
