@@ -111,3 +111,24 @@ def test_end_factor_derivative_of_the_in_phase_mode():
 def test_bad_entries_name_the_parameter():
     with pytest.raises(ValueError, match=r"contact_kappa_n_m1p5\[a\]"):
         scaled_chain(chain(5e6, 1.1e7, 5e6), ("contact_kappa_n_m1p5[a]",), np.zeros(1))
+
+
+def test_series_compliance_at_the_ends_only_gives_the_series_formula_modes():
+    # Hertz at every contact (sphere-flat ends, sphere-sphere between), the ends in series with a
+    # spring of compliance c: k_e = 1 / (1/k_hertz + c), the bead-bead contact plain Hertz
+    kappa_flat, kappa_sphere, force, c = 1.38e10, 9.7576e9, 4.5, 1.3e-7
+    two = DrivenChain(
+        [MASS_KG, MASS_KG],
+        [kappa_flat, kappa_sphere, kappa_flat],
+        force,
+        0.0,
+        contact_law=laws.SeriesCompliance(laws.Hertz(), [c, 0.0, c]),
+    )
+    end = 1.0 / (1.0 / (1.5 * kappa_flat ** (2 / 3) * force ** (1 / 3)) + c)
+    middle = 1.5 * kappa_sphere ** (2 / 3) * force ** (1 / 3)
+    f = normal_modes(two)[0]
+    expected = np.sqrt(np.array([end, end + 2 * middle]) / MASS_KG) / (2 * math.pi)
+    np.testing.assert_allclose(np.asarray(f), expected, rtol=1e-10)
+    np.testing.assert_allclose(
+        np.asarray(symmetric_pair_stiffness_n_m(f, MASS_KG)), [end, middle], rtol=1e-10
+    )
