@@ -13,7 +13,7 @@ then fitted on the low drive levels and used to predict the high ones.
    README's constants (sphere-sphere 9.7576e9 N/m^{3/2}, sphere-flat that times sqrt 2) at the
    stated preloads, the preload at which Hertz would give each contact's stiffness, and the end
    contacts' series compliance beside Hertz at the preload the middle contact implies.
-2. `fit.json`: two fits, the two-bead chain with the single bead's micro-slip supports
+2. `fit.json`: three fits. The two-bead chain with the single bead's micro-slip supports
    (`with_supports`) and without (`bare`), each with the single bead's viscous rate to start.
    Free: the end contacts' and the bead-bead contact's Hertz constants (started at the linear
    stiffnesses of 1, same case), the precompression (started at the best of
@@ -21,8 +21,11 @@ then fitted on the low drive levels and used to predict the high ones.
    (calibration prior), on the lowest `FITTED_LEVELS` drive levels (every `level-stride`-th,
    every `row-stride`-th frequency). Predicted, not fitted: the other levels, the peak
    velocity per nm top over lowest and the resonance shift per mode, and the period doubling
-   near twice each mode (`emulate_loop`, the single bead's tongue amplitudes). `fit.png`:
-   measured and model curves.
+   near twice each mode (`emulate_loop`, the single bead's tongue amplitudes). Third
+   (`hertz_series_ends`): every contact Hertz with the README's constants, the end contacts in
+   series with a linear spring (`laws.SeriesCompliance`), its compliance, the precompression
+   (started at the bead-bead contact's Hertz preload and the series compliance of 1), the
+   viscous rate and the drive scale free, no supports. `fit.png`: measured and model curves.
 Whole or nothing: the folder is written only when every part has run.
 """
 
@@ -65,6 +68,7 @@ FITTED_LEVELS = (
 )
 FACTOR_BOUNDS = (math.log(0.01), math.log(100.0))
 START_PRELOADS_N = (3.0, 1.0, 0.3, 0.1)
+SERIES_PATHS = ("contact_law.compliance_m_n", "precompression_n", "damping_rate_per_s")
 PATHS = (
     "contact_kappa_n_m1p5[0,2]",
     "contact_kappa_n_m1p5[1]",
@@ -199,7 +203,22 @@ def two_bead_chain(
     )
 
 
-def fit_record(args, experiment, constants, start_stiffness, supports: bool) -> tuple[dict, dict]:
+def series_chain(constants: dict, compliance_m_n: float, preload_n: float) -> DrivenChain:
+    """The two beads with the README's Hertz constants (sphere on flat at the ends, sphere on
+    sphere between), the end contacts in series with a spring of `compliance_m_n` (m/N), at
+    `preload_n` (N), the single bead's viscous rate, no supports."""
+    return DrivenChain(
+        [BEAD_MASS_KG, BEAD_MASS_KG],
+        [KAPPA_SPHERE_FLAT, KAPPA_SPHERE_SPHERE, KAPPA_SPHERE_FLAT],
+        preload_n,
+        constants["damping_rate_per_s"][0],
+        contact_law=laws.SeriesCompliance(laws.Hertz(), [compliance_m_n, 0.0, compliance_m_n]),
+    )
+
+
+def fit_record(args, experiment, starts: dict, paths: tuple, fixed: dict) -> tuple[dict, dict]:
+    """Fit the factors on `paths` and the drive scale from the best of the `starts` ({preload
+    (N): chain}, by chi^2 at the start); the record of the fit and its curves."""
     rows = experiment.fit_mask & (np.arange(experiment.fit_mask.size) % args.row_stride == 0)
     full = Measurement(
         "bending",
@@ -215,18 +234,16 @@ def fit_record(args, experiment, constants, start_stiffness, supports: bool) -> 
         dataclasses.replace(full, fit_mask=rows), levels - FITTED_LEVELS, args.level_stride
     )
     joint = dataclasses.replace(experiment, measurements=(fitted,))
-    parameters = [JointParameter(p, None) for p in PATHS] + [JointParameter(DRIVE_SCALE, RUN)]
-    # the start: the preload of START_PRELOADS_N whose chain (same linear stiffnesses) fits best
+    parameters = [JointParameter(p, None) for p in paths] + [JointParameter(DRIVE_SCALE, RUN)]
     scan = {}
-    for preload in START_PRELOADS_N:
-        trial = two_bead_chain(constants, *start_stiffness, supports, preload)
+    for preload, trial in starts.items():
         unit = BoundedJointModel(
             joint, trial, parameters, {RUN: 1.0}, 0.1, False, bounds=(-np.inf, np.inf)
         )
         r = unit.residuals(np.zeros(len(parameters)))
         scan[preload] = float(r @ r)
     start_preload = min(scan, key=scan.get)
-    chain = two_bead_chain(constants, *start_stiffness, supports, start_preload)
+    chain = starts[start_preload]
     bounds = (
         np.full(len(parameters), FACTOR_BOUNDS[0]),
         np.full(len(parameters), FACTOR_BOUNDS[1]),
@@ -301,19 +318,13 @@ def fit_record(args, experiment, constants, start_stiffness, supports: bool) -> 
         "start_scan_chi2": {str(k): v for k, v in scan.items()},
         "precompression_n": float(chain_fit.precompression_n),
         "static_overlap_m": np.asarray(chain_fit.static_overlap_m()).tolist(),
-        "fixed": {
-            **(
-                {
-                    "support_friction.stiffness_n_m": constants["support_friction.stiffness_n_m"],
-                    "support_friction.slip_displacement_m": constants[
-                        "support_friction.slip_displacement_m"
-                    ],
-                }
-                if supports
-                else {"support_friction": None}
-            ),
-        },
-        "start_stiffness_n_m": {"end": start_stiffness[0], "middle": start_stiffness[1]},
+        "fixed": fixed,
+        "contact_law": type(chain_fit.contact_law).__name__,
+        "end_series_compliance_m_n": (
+            float(chain_fit.contact_law.compliance_m_n[0])
+            if isinstance(chain_fit.contact_law, laws.SeriesCompliance)
+            else None
+        ),
         "fitted_levels_m": fitted.data.sweep.drive_amplitudes_m.tolist(),
         "row_stride": args.row_stride,
         "constants": constants_out,
@@ -386,15 +397,29 @@ def main(argv=None) -> None:
     constants = single_bead_constants()
     stiffness = stiffness_record(two_hz, one_hz, constants["support_friction.stiffness_n_m"])
     fits, shown = {}, {}
+    supports_fixed = {
+        key: constants[key]
+        for key in ("support_friction.stiffness_n_m", "support_friction.slip_displacement_m")
+    }
     for name, supports in (("with_supports", True), ("bare", False)):
         case = stiffness["symmetric_ends"][name]
-        fits[name], shown[name] = fit_record(
-            args,
-            experiment,
-            constants,
-            (case["two_bead_end_n_m"], case["two_bead_middle_n_m"]),
-            supports,
-        )
+        starts = {
+            preload: two_bead_chain(
+                constants, case["two_bead_end_n_m"], case["two_bead_middle_n_m"], supports, preload
+            )
+            for preload in START_PRELOADS_N
+        }
+        fixed = supports_fixed if supports else {"support_friction": None}
+        fits[name], shown[name] = fit_record(args, experiment, starts, PATHS, fixed)
+    # Hertz of the README at every contact, the ends in series with a spring: started where the
+    # bead-bead contact's stiffness puts the preload, with the series compliance that leaves
+    bare = stiffness["symmetric_ends"]["bare"]
+    preload = bare["middle_hertz_preload_n"]
+    starts = {preload: series_chain(constants, bare["end_series_compliance_m_n"], preload)}
+    fixed = {"contact_kappa_n_m1p5": [KAPPA_SPHERE_FLAT, KAPPA_SPHERE_SPHERE, KAPPA_SPHERE_FLAT]}
+    fits["hertz_series_ends"], shown["hertz_series_ends"] = fit_record(
+        args, experiment, starts, SERIES_PATHS, fixed
+    )
     with output_folder(args.out, "two_bead_end_compliance.py", "fit.json") as folder:
         write_stamped(
             folder / "stiffness.json",
