@@ -88,11 +88,31 @@ class JointParameter:
         return self.name if self.run is None else f"{self.name}[{self.run}]"
 
 
-def _leaf(chain, path: str):
+def _entries(path: str) -> tuple[str, list[int] | None]:
+    """A path and the entries it selects: `contact_kappa_n_m1p5[0,2]` -> (`contact_kappa_n_m1p5`,
+    [0, 2]) (the end contacts of two beads); a path without brackets selects the whole field."""
+    if not path.endswith("]"):
+        return path, None
+    field, _, inside = path[:-1].partition("[")
+    try:
+        return field, [int(part) for part in inside.split(",")]
+    except ValueError:
+        raise ValueError(f"parameter {path!r}: the entries in brackets must be whole numbers, e.g. "
+                         "contact_kappa_n_m1p5[0,2].") from None
+
+
+def _field(chain, path: str):
     value = chain
     for part in path.split("."):
         value = value[int(part)] if part.isdigit() else getattr(value, part)  # a tuple of laws by index
     return value
+
+
+def _leaf(chain, path: str):
+    """The value a parameter's path addresses (its selected entries for `field[i,j]`)."""
+    field, entries = _entries(path)
+    value = _field(chain, field)
+    return value if entries is None else value[jnp.asarray(entries)]
 
 
 def chain_fields(chain: DrivenChain) -> list[str]:
@@ -106,9 +126,15 @@ def chain_fields(chain: DrivenChain) -> list[str]:
 
 
 def scaled_chain(chain: DrivenChain, paths: tuple, log_factors) -> DrivenChain:
-    """`chain` with the field at each of `paths` times $e^{x_k}$ (traceable in `log_factors`)."""
+    """`chain` with the field at each of `paths` times $e^{x_k}$ (traceable in `log_factors`);
+    a path `field[i,j]` scales those entries of an array field only (e.g. the end contacts'
+    Hertz constants apart from the bead-bead ones)."""
     for k, path in enumerate(paths):
-        chain = eqx.tree_at(lambda c, p=path: _leaf(c, p), chain, _leaf(chain, path) * jnp.exp(log_factors[k]))
+        field, entries = _entries(path)
+        value, factor = _field(chain, field), jnp.exp(log_factors[k])
+        if entries is not None:  # the factor on the selected entries, 1 on the others
+            factor = jnp.where(jnp.zeros(value.shape, bool).at[jnp.asarray(entries)].set(True), factor, 1.0)
+        chain = eqx.tree_at(lambda c, p=field: _field(c, p), chain, value * factor)
     return chain
 
 

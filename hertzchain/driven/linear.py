@@ -119,3 +119,21 @@ def monatomic_band_edge_hz(bead_mass_kg, contact_kappa_n_m1p5, precompression_n)
         return band_structure(bead_mass_kg, contact_kappa_n_m1p5, force_n, jnp.array([jnp.pi]))[0, 0]
 
     return jnp.vectorize(edge)(jnp.asarray(precompression_n, dtype=float))
+
+
+def symmetric_pair_stiffness_n_m(mode_frequencies_hz, bead_mass_kg, support_stiffness_n_m=0.0):
+    """The contact stiffnesses of two equal beads between two equal end contacts from their two
+    linear mode frequencies: the inverse of `normal_modes` for n = 2. With end contacts $k_e$,
+    the bead-bead one $k_m$ and each bead's supports $k_s$ (N/m), the modes are
+    $m\\omega_1^2 = k_e + k_s$ (in phase) and $m\\omega_2^2 = k_e + 2k_m + k_s$ (in antiphase).
+
+    **Arguments:** `mode_frequencies_hz` (2,), ascending, Hz; `bead_mass_kg`, kg;
+    `support_stiffness_n_m`, N/m (default 0).
+
+    **Returns:** `(end_n_m, middle_n_m)`, N/m.
+    """
+    f = jnp.asarray(mode_frequencies_hz, dtype=float)
+    if f.shape != (2,):
+        raise ValueError(f"mode_frequencies_hz: expected the two mode frequencies (Hz), got shape {f.shape}.")
+    stiffness = bead_mass_kg * (2 * jnp.pi * f) ** 2
+    return stiffness[0] - support_stiffness_n_m, 0.5 * (stiffness[1] - stiffness[0])
