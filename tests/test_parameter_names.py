@@ -305,3 +305,25 @@ def test_diagnose_reads_free_parameters_and_nuisances_in_either_spelling():
         "--free: 'eta' is now called 'eta_s'; write eta_s (the old name is accepted until the next release)."]
     with pytest.raises(ValueError, match="Unknown parameter 'etaa' in --free"):
         _parameters("etaa", "--free")
+
+
+def test_the_docs_check_resolves_sensitivity_design_and_diagnose_names():
+    """`benchmarks/docs_commands.py` holds a documented sensitivity, design or diagnosis to
+    the public names: a previous name in a repeatable option (`--sweep`), a nuisance or a
+    free parameter is named, the public spelling passes."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import docs_commands
+
+    sweep = ["sensitivity", "--params", "eta_s", "--observables", "wall_peak", "--sweep", "{}=0,1us"]
+    assert docs_commands.parse_check([*sweep[:-1], sweep[-1].format("eta_s")]) == (None, None)
+    assert docs_commands.parse_check([*sweep[:-1], sweep[-1].format("eta")])[1].startswith(
+        "--sweep: 'eta' is now called 'eta_s'")
+    design = ["design", "--params", "eta_s,mu,C", "--velocities", "0.1", "--nuisances"]
+    assert docs_commands.parse_check([*design, "striker_velocity_m_s,gain"]) == (None, None)
+    assert docs_commands.parse_check([*design, "time_offset"])[1].startswith(
+        "--nuisances: 'time_offset' is now called 'time_offset_s'")
+    assert docs_commands.parse_check(["diagnose", "a.csv", "--free", "wall_youngs"])[1].startswith(
+        "--free: 'wall_youngs' is now called 'wall_youngs_pa'")
