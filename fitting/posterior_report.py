@@ -37,7 +37,7 @@ from hertzchain.io.atomic import (  # noqa: E402
 )
 from hertzchain.units import format_measured  # noqa: E402
 
-from .parameters import public_label  # noqa: E402
+from .parameters import public_label
 from .posterior import PosteriorResult, posterior_predictive  # noqa: E402
 
 # pairs and traces show the global parameters (per-file nuisances would make a wall of panels)

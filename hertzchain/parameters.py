@@ -9,8 +9,9 @@ the quantity where no field holds it (`striker_mass_kg`, `yield_force_n`, `bead_
 dimensionless ones keep theirs (`mu`, `mu_star`, `wall_poisson`, `bead_poisson`,
 `sensor_beta`). `resolve_name` maps either spelling to the key (the short one, the previous
 public name, with a one-line `ParameterNameWarning` where a user wrote it), `public_name`
-maps a key or a per-bead label (`bead_masses[3]`) to what a user sees. `get` and `set` are pure and differentiable, so a value can be traced through
-`jax.grad`, `jax.jacfwd` and `jax.vmap`. `hertzchain.sensitivity` takes derivatives
+maps a key or a per-bead label (`bead_masses[3]`) to what a user sees. `get` and `set` are
+pure and differentiable, so a value can be traced through `jax.grad`, `jax.jacfwd` and
+`jax.vmap`. `hertzchain.sensitivity` takes derivatives
 against these names. What a name does to a setup is defined here and nowhere else: a
 registry that fits setup quantities (`fitting.parameters`, which adds bounds, coordinate
 transforms and scopes) uses these entries' `get` and `set` for the names it shares.
@@ -23,8 +24,9 @@ striker radius), `wall_youngs_pa` (`wall_youngs`), `wall_poisson`, `bead_radius_
 (`precompression`), `bead_yield_stress_pa` (`yield_stress`) and `yield_force_n`
 (`yield_force`, the bead-bead contacts' yield force; all contacts' yield forces scale
 together as the yield stress cubed), and `bead_masses_kg` (`bead_masses`, one per bead: N
-values, at fixed radii). The bead parameters act on the beads, not on the striker; for a chain of
-unequal beads they read bead 1's value and scale every bead's value in proportion to it.
+values, at fixed radii). The bead parameters act on the beads, not on the striker; for a
+chain of unequal beads they read bead 1's value and scale every bead's value in proportion
+to it.
 """
 
 from __future__ import annotations

@@ -22,11 +22,12 @@ from .sweep import check_axes, grid_for_batch, jacobians_at_points, undefined_me
 class GlobalSensitivity:
     """Derivative-based global sensitivity measures over a sampled parameter box.
 
-    **Fields:** parameters named by their public names: `box` (param -> (low, high), SI), `n_samples` (points sampled; `n_valid`
-    per observable where it exists), `mean_squared_elasticity` and
-    `mean_abs_elasticity` (observable -> param -> value: $E[(\\partial\\ln O/\\partial\\ln
-    p)^2]$ and $E|\\cdot|$ over the box), `ranking` (observable -> params from most to least
-    influential), `samples` (the underlying `SensitivityResult`, grid axis "sample").
+    **Fields** (parameters by their public names, `eta_s`): `box` (param -> (low, high),
+    SI), `n_samples` (points sampled; `n_valid` per observable where it exists),
+    `mean_squared_elasticity` and `mean_abs_elasticity` (observable -> param -> value:
+    $E[(\\partial\\ln O/\\partial\\ln p)^2]$ and $E|\\cdot|$ over the box), `ranking`
+    (observable -> params from most to least influential), `samples` (the underlying
+    `SensitivityResult`, grid axis "sample").
     """
 
     box: dict
