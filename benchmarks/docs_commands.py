@@ -7,9 +7,11 @@ docs/**/*.md parses, and a newcomer's path through the docs runs.
 the pages under docs/ (continuation lines joined, `# comments` dropped, example output
 lines such as `hertzchain fit: error: ...` skipped) is parsed by the command line's own
 argparse parsers (`hertzchain.cli.main` with the command's `run` replaced by a check that
-does no work), and a `hertzchain fit` or `diagnose` of trace files has its parameter names
-resolved as the fit resolves them (`fitting.parameters.resolve_name`): an unknown name is a
-failure, a previous name (still read, with a warning, for one release) is listed apart.
+does no work), and a `hertzchain fit`, `diagnose` or `design` of trace files has its
+parameter names resolved as the fit resolves them (`fitting.parameters.resolve_name`), a
+`hertzchain sensitivity` as it resolves them (`hertzchain.parameters.resolve_name`): an
+unknown name is a failure, a previous name (still read, with a warning, for one release) is
+listed apart.
 Prints one line per command that fails or uses a previous name; exit 1 if any fails.
 
 `--run`: the newcomer's path (simulate, sweep, synth, fit, diagnose, import, analyze, a
@@ -47,10 +49,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-# The options of each command that name fitted parameters: (option, a list of names, or of
-# NAME=VALUE assignments).
+# The options of each command that name parameters: (option, a list of names, or of
+# NAME=VALUE assignments). A repeatable option (a list of values) is read item by item.
 _NAME_OPTIONS = {"fit": (("params", False), ("profile", False), ("start", True), ("fixed", True)),
-                 "diagnose": (("free", False),)}
+                 "diagnose": (("free", False), ("nuisances", False)),
+                 "design": (("params", False), ("nuisances", False)),
+                 "sensitivity": (("params", False), ("sweep", True), ("box", True))}
 
 
 def documents(root: Path = ROOT) -> list[Path]:
@@ -106,21 +110,25 @@ class PreviousName(Exception):
 
 
 def _name_check(command: str, args) -> None:
-    """A fit or diagnosis of trace files: each parameter name resolved as the fit resolves it
-    (a previous name's warning raised as an error)."""
+    """A fit, diagnosis, design or sensitivity study: each parameter name resolved as the
+    command resolves it (a previous name's warning raised as an error)."""
     from fitting.driven_experiment import is_driven_experiment
     from fitting.parameters import ParameterNameWarning, resolve_label
+    from hertzchain.parameters import resolve_name
 
-    if args.data_dir is not None or any(Path(f).is_file() and is_driven_experiment(f) for f in args.files):
+    files = getattr(args, "files", ())
+    if getattr(args, "data_dir", None) is not None or any(Path(f).is_file() and is_driven_experiment(f) for f in files):
         return  # a driven experiment names its own parameters (fitting.driven_experiment)
+    resolve = resolve_name if command == "sensitivity" else resolve_label
     with warnings.catch_warnings():
         warnings.simplefilter("error", ParameterNameWarning)
         try:
             for option, assignments in _NAME_OPTIONS[command]:
-                names = [part.split("=", 1)[0].strip() if assignments else part.strip()
-                         for part in (getattr(args, option) or "").split(",")]
+                given = getattr(args, option) or ""
+                items = given.split(",") if isinstance(given, str) else given
+                names = [part.split("=", 1)[0].strip() if assignments else part.strip() for part in items]
                 for name in filter(None, names):
-                    resolve_label(name, where=f"--{option}")
+                    resolve(name, where=f"--{option}")
             for prior in getattr(args, "prior", ()):
                 resolve_label(prior.split("=", 1)[0].strip(), where="--prior")
         except ParameterNameWarning as previous_name:

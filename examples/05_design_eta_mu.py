@@ -35,8 +35,8 @@ from hertzchain.io.atomic import save_figure, write_json  # noqa: E402
 SMALL = os.environ.get("HERTZCHAIN_EXAMPLE_SMALL") == "1"
 OUT = Path(os.environ.get("HERTZCHAIN_EXAMPLE_OUT", "out/examples"))
 
-values = {"eta": 1.7e-6, "mu": 0.12, "mu_star": 0.03}
-setup = hc.ChainSetup(eta_s=values["eta"], mu=values["mu"], mu_star=values["mu_star"])
+values = {"eta_s": 1.7e-6, "mu": 0.12, "mu_star": 0.03}
+setup = hc.ChainSetup(eta_s=values["eta_s"], mu=values["mu"], mu_star=values["mu_star"])
 velocities = [0.1, 0.4] if SMALL else [0.03, 0.06, 0.1, 0.2, 0.4, 0.8]
 channels = ["contact_6", "contact_15", "wall"] if SMALL else [
     "contact_2", "contact_6", "contact_10", "contact_15", "contact_19", "wall"]
@@ -51,12 +51,12 @@ run = dict(noise_std_n=0.5, sample_interval_s=2e-6 if SMALL else 1e-6,
 
 # %%
 optimization = fd.optimize_plan(
-    setup, ("eta", "mu", "C"), candidate_velocities_m_s=velocities, candidate_channels=channels,
+    setup, ("eta_s", "mu", "C"), candidate_velocities_m_s=velocities, candidate_channels=channels,
     size=4 if not SMALL else 3, values=values, criterion="D", baseline_units=paper_plan,
     progress=False, **run,
 )
 print("recommended:", ", ".join(f"{c} at {v:g} m/s" for v, c in optimization.chosen))
-for p in ("eta", "mu", "C"):
+for p in ("eta_s", "mu", "C"):
     before = optimization.baseline.relative_stderr[p]
     after = optimization.recommended.relative_stderr[p]
     print(f"  {p}: paper-like plan {100 * before:.3g} %  ->  recommended {100 * after:.3g} %")
@@ -76,7 +76,7 @@ for i, v in enumerate(grid_velocities):
             single = optimization.evaluate([(v, c)])
         except fd.DesignError:
             continue
-        sigma_eta[i, j] = 100 * single.relative_stderr["eta"]
+        sigma_eta[i, j] = 100 * single.relative_stderr["eta_s"]
         sigma_mu[i, j] = 100 * single.relative_stderr["mu"]
         corr[i, j] = single.correlation[0, 1]
 
@@ -115,7 +115,7 @@ print("wrote", OUT / "05_design_single_recordings.png", OUT / "05_design_plans.p
 # the two mechanisms best; that is what the D-optimal search exploits).
 
 # %%
-for name, data in (("eta", sigma_eta), ("mu", sigma_mu)):
+for name, data in (("eta_s", sigma_eta), ("mu", sigma_mu)):
     i, j = np.unravel_index(np.nanargmin(data), data.shape)
     print(f"best single recording for {name}: {channels[j]} at {grid_velocities[i]:g} m/s "
           f"({data[i, j]:.3g} %)")

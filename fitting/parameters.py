@@ -54,7 +54,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import warnings
 from collections.abc import Callable
 
 import equinox as eqx
@@ -64,6 +63,7 @@ import numpy as np
 from hertzchain import contact
 from hertzchain.chain import ChainSetup
 from hertzchain.parameters import PARAMETERS as SETUP_PARAMETERS
+from hertzchain.parameters import ParameterNameWarning, warn_previous_name  # noqa: F401 (the warning: one class for both registries)
 from hertzchain.theory import LONG_WAVE_SPEED_FACTOR, discrete_velocity_constant
 
 SCOPES = ("global", "experiment", "channel", "sensor")
@@ -209,11 +209,6 @@ REGISTRY: dict[str, ParameterSpec] = {}
 _KEY_OF_PUBLIC: dict[str, str] = {}
 
 
-class ParameterNameWarning(FutureWarning):
-    """A parameter written with its previous name (`eta` for `eta_s`): accepted for one
-    release; the message says the name to write."""
-
-
 def register_parameter(spec: ParameterSpec, *, replace: bool = False) -> ParameterSpec:
     """Add a parameter to the registry (e.g. the strength of a new model effect)."""
     taken = spec.name in REGISTRY or spec.public_name in _KEY_OF_PUBLIC
@@ -243,8 +238,7 @@ def resolve_name(name: str, *, where: str | None = None) -> str:
                          f"Fittable parameters: {', '.join(public_names())}.")
     public = REGISTRY[name].public_name
     if where is not None and public != name:
-        warnings.warn(f"{where}: {name!r} is now called {public!r}; write {public} (the old name is "
-                      "accepted until the next release).", ParameterNameWarning, stacklevel=2)
+        warn_previous_name(name, public, where)
     return name
 
 

@@ -1,6 +1,6 @@
 """Posterior distributions of chain parameters by Hamiltonian Monte Carlo (NUTS).
 
-`sample_posterior(experiments, ("eta", "mu", "C"), priors=["bead_youngs=203GPa+-4GPa"])`
+`sample_posterior(experiments, ("eta_s", "mu", "C"), priors=["bead_youngs_pa=203GPa+-4GPa"])`
 samples $p(x \\mid y) \\propto \\exp(-\\chi^2(x)/2)\\, p(x)$ with the same whitened
 residuals as the least-squares fit (`fitting.model`, stated noise sigma), so the
 posterior is marginal over every nuisance that has a prior (bead modulus and radius,
@@ -55,7 +55,14 @@ from hertzchain.io.atomic import json_ready
 
 from .fit import FitResult, FitWarning, fit
 from .model import ForwardModel, Problem
-from .parameters import from_unbounded, to_unbounded, transform_arrays
+from .parameters import (
+    LabelledValues,
+    from_unbounded,
+    public_keys,
+    public_label,
+    to_unbounded,
+    transform_arrays,
+)
 from .priors import describe
 
 RHAT_LIMIT = 1.01
@@ -75,7 +82,10 @@ class PosteriorResult:
 
     **Fields:**
 
-    - `labels`, `units`: the sampled parameters (the fit's labels) and their SI units.
+    - `labels`, `units`: the sampled parameters (the fit's labels, registry spelling: the
+      dicts below are read by either spelling, `fitting.parameters.LabelledValues`) and their
+      SI units. `to_json`, the warnings and the report files name them as a user writes them
+      (`eta_s`, `striker_velocity_m_s[run1]`: `fitting.parameters.public_label`).
     - `draws`: (chains, draws, p) physical values (SI).
     - `summary`: label -> mean, sd, q05, q50, q95, r_hat, ess (bulk), ess_tail.
     - `laplace`: label -> the MAP value and the Laplace sd, with the ratios to the posterior
@@ -122,10 +132,10 @@ class PosteriorResult:
         failed = []
         for label, row in self.summary.items():
             if not row["r_hat"] <= RHAT_LIMIT:
-                failed.append(f"R-hat of {label} is {row['r_hat']:.4f} (> {RHAT_LIMIT})")
+                failed.append(f"R-hat of {public_label(label)} is {row['r_hat']:.4f} (> {RHAT_LIMIT})")
             ess = min(row["ess"], row["ess_tail"])
             if not ess >= ESS_MIN:
-                failed.append(f"ESS of {label} is {ess:.0f} (< {ESS_MIN})")
+                failed.append(f"ESS of {public_label(label)} is {ess:.0f} (< {ESS_MIN})")
         if self.divergences:
             failed.append(f"{self.divergences} divergent transitions")
         return failed
@@ -138,14 +148,14 @@ class PosteriorResult:
         """JSON-ready dict (SI units; non-finite numbers as null)."""
         return {
             "params": {
-                label: {**{k: json_ready(v) for k, v in row.items()}, "unit": self.units[label]}
+                public_label(label): {**{k: json_ready(v) for k, v in row.items()}, "unit": self.units[label]}
                 for label, row in self.summary.items()
             },
             "laplace": {
-                label: {k: (v if isinstance(v, bool) else json_ready(v)) for k, v in row.items()}
+                public_label(label): {k: (v if isinstance(v, bool) else json_ready(v)) for k, v in row.items()}
                 for label, row in self.laplace.items()
             },
-            "priors": {label: {k: json_ready(v) if not isinstance(v, str) else v for k, v in p.items()}
+            "priors": {public_label(label): {k: json_ready(v) if not isinstance(v, str) else v for k, v in p.items()}
                        for label, p in self.priors.items()},
             "divergences": int(self.divergences),
             "step_size": json_ready(self.step_size),
@@ -155,12 +165,12 @@ class PosteriorResult:
             "timing_s": {k: json_ready(v) for k, v in self.elapsed_s.items()},
             "seconds_per_effective_sample": json_ready(self.seconds_per_effective_sample),
             # bulk effective samples per second of the whole run (fit, compilation, warmup, sampling)
-            "ess_per_second_total": {label: json_ready(row["ess"] / self.elapsed_s["total"])
+            "ess_per_second_total": {public_label(label): json_ready(row["ess"] / self.elapsed_s["total"])
                                      for label, row in self.summary.items()},
             "diagnostics_passed": self.passed,
             "failed_diagnostics": self.failed_diagnostics(),
             "warnings": list(self.warnings),
-            "map": {label: json_ready(v) for label, v in self.fit.values.items()},
+            "map": {label: json_ready(v) for label, v in public_keys(self.fit.values).items()},
             "map_reduced_chi2": json_ready(self.fit.reduced_chi2),
             "map_converged": bool(self.fit.converged),
             "map_steps": int(self.fit.n_steps),
@@ -309,7 +319,7 @@ def compare_with_laplace(summary: dict, values: dict, stderr: dict, *,
     return out
 
 
-def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chains: int = 4,
+def sample_posterior(experiments, params=("eta_s", "mu", "C"), *, priors=(), chains: int = 4,
                      warmup: int = 100, draws: int = 200, seed: int = 0, target_accept: float = 0.8,
                      max_tree_depth: int = 8, adapt_metric: bool = False,
                      forward: ForwardModel | None = None,
@@ -395,10 +405,10 @@ def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chain
     smallest_ess = min(min(row["ess"], row["ess_tail"]) for row in summary.values())
     result = PosteriorResult(
         labels=labels,
-        units={inst.label: inst.spec.unit for inst in problem.instances},
+        units=LabelledValues({inst.label: inst.spec.unit for inst in problem.instances}),
         draws=x_draws,
-        summary=summary,
-        laplace=laplace,
+        summary=LabelledValues(summary),
+        laplace=LabelledValues(laplace),
         sample_stats=stats,
         divergences=int(np.sum(stats["diverging"])),
         step_size=step_size,
@@ -406,7 +416,7 @@ def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chain
                    "total": time.perf_counter() - began},
         gradient_evaluations=gradient_evaluations,
         seconds_per_effective_sample=sampling_s / smallest_ess if smallest_ess > 0 else math.inf,
-        priors=describe(problem.instances, problem.priors),
+        priors=LabelledValues(describe(problem.instances, problem.priors)),
         warnings=messages,
         fit=fit_result,
         settings={"chains": chains, "devices": len(groups), "warmup": warmup, "draws": draws, "seed": seed,
@@ -423,7 +433,7 @@ def sample_posterior(experiments, params=("eta", "mu", "C"), *, priors=(), chain
     flagged = [label for label, row in laplace.items() if row["fails"]]
     if flagged:
         worst = ", ".join(
-            f"{label} (sd x{laplace[label]['sd_ratio']:.2f}, 90 % interval halves "
+            f"{public_label(label)} (sd x{laplace[label]['sd_ratio']:.2f}, 90 % interval halves "
             f"x{laplace[label]['lower_ratio']:.2f}/x{laplace[label]['upper_ratio']:.2f})"
             for label in flagged
         )

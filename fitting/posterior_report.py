@@ -3,10 +3,13 @@
 `write_posterior_report(result, out_dir)` writes (each file whole or not at all):
 
 - `posterior.json`: `PosteriorResult.to_json()`: `params.<label>.{mean, sd, q05, q50, q95,
-  r_hat, ess, ess_tail, unit}` (SI, the labels of `fit.json`), the Laplace comparison,
-  priors, divergences, timing and settings.
+  r_hat, ess, ess_tail, unit}` (SI, the labels of `fit.json`: `eta_s`,
+  `striker_velocity_m_s[run1]`), the Laplace comparison, priors, divergences, timing and
+  settings.
 - `posterior.nc`: the draws and sampler statistics as an ArviZ `InferenceData` (netCDF).
-- `draws.csv`: one row per draw: chain, draw, every parameter (SI).
+- `draws.csv`: one row per draw: chain, draw, every parameter (SI, by the same labels).
+
+Every file names a parameter as a user writes it (`fitting.parameters.public_label`).
 - `posterior_summary.md`: the summary table with the Laplace comparison, and the warnings.
 - `posterior_pairs.png`: pairs of the global parameters, draws over the Laplace 1- and
   2-sigma ellipses, marginals over the Laplace normal.
@@ -32,9 +35,9 @@ from hertzchain.io.atomic import (  # noqa: E402
     write_json,
     write_text,
 )
-
 from hertzchain.units import format_measured  # noqa: E402
 
+from .parameters import public_label
 from .posterior import PosteriorResult, posterior_predictive  # noqa: E402
 
 # pairs and traces show the global parameters (per-file nuisances would make a wall of panels)
@@ -44,7 +47,7 @@ _MAX_PLOTTED = 8
 def _inference_data(result: PosteriorResult):
     import arviz as az
 
-    names = {label: file_stem(label) for label in result.labels}
+    names = {label: file_stem(public_label(label)) for label in result.labels}
     posterior = {names[label]: result.draws[..., i] for i, label in enumerate(result.labels)}
     stats = {
         "diverging": result.sample_stats["diverging"].astype(bool),
@@ -54,7 +57,7 @@ def _inference_data(result: PosteriorResult):
     }
     idata = az.from_dict(posterior=posterior, sample_stats=stats)
     for label, name in names.items():
-        idata.posterior[name].attrs.update({"label": label, "unit": result.units[label]})
+        idata.posterior[name].attrs.update({"label": public_label(label), "unit": result.units[label]})
     return idata
 
 
@@ -74,7 +77,7 @@ def _markdown(result: PosteriorResult) -> str:
     for label, row in result.summary.items():
         lap = result.laplace[label]
         lines.append(
-            f"| {label} | {result.units[label]} | {row['mean']:.6g} | {row['sd']:.3g} | {row['q05']:.6g} "
+            f"| {public_label(label)} | {result.units[label]} | {row['mean']:.6g} | {row['sd']:.3g} | {row['q05']:.6g} "
             f"| {row['q50']:.6g} | {row['q95']:.6g} | {row['r_hat']:.4f} | {row['ess']:.0f} "
             f"| {row['ess_tail']:.0f} | {lap['map']:.6g} | {lap['laplace_sd']:.3g} "
             f"| {lap['sd_ratio']:.3f} | {'no' if lap['fails'] else 'yes'} |"
@@ -82,9 +85,9 @@ def _markdown(result: PosteriorResult) -> str:
     lines += ["", "Priors:", ""]
     for label, prior in result.priors.items():
         if prior["kind"] == "normal":
-            lines.append(f"- {label}: normal, {format_measured(prior['centre'], prior['sd'], prior['unit'])}")
+            lines.append(f"- {public_label(label)}: normal, {format_measured(prior['centre'], prior['sd'], prior['unit'])}")
         else:
-            lines.append(f"- {label}: flat on [{prior['low']:.6g}, {prior['high']:.6g}] {prior['unit']}")
+            lines.append(f"- {public_label(label)}: flat on [{prior['low']:.6g}, {prior['high']:.6g}] {prior['unit']}")
     if result.warnings:
         lines += ["", "Warnings:", ""] + [f"- {text}" for text in result.warnings]
     return "\n".join(lines) + "\n"
@@ -129,9 +132,9 @@ def plot_pairs(result: PosteriorResult):
                         shape = vectors @ (k * np.sqrt(np.maximum(values, 0))[:, None] * circle)
                         ax.plot(x_hat[j] + shape[0], x_hat[i] + shape[1], color="black", lw=0.8)
             if row == n - 1:
-                ax.set_xlabel(result.labels[j], fontsize=8)
+                ax.set_xlabel(public_label(result.labels[j]), fontsize=8)
             if col == 0 and row != col:
-                ax.set_ylabel(result.labels[i], fontsize=8)
+                ax.set_ylabel(public_label(result.labels[i]), fontsize=8)
             ax.tick_params(labelsize=6)
     fig.suptitle("posterior draws; black: Laplace approximation (1 and 2 sigma)", fontsize=9)
     fig.tight_layout()
@@ -146,7 +149,7 @@ def plot_trace(result: PosteriorResult):
         ax = axes[row, 0]
         for chain in range(result.draws.shape[0]):
             ax.plot(result.draws[chain, :, i], lw=0.6)
-        ax.set_ylabel(result.labels[i], fontsize=8)
+        ax.set_ylabel(public_label(result.labels[i]), fontsize=8)
         ax.tick_params(labelsize=7)
     axes[-1, 0].set_xlabel("draw")
     fig.tight_layout()
@@ -187,7 +190,7 @@ def write_posterior_report(result: PosteriorResult, out_dir, *, plots: bool = Tr
         [str(c), str(d)] + [repr(float(v)) for v in result.draws[c, d]]
         for c in range(chains) for d in range(draws)
     )
-    write_csv(written[2], ["chain", "draw"] + list(result.labels), rows)
+    write_csv(written[2], ["chain", "draw"] + [public_label(label) for label in result.labels], rows)
     write_text(written[3], _markdown(result))
     if plots:
         figures = [("posterior_pairs.png", plot_pairs(result)), ("posterior_trace.png", plot_trace(result))]

@@ -2,24 +2,36 @@
 
 One registry, `PARAMETERS`, maps a short name (`eta`, `wall_youngs`, `bead_radius`, ...) to
 a `Parameter` that reads the value from a setup and writes a new value into it, in SI
-units. `get` and `set` are pure and differentiable, so a value can be traced through
-`jax.grad`, `jax.jacfwd` and `jax.vmap`. `hertzchain.sensitivity` takes derivatives
+units. The short names are the registry's keys, what code uses; a user writes and reads
+each parameter by its public name (`Parameter.public_name`), the unit-suffixed spelling of
+the `ChainSetup` field it sets (`eta_s`, `wall_youngs_pa`, `bead_yield_stress_pa`), or of
+the quantity where no field holds it (`striker_mass_kg`, `yield_force_n`, `bead_masses_kg`);
+dimensionless ones keep theirs (`mu`, `mu_star`, `wall_poisson`, `bead_poisson`,
+`sensor_beta`). `resolve_name` maps either spelling to the key (the short one, the previous
+public name, with a one-line `ParameterNameWarning` where a user wrote it), `public_name`
+maps a key or a per-bead label (`bead_masses[3]`) to what a user sees. `get` and `set` are
+pure and differentiable, so a value can be traced through `jax.grad`, `jax.jacfwd` and
+`jax.vmap`. `hertzchain.sensitivity` takes derivatives
 against these names. What a name does to a setup is defined here and nowhere else: a
 registry that fits setup quantities (`fitting.parameters`, which adds bounds, coordinate
 transforms and scopes) uses these entries' `get` and `set` for the names it shares.
 
-**Parameters** (SI units): `eta` (s), `mu`, `mu_star`, `striker_velocity` (m/s),
-`striker_mass` (kg, at fixed striker radius), `wall_youngs` (Pa), `wall_poisson`,
-`bead_radius` (m), `bead_density` (kg/m^3), `bead_youngs` (Pa), `bead_poisson`,
-`sensor_beta`, `sensor_f0` (Hz), `precompression` (N), `yield_stress` (Pa) and
-`yield_force` (N, the bead-bead contacts' yield force; all contacts' yield forces scale
-together as the yield stress cubed), and `bead_masses` (kg, one per bead: N values, at
-fixed radii). The bead parameters act on the beads, not on the striker; for a chain of
-unequal beads they read bead 1's value and scale every bead's value in proportion to it.
+**Parameters** (public name, key; SI units): `eta_s` (`eta`), `mu`, `mu_star`,
+`striker_velocity_m_s` (`striker_velocity`), `striker_mass_kg` (`striker_mass`, at fixed
+striker radius), `wall_youngs_pa` (`wall_youngs`), `wall_poisson`, `bead_radius_m`
+(`bead_radius`), `bead_density_kg_m3` (`bead_density`), `bead_youngs_pa` (`bead_youngs`),
+`bead_poisson`, `sensor_beta`, `sensor_f0_hz` (`sensor_f0`), `precompression_n`
+(`precompression`), `bead_yield_stress_pa` (`yield_stress`) and `yield_force_n`
+(`yield_force`, the bead-bead contacts' yield force; all contacts' yield forces scale
+together as the yield stress cubed), and `bead_masses_kg` (`bead_masses`, one per bead: N
+values, at fixed radii). The bead parameters act on the beads, not on the striker; for a
+chain of unequal beads they read bead 1's value and scale every bead's value in proportion
+to it.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import NamedTuple
 
@@ -33,9 +45,9 @@ from .chain import ChainSetup
 class Parameter(NamedTuple):
     """A physical parameter of a `ChainSetup`.
 
-    **Fields:** `name` (command-line name), `unit` (SI unit, "" if dimensionless),
+    **Fields:** `name` (the registry key), `unit` (SI unit, "" if dimensionless),
     `meaning`, `get(setup) -> array` and `set(setup, value) -> setup` (pure, differentiable),
-    `per_bead` (one value per bead).
+    `per_bead` (one value per bead), `public_name` (what a user writes and reads).
     """
 
     name: str
@@ -44,6 +56,7 @@ class Parameter(NamedTuple):
     get: Callable
     set: Callable
     per_bead: bool = False
+    public_name: str = ""
 
 
 def _field(name: str) -> Callable:
@@ -91,11 +104,11 @@ def _set_yield_force(setup, force_n):
 
 
 def _scalar(name, field, unit, meaning) -> Parameter:
-    return Parameter(name, unit, meaning, _field(field), _setter(field))
+    return Parameter(name, unit, meaning, _field(field), _setter(field), public_name=field)
 
 
 def _bead(name, field, unit, meaning) -> Parameter:
-    return Parameter(name, unit, meaning, _bead_scalar_get(field), _bead_scalar_set(field))
+    return Parameter(name, unit, meaning, _bead_scalar_get(field), _bead_scalar_set(field), public_name=field)
 
 
 PARAMETERS: dict[str, Parameter] = {
@@ -107,7 +120,7 @@ PARAMETERS: dict[str, Parameter] = {
         _scalar("striker_velocity", "striker_velocity_m_s", "m/s", "impact velocity"),
         Parameter(
             "striker_mass", "kg", "striker mass at fixed striker radius",
-            lambda s: s.striker_mass_kg, _set_striker_mass,
+            lambda s: s.striker_mass_kg, _set_striker_mass, public_name="striker_mass_kg",
         ),
         _scalar("wall_youngs", "wall_youngs_pa", "Pa", "Young's modulus of the wall"),
         _scalar("wall_poisson", "wall_poisson", "", "Poisson ratio of the wall"),
@@ -124,22 +137,68 @@ PARAMETERS: dict[str, Parameter] = {
             "yield_force", "N", "yield force of the bead-bead contacts (plasticity=True; "
             "all contacts' yield forces scale together, F_Y ~ yield stress^3)",
             lambda s: s.contact_yield_force_n()[1 if s.n_beads > 1 else 0], _set_yield_force,
+            public_name="yield_force_n",
         ),
         Parameter(
             "bead_masses", "kg", "mass of each bead at fixed radius (N parameters)",
-            lambda s: s.bead_mass_kg, _set_bead_masses, per_bead=True,
+            lambda s: s.bead_mass_kg, _set_bead_masses, per_bead=True, public_name="bead_masses_kg",
         ),
     )
 }
 
+# public name -> registry key
+_KEY_OF_PUBLIC = {p.public_name: p.name for p in PARAMETERS.values()}
+
+
+class ParameterNameWarning(FutureWarning):
+    """A parameter written with its previous name (`eta` for `eta_s`): accepted for one
+    release; the message says the name to write."""
+
+
+def warn_previous_name(name: str, public: str, where: str) -> None:
+    """The one-line notice that `name`, written in `where` (an option or a file), is now
+    called `public` (`ParameterNameWarning`)."""
+    warnings.warn(f"{where}: {name!r} is now called {public!r}; write {public} (the old name is "
+                  "accepted until the next release).", ParameterNameWarning, stacklevel=3)
+
+
+def public_names(*, per_bead: bool = True) -> tuple[str, ...]:
+    """The names a user writes, one per parameter, in registry order (without the per-bead
+    ones when `per_bead` is False)."""
+    return tuple(p.public_name for p in PARAMETERS.values() if per_bead or not p.per_bead)
+
+
+def resolve_name(name: str, *, where: str | None = None) -> str:
+    """The registry key of the parameter a user named `name`, written either way: its public
+    name (`wall_youngs_pa`) or its previous, short one (`wall_youngs`). `where` is the option
+    or file it was written in (`--params`): given, a previous name warns once, one line
+    (`ParameterNameWarning`). An unknown name raises a ValueError listing the public names."""
+    if name in _KEY_OF_PUBLIC:
+        return _KEY_OF_PUBLIC[name]
+    if name not in PARAMETERS:
+        raise ValueError(f"unknown parameter {name!r}{f' in {where}' if where else ''}; valid parameters: "
+                         f"{', '.join(public_names())}.")
+    if where is not None and PARAMETERS[name].public_name != name:
+        warn_previous_name(name, PARAMETERS[name].public_name, where)
+    return name
+
+
+def public_name(label: str) -> str:
+    """What a user sees for a registry key or a per-bead label: `eta` -> `eta_s`,
+    `bead_masses[3]` -> `bead_masses_kg[3]`; other names unchanged."""
+    name, bracket, rest = label.partition("[")
+    return (PARAMETERS[name].public_name if name in PARAMETERS else name) + bracket + rest
+
 
 def parameter_values(setup: ChainSetup, params: Sequence[str]) -> dict[str, jax.Array]:
-    """The current values of `params` in `setup` (scalars, or (N,) for per-bead ones), SI."""
-    return {name: jnp.asarray(PARAMETERS[name].get(setup)) for name in params}
+    """The current values of `params` (either spelling, `resolve_name`) in `setup` (scalars,
+    or (N,) for per-bead ones), SI, keyed as given."""
+    return {name: jnp.asarray(PARAMETERS[resolve_name(name)].get(setup)) for name in params}
 
 
 def with_parameters(setup: ChainSetup, values: Mapping[str, jax.Array]) -> ChainSetup:
-    """`setup` with the named parameters set to `values` (pure and differentiable)."""
+    """`setup` with the named parameters (either spelling) set to `values` (pure and
+    differentiable)."""
     for name, value in values.items():
-        setup = PARAMETERS[name].set(setup, value)
+        setup = PARAMETERS[resolve_name(name)].set(setup, value)
     return setup

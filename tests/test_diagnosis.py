@@ -276,6 +276,7 @@ def test_report_files(viscous_short, tmp_path):
     assert step["converged"] is True and step["steps"] == 0
     assert payload["base_fit"]["converged"] is True and payload["final"]["converged"] is True
     assert payload["converged"] is True and payload["unconverged_fits"] == []
+    assert payload["settings"]["nuisances"] == ["striker_velocity_m_s", "time_offset_s"]  # as a user writes them
     refitted = [c for c in step["candidates"] if c["chi2"] is not None]
     assert refitted and all(isinstance(c["converged"], bool) and c["steps"] > 0 for c in refitted)
     assert "viscous_damping" in paths["markdown"].read_text()

@@ -157,3 +157,173 @@ def test_diagnosis_files_name_parameters_as_a_user_writes_them():
                            "stderr": {"eta": 1e-8}})
     assert summary == {"chi2": 10.0, "values": {"striker_velocity_m_s[shot1]": 0.3, "eta_s": 1e-6},
                        "stderr": {"eta_s": 1e-8}}
+
+
+def _written_names(text: str) -> set[str]:
+    """The previous short names that occur as whole words in `text` (`eta`, not `eta_s`)."""
+    import re
+
+    return {name for name in (*OLD_NAMES, "striker_mass", "sensor_f0", "yield_force", "bead_masses")
+            if re.search(rf"(?<![\w.]){name}(?![\w])", text)}
+
+
+def test_sensitivity_reads_either_spelling_gives_the_same_numbers_and_writes_the_public_names(tmp_path, capsys):
+    """`hertzchain sensitivity` over a swept grid: the previous names in --params and --sweep
+    give the numbers of the public ones, each warns once naming its option, and the JSON,
+    the CSV and the console speak only the public names."""
+    base = ["sensitivity", "--n-beads", "5", "--eta", "1us", "--mu-star", "0.03", "--observables",
+            "wall_peak,contact_2_peak", "--t-end", "0.4ms", "--sample-interval", "2us", "--sweep-velocities", "0.1,0.3"]
+    assert main([*base, "--params", "eta_s,wall_youngs_pa,mu_star", "--sweep", "eta_s=0.5us,1us",
+                 "--out", str(tmp_path / "new")]) == 0
+    new_out = capsys.readouterr().out
+    with pytest.warns(ParameterNameWarning) as caught:
+        assert main([*base, "--params", "eta,wall_youngs,mu_star", "--sweep", "eta=0.5us,1us",
+                     "--out", str(tmp_path / "old")]) == 0
+    capsys.readouterr()
+    assert [str(w.message).split(";")[0] for w in caught] == [
+        "--params: 'eta' is now called 'eta_s'", "--params: 'wall_youngs' is now called 'wall_youngs_pa'",
+        "--sweep: 'eta' is now called 'eta_s'"]
+    new = json.loads((tmp_path / "new" / "sensitivity.json").read_text())
+    old = json.loads((tmp_path / "old" / "sensitivity.json").read_text())
+    assert new == old
+    assert new["grid"]["axes"] == ["striker_velocity_m_s", "eta_s"]
+    assert list(new["params"]) == ["eta_s", "wall_youngs_pa", "mu_star"] and new["params"]["eta_s"]["unit"] == "s"
+    assert set(new["elasticity"]["wall_peak"]) == {"eta_s", "wall_youngs_pa", "mu_star"}
+    # the peak force grows with the impact velocity as V^(6/5) (dissipation lowers it a little)
+    ratio = np.asarray(new["observables"]["wall_peak"]["value"])[1] / np.asarray(new["observables"]["wall_peak"]["value"])[0]
+    assert np.all((ratio > 3 ** 1.1) & (ratio < 3 ** 1.2))
+    table = (tmp_path / "new" / "sensitivity.csv").read_text()
+    assert table == (tmp_path / "old" / "sensitivity.csv").read_text()
+    assert table.splitlines()[0].startswith("striker_velocity_m_s,eta_s,observable,")
+    assert {row.split(",")[5] for row in table.splitlines()[1:]} == {"eta_s", "wall_youngs_pa", "mu_star"}
+    assert "sweep over striker_velocity_m_s (2) x eta_s (2)" in new_out
+    for text in (table, json.dumps(new), new_out):
+        assert not _written_names(text)
+
+
+def test_sensitivity_boxes_and_library_calls_read_either_spelling():
+    """--box warns once per previous name and yields the same box; the library reads both
+    spellings silently and names its result's parameters publicly; an unknown name lists the
+    public ones."""
+    import argparse
+
+    from hertzchain import sensitivity as S
+    from hertzchain.cli.sensitivity import _box
+    from hertzchain.sensitivity.sweep import check_axes
+
+    new = _box(argparse.Namespace(box=["eta_s=0:2us", "wall_youngs_pa=3GPa:203GPa"]))
+    with pytest.warns(ParameterNameWarning) as caught:
+        old = _box(argparse.Namespace(box=["eta=0:2us", "wall_youngs=3GPa:203GPa"]))
+    assert old == new == {"eta": (0.0, 2e-6), "wall_youngs": (3e9, 203e9)}
+    assert [str(w.message).split(";")[0] for w in caught] == [
+        "--box: 'eta' is now called 'eta_s'", "--box: 'wall_youngs' is now called 'wall_youngs_pa'"]
+    with pytest.raises(ValueError, match="--box: eta_s is given twice"), pytest.warns(ParameterNameWarning):
+        _box(argparse.Namespace(box=["eta_s=0:2us", "eta=0:1us"]))
+    setup = ChainSetup(4, eta_s=1e-6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert check_axes(setup, {"eta": [1e-6], "wall_youngs_pa": [5e9]}).keys() == {"eta", "wall_youngs"}
+        values = S.parameter_values(setup, ("eta_s", "wall_youngs"))
+    assert float(values["eta_s"]) == 1e-6 and float(values["wall_youngs"]) == float(setup.wall_youngs_pa)
+    with pytest.raises(ValueError, match=r"params: unknown parameter 'eta_us'; valid parameters: eta_s, mu, mu_star, "
+                                         r"striker_velocity_m_s, striker_mass_kg"):
+        S.sensitivity(setup, ("eta_us",), ("wall_peak",), t_end_s=1e-4)
+    with pytest.raises(ValueError, match="a parameter is listed twice: \\('eta_s', 'eta_s'\\)"):
+        S.sensitivity(setup, ("eta", "eta_s"), ("wall_peak",), t_end_s=1e-4)
+
+
+def test_each_sensitivity_parameter_is_named_as_the_quantity_it_sets():
+    """The public name of a setup parameter is the unit-suffixed `ChainSetup` field (or
+    property) it sets: setting it through the registry changes that field and nothing named
+    otherwise; the fitted ones agree with `fitting.parameters`."""
+    from hertzchain.parameters import public_name
+
+    setup = ChainSetup(4, sensor_beads=(2,), precompression_n=1.0)
+    for key, parameter in PARAMETERS.items():
+        public = parameter.public_name
+        assert public_name(key) == public and (public == key or not public.startswith(key + "_") or parameter.unit)
+        if key in REGISTRY:
+            assert REGISTRY[key].public_name == public, key
+        if key in ("yield_force", "bead_masses"):
+            continue  # a contact's yield force, the per-bead masses: no single field
+        value = np.asarray(getattr(setup, public))
+        changed = parameter.set(setup, 1.25 * parameter.get(setup))
+        assert np.allclose(np.asarray(getattr(changed, public)), 1.25 * value, rtol=1e-12), key
+    masses = PARAMETERS["bead_masses"].set(setup, 2.0 * setup.bead_mass_kg)
+    assert np.allclose(masses.bead_mass_kg, 2.0 * setup.bead_mass_kg) and public_name("bead_masses[3]") == "bead_masses_kg[3]"
+
+
+def test_design_reads_either_spelling_gives_the_same_numbers_and_writes_the_public_names(tmp_path, capsys):
+    """`hertzchain design`: --params and --nuisances by their previous names give the
+    numbers of the public ones, each previous name warns once, and design.json, design.csv
+    and the console speak only the public names."""
+    base = ["design", "--n-beads", "6", "--eta", "1.7us", "--mu", "0.12", "--mu-star", "0.03", "--velocities",
+            "0.1,0.3", "--contacts", "2", "--t-end", "0.4ms"]
+    assert main([*base, "--params", "eta_s,mu,C", "--nuisances", "striker_velocity_m_s",
+                 "--out", str(tmp_path / "new")]) == 0
+    new_out = capsys.readouterr().out
+    with pytest.warns(ParameterNameWarning) as caught:
+        assert main([*base, "--params", "eta,mu,C", "--nuisances", "striker_velocity",
+                     "--out", str(tmp_path / "old")]) == 0
+    capsys.readouterr()
+    assert [str(w.message).split(";")[0] for w in caught] == [
+        "--params: 'eta' is now called 'eta_s'", "--nuisances: 'striker_velocity' is now called 'striker_velocity_m_s'"]
+    new = json.loads((tmp_path / "new" / "design.json").read_text())
+    old = json.loads((tmp_path / "old" / "design.json").read_text())
+    assert {k: v for k, v in new.items() if k != "plan"} == {k: v for k, v in old.items() if k != "plan"}
+    assert list(new["params"]) == ["eta_s", "mu", "C"] and new["correlation"]["names"] == ["eta_s", "mu", "C"]
+    assert new["nuisances"]["free"] == ["striker_velocity_m_s"]
+    assert new["values"] == {"eta_s": pytest.approx(1.7e-6), "mu": 0.12, "mu_star": 0.03}
+    eta = new["params"]["eta_s"]
+    assert eta["unit"] == "s" and eta["value"] == pytest.approx(1.7e-6) and 0 < eta["relative_stderr"] < 0.1
+    table = (tmp_path / "new" / "design.csv").read_text()
+    assert table == (tmp_path / "old" / "design.csv").read_text()
+    assert [row.split(",")[0] for row in table.splitlines()] == ["param", "eta_s", "mu", "C"]
+    assert "Fisher information of eta_s, mu, C (free nuisances: striker_velocity_m_s)" in new_out
+    for text in (table, json.dumps({k: v for k, v in new.items() if k != "plan"}), new_out):
+        assert not _written_names(text)
+
+
+def test_diagnose_reads_free_parameters_and_nuisances_in_either_spelling():
+    """`hertzchain diagnose --free/--nuisances`: both spellings give the same registry keys;
+    a previous name warns once, naming the option; the default nuisances are public names."""
+    import argparse
+
+    from hertzchain.cli.diagnose import _parameters, add_arguments
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert _parameters("eta_s,C", "--free") == ["eta", "C"]
+        parser = argparse.ArgumentParser()
+        add_arguments(parser)
+        default = parser.get_default("nuisances")
+        assert default == "striker_velocity_m_s,time_offset_s"
+        assert _parameters(default, "--nuisances") == ["striker_velocity", "time_offset"]
+    with pytest.warns(ParameterNameWarning) as caught:
+        assert _parameters("eta,C", "--free") == ["eta", "C"]
+    assert [str(w.message) for w in caught] == [
+        "--free: 'eta' is now called 'eta_s'; write eta_s (the old name is accepted until the next release)."]
+    with pytest.raises(ValueError, match="Unknown parameter 'etaa' in --free"):
+        _parameters("etaa", "--free")
+
+
+def test_the_docs_check_resolves_sensitivity_design_and_diagnose_names():
+    """`benchmarks/docs_commands.py` holds a documented sensitivity, design or diagnosis to
+    the public names: a previous name in a repeatable option (`--sweep`), a nuisance or a
+    free parameter is named, the public spelling passes."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import docs_commands
+
+    sweep = ["sensitivity", "--params", "eta_s", "--observables", "wall_peak", "--sweep", "{}=0,1us"]
+    assert docs_commands.parse_check([*sweep[:-1], sweep[-1].format("eta_s")]) == (None, None)
+    assert docs_commands.parse_check([*sweep[:-1], sweep[-1].format("eta")])[1].startswith(
+        "--sweep: 'eta' is now called 'eta_s'")
+    design = ["design", "--params", "eta_s,mu,C", "--velocities", "0.1", "--nuisances"]
+    assert docs_commands.parse_check([*design, "striker_velocity_m_s,gain"]) == (None, None)
+    assert docs_commands.parse_check([*design, "time_offset"])[1].startswith(
+        "--nuisances: 'time_offset' is now called 'time_offset_s'")
+    assert docs_commands.parse_check(["diagnose", "a.csv", "--free", "wall_youngs"])[1].startswith(
+        "--free: 'wall_youngs' is now called 'wall_youngs_pa'")

@@ -264,17 +264,21 @@ def test_report_files_are_whole_and_agree(noise_only, tmp_path):
     assert {"posterior.json", "posterior.nc", "draws.csv", "posterior_summary.md", "posterior_pairs.png",
             "posterior_trace.png"} <= names
     report = json.loads((tmp_path / "posterior.json").read_text())
-    for label in ("eta", "C"):
+    assert list(report["params"]) == list(report["laplace"]) == list(report["priors"]) == ["eta_s", "C"]
+    assert set(report["map"]) == {"eta_s", "C"}
+    for label in ("eta_s", "C"):
         entry = report["params"][label]
         assert set(entry) >= {"mean", "sd", "q05", "q50", "q95", "r_hat", "ess", "unit"}
         assert entry["mean"] == pytest.approx(noise_only.summary[label]["mean"], rel=1e-12)
+    assert (tmp_path / "draws.csv").read_text().splitlines()[0] == "chain,draw,eta_s,C"
     draws = np.genfromtxt(tmp_path / "draws.csv", delimiter=",", names=True)
     assert draws.size == 2 * 150
-    assert np.mean(draws["eta"]) == pytest.approx(report["params"]["eta"]["mean"], rel=1e-9)
+    assert np.mean(draws["eta_s"]) == pytest.approx(report["params"]["eta_s"]["mean"], rel=1e-9)
+    assert "| eta_s | s |" in (tmp_path / "posterior_summary.md").read_text()
     import arviz as az
 
     idata = az.from_netcdf(tmp_path / "posterior.nc")
-    assert idata.posterior["C"].shape == (2, 150)
+    assert idata.posterior["C"].shape == (2, 150) and idata.posterior["eta_s"].attrs["label"] == "eta_s"
     assert math.isclose(float(idata.posterior["C"].mean()), report["params"]["C"]["mean"], rel_tol=1e-12)
     assert not list(tmp_path.glob(".*.tmp"))
 
@@ -296,7 +300,7 @@ def test_command_line_posterior_is_strict_about_too_few_draws(brass_traces, tmp_
     report = json.loads((out / "posterior.json").read_text())
     assert not report["diagnostics_passed"]
     assert any("ESS" in text for text in report["failed_diagnostics"])
-    assert set(report["params"]) == {"eta", "sensor_gain[contact_3]", "sensor_gain[wall]"}
+    assert set(report["params"]) == {"eta_s", "sensor_gain[contact_3]", "sensor_gain[wall]"}
     assert report["priors"]["sensor_gain[wall]"]["sd"] == pytest.approx(0.02)
 
 
@@ -327,7 +331,7 @@ def test_command_line_posterior_splits_chains_over_the_cpu_cores(brass_traces, n
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     assert report["settings"]["devices"] == min(cores, 2)
     assert report["divergences"] == 0
-    for label in ("eta", "C"):
+    for label in ("eta_s", "C"):
         ours, one_device = report["params"][label], noise_only.summary[label]
         assert ours["sd"] == pytest.approx(one_device["sd"], rel=0.2), label
         assert abs(ours["mean"] - one_device["mean"]) < 0.3 * one_device["sd"], label

@@ -78,12 +78,12 @@ def smooth_grid(smooth_setup):
 
 
 PARAMS_ALL = (
-    "eta", "mu_star", "striker_velocity", "striker_mass", "wall_youngs", "wall_poisson",
-    "bead_radius", "bead_density", "bead_youngs", "bead_poisson", "sensor_beta", "sensor_f0",
+    "eta_s", "mu_star", "striker_velocity_m_s", "striker_mass_kg", "wall_youngs_pa", "wall_poisson",
+    "bead_radius_m", "bead_density_kg_m3", "bead_youngs_pa", "bead_poisson", "sensor_beta", "sensor_f0_hz",
 )
 
 
-PARAMS_DEFAULT = ("eta", "mu_star", "striker_velocity", "wall_youngs", "bead_radius", "sensor_f0")
+PARAMS_DEFAULT = ("eta_s", "mu_star", "striker_velocity_m_s", "wall_youngs_pa", "bead_radius_m", "sensor_f0_hz")
 
 
 def test_derivatives_match_finite_differences(smooth_setup, smooth_grid):
@@ -93,9 +93,9 @@ def test_derivatives_match_finite_differences(smooth_setup, smooth_grid):
     fd = _central_differences(smooth_setup, PARAMS_DEFAULT, observables, smooth_grid, 1e-6)
     _check_against_fd(result, fd)
     # a few physical signs: damping lowers the wall peak, a stiffer wall raises it
-    assert result.derivative["wall_peak"]["eta"] < 0
-    assert result.derivative["wall_peak"]["wall_youngs"] > 0
-    assert abs(result.elasticity["contact_2_peak"]["wall_youngs"]) < 1e-30  # before the wall is hit
+    assert result.derivative["wall_peak"]["eta_s"] < 0
+    assert result.derivative["wall_peak"]["wall_youngs_pa"] > 0
+    assert abs(result.elasticity["contact_2_peak"]["wall_youngs_pa"]) < 1e-30  # before the wall is hit
 
 
 @pytest.mark.slow
@@ -105,9 +105,9 @@ def test_every_parameter_matches_finite_differences(smooth_setup, smooth_grid):
     fd = _central_differences(smooth_setup, PARAMS_ALL, observables, smooth_grid, 1e-6)
     _check_against_fd(result, fd)
     few = ("wall_peak", "contact_5_arrival", "sensor_3_peak", "dissipated_viscous")
-    masses = S.sensitivity(smooth_setup, ("bead_masses",), few, grid=smooth_grid)
+    masses = S.sensitivity(smooth_setup, ("bead_masses_kg",), few, grid=smooth_grid)
     assert masses.mode == "reverse"  # 4 observables, 8 masses
-    fd = _central_differences(smooth_setup, ("bead_masses",), few, smooth_grid, 1e-6, "reverse")
+    fd = _central_differences(smooth_setup, ("bead_masses_kg",), few, smooth_grid, 1e-6, "reverse")
     _check_against_fd(masses, fd)
 
 
@@ -116,16 +116,16 @@ def test_reverse_mode_equals_forward_for_per_bead_masses():
     setup = hc.ChainSetup(6, eta_s=1e-6, wall_youngs_pa=45e9)
     observables = ("wall_peak", "contact_3_arrival", "dissipated_viscous")
     kwargs = dict(t_end_s=0.5e-3, sample_interval_s=2e-6, steps_per_contact=40)
-    reverse = S.sensitivity(setup, ("bead_masses", "eta"), observables, **kwargs)
+    reverse = S.sensitivity(setup, ("bead_masses_kg", "eta_s"), observables, **kwargs)
     assert reverse.mode == "reverse"  # 3 observables, 7 parameter values
-    forward = S.sensitivity(setup, ("bead_masses", "eta"), observables, mode="forward", **kwargs)
+    forward = S.sensitivity(setup, ("bead_masses_kg", "eta_s"), observables, mode="forward", **kwargs)
     for o in observables:
-        for p in ("bead_masses", "eta"):
+        for p in ("bead_masses_kg", "eta_s"):
             np.testing.assert_allclose(reverse.derivative[o][p], forward.derivative[o][p], rtol=1e-9)
-    assert reverse.derivative["wall_peak"]["bead_masses"].shape == (6,)
+    assert reverse.derivative["wall_peak"]["bead_masses_kg"].shape == (6,)
     # a heavier bead 1 (hit by the striker) delays the pulse; the last bead barely matters
     # before the pulse has reached it (only the pulse's leading tail touches it)
-    e = reverse.elasticity["contact_3_arrival"]["bead_masses"]
+    e = reverse.elasticity["contact_3_arrival"]["bead_masses_kg"]
     assert e[0] > 0 and abs(e[-1]) < 1e-3 * e[0]
 
 
@@ -134,7 +134,7 @@ def test_track_friction_on_the_incident_pulse():
     """Coulomb friction (exact stick-slip): derivatives along the incident pulse."""
     setup = hc.ChainSetup(8, eta_s=1e-6, mu=0.2, striker_velocity_m_s=0.05, end="free")
     grid = hc.choose_time_grid(setup, t_end_s=0.5e-3, sample_interval_s=2e-6, steps_per_contact=60)
-    params = ("mu", "eta", "striker_velocity")
+    params = ("mu", "eta_s", "striker_velocity_m_s")
     observables = ("contact_2_peak", "contact_5_arrival", "contact_2_duration", "dissipated_friction")
     result = S.sensitivity(setup, params, observables, grid=grid)
     fd = _central_differences(setup, params, observables, grid, 1e-7)
@@ -149,7 +149,7 @@ def test_scaling_symmetry_gives_exact_elasticities():
     stiffness scale (1 + mu*)."""
     setup = hc.ChainSetup(10, mu_star=0.1, striker_velocity_m_s=0.3)
     observables = ("contact_6_peak", "wall_peak", "contact_6_arrival", "contact_6_peak_time", "speed_3_7")
-    result = S.sensitivity(setup, ("striker_velocity", "mu_star"), observables,
+    result = S.sensitivity(setup, ("striker_velocity_m_s", "mu_star"), observables,
                            t_end_s=0.6e-3, sample_interval_s=0.25e-6)
     e = result.elasticity
     stiffness = 0.1 / 1.1  # d ln(1 + mu*) / d ln mu*
@@ -160,66 +160,66 @@ def test_scaling_symmetry_gives_exact_elasticities():
         # (sampling at 0.25 us and the interpolated peaks/crossings leave ~1e-4; a speed is a
         # ratio of a time difference, which amplifies it)
         tol = 1e-3 if o.startswith("speed") else 2e-4
-        assert e[o]["striker_velocity"] == pytest.approx(ev, abs=tol), o
+        assert e[o]["striker_velocity_m_s"] == pytest.approx(ev, abs=tol), o
         assert e[o]["mu_star"] == pytest.approx(ek * stiffness, abs=1e-4), o
 
 
 @pytest.mark.slow
 def test_sweep_matches_single_points_and_eq5_trend():
     setup = hc.ChainSetup(8)
-    sweep = {"striker_velocity": [0.1, 0.4], "wall_youngs": [5e9, 2.03e11]}
+    sweep = {"striker_velocity_m_s": [0.1, 0.4], "wall_youngs_pa": [5e9, 2.03e11]}
     observables = ("force_ratio_4", "wall_peak")
-    result = S.sensitivity_sweep(setup, ("wall_youngs", "striker_velocity"), observables, sweep,
+    result = S.sensitivity_sweep(setup, ("wall_youngs_pa", "striker_velocity_m_s"), observables, sweep,
                                  t_end_s=0.9e-3, sample_interval_s=1e-6, chunk_size=3, progress=False)
     assert result.grid_shape == (2, 2)
     single = S.sensitivity(
-        S.with_parameters(setup, {"striker_velocity": 0.4, "wall_youngs": 5e9}),
-        ("wall_youngs", "striker_velocity"), observables, grid=result.time_grid,
+        S.with_parameters(setup, {"striker_velocity_m_s": 0.4, "wall_youngs_pa": 5e9}),
+        ("wall_youngs_pa", "striker_velocity_m_s"), observables, grid=result.time_grid,
     )
     for o in observables:
-        for p in ("wall_youngs", "striker_velocity"):
+        for p in ("wall_youngs_pa", "striker_velocity_m_s"):
             assert result.derivative[o][p][1, 0] == pytest.approx(float(single.derivative[o][p]), rel=1e-9)
     # Eq. 5: F_end/F_bead ~ (1 + Y_b/Y_w)^(-2/5): its elasticity in Y_w is
     # (2/5) (Y_b/Y_w)/(1 + Y_b/Y_w): large for a soft wall, smaller for a steel one
-    e = result.elasticity["force_ratio_4"]["wall_youngs"]
+    e = result.elasticity["force_ratio_4"]["wall_youngs_pa"]
     assert np.all(e > 0) and np.all(e[:, 0] > 2 * e[:, 1])
     assert e[:, 1] == pytest.approx(0.2 * np.ones(2), abs=0.08)
     # without dissipation the ratio is amplitude-free: no dependence on the impact velocity
-    assert np.max(np.abs(result.elasticity["force_ratio_4"]["striker_velocity"])) < 2e-3
-    assert result.elasticity["wall_peak"]["striker_velocity"] == pytest.approx(1.2 * np.ones((2, 2)), abs=2e-3)
+    assert np.max(np.abs(result.elasticity["force_ratio_4"]["striker_velocity_m_s"])) < 2e-3
+    assert result.elasticity["wall_peak"]["striker_velocity_m_s"] == pytest.approx(1.2 * np.ones((2, 2)), abs=2e-3)
 
 
 @pytest.mark.slow
 def test_global_sensitivity_ranks_the_impact_velocity_first():
     setup = hc.ChainSetup(8, striker_velocity_m_s=0.2)
-    box = {"striker_velocity": (0.1, 0.4), "eta": (0.0, 2e-6)}
+    box = {"striker_velocity_m_s": (0.1, 0.4), "eta_s": (0.0, 2e-6)}
     result = S.global_sensitivity(setup, ("contact_4_peak",), box, n_samples=4, t_end_s=0.5e-3,
                                   sample_interval_s=2e-6, progress=False)
-    assert result.ranking["contact_4_peak"] == ["striker_velocity", "eta"]
+    assert result.ranking["contact_4_peak"] == ["striker_velocity_m_s", "eta_s"]
     samples = result.samples
     point = {p: float(samples.param_values[p][0]) for p in box}
     single = S.sensitivity(S.with_parameters(setup, point), tuple(box), ("contact_4_peak",),
                            grid=samples.time_grid)
-    assert float(samples.elasticity["contact_4_peak"]["eta"][0]) == pytest.approx(
-        float(single.elasticity["contact_4_peak"]["eta"]), rel=1e-9)
+    assert float(samples.elasticity["contact_4_peak"]["eta_s"][0]) == pytest.approx(
+        float(single.elasticity["contact_4_peak"]["eta_s"]), rel=1e-9)
     # Peaks scale as V0^(6/5) without dissipation; the viscous loss grows with the amplitude,
     # so each sample's elasticity lies a little below 6/5 (1.16-1.20 here).
-    mean_square = result.mean_squared_elasticity["contact_4_peak"]["striker_velocity"]
+    mean_square = result.mean_squared_elasticity["contact_4_peak"]["striker_velocity_m_s"]
     assert 1.1**2 < mean_square < 1.2**2
-    assert result.mean_abs_elasticity["contact_4_peak"]["striker_velocity"] <= math.sqrt(mean_square)
+    assert result.mean_abs_elasticity["contact_4_peak"]["striker_velocity_m_s"] <= math.sqrt(mean_square)
 
 
 @pytest.mark.parametrize(
     ("params", "observables", "setup_kwargs", "match"),
     [
-        (("etaa",), ("wall_peak",), {}, "unknown parameter 'etaa'; valid parameters: eta, mu"),
-        (("eta",), ("wall_max",), {}, "unknown observable 'wall_max'; valid forms"),
-        (("eta",), ("contact_12_peak",), {}, "contact 12 is not in the chain"),
-        (("eta",), ("sensor_2_peak",), {}, "bead 2 has no embedded sensor"),
-        (("wall_youngs",), ("wall_peak",), {"wall_youngs_pa": np.inf}, "infinitely stiff wall"),
-        (("precompression",), ("wall_peak",), {}, "singular at zero preload"),
-        (("yield_force",), ("wall_peak",), {}, "plasticity=True"),
-        (("eta",), ("speed_5_2",), {}, "needs K < L"),
+        (("etaa",), ("wall_peak",), {}, "unknown parameter 'etaa'; valid parameters: eta_s, mu"),
+        (("eta_s",), ("wall_max",), {}, "unknown observable 'wall_max'; valid forms"),
+        (("eta_s",), ("contact_12_peak",), {}, "contact 12 is not in the chain"),
+        (("eta_s",), ("sensor_2_peak",), {}, "bead 2 has no embedded sensor"),
+        (("wall_youngs_pa",), ("wall_peak",), {"wall_youngs_pa": np.inf}, "infinitely stiff wall"),
+        (("precompression_n",), ("wall_peak",), {}, "singular at zero preload"),
+        (("yield_force_n",), ("wall_peak",), {}, "plasticity=True"),
+        (("eta_s",), ("speed_5_2",), {}, "needs K < L"),
     ],
 )
 def test_bad_names_give_clear_errors(params, observables, setup_kwargs, match):
@@ -231,7 +231,7 @@ def test_bad_names_give_clear_errors(params, observables, setup_kwargs, match):
 def test_pulse_that_never_arrives_is_an_error():
     setup = hc.ChainSetup(8)
     with pytest.raises(ValueError, match="wall_peak: no complete pulse .* lengthen the record"):
-        S.sensitivity(setup, ("eta",), ("wall_peak",), t_end_s=0.2e-3, sample_interval_s=2e-6,
+        S.sensitivity(setup, ("eta_s",), ("wall_peak",), t_end_s=0.2e-3, sample_interval_s=2e-6,
                       steps_per_contact=40)
 
 
@@ -242,22 +242,22 @@ def test_command_line_writes_json_csv_and_plots(tmp_path):
     out = tmp_path / "sens"
     code = main([
         "sensitivity", "--n-beads", "6", "--eta", "1us", "--mu-star", "0.03",
-        "--params", "eta,wall_youngs,mu_star", "--observables", "wall_peak,contact_2_peak,trace_wall",
+        "--params", "eta_s,wall_youngs_pa,mu_star", "--observables", "wall_peak,contact_2_peak,trace_wall",
         "--t-end", "0.5ms", "--sample-interval", "2us", "--out", str(out),
     ])
     assert code == 0
     data = json.loads((out / "sensitivity.json").read_text())
     assert set(data["derivative"]) == {"wall_peak", "contact_2_peak", "trace_wall"}
     setup = hc.ChainSetup(6, eta_s=1e-6, mu_star=0.03)
-    api = S.sensitivity(setup, ("eta", "wall_youngs", "mu_star"), ("wall_peak",), t_end_s=0.5e-3,
+    api = S.sensitivity(setup, ("eta_s", "wall_youngs_pa", "mu_star"), ("wall_peak",), t_end_s=0.5e-3,
                         sample_interval_s=2e-6)
-    assert data["derivative"]["wall_peak"]["eta"] == pytest.approx(float(api.derivative["wall_peak"]["eta"]), rel=1e-9)
+    assert data["derivative"]["wall_peak"]["eta_s"] == pytest.approx(float(api.derivative["wall_peak"]["eta_s"]), rel=1e-9)
     assert data["elasticity"]["wall_peak"]["mu_star"] == pytest.approx(
         float(api.elasticity["wall_peak"]["mu_star"]), rel=1e-9)
     assert (out / "sensitivity.csv").read_text().startswith("observable,")
     assert (out / "elasticities.png").stat().st_size > 0
     assert (out / "trace_sensitivity.csv").exists()
-    assert main(["sensitivity", "--n-beads", "6", "--params", "eta,foo", "--observables", "wall_peak",
+    assert main(["sensitivity", "--n-beads", "6", "--params", "eta_s,foo", "--observables", "wall_peak",
                  "--out", str(out)]) == 2
 
 
@@ -267,11 +267,11 @@ def test_plastic_contacts_and_preload_match_finite_differences():
     setup = hc.ChainSetup(6, plasticity=True, striker_velocity_m_s=1.2, eta_s=0.5e-6,
                           precompression_n=2.0)
     grid = hc.choose_time_grid(setup, t_end_s=0.4e-3, sample_interval_s=1e-6, steps_per_contact=60)
-    params = ("yield_force", "precompression", "eta")
+    params = ("yield_force_n", "precompression_n", "eta_s")
     observables = ("wall_peak", "contact_2_peak", "contact_4_arrival", "dissipated_plastic")
     result = S.sensitivity(setup, params, observables, grid=grid)
     assert float(result.values["dissipated_plastic"]) > 0
     fd = _central_differences(setup, params, observables, grid, 1e-6)
     _check_against_fd(result, fd)
     # a higher yield force leaves more of the impact elastic: less plastic loss
-    assert result.derivative["dissipated_plastic"]["yield_force"] < 0
+    assert result.derivative["dissipated_plastic"]["yield_force_n"] < 0

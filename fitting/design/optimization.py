@@ -14,6 +14,7 @@ from hertzchain.progress import Progress
 
 from ..data import Experiment
 from ..model import ForwardModel
+from ..parameters import public_label
 from .plan import (
     CRITERIA,
     NUISANCES,
@@ -77,7 +78,7 @@ class PlanOptimization:
         if self.baseline is not None:
             out["baseline"] = self.baseline.to_json()
             out["stderr_ratio_recommended_over_baseline"] = {
-                p: self.recommended.stderr[p] / self.baseline.stderr[p]
+                public_label(p): self.recommended.stderr[p] / self.baseline.stderr[p]
                 for p in self.recommended.params
             }
         return out
@@ -112,7 +113,7 @@ def _score(blocks, chosen, interest, nuisance_of, values_abs, criterion) -> floa
 
 def optimize_plan(
     setup: ChainSetup,
-    params=("eta", "mu", "C"),
+    params=("eta_s", "mu", "C"),
     *,
     candidate_velocities_m_s: Sequence[float],
     candidate_channels: Sequence[str],

@@ -11,15 +11,15 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from hertzchain.io.atomic import json_ready
 from hertzchain.chain import ChainSetup
 from hertzchain.covariance import gauss_newton_covariance, information_rows
+from hertzchain.io.atomic import json_ready
 from hertzchain.io.tracefile import TraceFile, setup_header
 
 from ..data import Experiment, as_experiments, make_experiment
 from ..fit import make_problem
 from ..model import ForwardModel, Problem, residuals_and_jacobian
-from ..parameters import get_spec, parse_parameter_list
+from ..parameters import LabelledValues, get_spec, parse_parameter_list, public_label, resolve_name
 from ..synthetic import simulate_clean
 
 # Verlet steps per contact time of the noise-free data of a planned experiment: the design
@@ -122,8 +122,10 @@ class DesignResult:
 
     **Fields:**
 
-    - `params`: the parameters of interest; `values`, `stderr`, `relative_stderr`: name ->
-      SI value, predicted standard error, stderr/|value|; `units`.
+    - `params`: the parameters of interest (registry keys, as `FitResult.labels`); `values`,
+      `stderr`, `relative_stderr`: name -> SI value, predicted standard error, stderr/|value|;
+      `units` (read by either spelling, `fitting.parameters.LabelledValues`). `to_json` names
+      them as a user writes them (`eta_s`, `wall_youngs_pa`: `public_label`).
     - `correlation`: (p, p) predicted correlation matrix of the parameters of interest.
     - `covariance`: (p, p) predicted covariance (SI).
     - `nuisances`: the free nuisance parameters (marginalised); () = fixed (known).
@@ -151,16 +153,16 @@ class DesignResult:
     def to_json(self) -> dict:
         return {
             "params": {
-                p: {"value": json_ready(self.values[p]), "stderr": json_ready(self.stderr[p]),
-                    "relative_stderr": json_ready(self.relative_stderr[p]), "unit": self.units[p]}
+                public_label(p): {"value": json_ready(self.values[p]), "stderr": json_ready(self.stderr[p]),
+                                  "relative_stderr": json_ready(self.relative_stderr[p]), "unit": self.units[p]}
                 for p in self.params
             },
             "correlation": {
-                "names": list(self.params),
+                "names": [public_label(p) for p in self.params],
                 "matrix": [[json_ready(c) for c in row] for row in np.asarray(self.correlation)],
             },
             "nuisances": {
-                "free": list(self.nuisances),
+                "free": [public_label(n) for n in self.nuisances],
                 "treatment": "free and marginalised" if self.nuisances
                 else "fixed (striker velocity, trigger offset and gains known)",
             },
@@ -185,20 +187,27 @@ def _plan_summary(experiments: Sequence[Experiment]) -> list[dict]:
 
 
 def _check_names(params, nuisances) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The registry keys of `params` and `nuisances` (either spelling), checked."""
     params = parse_parameter_list(params)
+    shown = ", ".join(map(public_label, NUISANCES))
     for name in params:
         if name in NUISANCES:
             raise ValueError(
-                f"params: {name} is a nuisance; list it in nuisances to make it free "
-                f"(nuisances: {', '.join(NUISANCES)})."
+                f"params: {public_label(name)} is a nuisance; list it in nuisances to make it free "
+                f"(nuisances: {shown})."
             )
         if get_spec(name).scope != "global":
-            raise ValueError(f"params: {name} is not a global parameter.")
-    nuisances = tuple(dict.fromkeys(nuisances))
+            raise ValueError(f"params: {public_label(name)} is not a global parameter.")
+    keys = []
     for name in nuisances:
-        if name not in NUISANCES:
-            raise ValueError(f"nuisances: unknown nuisance {name!r}; nuisances are {', '.join(NUISANCES)}.")
-    return params, nuisances
+        try:
+            key = resolve_name(name)
+        except ValueError:
+            key = None
+        if key not in NUISANCES:
+            raise ValueError(f"nuisances: unknown nuisance {name!r}; nuisances are {shown}.")
+        keys.append(key)
+    return params, tuple(dict.fromkeys(keys))
 
 
 def _setup_with_values(setup: ChainSetup, values: Mapping[str, float], skip=()) -> ChainSetup:
@@ -207,7 +216,7 @@ def _setup_with_values(setup: ChainSetup, values: Mapping[str, float], skip=()) 
             continue
         spec = get_spec(name)
         if spec.kind != "setup" or spec.scope != "global":
-            raise ValueError(f"values: {name} is not a global physical parameter.")
+            raise ValueError(f"values: {public_label(name)} is not a global physical parameter.")
         setup = spec.apply(setup, float(value))
     return setup
 
@@ -216,9 +225,7 @@ class _Plan:
     """The Problem of a plan and its parameter vector at the given values."""
 
     def __init__(self, experiments, params, nuisances, values, forward):
-        values = dict(values or {})
-        for name in values:
-            get_spec(name)
+        values = {resolve_name(name): value for name, value in (values or {}).items()}
         if "C" in params and "mu_star" in values:
             # C is set through the stiffness scale: apply mu* to read C, do not fix it
             fixed = {k: v for k, v in values.items() if k not in params and k != "mu_star"}
@@ -242,7 +249,7 @@ class _Plan:
         for i, inst in enumerate(self.problem.instances):
             if inst.name in params and not self.x[i] != 0:
                 raise ValueError(
-                    f"values: {inst.name} is 0 in the plan's setup; give the value you expect "
+                    f"values: {public_label(inst.name)} is 0 in the plan's setup; give the value you expect "
                     f"(e.g. --{inst.name.replace('_', '-')} ...): the design is made at that value."
                 )
         self.params = params
@@ -260,6 +267,7 @@ def _degeneracy_message(fisher, labels, gauss_newton) -> str | None:
     """Name the parameters of directions the plan cannot see (None if there are none);
     `gauss_newton` is `fisher`'s `hertzchain.covariance.GaussNewtonCovariance`."""
     diag = np.diag(fisher)
+    labels = [public_label(label) for label in labels]
     blind = [labels[j] for j in range(len(labels)) if not diag[j] > 0]
     singular = gauss_newton.singular_values
     top = singular[0] if singular[0] > 0 else 1.0
@@ -300,10 +308,10 @@ def _result_from_fisher(fisher, labels, x, interest, nuisances, units, plan_rows
     sign, logdet = np.linalg.slogdet(np.linalg.inv(cov) * np.outer(scale, scale))
     return DesignResult(
         params=tuple(names),
-        values={n: float(x[i]) for n, i in zip(names, idx)},
-        stderr={n: float(stderr[k]) for k, n in enumerate(names)},
-        relative_stderr=relative,
-        units={n: units[i] for n, i in zip(names, idx)},
+        values=LabelledValues({n: float(x[i]) for n, i in zip(names, idx)}),
+        stderr=LabelledValues({n: float(stderr[k]) for k, n in enumerate(names)}),
+        relative_stderr=LabelledValues(relative),
+        units=LabelledValues({n: units[i] for n, i in zip(names, idx)}),
         correlation=correlation,
         covariance=cov,
         nuisances=tuple(nuisances),
@@ -321,7 +329,7 @@ def _result_from_jacobian(plan: _Plan, jac, experiments) -> DesignResult:
                                plan.nuisances, units, _plan_summary(experiments))
 
 
-def design(plan, params=("eta", "mu", "C"), *, values=None, nuisances=(),
+def design(plan, params=("eta_s", "mu", "C"), *, values=None, nuisances=(),
            forward: ForwardModel | None = None) -> DesignResult:
     """Predicted standard errors and correlations of `params` for a plan (Cramér–Rao).
 
@@ -330,12 +338,13 @@ def design(plan, params=("eta", "mu", "C"), *, values=None, nuisances=(),
     - `plan`: `Experiment`s (e.g. from `plan_experiments`), `TraceFile`s or trace-file paths:
       their headers (chain, striker velocity), channels, time axes and noise levels define
       the experiments (a file without `noise_std_n` gets the noise estimated from its data).
-    - `params`: global parameters of interest, names and units as `fitting.fit` (eta in s,
-      mu, C in m/s N^-1/6, mu_star, wall_youngs, ...).
-    - `values`: name -> SI value of the physical parameters expected (eta, mu, mu_star or C,
-      ...); parameters not given keep the trace headers' values (eta = mu = 0 there, which
+    - `params`: global parameters of interest, names and units as `fitting.fit` (eta_s in s,
+      mu, C in m/s N^-1/6, mu_star, wall_youngs_pa, ...; either spelling).
+    - `values`: name -> SI value of the physical parameters expected (eta_s, mu, mu_star or
+      C, ...); parameters not given keep the trace headers' values (eta = mu = 0 there, which
       would make the design meaningless for them: give them).
-    - `nuisances`: free nuisances to marginalise, from `NUISANCES`; default none (fixed).
+    - `nuisances`: free nuisances to marginalise, from `NUISANCES` (striker_velocity_m_s,
+      time_offset_s, gain; either spelling); default none (fixed).
     - `forward`: the fit's `ForwardModel` (time step, model switches).
 
     **Returns:** `DesignResult`. **Raises:** `DesignError` for a plan whose Fisher matrix is

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..parameters import public_label
 from .plan import DesignResult
 
 
@@ -23,14 +24,15 @@ def plot_design(result: DesignResult, *, baseline: DesignResult | None = None, t
     bars.bar(x + (width / 2 if baseline is not None else 0),
              [100 * result.relative_stderr[p] for p in result.params], width,
              label="recommended plan" if baseline is not None else "plan", color="tab:blue")
-    bars.set_xticks(x, result.params)
+    names = [public_label(p) for p in result.params]
+    bars.set_xticks(x, names)
     bars.set_yscale("log")
     bars.set_ylabel("predicted standard error (% of value)")
     bars.legend(fontsize=8)
     bars.set_title(title or "Cramér–Rao standard errors")
     image = matrix.imshow(result.correlation, vmin=-1, vmax=1, cmap="RdBu_r")
-    matrix.set_xticks(x, result.params)
-    matrix.set_yticks(x, result.params)
+    matrix.set_xticks(x, names)
+    matrix.set_yticks(x, names)
     for i in range(len(x)):
         for j in range(len(x)):
             matrix.text(j, i, f"{result.correlation[i, j]:.2f}", ha="center", va="center", fontsize=8)

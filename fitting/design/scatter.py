@@ -12,6 +12,7 @@ from hertzchain.progress import Progress
 from ..data import as_experiments
 from ..fit import OPTIMUM_TOLERANCE, fit_datasets
 from ..model import ForwardModel
+from ..parameters import LabelledValues, public_label
 from .plan import DesignError, DesignResult, _check_names, _Plan, _result_from_jacobian
 
 
@@ -19,7 +20,8 @@ from .plan import DesignError, DesignResult, _check_names, _Plan, _result_from_j
 class FitScatter:
     """Scatter of actual least-squares fits over noise seeds, against the design's prediction.
 
-    **Fields:** `params`; `truth` (name -> value); `estimates` (n_seeds, p) fitted values of
+    **Fields:** `params` (registry keys; the dicts read either spelling, `to_json` writes the
+    public names); `truth` (name -> value); `estimates` (n_seeds, p) fitted values of
     the converged fits; `empirical_std`, `predicted_stderr`, `ratio` (empirical/predicted),
     `bias` (mean - truth) per parameter; `n_seeds`, `n_converged`; `design` (`DesignResult`).
     """
@@ -43,7 +45,7 @@ class FitScatter:
             "n_seeds": self.n_seeds,
             "n_converged": self.n_converged,
             "params": {
-                p: {"truth": self.truth[p], "predicted_stderr": self.predicted_stderr[p],
+                public_label(p): {"truth": self.truth[p], "predicted_stderr": self.predicted_stderr[p],
                     "empirical_std": self.empirical_std[p], "ratio": self.ratio[p],
                     "bias": self.bias[p]}
                 for p in self.params
@@ -51,7 +53,7 @@ class FitScatter:
         }
 
 
-def fit_scatter(plan, params=("eta", "mu", "C"), *, values=None, nuisances=(), n_seeds: int = 50,
+def fit_scatter(plan, params=("eta_s", "mu", "C"), *, values=None, nuisances=(), n_seeds: int = 50,
                 seed: int = 0, chunk_size: int = 25, max_steps: int = 100, tolerance: float = OPTIMUM_TOLERANCE,
                 forward: ForwardModel | None = None, progress: bool = True) -> FitScatter:
     """Fit `n_seeds` noisy copies of a plan's data and compare the scatter with `design`.
@@ -98,12 +100,12 @@ def fit_scatter(plan, params=("eta", "mu", "C"), *, values=None, nuisances=(), n
     std = {n: float(np.std(fitted[:, k], ddof=1)) for k, n in enumerate(names)}
     return FitScatter(
         params=names,
-        truth=dict(predicted.values),
+        truth=LabelledValues(predicted.values),
         estimates=fitted,
-        empirical_std=std,
-        predicted_stderr=dict(predicted.stderr),
-        ratio={n: std[n] / predicted.stderr[n] for n in names},
-        bias={n: float(np.mean(fitted[:, k]) - predicted.values[n]) for k, n in enumerate(names)},
+        empirical_std=LabelledValues(std),
+        predicted_stderr=LabelledValues(predicted.stderr),
+        ratio=LabelledValues({n: std[n] / predicted.stderr[n] for n in names}),
+        bias=LabelledValues({n: float(np.mean(fitted[:, k]) - predicted.values[n]) for k, n in enumerate(names)}),
         n_seeds=n_seeds,
         n_converged=int(converged.sum()),
         design=predicted,

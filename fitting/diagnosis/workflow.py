@@ -12,7 +12,7 @@ from .. import effects as fx
 from ..data import as_experiments
 from ..locate import locate
 from ..model import STEPS_PER_CONTACT
-from ..parameters import get_spec, parse_parameter_list
+from ..parameters import get_spec, parse_parameter_list, public_label, resolve_name
 from .evaluator import _status
 from .protocol import MIN_SHARE, NUISANCES, DiagnosisError, parse_model
 from .report import _Report
@@ -238,11 +238,11 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
     """
     began = time.perf_counter()
     experiments = as_experiments(experiments)
-    nuisances = tuple(nuisances)
+    nuisances = tuple(resolve_name(name) for name in nuisances)
     free = tuple(parse_parameter_list(free)) if free else ()
     for name in nuisances:
         if get_spec(name).scope == "global":
-            raise DiagnosisError(f"nuisances: {name} is a global parameter; give it in `free`.")
+            raise DiagnosisError(f"nuisances: {public_label(name)} is a global parameter; give it in `free`.")
     if candidates is not None:
         for name in candidates:
             if name not in fx.EFFECT_NAMES:
@@ -255,6 +255,7 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
     while len(run.steps) < max_effects and run.round():
         pass
     run.backward_check()
-    settings = {"free": list(free), "nuisances": list(nuisances), "max_effects": max_effects,
+    settings = {"free": [public_label(n) for n in free], "nuisances": [public_label(n) for n in nuisances],
+                "max_effects": max_effects,
                 "steps_per_contact": steps_per_contact}
     return run.report(settings, began)

@@ -7,7 +7,10 @@ experiments) or by options (`--velocities 0.05,0.3 --contacts 6,11 --noise-std 0
 values at which the design is made come from the setup options (`--eta 1.7us --mu 0.12
 --mu-star 0.03`). Nuisances (striker velocity, trigger offset, gains) are fixed unless
 named in `--nuisances` (then free and marginalised). Writes `design.json`, `design.csv`
-and `design.png` into `--out`.
+and `design.png` into `--out`. Parameters are named as `hertzchain fit` names them
+(`fitting.parameters.public_names`: `eta_s`, `mu`, `C`, `wall_youngs_pa`,
+`striker_velocity_m_s`), in the options and in every file and line written; a previous
+short name (`eta`) still works for one release, with a one-line warning naming the option.
 """
 
 from __future__ import annotations
@@ -30,7 +33,13 @@ from fitting.design import (
     plan_experiments,
     plot_design,
 )
-from fitting.parameters import REGISTRY, parse_parameter_list
+from fitting.parameters import (
+    parse_parameter_list,
+    public_keys,
+    public_label,
+    public_names,
+    resolve_name,
+)
 
 from ..io.atomic import save_figure, write_json, write_text
 from ..units import parse_quantity
@@ -46,11 +55,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("files", nargs="*", metavar="FILE",
                         help="trace files or experiment files (.toml) defining the plan "
                         "(else give --velocities ...)")
-    parser.add_argument("--params", default="eta,mu,C",
-                        help="parameters to design for [eta,mu,C]; valid: "
-                        + ", ".join(n for n in REGISTRY if n not in NUISANCES))
+    nuisances = [public_label(n) for n in NUISANCES]
+    parser.add_argument("--params", default="eta_s,mu,C",
+                        help="parameters to design for [eta_s,mu,C]; valid: "
+                        + ", ".join(n for n in public_names() if n not in nuisances))
     parser.add_argument("--nuisances", default="",
-                        help="free nuisances, marginalised: " + ", ".join(NUISANCES)
+                        help="free nuisances, marginalised: " + ", ".join(nuisances)
                         + " [none: fixed, known from the headers]")
     add_setup_arguments(parser)
     plan = parser.add_argument_group("plan by options (instead of files)")
@@ -99,7 +109,7 @@ def _csv(result, recommended=None) -> str:
         header += ["recommended_stderr", "recommended_relative_stderr"]
     writer.writerow(header)
     for p in result.params:
-        row = [p, result.units[p], repr(result.values[p]), repr(result.stderr[p]),
+        row = [public_label(p), result.units[p], repr(result.values[p]), repr(result.stderr[p]),
                repr(result.relative_stderr[p])]
         if recommended is not None:
             row += [repr(recommended.stderr[p]), repr(recommended.relative_stderr[p])]
@@ -108,8 +118,8 @@ def _csv(result, recommended=None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    params = parse_parameter_list(args.params)
-    nuisances = _names(args.nuisances)
+    params = parse_parameter_list(args.params, where="--params")
+    nuisances = tuple(dict.fromkeys(resolve_name(n, where="--nuisances") for n in _names(args.nuisances)))
     chain = chain_from_args(args)
     setup = chain.setup
     values = _values(chain)
@@ -145,11 +155,11 @@ def run(args: argparse.Namespace) -> int:
     else:
         raise ValueError("no plan: give trace files, or --velocities (and --contacts, --noise-std, "
                          "--sample-interval, --t-end).")
-    print(f"Fisher information of {', '.join(params)} "
-          f"({'nuisances fixed' if not nuisances else 'free nuisances: ' + ', '.join(nuisances)}) ...",
+    print(f"Fisher information of {', '.join(map(public_label, params))} "
+          f"({'nuisances fixed' if not nuisances else 'free nuisances: ' + ', '.join(map(public_label, nuisances))}) ...",
           flush=True)
     result = design(plan, params, values=values, nuisances=nuisances)
-    data = {**result.to_json(), "values": values}
+    data = {**result.to_json(), "values": public_keys(values)}
     recommended = None
     if args.optimize:
         if args.candidate_channels:
@@ -193,7 +203,7 @@ def run(args: argparse.Namespace) -> int:
     figure = plot_design(recommended or result, baseline=result if recommended else None)
     save_figure(figure, out / "design.png", dpi=120)
     for p in result.params:
-        line = (f"  {p}: {result.values[p]:.6g} {result.units[p]} ± {result.stderr[p]:.3g} "
+        line = (f"  {public_label(p)}: {result.values[p]:.6g} {result.units[p]} ± {result.stderr[p]:.3g} "
                 f"({100 * result.relative_stderr[p]:.3g} %)")
         if recommended is not None:
             line += (f" -> recommended plan ± {recommended.stderr[p]:.3g} "

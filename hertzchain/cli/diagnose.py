@@ -38,6 +38,14 @@ def _names(text: str) -> list[str]:
     return [part.strip() for part in text.split(",") if part.strip()]
 
 
+def _parameters(text: str, option: str) -> list[str]:
+    """The registry keys of the parameters listed in `option` (either spelling; a previous
+    name warns once, as in `hertzchain fit`: `fitting.parameters.resolve_name`)."""
+    from fitting.parameters import resolve_name
+
+    return [resolve_name(name, where=option) for name in _names(text)]
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.epilog = exit_codes_epilog("a fit the result rests on (a named effect's refit, the fit adding it, "
                                       "the final fit; for driven files a candidate law's fit) reached no optimum")
@@ -47,10 +55,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="starting model: 'base' (header's chain, no dissipation, ideal force sensors) "
                         f"or 'base+EFFECT+...'; effects: {', '.join(EFFECT_NAMES)}")
     parser.add_argument("--out", default="out/diagnose", metavar="DIR", help="output folder (default: out/diagnose)")
-    parser.add_argument("--free", default="", help="further parameters fitted throughout, e.g. C or eta,mu")
-    parser.add_argument("--nuisances", default="striker_velocity,time_offset",
-                        help="per-file/per-channel nuisances (default striker_velocity,time_offset; add gain "
-                        "for uncalibrated channels)")
+    parser.add_argument("--free", default="", help="further parameters fitted throughout, e.g. C or eta_s,mu")
+    parser.add_argument("--nuisances", default="striker_velocity_m_s,time_offset_s",
+                        help="per-file/per-channel nuisances (default striker_velocity_m_s,time_offset_s; add "
+                        "gain for uncalibrated channels)")
     parser.add_argument("--candidates", default="",
                         help="effects to consider (default: all); driven files: candidate laws, of "
                         f"{', '.join(c.name for c in CANDIDATES + SLOW_CANDIDATES)} (default: all but "
@@ -109,7 +117,8 @@ def _diagnose(args, out: Path) -> int:
 
     experiments = load_experiments(args.files, channels=_names(args.channels) or None)
     diagnosis = diagnose(
-        experiments, model=args.model, free=_names(args.free), nuisances=_names(args.nuisances),
+        experiments, model=args.model, free=_parameters(args.free, "--free"),
+        nuisances=_parameters(args.nuisances, "--nuisances"),
         candidates=_names(args.candidates) or None, max_effects=args.max_effects,
         min_share=args.min_share, steps_per_contact=args.steps_per_contact, progress=not args.quiet,
     )

@@ -1,5 +1,10 @@
 """`hertzchain sensitivity`: exact derivatives and elasticities of observables to parameters,
-at one setup, over a swept grid of setups, or averaged over a parameter box (global)."""
+at one setup, over a swept grid of setups, or averaged over a parameter box (global).
+
+Parameters are named by their public names (`hertzchain.parameters`: `eta_s`,
+`wall_youngs_pa`, `mu_star`) in the options and in every file and line written; a previous
+short name (`eta`, `wall_youngs`) still works for one release, with a one-line warning
+naming the option."""
 
 from __future__ import annotations
 
@@ -12,6 +17,7 @@ import numpy as np
 from .. import sensitivity as S
 from ..io.atomic import save_figure, write_csv, write_json, write_text
 from ..io.tracefile import setup_header
+from ..parameters import public_name, public_names, resolve_name
 from ..units import parse_quantity
 from ..validation import check_batch_size
 from .setup_options import add_run_arguments, add_setup_arguments, setup_from_args
@@ -27,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("sensitivity")
     group.add_argument(
         "--params", type=_names, required=True,
-        help="parameters, comma-separated: " + ", ".join(S.PARAMETERS),
+        help="parameters, comma-separated: " + ", ".join(public_names()),
     )
     group.add_argument(
         "--observables", type=_names, required=True,
@@ -45,20 +51,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sweep.add_argument("--sweep-velocities", help="impact velocities (m/s), e.g. 0.05,0.1,0.3,1")
     sweep.add_argument("--sweep-wall-youngs", help="wall moduli (Pa), e.g. 3e9,45e9,203e9")
     sweep.add_argument("--sweep", action="append", default=[], metavar="PARAM=V1,V2,...",
-                       help="sweep any scalar parameter (SI values or with units, e.g. eta=0,1us,2us); "
+                       help="sweep any scalar parameter (SI values or with units, e.g. eta_s=0,1us,2us); "
                             "repeatable")
     sweep.add_argument("--chunk-size", type=int, default=64, help="setups per vmapped call [64]")
     glob = parser.add_argument_group("global (derivative-based measures over a box)")
     glob.add_argument("--box", action="append", default=[], metavar="PARAM=LOW:HIGH",
-                      help="range of a parameter (SI or with units, e.g. eta=0:2us); repeatable; turns "
+                      help="range of a parameter (SI or with units, e.g. eta_s=0:2us); repeatable; turns "
                            "on the global study")
     glob.add_argument("--global-samples", type=int, default=64, help="Latin-hypercube points [64]")
     glob.add_argument("--seed", type=int, default=0, help="sampling seed [0]")
-
-
-def _unit(name: str) -> str:
-    """The SI unit of a sensitivity parameter ("" for an unknown name: refused later, by name)."""
-    return S.PARAMETERS[name].unit if name in S.PARAMETERS else ""
 
 
 def _values(text: str, unit: str, option: str) -> list[float]:
@@ -66,32 +67,37 @@ def _values(text: str, unit: str, option: str) -> list[float]:
 
 
 def _sweep_axes(args) -> dict[str, list[float]]:
+    """Swept parameter (registry key) -> values (SI)."""
     axes = {}
     if args.sweep_velocities:
         axes["striker_velocity"] = _values(args.sweep_velocities, "m/s", "--sweep-velocities")
     if args.sweep_wall_youngs:
         axes["wall_youngs"] = _values(args.sweep_wall_youngs, "Pa", "--sweep-wall-youngs")
     for item in args.sweep:
-        name, _, values = item.partition("=")
+        written, _, values = item.partition("=")
         if not values:
             raise ValueError(f"--sweep {item!r}: expected PARAM=V1,V2,... (SI values).")
-        if name.strip() in axes:
-            raise ValueError(f"--sweep: {name.strip()} is swept twice.")
-        axes[name.strip()] = _values(values, _unit(name.strip()), f"--sweep {name.strip()}")
+        name = resolve_name(written.strip(), where="--sweep")
+        if name in axes:
+            raise ValueError(f"--sweep: {public_name(name)} is swept twice.")
+        axes[name] = _values(values, S.PARAMETERS[name].unit, f"--sweep {written.strip()}")
     return axes
 
 
 def _box(args) -> dict[str, tuple[float, float]]:
+    """Parameter (registry key) -> (low, high) of the global study's box (SI)."""
     box = {}
     for item in args.box:
-        name, _, bounds = item.partition("=")
+        written, _, bounds = item.partition("=")
         low, colon, high = bounds.partition(":")
         if not colon:
             raise ValueError(f"--box {item!r}: expected PARAM=LOW:HIGH (SI, or with units: "
-                             "wall_youngs=3GPa:203GPa).")
-        unit = _unit(name.strip())
-        box[name.strip()] = (parse_quantity(low, unit, name=f"--box {name.strip()}"),
-                             parse_quantity(high, unit, name=f"--box {name.strip()}"))
+                             "wall_youngs_pa=3GPa:203GPa).")
+        name = resolve_name(written.strip(), where="--box")
+        if name in box:
+            raise ValueError(f"--box: {public_name(name)} is given twice.")
+        unit, option = S.PARAMETERS[name].unit, f"--box {written.strip()}"
+        box[name] = (parse_quantity(low, unit, name=option), parse_quantity(high, unit, name=option))
     return box
 
 
@@ -131,6 +137,7 @@ def run(args: argparse.Namespace) -> int:
     setup = setup_from_args(args)
     options = _run_options(args)
     out = Path(args.out)
+    params = tuple(resolve_name(name, where="--params") for name in args.params)
     axes, box = _sweep_axes(args), _box(args)
     if axes and box:
         raise ValueError("give either sweep options or --box (a global study), not both.")
@@ -138,12 +145,13 @@ def run(args: argparse.Namespace) -> int:
         # every run records the chain's contacts with one tangent per parameter (forward mode)
         n_runs = args.global_samples if box else math.prod(len(v) for v in axes.values()) if axes else 1
         check_batch_size(setup, n_runs=n_runs, n_runs_in_memory=args.chunk_size,
-                         n_channels=(1 + len(args.params)) * (setup.n_beads + 2), **options)
+                         n_channels=(1 + len(params)) * (setup.n_beads + 2), **options)
     header = {"setup": setup_header(setup)}
     if box:
-        print(f"global sensitivity over {', '.join(box)} ({args.global_samples} samples) ...", flush=True)
+        print(f"global sensitivity over {', '.join(map(public_name, box))} ({args.global_samples} samples) ...",
+              flush=True)
         result = S.global_sensitivity(
-            setup, args.observables, box, params=args.params, n_samples=args.global_samples,
+            setup, args.observables, box, params=params, n_samples=args.global_samples,
             seed=args.seed, chunk_size=args.chunk_size, **options,
         )
         write_json(out / "sensitivity.json", {**header, "global": result.to_json(),
@@ -156,10 +164,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {out / 'sensitivity.json'}, {out / 'sensitivity.csv'}, {out / 'global_ranking.png'}")
         return 0
     if axes:
-        print(f"sensitivity sweep over {' x '.join(f'{k} ({len(v)})' for k, v in axes.items())} ...",
+        print(f"sensitivity sweep over {' x '.join(f'{public_name(k)} ({len(v)})' for k, v in axes.items())} ...",
               flush=True)
         result = S.sensitivity_sweep(
-            setup, args.params, args.observables, axes, mode=args.mode,
+            setup, params, args.observables, axes, mode=args.mode,
             steps_per_contact=args.steps_per_contact, chunk_size=args.chunk_size, **options,
         )
         for message in result.messages.values():
@@ -167,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
         figure_name = "sweep.png"
         save_figure(S.plot_sweep(result), out / figure_name, dpi=110)
     else:
-        result = S.sensitivity(setup, args.params, args.observables, mode=args.mode,
+        result = S.sensitivity(setup, params, args.observables, mode=args.mode,
                                steps_per_contact=args.steps_per_contact, **options)
         figure_name = "elasticities.png"
         save_figure(S.plot_elasticities(result), out / figure_name, dpi=120)

@@ -6,13 +6,14 @@ length) is fixed before differentiating, so a derivative is that of the simulato
 grid, and central finite differences of the simulator on the same grid agree with it
 (tests/test_sensitivity.py).
 
-**Parameters** (`PARAMETERS`, the registry of `hertzchain.parameters`; SI units): `eta`
-(s), `mu`, `mu_star`, `striker_velocity` (m/s), `striker_mass` (kg), `wall_youngs` (Pa),
-`wall_poisson`, `bead_radius` (m), `bead_density` (kg/m^3), `bead_youngs` (Pa),
-`bead_poisson`, `sensor_beta`, `sensor_f0` (Hz), `precompression` (N, at a positive
-preload: at zero the static overlap F^(2/3) makes the derivative singular), `yield_stress`
-(Pa) and `yield_force` (N) for elastic-plastic contacts (`plasticity=True`), and
-`bead_masses` (kg, one per bead: N parameters).
+**Parameters** (`PARAMETERS`, the registry of `hertzchain.parameters`, by their public
+names; SI units): `eta_s`, `mu`, `mu_star`, `striker_velocity_m_s`, `striker_mass_kg`,
+`wall_youngs_pa`, `wall_poisson`, `bead_radius_m`, `bead_density_kg_m3`, `bead_youngs_pa`,
+`bead_poisson`, `sensor_beta`, `sensor_f0_hz`, `precompression_n` (at a positive preload:
+at zero the static overlap F^(2/3) makes the derivative singular), `bead_yield_stress_pa`
+and `yield_force_n` for elastic-plastic contacts (`plasticity=True`), and `bead_masses_kg`
+(one per bead: N parameters). The registry keys (`eta`, `wall_youngs`) are read too; every
+result names a parameter by its public name.
 
 **Observables** (`observable_names`), with `CH` one of `contact_K`, `wall`, `sensor_K`:
 

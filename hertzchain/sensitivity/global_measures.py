@@ -11,7 +11,7 @@ import numpy as np
 
 from ..chain import ChainSetup
 from ..io.atomic import json_ready
-from ..parameters import parameter_values
+from ..parameters import parameter_values, public_name
 from .jacobian import n_values, resolve_mode
 from .local import prepare
 from .result import SensitivityResult, build_result
@@ -22,11 +22,12 @@ from .sweep import check_axes, grid_for_batch, jacobians_at_points, undefined_me
 class GlobalSensitivity:
     """Derivative-based global sensitivity measures over a sampled parameter box.
 
-    **Fields:** `box` (param -> (low, high), SI), `n_samples` (points sampled; `n_valid`
-    per observable where it exists), `mean_squared_elasticity` and
-    `mean_abs_elasticity` (observable -> param -> value: $E[(\\partial\\ln O/\\partial\\ln
-    p)^2]$ and $E|\\cdot|$ over the box), `ranking` (observable -> params from most to least
-    influential), `samples` (the underlying `SensitivityResult`, grid axis "sample").
+    **Fields** (parameters by their public names, `eta_s`): `box` (param -> (low, high),
+    SI), `n_samples` (points sampled; `n_valid` per observable where it exists),
+    `mean_squared_elasticity` and `mean_abs_elasticity` (observable -> param -> value:
+    $E[(\\partial\\ln O/\\partial\\ln p)^2]$ and $E|\\cdot|$ over the box), `ranking`
+    (observable -> params from most to least influential), `samples` (the underlying
+    `SensitivityResult`, grid axis "sample").
     """
 
     box: dict
@@ -66,7 +67,8 @@ def global_sensitivity(
 ) -> GlobalSensitivity:
     """Mean squared elasticities of `observables` over a Latin-hypercube sample of `box`.
 
-    **Arguments:** `box`: parameter -> (low, high) in SI (uniform sampling); `params`: the
+    **Arguments:** `box`: parameter (public name, or registry key) -> (low, high) in SI
+    (uniform sampling); `params`: the
     parameters to rank (default: those of the box); `n_samples` points, drawn with `seed`;
     run options as `sensitivity`.
 
@@ -76,7 +78,7 @@ def global_sensitivity(
     from scipy.stats import qmc
 
     if not box:
-        raise ValueError("box: give at least one parameter range, e.g. {'eta': (0, 3e-6)}.")
+        raise ValueError("box: give at least one parameter range, e.g. {'eta_s': (0, 3e-6)}.")
     for name, bounds in box.items():
         if len(bounds) != 2 or not float(bounds[0]) <= float(bounds[1]):
             raise ValueError(f"box: {name} needs (low, high) with low <= high, got {bounds}.")
@@ -89,7 +91,7 @@ def global_sensitivity(
     high = np.array([float(box[n][1]) for n in names])
     points = low + unit * (high - low)
     params, parsed = prepare(setup, params, observables)
-    check_axes(setup, {n: points[:, i] for i, n in enumerate(names)})
+    names = list(check_axes(setup, {n: points[:, i] for i, n in enumerate(names)}))
     if any(o.is_trace for o in parsed):
         raise ValueError("global sensitivity: whole-trace observables (trace_*) are not supported.")
     batch = {n: jnp.asarray(points[:, i]) for i, n in enumerate(names)}
@@ -109,14 +111,14 @@ def global_sensitivity(
         ok = samples.valid[obs]
         n_valid[obs] = int(ok.sum())
         msq[obs], mabs[obs] = {}, {}
-        for p in params:
+        for p in samples.params:
             e = samples.elasticity[obs][p][ok]
             e = e.reshape(e.shape[0], -1)
             msq[obs][p] = json_ready(np.mean(np.sum(e**2, axis=1)))
             mabs[obs][p] = json_ready(np.mean(np.sqrt(np.sum(e**2, axis=1))))
-        ranking[obs] = sorted(params, key=lambda p: -(msq[obs][p] or 0.0))
+        ranking[obs] = sorted(samples.params, key=lambda p: -(msq[obs][p] or 0.0))
     return GlobalSensitivity(
-        box={k: (float(v[0]), float(v[1])) for k, v in box.items()},
+        box={public_name(k): (float(low[i]), float(high[i])) for i, k in enumerate(names)},
         n_samples=n_samples,
         n_valid=n_valid,
         mean_squared_elasticity=msq,

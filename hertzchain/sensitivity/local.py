@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..chain import ChainSetup
-from ..parameters import PARAMETERS, parameter_values
+from ..parameters import PARAMETERS, parameter_values, public_name, public_names, resolve_name
 from ..timegrid import DEFAULT_STEPS_PER_CONTACT, TimeGrid, choose_time_grid
 from .jacobian import jacobian_at, n_values, resolve_mode
 from .observables import OBSERVABLE_FORMS, Observable, invalid_reason, parse_observable
@@ -16,47 +16,47 @@ from .result import SensitivityResult, build_result
 
 
 def check_params(setup: ChainSetup, params: Sequence[str]) -> tuple[str, ...]:
-    """`params` as a tuple, checked: known, distinct, finite in `setup`, and acting in it
-    (a sensor, a wall, elastic-plastic contacts, a positive preload where needed)."""
-    params = tuple(params)
-    if not params:
-        raise ValueError(f"params: give at least one parameter; valid: {', '.join(PARAMETERS)}.")
-    for name in params:
-        if name not in PARAMETERS:
-            raise ValueError(
-                f"params: unknown parameter {name!r}; valid parameters: {', '.join(PARAMETERS)}."
-            )
+    """The registry keys of `params` (either spelling, `hertzchain.parameters.resolve_name`),
+    checked: known, distinct, finite in `setup`, and acting in it (a sensor, a wall,
+    elastic-plastic contacts, a positive preload where needed)."""
+    if not tuple(params):
+        raise ValueError(f"params: give at least one parameter; valid: {', '.join(public_names())}.")
+    try:
+        params = tuple(resolve_name(name) for name in params)
+    except ValueError as unknown:
+        raise ValueError(f"params: {unknown}") from None
     if len(set(params)) != len(params):
-        raise ValueError(f"params: a parameter is listed twice: {params}.")
+        raise ValueError(f"params: a parameter is listed twice: {tuple(map(public_name, params))}.")
     for name in params:
+        shown = public_name(name)
         value = np.asarray(PARAMETERS[name].get(setup), dtype=float)
         if not np.all(np.isfinite(value)):
             raise ValueError(
-                f"params: {name} is {value.tolist()} in this setup; its sensitivity is not defined "
+                f"params: {shown} is {value.tolist()} in this setup; its sensitivity is not defined "
                 "(an infinitely stiff wall does not respond to its modulus): give a finite value."
             )
         if name.startswith("sensor_") and not setup.sensor_beads:
-            raise ValueError(f"params: {name} needs an embedded sensor (sensor_beads is empty).")
+            raise ValueError(f"params: {shown} needs an embedded sensor (sensor_beads is empty).")
         if name in ("yield_stress", "yield_force") and not setup.plasticity:
             raise ValueError(
-                f"params: {name} acts only on elastic-plastic contacts; build the setup with "
+                f"params: {shown} acts only on elastic-plastic contacts; build the setup with "
                 "plasticity=True (the elastic model only checks the yield force)."
             )
         if name == "precompression" and not float(setup.precompression_n) > 0:
             raise ValueError(
-                "params: the sensitivity to precompression is singular at zero preload (the "
+                "params: the sensitivity to precompression_n is singular at zero preload (the "
                 "static overlap grows as F^(2/3)); evaluate it at a positive precompression_n."
             )
-        if name == "wall_youngs" or name == "wall_poisson":
-            if setup.end != "wall":
-                raise ValueError(f"params: {name} needs a wall (this chain has a free end).")
+        if name in ("wall_youngs", "wall_poisson") and setup.end != "wall":
+            raise ValueError(f"params: {shown} needs a wall (this chain has a free end).")
     return params
 
 
 def prepare(
     setup: ChainSetup, params: Sequence[str], observables: Sequence[str] | str
 ) -> tuple[tuple[str, ...], tuple[Observable, ...]]:
-    """Checked parameter names and parsed observables (`ValueError` names what is wrong)."""
+    """Checked parameter keys (`check_params`) and parsed observables (`ValueError` names
+    what is wrong)."""
     params = check_params(setup, params)
     if isinstance(observables, str):
         observables = [observables]
@@ -86,13 +86,14 @@ def sensitivity(
     **Arguments:**
 
     - `setup`: the chain (a single, unbatched `ChainSetup`).
-    - `params`: names from `PARAMETERS` (e.g. `("eta", "mu", "wall_youngs")`).
+    - `params`: parameters of `PARAMETERS`, by public name (e.g. `("eta_s", "mu",
+      "wall_youngs_pa")`; the registry keys `eta`, `wall_youngs` are read too).
     - `observables`: names (see `hertzchain.sensitivity`, e.g. `("wall_peak", "contact_6_peak")`).
     - `t_end_s`, `sample_interval_s`, `dt_s`, `steps_per_contact`: the run, as in `simulate`
       (or give a ready `grid`).
     - `mode`: "auto" (by the Jacobian's shape), "forward" or "reverse".
 
-    **Returns:** `SensitivityResult`.
+    **Returns:** `SensitivityResult`, its parameters named by their public names.
 
     **Raises:** `ValueError` for unknown names (the valid ones are listed), observables not
     in the chain, and observables that do not exist in the run (e.g. a pulse that never

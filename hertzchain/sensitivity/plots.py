@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..parameters import PARAMETERS
+from ..parameters import PARAMETERS, resolve_name
 from .global_measures import GlobalSensitivity
 from .result import SensitivityResult
 
@@ -98,7 +98,7 @@ def plot_sweep(result: SensitivityResult):
 
 
 def _axis_label(result, name):
-    unit = result.units.get(name) or PARAMETERS[name].unit
+    unit = result.units.get(name) or PARAMETERS[resolve_name(name)].unit
     return f"{name} ({unit})" if unit else name
 
 

@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 
 from ..io.atomic import json_ready
-from ..parameters import PARAMETERS
+from ..parameters import PARAMETERS, public_name
 from ..timegrid import TimeGrid
 
 
@@ -43,7 +43,8 @@ class SensitivityResult:
 
     **Fields:**
 
-    - `params`, `observables`: names; `units`: name -> SI unit.
+    - `params`, `observables`: names (parameters by their public names, `eta_s`,
+      `wall_youngs_pa`: `hertzchain.parameters`); `units`: name -> SI unit.
     - `param_values`: name -> value, shape `grid_shape + param_shape`.
     - `values`: observable -> value, shape `grid_shape + obs_shape` (NaN where invalid).
     - `derivative`, `elasticity`: observable -> param -> array of shape
@@ -51,7 +52,7 @@ class SensitivityResult:
       elasticity undefined).
     - `valid`: observable -> bool array of shape `grid_shape`; `messages`: why not, per
       invalid observable (first grid point where it fails).
-    - `grid_axes`: swept parameter -> values (empty for one setup); `mode`: "forward" or
+    - `grid_axes`: swept parameter (public name) -> values (empty for one setup); `mode`: "forward" or
       "reverse"; `time_grid`: the fixed `TimeGrid`; `time_s`: the sample times.
     """
 
@@ -138,14 +139,17 @@ class SensitivityResult:
 
 
 def _units(params, parsed) -> dict:
-    units = {p: PARAMETERS[p].unit for p in params}
+    units = {public_name(p): PARAMETERS[p].unit for p in params}
     units.update({o.name: o.unit for o in parsed})
     return units
 
 
 def build_result(params, parsed, param_values, out, valid, jac, axes, mode, grid, messages):
     """The `SensitivityResult` of a Jacobian evaluation (`out`, `valid`, `jac` as
-    `jacobian_at` returns them, with leading grid axes `axes`); NumPy, NaN where invalid."""
+    `jacobian_at` returns them, keyed by the registry keys `params`, with leading grid axes
+    `axes`, keyed by registry keys or public names); NumPy, NaN where invalid, every
+    parameter named by its public name."""
+    shown = {p: public_name(p) for p in params}
     derivative, elasticity, values = {}, {}, {}
     grid_ndim = len(axes)
     for obs in parsed:
@@ -158,19 +162,19 @@ def build_result(params, parsed, param_values, out, valid, jac, axes, mode, grid
             d = np.asarray(jac[obs.name][p], dtype=float)
             dmask = ok.reshape(ok.shape + (1,) * (d.ndim - grid_ndim))
             d = np.where(dmask, d, np.nan)
-            derivative[obs.name][p] = d
-            elasticity[obs.name][p] = _elasticity(d, values[obs.name], param_values[p], obs.is_trace)
+            derivative[obs.name][shown[p]] = d
+            elasticity[obs.name][shown[p]] = _elasticity(d, values[obs.name], param_values[p], obs.is_trace)
     return SensitivityResult(
-        params=tuple(params),
+        params=tuple(shown.values()),
         observables=tuple(o.name for o in parsed),
         units=_units(params, parsed),
-        param_values={p: np.asarray(param_values[p], dtype=float) for p in params},
+        param_values={shown[p]: np.asarray(param_values[p], dtype=float) for p in params},
         values=values,
         derivative=derivative,
         elasticity=elasticity,
         valid={o.name: np.asarray(valid[o.name], dtype=bool) for o in parsed},
         messages=messages,
-        grid_axes={k: np.asarray(v, dtype=float) for k, v in axes.items()},
+        grid_axes={public_name(k): np.asarray(v, dtype=float) for k, v in axes.items()},
         mode=mode,
         time_grid=grid,
         time_s=grid.sample_interval_s * np.arange(1, grid.n_samples + 1),

@@ -11,7 +11,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..chain import ChainSetup
-from ..parameters import PARAMETERS, parameter_values, with_parameters
+from ..parameters import (
+    PARAMETERS,
+    parameter_values,
+    public_name,
+    public_names,
+    resolve_name,
+    with_parameters,
+)
 from ..progress import Progress
 from ..timegrid import DEFAULT_STEPS_PER_CONTACT, TimeGrid, choose_time_grid
 from .jacobian import jacobian_fn, n_values, observable_function, resolve_mode
@@ -21,21 +28,27 @@ from .result import SensitivityResult, build_result
 
 
 def check_axes(setup: ChainSetup, axes: Mapping[str, Sequence[float]]) -> dict[str, np.ndarray]:
-    """Swept parameter name -> finite values (SI), checked as `check_params` does."""
+    """Swept parameter (either spelling) -> finite values (SI), keyed by registry key and
+    checked as `check_params` does."""
     if not axes:
         raise ValueError("sweep: give at least one parameter to sweep, e.g. "
-                         "{'striker_velocity': [0.1, 0.3], 'wall_youngs': [5e9, 2.03e11]}.")
+                         "{'striker_velocity_m_s': [0.1, 0.3], 'wall_youngs_pa': [5e9, 2.03e11]}.")
     out = {}
     for name, values in axes.items():
-        if name not in PARAMETERS or PARAMETERS[name].per_bead:
-            scalar = [n for n, p in PARAMETERS.items() if not p.per_bead]
+        try:
+            key = resolve_name(name)
+        except ValueError:
+            key = None
+        if key is None or PARAMETERS[key].per_bead:
             raise ValueError(
-                f"sweep: cannot sweep {name!r}; sweepable parameters: {', '.join(scalar)}."
+                f"sweep: cannot sweep {name!r}; sweepable parameters: {', '.join(public_names(per_bead=False))}."
             )
         array = np.asarray(values, dtype=float).ravel()
         if array.size == 0 or not np.all(np.isfinite(array)):
-            raise ValueError(f"sweep: {name} needs finite values, got {list(values)}.")
-        out[name] = array
+            raise ValueError(f"sweep: {public_name(key)} needs finite values, got {list(values)}.")
+        if key in out:
+            raise ValueError(f"sweep: {public_name(key)} is swept twice.")
+        out[key] = array
     check_params(setup, tuple(out))
     return out
 
@@ -129,7 +142,7 @@ def sensitivity_sweep(
     """`sensitivity` over the outer product of swept parameter values, vmapped in chunks.
 
     **Arguments:** as `sensitivity`, plus `sweep`: parameter name -> values (the grid is
-    their outer product, e.g. `{"striker_velocity": [...], "wall_youngs": [...]}`), and
+    their outer product, e.g. `{"striker_velocity_m_s": [...], "wall_youngs_pa": [...]}`), and
     `chunk_size` setups per vmapped call. One time step, fine enough for every grid point,
     is used for all. Observables must be scalars (no `trace_*`).
 
@@ -157,7 +170,7 @@ def sensitivity_sweep(
 
     def first_undefined(ok):
         first = np.argwhere(~ok)[0]
-        where = ", ".join(f"{a} = {axes[a][i]:g}" for a, i in zip(axes, first))
+        where = ", ".join(f"{public_name(a)} = {axes[a][i]:g}" for a, i in zip(axes, first))
         return f"grid points (first: {where})"
 
     messages = undefined_messages(parsed, valid, grid.t_end_s, "at every grid point",
