@@ -192,7 +192,7 @@ NEWCOMER = (
      "--grid wall_youngs_pa=3e9,45e9,203e9 --grid eta_s=0,2e-6 --out out/sweep")),
     ("README.md", ("hertzchain synth --velocities 0.05,0.1,0.3 --contacts 6,11 --eta 2us --mu 0.19 "
      "--noise-fraction 0.005 --bits 8 --out out/synth")),
-    ("README.md", "hertzchain fit out/synth/*.csv --params eta,mu,C --out out/fit"),
+    ("README.md", "hertzchain fit out/synth/*.csv --params eta_s,mu,C --out out/fit"),
     ("README.md", "hertzchain diagnose out/synth/*.csv --out out/diagnose"),
     ("docs/how-to/experiment-files.md", "hertzchain import experiment.toml --out out/import"),
     ("docs/how-to/experiment-files.md", "hertzchain analyze experiment.toml --out out/analyze"),

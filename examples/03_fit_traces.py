@@ -54,9 +54,9 @@ print("trace files:", ", ".join(p.name for p in paths))
 # noise level are read from each file's header.
 
 # %%
-result = fitting.fit(paths, params=("eta", "mu", "C"), start={"eta": 1e-6, "mu": 0.05},
+result = fitting.fit(paths, params=("eta_s", "mu", "C"), start={"eta_s": 1e-6, "mu": 0.05},
                      progress=False)
-truth = {"eta": TRUE_ETA_S, "mu": TRUE_MU}
+truth = {"eta_s": TRUE_ETA_S, "mu": TRUE_MU}
 for label in result.labels:
     value, error = result.values[label], result.stderr[label]
     line = f"{label:>4} = {value:.6g} +- {error:.2g} {result.units[label]}"

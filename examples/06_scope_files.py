@@ -106,9 +106,9 @@ for trace in traces:
 # ## Fit η, μ and C to the recorded traces
 
 # %%
-result = fitting.fit(OUT / "experiment.toml", ("eta", "mu", "C"), progress=False)
+result = fitting.fit(OUT / "experiment.toml", ("eta_s", "mu", "C"), progress=False)
 write_report(result, OUT / "fit")
-for name, true in (("eta", truth["eta_s"]), ("mu", truth["mu"])):
+for name, true in (("eta_s", truth["eta_s"]), ("mu", truth["mu"])):
     print(f"{name} = {result.values[name]:.4g} +- {result.stderr[name]:.2g} (truth {true:g})")
 print(f"C = {result.values['C']:.5g} +- {result.stderr['C']:.2g}, chi^2/dof = {result.reduced_chi2:.3f}")
 

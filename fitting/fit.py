@@ -41,6 +41,8 @@ from .parameters import (
     build_instances,
     get_spec,
     parse_parameter_list,
+    public_label,
+    resolve_label,
     to_unbounded,
     transform_arrays,
 )
@@ -128,6 +130,16 @@ def make_problem(experiments, params=("eta", "mu", "C"), *, fixed=None,
     return Problem(experiments, instances, base, forward, rows)
 
 
+def _start_key(key: str) -> str:
+    """A `start` key written with a public or a previous parameter name, as the problem labels
+    it (`eta_s` -> `eta`, `striker_velocity_m_s[run1]` -> `striker_velocity[run1]`); a key that
+    names no parameter is kept, for the check that names it."""
+    try:
+        return resolve_label(key)
+    except ValueError:
+        return key
+
+
 def initial_values(problem: Problem, start=None) -> np.ndarray:
     """Start values (SI) of the problem's parameters.
 
@@ -135,11 +147,12 @@ def initial_values(problem: Problem, start=None) -> np.ndarray:
     instance label) where given; else eta, mu, C from the data (`fitting.start`); else the
     header's value (`spec.read`) or the spec's default.
     """
-    start = dict(start or {})
+    start = {_start_key(key): value for key, value in dict(start or {}).items()}
     for key in start:
         if key not in problem.labels and key not in {inst.name for inst in problem.instances}:
             raise ValueError(
-                f"start: {key!r} is not a fitted parameter; fitted: {', '.join(problem.labels)}."
+                f"start: {public_label(key)!r} is not a fitted parameter; fitted: "
+                f"{', '.join(public_label(label) for label in problem.labels)}."
             )
     estimates = None  # from the data, only when a start value is needed from them
     values = []

@@ -57,7 +57,7 @@ def test_03_fit_traces(small):
     result = namespace["result"]
     assert result.converged
     assert result.reduced_chi2 == pytest.approx(1.0, abs=0.1)
-    for label, true in (("eta", 1.7e-6), ("mu", 0.12)):
+    for label, true in (("eta_s", 1.7e-6), ("mu", 0.12)):
         assert abs(result.values[label] - true) < 4 * result.stderr[label]
     assert result.values["C"] == pytest.approx(201.385, abs=0.1)
     assert (small / "03_fit" / "fit.json").exists()
@@ -78,7 +78,7 @@ def test_06_scope_files(small):
     result, truth = namespace["result"], namespace["truth"]
     assert result.converged and result.reduced_chi2 == pytest.approx(1.0, abs=0.15)
     # the stick-slip loss has kinks: mu's local standard error understates its scatter
-    assert result.values["eta"] == pytest.approx(truth["eta_s"], rel=0.02)
+    assert result.values["eta_s"] == pytest.approx(truth["eta_s"], rel=0.02)
     assert result.values["mu"] == pytest.approx(truth["mu"], rel=0.05)
     diagnosis = namespace["diagnosis"]
     assert set(diagnosis.missing_effects) == {"viscous_damping", "track_friction"}

@@ -327,3 +327,19 @@ def test_the_docs_check_resolves_sensitivity_design_and_diagnose_names():
         "--nuisances: 'time_offset' is now called 'time_offset_s'")
     assert docs_commands.parse_check(["diagnose", "a.csv", "--free", "wall_youngs"])[1].startswith(
         "--free: 'wall_youngs' is now called 'wall_youngs_pa'")
+
+
+def test_library_start_values_read_either_spelling_and_an_unknown_key_is_named_publicly(soft_wall_traces):
+    """`fitting.fit(start=...)` (`initial_values`) keyed by public names, previous names or
+    instance labels gives the same start vector; a key that is not fitted is refused with the
+    fitted parameters listed by their public names."""
+    from fitting.fit import initial_values, make_problem
+
+    paths, _ = soft_wall_traces
+    problem = make_problem(paths, ("eta_s", "wall_youngs_pa", "C"))
+    new = initial_values(problem, {"eta_s": 1.3e-6, "wall_youngs_pa": 25e9})
+    old = initial_values(problem, {"eta": 1.3e-6, "wall_youngs": 25e9})
+    np.testing.assert_array_equal(new, old)
+    assert not np.array_equal(new, initial_values(problem, {"eta_s": 2.6e-6, "wall_youngs_pa": 25e9}))
+    with pytest.raises(ValueError, match=r"start: 'mu' is not a fitted parameter; fitted: eta_s, wall_youngs_pa, C\."):
+        initial_values(problem, {"mu": 0.1})
