@@ -104,6 +104,20 @@ def _is_concrete(value) -> bool:
     return not isinstance(value, jax.core.Tracer)
 
 
+def check_law_parameters(owner: str, fields, *, zero_ok: bool = False) -> None:
+    """Refuse a law's parameter that is not finite and > 0 (>= 0 where `zero_ok`).
+
+    `owner`: the law's name, for the message; `fields`: (name, value, unit) triples. Traced
+    values (inside `jit`, `vmap`, `grad`) are left to the caller's run.
+    """
+    bound = ">= 0" if zero_ok else "> 0"
+    for name, value, unit in fields:
+        if _is_concrete(value):
+            array = np.asarray(value)
+            if not bool(np.all(np.isfinite(array) & ((array >= 0.0) if zero_ok else (array > 0.0)))):
+                raise ValueError(f"{owner}: {name} must be finite and {bound} ({unit}), got {value}.")
+
+
 def _allowed(rule: Rule, array: np.ndarray) -> np.ndarray:
     above = array > rule.low if rule.low_open else array >= rule.low
     below = array < rule.high if rule.high_open else array <= rule.high
