@@ -21,7 +21,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ..validation import check_law_parameters
+from ..validation import check_positive_parameters
 from .contact_law import AbstractContactLaw
 from .series import AbstractInSeries
 
@@ -50,7 +50,7 @@ class RoughContact(AbstractInSeries):
         self.touch_force_n = jnp.asarray(touch_force_n, dtype=jnp.float64)
 
     def __check_init__(self):
-        check_law_parameters("RoughContact", (("roughness_m", self.roughness_m, "m"),
+        check_positive_parameters("RoughContact", (("roughness_m", self.roughness_m, "m"),
                                               ("touch_force_n", self.touch_force_n, "N")))
 
     def layer_overlap_m(self, force_n):

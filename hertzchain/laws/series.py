@@ -24,7 +24,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ..validation import check_law_parameters
+from ..validation import check_positive_parameters
 from .contact_law import AbstractContactLaw, ContactConstants
 
 # Bracketed Newton iterations of the series split before its differentiated step. Started
@@ -121,7 +121,7 @@ class SeriesCompliance(AbstractInSeries):
         self.compliance_m_n = jnp.asarray(compliance_m_n, dtype=jnp.float64)
 
     def __check_init__(self):
-        check_law_parameters("SeriesCompliance", (("compliance_m_n", self.compliance_m_n, "m/N, the spring's 1/k"),),
+        check_positive_parameters("SeriesCompliance", (("compliance_m_n", self.compliance_m_n, "m/N, the spring's 1/k"),),
                              zero_ok=True)
 
     def layer_overlap_m(self, force_n):

@@ -25,7 +25,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ..validation import check_law_parameters
+from ..validation import check_positive_parameters
 
 
 class IwanSupport(eqx.Module):
@@ -53,7 +53,7 @@ class IwanSupport(eqx.Module):
         self.elements = int(elements)
 
     def __check_init__(self):
-        check_law_parameters("IwanSupport", (("stiffness_n_m", self.stiffness_n_m, "N/m"),
+        check_positive_parameters("IwanSupport", (("stiffness_n_m", self.stiffness_n_m, "N/m"),
                                              ("slip_displacement_m", self.slip_displacement_m, "m")))
 
     @property
