@@ -37,7 +37,7 @@ import numpy as np
 
 from benchmarks.contact_burgoyne import caltech_and_base, run_calibration
 from benchmarks.contact_processing import best_alignment
-from benchmarks.contact_rate_terms import _span
+from benchmarks.contact_rate_terms import _span, material_table
 from fitting.contact_calibration import shifted_approach
 from hertzchain.io import atomic
 
@@ -131,12 +131,8 @@ def _markdown(summary, labels) -> str:
              "σ_Y fitted once per material; published rate constants; approach offset shifted out. "
              "`damping`: the Kuwabara-Kono damping time per material without a drift "
              "(`contact_rate_terms.py`); the drift b (m/s) is fitted per curve, the law driven with "
-             "δ(t) − b (t − t₀).", "",
-             "| | " + " | ".join(materials) + " |", "|---" * (len(materials) + 1) + "|"]
-
-    def add(label, cell):
-        lines.append(f"| {label} | " + " | ".join(cell(m) for m in materials) + " |")
-
+             "δ(t) − b (t − t₀).", ""]
+    add = material_table(lines, materials)
     for label in labels:
         add(f"{label}: RMS ÷ peak (%)", lambda m: _span([100 * r[f"{label}_rms"] for r in rows
                                                          if r["material"] == m]))

@@ -209,9 +209,7 @@ def _figures(curves, rows, out):
             ax.set_ylabel("(model - data) / peak (%)", fontsize=8)
         axes.flat[0].legend(fontsize=7, markerscale=5)
         figure.suptitle(f"residual of the law with damping (sigma_Y, eta fitted per material) against {axis_name}")
-        figure.tight_layout()
-        atomic.save_figure(figure, out / filename, dpi=80)
-        plt.close(figure)
+        atomic.finish_figure(figure, out / filename, dpi=80)
 
 
 def main(argv=None) -> int:

@@ -70,6 +70,17 @@ def _span(values, digits=1):
     return f"{min(values):.{digits}f} … {max(values):.{digits}f}" if values else "-"
 
 
+def material_table(lines: list[str], materials):
+    """Append the head of a markdown table with one column per material to `lines`; returns
+    `add(label, cell)`, which appends the row `label` with `cell(material)` in each column."""
+    lines += ["| | " + " | ".join(materials) + " |", "|---" * (len(materials) + 1) + "|"]
+
+    def add(label, cell):
+        lines.append(f"| {label} | " + " | ".join(cell(m) for m in materials) + " |")
+
+    return add
+
+
 def main(argv=None) -> int:
     started = caltech_and_base(argv, __doc__, "published", "contact_burgoyne.py")
     if started is None:
@@ -167,12 +178,8 @@ def _markdown(summary, labels) -> str:
     materials = list(summary["materials"])
     lines = ["# Force peaking before the approach: damping or a time shift (15 Caltech curves)", "",
              "σ_Y fitted once per material; published rate constants; approach offset shifted out. "
-             "`law_alone`: the rate-independent law (`published/`).", "",
-             "| | " + " | ".join(materials) + " |", "|---" * (len(materials) + 1) + "|"]
-
-    def add(label, cell):
-        lines.append(f"| {label} | " + " | ".join(cell(m) for m in materials) + " |")
-
+             "`law_alone`: the rate-independent law (`published/`).", ""]
+    add = material_table(lines, materials)
     for label in labels:
         add(f"{label}: RMS ÷ peak (%)", lambda m: _span([r[f"{label}_rms_percent"] for r in rows
                                                          if r["material"] == m]))

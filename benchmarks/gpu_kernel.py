@@ -300,6 +300,16 @@ def item_fit() -> dict:
     return row
 
 
+def save_result(result: dict, out: str, start: float) -> None:
+    """Store `result` in the JSON file `out` with its `wall_s`, the seconds since `start` (a
+    `time.perf_counter()` reading); called after every item, so that a run cut short keeps
+    what it measured."""
+    from hertzchain.io.atomic import write_json
+
+    result["wall_s"] = time.perf_counter() - start
+    write_json(Path(out), result)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", required=True, help="output JSON file")
@@ -314,7 +324,6 @@ def main(argv=None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from hertzchain.io.atomic import write_json
 
     start = time.perf_counter()
     device = jax.devices()[0]
@@ -367,8 +376,7 @@ def main(argv=None) -> int:
                     if "bead_steps_per_s" in ours and "bead_steps_per_s" in plain:
                         result.setdefault(f"{impl}_over_cuda", {})[f"{kind}_{size}"] = (
                             ours["bead_steps_per_s"] / plain["bead_steps_per_s"])
-        result["wall_s"] = time.perf_counter() - start
-        write_json(Path(args.out), result)
+        save_result(result, args.out, start)
     print(f"wrote {args.out} ({time.perf_counter() - start:.0f} s)", flush=True)
     return 0
 

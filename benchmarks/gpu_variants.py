@@ -120,9 +120,7 @@ def main(argv=None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from gpu_kernel import item_cuda
-
-    from hertzchain.io.atomic import write_json
+    from gpu_kernel import item_cuda, save_result
 
     result["device"] = str(jax.devices()[0])
     for kind in ("conservative", "damped"):
@@ -131,7 +129,7 @@ def main(argv=None) -> int:
         except Exception as error:  # noqa: BLE001 - each item fails on its own
             result[f"plain_cuda_{kind}"] = {"error": f"{type(error).__name__}: {error}"}
         print(f"plain {kind}: {result[f'plain_cuda_{kind}'].get('bead_steps_per_s')}", flush=True)
-    write_json(Path(args.out), result)
+    save_result(result, args.out, start)
     for name, flags in variants.items():
         row = result["variants"][name]
         if not row["build_ok"]:
@@ -151,8 +149,7 @@ def main(argv=None) -> int:
         print(f"{name}: " + ", ".join(f"{kind} {row.get(kind, {}).get('bead_steps_per_s', 'error')} "
                                        f"({row.get(f'{kind}_over_plain_cuda', float('nan')):.3f}x)"
                                        for kind in ("conservative", "damped")), flush=True)
-        result["wall_s"] = time.perf_counter() - start
-        write_json(Path(args.out), result)
+        save_result(result, args.out, start)
     print(f"wrote {args.out} ({time.perf_counter() - start:.0f} s)", flush=True)
     return 0
 

@@ -126,7 +126,7 @@ def _plot(rows, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hertzchain.io.atomic import save_figure
+    from hertzchain.io.atomic import finish_figure
 
     fig, axes = plt.subplots(1, len({r["n_beads"] for r in rows}), figsize=(12, 4), squeeze=False)
     for ax, n in zip(axes[0], sorted({r["n_beads"] for r in rows})):
@@ -143,9 +143,7 @@ def _plot(rows, path):
         ax.set_title(f"N = {n} beads, f64, dt = 1 us")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend()
-    fig.tight_layout()
-    save_figure(fig, path, dpi=120)
-    plt.close(fig)
+    finish_figure(fig, path, dpi=120)
 
 
 def _fit_iteration() -> dict:

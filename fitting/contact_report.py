@@ -79,9 +79,7 @@ def write_outputs(report: dict, curves, out_dir, *, title: str = "") -> dict:
     laws.suptitle(title or "force-approach: data and contact laws")
     residual_figure.suptitle("residuals: given constants (blue dashed), fitted (red)")
     for figure, name in ((laws, "contact.png"), (residual_figure, "residuals.png")):
-        figure.tight_layout()
-        atomic.save_figure(figure, out / name, dpi=90)
-        plt.close(figure)
+        atomic.finish_figure(figure, out / name, dpi=90)
     data = {key: value for key, value in report.items() if key != "curves"}
     data["curves"] = [{k: v for k, v in entry.items() if k != "_series"} for entry in report["curves"]]
     data["summary"] = summary_table(report)

@@ -27,7 +27,7 @@ from hertzchain.native import kernel_record
 from hertzchain.units import display_unit, format_measured
 
 from .diagnosis import Diagnosis
-from .effects import DEFAULT_YIELD_STRESS_PA, PREFIX, fitted_wall_youngs_pa
+from .effects import PREFIX, fitted_wall_youngs_pa, nominal_yield_stress_pa
 from .locate import WINDOWS
 from .parameters import REGISTRY
 
@@ -59,9 +59,7 @@ def physical_reading(name: str, value: float, stderr, setup) -> str:
     if short == "yield_softening":
         if value <= 0:
             return "no yield (elastic contacts)"
-        nominal = float(setup.bead_yield_stress_pa)
-        nominal = nominal if math.isfinite(nominal) else DEFAULT_YIELD_STRESS_PA
-        stress = nominal / value
+        stress = float(nominal_yield_stress_pa(setup)) / value
         return "yield stress " + format_measured(stress, error(stress / value), "Pa")
     if short == "sensor_rate" and value > 0:
         f0 = 1e5 / math.sqrt(value)

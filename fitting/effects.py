@@ -270,12 +270,8 @@ def apply_effects(setup: ChainSetup, extras: dict, *, plastic: bool = True,
     deviations = jnp.stack([jnp.asarray(extras.get(f"{p}bead_radius_dev_{b}", 0.0), dtype=jnp.float64)
                             for b in range(1, n + 1)])
     radius = setup.bead_radius_m * (1.0 + deviations)
-    wall_nominal = setup.wall_youngs_pa
-    wall_nominal = jnp.where(jnp.isfinite(wall_nominal), wall_nominal,
-                             _RIGID_WALL_FACTOR * setup.bead_youngs_pa[-1])
-    wall = wall_nominal * jnp.exp(-extras[p + "wall_softening"])
-    sigma0 = jnp.where(jnp.isfinite(setup.bead_yield_stress_pa), setup.bead_yield_stress_pa,
-                       DEFAULT_YIELD_STRESS_PA)
+    wall = _nominal_wall_youngs(setup) * jnp.exp(-extras[p + "wall_softening"])
+    sigma0 = nominal_yield_stress_pa(setup)
     softening = extras[p + "yield_softening"]
     yields = softening > 0
     sigma = jnp.where(yields, sigma0 / jnp.where(yields, softening, 1.0), jnp.inf)
@@ -415,20 +411,31 @@ def effects_forward_model(n_beads: int, steps_per_contact: int = 200, *, plastic
                         kernel=simulation)
 
 
+def nominal_yield_stress_pa(setup: ChainSetup) -> jax.Array:
+    """sigma_Y,0, the beads' yield stress at yield_softening 1, Pa: the header's, else
+    `DEFAULT_YIELD_STRESS_PA` where the header's beads never yield (traceable)."""
+    stress = setup.bead_yield_stress_pa
+    return jnp.where(jnp.isfinite(stress), stress, DEFAULT_YIELD_STRESS_PA)
+
+
 def nominal_yield_forces_n(setup: ChainSetup) -> np.ndarray:
     """Every contact's yield force under `plasticity` at yield_softening 1, N: striker-bead,
-    bead-bead..., wall (the header's yield stress, else `DEFAULT_YIELD_STRESS_PA`)."""
-    stress = float(setup.bead_yield_stress_pa)
+    bead-bead..., wall (`nominal_yield_stress_pa`)."""
     nominal = rebuild_setup(setup, contact_law=laws.JacksonGreen(),
-                            bead_yield_stress_pa=stress if math.isfinite(stress) else DEFAULT_YIELD_STRESS_PA)
+                            bead_yield_stress_pa=float(nominal_yield_stress_pa(setup)))
     return np.asarray(nominal.contact_yield_force_n(), dtype=float)
+
+
+def _nominal_wall_youngs(setup: ChainSetup) -> jax.Array:
+    """`nominal_wall_youngs_pa`, traceable."""
+    wall = setup.wall_youngs_pa
+    return jnp.where(jnp.isfinite(wall), wall, _RIGID_WALL_FACTOR * setup.bead_youngs_pa[-1])
 
 
 def nominal_wall_youngs_pa(setup: ChainSetup) -> float:
     """The wall's Young's modulus at wall_softening 0, Pa: the header's, a rigid wall's stand-in
     (`_RIGID_WALL_FACTOR` times the last bead's) where the header has none."""
-    wall = float(setup.wall_youngs_pa)
-    return wall if math.isfinite(wall) else _RIGID_WALL_FACTOR * float(np.asarray(setup.bead_youngs_pa)[-1])
+    return float(_nominal_wall_youngs(setup))
 
 
 def fitted_wall_youngs_pa(setup: ChainSetup, softening: float) -> float:
@@ -451,8 +458,7 @@ def describe_wall(setup: ChainSetup, softening: float, softening_stderr: float) 
 def describe_plasticity(setup: ChainSetup, softening: float, softening_stderr: float) -> str:
     """The fitted `yield_softening` in words: the yield stress (MPa) with its standard error,
     and the force at which contacts between beads then leave Hertz (N)."""
-    stress = float(setup.bead_yield_stress_pa)
-    sigma0 = stress if math.isfinite(stress) else DEFAULT_YIELD_STRESS_PA
+    sigma0 = float(nominal_yield_stress_pa(setup))
     fitted = sigma0 / softening
     error = sigma0 * softening_stderr / softening**2
     forces = nominal_yield_forces_n(setup) / softening**3

@@ -30,7 +30,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from hertzchain.io.atomic import file_stem, save_figure, write_csv, write_json
+from hertzchain.io.atomic import file_stem, finish_figure, save_figure, write_csv, write_json
 from hertzchain.native import kernel_record
 from hertzchain.units import column_name, display_unit, format_measured
 
@@ -198,10 +198,8 @@ def _correlation_figure(result, out: Path) -> Path:
     ax.set_yticks(range(p), shown, fontsize=7)
     figure.colorbar(image, ax=ax, label="correlation (dimensionless)")
     ax.set_title("parameter correlation")
-    figure.tight_layout()
     path = out / "correlation.png"
-    save_figure(figure, path, dpi=110)
-    plt.close(figure)
+    finish_figure(figure, path)
     return path
 
 
@@ -228,10 +226,8 @@ def _plots(result, predictions, out: Path, per_trace: bool) -> list[Path]:
                 ax.legend(fontsize=7, loc="upper right")
             axes[-1, 0].set_xlabel("time after impact (µs)")
             figure.suptitle(f"{experiment.label}: {'fit' if kind == 'overlay' else 'residuals'}")
-            figure.tight_layout()
             path = out / f"{kind}_{file_stem(experiment.label)}.png"
-            save_figure(figure, path, dpi=110)
-            plt.close(figure)
+            finish_figure(figure, path)
             written.append(path)
     if per_trace:
         written.append(_correlation_figure(result, out))
@@ -246,10 +242,8 @@ def _plots(result, predictions, out: Path, per_trace: bool) -> list[Path]:
         ax.set_xlabel(f"{public_label(label)} ({display_unit(scale)})")
         ax.set_ylabel("Δχ² / s² (dimensionless)")
         ax.set_title(f"profile likelihood of {public_label(label)}")
-        figure.tight_layout()
         path = out / f"profile_{file_stem(public_label(label))}.png"
-        save_figure(figure, path, dpi=110)
-        plt.close(figure)
+        finish_figure(figure, path)
         written.append(path)
     return written
 

@@ -70,6 +70,7 @@ from .batched_step import (
 from .chain import (
     ChainSetup,
     build_model,
+    end_loads,
     internal_contact_index,
     internal_sensor_index,
 )
@@ -194,10 +195,7 @@ def _vector_model(setup: ChainSetup) -> _Model:
         wall_overlap0_m=contact.overlap_at_force(preload, setup.wall_kappa()) if has_wall else jnp.zeros(()),
         eta_s=setup.eta_s,
         dashpot_n_s_m=setup.dashpot_n_s_m,
-        friction_decel_m_s2=setup.mu * setup.gravity_m_s2,
-        first_bead_force_n=preload,
-        last_body_force_n=jnp.zeros(()) if has_wall else -preload,
-        striker_velocity_m_s=setup.striker_velocity_m_s,
+        **end_loads(setup),
     )
 
 

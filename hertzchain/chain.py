@@ -481,6 +481,19 @@ def _bead_links(setup: ChainSetup):
             yield bead, "hertz"
 
 
+def end_loads(setup: ChainSetup) -> dict:
+    """The `ChainModel` fields of what acts on the chain from outside: the track friction's
+    deceleration mu g (m/s^2), the preload on bead 1 and, at a free end, on the last body
+    (N), and the striker's impact velocity (m/s)."""
+    preload = setup.precompression_n
+    return {
+        "friction_decel_m_s2": setup.mu * setup.gravity_m_s2,
+        "first_bead_force_n": preload,
+        "last_body_force_n": jnp.zeros(()) if setup.end == "wall" else -preload,
+        "striker_velocity_m_s": setup.striker_velocity_m_s,
+    }
+
+
 def build_model(setup: ChainSetup) -> ChainModel:
     """Derive masses, stiffnesses and the static state of a setup (pure, differentiable).
 
@@ -555,10 +568,7 @@ def build_model(setup: ChainSetup) -> ChainModel:
         wall_yield_force_n=yield_force[-1],
         contact_law=setup.contact_law,
         dissipation=setup.dissipation,
-        friction_decel_m_s2=setup.mu * setup.gravity_m_s2,
-        first_bead_force_n=preload,
-        last_body_force_n=jnp.zeros(()) if has_wall else -preload,
-        striker_velocity_m_s=setup.striker_velocity_m_s,
+        **end_loads(setup),
         **(_plastic_fields(setup, links) if setup.contact_law.has_history else {}),
     )
 

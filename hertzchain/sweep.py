@@ -60,7 +60,7 @@ import numpy as np
 from .batched import BatchedTraces, solve_batched
 from .chain import ChainSetup
 from .integrate import Recording
-from .io.atomic import atomic_path, save_figure, write_csv, write_json
+from .io.atomic import atomic_path, finish_figure, write_csv, write_json
 from .io.setup_record import canonical, setup_record
 from .native import kernel_record
 from .progress import Progress
@@ -608,9 +608,7 @@ def plot_sweep(table: dict[str, np.ndarray], folder) -> None:
         ax.grid(True, alpha=0.3)
         if others:
             ax.legend(fontsize=6)
-        fig.tight_layout()
-        save_figure(fig, folder / "force_ratio.png", dpi=120)
-        plt.close(fig)
+        finish_figure(fig, folder / "force_ratio.png", dpi=120)
     if "speed_m_s" in table and "incident_peak_n" in table:
         fig, ax = plt.subplots(figsize=(6, 4))
         ok = np.isfinite(table["speed_m_s"]) & (table["incident_peak_n"] > 0)
@@ -623,9 +621,7 @@ def plot_sweep(table: dict[str, np.ndarray], folder) -> None:
         ax.set_xlabel("incident peak force (N)")
         ax.set_ylabel("pulse speed (m/s)")
         ax.grid(True, which="both", alpha=0.3)
-        fig.tight_layout()
-        save_figure(fig, folder / "speed_vs_amplitude.png", dpi=120)
-        plt.close(fig)
+        finish_figure(fig, folder / "speed_vs_amplitude.png", dpi=120)
 
 
 _OUTPUT_PREFIXES = ("peak_", "arrival_", "duration_")

@@ -98,10 +98,26 @@ RULES: dict[str, Rule] = {
 SENSOR_FIELDS = ("sensor_beta", "sensor_f0_hz")
 
 
-def _is_concrete(value) -> bool:
+def is_concrete(value) -> bool:
+    """True for a value with numbers (not a tracer of `jit`, `vmap` or `grad`)."""
     import jax
 
     return not isinstance(value, jax.core.Tracer)
+
+
+def check_positive_parameters(owner: str, fields, *, zero_ok: bool = False) -> None:
+    """Refuse a parameter that is not finite and > 0 (>= 0 where `zero_ok`), each element of
+    an array.
+
+    `owner`: the law's or model's name, for the message; `fields`: (name, value, unit)
+    triples. Traced values (inside `jit`, `vmap`, `grad`) are left to the caller's run.
+    """
+    bound = ">= 0" if zero_ok else "> 0"
+    for name, value, unit in fields:
+        if is_concrete(value):
+            array = np.asarray(value)
+            if not bool(np.all(np.isfinite(array) & ((array >= 0.0) if zero_ok else (array > 0.0)))):
+                raise ValueError(f"{owner}: {name} must be finite and {bound} ({unit}), got {value}.")
 
 
 def _allowed(rule: Rule, array: np.ndarray) -> np.ndarray:
@@ -138,7 +154,7 @@ def check_values(name: str, values, *, where: str | None = None) -> None:
     The message gives the value, the allowed range and, when the value looks like another
     unit's, the value the user probably meant.
     """
-    if name not in RULES or not _is_concrete(values):
+    if name not in RULES or not is_concrete(values):
         return
     rule = RULES[name]
     array = np.asarray(values, dtype=float)
@@ -155,7 +171,7 @@ def check_plausible(name: str, values, *, where: str | None = None) -> None:
     """Like `check_values`, and also refuse values outside the plausible range of measured
     chains (for values a user typed: options, grids, file headers), with the unit hint."""
     check_values(name, values, where=where)
-    if name not in RULES or not _is_concrete(values):
+    if name not in RULES or not is_concrete(values):
         return
     rule = RULES[name]
     low, high = rule.plausible
@@ -242,7 +258,7 @@ def check_step_stability(setup, dt_s: float, *, where: str = "") -> None:
     velocity-Verlet step `dt_s` unstable (`damping_rate_1_s` times dt_s >= 1), naming the
     damping values, the largest stable step and, for an implausible value, its likely unit."""
     damping = (setup.eta_s, setup.dashpot_n_s_m)
-    if not all(_is_concrete(x) for x in damping) or not any(np.any(np.asarray(x) > 0) for x in damping):
+    if not all(is_concrete(x) for x in damping) or not any(np.any(np.asarray(x) > 0) for x in damping):
         return
     rate = damping_rate_1_s(setup)
     if rate * dt_s < STABILITY_LIMIT:

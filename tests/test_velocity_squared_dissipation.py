@@ -60,5 +60,5 @@ def test_velocity_squared_force_and_its_registry_entry():
     rates = np.array([-0.2, 0.0, 0.3])
     np.testing.assert_allclose(law.force(1e-6, rates, 1e10), C_N_S2_M2 * np.abs(rates) * rates, rtol=1e-15)
     assert law.native_name is None and not laws.registry.runs_natively(laws.Hertz(), (law,))
-    with pytest.raises(ValueError, match="c_n_s2_m2 must be non-negative"):
+    with pytest.raises(ValueError, match="VelocitySquared: c_n_s2_m2 must be finite and >= 0"):
         laws.VelocitySquared(-1.0)

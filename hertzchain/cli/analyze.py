@@ -32,7 +32,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .. import pulses, sensor, theory  # noqa: E402
-from ..io.atomic import file_stem, json_ready, output_folder, save_figure, write_json, write_text  # noqa: E402
+from ..io.atomic import file_stem, finish_figure, json_ready, output_folder, write_json, write_text  # noqa: E402
 from ..io.importer import expand_sources  # noqa: E402
 from ..io.tracefile import TraceFile, read_trace  # noqa: E402
 
@@ -287,9 +287,7 @@ def _plot_file(time, plotted, title, path):
     axes.set_ylabel("force (N)")
     axes.set_title(f"{title}: traces (solid) and cos^6 fits (dashed)")
     axes.legend(fontsize=8)
-    figure.tight_layout()
-    save_figure(figure, path, dpi=110)
-    plt.close(figure)
+    finish_figure(figure, path)
 
 
 def _plot_speed_duration(summaries, rows, radius_m, path):
@@ -346,9 +344,7 @@ def _plot_speed_duration(summaries, rows, radius_m, path):
     duration_axes.set_xlabel("amplitude F_m (N)")
     duration_axes.set_ylabel("duration 2 tau (us)")
     duration_axes.legend(fontsize=8)
-    figure.tight_layout()
-    save_figure(figure, path, dpi=110)
-    plt.close(figure)
+    finish_figure(figure, path)
 
 
 def _plot_restitution(points, law, path):
@@ -368,9 +364,7 @@ def _plot_restitution(points, law, path):
     axes.set_xlabel("force F (N)")
     axes.set_ylabel("restitution (F_K2/F_K1)^(5/6 per contact)")
     axes.legend(fontsize=8)
-    figure.tight_layout()
-    save_figure(figure, path, dpi=110)
-    plt.close(figure)
+    finish_figure(figure, path)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -24,7 +24,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..io.atomic import file_stem, output_folder, save_figure, write_json  # noqa: E402
+from ..io.atomic import file_stem, finish_figure, output_folder, write_json  # noqa: E402
 from ..io.importer import import_experiment  # noqa: E402
 from ..io.tracefile import write_trace  # noqa: E402
 
@@ -48,9 +48,7 @@ def _plot(trace, path: Path) -> None:
     axes.set_ylabel("force (N)")
     axes.set_title(f"shot {trace.header['x_shot']}")
     axes.legend(fontsize=8)
-    figure.tight_layout()
-    save_figure(figure, path, dpi=110)
-    plt.close(figure)
+    finish_figure(figure, path)
 
 
 def run(args: argparse.Namespace) -> int:

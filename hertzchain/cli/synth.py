@@ -24,7 +24,7 @@ import numpy as np  # noqa: E402
 
 from ..acquisition import Acquisition, record_simulation  # noqa: E402
 from ..integrate import simulate  # noqa: E402
-from ..io.atomic import save_figure, write_json  # noqa: E402
+from ..io.atomic import finish_figure, write_json  # noqa: E402
 from ..io.tracefile import validate_header, write_trace  # noqa: E402
 from ..progress import Progress  # noqa: E402
 from ..units import parse_quantity  # noqa: E402
@@ -110,9 +110,7 @@ def _plot(trace, path: Path) -> None:
         f"synthetic record, impact {velocity:g} m/s, noise {trace.header['noise_std_n']:.3g} N"
     )
     axes.legend(fontsize=9)
-    figure.tight_layout()
-    save_figure(figure, path, dpi=110)
-    plt.close(figure)
+    finish_figure(figure, path)
 
 
 def run(args: argparse.Namespace) -> int:

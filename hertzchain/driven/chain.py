@@ -38,6 +38,7 @@ import numpy as np
 
 from .. import contact, laws
 from ..precision import require_float64
+from ..validation import check_positive_parameters, is_concrete
 from .drive import DRIVE_STROKES, ActuatorMode, RayleighStroke
 
 
@@ -282,10 +283,10 @@ def _check_fields(chain: DrivenChain) -> None:
     if chain.drive_stroke is not None and not isinstance(chain.drive_stroke, DRIVE_STROKES):
         raise ValueError(f"drive_stroke: expected a hertzchain.driven.RayleighStroke or ActuatorMode, "
                          f"got {chain.drive_stroke!r}.")
-    _check_concrete_positive("bead_mass_kg", chain.bead_mass_kg, "kg")
-    _check_concrete_positive("contact_kappa_n_m1p5", chain.contact_kappa_n_m1p5, "N/m^1.5")
-    _check_concrete_positive("precompression_n", chain.precompression_n, "N")
-    _check_concrete_nonnegative("damping_rate_per_s", chain.damping_rate_per_s, "1/s")
+    check_positive_parameters("DrivenChain", (("bead_mass_kg", chain.bead_mass_kg, "kg"),
+                                              ("contact_kappa_n_m1p5", chain.contact_kappa_n_m1p5, "N/m^1.5"),
+                                              ("precompression_n", chain.precompression_n, "N")))
+    check_positive_parameters("DrivenChain", (("damping_rate_per_s", chain.damping_rate_per_s, "1/s"),), zero_ok=True)
     _check_law_constants(chain)
 
 
@@ -303,20 +304,6 @@ def _yield_constants(n, radius, bead_youngs_pa, bead_poisson, driver_youngs_pa, 
                 "contact_reduced_radius_m": 1.0 / (1.0 / radius + 1.0 / face_radius),
                 "contact_poisson": jnp.full((n + 1,), bead_poisson, dtype=jnp.float64),
                 "yield_stress_pa": bead_yield_stress_pa}
-
-
-def _is_concrete(value) -> bool:
-    return not isinstance(value, jax.core.Tracer)
-
-
-def _check_concrete_positive(name: str, value, unit: str) -> None:
-    if _is_concrete(value) and not (np.all(np.asarray(value) > 0.0) and np.all(np.isfinite(np.asarray(value)))):
-        raise ValueError(f"{name}: every value must be finite and > 0 ({unit}), got {np.asarray(value)}.")
-
-
-def _check_concrete_nonnegative(name: str, value, unit: str) -> None:
-    if _is_concrete(value) and not (np.all(np.asarray(value) >= 0.0) and np.all(np.isfinite(np.asarray(value)))):
-        raise ValueError(f"{name}: every value must be finite and >= 0 ({unit}), got {np.asarray(value)}.")
 
 
 def _describe_chain(chain: DrivenChain) -> dict:
@@ -348,7 +335,7 @@ def _describe_law(law) -> dict:
 def _concretely_inactive(law: laws.AbstractDissipation) -> bool:
     """Whether `law` concretely dissipates nothing (a traced coefficient may not be 0)."""
     leaves = jax.tree_util.tree_leaves(law)
-    if not all(_is_concrete(leaf) for leaf in leaves):
+    if not all(is_concrete(leaf) for leaf in leaves):
         return False
     with jax.ensure_compile_time_eval():  # concrete numbers, also while a caller's jit traces
         return not bool(np.any(np.asarray(law.is_active())))
@@ -405,7 +392,7 @@ def _check_law_constants(chain: DrivenChain) -> None:
                          "that never yields), or build the chain with DrivenChain.from_materials(..., "
                          "bead_yield_stress_pa=...).")
     leaves = jax.tree_util.tree_leaves((chain.precompression_n, chain.contact_constants()))
-    if law.has_history and all(_is_concrete(leaf) for leaf in leaves):
+    if law.has_history and all(is_concrete(leaf) for leaf in leaves):
         with jax.ensure_compile_time_eval():
             above = np.asarray(chain.static_force_n() > law.yield_force_n(chain.contact_constants()))
         if np.any(above):
@@ -414,4 +401,4 @@ def _check_law_constants(chain: DrivenChain) -> None:
                              "(Hertz) one, so give a preload below yield (or a larger yield force).")
     for dissipation in chain.dissipation:
         if isinstance(dissipation, laws.Viscoelastic):
-            _check_concrete_nonnegative("eta_s", dissipation.eta_s, "s")
+            check_positive_parameters("Viscoelastic", (("eta_s", dissipation.eta_s, "s"),), zero_ok=True)

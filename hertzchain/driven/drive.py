@@ -21,6 +21,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ..validation import check_positive_parameters
+
 
 class RayleighStroke(eqx.Module):
     """A piezo stack whose stroke grows with its drive: Rayleigh's law of soft piezoceramics
@@ -46,9 +48,7 @@ class RayleighStroke(eqx.Module):
         self.rayleigh_per_m = jnp.asarray(rayleigh_per_m, dtype=jnp.float64)
 
     def __check_init__(self):
-        value = self.rayleigh_per_m
-        if not isinstance(value, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(value) & (value >= 0.0))):
-            raise ValueError(f"RayleighStroke: rayleigh_per_m must be finite and >= 0 (1/m), got {value}.")
+        check_positive_parameters("RayleighStroke", (("rayleigh_per_m", self.rayleigh_per_m, "1/m"),), zero_ok=True)
 
     def motion(self, amplitude_m, amplitude_rate_m_s, omega_rad_s, cos, sin):
         """The face's displacement (m) and velocity (m/s) at the phase of `cos`, `sin`, for
@@ -88,9 +88,7 @@ class ActuatorMode(eqx.Module):
         self.damping_ratio = jnp.asarray(damping_ratio, dtype=jnp.float64)
 
     def __check_init__(self):
-        for name, value, unit in (("mode_hz", self.mode_hz, "Hz"), ("damping_ratio", self.damping_ratio, "1")):
-            if not isinstance(value, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(value) & (value > 0.0))):
-                raise ValueError(f"ActuatorMode: {name} must be finite and > 0 ({unit}), got {value}.")
+        check_positive_parameters("ActuatorMode", (("mode_hz", self.mode_hz, "Hz"), ("damping_ratio", self.damping_ratio, "1")))
 
     def transfer(self, frequency_hz):
         """$H(f)$ at `frequency_hz` (Hz): (real part, imaginary part), face over nominal stroke."""

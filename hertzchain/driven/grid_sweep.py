@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
-from ..io.atomic import save_figure, write_json
+from ..io.atomic import finish_figure, write_json
 from ..progress import Progress
 from ..sweep import _read_parquet, _write_parquet, _write_table_csv
 from . import fused
@@ -241,6 +241,4 @@ def plot_lockin(grid: LockinGrid, path, *, max_curves: int = 12) -> None:
     ax.set_ylabel(f"bead {grid.bead} {grid.quantity}, lock-in RMS at {grid.harmonics[harmonic]:g} f ({unit})")
     ax.legend(title="drive amplitude", fontsize=6, ncol=2)
     ax.grid(True, alpha=0.3)
-    fig.tight_layout()
-    save_figure(fig, Path(path), dpi=120)
-    plt.close(fig)
+    finish_figure(fig, Path(path), dpi=120)

@@ -20,6 +20,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..validation import is_concrete
+
 
 class AbstractReading(eqx.Module):
     """Lock-in readings held as complex amplitudes $c = Ae^{i\\varphi}$ (the signal's unit),
@@ -58,8 +60,8 @@ def lockin(signal, sample_interval_s, frequency_hz, *, start_time_s=0.0, axis: i
     count = signal.shape[-1]
     frequency = jnp.asarray(frequency_hz)[..., None]
     interval = jnp.asarray(sample_interval_s)[..., None]
-    cycles = np.asarray(frequency_hz) * np.asarray(sample_interval_s) * count if _concrete(
-        frequency_hz, sample_interval_s) else None
+    concrete = is_concrete(frequency_hz) and is_concrete(sample_interval_s)
+    cycles = np.asarray(frequency_hz) * np.asarray(sample_interval_s) * count if concrete else None
     if cycles is not None:
         if np.any(np.asarray(frequency_hz) <= 0):
             raise ValueError(f"frequency_hz: must be > 0 Hz, got {np.asarray(frequency_hz)}.")
@@ -97,7 +99,3 @@ def step_reference(count: int, steps_per_period: int, harmonic: float, first_ste
     steps = (first_step + np.arange(count)) % period_steps
     phase = (2.0 * np.pi * harmonic / steps_per_period) * steps
     return np.exp(-1j * phase)
-
-
-def _concrete(*values) -> bool:
-    return not any(isinstance(v, jax.core.Tracer) for v in values)

@@ -191,3 +191,13 @@ def save_figure(figure, path, **kwargs) -> None:
     target = Path(path)
     with atomic_path(target) as temporary:
         figure.savefig(temporary, format=target.suffix.lstrip(".") or "png", **kwargs)
+
+
+def finish_figure(figure, path, *, dpi: int = 110) -> None:
+    """Lay out a pyplot figure (`tight_layout`), save it atomically at `dpi` dots per inch
+    and close it."""
+    import matplotlib.pyplot as plt
+
+    figure.tight_layout()
+    save_figure(figure, path, dpi=dpi)
+    plt.close(figure)

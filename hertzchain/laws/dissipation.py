@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 
 from .. import contact
+from ..validation import check_positive_parameters
 
 
 class AbstractDissipation(eqx.Module):
@@ -130,9 +131,7 @@ class VelocitySquared(AbstractDissipation):
         self.c_n_s2_m2 = jnp.asarray(c_n_s2_m2, dtype=jnp.float64)
 
     def __check_init__(self):
-        if not isinstance(self.c_n_s2_m2, jax.core.Tracer) and not bool(
-                jnp.all(jnp.isfinite(self.c_n_s2_m2) & (self.c_n_s2_m2 >= 0.0))):
-            raise ValueError(f"c_n_s2_m2 must be non-negative and finite (N s^2/m^2), got {self.c_n_s2_m2}.")
+        check_positive_parameters("VelocitySquared", (("c_n_s2_m2", self.c_n_s2_m2, "N s^2/m^2"),), zero_ok=True)
 
     def force(self, overlap_m, overlap_rate_m_s, kappa_n_m1p5):
         return jnp.where(kappa_n_m1p5 > 0.0, self.c_n_s2_m2, 0.0) * jnp.abs(overlap_rate_m_s) * overlap_rate_m_s

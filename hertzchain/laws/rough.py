@@ -21,6 +21,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from ..validation import check_positive_parameters
 from .contact_law import AbstractContactLaw
 from .series import AbstractInSeries
 
@@ -49,9 +50,8 @@ class RoughContact(AbstractInSeries):
         self.touch_force_n = jnp.asarray(touch_force_n, dtype=jnp.float64)
 
     def __check_init__(self):
-        for name, value, unit in (("roughness_m", self.roughness_m, "m"), ("touch_force_n", self.touch_force_n, "N")):
-            if not isinstance(value, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(value) & (value > 0.0))):
-                raise ValueError(f"RoughContact: {name} must be finite and > 0 ({unit}), got {value}.")
+        check_positive_parameters("RoughContact", (("roughness_m", self.roughness_m, "m"),
+                                              ("touch_force_n", self.touch_force_n, "N")))
 
     def layer_overlap_m(self, force_n):
         return self.roughness_m * jnp.log1p(jnp.maximum(force_n, 0.0) / self.touch_force_n)

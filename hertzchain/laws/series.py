@@ -24,6 +24,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ..validation import check_positive_parameters
 from .contact_law import AbstractContactLaw, ContactConstants
 
 # Bracketed Newton iterations of the series split before its differentiated step. Started
@@ -120,10 +121,8 @@ class SeriesCompliance(AbstractInSeries):
         self.compliance_m_n = jnp.asarray(compliance_m_n, dtype=jnp.float64)
 
     def __check_init__(self):
-        if not isinstance(self.compliance_m_n, jax.core.Tracer) and not bool(
-                jnp.all(jnp.isfinite(self.compliance_m_n) & (self.compliance_m_n >= 0.0))):
-            raise ValueError(f"SeriesCompliance: compliance_m_n must be finite and >= 0 (m/N, the spring's 1/k), "
-                             f"got {self.compliance_m_n}.")
+        check_positive_parameters("SeriesCompliance", (("compliance_m_n", self.compliance_m_n, "m/N, the spring's 1/k"),),
+                             zero_ok=True)
 
     def layer_overlap_m(self, force_n):
         return self.compliance_m_n * force_n

@@ -25,6 +25,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ..validation import check_positive_parameters
+
 
 class IwanSupport(eqx.Module):
     """Micro-slip friction at the supports of every bead (see the module docstring).
@@ -51,10 +53,8 @@ class IwanSupport(eqx.Module):
         self.elements = int(elements)
 
     def __check_init__(self):
-        for name, value, unit in (("stiffness_n_m", self.stiffness_n_m, "N/m"),
-                                  ("slip_displacement_m", self.slip_displacement_m, "m")):
-            if not isinstance(value, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(value) & (value > 0.0))):
-                raise ValueError(f"IwanSupport: {name} must be finite and > 0 ({unit}), got {value}.")
+        check_positive_parameters("IwanSupport", (("stiffness_n_m", self.stiffness_n_m, "N/m"),
+                                             ("slip_displacement_m", self.slip_displacement_m, "m")))
 
     @property
     def coulomb_force_n(self) -> jax.Array:

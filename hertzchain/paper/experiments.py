@@ -199,18 +199,20 @@ def run_sweep(plan: Plan) -> Sweep:
     def wall_part(x):
         return _np(x)[n_chain:]
 
+    def recorded(part, *energies):
+        """The contact and wall forces and the named energies of `traces`, each through `part`."""
+        return {
+            "contact_n": {k: part(traces.forces_n[f"contact_{k}"]) for k in SWEEP_CONTACTS},
+            "wall_n": part(traces.forces_n["wall"]),
+            **{name: part(getattr(traces, name)) for name in energies},
+        }
+
     chosen = combos.index((0.3, 0.0, 0.0, float(setup.wall_youngs_pa), float(setup.wall_poisson)))
     return Sweep(
         plan=plan,
         setup=setup,
         time_s=_np(traces.time_s)[0],
-        contact_n={k: grid(traces.forces_n[f"contact_{k}"]) for k in SWEEP_CONTACTS},
-        wall_n=grid(traces.forces_n["wall"]),
-        wall_elastic_j=grid(traces.wall_elastic_j),
-        kinetic_j=grid(traces.kinetic_j),
-        potential_j=grid(traces.potential_j),
-        dissipated_j=grid(traces.dissipated_j),
-        initial_energy_j=grid(traces.initial_energy_j),
+        **recorded(grid, "wall_elastic_j", "kinetic_j", "potential_j", "dissipated_j", "initial_energy_j"),
         full={
             "contact_forces_n": _np(traces.contact_forces_n[chosen]),
             "contact_elastic_j": _np(traces.contact_elastic_j[chosen]),
@@ -220,12 +222,7 @@ def run_sweep(plan: Plan) -> Sweep:
             names=tuple(named),
             youngs_pa=np.asarray([y for y, _ in walls], dtype=float),
             poisson=np.asarray([nu for _, nu in walls], dtype=float),
-            contact_n={k: wall_part(traces.forces_n[f"contact_{k}"]) for k in SWEEP_CONTACTS},
-            wall_n=wall_part(traces.forces_n["wall"]),
-            wall_elastic_j=wall_part(traces.wall_elastic_j),
-            kinetic_j=wall_part(traces.kinetic_j),
-            potential_j=wall_part(traces.potential_j),
-            initial_energy_j=wall_part(traces.initial_energy_j),
+            **recorded(wall_part, "wall_elastic_j", "kinetic_j", "potential_j", "initial_energy_j"),
         ),
     )
 
