@@ -189,135 +189,89 @@ struct FullArgs {
   Outputs out;
 };
 
-// The full step of `chain_kernel.cc`'s RunFullBlock for one chain and (kTangent) one
-// tangent direction `d`: Kuwabara-Kono damping and a linear dashpot (the total force clipped at 0), track
-// friction before the drift and after the second half kick, the preload's and springs'
-// terms (kExtras); the tangents of the kicks and the forces are those laws run on dual
-// numbers along the direction (`hertzchain::Along`).
+// The full step of `chain_kernel.cc`'s RunFullBlock for one chain: Kuwabara-Kono damping and
+// a linear dashpot (the total force clipped at 0), track friction before the drift and
+// after the second half kick, the preload's and springs' terms (kExtras). One step over the
+// number type T: doubles for the values, and (kTangent) dual numbers along the thread's
+// tangent direction `d` (`hertzchain::Along`), so that the tangent is this same step run on
+// them, the derivative rules JAX's jvp applies operation by operation (the values are the
+// doubles' operations, so the same bits).
 template <bool kViscous, bool kFriction, bool kTangent, bool kExtras, bool kDashpot>
 HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
   using namespace hertzchain;
+  using T = std::conditional_t<kTangent, Dual<1, 1u>, double>;
   const int64_t B = A.batch;
   const double dt = A.dt, h = 0.5 * dt;
-  double x[kRows], v[kRows], a[kRows];
-  double tx[kTangent ? kRows : 1], tv[kTangent ? kRows : 1], ta[kTangent ? kRows : 1];
+  // input `row` of (rows) of a parameter, with its tangent along the direction
+  auto in = [&](const Param& p, const Tangent& t, int row, int rows) -> T {
+    if constexpr (kTangent) {
+      return Along(p.at(row, b), t.at(d, row, rows, B, b));
+    } else {
+      return p.at(row, b);
+    }
+  };
+  auto state0 = [&](int row) -> T {
+    if constexpr (kTangent) {
+      return Along(A.state0[row * B + b], A.t_state0.at(d, row, 3 * kRows, B, b));
+    } else {
+      return A.state0[row * B + b];
+    }
+  };
+  T x[kRows], v[kRows], a[kRows];
 #pragma unroll
   for (int r = 0; r < kRows; ++r) {
-    x[r] = A.state0[r * B + b];
-    v[r] = A.state0[(kRows + r) * B + b];
-    a[r] = A.state0[(2 * kRows + r) * B + b];
-    if (kTangent) {
-      tx[r] = A.t_state0.at(d, r, 3 * kRows, B, b);
-      tv[r] = A.t_state0.at(d, kRows + r, 3 * kRows, B, b);
-      ta[r] = A.t_state0.at(d, 2 * kRows + r, 3 * kRows, B, b);
-    }
+    x[r] = state0(r);
+    v[r] = state0(kRows + r);
+    a[r] = state0(2 * kRows + r);
   }
-  const double eta = A.eta.at(0, b), loss = A.friction.at(0, b) * h, c1 = 1.5 * eta;
-  const double dashpot = kDashpot ? A.dashpot.at(0, b) : 0.0;
-  double tloss = 0.0, t15eta = 0.0, tdashpot = 0.0;
-  if (kTangent) {
-    tloss = A.t_friction.at(d, 0, 1, B, b) * h;
-    t15eta = 1.5 * A.t_eta.at(d, 0, 1, B, b);
-    if (kDashpot) tdashpot = A.t_dashpot.at(d, 0, 1, B, b);
-  }
-  auto tangent_param = [&](const Tangent& t, int row, int rows) { return t.at(d, row, rows, B, b); };
-
-  // the friction kick of a velocity w and its tangent t along the direction
-  auto kick_tangent = [&](double w, double t) { return Kick(Along(w, t), Along(loss, tloss)).d[0]; };
-  // the tangent of contact i's force at overlap dl and rate, their tangents tdl and trate
-  auto force_tangent = [&](int i, double dl, double rate, double tdl, double trate) {
-    const double k = A.kappa.at(i, b), sp = kExtras ? A.spring.at(i, b) : 0.0;
-    const auto kd = Along(k, tangent_param(A.t_kappa, i, kContacts));
-    const auto dash = ContactDashpot(kd, Along(dashpot, tdashpot));
-    return TotalForce<kViscous, kExtras, kDashpot>(Along(dl, tdl), Along(rate, trate), kd, Along(c1, t15eta) * kd,
-                                                   dash, Along(sp, tangent_param(A.t_spring, i, kContacts)))
-        .d[0];
+  const T eta = in(A.eta, A.t_eta, 0, 1), loss = in(A.friction, A.t_friction, 0, 1) * h, c1 = 1.5 * eta;
+  const T dashpot = kDashpot ? in(A.dashpot, A.t_dashpot, 0, 1) : Like(eta, 0.0);
+  // contact i's total force at overlap dl and rate
+  auto force = [&](int i, const T& dl, const T& rate) {
+    const T k = in(A.kappa, A.t_kappa, i, kContacts);
+    const T sp = kExtras ? in(A.spring, A.t_spring, i, kContacts) : Like(eta, 0.0);
+    return TotalForce<kViscous, kExtras, kDashpot>(dl, rate, k, c1 * k, ContactDashpot(k, dashpot), sp);
+  };
+  // the second half kick of body i by the force `body` on it, and friction
+  auto kick = [&](int i, const T& body, const T& w) {
+    const T acc = body * in(A.inv_mass, A.t_inv_mass, i, kRows);
+    T vn = w + h * acc;
+    if (kFriction) vn = Kick(vn, loss);
+    a[i] = acc;
+    v[i] = vn;
   };
 
   for (int64_t n = 0; n < A.n_samples; ++n) {
     for (int64_t s = 0; s < A.steps_per_sample; ++s) {
       // body 0: half kick, friction, drift, predicted velocity
-      double w = v[0] + h * a[0];
-      const double w_first = w;
+      T w = v[0] + h * a[0];
       if (kFriction) w = Kick(w, loss);
       x[0] = x[0] + dt * w;
-      double w_prev = w, p_prev = w + h * a[0], f_prev = 0.0;
-      double tw_prev = 0.0, tp_prev = 0.0, tf_prev = 0.0;
-      if (kTangent) {
-        double tw = tv[0] + h * ta[0];
-        if (kFriction) tw = kick_tangent(w_first, tw);
-        tx[0] = tx[0] + dt * tw;
-        tw_prev = tw;
-        tp_prev = tw + h * ta[0];
-      }
+      T w_prev = w, p_prev = w + h * a[0], f_prev = Like(eta, 0.0);
 #pragma unroll
       for (int i = 0; i < kContacts; ++i) {
         const int nx = i + 1;
         // body i + 1: half kick, friction, drift, predicted velocity
-        double wn = v[nx] + h * a[nx];
-        const double w_raw = wn;
+        T wn = v[nx] + h * a[nx];
         if (kFriction) wn = Kick(wn, loss);
         x[nx] = x[nx] + dt * wn;
-        double pred = wn + h * a[nx];
+        const T pred = wn + h * a[nx];
         // contact i
-        double dl = x[i] - x[nx];
-        if (kExtras) dl = dl + A.overlap0.at(i, b);
-        const double rate = p_prev - pred;
-        const double k = A.kappa.at(i, b), kv = c1 * k, sp = kExtras ? A.spring.at(i, b) : 0.0;
-        const double dash = ContactDashpot(k, dashpot);
-        double f = TotalForce<kViscous, kExtras, kDashpot>(dl, rate, k, kv, dash, sp);
+        T dl = x[i] - x[nx];
+        if (kExtras) dl = dl + in(A.overlap0, A.t_overlap0, i, kContacts);
+        const T f = force(i, dl, p_prev - pred);
         // body i: second half kick, friction
-        double body = f_prev - f;
-        if (kExtras) body = body + A.external.at(i, b);
-        const double inv = A.inv_mass.at(i, b);
-        double acc = body * inv;
-        double vn = w_prev + h * acc;
-        const double vn_raw = vn;
-        if (kFriction) vn = Kick(vn, loss);
-        a[i] = acc;
-        v[i] = vn;
-        if (kTangent) {
-          double tw = tv[nx] + h * ta[nx];
-          if (kFriction) tw = kick_tangent(w_raw, tw);
-          tx[nx] = tx[nx] + dt * tw;
-          double tpred = tw + h * ta[nx];
-          double tdl = tx[i] - tx[nx];
-          if (kExtras) tdl = tdl + tangent_param(A.t_overlap0, i, kContacts);
-          const double tf = force_tangent(i, dl, rate, tdl, tp_prev - tpred);
-          double tb = tf_prev - tf;
-          if (kExtras) tb = tb + tangent_param(A.t_external, i, kRows);
-          double tacc = tb * inv + body * tangent_param(A.t_inv_mass, i, kRows);
-          double tvn = tw_prev + h * tacc;
-          if (kFriction) tvn = kick_tangent(vn_raw, tvn);
-          ta[i] = tacc;
-          tv[i] = tvn;
-          tf_prev = tf;
-          tw_prev = tw;
-          tp_prev = tpred;
-        }
+        T body = f_prev - f;
+        if (kExtras) body = body + in(A.external, A.t_external, i, kRows);
+        kick(i, body, w_prev);
         f_prev = f;
         w_prev = wn;
         p_prev = pred;
       }
       // the wall's row (inverse mass 0: at rest)
-      double body = f_prev;
-      if (kExtras) body = body + A.external.at(kContacts, b);
-      const double inv = A.inv_mass.at(kContacts, b);
-      double acc = body * inv;
-      double vn = w_prev + h * acc;
-      const double vn_raw = vn;
-      if (kFriction) vn = Kick(vn, loss);
-      a[kContacts] = acc;
-      v[kContacts] = vn;
-      if (kTangent) {
-        double tb = tf_prev;
-        if (kExtras) tb = tb + tangent_param(A.t_external, kContacts, kRows);
-        double tacc = tb * inv + body * tangent_param(A.t_inv_mass, kContacts, kRows);
-        double tvn = tw_prev + h * tacc;
-        if (kFriction) tvn = kick_tangent(vn_raw, tvn);
-        ta[kContacts] = tacc;
-        tv[kContacts] = tvn;
-      }
+      T body = f_prev;
+      if (kExtras) body = body + in(A.external, A.t_external, kContacts, kRows);
+      kick(kContacts, body, w_prev);
     }
     // the recorded channels from the new displacements and velocities
     // (every contact tested in turn: a search as the conservative kernel's costs the
@@ -325,22 +279,13 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
 #pragma unroll
     for (int i = 0; i < kContacts; ++i) {
       if (!A.channels.recorded(i)) continue;
-      double dl = x[i] - x[i + 1];
-      if (kExtras) dl = dl + A.overlap0.at(i, b);
-      const double rate = v[i] - v[i + 1];
-      const double k = A.kappa.at(i, b), kv = c1 * k, sp = kExtras ? A.spring.at(i, b) : 0.0;
-      const double dash = ContactDashpot(k, dashpot);
-      const double f = TotalForce<kViscous, kExtras, kDashpot>(dl, rate, k, kv, dash, sp);
-      double tf = 0.0;
-      if (kTangent) {
-        double tdl = tx[i] - tx[i + 1];
-        if (kExtras) tdl = tdl + tangent_param(A.t_overlap0, i, kContacts);
-        tf = force_tangent(i, dl, rate, tdl, tv[i] - tv[i + 1]);
-      }
+      T dl = x[i] - x[i + 1];
+      if (kExtras) dl = dl + in(A.overlap0, A.t_overlap0, i, kContacts);
+      const T f = force(i, dl, v[i] - v[i + 1]);
       for (int c = 0; c < A.channels.count; ++c) {
         if (A.channels.contact[c] != i) continue;
-        if (d == 0) A.out.trace[c][n * B + b] = f;
-        if (kTangent) A.out.tangent[c][(d * A.n_samples + n) * B + b] = tf;
+        if (d == 0) A.out.trace[c][n * B + b] = Value(f);
+        if constexpr (kTangent) A.out.tangent[c][(d * A.n_samples + n) * B + b] = f.d[0];
       }
     }
   }

@@ -2,7 +2,10 @@
 // host kernel: a block of runs at a time through all the steps of its run while the block's
 // state sits in registers and L1, every contact's force computed once per step, the lock-in
 // accumulated as the window's samples are made (nothing but the complex amplitudes leaves
-// the kernel), and forward-mode tangents carried through the same loop.
+// the kernel), and forward-mode tangents carried through the same loop: each phase of the
+// step is written once over its number type, run on doubles for the values and on dual
+// numbers along every tangent direction (`DrivenBlock`), the contact law's partial
+// derivatives from the law run once on dual numbers seeded with its inputs.
 //
 // A run (`hertzchain.driven.kernel.step`, one harmonic level of `drive.harmonic_segment`):
 // the driver's amplitude rises from 0 to the run's `amplitude` along the smooth step over
@@ -35,6 +38,7 @@
 #include "xla/ffi/api/ffi.h"
 
 #include "chain_blocks.h"
+#include "chain_lanes.h"
 #include "chain_laws.h"
 
 namespace ffi = xla::ffi;
@@ -74,8 +78,9 @@ struct Run {
 constexpr int kOverlapIn = 0, kKappaIn = 1, kRateIn = 2, kEtaIn = 3;
 constexpr int ForceInputs(bool viscous) { return viscous ? 4 : 2; }
 
-// The partial derivatives of every contact's force by its inputs, input by input over the
-// lanes of every contact (c, j) at c * kLanes + j, so that the tangents' lane loops vectorise.
+// The partial derivatives of every contact's force by its inputs (the law run on dual
+// numbers seeded with each input), input by input over the lanes of every contact (c, j) at
+// c * kLanes + j, so that the tangents' lane loops vectorise.
 struct Slopes {
   std::vector<double> by[4];
   Slopes(int64_t size, int inputs) {
@@ -83,81 +88,173 @@ struct Slopes {
   }
 };
 
-// One block of kLanes runs from lo (lanes past the batch repeat its last run). kTangent:
-// with the D directions' tangents of every state variable, each step's tangent computed
-// right after the part of the primal step it differentiates (JAX's rules: products by the
-// product rule, d(a / b) = da / b - (a / b) db / b).
-template <bool kViscous, bool kTangent>
-void RunDrivenBlock(const Run& r, int64_t lo, const Inputs& in, const TangentInputs& tin, int64_t D,
-                    double* sums, double* tsums) {
-  constexpr int64_t L = kLanes;
-  const int64_t n = r.beads, c_rows = n + 1, valid = std::min(L, r.batch - lo), H = r.harmonics;
-  std::vector<double> m(n * L), g(n * L), k(c_rows * L), o(c_rows * L), eta(L), a(L), dt(L), om(L);
-  Load<L>(in.inv_mass, n, lo, m.data(), valid);
-  Load<L>(in.gamma, n, lo, g.data(), valid);
-  Load<L>(in.kappa, c_rows, lo, k.data(), valid);
-  Load<L>(in.overlap0, c_rows, lo, o.data(), valid);
-  Load<L>(in.eta, 1, lo, eta.data(), valid);
-  Load<L>(in.amplitude, 1, lo, a.data(), valid);
-  Load<L>(in.dt, 1, lo, dt.data(), valid);
-  Load<L>(in.omega, 1, lo, om.data(), valid);
-  const int64_t TD = kTangent ? D : 0;
-  std::vector<double> tm(TD * n * L), tg(TD * n * L), tk(TD * c_rows * L), to(TD * c_rows * L);
-  std::vector<double> teta(TD * L), ta(TD * L), tdt(TD * L), tom(TD * L);
-  if (kTangent) {
-    LoadTangent<L>(tin.inv_mass, D, n, r.batch, lo, tm.data(), valid);
-    LoadTangent<L>(tin.gamma, D, n, r.batch, lo, tg.data(), valid);
-    LoadTangent<L>(tin.kappa, D, c_rows, r.batch, lo, tk.data(), valid);
-    LoadTangent<L>(tin.overlap0, D, c_rows, r.batch, lo, to.data(), valid);
-    LoadTangent<L>(tin.eta, D, 1, r.batch, lo, teta.data(), valid);
-    LoadTangent<L>(tin.amplitude, D, 1, r.batch, lo, ta.data(), valid);
-    LoadTangent<L>(tin.dt, D, 1, r.batch, lo, tdt.data(), valid);
-    LoadTangent<L>(tin.omega, D, 1, r.batch, lo, tom.data(), valid);
+// The step's numbers: doubles for the values, dual numbers along one tangent direction for
+// the tangents (the same operations on them: JAX's jvp rules).
+using Dual1 = hertzchain::Dual<1, 1u>;
+
+// num / den for a den constant through the run, inv its reciprocal: the quotient for the
+// values (as JAX divides), the product with the reciprocal for dual numbers (the same
+// derivative: no division per direction and step, a fifth of the tangent run's time)
+HC_INLINE double Over(double num, double den, double) { return num / den; }
+HC_INLINE Dual1 Over(const Dual1& num, const Dual1&, const Dual1& inv) { return num * inv; }
+
+// A run's constants of one lane (and bead): h = dt/2, 1.5 eta, T = R dt (the ramp's
+// duration) and its reciprocal, 1 + h gamma and its reciprocal
+template <class T>
+struct RunConstants {
+  T h, c1, ramp_time, inv_ramp_time;
+};
+template <class T>
+HC_INLINE RunConstants<T> Constants(const T& dt, const T& eta, double ramp) {
+  const T ramp_time = ramp * dt;
+  return {0.5 * dt, 1.5 * eta, ramp_time, 1.0 / ramp_time};
+}
+
+// the kick and drift of one bead: kick = h (f - gamma v), v_half = v + kick, x' = x + dt
+// v_half (x in place), and the predicted velocity v_half + kick (into references: a
+// returned struct of them leaves the lane loops scalar)
+template <class T>
+HC_INLINE void KickAndDrift(T& x, const T& v, const T& f, const T& g, const T& h, const T& dt, T& half,
+                            T& predicted) {
+  const T kick = h * (f - g * v);
+  half = v + kick;
+  x = x + dt * half;
+  predicted = half + kick;
+}
+
+// the driver (`drive.harmonic_segment` from 0 to a: from + change S, change = a; without a
+// ramp the amplitude at once) at the step's cos, sin, S and S': its motion u and rate u'
+// (+ 0, as JAX pads them); T the ramp's duration, inv_T its reciprocal
+template <class T>
+HC_INLINE void Driver(const T& a, const T& om, const T& ramp_time, const T& inv_ramp_time, bool ramping, double shape,
+                      double slope, double cs, double sn, T& u, T& rate_u) {
+  const T envelope = ramping ? a * shape : a;
+  const T rate = ramping ? Over(a * slope, ramp_time, inv_ramp_time) : hertzchain::Like(a, 0.0);
+  u = envelope * cs + 0.0;
+  rate_u = (rate * cs - envelope * om * sn) + 0.0;
+}
+
+// A row of a (rows, kLanes) block: its values and (a direction's) tangents; `At` reads lane
+// j as a number of type T (a double: the value; a dual number: with its tangent), `Put`
+// writes a double's value or a dual number's tangent.
+struct Row {
+  const double* value;
+  const double* tangent;
+};
+struct OutRow {
+  double* value;
+  double* tangent;
+};
+template <class T>
+HC_INLINE T At(const Row& row, int64_t j) {
+  if constexpr (std::is_same_v<T, double>) {
+    return row.value[j];
+  } else {
+    return hertzchain::Along(row.value[j], row.tangent[j]);
   }
-  // per lane and run: h = dt/2, 1.5 eta, kv = 1.5 eta kappa (as JAX rounds it: (1.5 eta)
-  // kappa), T = R dt (the ramp's duration), 1 + h gamma; and their tangents, with the
-  // quotients of the quotient rule that are constant through the run (dT / T, d(1 + h
-  // gamma) / (1 + h gamma)) computed once, and the divisions by T and 1 + h gamma as
-  // products with their reciprocals (the tangents to round-off: a division per direction
-  // and step cost the tangent run about a fifth of its time)
-  const double ramp = static_cast<double>(r.ramp_steps);
-  const bool ramping = r.ramp_steps > 0;
-  std::vector<double> h(L), c1(L), kv(c_rows * L), ramp_time(L), den(n * L), inv_ramp_time(L), inv_den(n * L);
-  std::vector<double> th(TD * L), t15e(TD * L), ramp_ratio(TD * L), den_ratio(TD * n * L);
-  for (int64_t j = 0; j < L; ++j) {
-    h[j] = 0.5 * dt[j];
-    c1[j] = 1.5 * eta[j];
-    ramp_time[j] = ramp * dt[j];
-    inv_ramp_time[j] = 1.0 / ramp_time[j];
-    for (int64_t c = 0; c < c_rows; ++c) kv[c * L + j] = 1.5 * eta[j] * k[c * L + j];
-    for (int64_t i = 0; i < n; ++i) {
-      den[i * L + j] = 1.0 + h[j] * g[i * L + j];
-      inv_den[i * L + j] = 1.0 / den[i * L + j];
+}
+HC_INLINE void Put(double x, const OutRow& row, int64_t j) { row.value[j] = x; }
+HC_INLINE void Put(const Dual1& x, const OutRow& row, int64_t j) { row.tangent[j] = x.d[0]; }
+
+// One block of kLanes runs from lo (lanes past the batch repeat its last run): its inputs,
+// state and tangents (D directions) as (rows, kLanes) blocks, and the step's phases. Each
+// phase is written once over its number type T and run on doubles (the values, `d` = -1)
+// and, kTangent, on dual numbers along every direction d before the values move on.
+template <bool kViscous, bool kTangent>
+struct DrivenBlock {
+  static constexpr int64_t L = kLanes;
+  static constexpr int kInputs = ForceInputs(kViscous);
+  const Run& r;
+  const int64_t n, c_rows, valid, H, D;
+  const bool ramping;
+  // inputs (rows, L) and their tangents (D, rows, L)
+  std::vector<double> m, g, k, o, eta, a, dt, om, tm, tg, tk, to, teta, ta, tdt, tom;
+  // the run's constants (`RunConstants`; rc: h, c1, ramp time, its reciprocal, row by row),
+  // 1 + h gamma and its reciprocal (n, L), 1.5 eta kappa (as JAX rounds it: (1.5 eta)
+  // kappa); and their tangents
+  std::vector<double> rc, den, inv_den, kv, trc, tden, tinv_den;
+  // state (n, L): x, v and the contact forces' acceleration f; the step's half-kicked and
+  // predicted velocities; the contacts' forces (n + 1, L); tangents (D, ...)
+  std::vector<double> x, v, f, vh, vp, F, tx, tv, tf, tvh, tvp, tF;
+  Slopes slopes;
+  std::vector<double> acc, tacc;  // the lock-in's sums (2 H, L) and their tangents (D, 2 H, L)
+  double u[L], ud[L];             // the driver's motion and rate this step
+
+  DrivenBlock(const Run& r_, int64_t lo, const Inputs& in, const TangentInputs& tin, int64_t directions)
+      : r(r_), n(r_.beads), c_rows(r_.beads + 1), valid(std::min(L, r_.batch - lo)), H(r_.harmonics),
+        D(kTangent ? directions : 0), ramping(r_.ramp_steps > 0), m(n * L), g(n * L), k(c_rows * L),
+        o(c_rows * L), eta(L), a(L), dt(L), om(L), tm(D * n * L), tg(D * n * L), tk(D * c_rows * L),
+        to(D * c_rows * L), teta(D * L), ta(D * L), tdt(D * L), tom(D * L), rc(4 * L), den(n * L),
+        inv_den(n * L), kv(c_rows * L), trc(D * 4 * L), tden(D * n * L), tinv_den(D * n * L), x(n * L, 0.0),
+        v(n * L, 0.0), f(n * L), vh(n * L), vp(n * L), F(c_rows * L), tx(D * n * L, 0.0), tv(D * n * L, 0.0),
+        tf(D * n * L), tvh(D * n * L), tvp(D * n * L), tF(c_rows * L), slopes(kTangent ? c_rows * L : 0, kInputs),
+        acc(2 * H * L, 0.0), tacc(D * 2 * H * L, 0.0) {
+    const Param params[8] = {in.inv_mass, in.gamma, in.kappa, in.overlap0, in.eta, in.amplitude, in.dt, in.omega};
+    const Tangent tangents[8] = {tin.inv_mass, tin.gamma,     tin.kappa, tin.overlap0,
+                                 tin.eta,      tin.amplitude, tin.dt,    tin.omega};
+    std::vector<double>* values[8] = {&m, &g, &k, &o, &eta, &a, &dt, &om};
+    std::vector<double>* tvalues[8] = {&tm, &tg, &tk, &to, &teta, &ta, &tdt, &tom};
+    const int64_t rows[8] = {n, n, c_rows, c_rows, 1, 1, 1, 1};
+    for (int p = 0; p < 8; ++p) {
+      Load<L>(params[p], rows[p], lo, values[p]->data(), valid);
+      if (kTangent) LoadTangent<L>(tangents[p], D, rows[p], r.batch, lo, tvalues[p]->data(), valid);
     }
-    for (int64_t d = 0; d < TD; ++d) {
-      const int64_t p = d * L + j;
-      th[p] = 0.5 * tdt[p];
-      t15e[p] = 1.5 * teta[p];
-      ramp_ratio[p] = (ramp * tdt[p]) / ramp_time[j];
+    Prepare<double>(-1);
+    for (int64_t d = 0; d < D; ++d) Prepare<Dual1>(d);
+    for (int64_t c = 0; c < c_rows; ++c)
+      for (int64_t j = 0; j < L; ++j) kv[c * L + j] = rc[L + j] * k[c * L + j];
+  }
+
+  // row `row` of a (rows, L) block `value` and, along direction d >= 0, of its tangents
+  // (D, rows, L); `Out`: the same to write
+  static Row In(const std::vector<double>& value, const std::vector<double>& tangent, int64_t row, int64_t rows,
+                int64_t d) {
+    return {&value[row * L], d < 0 ? nullptr : &tangent[(d * rows + row) * L]};
+  }
+  static OutRow Out(std::vector<double>& value, std::vector<double>& tangent, int64_t row, int64_t rows,
+                    int64_t d) {
+    return {&value[row * L], d < 0 ? nullptr : &tangent[(d * rows + row) * L]};
+  }
+  // the run's constants (`Constants`, 1 + h gamma and its reciprocal) along direction d
+  template <class T>
+  void Prepare(int64_t d) {
+    for (int64_t j = 0; j < L; ++j) {
+      const RunConstants<T> c =
+          Constants(At<T>(In(dt, tdt, 0, 1, d), j), At<T>(In(eta, teta, 0, 1, d), j), static_cast<double>(r.ramp_steps));
+      const T parts[4] = {c.h, c.c1, c.ramp_time, c.inv_ramp_time};
+      for (int row = 0; row < 4; ++row) Put(parts[row], Out(rc, trc, row, 4, d), j);
       for (int64_t i = 0; i < n; ++i) {
-        const int64_t t = (d * n + i) * L + j;
-        den_ratio[t] = (th[p] * g[i * L + j] + h[j] * tg[t]) / den[i * L + j];
+        const T one_plus = 1.0 + c.h * At<T>(In(g, tg, i, n, d), j);
+        Put(one_plus, Out(den, tden, i, n, d), j);
+        Put(1.0 / one_plus, Out(inv_den, tinv_den, i, n, d), j);
       }
     }
   }
-  // state (n, L): x, v and the contact forces' acceleration f; the step's half-kicked and
-  // predicted velocities and its kick; the contacts' forces (n + 1, L); tangents (D, ...)
-  std::vector<double> x(n * L, 0.0), v(n * L, 0.0), f(n * L), vh(n * L), vp(n * L), kick(n * L), F(c_rows * L);
-  std::vector<double> tx(TD * n * L, 0.0), tv(TD * n * L, 0.0), tf(TD * n * L), tvh(TD * n * L), tvp(TD * n * L);
-  std::vector<double> tF(c_rows * L);
-  constexpr int kInputs = ForceInputs(kViscous);
-  Slopes slopes(kTangent ? c_rows * L : 0, kInputs);
-  std::vector<double> acc(2 * H * L, 0.0), tacc(TD * 2 * H * L, 0.0);
+
+  // kick and drift of every bead along direction d
+  template <class T>
+  HC_INLINE void Drift(int64_t d) {
+    const Row h_row = In(rc, trc, 0, 4, d), dt_row = In(dt, tdt, 0, 1, d);
+    for (int64_t i = 0; i < n; ++i) {
+      const Row x_in = In(x, tx, i, n, d), v_in = In(v, tv, i, n, d), f_in = In(f, tf, i, n, d);
+      const Row g_in = In(g, tg, i, n, d);
+      const OutRow x_out = Out(x, tx, i, n, d), half = Out(vh, tvh, i, n, d), pred = Out(vp, tvp, i, n, d);
+#pragma GCC ivdep
+      for (int64_t j = 0; j < L; ++j) {
+        T position = At<T>(x_in, j), half_v, predicted;
+        KickAndDrift(position, At<T>(v_in, j), At<T>(f_in, j), At<T>(g_in, j), At<T>(h_row, j), At<T>(dt_row, j),
+                     half_v, predicted);
+        Put(position, x_out, j);
+        Put(half_v, half, j);
+        Put(predicted, pred, j);
+      }
+    }
+  }
 
   // contact c of lane j at overlap dl and rate (`contact.contact_force`'s total, or Hertz
   // without damping), with kTangent its partial derivatives by its inputs (the law run on
-  // dual numbers seeded with each input: kv = (1.5 eta) kappa as JAX rounds it)
-  auto force = [&](int64_t c, int64_t j, double dl, double rate) {
+  // dual numbers seeded with each input)
+  HC_INLINE void Force(int64_t c, int64_t j, double dl, double rate) {
     const int64_t q = c * L + j;
     if constexpr (kTangent) {
       using hertzchain::Seed;
@@ -165,135 +262,101 @@ void RunDrivenBlock(const Run& r, int64_t lo, const Inputs& in, const TangentInp
       const auto kd = Seed<kInputs, kKappaIn>(k[q]);
       const auto total = hertzchain::TotalForce<kViscous, false, false>(
           Seed<kInputs, kOverlapIn>(dl), SeedIf<kViscous, kInputs, kRateIn>(rate), kd,
-          SeedIf<kViscous, kInputs, kEtaIn>(c1[j]) * kd, 0.0, 0.0);
+          SeedIf<kViscous, kInputs, kEtaIn>(rc[L + j]) * kd, 0.0, 0.0);
       F[q] = total.v;
       for (int slot = 0; slot < kInputs; ++slot) slopes.by[slot][q] = hertzchain::Slope(total, slot);
     } else {
       F[q] = hertzchain::TotalForce<kViscous, false, false>(dl, rate, k[q], kv[q], 0.0, 0.0);
     }
-  };
+  }
   // its tangent along direction d from the partials and the inputs' tangents
-  auto tforce = [&](int64_t d, int64_t c, int64_t j, double tdl, double trate) {
+  HC_INLINE void ForceTangent(int64_t d, int64_t c, int64_t j, double tdl, double trate) {
     const int64_t q = c * L + j;
     double t = slopes.by[kOverlapIn][q] * tdl + slopes.by[kKappaIn][q] * tk[(d * c_rows + c) * L + j];
-    if constexpr (kViscous) t = t + slopes.by[kRateIn][q] * trate + slopes.by[kEtaIn][q] * t15e[d * L + j];
+    if constexpr (kViscous) t = t + slopes.by[kRateIn][q] * trate + slopes.by[kEtaIn][q] * trc[(d * 4 + 1) * L + j];
     tF[q] = t;
-  };
-  // f = (F_i - F_{i+1}) m_i, and its tangent along direction d
-  auto accelerations = [&]() {
-    for (int64_t i = 0; i < n; ++i)
-#pragma GCC ivdep
-      for (int64_t j = 0; j < L; ++j) f[i * L + j] = (F[i * L + j] - F[(i + 1) * L + j]) * m[i * L + j];
-  };
-  auto taccelerations = [&](int64_t d) {
-    for (int64_t i = 0; i < n; ++i)
-#pragma GCC ivdep
-      for (int64_t j = 0; j < L; ++j) {
-        const int64_t t = (d * n + i) * L + j;
-        tf[t] = (tF[i * L + j] - tF[(i + 1) * L + j]) * m[i * L + j] + (F[i * L + j] - F[(i + 1) * L + j]) * tm[t];
-      }
-  };
-
-  // the static equilibrium (`kernel.static_state`): at rest, the driver at 0
-  for (int64_t c = 0; c < c_rows; ++c)
-    for (int64_t j = 0; j < L; ++j) force(c, j, (o[c * L + j] + 0.0) - 0.0, 0.0);
-  accelerations();
-  for (int64_t d = 0; d < TD; ++d) {
-    for (int64_t c = 0; c < c_rows; ++c)
-      for (int64_t j = 0; j < L; ++j) tforce(d, c, j, to[(d * c_rows + c) * L + j], 0.0);
-    taccelerations(d);
   }
 
-  const int64_t first_recorded = r.steps - r.window + 1;
-  for (int64_t step = 1; step <= r.steps; ++step) {
-    const int64_t phase = step % r.steps_per_period;
-    const double cs = r.cos[phase], sn = r.sin[phase];
-    const int64_t ramp_index = std::min(step, r.ramp_steps);
-    const double shape = ramping ? r.shape[ramp_index] : 1.0, slope = ramping ? r.slope[ramp_index] : 0.0;
-    // kick and drift
-    for (int64_t i = 0; i < n; ++i)
+  // every contact's force along direction d: between the driver (c = 0; its motion and
+  // rate `drive`, `drive_rate`) or a bead and a bead or the wall (c = n, at rest), at the
+  // overlap (overlap0 + front) - back and the predicted rate; then the accelerations
+  // f = (F_i - F_{i+1}) m_i. At rest (`kernel.static_state`, the driver at 0) with `at_rest`.
+  template <class T>
+  HC_INLINE void Forces(int64_t d, bool at_rest, Row drive, Row drive_rate) {
+    const Row zero{kZeros, kZeros};
+    for (int64_t c = 0; c < c_rows; ++c) {
+      const Row front = at_rest ? zero : c == 0 ? drive : In(x, tx, c - 1, n, d);
+      const Row back = at_rest || c == n ? zero : In(x, tx, c, n, d);
+      const Row front_v = at_rest ? zero : c == 0 ? drive_rate : In(vp, tvp, c - 1, n, d);
+      const Row back_v = at_rest || c == n ? zero : In(vp, tvp, c, n, d);
+      const Row overlap0 = In(o, to, c, c_rows, d);
 #pragma GCC ivdep
       for (int64_t j = 0; j < L; ++j) {
-        const int64_t q = i * L + j;
-        kick[q] = h[j] * (f[q] - g[q] * v[q]);
-        vh[q] = v[q] + kick[q];
-        x[q] = x[q] + dt[j] * vh[q];
-        vp[q] = vh[q] + kick[q];
+        const T dl = (At<T>(overlap0, j) + At<T>(front, j)) - At<T>(back, j);
+        const T rate = At<T>(front_v, j) - At<T>(back_v, j);
+        if constexpr (std::is_same_v<T, double>)
+          Force(c, j, dl, rate);
+        else
+          ForceTangent(d, c, j, dl.d[0], rate.d[0]);
       }
-    for (int64_t d = 0; d < TD; ++d)
-      for (int64_t i = 0; i < n; ++i)
+    }
+    for (int64_t i = 0; i < n; ++i) {
+      const Row front{&F[i * L], &tF[i * L]}, back{&F[(i + 1) * L], &tF[(i + 1) * L]}, mass = In(m, tm, i, n, d);
+      const OutRow out = Out(f, tf, i, n, d);
 #pragma GCC ivdep
-        for (int64_t j = 0; j < L; ++j) {
-          const int64_t q = i * L + j, t = (d * n + i) * L + j;
-          const double tkick = th[d * L + j] * (f[q] - g[q] * v[q]) + h[j] * (tf[t] - (tg[t] * v[q] + g[q] * tv[t]));
-          tvh[t] = tv[t] + tkick;
-          tx[t] = tx[t] + (tdt[d * L + j] * vh[q] + dt[j] * tvh[t]);
-          tvp[t] = tvh[t] + tkick;
-        }
-    // the driver (`drive.harmonic_segment` from 0 to a: from + change S, change = a; without
-    // a ramp the amplitude at once) and the contacts' forces
-    double u[L], ud[L], envelope[L], rate[L];
+      for (int64_t j = 0; j < L; ++j) Put((At<T>(front, j) - At<T>(back, j)) * At<T>(mass, j), out, j);
+    }
+  }
+
+  // the driver at this step and the contacts' forces along direction d
+  template <class T>
+  HC_INLINE void DriveAndForces(int64_t d, double shape, double slope, double cs, double sn) {
+    double tu[L], tud[L];
+    const Row a_in = In(a, ta, 0, 1, d), om_in = In(om, tom, 0, 1, d);
+    const Row ramp_time = In(rc, trc, 2, 4, d), inv_ramp_time = In(rc, trc, 3, 4, d);
 #pragma GCC ivdep
     for (int64_t j = 0; j < L; ++j) {
-      envelope[j] = ramping ? a[j] * shape : a[j];
-      rate[j] = ramping ? a[j] * slope / ramp_time[j] : 0.0;
-      u[j] = envelope[j] * cs + 0.0;
-      ud[j] = (rate[j] * cs - envelope[j] * om[j] * sn) + 0.0;
+      T motion, rate;
+      Driver(At<T>(a_in, j), At<T>(om_in, j), At<T>(ramp_time, j), At<T>(inv_ramp_time, j), ramping, shape, slope, cs,
+             sn, motion, rate);
+      Put(motion, OutRow{u, tu}, j);
+      Put(rate, OutRow{ud, tud}, j);
     }
-    for (int64_t c = 0; c < c_rows; ++c) {
-      // the bodies on either side: the driver (its motion + 0, as JAX pads it) or a bead,
-      // and a bead or the wall (at rest)
-      const double* __restrict front = c == 0 ? u : &x[(c - 1) * L];
-      const double* __restrict back = c == n ? kZeros : &x[c * L];
-      const double* __restrict front_v = c == 0 ? ud : &vp[(c - 1) * L];
-      const double* __restrict back_v = c == n ? kZeros : &vp[c * L];
+    Forces<T>(d, false, Row{u, tu}, Row{ud, tud});
+  }
+
+  // the second half kick, implicit in the drag: v' = (v_half + h f') / (1 + h gamma). The
+  // values' lane loop is kept rolled: unrolled in full, GCC vectorised the loop over the
+  // beads instead, and the forward run took 11 % more instructions
+  // (`benchmarks/results/native_step/driven_and_thread.json`).
+  template <class T>
+  HC_INLINE void Kick(int64_t d) {
+    const Row h_row = In(rc, trc, 0, 4, d);
+    for (int64_t i = 0; i < n; ++i) {
+      const Row half = In(vh, tvh, i, n, d), f_in = In(f, tf, i, n, d);
+      const Row den_in = In(den, tden, i, n, d), inv_in = In(inv_den, tinv_den, i, n, d);
+      const OutRow out = Out(v, tv, i, n, d);
+      auto lane = [&](int64_t j) HC_LANES {
+        const T num = At<T>(half, j) + At<T>(h_row, j) * At<T>(f_in, j);
+        Put(Over(num, At<T>(den_in, j), At<T>(inv_in, j)), out, j);
+      };
+      if constexpr (std::is_same_v<T, double>) {
 #pragma GCC ivdep
-      for (int64_t j = 0; j < L; ++j) force(c, j, (o[c * L + j] + front[j]) - back[j], front_v[j] - back_v[j]);
+#pragma GCC unroll 1
+        for (int64_t j = 0; j < L; ++j) lane(j);
+      } else {
+#pragma GCC ivdep
+        for (int64_t j = 0; j < L; ++j) lane(j);
+      }
     }
-    accelerations();
-    for (int64_t d = 0; d < TD; ++d) {
-      double tu[L], tud[L];
-#pragma GCC ivdep
-      for (int64_t j = 0; j < L; ++j) {
-        const int64_t p = d * L + j;
-        const double tenvelope = ramping ? ta[p] * shape : ta[p];
-        const double trate = ramping ? (ta[p] * slope) * inv_ramp_time[j] - rate[j] * ramp_ratio[p] : 0.0;
-        tu[j] = tenvelope * cs;
-        tud[j] = trate * cs - (tenvelope * om[j] + envelope[j] * tom[p]) * sn;
-      }
-      for (int64_t c = 0; c < c_rows; ++c) {
-        const double* __restrict front = c == 0 ? tu : &tx[(d * n + c - 1) * L];
-        const double* __restrict back = c == n ? kZeros : &tx[(d * n + c) * L];
-        const double* __restrict front_v = c == 0 ? tud : &tvp[(d * n + c - 1) * L];
-        const double* __restrict back_v = c == n ? kZeros : &tvp[(d * n + c) * L];
-        const double* __restrict t_overlap0 = &to[(d * c_rows + c) * L];
-#pragma GCC ivdep
-        for (int64_t j = 0; j < L; ++j)
-          tforce(d, c, j, (t_overlap0[j] + front[j]) - back[j], front_v[j] - back_v[j]);
-      }
-      taccelerations(d);
-    }
-    // the second half kick, implicit in the drag
-    for (int64_t i = 0; i < n; ++i)
-#pragma GCC ivdep
-      for (int64_t j = 0; j < L; ++j) {
-        const int64_t q = i * L + j;
-        v[q] = (vh[q] + h[j] * f[q]) / den[q];
-      }
-    for (int64_t d = 0; d < TD; ++d)
-      for (int64_t i = 0; i < n; ++i)
-#pragma GCC ivdep
-        for (int64_t j = 0; j < L; ++j) {
-          const int64_t q = i * L + j, t = (d * n + i) * L + j;
-          const double tnum = tvh[t] + (th[d * L + j] * f[q] + h[j] * tf[t]);
-          tv[t] = tnum * inv_den[q] - v[q] * den_ratio[t];
-        }
-    // the lock-in's sums over the window
-    if (step < first_recorded) continue;
-    const int64_t w = step - first_recorded;
-    for (int64_t d = -1; d < TD; ++d) {  // the values (d = -1), then every direction's tangents
-      const double* __restrict y = d < 0 ? (r.displacement ? &x[r.row * L] : &v[r.row * L])
-                                         : (r.displacement ? &tx[(d * n + r.row) * L] : &tv[(d * n + r.row) * L]);
+  }
+
+  // the lock-in's sums over the window at window step w: the values (d = -1), then every
+  // direction's tangents
+  void LockIn(int64_t w) {
+    for (int64_t d = -1; d < D; ++d) {
+      const std::vector<double>& read = d < 0 ? (r.displacement ? x : v) : (r.displacement ? tx : tv);
+      const double* __restrict y = &read[((d < 0 ? 0 : d * n) + r.row) * L];
       double* __restrict sum = d < 0 ? acc.data() : &tacc[d * 2 * H * L];
       for (int64_t hm = 0; hm < H; ++hm) {
         const double re = r.reference[hm * r.window + w], im = r.reference[(H + hm) * r.window + w];
@@ -307,12 +370,47 @@ void RunDrivenBlock(const Run& r, int64_t lo, const Inputs& in, const TangentInp
       }
     }
   }
-  for (int64_t part = 0; part < 2 * H; ++part)
-    for (int64_t j = 0; j < valid; ++j) sums[part * r.batch + lo + j] = acc[part * L + j];
-  for (int64_t d = 0; d < TD; ++d)
+
+  // a phase along every direction's tangents (before the values move on), then the values
+  template <class Phase>
+  HC_INLINE void Tangents(const Phase& phase) {
+    if constexpr (kTangent)
+      for (int64_t d = 0; d < D; ++d) phase(Dual1{}, d);
+  }
+
+  // the run: the static equilibrium, then every step, the window's samples into the sums
+  void RunSteps(double* sums, double* tsums, int64_t lo) {
+    Forces<double>(-1, true, Row{kZeros, kZeros}, Row{kZeros, kZeros});
+    Tangents([&](auto t, int64_t d) { Forces<decltype(t)>(d, true, Row{kZeros, kZeros}, Row{kZeros, kZeros}); });
+    const int64_t first_recorded = r.steps - r.window + 1;
+    for (int64_t step = 1; step <= r.steps; ++step) {
+      const int64_t phase = step % r.steps_per_period, ramp_index = std::min(step, r.ramp_steps);
+      const double cs = r.cos[phase], sn = r.sin[phase];
+      const double shape = ramping ? r.shape[ramp_index] : 1.0, slope = ramping ? r.slope[ramp_index] : 0.0;
+      Tangents([&](auto t, int64_t d) { Drift<decltype(t)>(d); });
+      Drift<double>(-1);
+      DriveAndForces<double>(-1, shape, slope, cs, sn);  // (the values first: their partials)
+      Tangents([&](auto t, int64_t d) { DriveAndForces<decltype(t)>(d, shape, slope, cs, sn); });
+      Tangents([&](auto t, int64_t d) { Kick<decltype(t)>(d); });
+      Kick<double>(-1);
+      if (step >= first_recorded) LockIn(step - first_recorded);
+    }
     for (int64_t part = 0; part < 2 * H; ++part)
-      for (int64_t j = 0; j < valid; ++j)
-        tsums[(d * 2 * H + part) * r.batch + lo + j] = tacc[(d * 2 * H + part) * L + j];
+      for (int64_t j = 0; j < valid; ++j) sums[part * r.batch + lo + j] = acc[part * L + j];
+    for (int64_t d = 0; d < D; ++d)
+      for (int64_t part = 0; part < 2 * H; ++part)
+        for (int64_t j = 0; j < valid; ++j)
+          tsums[(d * 2 * H + part) * r.batch + lo + j] = tacc[(d * 2 * H + part) * L + j];
+  }
+};
+
+// One block of kLanes runs from lo, with kTangent the D directions' tangents of every state
+// variable.
+template <bool kViscous, bool kTangent>
+void RunDrivenBlock(const Run& r, int64_t lo, const Inputs& in, const TangentInputs& tin, int64_t D,
+                    double* sums, double* tsums) {
+  DrivenBlock<kViscous, kTangent> block(r, lo, in, tin, D);
+  block.RunSteps(sums, tsums, lo);
 }
 
 Inputs AsInputs(const ffi::Buffer<ffi::F64>* b) {
