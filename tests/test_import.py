@@ -321,7 +321,7 @@ def test_analyze_and_design_take_the_experiment_file(lab, tmp_path):
     assert main(["design", str(experiment), "--eta", "1.5us", "--mu", "0.15",
                  "--out", str(tmp_path / "design")]) == 0
     planned = json.loads((tmp_path / "design" / "design.json").read_text())
-    assert planned["params"]["eta"]["stderr"] > 0 and len(planned["plan"]) == 3
+    assert planned["params"]["eta_s"]["stderr"] > 0 and len(planned["plan"]) == 3
 
 
 def test_experiment_priors_are_read_and_must_agree(tmp_path, lab):
