@@ -266,8 +266,17 @@ def _compile(command_for, path: Path, name: str) -> None:
         partial = Path(scratch) / path.name
         proc = subprocess.run(command_for(partial), capture_output=True, text=True, check=False)
         if proc.returncode != 0:
-            raise RuntimeError(f"compiling {name} failed:\n{proc.stderr[-2000:]}")
+            raise _compile_error(name, proc.stderr)
         os.replace(partial, path)
+
+
+def _compile_error(name: str, stderr: str) -> RuntimeError:
+    """The failure of compiling `name`: its first line names the compiler's first error (the
+    first line that says "error" or "fatal", else its first line), then the end of what the
+    compiler printed."""
+    lines = [line.strip() for line in stderr.splitlines() if line.strip()]
+    first = next((line for line in lines if re.search(r"error|fatal", line, re.IGNORECASE)), lines[0] if lines else "")
+    return RuntimeError(f"compiling {name} failed: {first}\n{stderr[-2000:]}")
 
 
 def _record_path(path: Path) -> Path:
@@ -395,7 +404,7 @@ def _build(path: Path, defines: tuple[str, ...] = (), source: Path = SOURCE) -> 
         failed = [proc.communicate()[1] for proc in compiling]
         failed = [err for proc, err in zip(compiling, failed) if proc.returncode != 0]
         if failed:
-            raise RuntimeError(f"compiling {source.name} failed:\n{failed[0][-2000:]}")
+            raise _compile_error(source.name, failed[0])
         _compile(lambda partial: [compiler, *_flags(), *map(str, objects), "-o", str(partial), *_libraries(defines)],
                  path, source.name)
 
@@ -721,12 +730,19 @@ def _host_library_loads(flags) -> bool:
     return True
 
 
-def kernel_for(flags, devices) -> FusedKernel | None:
+def _platforms(devices) -> set[str]:
+    """The platforms ("cpu", "gpu") of `devices`, or JAX's default one where none are given."""
+    return {d.platform for d in devices} if devices else {jax.default_backend()}
+
+
+def kernel_for(flags, devices, rows: int | None = None) -> FusedKernel | None:
     """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
     devices, or None (the JAX kernel: laws other than Hertz's on a GPU, compliant sensors on
     a GPU or with the books, the books of damping or friction on a GPU, devices
-    of another kind, no compiler)."""
-    platforms = {d.platform for d in devices} if devices else {jax.default_backend()}
+    of another kind, no compiler, a library that cannot be built or loaded). `rows`: the
+    kernel arrays' rows (bodies + 1); where given, the GPU's thread kernel for that chain
+    length is built and loaded here, and one that cannot be (said once on stderr) gives None."""
+    platforms = _platforms(devices)
     if flags.sensors:  # compliant sensors: the host's sensor libraries, no books
         if flags.ledger or platforms != {"cpu"} or not available() or not _host_library_loads(flags):
             return None
@@ -740,7 +756,8 @@ def kernel_for(flags, devices) -> FusedKernel | None:
         return FusedKernel(physics, "host")
     if flags.full_state and flags.ledger:  # the thread kernels keep no books of the full step
         return None
-    if platforms == {"gpu"} and thread_unavailable_reason("cuda") is None:
+    if platforms == {"gpu"} and thread_unavailable_reason("cuda") is None and (
+            rows is None or _thread_library_loads("cuda", int(rows))):
         return FusedKernel(physics, "cuda")
     return None
 
@@ -811,6 +828,11 @@ def _thread_target(backend: str, rows: int, kind: str) -> str:
 
 @functools.cache
 def _thread_library(backend: str, rows: int) -> Path:
+    """Build (if needed), load and register the thread kernel of `backend` for chains of
+    `rows` - 1 bodies: its path. A library that cannot be built or loaded (the compiler
+    fails, or the library does not load) raises RuntimeError or OSError, said once a
+    process on stderr with the first line of why and recorded (`kernel_record`'s
+    "not_available"); later calls raise at once."""
     reason = thread_unavailable_reason(backend)
     if reason is not None:
         raise RuntimeError(f"the {backend} chain kernel is unavailable: {reason}")
@@ -820,16 +842,36 @@ def _thread_library(backend: str, rows: int) -> Path:
                  " ".join(_thread_build_command(backend, rows, Path("-"))).encode(), toolchain.encode()):
         digest.update(part)
     path = _cache_dir() / f"chain_thread-{backend}-r{rows}-{digest.hexdigest()[:16]}.so"
-    _LOADED[path] = _ensure_built(
-        path, f"the {backend} chain kernel for {rows - 1} bodies",
-        lambda out: _compile(lambda partial: _thread_build_command(backend, rows, partial), out, THREAD_SOURCE.name),
-        note="once")
-    library = ctypes.cdll.LoadLibrary(str(path))
+    if path in _FAILED:
+        raise RuntimeError(_FAILED[path])
+    what = f"the {backend} chain kernel for {rows - 1} bodies"
+    try:
+        digest = _ensure_built(
+            path, what,
+            lambda out: _compile(lambda partial: _thread_build_command(backend, rows, partial), out, THREAD_SOURCE.name),
+            note="once")
+        library = ctypes.cdll.LoadLibrary(str(path))
+    except (OSError, RuntimeError) as error:
+        _FAILED[path] = str(error) or type(error).__name__
+        _announce_failure(what, error, "those runs take the JAX kernel instead")
+        raise
+    _LOADED[path] = digest
     platform_name = "CUDA" if backend == "cuda" else "cpu"
     for kind, symbol in _THREAD_SYMBOLS.items():
         jax.ffi.register_ffi_target(f"hertzchain_thread_{backend}_r{rows}_{kind}",
                                     jax.ffi.pycapsule(getattr(library, symbol)), platform=platform_name)
     return path
+
+
+def _thread_library_loads(backend: str, rows: int) -> bool:
+    """Whether the thread kernel of `backend` for chains of `rows` - 1 bodies is built and
+    loads (`_thread_library`); where it cannot be, that was said once on stderr and those
+    runs take the JAX kernel."""
+    try:
+        _thread_library(backend, rows)
+    except (OSError, RuntimeError):
+        return False
+    return True
 
 
 def _require(backend: str) -> None:
