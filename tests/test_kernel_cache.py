@@ -80,8 +80,8 @@ sys.exit(main(sys.argv[2:]))
 """
 
 
-def _truncated_cache(tmp_path) -> tuple[Path, Path]:
-    """A private cache holding this machine's main library, truncated to 800000 bytes after its
+def _truncated_cache(tmp_path, size_bytes: int = 800000) -> tuple[Path, Path]:
+    """A private cache holding this machine's main library, truncated to `size_bytes` after its
     build record was written: (the good library, the damaged copy)."""
     good = _built_library()
     cache = tmp_path / "cache"
@@ -89,26 +89,29 @@ def _truncated_cache(tmp_path) -> tuple[Path, Path]:
     damaged = cache / good.name
     shutil.copy(good, damaged)
     native._write_record(damaged)
-    os.truncate(damaged, 800000)
+    os.truncate(damaged, size_bytes)
     return good, damaged
 
 
-def _run_on(good: Path, damaged: Path, *command):
+def _run_on(good: Path, damaged: Path, *command, said: str = "holds 800000 bytes where its build wrote"):
     env = dict(os.environ, HERTZCHAIN_CACHE=str(damaged.parent))
     env.pop("HERTZCHAIN_NATIVE", None)
     done = subprocess.run([sys.executable, "-c", _SCRIPT, str(good), *command], capture_output=True, text=True, check=False,
                           env=env, timeout=600)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
-    assert done.stderr.count("holds 800000 bytes where its build wrote") == 1 and "building it again" in done.stderr
+    assert done.stderr.count(said) == 1 and "building it again" in done.stderr
     assert damaged.stat().st_size == good.stat().st_size and native._check(damaged)[0] is None
     return done
 
 
-def test_a_truncated_library_is_rebuilt_by_the_kernel_command(tmp_path):
+@pytest.mark.parametrize("size_bytes", [800000, 0])
+def test_a_truncated_library_is_rebuilt_by_the_kernel_command(tmp_path, size_bytes):
     """`hertzchain kernel` on a cache whose library was truncated (before: SIGBUS, exit 135,
-    no message): it says so in one line, builds it again (here: a copy of the good one) and
-    exits 0."""
-    done = _run_on(*_truncated_cache(tmp_path), "kernel")
+    no message) or emptied: it says so in one line, builds it again (here: a copy of the good
+    one) and exits 0."""
+    said = (f"{_built_library().name} is empty; building it again" if size_bytes == 0
+            else "holds 800000 bytes where its build wrote")
+    done = _run_on(*_truncated_cache(tmp_path, size_bytes), "kernel", said=said)
     assert "[1/1] chain (" in done.stdout and "ready, 1 libraries" in done.stdout
 
 
