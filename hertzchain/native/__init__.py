@@ -64,8 +64,8 @@ could not load, and ran), `host` (the host libraries, their targets, `kernel_for
 `thread` (the one-thread-per-chain kernels) and `calls` (the kernels as JAX functions).
 """
 
-# Beside the public names (`__all__`), the internal ones that `hertzchain.driven.fused` and the
-# benchmarks call through the package (the `noqa`s); to replace one in a test, patch the
+# Beside the public names (`__all__`), the internal ones that `hertzchain.driven.fused`, `fitting`
+# and the benchmarks call through the package (the `noqa`s); to replace one in a test, patch the
 # module that defines it (e.g. `native.build._build`).
 from .build import (  # noqa: F401
     ARCH_VARIABLE,
@@ -83,6 +83,7 @@ from .build import (  # noqa: F401
     SOURCE_PARTS,
     UNMASKED_FLAGS,
     _build,
+    _cache_dir,
     _cxx,
     prune_cache,
 )

@@ -13,14 +13,11 @@ from . import build
 # `unavailable_reason()` where `HERTZCHAIN_NATIVE=0` switched the kernel off
 SWITCHED_OFF = "switched off (HERTZCHAIN_NATIVE=0)"
 
-
 # The libraries this process failed to build or load: path -> why (tried once a process).
 _FAILED: dict[Path, str] = {}
 
-
 # The libraries this process loaded: path -> its SHA-256 (verified against its build record).
 _LOADED: dict[Path, str] = {}
-
 
 # The libraries whose kernels computed this process's results: file name -> (backend, SHA-256).
 _USED: dict[str, tuple[str, str]] = {}

@@ -92,7 +92,7 @@ def _thread_library(backend: str, rows: int) -> Path:
         raise RuntimeError(registry._FAILED[path])
     what = f"the {backend} chain kernel for {rows - 1} bodies"
     try:
-        digest = build._ensure_built(
+        sha256 = build._ensure_built(
             path, what,
             lambda out: build._compile(lambda partial: _thread_build_command(backend, rows, partial), out, THREAD_SOURCE.name),
             note="once")
@@ -101,7 +101,7 @@ def _thread_library(backend: str, rows: int) -> Path:
         registry._FAILED[path] = str(error) or type(error).__name__
         registry._announce_failure(what, error, "those runs take the JAX kernel instead")
         raise
-    registry._LOADED[path] = digest
+    registry._LOADED[path] = sha256
     platform_name = "CUDA" if backend == "cuda" else "cpu"
     for kind, symbol in _THREAD_SYMBOLS.items():
         jax.ffi.register_ffi_target(f"hertzchain_thread_{backend}_r{rows}_{kind}",
