@@ -503,7 +503,8 @@ def solve_batched(
     if devices is not None:
         padded = len(devices) * math.ceil(padded / len(devices))
     params = share_uniform(kernel_params(setup, pad_to=padded))
-    fused = native.kernel_for(flags, devices) if kernel == "auto" and _native_laws(setup) else None
+    native_ok = kernel == "auto" and _native_laws(setup)
+    fused = native.kernel_for(flags, devices, params["inv_mass"].shape[-2]) if native_ok else None
     if fused is not None and fused.physics == "full":
         flags = flags._replace(full_step=True)
     return _solve_fast(params, batch, flags, grid, rows, names, user, int(block_steps), devices, fused)
@@ -553,7 +554,8 @@ def record_batched(
     params = _params(setup, None)
     if flags.sensors or compliant_sensors is not None:
         params = _with_compliant_sensors(params, setup, flags, compliant_sensors)
-    fused = native.kernel_for(flags, None) if kernel == "auto" and not flags.ledger and _native_laws(setup) else None
+    native_ok = kernel == "auto" and not flags.ledger and _native_laws(setup)
+    fused = native.kernel_for(flags, None, params["inv_mass"].shape[-2]) if native_ok else None
     if fused is not None:  # the full kernel carries the tangents, whatever the physics
         fused = fused._replace(physics="full")
     return _assemble(params, batch, flags, grid, rows, names, user, int(block_steps), None, fused)

@@ -195,7 +195,7 @@ def assert_fit_iteration_equals_the_jax_kernels(monkeypatch) -> None:
     problem, x = synthetic_fit_problem()
     assert problem.simulates_natively()
     r, jac = residuals_and_jacobian(problem, x)
-    monkeypatch.setattr(native, "kernel_for", lambda flags, devices: None)
+    monkeypatch.setattr(native, "kernel_for", lambda flags, devices, rows=None: None)
     problem_jax, _ = synthetic_fit_problem()
     r_jax, jac_jax = residuals_and_jacobian(problem_jax, x)
     assert r.shape == r_jax.shape and np.linalg.norm(r) > 10.0  # the start is off the data

@@ -16,7 +16,7 @@ from hertzchain.driven import DrivenChain, fused, lockin_grid
 
 # Skipped only where the kernel cannot be built at all (no compiler, switched off, not a
 # CPU); a kernel that fails to build fails `test_the_kernel_builds_where_a_compiler_is`.
-_CANNOT = (native._cxx() is None or os.environ.get("HERTZCHAIN_NATIVE", "1") == "0"
+_CANNOT = (native.build._cxx() is None or os.environ.get("HERTZCHAIN_NATIVE", "1") == "0"
            or jax.default_backend() != "cpu")
 pytestmark = pytest.mark.skipif(_CANNOT, reason="no C++ compiler, HERTZCHAIN_NATIVE=0 or not a CPU")
 

@@ -18,7 +18,7 @@ import pytest
 from hertzchain import native
 from hertzchain.batched import KernelFlags
 
-_COMPILER = shutil.which("c++") or native._cxx()
+_COMPILER = shutil.which("c++") or native.build._cxx()
 _SWITCHED_OFF = os.environ.get("HERTZCHAIN_NATIVE", "1") == "0"
 
 
@@ -41,7 +41,7 @@ def _damage(path: Path, how: str) -> None:
         data[len(data) // 2] ^= 0xFF
         path.write_bytes(bytes(data))
     elif how == "no record":
-        native._record_path(path).unlink()
+        native.build._record_path(path).unlink()
 
 
 @pytest.mark.parametrize("how, said", [("truncated", "holds 500 bytes where its build wrote 1000"),
@@ -55,17 +55,17 @@ def test_a_library_that_is_not_its_build_record_is_named_and_built_again(tmp_pat
         built.append(out)
         out.write_bytes(bytes(range(250)) * 4)  # 1000 bytes
 
-    digest = native._ensure_built(path, "a test library", build)
+    digest = native.build._ensure_built(path, "a test library", build)
     assert digest == hashlib.sha256(path.read_bytes()).hexdigest()
-    assert json.loads(native._record_path(path).read_text()) == {"library": path.name, "bytes": 1000, "sha256": digest}
+    assert json.loads(native.build._record_path(path).read_text()) == {"library": path.name, "bytes": 1000, "sha256": digest}
     assert "compiling a test library into" in capsys.readouterr().err
-    assert native._ensure_built(path, "a test library", build) == digest and len(built) == 1  # verified: kept
+    assert native.build._ensure_built(path, "a test library", build) == digest and len(built) == 1  # verified: kept
     _damage(path, how)
-    assert native._check(path)[0] is not None and said in native._check(path)[0]
-    assert native._ensure_built(path, "a test library", build) == digest and len(built) == 2
+    assert native.build._check(path)[0] is not None and said in native.build._check(path)[0]
+    assert native.build._ensure_built(path, "a test library", build) == digest and len(built) == 2
     err = capsys.readouterr().err
     assert err.count(f"the cached library {path} ") == 1 and said in err and "building it again" in err
-    assert native._check(path) == (None, digest)
+    assert native.build._check(path) == (None, digest)
 
 
 _SCRIPT = r"""
@@ -73,42 +73,45 @@ import shutil, sys
 from pathlib import Path
 from hertzchain import native
 good = Path(sys.argv[1])
-native._build = lambda path, defines=(), source=native.SOURCE: shutil.copy(good, path)  # a stand-in build
+native.build._build = lambda path, defines=(), source=native.SOURCE: shutil.copy(good, path)  # a stand-in build
 native.FIRST_USE_LIBRARIES = ("chain",)  # `hertzchain kernel`: the main library alone
 from hertzchain.cli import main
 sys.exit(main(sys.argv[2:]))
 """
 
 
-def _truncated_cache(tmp_path) -> tuple[Path, Path]:
-    """A private cache holding this machine's main library, truncated to 800000 bytes after its
+def _truncated_cache(tmp_path, size_bytes: int = 800000) -> tuple[Path, Path]:
+    """A private cache holding this machine's main library, truncated to `size_bytes` after its
     build record was written: (the good library, the damaged copy)."""
     good = _built_library()
     cache = tmp_path / "cache"
     cache.mkdir()
     damaged = cache / good.name
     shutil.copy(good, damaged)
-    native._write_record(damaged)
-    os.truncate(damaged, 800000)
+    native.build._write_record(damaged)
+    os.truncate(damaged, size_bytes)
     return good, damaged
 
 
-def _run_on(good: Path, damaged: Path, *command):
+def _run_on(good: Path, damaged: Path, *command, said: str = "holds 800000 bytes where its build wrote"):
     env = dict(os.environ, HERTZCHAIN_CACHE=str(damaged.parent))
     env.pop("HERTZCHAIN_NATIVE", None)
     done = subprocess.run([sys.executable, "-c", _SCRIPT, str(good), *command], capture_output=True, text=True, check=False,
                           env=env, timeout=600)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
-    assert done.stderr.count("holds 800000 bytes where its build wrote") == 1 and "building it again" in done.stderr
-    assert damaged.stat().st_size == good.stat().st_size and native._check(damaged)[0] is None
+    assert done.stderr.count(said) == 1 and "building it again" in done.stderr
+    assert damaged.stat().st_size == good.stat().st_size and native.build._check(damaged)[0] is None
     return done
 
 
-def test_a_truncated_library_is_rebuilt_by_the_kernel_command(tmp_path):
+@pytest.mark.parametrize("size_bytes", [800000, 0])
+def test_a_truncated_library_is_rebuilt_by_the_kernel_command(tmp_path, size_bytes):
     """`hertzchain kernel` on a cache whose library was truncated (before: SIGBUS, exit 135,
-    no message): it says so in one line, builds it again (here: a copy of the good one) and
-    exits 0."""
-    done = _run_on(*_truncated_cache(tmp_path), "kernel")
+    no message) or emptied: it says so in one line, builds it again (here: a copy of the good
+    one) and exits 0."""
+    said = (f"{_built_library().name} is empty; building it again" if size_bytes == 0
+            else "holds 800000 bytes where its build wrote")
+    done = _run_on(*_truncated_cache(tmp_path, size_bytes), "kernel", said=said)
     assert "[1/1] chain (" in done.stdout and "ready, 1 libraries" in done.stdout
 
 
@@ -130,9 +133,9 @@ def test_a_library_built_on_first_use_that_fails_is_announced_once_and_its_runs_
         tmp_path, monkeypatch, capsys):
     _built_library()
     monkeypatch.setenv("HERTZCHAIN_CACHE", str(tmp_path))
-    monkeypatch.setattr(native, "_build", _failing_build)
-    monkeypatch.setattr(native, "_FAILED", {})
-    monkeypatch.setattr(native, "_load_dashpot", native._load_dashpot.__wrapped__)
+    monkeypatch.setattr(native.build, "_build", _failing_build)
+    monkeypatch.setattr(native.registry, "_FAILED", {})
+    monkeypatch.setattr(native.host, "_load_dashpot", native.host._load_dashpot.__wrapped__)
     flags = KernelFlags(viscous=True, springs=False, preload=False, dashpot=True)
     for _ in range(3):
         assert native.kernel_for(flags, None) is None
@@ -148,8 +151,8 @@ def test_the_driven_kernel_that_cannot_be_built_is_announced_once(tmp_path, monk
 
     monkeypatch.setenv("HERTZCHAIN_CACHE", str(tmp_path))
     monkeypatch.delenv("HERTZCHAIN_NATIVE", raising=False)
-    monkeypatch.setattr(native, "_build", _failing_build)
-    monkeypatch.setattr(native, "_FAILED", {})
+    monkeypatch.setattr(native.build, "_build", _failing_build)
+    monkeypatch.setattr(native.registry, "_FAILED", {})
     monkeypatch.setattr(fused, "_library", fused._library.__wrapped__)
     for _ in range(2):
         assert fused._load.__wrapped__() == "compiling chain_kernel.cc failed:\nfirst line of the error\nsecond line"
@@ -163,7 +166,7 @@ def test_libraries_are_built_at_once(tmp_path, monkeypatch):
     with its own time; a failed one is reported with its whole message."""
     monkeypatch.setenv("HERTZCHAIN_CACHE", str(tmp_path))
     loaded = []
-    monkeypatch.setattr(native, "_load_named", loaded.append)
+    monkeypatch.setattr(native.host, "_load_named", loaded.append)
 
     def build(path, defines=(), source=native.SOURCE):
         time.sleep(0.5)
@@ -171,7 +174,7 @@ def test_libraries_are_built_at_once(tmp_path, monkeypatch):
             raise RuntimeError("compiling chain_kernel.cc failed:\nwhole message")
         path.write_bytes(b"library")
 
-    monkeypatch.setattr(native, "_build", build)
+    monkeypatch.setattr(native.build, "_build", build)
     names = ("chain", "dashpot", "thornton", "driven")
     began = time.perf_counter()
     done = {name: (seconds, why) for name, _, seconds, why in native.build_libraries(names, jobs=4)}
@@ -182,16 +185,16 @@ def test_libraries_are_built_at_once(tmp_path, monkeypatch):
 
 
 def test_kernel_record_names_the_libraries_that_ran(monkeypatch):
-    monkeypatch.setattr(native, "_USED", {})
-    monkeypatch.setattr(native, "_FAILED", {})
+    monkeypatch.setattr(native.registry, "_USED", {})
+    monkeypatch.setattr(native.registry, "_FAILED", {})
     assert native.kernel_record() == {"name": "jax"}
-    monkeypatch.setattr(native, "_compiler_macros", lambda arch: "#define __AVX2__ 1\n#define __SSE2__ 1\n")
-    monkeypatch.setattr(native, "_LOADED", {Path("/c/chain_kernel-a.so"): "ab" * 32, Path("/c/t-r8.so"): "cd" * 32})
+    monkeypatch.setattr(native.build, "_compiler_macros", lambda arch: "#define __AVX2__ 1\n#define __SSE2__ 1\n")
+    monkeypatch.setattr(native.registry, "_LOADED", {Path("/c/chain_kernel-a.so"): "ab" * 32, Path("/c/t-r8.so"): "cd" * 32})
     native.note_use(Path("/c/chain_kernel-a.so"))
     assert native.kernel_record() == {"name": "native-avx2", "libraries": {"chain_kernel-a.so": "ab" * 32}}
     native.note_use(Path("/c/t-r8.so"), "emulated")
     assert native.kernel_record()["name"] == "native-avx2+native-emulated"
-    native._FAILED[Path("/c/chain_kernel-dashpot-b.so")] = "compiling chain_kernel.cc failed:\nwhy"
+    native.registry._FAILED[Path("/c/chain_kernel-dashpot-b.so")] = "compiling chain_kernel.cc failed:\nwhy"
     assert native.kernel_record()["name"] == "native-avx2+native-emulated+jax"  # the dashpot's runs: JAX
     assert native.kernel_record()["not_available"] == {"chain_kernel-dashpot-b.so": "compiling chain_kernel.cc failed:"}
 
@@ -203,13 +206,13 @@ def test_a_change_to_any_header_beside_the_source_names_a_new_library(tmp_path):
     folder = tmp_path / "csrc"
     shutil.copytree(native.CSRC, folder)
     source = folder / native.SOURCE.name
-    before = native._library_path((), source)
-    assert before == native._library_path((), source)  # the name is a function of the files
+    before = native.build._library_path((), source)
+    assert before == native.build._library_path((), source)  # the name is a function of the files
     headers = sorted(folder.glob("*.h"))
     assert {h.name for h in headers} >= {"chain_laws.h", "chain_step.h", "chain_full_block.h", "chain_lanes.h"}
     for header in headers:
         text = header.read_bytes()
         header.write_bytes(text + b"\n")
-        assert native._library_path((), source) != before, header.name
+        assert native.build._library_path((), source) != before, header.name
         header.write_bytes(text)
-    assert native._library_path((), source) == before
+    assert native.build._library_path((), source) == before

@@ -10,12 +10,12 @@ import pytest
 from hertzchain import native
 from hertzchain.cli import kernel
 
-_COMPILER = shutil.which("c++") or native._cxx()
+_COMPILER = shutil.which("c++") or native.build._cxx()
 
 
 def _run(**environment):
     env = {**os.environ, **environment}
-    return subprocess.run([sys.executable, "-m", "hertzchain", "kernel"], capture_output=True, text=True, env=env)
+    return subprocess.run([sys.executable, "-m", "hertzchain", "kernel"], capture_output=True, text=True, env=env, check=False)
 
 
 def test_switched_off_kernel_is_named_with_its_reason():
@@ -49,7 +49,7 @@ def test_a_kernel_that_cannot_be_built_fails_the_command_with_its_reason_given_o
 
 
 def test_no_compiler_fails_the_command_saying_so(monkeypatch, capsys):
-    monkeypatch.setattr(native, "_cxx", lambda: None)
+    monkeypatch.setattr(native.build, "_cxx", lambda: None)
     monkeypatch.delenv("HERTZCHAIN_NATIVE", raising=False)
     assert _kernel_command() == kernel.BUILD_FAILED
     out = capsys.readouterr().out
@@ -62,7 +62,7 @@ def test_ready_kernel_names_its_build():
     assert native.available(), f"a C++ compiler is here but the kernel cannot be built: {native.unavailable_reason()}"
     done = _run(HERTZCHAIN_NATIVE="1")
     assert done.returncode == 0, done.stdout + done.stderr
-    assert f"] chain (" in done.stdout and str(native.library_path()) in done.stdout
+    assert "] chain (" in done.stdout and str(native.library_path()) in done.stdout
     assert f"ready, {len(native.FIRST_USE_LIBRARIES)} libraries" in done.stdout
 
 
@@ -79,7 +79,7 @@ def test_the_libraries_asked_for_are_built_with_a_progress_line_each(monkeypatch
             yield name, native.cache_dir() / f"{name}.so", 10.0 * k, None
 
     monkeypatch.setattr(native, "build_libraries", build)
-    monkeypatch.setattr(native, "_cxx", lambda: "c++")
+    monkeypatch.setattr(native.build, "_cxx", lambda: "c++")
     monkeypatch.delenv("HERTZCHAIN_NATIVE", raising=False)
     assert _kernel_command(all=everything) == 0
     names = tuple(native.library_table()) if everything else native.FIRST_USE_LIBRARIES

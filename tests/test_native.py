@@ -26,7 +26,7 @@ from hertzchain.integrate import Recording, solve_stacked
 # Skipped only where the kernel cannot be built at all (no C++ compiler, or switched off on
 # purpose); where a compiler is, a kernel that cannot be built or loaded fails every test.
 pytestmark = pytest.mark.skipif(
-    (shutil.which("c++") or native._cxx()) is None or os.environ.get("HERTZCHAIN_NATIVE", "1") == "0",
+    (shutil.which("c++") or native.build._cxx()) is None or os.environ.get("HERTZCHAIN_NATIVE", "1") == "0",
     reason="no C++ compiler (or HERTZCHAIN_NATIVE=0): the fused kernel cannot be built here")
 
 
@@ -379,7 +379,7 @@ def test_power_law_runs_on_the_full_kernel_equal_to_the_jax_kernel():
 
     q = jnp.asarray([1e-6, 0.1, 1.6, 2e-6, 1.0])
     jacobian = jax.jit(jax.jacfwd(lambda q: traced(q, "auto")))
-    assert jacobian.lower(q).as_text().count(f"custom_call @{native._law_target('tangent', 'power_law')}") == 1
+    assert jacobian.lower(q).as_text().count(f"custom_call @{native.host._law_target('tangent', 'power_law')}") == 1
     jac = np.asarray(jacobian(q))
     expected = np.asarray(jax.jit(jax.jacfwd(lambda q: traced(q, "jax")))(q))
     for i in range(q.size):
@@ -435,7 +435,7 @@ def test_elastic_plastic_contacts_run_on_the_full_kernel_equal_to_the_jax_kernel
         return jax.jit(lambda q: (traced(q, kernel), jax.jacfwd(lambda q: traced(q, kernel))(q)))
 
     fused = evaluation("auto")
-    assert fused.lower(q).as_text().count(f"custom_call @{native._law_target('tangent', law)}") == 1
+    assert fused.lower(q).as_text().count(f"custom_call @{native.host._law_target('tangent', law)}") == 1
     (forces, jac), (expected_forces, expected) = fused(q), evaluation("jax")(q)
     np.testing.assert_allclose(forces, expected_forces, rtol=0, atol=2e-12 * np.max(np.abs(expected_forces)))
     jac, expected = np.asarray(jac), np.asarray(expected)
@@ -520,23 +520,23 @@ def test_switched_off_runs_the_jax_kernel(tmp_path):
     np.testing.assert_array_equal(np.asarray(result["wall"]), reference.forces_n["wall"])
 
 
-@pytest.mark.skipif(native._cxx() is None, reason="no C++ compiler")
+@pytest.mark.skipif(native.build._cxx() is None, reason="no C++ compiler")
 def test_builds_without_vector_masks_may_speculate_floating_point_operations(monkeypatch):
     """AVX2 builds get -fno-trapping-math (their tangent loops stay vectorised), AVX-512
     builds do not; both keep IEEE arithmetic without contraction."""
     monkeypatch.setenv(native.ARCH_VARIABLE, "haswell")
-    assert "-fno-trapping-math" in native._flags()
+    assert "-fno-trapping-math" in native.build._flags()
     monkeypatch.setenv(native.ARCH_VARIABLE, "skylake-avx512")
-    assert "-fno-trapping-math" not in native._flags()
+    assert "-fno-trapping-math" not in native.build._flags()
     for arch in ("haswell", "skylake-avx512"):
         monkeypatch.setenv(native.ARCH_VARIABLE, arch)
-        assert "-ffp-contract=off" in native._flags() and not any("fast-math" in f for f in native._flags())
+        assert "-ffp-contract=off" in native.build._flags() and not any("fast-math" in f for f in native.build._flags())
 
 
 _REUSE = r"""
 import ctypes, json, resource
 from hertzchain import native
-tuned = native._keep_freed_buffers()
+tuned = native.host._keep_freed_buffers()
 libc = ctypes.CDLL("libc.so.6")
 libc.malloc.restype = ctypes.c_void_p
 libc.free.argtypes = [ctypes.c_void_p]
@@ -576,7 +576,7 @@ def test_failed_build_names_the_compiler_error(tmp_path):
     broken.write_text("this is not C++\n")
     target = tmp_path / "cache" / "kernel.so"
     with pytest.raises(RuntimeError, match="compiling chain_kernel.cc failed"):
-        native._build(target, source=broken)
+        native.build._build(target, source=broken)
     assert not target.exists() and list(target.parent.iterdir()) == []
 
 
@@ -588,10 +588,10 @@ def test_a_kernel_that_cannot_be_built_is_announced_once_with_its_reason(tmp_pat
         raise RuntimeError("no C++ compiler found (set CXX, or install g++)\nmore detail")
 
     monkeypatch.setenv("HERTZCHAIN_CACHE", str(tmp_path))
-    monkeypatch.setattr(native, "_build", no_compiler)
-    monkeypatch.setattr(native, "_FAILED", {})
-    monkeypatch.setattr(native, "_load_main", native._load_main.__wrapped__)
-    load = native._load.__wrapped__  # the uncached build-and-load (the cache says it once a process)
+    monkeypatch.setattr(native.build, "_build", no_compiler)
+    monkeypatch.setattr(native.registry, "_FAILED", {})
+    monkeypatch.setattr(native.host, "_load_main", native.host._load_main.__wrapped__)
+    load = native.host._load.__wrapped__  # the uncached build-and-load (the cache says it once a process)
     monkeypatch.delenv("HERTZCHAIN_NATIVE", raising=False)
     for _ in range(2):
         assert load() == "no C++ compiler found (set CXX, or install g++)\nmore detail"

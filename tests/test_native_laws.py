@@ -26,7 +26,7 @@ from hertzchain.compliant_sensor import CompliantSensors
 from hertzchain.integrate import Recording
 
 pytestmark = pytest.mark.skipif(
-    (shutil.which("c++") or native._cxx()) is None or os.environ.get("HERTZCHAIN_NATIVE", "1") == "0",
+    (shutil.which("c++") or native.build._cxx()) is None or os.environ.get("HERTZCHAIN_NATIVE", "1") == "0",
     reason="no C++ compiler (or HERTZCHAIN_NATIVE=0): the fused kernel cannot be built here")
 
 # Yield stress (Pa) low enough that the faster strikers yield the first contacts.
@@ -77,7 +77,7 @@ def test_elastic_plastic_full_runs_and_jacfwd_equal_the_jax_kernel(law):
         return jax.jit(lambda q: (traced(q, kernel), jax.jacfwd(lambda q: traced(q, kernel))(q)))
 
     fused = evaluation("auto")
-    assert fused.lower(q).as_text().count(f"custom_call @{native._law_target('tangent', law)}") == 1
+    assert fused.lower(q).as_text().count(f"custom_call @{native.host._law_target('tangent', law)}") == 1
     (forces, jac), (expected_forces, expected) = fused(q), evaluation("jax")(q)
     np.testing.assert_allclose(forces, expected_forces, rtol=0, atol=1e-12 * np.max(np.abs(expected_forces)))
     _assert_columns_close(jac, expected, 1e-10)
@@ -107,7 +107,7 @@ def test_compliant_sensor_runs_and_jacfwd_on_the_law_equal_the_jax_kernel(law):
 
     q = jnp.asarray([0.3, 3.0, 1e-7, YIELD_PA if law == "thornton" else 1.6])
     fused = jax.jit(lambda q: (traced(q, "auto"), jax.jacfwd(lambda q: traced(q, "auto"))(q)))
-    assert fused.lower(q).as_text().count(f"custom_call @{native._law_target('tangent', law)}_sensors") == 1
+    assert fused.lower(q).as_text().count(f"custom_call @{native.host._law_target('tangent', law)}_sensors") == 1
     (forces, jac) = fused(q)
     expected_forces, expected = jax.jit(lambda q: (traced(q, "jax"), jax.jacfwd(lambda q: traced(q, "jax"))(q)))(q)
     np.testing.assert_allclose(forces, expected_forces, rtol=0, atol=1e-12 * np.max(np.abs(expected_forces)))

@@ -173,7 +173,7 @@ def test_sampler_gradient_on_the_cpp_kernel_equals_reverse_mode_through_the_jax_
     values, gradients = sampler(batch)
 
     # the reference: a new problem (its own compiled functions) on the JAX kernel
-    monkeypatch.setattr(native, "kernel_for", lambda flags, devices: None)
+    monkeypatch.setattr(native, "kernel_for", lambda flags, devices, rows=None: None)
     reference = problem.with_setups(problem.base_setups)
     # JAX's own differentiation of the kernel (not the model's custom JVP)
     plain = plain_with(lambda x: reference.residuals(x, directional=True))

@@ -35,7 +35,7 @@ def _backends():
 def backend(request, monkeypatch):
     """Every fused kernel call of this test on the thread kernel of `request.param`."""
 
-    def kernel_for(flags, devices):
+    def kernel_for(flags, devices, rows=None):
         if flags.full_state and flags.ledger:
             return None
         return native.FusedKernel("full" if flags.full_state else "conservative", request.param)
@@ -103,3 +103,53 @@ def test_too_many_channels_are_refused_with_the_limit(backend):
     grid = hc.choose_time_grid(setup, t_end_s=0.1e-3, sample_interval_s=2e-6)
     with pytest.raises(Exception, match="at most 16 recorded channels"):
         solve_batched(setup, grid, Recording(tuple(range(17))), books=False)
+
+
+_FAKE_NVCC = """#!/bin/sh
+if [ "$1" = --version ]; then echo "Cuda compilation tools, release 12.4"; exit 0; fi
+{body}
+"""
+_BUILDS = {
+    # the compiler fails: its first line is the reason given
+    "compiler fails": (("echo 'nvcc fatal   : Unsupported gpu architecture compute_99' >&2\n"
+                        "echo 'second line of the failure' >&2\nexit 1"),
+                       "nvcc fatal   : Unsupported gpu architecture compute_99"),
+    # the build "succeeds" but writes no shared library: loading it fails
+    "library does not load": (('while [ $# -gt 0 ]; do if [ "$1" = -o ]; then echo "not a library" > "$2"; fi; '
+                               "shift; done\nexit 0"),
+                              "file too short"),
+}
+
+
+@pytest.mark.parametrize("build", list(_BUILDS))
+def test_a_gpu_kernel_that_cannot_be_built_is_announced_once_and_its_runs_take_the_jax_kernel(
+        build, tmp_path, monkeypatch, capsys):
+    """On a GPU with a CUDA compiler whose build of the thread kernel fails (or whose library
+    does not load), a simulation does not raise: the failure is said once on stderr with its
+    first line, recorded in `kernel_record`, and the runs are the JAX kernel's."""
+    body, first_line = _BUILDS[build]
+    nvcc = tmp_path / "nvcc"
+    nvcc.write_text(_FAKE_NVCC.format(body=body))
+    nvcc.chmod(0o755)
+    monkeypatch.setenv("HERTZCHAIN_CACHE", str(tmp_path / "cache"))
+    monkeypatch.delenv("HERTZCHAIN_NATIVE", raising=False)
+    monkeypatch.setattr(native.thread, "_nvcc", lambda: str(nvcc))
+    monkeypatch.setattr(native.host, "_platforms", lambda devices: {"gpu"})
+    monkeypatch.setattr(native.registry, "_FAILED", {})
+    monkeypatch.setattr(native.thread, "_thread_library", native.thread._thread_library.__wrapped__)  # (uncached: tried anew)
+    setup, grid = ten_bead_batch()
+    runs = [solve_batched(setup, grid, Recording(contacts=(2, 5)), books=True) for _ in range(2)]
+    reference = solve_batched(setup, grid, Recording(contacts=(2, 5)), books=True, kernel="jax")
+    for ours in runs:
+        assert ours.kernel == "jax"
+        for name, force in reference.forces_n.items():
+            np.testing.assert_array_equal(ours.forces_n[name], force)
+        np.testing.assert_array_equal(ours.max_force_n, reference.max_force_n)
+    err = capsys.readouterr().err
+    said = "hertzchain: the cuda chain kernel for 11 bodies cannot be used ("
+    assert err.count(said) == 1 and first_line in err.split(said)[1].splitlines()[0]
+    assert "second line" not in err and "those runs take the JAX kernel instead" in err
+    record = native.kernel_record()
+    assert record["name"].endswith("jax")
+    (library, why), = record["not_available"].items()
+    assert library.startswith("chain_thread-cuda-r12-") and first_line in why

@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     if args.jobs is not None and args.jobs < 1:
         raise ValueError(f"--jobs must be a positive number of builds, got {args.jobs}.")
     names = tuple(native.library_table()) if args.all else native.FIRST_USE_LIBRARIES
-    if native._cxx() is None:
+    if native.build._cxx() is None:
         print("hertzchain kernel: no C++ compiler found (set CXX, or install g++): the fused kernels cannot be "
               "built, and every command runs the JAX kernel instead, several times slower.")
         return BUILD_FAILED

@@ -1,0 +1,376 @@
+"""The fused kernels as JAX functions: their FFI calls on each backend, the conservative
+run (`run`), the full run with forward-mode tangents (`run_full`) and with the books
+(`run_full_books`), and their `jax.vmap` rules (mapped chains join the kernel's batch,
+mapped tangents its directions)."""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import jax
+import numpy as np
+from jax.interpreters import partial_eval
+
+from .. import contact
+from . import build, host, registry, thread
+
+
+def _require(backend: str) -> None:
+    reason = host._load() if backend == "host" else thread.thread_unavailable_reason(backend)
+    if reason is not None:
+        raise RuntimeError(f"the fused chain kernel ({backend}) is unavailable: {reason}")
+
+
+class _Ffi(NamedTuple):
+    """One kernel call on one backend: its target, and the layout of its traces (host: (B,
+    n_samples); thread kernels: (n_samples, B), so that neighbouring threads write
+    neighbouring addresses, transposed here)."""
+
+    backend: str
+    rows: int
+    n_samples: int
+
+    def trace_shapes(self, state0, count: int, leading: tuple = ()) -> tuple:
+        batch = state0.shape[-1]
+        shape = (batch, self.n_samples) if self.backend == "host" else (self.n_samples, batch)
+        return tuple(jax.ShapeDtypeStruct(leading + shape, state0.dtype) for _ in range(count))
+
+    def call(self, kind: str, shapes, args, index, attrs, beads=()) -> tuple:
+        """`kind`: "forward", "full", "tangent", "books", the last three with a dashpot
+        ("_dashpot": its own host library; the thread kernels compile it into the same one) or
+        on another law ("_<law>", a `LAW_DEFINES` key: its own host library), the first two
+        also with compliant sensors ("_sensors", in `beads`: their own host library)."""
+        if self.backend == "host":  # the library built on first use that holds the handler
+            law = next((law for law in build.LAW_DEFINES if f"_{law}" in kind), "hertz")
+            if kind.endswith("_sensors"):
+                path = host._load_sensors(law)
+            elif kind.endswith("_dashpot"):
+                path = host._load_dashpot()
+            elif law != "hertz":
+                path = host._load_law(law)
+            else:
+                path = host._load_main()
+            registry.note_use(path)
+            # the host's full kernels take the sensors' beads after the channels (empty without)
+            extra = () if kind == "forward" else (np.asarray(beads, dtype=np.int64),)
+            return tuple(jax.ffi.ffi_call(host._HOST_TARGETS[kind], shapes)(*args, index, *extra, **attrs))
+        target = thread._thread_target(self.backend, int(self.rows), kind.removesuffix("_dashpot"))
+        registry.note_use(thread._thread_library(self.backend, int(self.rows)), self.backend)
+        return tuple(jax.ffi.ffi_call(target, shapes)(*args, channels=index, **attrs))
+
+    def traces(self, traces) -> tuple:
+        if self.backend == "host":
+            return tuple(traces)
+        return tuple(jax.numpy.swapaxes(trace, -1, -2) for trace in traces)
+
+
+def run(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
+        channels: tuple[int, ...], preload: bool, springs: bool, books: bool, backend: str = "host"):
+    """Advance the packed state `state0` (rows, B) of `batched._Layout` through
+    `n_samples` samples of `steps_per_sample` steps of `dt_s` seconds: returns the final
+    state (rows, B) and one (B, n_samples) force trace per channel, N. Under `jax.vmap`
+    the mapped chains join the kernel's batch: one run for all of them. `backend`: "host"
+    (the vectorised C++ kernel), "cuda" (one thread per chain on a GPU) or "emulated" (the
+    CUDA kernel's source run on the host, one thread after another: for tests)."""
+    _require(backend)
+    zeros = np.zeros((p["kappa"].shape[0], 1))
+    args = (
+        state0,
+        p["inv_mass"],
+        p["kappa"],
+        p["overlap0"] if preload else zeros,
+        p["spring"] if springs else zeros,
+        p["external"] if preload else np.zeros((p["inv_mass"].shape[0], 1)),
+    )
+    config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
+              bool(preload), bool(springs), bool(books), backend)
+    state, *traces = _conservative_call(config)(*args)
+    return tuple(traces), state
+
+
+@functools.cache
+def _conservative_call(config):
+    """The conservative kernel for one configuration as a function of its arrays."""
+    dt_s, steps_per_sample, n_samples, channels, preload, springs, books, backend = config
+    attrs = {"dt": np.float64(dt_s), "steps_per_sample": np.int64(steps_per_sample), "preload": np.int64(preload),
+             "springs": np.int64(springs), "books": np.int64(books)}
+    index = np.asarray(channels, dtype=np.int64)
+
+    @jax.custom_batching.custom_vmap
+    def call(*args):
+        state0 = args[0]
+        ffi = _Ffi(backend, args[1].shape[-2], n_samples)
+        shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + ffi.trace_shapes(state0, len(channels))
+        state, *traces = ffi.call("forward", shapes, args, index, attrs)
+        return (state,) + ffi.traces(traces)
+
+    @call.def_vmap
+    def _(size, batched, *args):
+        state, *traces = call(*_fold_chains(size, batched, args))
+        out = (_unfold_chains(size, state, axis=1),) + tuple(_unfold_chains(size, leaf) for leaf in traces)
+        return out, (True,) * len(out)
+
+    return call
+
+
+def _fold_chains(size: int, batched, args, width: int | None = None):
+    """The arrays of `size` vmapped kernel runs as the arrays of one run of `size` x B
+    chains: every array (..., rows, 1 or B), mapped ones with a leading axis of `size`,
+    becomes (..., rows, size B), chain (l, b) at column l B + b; an unmapped one of width 1
+    stays (..., rows, 1) (shared by every chain) unless `width` (B) is given: then every
+    array is spread to size B chains (the tangents, which the kernel reads per chain)."""
+    chains = args[0].shape[-1] if width is None else width
+
+    def fold(leaf, mapped):
+        if width is None and not mapped and leaf.shape[-1] == 1:
+            return leaf
+        if not mapped:
+            leaf = jax.numpy.broadcast_to(leaf, (size,) + leaf.shape)
+        leaf = jax.numpy.broadcast_to(leaf, leaf.shape[:-1] + (chains,))
+        leaf = jax.numpy.moveaxis(leaf, 0, -2)  # (..., rows, size, B)
+        return leaf.reshape(leaf.shape[:-2] + (size * chains,))
+
+    return tuple(fold(leaf, mapped) for leaf, mapped in zip(args, batched))
+
+
+def _unfold_chains(size: int, leaf, axis: int = 0):
+    """A result of a folded run, its chains (size B) on `axis`, back to `size` results
+    (size, ...) with B chains each."""
+    chains = leaf.shape[axis]
+    leaf = leaf.reshape(leaf.shape[:axis] + (size, chains // size) + leaf.shape[axis + 1:])
+    return jax.numpy.moveaxis(leaf, axis, 0)
+
+
+def _fold_directions(size: int, batched, tangents):
+    """Tangents (D or 1, rows, B) of `size` vmapped directional derivatives (a `jacfwd`'s
+    basis) as the tangents of one run of size x D directions: mapped ones (size, D or 1,
+    rows, B) become (size D, rows, B); unmapped ones of one direction stay shared (1, rows, B)."""
+    directions = max(leaf.shape[1] if mapped else leaf.shape[0] for leaf, mapped in zip(tangents, batched))
+
+    def fold(leaf, mapped):
+        if not mapped and leaf.shape[0] == 1:
+            return leaf
+        if not mapped:
+            leaf = jax.numpy.broadcast_to(leaf, (size,) + leaf.shape)
+        leaf = jax.numpy.broadcast_to(leaf, (size, directions) + leaf.shape[2:])
+        return leaf.reshape((size * directions,) + leaf.shape[2:])
+
+    return tuple(fold(leaf, mapped) for leaf, mapped in zip(tangents, batched))
+
+
+def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples: int,
+             channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
+             dashpot: bool = False, law: str = "hertz", backend: str = "host",
+             sensors: tuple[int, ...] = (), sensor_state=None):
+    """The full step (`batched._step` with velocities and accelerations apart: damping,
+    friction) from displacements `x`, velocities `v` and accelerations `a` (bodies + 1, B)
+    at the impact, through `n_samples` samples of `steps_per_sample` steps of `dt_s`
+    seconds: one (B, n_samples) force trace per channel, N, recorded after every sample.
+
+    Differentiable in forward mode (`jax.jvp`, `jax.jacfwd`, `jax.linearize`) in every array
+    of `p` and in the initial state: the tangents are carried through the same loop
+    (`chain_kernel.cc`), the forces and all the directions of a `jacfwd` in one run. Under
+    `jax.vmap` the mapped chains join the kernel's batch (one run for all of them, with or
+    without tangents): a vmapped batch of fits, `jacfwd` of `vmap` and `vmap` of `jacfwd`
+    are one kernel run each. Reverse mode is not available (use the JAX kernel,
+    `kernel="jax"`). `dashpot`: a linear dashpot on every contact (`p["dashpot"]`, N s/m;
+    needs `viscous`), its terms compiled into this call's kernel only. `law`: the contacts'
+    elastic law (`batched.KernelFlags.law`: "hertz", or "power_law" on `contact.power_law_force`,
+    "thornton" or "jackson_green" on the elastic-plastic laws of `forces.elastic_parts`, from
+    the arrays `batched` stores for them; host only, each in a library of its own;
+    an elastic-plastic run starts from the largest overlaps so far at `x`). `backend` as for
+    `run`. `sensors`: beads K with a compliant sensor (`hertzchain.compliant_sensor`, the
+    step of `batched._step`; on the host, in a library of its own for each law), whose
+    parameters `p` holds as `batched` stores them ("sensor_beta", "sensor_inv",
+    "sensor_back", "sensor_front", (n_sensors, 1 or B) each, and "first_force"), and
+    `sensor_state` their forces (N), rates (N/s) and drives (N) at the impact, (3 n_sensors, B)."""
+    _require(backend)
+    _check_law(law, backend, "run_full")
+    sensors = tuple(int(k) for k in sensors)
+    if sensors and backend != "host":
+        raise ValueError("run_full: compliant sensors run on the host kernel (backend 'host').")
+    if sensors and (sensor_state is None or sensor_state.shape[0] != 3 * len(sensors)):
+        raise ValueError("run_full: sensor_state must hold the sensors' forces, rates and drives, "
+                         "(3 n_sensors, B).")
+    state0 = jax.numpy.concatenate([x, v, a] + ([sensor_state] if sensors else []))
+    args = _full_args(p, state0, preload, springs, dashpot, law, backend, sensors)
+    config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
+              bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), law, backend, sensors)
+    return _full_call(config)(*args)
+
+
+def run_full_books(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
+                   channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
+                   dashpot: bool = False, law: str = "hertz"):
+    """`run_full` with the books, on the host: advances the packed state `state0` (rows, B)
+    of `batched._Layout` for the full step with the books (x, v, a; for elastic-plastic
+    contacts every contact's largest overlap so far; every contact's largest total force; with damping, the viscous force on every body; the energy dissipated by
+    damping and friction so far) and returns (the (B, n_samples) force traces, one per
+    channel, N; the final packed state). The books' sums over the bodies follow
+    `batched._step`'s order; the run is not differentiable (sweeps; fits call `run_full`).
+    `dashpot`, `law` as for `run_full`."""
+    _require("host")
+    if dashpot and not viscous:
+        raise ValueError("run_full_books: a dashpot needs viscous=True (the kernel's rates come with the damping).")
+    _check_law(law, "host", "run_full_books")
+    args = _full_args(p, state0, preload, springs, dashpot, law, "host") + (p["mass"],)
+    attrs = {"dt": np.float64(dt_s), "steps_per_sample": np.int64(steps_per_sample), "viscous": np.int64(viscous),
+             "friction": np.int64(friction), "extras": np.int64(preload or springs), "dashpot": np.int64(dashpot)}
+    call = _Ffi("host", p["inv_mass"].shape[-2], n_samples)
+    shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + call.trace_shapes(state0, len(channels))
+    index = np.asarray(channels, dtype=np.int64)
+    kind = f"books_{law}" if law != "hertz" else "books_dashpot" if dashpot else "books"
+    state, *traces = call.call(kind, shapes, args, index, attrs)
+    return tuple(traces), state
+
+
+def _check_law(law: str, backend: str, caller: str) -> None:
+    if law not in build.CONTACT_LAWS:
+        raise ValueError(f"{caller}: law must be one of {build.CONTACT_LAWS}, got {law!r}.")
+    if law != "hertz" and backend != "host":
+        raise ValueError(f"{caller}: the {law} law runs on the host kernel (backend 'host').")
+
+
+def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool, law: str, backend: str,
+               sensors: tuple[int, ...] = ()) -> tuple:
+    """The full kernels' arrays: the state, then the eight parameter arrays (zeros for the
+    physics a run does not have) and, for the host kernels, the law's (`_law_array`) and the
+    compliant sensors' (`_sensor_array`)."""
+    width = lambda leaf: leaf.shape[-1]
+    zeros = lambda leaf: jax.numpy.zeros_like(leaf)
+    return (
+        state0,
+        p["inv_mass"],
+        p["kappa"],
+        p["overlap0"] if preload else zeros(p["overlap0"]),
+        p["spring"] if springs else zeros(p["spring"]),
+        p["external"] if preload else zeros(p["external"]),
+        jax.numpy.reshape(p["eta"], (1, width(p["eta"]))),
+        jax.numpy.reshape(p["friction"], (1, width(p["friction"]))),
+        # the linear dashpot (N s/m, `contact.contact_force`), zeros without one
+        jax.numpy.reshape(p["dashpot"], (1, width(p["dashpot"]))) if dashpot else jax.numpy.zeros((1, 1)),
+    ) + ((_law_array(p, law), _sensor_array(p, sensors)) if backend == "host" else ())
+
+
+def _sensor_array(p: dict, sensors: tuple[int, ...]):
+    """The compliant sensors' parameters as the host kernels' (rows, 1 or B) array
+    (`chain_kernel.cc`'s `SensorRows`): their mass fractions, 1/omega0^2 (s^2), back and
+    front compliances (m/N), then the preload's force on the first bead (N); one row of zeros
+    without sensors."""
+    if not sensors:
+        return jax.numpy.zeros((1, 1))
+    rows = [p["sensor_beta"], p["sensor_inv"], p["sensor_back"], p["sensor_front"],
+            jax.numpy.reshape(p["first_force"], (1, -1))]
+    width = max(row.shape[-1] for row in rows)
+    return jax.numpy.concatenate([jax.numpy.broadcast_to(row, (row.shape[0], width)) for row in rows])
+
+
+def _law_array(p: dict, law: str):
+    """The law's parameters as the host kernels' (rows, 1 or B) array (`chain_kernel.cc`'s
+    `LawRows`): Hertz's, two rows of zeros; the power law's exponent and reference overlap
+    (m); Thornton's, every contact's yield force (N); Jackson-Green's, every contact's yield
+    force, reduced radius (m) and Poisson ratio, then the yield stress (Pa) and the hardness
+    ratio (`contact.JG_HARDNESS_RATIO`, the one `forces.elastic_parts` applies)."""
+    if law == "hertz":
+        return jax.numpy.zeros((2, 1))
+    if law == "power_law":
+        rows = [p["exponent"], p["reference_overlap_m"]]
+    elif law == "thornton":
+        rows = [p["yield_force_n"]]
+    else:
+        hardness = jax.numpy.full((1,), contact.JG_HARDNESS_RATIO)
+        rows = [p["yield_force_n"], p["reduced_radius_m"], p["poisson"], p["yield_stress_pa"], hardness]
+    rows = [jax.numpy.reshape(row, (-1, row.shape[-1]) if row.ndim > 1 else (1, -1)) for row in rows]
+    width = max(row.shape[-1] for row in rows)
+    return jax.numpy.concatenate([jax.numpy.broadcast_to(row, (row.shape[0], width)) for row in rows])
+
+
+@functools.cache
+def _full_call(config):
+    """The full kernel for one configuration as a function of its arrays, with its JVP."""
+    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, dashpot, law, backend, sensors = config
+    if dashpot and not viscous:
+        raise ValueError("run_full: a dashpot needs viscous=True (the kernel's rates come with the damping).")
+    # dashpot: the kernel with the dashpot's terms compiled in (`DASHPOT_DEFINE`)
+    attrs = {"dt": np.float64(dt_s), "steps_per_sample": np.int64(steps_per_sample),
+             "viscous": np.int64(viscous), "friction": np.int64(friction), "extras": np.int64(extras),
+             "dashpot": np.int64(dashpot)}
+    index = np.asarray(channels, dtype=np.int64)
+    # the state, the eight parameter arrays (host: and the law's and the sensors')
+    n_args = 11 if backend == "host" else 9
+    # a dashpot on Hertz contacts: the dashpot library; on another law: that law's library;
+    # compliant sensors (with or without a dashpot): the sensors' library
+    if law != "hertz":
+        kinds = (f"full_{law}", f"tangent_{law}")
+    elif dashpot and not sensors:
+        kinds = ("full_dashpot", "tangent_dashpot")
+    else:
+        kinds = ("full", "tangent")
+    if sensors:
+        kinds = tuple(f"{kind}_sensors" for kind in kinds)
+
+    def ffi(args):
+        return _Ffi(backend, args[1].shape[-2], n_samples)
+
+    @jax.custom_batching.custom_vmap
+    def traces(*args):
+        call = ffi(args)
+        shapes = call.trace_shapes(args[0], len(channels))
+        return call.traces(call.call(kinds[0], shapes, args, index, attrs, sensors))
+
+    @traces.def_vmap
+    def _(size, batched, *args):
+        out = traces(*_fold_chains(size, batched, args))
+        return tuple(_unfold_chains(size, leaf) for leaf in out), (True,) * len(out)
+
+    @jax.custom_batching.custom_vmap
+    def traces_and_tangents(*args):
+        """(the arrays, their tangents (D or 1, rows, B)) -> the traces (B, n), then their
+        tangents (D, B, n)."""
+        primals, tangents = args[:n_args], args[n_args:]
+        directions = max(t.shape[0] for t in tangents)
+        call = ffi(primals)
+        n = len(channels)
+        out_shapes = call.trace_shapes(primals[0], n) + call.trace_shapes(primals[0], n, (directions,))
+        out = call.call(kinds[1], out_shapes, primals + tangents, index, attrs, sensors)
+        return call.traces(out[:n]) + call.traces(out[n:])
+
+    @traces_and_tangents.def_vmap
+    def _(size, batched, *args):
+        n = len(channels)
+        primals, tangents = args[:n_args], args[n_args:]
+        if any(batched[:n_args]):
+            # mapped primals (a batch of fits, or of chains): their chains join the batch
+            # axis; the tangents' direction axis stays where it is
+            folded = _fold_chains(size, batched[:n_args], primals)
+            folded_t = _fold_chains(size, batched[n_args:], tangents, width=primals[0].shape[-1])
+            out = traces_and_tangents(*folded, *folded_t)
+            return (tuple(_unfold_chains(size, leaf) for leaf in out[:n])
+                    + tuple(_unfold_chains(size, leaf, axis=1) for leaf in out[n:])), (True,) * (2 * n)
+        # mapped tangents only (a jacfwd's basis): their directions join the direction axis
+        out = traces_and_tangents(*primals, *_fold_directions(size, batched[n_args:], tangents))
+        unfolded = tuple(leaf.reshape((size, leaf.shape[0] // size) + leaf.shape[1:]) for leaf in out[n:])
+        return tuple(out[:n]) + unfolded, (False,) * n + (True,) * n
+
+    @jax.custom_jvp
+    def forward(*args):
+        return traces(*args)
+
+    @forward.defjvp
+    def forward_jvp(primals, tangents):
+        batch = primals[0].shape[-1]
+        # every tangent at its primal's rows and the full batch width, one direction (a
+        # jacfwd's basis or a vmap adds the rest through `traces_and_tangents`' batching rule)
+        directions = tuple(
+            jax.numpy.broadcast_to(t, primal.shape[:-1] + (batch,))[None] for primal, t in zip(primals, tangents)
+        )
+        out = traces_and_tangents(*primals, *directions)
+        primal = tuple(out[: len(channels)])
+        if any(isinstance(t, partial_eval.JaxprTracer) for t in tangents):
+            # `jax.linearize` needs forces that do not depend on the (unknown) tangents:
+            # the forward run's; elsewhere the tangent run's own (the same numbers)
+            primal = traces(*primals)
+        return primal, tuple(t[0] for t in out[len(channels):])
+
+    return forward
