@@ -131,7 +131,7 @@ def test_cli_refuses_implausible_and_oversized_runs(tmp_path, capsys):
     # the commands that run many shots: synth (one file a velocity) and sensitivity (tangents)
     assert cli_main(["synth", "--n-beads", "5", "--t-end", "1e3", "--out", str(out)]) == 2
     assert "add --yes" in capsys.readouterr().err
-    assert cli_main(["sensitivity", "--n-beads", "5", "--params", "eta", "--observables", "wall_peak",
+    assert cli_main(["sensitivity", "--n-beads", "5", "--params", "eta_s", "--observables", "wall_peak",
                      "--t-end", "1e3", "--out", str(out)]) == 2
     assert "add --yes" in capsys.readouterr().err
     assert not out.exists()
