@@ -49,6 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from hertzchain import native
+from hertzchain.batched import kernel_rows
 from hertzchain.chain import ChainSetup
 from hertzchain.precision import require_float64
 
@@ -129,10 +130,11 @@ class Problem:
         return fast_path_flags(self, group)
 
     def simulates_natively(self) -> bool:
-        """Whether every group's simulation runs the C++ kernel (`hertzchain.native`) in a fit."""
+        """Whether every group's simulation runs the C++ kernel (`hertzchain.native`) in a fit
+        (on a GPU, the thread kernel of the group's chain length is built to answer)."""
         return all(
-            flags is not None and native.kernel_for(flags, None) is not None
-            for flags in map(self.fast_path_flags, self.groups)
+            flags is not None and native.kernel_for(flags, None, kernel_rows(group.setups)) is not None
+            for flags, group in zip(map(self.fast_path_flags, self.groups), self.groups, strict=True)
         )
 
     def simulated(self, x, *, directional: bool = False):

@@ -399,6 +399,13 @@ def kernel_params(setup: ChainSetup, pad_to: int | None = None) -> dict:
 _params_jit = eqx.filter_jit(_params)
 
 
+def kernel_rows(setup: ChainSetup) -> int:
+    """The rows of a setup's kernel arrays (`kernel_params`' "inv_mass"), bodies + 1: the
+    striker, the beads (a compliant sensor bead as its two halves) and the end's row; known
+    from the setup's shape alone, before any array is made."""
+    return setup.n_beads + len(setup.sensor_beads) + 2
+
+
 def share_uniform(params: dict) -> dict:
     """Kernel arrays with every parameter that is the same in all chains reduced to one
     column (…, 1): the kernel broadcasts it, so a sweep over striker speeds and walls reads

@@ -26,6 +26,25 @@ def small_problem():
     return problem, x_true
 
 
+def test_a_fit_asks_for_the_kernel_of_its_chains_length(small_problem, monkeypatch):
+    """`simulates_natively` names each group's chain length to `kernel_for` (on a GPU it builds
+    that length's thread kernel to answer): the rows of the kernel arrays the batched kernel
+    makes for the group, which `kernel_rows` knows from the setup's shape (sensor beads as two
+    bodies, a free end keeping its row)."""
+    import hertzchain as hc
+    from hertzchain import native
+    from hertzchain.batched import kernel_params, kernel_rows, stack_setups
+
+    for changes in ({}, {"end": "free"}, {"sensor_beads": (3, 7)}):
+        setups = stack_setups([hc.ChainSetup(9, **changes), hc.ChainSetup(9, striker_velocity_m_s=0.5, **changes)])
+        assert kernel_rows(setups) == kernel_params(setups)["inv_mass"].shape[-2]
+    problem, _ = small_problem
+    asked = []
+    monkeypatch.setattr(native, "kernel_for", lambda flags, devices, rows=None: asked.append(rows) or None)
+    assert not problem.simulates_natively()
+    assert asked == [kernel_params(group.setups)["inv_mass"].shape[-2] for group in problem.groups] == [23]
+
+
 def test_interpolation_is_third_order():
     errors = []
     for n in (50, 100, 200):
