@@ -63,7 +63,7 @@ import numpy as np
 from hertzchain import contact
 from hertzchain.chain import ChainSetup
 from hertzchain.parameters import PARAMETERS as SETUP_PARAMETERS
-from hertzchain.parameters import ParameterNameWarning, warn_previous_name  # noqa: F401 (the warning: one class for both registries)
+from hertzchain.parameters import ParameterNameWarning, relabel, resolve_key  # noqa: F401 (the warning: one class for both registries)
 from hertzchain.theory import LONG_WAVE_SPEED_FACTOR, discrete_velocity_constant
 
 SCOPES = ("global", "experiment", "channel", "sensor")
@@ -231,28 +231,16 @@ def resolve_name(name: str, *, where: str | None = None) -> str:
     or file it was written in (`--fixed`): given, a previous name warns once, one line
     (`ParameterNameWarning`), with the name to write. An unknown name raises a ValueError
     listing the public names."""
-    if name in _KEY_OF_PUBLIC:
-        return _KEY_OF_PUBLIC[name]
-    if name not in REGISTRY:
-        raise ValueError(f"Unknown parameter {name!r}{f' in {where}' if where else ''}. "
-                         f"Fittable parameters: {', '.join(public_names())}.")
-    public = REGISTRY[name].public_name
-    if where is not None and public != name:
-        warn_previous_name(name, public, where)
-    return name
-
-
-def _relabel(label: str, rename: Callable[[str], str]) -> str:
-    """`label` with its parameter's name renamed, the instance kept:
-    `striker_velocity[run1]` -> `rename("striker_velocity") + "[run1]"`."""
-    name, bracket, instance = label.partition("[")
-    return rename(name.strip()) + bracket + instance
+    return resolve_key(
+        name, _KEY_OF_PUBLIC, lambda key: REGISTRY[key].public_name if key in REGISTRY else None, where,
+        lambda: ValueError(f"Unknown parameter {name!r}{f' in {where}' if where else ''}. "
+                           f"Fittable parameters: {', '.join(public_names())}."))
 
 
 def resolve_label(label: str, *, where: str | None = None) -> str:
     """`resolve_name` of a label's parameter, the instance kept: `striker_velocity_m_s[run1]`
     -> `striker_velocity[run1]`."""
-    return _relabel(label, lambda name: resolve_name(name, where=where))
+    return relabel(label, lambda name: resolve_name(name, where=where))
 
 
 class LabelledValues(dict):
@@ -264,7 +252,7 @@ class LabelledValues(dict):
     def _key(self, label):
         if not isinstance(label, str) or dict.__contains__(self, label):
             return label
-        return _relabel(label, lambda name: _KEY_OF_PUBLIC.get(name, name))
+        return relabel(label, lambda name: _KEY_OF_PUBLIC.get(name, name))
 
     def __getitem__(self, label):
         return dict.__getitem__(self, self._key(label))
@@ -279,7 +267,7 @@ class LabelledValues(dict):
 def public_label(label: str) -> str:
     """What a user sees for a registry key or instance label: `eta` -> `eta_s`,
     `striker_velocity[run1]` -> `striker_velocity_m_s[run1]`; other names unchanged."""
-    return _relabel(label, lambda name: REGISTRY[name].public_name if name in REGISTRY else name)
+    return relabel(label, lambda name: REGISTRY[name].public_name if name in REGISTRY else name)
 
 
 def public_keys(values: dict) -> dict:

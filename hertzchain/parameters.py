@@ -155,11 +155,31 @@ class ParameterNameWarning(FutureWarning):
     release; the message says the name to write."""
 
 
-def warn_previous_name(name: str, public: str, where: str) -> None:
-    """The one-line notice that `name`, written in `where` (an option or a file), is now
-    called `public` (`ParameterNameWarning`)."""
-    warnings.warn(f"{where}: {name!r} is now called {public!r}; write {public} (the old name is "
-                  "accepted until the next release).", ParameterNameWarning, stacklevel=3)
+def resolve_key(name: str, key_of_public: Mapping[str, str], public_of: Callable[[str], str | None],
+                where: str | None, unknown: Callable[[], Exception]) -> str:
+    """The key of the parameter a user named `name` in a registry of parameters (this one, or
+    `fitting.parameters`' of fitted ones), written either way: `key_of_public` maps public names
+    to keys, `public_of(key)` is a key's public name (None: no such key). `where` (the option or
+    file `name` was written in): given, a previous name warns once, one line
+    (`ParameterNameWarning`), naming the name to write. A name of neither spelling raises
+    `unknown()`."""
+    if name in key_of_public:
+        return key_of_public[name]
+    public = public_of(name)
+    if public is None:
+        raise unknown()
+    if where is not None and public != name:
+        warnings.warn(f"{where}: {name!r} is now called {public!r}; write {public} (the old name is "
+                      "accepted until the next release).", ParameterNameWarning, stacklevel=3)
+    return name
+
+
+def relabel(label: str, rename: Callable[[str], str]) -> str:
+    """`label` with its parameter's name renamed, the instance kept:
+    `striker_velocity[run1]` -> `rename("striker_velocity") + "[run1]"`, `bead_masses[3]` ->
+    `rename("bead_masses") + "[3]"`."""
+    name, bracket, instance = label.partition("[")
+    return rename(name.strip()) + bracket + instance
 
 
 def public_names(*, per_bead: bool = True) -> tuple[str, ...]:
@@ -173,21 +193,16 @@ def resolve_name(name: str, *, where: str | None = None) -> str:
     name (`wall_youngs_pa`) or its previous, short one (`wall_youngs`). `where` is the option
     or file it was written in (`--params`): given, a previous name warns once, one line
     (`ParameterNameWarning`). An unknown name raises a ValueError listing the public names."""
-    if name in _KEY_OF_PUBLIC:
-        return _KEY_OF_PUBLIC[name]
-    if name not in PARAMETERS:
-        raise ValueError(f"unknown parameter {name!r}{f' in {where}' if where else ''}; valid parameters: "
-                         f"{', '.join(public_names())}.")
-    if where is not None and PARAMETERS[name].public_name != name:
-        warn_previous_name(name, PARAMETERS[name].public_name, where)
-    return name
+    return resolve_key(
+        name, _KEY_OF_PUBLIC, lambda key: PARAMETERS[key].public_name if key in PARAMETERS else None, where,
+        lambda: ValueError(f"unknown parameter {name!r}{f' in {where}' if where else ''}; valid parameters: "
+                           f"{', '.join(public_names())}."))
 
 
 def public_name(label: str) -> str:
     """What a user sees for a registry key or a per-bead label: `eta` -> `eta_s`,
     `bead_masses[3]` -> `bead_masses_kg[3]`; other names unchanged."""
-    name, bracket, rest = label.partition("[")
-    return (PARAMETERS[name].public_name if name in PARAMETERS else name) + bracket + rest
+    return relabel(label, lambda name: PARAMETERS[name].public_name if name in PARAMETERS else name)
 
 
 def parameter_values(setup: ChainSetup, params: Sequence[str]) -> dict[str, jax.Array]:
