@@ -39,6 +39,10 @@ from fitting.driven_experiment import load_driven_experiment
 HERE = Path(__file__).resolve().parent
 SOURCE = "micro_slip_tongue_run_preload.json"
 TRANSFER = "drive_response.json"
+# The frequencies the source's tongue run was stepped at (its `--tongue-hz`, as the driven
+# how-to's command gives it); the source stores onsets at every measured frequency, None where
+# it stepped none or found none.
+STEPPED_HZ = (6600.0, 6750.0, 6900.0, 7050.0, 7200.0, 7350.0, 7500.0)
 # The targets of a prediction (the tongue tip within 25 % in amplitude and 2 % in frequency).
 TIP_AMPLITUDE_TOLERANCE = 0.25
 TIP_FREQUENCY_TOLERANCE = 0.02
@@ -132,6 +136,8 @@ def main(argv=None) -> None:
     parser.add_argument("--data-dir", required=True, help="the lydon-2015 data folder")
     parser.add_argument("--results", default=str(HERE / "results" / "single_bead_diagnosis_laws"),
                         help="the folder holding drive_response.json and micro_slip_tongue_run_preload.json")
+    parser.add_argument("--stepped-hz", type=float, nargs="+", default=list(STEPPED_HZ),
+                        help="the frequencies the source run stepped (its --tongue-hz)")
     args = parser.parse_args(argv)
     start = started()
     folder = Path(args.results)
@@ -140,7 +146,13 @@ def main(argv=None) -> None:
     experiment = load_driven_experiment(HERE / "single_bead_joint.toml", args.data_dir)
     tongue = next(m for m in experiment.measurements if m.kind == "tongue").data
     onsets = {float(f): float(o) for f, o in zip(tongue.frequencies_hz, tongue.onset_m, strict=True) if np.isfinite(o)}
-    stepped = {float(c) for c in source["tongue_run_rows"][0]["tongue"]["how"].split("(")[-1].split(")")[0].split(",")}
+    stepped = set(args.stepped_hz)
+    for row in source["tongue_run_rows"]:
+        found = {f for f, onset in zip(row["tongue"]["frequencies_hz"], row["tongue"]["model_onset_m"], strict=True)
+                 if onset is not None}
+        if not found <= stepped:
+            parser.error(f"--stepped-hz: the source has onsets at {sorted(found - stepped)} Hz too; give every "
+                         "frequency its run stepped")
     j = int(np.nanargmin(tongue.onset_m))
     measured = {"tip_m": float(tongue.onset_m[j]), "tip_hz": float(tongue.frequencies_hz[j]),
                 "onset_m": {f: onsets.get(f) for f in sorted(stepped)}, "stepped_hz": stepped, "all_onset_m": onsets}
