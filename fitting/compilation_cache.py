@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from hertzchain.native import _cache_dir as hertzchain_cache_dir
+from hertzchain.native import cache_dir as hertzchain_cache_dir
 
 # Environment variable that turns the cache off (any value but "", "0", "false", "no").
 DISABLE_VARIABLE = "HERTZCHAIN_NO_COMPILE_CACHE"

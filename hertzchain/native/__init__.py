@@ -83,8 +83,6 @@ from .build import (  # noqa: F401
     SOURCE_PARTS,
     UNMASKED_FLAGS,
     _build,
-    _cache_dir,
-    _cxx,
     prune_cache,
 )
 from .calls import _fold_chains, _fold_directions, _unfold_chains, run, run_full, run_full_books  # noqa: F401
