@@ -78,12 +78,14 @@ PATHS = (
 
 
 def hertz_stiffness_n_m(kappa_n_m1p5, force_n):
-    """Hertz's linear stiffness $\\tfrac32\\kappa^{2/3}F^{1/3}$, N/m."""
-    return 1.5 * kappa_n_m1p5 ** (2.0 / 3.0) * force_n ** (1.0 / 3.0)
+    """Hertz's linear stiffness at a static force, $\\tfrac32\\kappa^{2/3}F^{1/3}$, N/m: the
+    law's own (`laws.Hertz.stiffness_at_force`)."""
+    return float(laws.Hertz().stiffness_at_force(force_n, laws.ContactConstants(kappa_n_m1p5=kappa_n_m1p5)))
 
 
 def hertz_force_n(kappa_n_m1p5, stiffness_n_m):
-    """The preload at which a Hertz contact of `kappa_n_m1p5` has `stiffness_n_m`, N."""
+    """The preload at which a Hertz contact of `kappa_n_m1p5` has `stiffness_n_m`, N (the
+    inverse of `hertz_stiffness_n_m`)."""
     return (stiffness_n_m / (1.5 * kappa_n_m1p5 ** (2.0 / 3.0))) ** 3
 
 
