@@ -165,8 +165,8 @@ def main(argv=None) -> None:
                      "onset_m": {str(f): o for f, o in sorted(onsets.items())}},
         "targets": {"tip_amplitude": TIP_AMPLITUDE_TOLERANCE, "tip_frequency": TIP_FREQUENCY_TOLERANCE},
         "rows": rows,
-        "caveats": ["the drive calibration is uncertain by sqrt(2); the transfer is measured relative to a linear "
-                    "bead at the smooth scale, at the tongue run's lowest drive levels only",
+        "caveats": [("the drive calibration is uncertain by sqrt(2); the transfer is measured relative to a linear "
+                     "bead at the smooth scale, at the tongue run's lowest drive levels only"),
                     "onsets known to one drive level (2.25 nm nominal)",
                     "the loop ran the next day: its transfer is the tongue run's, borrowed"],
     }
