@@ -105,7 +105,7 @@ def test_lydon_reproduce_builds_command_lines_its_scripts_parse(monkeypatch, cap
     reproduce = runpy.run_path(str(folder / "reproduce.py"))
     commands = reproduce["main"](["--data-root", "data", "--out", str(tmp_path), "--dry-run"])["commands"]
     assert set(reproduce["SCRIPTS"]) <= set(commands) and not any(tmp_path.iterdir())
-    for name in ("two_bead_end_compliance", "tongue_drive_transfer"):
+    for name in ("two_bead_end_compliance", "tongue_drive_transfer", "micro_slip_floquet_tongue"):
         script, *arguments = commands[name]
         assert arguments[arguments.index("--out") + 1] == str(tmp_path / name)
         parsed = []

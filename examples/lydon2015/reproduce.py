@@ -6,9 +6,9 @@
 runs `hertzchain fit` on the single- and two-bead bending files and on the joint file of the
 single bead's bending, tongue and loop, `hertzchain diagnose` on the joint file and on the
 two-bead bending file, and the lab's scripts (`SCRIPTS`: the 2014 band edge, the two beads'
-end compliance, the tongue with the measured drive transfer, the last from the stored
-`results/single_bead_diagnosis_laws` inputs), each into its own folder under `--out`, and
-writes `summary.json`: the acceptance numbers of each, the wall time of each command (with the
+end compliance, the tongue with the measured drive transfer and the micro-slip tongue by
+Floquet multipliers, these two from the stored `results/single_bead_diagnosis_laws` inputs),
+each into its own folder under `--out`, and writes `summary.json`: the acceptance numbers of each, the wall time of each command (with the
 machine's load average at the start: timings from a loaded machine are marked so) and the
 command lines. `--only` runs the named ones (`JOBS`, `SCRIPTS`) and keeps the other entries of
 an existing `summary.json` as they are; `--dry-run` prints the command lines and runs nothing.
@@ -47,6 +47,10 @@ SCRIPTS = {
     "tongue_drive_transfer": ("tongue_drive_transfer.py",
                               lambda data, out: ["--data-dir", str(data / "lydon-2015"), "--results",
                                                  str(HERE / "results" / "single_bead_diagnosis_laws"), "--out", str(out)]),
+    "micro_slip_floquet_tongue": ("micro_slip_floquet_tongue.py",
+                                  lambda data, out: ["--data-dir", str(data / "lydon-2015"), "--results",
+                                                     str(HERE / "results" / "single_bead_diagnosis_laws"), "--out",
+                                                     str(out)]),
 }
 
 
