@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hertzchain import laws
-from hertzchain.driven import DrivenChain, HarmonicSchedule, floquet_multipliers, record_schedule
+from hertzchain.driven import DrivenChain, HarmonicSchedule, record_schedule
 
 K, PHI = 2e6, 50e-9  # N/m, m: a Coulomb force of 0.05 N
 
@@ -78,7 +78,5 @@ def test_driven_bead_energy_books_close():
     assert supports > 0.2 * drag  # the supports' loss matters in the books
     assert driver_work == pytest.approx(drag + supports, rel=3e-3)  # measured 3e-4 (the transient left)
     assert not chain.runs_on_fused_kernel
-    with pytest.raises(ValueError, match="friction sliders"):
-        floquet_multipliers(chain, 4000.0, 30e-9)
     with pytest.raises(ValueError, match="one per bead"):
         DrivenChain([0.028], [1.38e10, 1.38e10], 4.5, gamma, support_friction=laws.IwanSupport([K, K], PHI))

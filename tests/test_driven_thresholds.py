@@ -8,7 +8,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from hertzchain import laws
 from hertzchain.driven import DrivenChain, HarmonicSchedule, floquet_multipliers, lockin_schedule
+from hertzchain.driven.floquet import period_doubling_threshold
 from hertzchain.driven.thresholds import onset_tangents, period_doubling_onsets
 
 
@@ -100,3 +102,34 @@ def test_emulated_loop_doubles_just_past_the_floquet_threshold():
     loop = emulate_loop(chain, FREQUENCIES[1], np.r_[up, up[-2::-1]])
     assert loop.onset_up_m == up[up > threshold][0]
     assert loop.gone_down_m == up[up < threshold][-1]
+
+
+@pytest.mark.slow  # ~60 s (nested forward passes through 18 state coordinates); the default suite's
+# micro-slip Floquet checks are in test_driven_floquet.py
+def test_micro_slip_onset_and_its_derivative():
+    """With micro-slip supports (the sliders as state): the continuation's threshold against a
+    scan of `floquet_multipliers` from rest (eigenvalues, linear interpolation of mu + 1), and
+    its derivative with respect to the supports' stiffness against central differences (the map
+    is piecewise smooth: at 7900 Hz no slip pattern changes within the steps)."""
+    base = eqx.tree_at(lambda c: c.support_friction, fitted_bead(), laws.IwanSupport(1e6, 10e-9, elements=8),
+                       is_leaf=lambda leaf: leaf is None)
+
+    def build(log_factor):
+        return eqx.tree_at(lambda c: c.support_friction.stiffness_n_m, base,
+                           base.support_friction.stiffness_n_m * jnp.exp(log_factor[0]))
+
+    def search(chain):
+        return period_doubling_onsets(chain, [7900.0], lowest_amplitude_m=5e-9, highest_amplitude_m=60e-9,
+                                      steps_per_period=48)
+
+    found = search(base)
+    assert found.reasons == ("crossed",)
+    scan = period_doubling_threshold(base, 7900.0, np.linspace(12e-9, 18e-9, 7), steps_per_period=48)
+    assert found.amplitude_m[0] == pytest.approx(scan, rel=5e-3)  # measured 1.4268e-8 against 1.4288e-8 m
+    x = jnp.zeros(1)
+    tangents = jax.vmap(lambda d: jax.jvp(build, (x,), (d,))[1])(jnp.eye(1))
+    derivative = onset_tangents(base, found, tangents)[0, 0]
+    h = 1e-3
+    difference = (search(build(x + h)).amplitude_m[0] - search(build(x - h)).amplitude_m[0]) / (2 * h)
+    assert derivative > 0  # measured 2.63e-9 m per unit of log K
+    assert derivative == pytest.approx(difference, rel=1e-5)  # measured 4e-6

@@ -1,5 +1,6 @@
 """Each example in `examples/` runs at its small size and writes what it promises."""
 
+import argparse
 import runpy
 from pathlib import Path
 
@@ -94,3 +95,28 @@ def test_lydon_reproduce_refuses_an_unknown_part(capsys):
     assert stop.value.code == 2
     err = capsys.readouterr().err
     assert "unknown two_beads_diagnosis" in err and "two_bead_bending_diagnosis" in err and "lydon2014_band_edge" in err
+
+
+def test_lydon_reproduce_builds_command_lines_its_scripts_parse(monkeypatch, capsys, tmp_path):
+    """`reproduce.py --dry-run` runs nothing, and each lab script's parser takes the command line
+    built for it (stopped right after parsing)."""
+    folder = EXAMPLES / "lydon2015"
+    monkeypatch.syspath_prepend(str(folder))
+    reproduce = runpy.run_path(str(folder / "reproduce.py"))
+    commands = reproduce["main"](["--data-root", "data", "--out", str(tmp_path), "--dry-run"])["commands"]
+    assert set(reproduce["SCRIPTS"]) <= set(commands) and not any(tmp_path.iterdir())
+    for name in ("two_bead_end_compliance", "tongue_drive_transfer", "micro_slip_floquet_tongue"):
+        script, *arguments = commands[name]
+        assert arguments[arguments.index("--out") + 1] == str(tmp_path / name)
+        parsed = []
+        original = argparse.ArgumentParser.parse_args
+
+        def stop(parser, args=None, namespace=None, parsed=parsed, original=original):
+            parsed.append(original(parser, args, namespace))
+            raise RuntimeError("parsed")
+
+        monkeypatch.setattr(argparse.ArgumentParser, "parse_args", stop)
+        with pytest.raises(RuntimeError, match="parsed"):
+            runpy.run_path(script)["main"](arguments)
+        monkeypatch.setattr(argparse.ArgumentParser, "parse_args", original)
+        assert parsed[0].out == str(tmp_path / name) and parsed[0].data_dir == str(Path("data") / "lydon-2015")

@@ -2,7 +2,7 @@
 frequency, not a smooth calibration:
 
     python examples/lydon2015/tongue_drive_transfer.py --data-dir ../shared/data/real/lydon-2015
-        [--results examples/lydon2015/results/single_bead_diagnosis_laws]
+        [--results examples/lydon2015/results/single_bead_diagnosis_laws] [--out FOLDER]
 
 Below every onset, the tongue run's own fundamental is linear in the drive, so its ratio to a
 linear bead's at one smooth drive scale (`drive_response.json#runs.tongue.by_resonance`) is the
@@ -21,7 +21,7 @@ measured transfer could move an onset into range only where r(f) > 1, and those 
 reported as not computed. The loop (6850 Hz, the next day) has no transfer of its own: its row
 borrows the tongue run's r(6850 Hz) and is marked so.
 
-Writes `tongue_drive_transfer.json` and `.png` beside the inputs (whole or not at all).
+Writes `tongue_drive_transfer.json` and `.png` beside the inputs, or into `--out` (whole or not at all).
 """
 
 from __future__ import annotations
@@ -136,6 +136,8 @@ def main(argv=None) -> None:
     parser.add_argument("--data-dir", required=True, help="the lydon-2015 data folder")
     parser.add_argument("--results", default=str(HERE / "results" / "single_bead_diagnosis_laws"),
                         help="the folder holding drive_response.json and micro_slip_tongue_run_preload.json")
+    parser.add_argument("--out", default=None,
+                        help="the folder to write tongue_drive_transfer.json and .png to (default: --results)")
     parser.add_argument("--stepped-hz", type=float, nargs="+", default=list(STEPPED_HZ),
                         help="the frequencies the source run stepped (its --tongue-hz)")
     args = parser.parse_args(argv)
@@ -174,8 +176,10 @@ def main(argv=None) -> None:
         print(f"{row['tongue_run_precompression_n']:g} N: tip {row.get('tip_m', float('nan')) * 1e9:.1f} nm at "
               f"{row.get('tip_hz')} Hz (measured {measured['tip_m'] * 1e9:.1f} nm at {measured['tip_hz']:.0f} Hz), "
               f"onsets log-rms {row['onset_log_rms']}, loop {row['loop']['onset_up_m']}")
-    plot(rows, measured, transfer_at(by_resonance, rows[-1]["resonance_hz"]), folder / "tongue_drive_transfer.png")
-    write_stamped(folder / "tongue_drive_transfer.json", result, start)
+    out = folder if args.out is None else Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    plot(rows, measured, transfer_at(by_resonance, rows[-1]["resonance_hz"]), out / "tongue_drive_transfer.png")
+    write_stamped(out / "tongue_drive_transfer.json", result, start)
 
 
 if __name__ == "__main__":

@@ -37,7 +37,7 @@ import numpy as np
 
 from . import kernel, measurements
 from .chain import DrivenChain
-from .floquet import period_map
+from .floquet import linearise, newton_step, orbit_state, period_map
 from .schedule import HarmonicSchedule, _levels, check_readout, lockin_schedule
 
 # A polished orbit whose period map misses it by more than this (relative) is lost: the
@@ -54,8 +54,9 @@ class DoublingOnsets(eqx.Module):
 
     **Fields:** `frequencies_hz` (B,); `amplitude_m` (B,) the driver amplitude at which a real
     multiplier crosses $-1$, m (NaN where none was found); `found` (B,) bool; `reasons` (B,)
-    one sentence per run (`"crossed"`, or why not); `orbit_state` (2n, B) the period-1 orbit
-    at the threshold (m, m/s from the static equilibrium; for `onset_tangents`);
+    one sentence per run (`"crossed"`, or why not); `orbit_state` (N, B) the period-1 orbit
+    at the threshold (the period map's state, `floquet.orbit_state`: m, m/s, m from the static
+    equilibrium; for `onset_tangents`);
     `margin_slope_per_m` (B,) $\\partial g/\\partial a$ there; `evaluations` the batched
     evaluations of $g$ the search took; static `steps_per_period`, `newton_steps`.
     """
@@ -74,25 +75,19 @@ class DoublingOnsets(eqx.Module):
 def doubling_margin(chain: DrivenChain, frequency_hz, amplitude_m, guess, steps_per_period: int,
                     newton_steps: int, unroll: int = kernel.DEFAULT_UNROLL):
     """$g = \\det(I + M)$ at the period-1 orbit that `newton_steps` Newton steps polish from
-    `guess` (2n, B), at `frequency_hz`, `amplitude_m` (B,) (traceable in every argument).
-    **Returns:** (g (B,), orbit (2n, B), relative orbit residual $|P(z) - z|/|z|$ (B,))."""
+    `guess` (N, B; the period map's state, `floquet.orbit_state`), at `frequency_hz`,
+    `amplitude_m` (B,) (traceable in every argument). With micro-slip supports each slider
+    stuck through the period contributes a factor $1 + 1 = 2$: $g$ keeps its sign, and jumps
+    where a slider starts or stops slipping (the map is piecewise smooth, `floquet`).
+    **Returns:** (g (B,), orbit (N, B), relative orbit residual $|P(z) - z|/|z|$ (B,))."""
     advance = period_map(chain, frequency_hz, amplitude_m, steps_per_period, unroll)
-    size = guess.shape[0]
-
-    def linearise(z):
-        def column(i):
-            return jax.jvp(advance, (z,), (jnp.zeros_like(z).at[i].set(1.0),))
-
-        images, columns = jax.vmap(column)(jnp.arange(size))
-        return images[0], jnp.moveaxis(columns, -1, 0).swapaxes(1, 2)  # P(z) (2n, B), M (B, 2n, 2n)
-
     z = guess
     for _ in range(newton_steps):
-        image, monodromy = linearise(z)
-        z = z - jnp.linalg.solve(monodromy - jnp.eye(size), (image - z).T[..., None])[..., 0].T
-    image, monodromy = linearise(z)
+        image, monodromy = linearise(advance, z)
+        z = newton_step(z, image, monodromy, chain.n_beads)
+    image, monodromy = linearise(advance, z)
     residual = jnp.linalg.norm(image - z, axis=0) / jnp.maximum(jnp.linalg.norm(z, axis=0), 1e-300)
-    return jnp.linalg.det(jnp.eye(size) + monodromy), z, residual
+    return jnp.linalg.det(jnp.eye(z.shape[0]) + monodromy), z, residual
 
 
 @eqx.filter_jit
@@ -109,7 +104,7 @@ def _margin_and_slope(chain, frequency_hz, amplitude_m, guess, steps_per_period,
 def _ramped_orbit(chain, frequency_hz, amplitude_m, steps_per_period, ramp_periods, hold_periods):
     schedule = HarmonicSchedule(frequency_hz[None], amplitude_m[None], steps_per_period, ramp_periods, hold_periods, 0)
     _, _, state = _levels(chain, schedule, steps_per_period, lambda s, u, u_dot: u, kernel.DEFAULT_UNROLL)
-    return jnp.concatenate([state.displacement_m, state.velocity_m_s])
+    return orbit_state(state)
 
 
 def period_doubling_onsets(chain: DrivenChain, frequencies_hz, *, lowest_amplitude_m: float,

@@ -73,10 +73,12 @@ class IwanSupport(eqx.Module):
 
     def update_state(self, slider_m, displacement_m):
         """The sliders after a move to `displacement_m`: each follows just enough that its
-        spring's stretch stays within $\\pm\\phi_j$, m."""
+        spring's stretch stays within $\\pm\\phi_j$, m. A slider that sticks keeps its
+        position exactly (the stretch beyond $\\phi_j$ it moves by is an exact 0), and so does
+        its derivative: a period map's row of a slider stuck throughout is exactly a unit row."""
         limit = self._slip_at(displacement_m)
-        stretch = jnp.clip(displacement_m - slider_m, -limit, limit)
-        return displacement_m - stretch
+        stretch = displacement_m - slider_m
+        return slider_m + (stretch - jnp.clip(stretch, -limit, limit))
 
     def force(self, displacement_m, slider_m):
         """The supports' force on the bead, N (negative for a bead displaced to +x)."""
