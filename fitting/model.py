@@ -36,7 +36,8 @@ The model's units, one concept a module: this one holds `Problem` (the residual 
 and its Jacobian; `fitting.forward_model` how predictions are made (`ForwardModel`,
 `KernelForm`, `time_step_s`), `fitting.simulation_groups` which experiments share a
 simulation and where each parameter acts, `fitting.group_simulator` one group's compiled
-simulation and its custom JVP, `fitting.sampling` the interpolation onto the data's samples.
+simulation and its custom JVP, `fitting.sampling` the interpolation onto the data's samples
+and the residual vector's layout.
 """
 
 from __future__ import annotations
@@ -64,8 +65,8 @@ from .forward_model import (  # noqa: F401  (the forward model's names, importab
 )
 from .group_simulator import fast_path_flags, group_simulator
 from .parameters import ParameterInstance
-from .sampling import interpolate, interpolate_rows, sample_layout  # noqa: F401
-from .simulation_groups import _Group, make_groups, parameter_index
+from .sampling import interpolate, interpolate_rows, residual_slices, sample_layout  # noqa: F401
+from .simulation_groups import _Group, coarse_experiments, make_groups, parameter_index
 
 # Narrowest block of Jacobian columns computed by directional forward mode (see
 # `residuals_and_jacobian`).
@@ -167,7 +168,7 @@ class Problem:
         """The model at every data sample, in residual layout (jax), from the simulated
         `outputs` of `simulated`: one gather per group."""
         x = jnp.asarray(x)
-        x_or_default = lambda index, default: jnp.where(  # noqa: E731
+        x_or_default = lambda index, default: jnp.where(
             index >= 0, x[np.maximum(index, 0)], default
         )
         pieces = []
@@ -238,16 +239,8 @@ class Problem:
         return jax.jit(self.model_vector)
 
     def residual_slices(self) -> list[dict]:
-        """Per experiment, channel -> slice of the residual vector."""
-        slices, start = [], 0
-        for experiment in self.experiments:
-            entry = {}
-            for name in experiment.channels:
-                n = len(experiment.time_s)
-                entry[name] = slice(start, start + n)
-                start += n
-            slices.append(entry)
-        return slices
+        """Per experiment, channel -> slice of the residual vector (`sampling.residual_slices`)."""
+        return residual_slices(self.experiments)
 
     @property
     def n_residuals(self) -> int:
@@ -262,16 +255,9 @@ class Problem:
         return sum(e.n_fitted for e in self.experiments) + len(self.priors)
 
     def check_resolution(self, x) -> list[str]:
-        """Experiments whose fitted setup is resolved by fewer than half the asked steps."""
-        coarse = []
-        for group in self.groups:
-            for e in group.experiments:
-                setup = self.setup_at(np.asarray(x), e)
-                needed = time_step_s(setup, group.grid.sample_interval_s,
-                                     steps_per_contact=self.forward.steps_per_contact)
-                if group.grid.dt_s > 2 * needed:
-                    coarse.append(self.experiments[e].label)
-        return coarse
+        """Experiments whose fitted setup is resolved by fewer than half the asked steps
+        (`simulation_groups.coarse_experiments`)."""
+        return coarse_experiments(self, x)
 
 
 def residuals_and_jacobian(problem: Problem, x, columns=None):

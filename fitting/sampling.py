@@ -1,5 +1,6 @@
 """The model at the data's samples: Catmull-Rom interpolation of the simulated channels,
-and where each residual's sample comes from (row, time, offset, gain, AC coupling)."""
+where each channel's samples lie in the residual vector, and where each residual's sample
+comes from (row, time, offset, gain, AC coupling)."""
 
 from __future__ import annotations
 
@@ -37,6 +38,20 @@ def interpolate_rows(series, rows, position):
     )
 
 
+def residual_slices(experiments) -> list[dict]:
+    """Per experiment, channel -> slice of the residual vector: every fitted channel's
+    samples, experiment after experiment, in the order of its `channels`."""
+    slices, start = [], 0
+    for experiment in experiments:
+        entry = {}
+        for name in experiment.channels:
+            n = len(experiment.time_s)
+            entry[name] = slice(start, start + n)
+            start += n
+        slices.append(entry)
+    return slices
+
+
 def sample_layout(problem):
     """Per group, where each residual's sample comes from (numpy, built once).
 
@@ -46,13 +61,9 @@ def sample_layout(problem):
     whether its channel is AC-coupled.
     `order` maps the concatenation of the groups' samples to the residual layout.
     """
-    layouts, position = [], {}
-    start = 0
-    for e, experiment in enumerate(problem.experiments):
-        for name in experiment.channels:
-            position[(e, name)] = start
-            start += len(experiment.time_s)
-    order = []
+    position = {(e, name): part.start for e, slices in enumerate(residual_slices(problem.experiments))
+                for name, part in slices.items()}
+    layouts, order = [], []
     for group in problem.groups:
         rows, times, offsets, gains, ac = [], [], [], [], []
         for row, e in enumerate(group.experiments):

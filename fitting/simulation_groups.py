@@ -1,6 +1,6 @@
 """Simulation groups: experiments of the same chain structure simulated together on one
-time grid, and where each parameter acts (offsets, gains, global and per-experiment
-simulator parameters)."""
+time grid (and whether it still resolves the fitted setups), and where each parameter acts
+(offsets, gains, global and per-experiment simulator parameters)."""
 
 from __future__ import annotations
 
@@ -123,3 +123,18 @@ def make_groups(problem, setups) -> list[_Group]:
             )
         )
     return groups
+
+
+def coarse_experiments(problem, x) -> list[str]:
+    """The labels of `problem`'s experiments whose setup at parameter values `x` is resolved
+    by fewer than half the steps per contact the forward model asks for: their group's time
+    step is more than twice the `time_step_s` the fitted setup needs."""
+    coarse = []
+    for group in problem.groups:
+        for e in group.experiments:
+            setup = problem.setup_at(np.asarray(x), e)
+            needed = time_step_s(setup, group.grid.sample_interval_s,
+                                 steps_per_contact=problem.forward.steps_per_contact)
+            if group.grid.dt_s > 2 * needed:
+                coarse.append(problem.experiments[e].label)
+    return coarse

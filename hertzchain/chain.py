@@ -19,8 +19,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import contact, laws
+from . import laws, setup_constants, setup_laws
 from .materials import BEAD_STEEL
+from .setup_laws import LAW_ATTRIBUTES  # noqa: F401  (importable from here too)
 from .validation import check_setup, check_values
 
 ENDS = ("wall", "free")
@@ -28,9 +29,6 @@ PLASTIC_LAWS = laws.registry.PLASTIC_LAW_NAMES
 # Keywords of `ChainSetup` that `contact_law=` replaces (kept for one release).
 DEPRECATED_LAW_KEYWORDS = ("plasticity", "plastic_law", "power_law", "contact_exponent",
                            "exponent_reference_overlap_m")
-# The law coefficients a setup exposes as attributes (`ChainSetup.eta_s`, ...): sweepable,
-# fittable and written to result files as before.
-LAW_ATTRIBUTES = ("eta_s", "dashpot_n_s_m", "contact_exponent", "exponent_reference_overlap_m")
 
 
 def _as_float(value, name: str):
@@ -40,21 +38,66 @@ def _as_float(value, name: str):
         raise ValueError(f"{name} must be a number (SI units), got {value!r}.") from error
 
 
+def _or_default(value, default, name: str) -> jax.Array:
+    """`value` (None: `default`) as a float64 array; ValueError naming `name` for a non-number."""
+    return _as_float(default if value is None else value, name)
+
+
+def _per_bead(value, name: str, n_beads: int) -> jax.Array:
+    """`value`, a number or one per bead, as an (n_beads,) float64 array; ValueError naming
+    `name` for another shape."""
+    array = _as_float(value, name)
+    if array.ndim == 0:
+        return jnp.full((n_beads,), array)
+    if array.shape != (n_beads,):
+        raise ValueError(
+            f"{name} must be a scalar or have one value per bead ({n_beads}), "
+            f"got shape {array.shape}."
+        )
+    return array
+
+
+def _bead_sizes(n_beads: int, radius_m, density_kg_m3, mass_kg) -> tuple[jax.Array, jax.Array]:
+    """The beads' radii (m) and densities (kg/m^3), each (n_beads,): `density_kg_m3`, or
+    where `mass_kg` (kg) is given (not None) the density of full spheres of that mass."""
+    radius = _per_bead(radius_m, "bead_radius_m", n_beads)
+    check_values("bead_radius_m", radius)
+    if mass_kg is None:
+        return radius, _per_bead(density_kg_m3, "bead_density_kg_m3", n_beads)
+    mass = _per_bead(mass_kg, "bead_mass_kg", n_beads)
+    check_values("bead_mass_kg", mass)
+    return radius, mass / (4.0 / 3.0 * jnp.pi * radius**3)
+
+
+def _striker_size(radius_m, mass_kg, density_kg_m3, bead_radius_m, bead_density_kg_m3) -> tuple[jax.Array, jax.Array]:
+    """The striker's radius (m) and density (kg/m^3): the density given (None: bead 1's,
+    `bead_density_kg_m3`), the radius given, or that of a full sphere of mass `mass_kg` (kg),
+    else bead 1's (`bead_radius_m`)."""
+    density = _or_default(density_kg_m3, bead_density_kg_m3, "striker_density_kg_m3")
+    if mass_kg is not None and radius_m is not None:
+        raise ValueError("Give striker_mass_kg or striker_radius_m, not both.")
+    if mass_kg is not None:
+        mass = _as_float(mass_kg, "striker_mass_kg")
+        check_values("striker_mass_kg", mass)
+        radius_m = (3.0 * mass / (4.0 * jnp.pi * density)) ** (1.0 / 3.0)
+    return _or_default(radius_m, bead_radius_m, "striker_radius_m"), density
+
+
 def _contact_law(contact_law, old: dict) -> laws.AbstractContactLaw:
     """The setup's contact law: `contact_law`, or the one the deprecated keywords `old`
-    describe (with a `DeprecationWarning`), else Hertz's."""
+    (name -> value, None: not given) describe (with a `DeprecationWarning`), else Hertz's."""
+    old = {name: value for name, value in old.items() if value is not None}
     if old:
         if contact_law is not None:
             raise ValueError(f"Give contact_law only: {', '.join(old)} are its former spelling.")
-        contact_law = laws.contact_law_from_keywords(**{name: value for name, value in old.items()
-                                                        if value is not None})
+        contact_law = laws.contact_law_from_keywords(**old)
         replacement = type(contact_law).__name__
         warnings.warn(f"ChainSetup({'=..., '.join(old)}=...) is deprecated: pass "
                       f"contact_law=hertzchain.laws.{replacement}(...) instead.", DeprecationWarning, stacklevel=3)
     if contact_law is None:
         return laws.Hertz()
     if not isinstance(contact_law, laws.AbstractContactLaw):
-        raise ValueError(f"contact_law must be a hertzchain.laws contact law (e.g. laws.Hertz(), "
+        raise ValueError(f"contact_law must be a hertzchain.laws contact law (e.g. laws.Hertz(), "  # noqa: TRY004 (bad input is a ValueError here)
                          f"laws.PowerLaw(1.6)), got {contact_law!r}.")
     return contact_law
 
@@ -66,7 +109,7 @@ def _dissipation(dissipation, eta_s, dashpot_n_s_m) -> tuple[laws.AbstractDissip
     given = (dissipation,) if isinstance(dissipation, laws.AbstractDissipation) else tuple(dissipation)
     for law in given:
         if not isinstance(law, laws.AbstractDissipation):
-            raise ValueError(f"dissipation must hold hertzchain.laws dissipation laws (e.g. "
+            raise ValueError(f"dissipation must hold hertzchain.laws dissipation laws (e.g. "  # noqa: TRY004 (bad input is a ValueError here)
                              f"laws.Viscoelastic(eta_s=1e-6)), got {law!r}.")
     firsts = []
     for kind, value, name in ((laws.Viscoelastic, eta_s, "eta_s"), (laws.Dashpot, dashpot_n_s_m, "dashpot_n_s_m")):
@@ -75,6 +118,17 @@ def _dissipation(dissipation, eta_s, dashpot_n_s_m) -> tuple[laws.AbstractDissip
             raise ValueError(f"dissipation lists {kind.__name__} {len(found)} times; give it once.")
         firsts.append(kind(_as_float(value, name)) if value is not None else found[0] if found else kind())
     return tuple(firsts) + tuple(law for law in given if type(law) not in (laws.Viscoelastic, laws.Dashpot))
+
+
+def _check_sensor_beads(sensor_beads: tuple[int, ...], n_beads: int) -> None:
+    """ValueError for a sensor bead outside 1..`n_beads` or listed twice."""
+    for bead in sensor_beads:
+        if not 1 <= bead <= n_beads:
+            raise ValueError(
+                f"sensor_beads: bead {bead} is not in the chain (beads are numbered 1..{n_beads})."
+            )
+    if len(set(sensor_beads)) != len(sensor_beads):
+        raise ValueError(f"sensor_beads lists a bead twice: {sensor_beads}.")
 
 
 class ChainSetup(eqx.Module):
@@ -166,101 +220,34 @@ class ChainSetup(eqx.Module):
         self,
         n_beads: int = 21,
         *,
-        bead_radius_m=0.013,
-        bead_density_kg_m3=BEAD_STEEL.density_kg_m3,
-        bead_youngs_pa=BEAD_STEEL.youngs_pa,
-        bead_poisson=BEAD_STEEL.poisson,
-        bead_mass_kg=None,
-        bead_yield_stress_pa=BEAD_STEEL.yield_stress_pa,
-        striker_radius_m=None,
-        striker_mass_kg=None,
-        striker_density_kg_m3=None,
-        striker_youngs_pa=None,
-        striker_poisson=None,
-        striker_velocity_m_s=0.3,
-        end: str = "wall",
-        wall_youngs_pa=None,
-        wall_poisson=None,
-        contact_law: laws.AbstractContactLaw | None = None,
-        dissipation=(),
-        eta_s=None,
-        dashpot_n_s_m=None,
-        mu=0.0,
-        mu_star=0.0,
-        precompression_n=0.0,
-        gravity_m_s2=9.81,
-        sensor_beads=(),
-        sensor_beta=0.11,
-        sensor_f0_hz=85e3,
-        plasticity: bool | None = None,
-        contact_exponent=None,
-        exponent_reference_overlap_m=None,
-        power_law: bool | None = None,
-        plastic_law: str | None = None,
+        bead_radius_m=0.013, bead_density_kg_m3=BEAD_STEEL.density_kg_m3, bead_youngs_pa=BEAD_STEEL.youngs_pa,
+        bead_poisson=BEAD_STEEL.poisson, bead_mass_kg=None, bead_yield_stress_pa=BEAD_STEEL.yield_stress_pa,
+        striker_radius_m=None, striker_mass_kg=None, striker_density_kg_m3=None, striker_youngs_pa=None,
+        striker_poisson=None, striker_velocity_m_s=0.3,
+        end: str = "wall", wall_youngs_pa=None, wall_poisson=None,
+        contact_law: laws.AbstractContactLaw | None = None, dissipation=(), eta_s=None, dashpot_n_s_m=None,
+        mu=0.0, mu_star=0.0, precompression_n=0.0, gravity_m_s2=9.81,
+        sensor_beads=(), sensor_beta=0.11, sensor_f0_hz=85e3,
+        plasticity: bool | None = None, contact_exponent=None, exponent_reference_overlap_m=None,
+        power_law: bool | None = None, plastic_law: str | None = None,
     ):
         if isinstance(n_beads, bool) or not isinstance(n_beads, (int, np.integer)) or n_beads < 1:
             raise ValueError(f"n_beads must be a positive integer, got {n_beads!r}.")
         if end not in ENDS:
             raise ValueError(f"end must be one of {ENDS}, got {end!r}.")
-
-        def per_bead(value, name):
-            array = _as_float(value, name)
-            if array.ndim == 0:
-                return jnp.full((n_beads,), array)
-            if array.shape != (n_beads,):
-                raise ValueError(
-                    f"{name} must be a scalar or have one value per bead ({n_beads}), "
-                    f"got shape {array.shape}."
-                )
-            return array
-
-        radius = per_bead(bead_radius_m, "bead_radius_m")
-        check_values("bead_radius_m", radius)
-        if bead_mass_kg is not None:
-            mass = per_bead(bead_mass_kg, "bead_mass_kg")
-            check_values("bead_mass_kg", mass)
-            density = mass / (4.0 / 3.0 * jnp.pi * radius**3)
-        else:
-            density = per_bead(bead_density_kg_m3, "bead_density_kg_m3")
-        self.bead_radius_m = radius
-        self.bead_density_kg_m3 = density
-        self.bead_youngs_pa = per_bead(bead_youngs_pa, "bead_youngs_pa")
-        self.bead_poisson = per_bead(bead_poisson, "bead_poisson")
-        self.bead_yield_stress_pa = _as_float(
-            math.inf if bead_yield_stress_pa is None else bead_yield_stress_pa,
-            "bead_yield_stress_pa",
-        )
-
-        self.striker_density_kg_m3 = _as_float(
-            density[0] if striker_density_kg_m3 is None else striker_density_kg_m3,
-            "striker_density_kg_m3",
-        )
-        if striker_mass_kg is not None and striker_radius_m is not None:
-            raise ValueError("Give striker_mass_kg or striker_radius_m, not both.")
-        if striker_mass_kg is not None:
-            striker_mass = _as_float(striker_mass_kg, "striker_mass_kg")
-            check_values("striker_mass_kg", striker_mass)
-            striker_radius_m = (3.0 * striker_mass / (4.0 * jnp.pi * self.striker_density_kg_m3)) ** (
-                1.0 / 3.0
-            )
-        self.striker_radius_m = _as_float(
-            radius[0] if striker_radius_m is None else striker_radius_m, "striker_radius_m"
-        )
-        self.striker_youngs_pa = _as_float(
-            self.bead_youngs_pa[0] if striker_youngs_pa is None else striker_youngs_pa,
-            "striker_youngs_pa",
-        )
-        self.striker_poisson = _as_float(
-            self.bead_poisson[0] if striker_poisson is None else striker_poisson, "striker_poisson"
-        )
+        self.bead_radius_m, self.bead_density_kg_m3 = _bead_sizes(n_beads, bead_radius_m, bead_density_kg_m3,
+                                                                   bead_mass_kg)
+        self.bead_youngs_pa = _per_bead(bead_youngs_pa, "bead_youngs_pa", n_beads)
+        self.bead_poisson = _per_bead(bead_poisson, "bead_poisson", n_beads)
+        self.bead_yield_stress_pa = _or_default(bead_yield_stress_pa, math.inf, "bead_yield_stress_pa")
+        self.striker_radius_m, self.striker_density_kg_m3 = _striker_size(
+            striker_radius_m, striker_mass_kg, striker_density_kg_m3, self.bead_radius_m[0], self.bead_density_kg_m3[0])
+        self.striker_youngs_pa = _or_default(striker_youngs_pa, self.bead_youngs_pa[0], "striker_youngs_pa")
+        self.striker_poisson = _or_default(striker_poisson, self.bead_poisson[0], "striker_poisson")
         self.striker_velocity_m_s = _as_float(striker_velocity_m_s, "striker_velocity_m_s")
         self.end = end
-        self.wall_youngs_pa = _as_float(
-            self.bead_youngs_pa[-1] if wall_youngs_pa is None else wall_youngs_pa, "wall_youngs_pa"
-        )
-        self.wall_poisson = _as_float(
-            self.bead_poisson[-1] if wall_poisson is None else wall_poisson, "wall_poisson"
-        )
+        self.wall_youngs_pa = _or_default(wall_youngs_pa, self.bead_youngs_pa[-1], "wall_youngs_pa")
+        self.wall_poisson = _or_default(wall_poisson, self.bead_poisson[-1], "wall_poisson")
         self.dissipation = _dissipation(dissipation, eta_s, dashpot_n_s_m)
         self.mu = _as_float(mu, "mu")
         self.mu_star = _as_float(mu_star, "mu_star")
@@ -269,66 +256,17 @@ class ChainSetup(eqx.Module):
         self.sensor_beads = tuple(sorted(int(k) for k in sensor_beads))
         self.sensor_beta = _as_float(sensor_beta, "sensor_beta")
         self.sensor_f0_hz = _as_float(sensor_f0_hz, "sensor_f0_hz")
-        old = dict(plasticity=plasticity, plastic_law=plastic_law, power_law=power_law,
-                   contact_exponent=contact_exponent, exponent_reference_overlap_m=exponent_reference_overlap_m)
-        self.contact_law = _contact_law(contact_law, {k: v for k, v in old.items() if v is not None})
+        self.contact_law = _contact_law(contact_law, {
+            "plasticity": plasticity, "plastic_law": plastic_law, "power_law": power_law,
+            "contact_exponent": contact_exponent, "exponent_reference_overlap_m": exponent_reference_overlap_m})
 
     def __check_init__(self):
         check_setup(self)
-        for bead in self.sensor_beads:
-            if not 1 <= bead <= self.n_beads:
-                raise ValueError(
-                    f"sensor_beads: bead {bead} is not in the chain (beads are numbered 1..{self.n_beads})."
-                )
-        if len(set(self.sensor_beads)) != len(self.sensor_beads):
-            raise ValueError(f"sensor_beads lists a bead twice: {self.sensor_beads}.")
+        _check_sensor_beads(self.sensor_beads, self.n_beads)
 
     @property
     def n_beads(self) -> int:
         return self.bead_radius_m.shape[-1]
-
-    @property
-    def law_attributes(self) -> tuple[str, ...]:
-        """The names of `LAW_ATTRIBUTES` that are coefficients of this setup's laws (so
-        `eqx.tree_at(lambda s: s.eta_s, ...)` changes them): `eta_s` and `dashpot_n_s_m`,
-        and with `laws.PowerLaw` its exponent and reference overlap."""
-        return LAW_ATTRIBUTES if self.power_law else LAW_ATTRIBUTES[:2]
-
-    @property
-    def eta_s(self) -> jax.Array:
-        """Viscoelastic time of the setup's `laws.Viscoelastic`, s."""
-        return self.dissipation[0].eta_s
-
-    @property
-    def dashpot_n_s_m(self) -> jax.Array:
-        """Coefficient of the setup's `laws.Dashpot`, N s/m."""
-        return self.dissipation[1].gamma_n_s_m
-
-    @property
-    def plasticity(self) -> bool:
-        """Whether the contact law is elastic-plastic (reads the largest overlap so far)."""
-        return self.contact_law.has_history
-
-    @property
-    def plastic_law(self) -> str:
-        """The elastic-plastic law's name ("thornton" or "jackson_green"; "thornton" for
-        elastic contacts, the former default)."""
-        return self.contact_law.native_name if self.contact_law.has_history else "thornton"
-
-    @property
-    def power_law(self) -> bool:
-        """Whether the contacts follow `laws.PowerLaw`."""
-        return isinstance(self.contact_law, laws.PowerLaw)
-
-    @property
-    def contact_exponent(self) -> jax.Array:
-        """Exponent of the contact law (1.5 unless `laws.PowerLaw`)."""
-        return self.contact_law.exponent if self.power_law else jnp.asarray(1.5)
-
-    @property
-    def exponent_reference_overlap_m(self) -> jax.Array:
-        """Reference overlap of `laws.PowerLaw`, m (its default 10 um for other laws)."""
-        return self.contact_law.reference_overlap_m if self.power_law else jnp.asarray(1e-5)
 
     @property
     def bead_mass_kg(self) -> jax.Array:
@@ -338,80 +276,42 @@ class ChainSetup(eqx.Module):
     def striker_mass_kg(self) -> jax.Array:
         return 4.0 / 3.0 * jnp.pi * self.striker_density_kg_m3 * self.striker_radius_m**3
 
-    def contact_kappa(self) -> jax.Array:
-        """Hertz stiffness of contacts 0..N-1 (striker-bead 1, then bead-bead), N/m^{3/2}.
+    # The laws under the attribute names of the former keywords (`hertzchain.setup_laws`).
+    law_attributes = property(setup_laws.law_attributes)
+    eta_s = property(setup_laws.eta_s)
+    dashpot_n_s_m = property(setup_laws.dashpot_n_s_m)
+    plasticity = property(setup_laws.plasticity)
+    plastic_law = property(setup_laws.plastic_law)
+    power_law = property(setup_laws.power_law)
+    contact_exponent = property(setup_laws.contact_exponent)
+    exponent_reference_overlap_m = property(setup_laws.exponent_reference_overlap_m)
 
-        Includes the thwarted-rotation factor $(1+\\mu^*)$.
-        """
-        radius = jnp.concatenate([self.striker_radius_m[None], self.bead_radius_m])
-        youngs = jnp.concatenate([self.striker_youngs_pa[None], self.bead_youngs_pa])
-        poisson = jnp.concatenate([self.striker_poisson[None], self.bead_poisson])
-        bare = contact.kappa_sphere_sphere(
-            radius[:-1], youngs[:-1], poisson[:-1], radius[1:], youngs[1:], poisson[1:]
-        )
-        return (1.0 + self.mu_star) * bare
+    def contact_kappa(self) -> jax.Array:
+        """Hertz stiffness of contacts 0..N-1, N/m^{3/2} (`setup_constants.contact_kappa`)."""
+        return setup_constants.contact_kappa(self)
 
     def wall_kappa(self) -> jax.Array:
-        """Hertz stiffness of bead N on the flat wall, N/m^{3/2} (with $(1+\\mu^*)$)."""
-        bare = contact.kappa_sphere_flat(
-            self.bead_radius_m[-1],
-            self.bead_youngs_pa[-1],
-            self.bead_poisson[-1],
-            self.wall_youngs_pa,
-            self.wall_poisson,
-        )
-        return (1.0 + self.mu_star) * bare
+        """Hertz stiffness of bead N on the wall, N/m^{3/2} (`setup_constants.wall_kappa`)."""
+        return setup_constants.wall_kappa(self)
 
     def contact_constants(self) -> laws.ContactConstants:
-        """What the chain gives its contacts 0..N-1 and the wall contact (last): Hertz
-        stiffness (N/m^{3/2}), the paper's mean-pressure yield force (`contact.yield_force`,
-        N), reduced radius (m), the Poisson ratio of the bead behind, the yield stress (Pa)."""
-        radius = jnp.concatenate([self.striker_radius_m[None], self.bead_radius_m])
-        theta = contact.theta(
-            jnp.concatenate([self.striker_youngs_pa[None], self.bead_youngs_pa]),
-            jnp.concatenate([self.striker_poisson[None], self.bead_poisson]),
-        )
-        beads = contact.yield_force(
-            self.bead_yield_stress_pa, radius[:-1], theta[:-1], radius[1:], theta[1:]
-        )
-        wall = contact.yield_force(
-            self.bead_yield_stress_pa,
-            self.bead_radius_m[-1],
-            theta[-1],
-            theta_b=contact.theta(self.wall_youngs_pa, self.wall_poisson),
-        )
-        return laws.ContactConstants(
-            kappa_n_m1p5=jnp.concatenate([self.contact_kappa(), self.wall_kappa()[None]]),
-            yield_force_n=jnp.concatenate([beads, wall[None]]),
-            reduced_radius_m=self.contact_reduced_radius_m(),
-            poisson=jnp.concatenate([self.bead_poisson, self.bead_poisson[-1:]]),
-            yield_stress_pa=self.bead_yield_stress_pa,
-        )
+        """The `laws.ContactConstants` of contacts 0..N-1 and the wall contact (last)
+        (`setup_constants.contact_constants`)."""
+        return setup_constants.contact_constants(self)
 
     def contact_yield_force_n(self) -> jax.Array:
-        """Yield force of contacts 0..N-1 and of the wall contact (last entry), N: the
-        contact law's (`laws.AbstractContactLaw.yield_force_n`): the paper's mean-pressure
-        estimate (`contact.yield_force`), or for `laws.JacksonGreen` the force at which that
-        law leaves Hertz (`contact.jackson_green_yield_force`)."""
-        return self.contact_law.yield_force_n(self.contact_constants())
+        """The contact law's yield force of contacts 0..N-1 and the wall contact (last), N
+        (`setup_constants.contact_yield_force_n`)."""
+        return setup_constants.contact_yield_force_n(self)
 
     def contact_reduced_radius_m(self) -> jax.Array:
-        """Reduced radius $R^* = RR'/(R+R')$ of contacts 0..N-1 and of the wall contact (last,
-        the bead's radius), m."""
-        radius = jnp.concatenate([self.striker_radius_m[None], self.bead_radius_m])
-        beads = 1.0 / (1.0 / radius[:-1] + 1.0 / radius[1:])
-        return jnp.concatenate([beads, self.bead_radius_m[-1:]])
+        """Reduced radius of contacts 0..N-1 and the wall contact (last), m
+        (`setup_constants.contact_reduced_radius_m`)."""
+        return setup_constants.contact_reduced_radius_m(self)
 
     def sensor_spring_n_m(self) -> jax.Array:
-        """Spring stiffness $k_s$ of each embedded sensor, N/m (in `sensor_beads` order).
-
-        From $\\omega_0^2 = k_s(1/m_+ + 1/m_-)$ with $m_+ = \\beta m$, $m_- = (1-\\beta) m$:
-        $k_s = \\omega_0^2\\,\\beta(1-\\beta)\\,m$.
-        """
-        beads = jnp.asarray(self.sensor_beads, dtype=int) - 1
-        mass = self.bead_mass_kg[beads]
-        omega0 = 2.0 * jnp.pi * self.sensor_f0_hz
-        return omega0**2 * self.sensor_beta * (1.0 - self.sensor_beta) * mass
+        """Spring stiffness of each embedded sensor, N/m (`setup_constants.sensor_spring_n_m`)."""
+        return setup_constants.sensor_spring_n_m(self)
 
 
 class CompliantSensorModel(eqx.Module):
@@ -453,7 +353,7 @@ class ChainModel(eqx.Module):
     last_body_force_n: jax.Array  # external force on the last body (free end only)
     striker_velocity_m_s: jax.Array
     # Embedded sensors in compliance form (`hertzchain.compliant_sensor`): none by default.
-    compliant: "CompliantSensorModel | None" = None
+    compliant: CompliantSensorModel | None = None
     # Elastic-plastic laws: reduced radius (m) and Poisson ratio of every internal contact then
     # the wall (n_contacts + 1,), and the yield stress (Pa); None for laws without a history.
     reduced_radius_m: jax.Array | None = None

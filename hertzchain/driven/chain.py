@@ -152,26 +152,12 @@ class DrivenChain(eqx.Module):
         return self.bead_mass_kg.shape[0]
 
     @classmethod
-    def from_materials(
-        cls,
-        *,
-        n_beads: int,
-        bead_radius_m: float,
-        bead_youngs_pa: float,
-        bead_poisson: float,
-        driver_youngs_pa: float,
-        driver_poisson: float,
-        wall_youngs_pa: float,
-        wall_poisson: float,
-        precompression_n: float,
-        damping_rate_per_s: float = 0.0,
-        bead_mass_kg: float | None = None,
-        bead_density_kg_m3: float | None = None,
-        eta_s: float | None = None,
-        contact_law: laws.AbstractContactLaw | None = None,
-        dissipation=None,
-        bead_yield_stress_pa: float | None = None,
-    ) -> DrivenChain:
+    def from_materials(cls, *, n_beads: int, bead_radius_m: float, bead_youngs_pa: float, bead_poisson: float,
+                       driver_youngs_pa: float, driver_poisson: float, wall_youngs_pa: float, wall_poisson: float,
+                       precompression_n: float, damping_rate_per_s: float = 0.0, bead_mass_kg: float | None = None,
+                       bead_density_kg_m3: float | None = None, eta_s: float | None = None,
+                       contact_law: laws.AbstractContactLaw | None = None, dissipation=None,
+                       bead_yield_stress_pa: float | None = None) -> DrivenChain:
         """n identical spheres of radius `bead_radius_m` between a flat driver face and a flat
         wall: Hertz sphere-flat stiffness (`contact.kappa_sphere_flat`) at the driver and the
         wall, sphere-sphere (`contact.kappa_sphere_sphere`) between beads. Give the bead mass
@@ -182,32 +168,12 @@ class DrivenChain(eqx.Module):
         (Pa) gives the elastic-plastic laws their constants: the paper's mean-pressure yield
         force of every contact (`contact.yield_force`), the reduced radii and the beads'
         Poisson ratio."""
-        if (bead_mass_kg is None) == (bead_density_kg_m3 is None):
-            raise ValueError("from_materials: give exactly one of bead_mass_kg (kg) or bead_density_kg_m3 (kg/m^3).")
-        if int(n_beads) != n_beads or n_beads < 1:
-            raise ValueError(f"n_beads: expected a positive whole number of beads, got {n_beads}.")
-        radius = jnp.asarray(bead_radius_m, dtype=jnp.float64)
-        if bead_mass_kg is None:
-            bead_mass_kg = 4.0 / 3.0 * np.pi * radius**3 * bead_density_kg_m3
-        driver = contact.kappa_sphere_flat(radius, bead_youngs_pa, bead_poisson, driver_youngs_pa, driver_poisson)
-        wall = contact.kappa_sphere_flat(radius, bead_youngs_pa, bead_poisson, wall_youngs_pa, wall_poisson)
-        between = contact.kappa_sphere_sphere(radius, bead_youngs_pa, bead_poisson, radius, bead_youngs_pa,
-                                              bead_poisson)
-        n = int(n_beads)
-        kappa = jnp.concatenate([jnp.atleast_1d(driver), jnp.full((n - 1,), between), jnp.atleast_1d(wall)])
-        plastic = {} if bead_yield_stress_pa is None else _yield_constants(
-            n, radius, bead_youngs_pa, bead_poisson, driver_youngs_pa, driver_poisson, wall_youngs_pa, wall_poisson,
-            bead_yield_stress_pa)
-        return cls(
-            bead_mass_kg=jnp.full((n,), bead_mass_kg, dtype=jnp.float64),
-            contact_kappa_n_m1p5=kappa,
-            precompression_n=precompression_n,
-            damping_rate_per_s=jnp.full((n,), damping_rate_per_s, dtype=jnp.float64),
-            eta_s=eta_s,
-            contact_law=contact_law,
-            dissipation=dissipation,
-            **plastic,
-        )
+        constants = _material_constants(n_beads, bead_radius_m, bead_youngs_pa, bead_poisson, driver_youngs_pa,
+                                        driver_poisson, wall_youngs_pa, wall_poisson, bead_mass_kg, bead_density_kg_m3,
+                                        bead_yield_stress_pa)
+        return cls(precompression_n=precompression_n,
+                   damping_rate_per_s=jnp.full((int(n_beads),), damping_rate_per_s, dtype=jnp.float64),
+                   eta_s=eta_s, contact_law=contact_law, dissipation=dissipation, **constants)
 
     def for_kernel(self) -> DrivenChain:
         """This chain as the compiled runs take it: the dissipation laws whose coefficient is
@@ -288,6 +254,32 @@ def _check_fields(chain: DrivenChain) -> None:
                                               ("precompression_n", chain.precompression_n, "N")))
     check_positive_parameters("DrivenChain", (("damping_rate_per_s", chain.damping_rate_per_s, "1/s"),), zero_ok=True)
     _check_law_constants(chain)
+
+
+def _material_constants(n_beads, radius_m, bead_youngs_pa, bead_poisson, driver_youngs_pa, driver_poisson,
+                        wall_youngs_pa, wall_poisson, bead_mass_kg, bead_density_kg_m3, bead_yield_stress_pa) -> dict:
+    """`from_materials`' masses and contact constants of `n_beads` identical spheres of radius
+    `radius_m` (m) between a flat driver face and a flat wall: the bead masses (kg, given or
+    full spheres of density `bead_density_kg_m3`, kg/m^3), the Hertz stiffness of every
+    contact (N/m^{3/2}) and, with a yield stress (Pa; None: none), the constants of the
+    elastic-plastic laws (`_yield_constants`)."""
+    if (bead_mass_kg is None) == (bead_density_kg_m3 is None):
+        raise ValueError("from_materials: give exactly one of bead_mass_kg (kg) or bead_density_kg_m3 (kg/m^3).")
+    if int(n_beads) != n_beads or n_beads < 1:
+        raise ValueError(f"n_beads: expected a positive whole number of beads, got {n_beads}.")
+    radius = jnp.asarray(radius_m, dtype=jnp.float64)
+    if bead_mass_kg is None:
+        bead_mass_kg = 4.0 / 3.0 * np.pi * radius**3 * bead_density_kg_m3
+    driver = contact.kappa_sphere_flat(radius, bead_youngs_pa, bead_poisson, driver_youngs_pa, driver_poisson)
+    wall = contact.kappa_sphere_flat(radius, bead_youngs_pa, bead_poisson, wall_youngs_pa, wall_poisson)
+    between = contact.kappa_sphere_sphere(radius, bead_youngs_pa, bead_poisson, radius, bead_youngs_pa,
+                                          bead_poisson)
+    n = int(n_beads)
+    kappa = jnp.concatenate([jnp.atleast_1d(driver), jnp.full((n - 1,), between), jnp.atleast_1d(wall)])
+    plastic = {} if bead_yield_stress_pa is None else _yield_constants(
+        n, radius, bead_youngs_pa, bead_poisson, driver_youngs_pa, driver_poisson, wall_youngs_pa, wall_poisson,
+        bead_yield_stress_pa)
+    return {"bead_mass_kg": jnp.full((n,), bead_mass_kg, dtype=jnp.float64), "contact_kappa_n_m1p5": kappa, **plastic}
 
 
 def _yield_constants(n, radius, bead_youngs_pa, bead_poisson, driver_youngs_pa, driver_poisson, wall_youngs_pa,
