@@ -22,7 +22,7 @@ import numpy as np
 from . import laws, setup_constants, setup_laws
 from .materials import BEAD_STEEL
 from .setup_laws import LAW_ATTRIBUTES  # noqa: F401  (importable from here too)
-from .validation import check_setup, check_values
+from .validation import as_float64, check_setup, check_values
 
 ENDS = ("wall", "free")
 PLASTIC_LAWS = laws.registry.PLASTIC_LAW_NAMES
@@ -31,22 +31,17 @@ DEPRECATED_LAW_KEYWORDS = ("plasticity", "plastic_law", "power_law", "contact_ex
                            "exponent_reference_overlap_m")
 
 
-def _as_float(value, name: str):
-    try:
-        return jnp.asarray(value, dtype=jnp.float64)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"{name} must be a number (SI units), got {value!r}.") from error
 
 
 def _or_default(value, default, name: str) -> jax.Array:
     """`value` (None: `default`) as a float64 array; ValueError naming `name` for a non-number."""
-    return _as_float(default if value is None else value, name)
+    return as_float64(default if value is None else value, name)
 
 
 def _per_bead(value, name: str, n_beads: int) -> jax.Array:
     """`value`, a number or one per bead, as an (n_beads,) float64 array; ValueError naming
     `name` for another shape."""
-    array = _as_float(value, name)
+    array = as_float64(value, name)
     if array.ndim == 0:
         return jnp.full((n_beads,), array)
     if array.shape != (n_beads,):
@@ -77,7 +72,7 @@ def _striker_size(radius_m, mass_kg, density_kg_m3, bead_radius_m, bead_density_
     if mass_kg is not None and radius_m is not None:
         raise ValueError("Give striker_mass_kg or striker_radius_m, not both.")
     if mass_kg is not None:
-        mass = _as_float(mass_kg, "striker_mass_kg")
+        mass = as_float64(mass_kg, "striker_mass_kg")
         check_values("striker_mass_kg", mass)
         radius_m = (3.0 * mass / (4.0 * jnp.pi * density)) ** (1.0 / 3.0)
     return _or_default(radius_m, bead_radius_m, "striker_radius_m"), density
@@ -116,7 +111,7 @@ def _dissipation(dissipation, eta_s, dashpot_n_s_m) -> tuple[laws.AbstractDissip
         found = [law for law in given if type(law) is kind]
         if len(found) > 1:
             raise ValueError(f"dissipation lists {kind.__name__} {len(found)} times; give it once.")
-        firsts.append(kind(_as_float(value, name)) if value is not None else found[0] if found else kind())
+        firsts.append(kind(as_float64(value, name)) if value is not None else found[0] if found else kind())
     return tuple(firsts) + tuple(law for law in given if type(law) not in (laws.Viscoelastic, laws.Dashpot))
 
 
@@ -244,18 +239,18 @@ class ChainSetup(eqx.Module):
             striker_radius_m, striker_mass_kg, striker_density_kg_m3, self.bead_radius_m[0], self.bead_density_kg_m3[0])
         self.striker_youngs_pa = _or_default(striker_youngs_pa, self.bead_youngs_pa[0], "striker_youngs_pa")
         self.striker_poisson = _or_default(striker_poisson, self.bead_poisson[0], "striker_poisson")
-        self.striker_velocity_m_s = _as_float(striker_velocity_m_s, "striker_velocity_m_s")
+        self.striker_velocity_m_s = as_float64(striker_velocity_m_s, "striker_velocity_m_s")
         self.end = end
         self.wall_youngs_pa = _or_default(wall_youngs_pa, self.bead_youngs_pa[-1], "wall_youngs_pa")
         self.wall_poisson = _or_default(wall_poisson, self.bead_poisson[-1], "wall_poisson")
         self.dissipation = _dissipation(dissipation, eta_s, dashpot_n_s_m)
-        self.mu = _as_float(mu, "mu")
-        self.mu_star = _as_float(mu_star, "mu_star")
-        self.precompression_n = _as_float(precompression_n, "precompression_n")
-        self.gravity_m_s2 = _as_float(gravity_m_s2, "gravity_m_s2")
+        self.mu = as_float64(mu, "mu")
+        self.mu_star = as_float64(mu_star, "mu_star")
+        self.precompression_n = as_float64(precompression_n, "precompression_n")
+        self.gravity_m_s2 = as_float64(gravity_m_s2, "gravity_m_s2")
         self.sensor_beads = tuple(sorted(int(k) for k in sensor_beads))
-        self.sensor_beta = _as_float(sensor_beta, "sensor_beta")
-        self.sensor_f0_hz = _as_float(sensor_f0_hz, "sensor_f0_hz")
+        self.sensor_beta = as_float64(sensor_beta, "sensor_beta")
+        self.sensor_f0_hz = as_float64(sensor_f0_hz, "sensor_f0_hz")
         self.contact_law = _contact_law(contact_law, {
             "plasticity": plasticity, "plastic_law": plastic_law, "power_law": power_law,
             "contact_exponent": contact_exponent, "exponent_reference_overlap_m": exponent_reference_overlap_m})

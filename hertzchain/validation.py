@@ -98,6 +98,17 @@ RULES: dict[str, Rule] = {
 SENSOR_FIELDS = ("sensor_beta", "sensor_f0_hz")
 
 
+def as_float64(value, name: str):
+    """`value` as a float64 JAX array (SI units), or a ValueError naming the argument `name`
+    where it is not a number."""
+    import jax.numpy as jnp
+
+    try:
+        return jnp.asarray(value, dtype=jnp.float64)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name} must be a number (SI units), got {value!r}.") from error
+
+
 def is_concrete(value) -> bool:
     """True for a value with numbers (not a tracer of `jit`, `vmap` or `grad`)."""
     import jax

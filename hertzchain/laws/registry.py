@@ -9,9 +9,9 @@ says which kernel ran).
 from __future__ import annotations
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
+from ..validation import as_float64
 from .contact_law import AbstractContactLaw
 from .dissipation import AbstractDissipation, Dashpot, VelocitySquared, Viscoelastic
 from .elastic import Hertz, PowerLaw
@@ -67,8 +67,8 @@ def contact_law_from_keywords(*, plasticity: bool = False, plastic_law: str = "t
     (m; `power_law` None: wherever the exponent is not 1.5), else Hertz's."""
     if plastic_law not in PLASTIC_LAW_NAMES:
         raise ValueError(f"plastic_law must be one of {PLASTIC_LAW_NAMES}, got {plastic_law!r}.")
-    exponent = _as_float(contact_exponent, "contact_exponent")
-    reference = _as_float(exponent_reference_overlap_m, "exponent_reference_overlap_m")
+    exponent = as_float64(contact_exponent, "contact_exponent")
+    reference = as_float64(exponent_reference_overlap_m, "exponent_reference_overlap_m")
     if power_law is None:
         power_law = not isinstance(exponent, jax.core.Tracer) and bool(np.any(np.asarray(exponent) != 1.5))
     if power_law and plasticity:
@@ -81,8 +81,3 @@ def contact_law_from_keywords(*, plasticity: bool = False, plastic_law: str = "t
     return Hertz()
 
 
-def _as_float(value, name: str):
-    try:
-        return jnp.asarray(value, dtype=jnp.float64)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"{name} must be a number (SI units), got {value!r}.") from error
