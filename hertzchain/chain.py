@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import laws, setup_constants, setup_laws
+from .caller import user_stacklevel
 from .materials import BEAD_STEEL
 from .setup_laws import LAW_ATTRIBUTES  # noqa: F401  (importable from here too)
 from .validation import as_float64, check_setup, check_values
@@ -88,7 +89,8 @@ def _contact_law(contact_law, old: dict) -> laws.AbstractContactLaw:
         contact_law = laws.contact_law_from_keywords(**old)
         replacement = type(contact_law).__name__
         warnings.warn(f"ChainSetup({'=..., '.join(old)}=...) is deprecated: pass "
-                      f"contact_law=hertzchain.laws.{replacement}(...) instead.", DeprecationWarning, stacklevel=3)
+                      f"contact_law=hertzchain.laws.{replacement}(...) instead.", DeprecationWarning,
+                      stacklevel=user_stacklevel())
     if contact_law is None:
         return laws.Hertz()
     if not isinstance(contact_law, laws.AbstractContactLaw):

@@ -2,6 +2,7 @@
 stiffness and energy against finite differences, the registry against the native kernels'
 names, and `ChainSetup`'s former keywords against the law objects they stand for."""
 
+import inspect
 import math
 import warnings
 
@@ -125,8 +126,11 @@ def test_registry_names_every_law_as_the_native_kernels_know_it():
     (dict(power_law=False, contact_exponent=1.6), laws.Hertz),
 ])
 def test_former_keywords_warn_and_build_the_law(old, law):
-    with pytest.warns(DeprecationWarning, match=f"contact_law=hertzchain.laws.{law.__name__}"):
+    with pytest.warns(DeprecationWarning, match=f"contact_law=hertzchain.laws.{law.__name__}") as record:
         setup = hc.ChainSetup(4, **old)
+    # attributed to this line (equinox's __init__ wrapper in between), so Python's default
+    # filters show it in a user's script
+    assert [(w.filename, w.lineno) for w in record] == [(__file__, inspect.currentframe().f_lineno - 3)]
     assert type(setup.contact_law) is law
     assert setup.plasticity == old.get("plasticity", False)
     if law is laws.PowerLaw:
