@@ -35,7 +35,7 @@ import sys
 
 import numpy as np
 
-from benchmarks.contact_burgoyne import caltech_and_base, run_calibration
+from benchmarks.contact_burgoyne import calibration_runs, caltech_and_base
 from benchmarks.contact_processing import best_alignment
 from benchmarks.contact_rate_terms import _span, material_table
 from fitting.contact_calibration import shifted_approach
@@ -72,10 +72,7 @@ def main(argv=None) -> int:
     if started is None:
         return 1
     args, out, curves, base = started
-    runs = {"damping": base}
-    for label, options in RUNS.items():
-        print(f"{label} ...", file=sys.stderr, flush=True)
-        runs[label] = run_calibration(curves, out / label, label.replace("_", " "), args.reuse, **options)
+    runs = {"damping": base, **calibration_runs(curves, out, RUNS, args.reuse)}
 
     rows = []
     for k, curve in enumerate(curves):

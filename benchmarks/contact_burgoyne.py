@@ -44,17 +44,32 @@ CALTECH = {
 GEOMETRY = ContactGeometry("sphere-sphere", 3.175e-3)  # two hemispheres of 1/8 in
 
 
-def run_calibration(curves, out, title, reuse=False, **options):
+def run_calibration(curves, out, title, reuse=False, curve_fields=None, **options):
     """`calibrate` on `curves` with `options`, written into `out` (its `contact.json` with the
-    elapsed time); `reuse`: read an existing `contact.json` instead."""
+    elapsed time); `reuse`: read an existing `contact.json` instead. `curve_fields(curve,
+    entry)`: further fields of each curve's entry in `contact.json`, from the curve and its
+    entry in the calibration's report (which still holds its `_series`)."""
     if reuse and (out / "contact.json").is_file():
         return json.loads((out / "contact.json").read_text())
     start = time.perf_counter()
     report = calibrate(curves, GEOMETRY, progress=lambda text: print(f"  {text}", file=sys.stderr), **options)
+    extra = [curve_fields(c, entry) for c, entry in zip(curves, report["curves"])] if curve_fields else None
     data = write_outputs(report, curves, out, title=title)
+    for entry, fields in zip(data["curves"], extra or ()):
+        entry.update(fields)
     data["elapsed_s"] = time.perf_counter() - start
     atomic.write_json(out / "contact.json", atomic.json_ready(data))
     return data
+
+
+def calibration_runs(curves, out, runs, reuse=False, curve_fields=None):
+    """`run_calibration` of `curves` for each entry of `runs` (label -> `calibrate` options),
+    each into `out / label`, titled by its label: label -> its `contact.json` data."""
+    done = {}
+    for label, options in runs.items():
+        print(f"{label} ...", file=sys.stderr, flush=True)
+        done[label] = run_calibration(curves, out / label, label.replace("_", " "), reuse, curve_fields, **options)
+    return done
 
 
 def _span(data, key, material):

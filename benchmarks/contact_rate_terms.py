@@ -31,15 +31,13 @@ Writes `rate_terms.json` and `rate_terms.md` into --out.
 
 from __future__ import annotations
 
-import json
 import math
 import sys
-import time
 
 import numpy as np
 
-from benchmarks.contact_burgoyne import GEOMETRY, caltech_and_base
-from fitting.contact_calibration import _kappa, _smoothed, calibrate, shifted_approach, write_outputs
+from benchmarks.contact_burgoyne import GEOMETRY, calibration_runs, caltech_and_base
+from fitting.contact_calibration import _kappa, _smoothed, shifted_approach
 from hertzchain.io import atomic
 
 # Travel time from the incident gauge minus that from the transmission gauge to the sample, s
@@ -56,6 +54,13 @@ RUNS = {
 def _lead_us(time_s, approach, force):
     """Time from the peak of `force` to the peak of `approach`, us."""
     return float(1e6 * (time_s[int(np.argmax(approach))] - time_s[int(np.argmax(force))]))
+
+
+def _model_force_lead(curve, entry) -> dict:
+    """`model_force_lead_us`: the lead of the fitted model's force peak (the calibration
+    report's `entry`) over the approach peak of `curve`, us."""
+    return {"model_force_lead_us": _lead_us(curve.time_s, shifted_approach(curve, "first-sample"),
+                                            entry["_series"]["force_fitted_n"])}
 
 
 def _loading_slope(approach, force, peak_index):
@@ -86,24 +91,8 @@ def main(argv=None) -> int:
     if started is None:
         return 1
     args, out, curves, base = started
-    runs = {"law_alone": base}
-    elapsed = {}
-    for label, options in RUNS.items():
-        if args.reuse and (out / label / "contact.json").is_file():
-            runs[label] = json.loads((out / label / "contact.json").read_text())
-            elapsed[label] = runs[label]["elapsed_s"]
-            continue
-        print(f"{label} ...", file=sys.stderr, flush=True)
-        began = time.perf_counter()
-        report = calibrate(curves, GEOMETRY, progress=lambda text: print(f"  {text}", file=sys.stderr), **options)
-        leads = [_lead_us(c.time_s, shifted_approach(c, "first-sample"), entry["_series"]["force_fitted_n"])
-                 for c, entry in zip(curves, report["curves"])]
-        runs[label] = write_outputs(report, curves, out / label, title=label.replace("_", " "))
-        for entry, lead in zip(runs[label]["curves"], leads):
-            entry["model_force_lead_us"] = lead
-        elapsed[label] = time.perf_counter() - began
-        runs[label]["elapsed_s"] = elapsed[label]
-        atomic.write_json(out / label / "contact.json", atomic.json_ready(runs[label]))
+    runs = {"law_alone": base, **calibration_runs(curves, out, RUNS, args.reuse, _model_force_lead)}
+    elapsed = {label: runs[label]["elapsed_s"] for label in RUNS}
 
     rows = []
     for k, curve in enumerate(curves):

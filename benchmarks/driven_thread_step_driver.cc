@@ -10,9 +10,9 @@
 // damped and with friction, 4000 steps and two recorded contacts, the tangent along three
 // directions (eta, friction, the striker's speed).
 #include <cmath>
-#include <cstdio>
-#include <cstring>
 #include <vector>
+
+#include "step_driver_main.h"
 
 #if defined(HC_DRIVEN_RUN)
 #include "driven_kernel.cc"
@@ -144,15 +144,5 @@ void Once() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  const char* run = argc > 1 ? argv[1] : "";
-  if (std::strcmp(run, "forward") == 0) {
-    Once<false>();
-  } else if (std::strcmp(run, "tangent") == 0) {
-    Once<true>();
-  } else {
-    std::fprintf(stderr, "usage: %s forward|tangent\n", argv[0]);
-    return 2;
-  }
-  std::printf("%.17g\n", checksum);
-  return 0;
+  return RunNamed(argc, argv, {{"forward", Once<false>}, {"tangent", Once<true>}}, checksum);
 }

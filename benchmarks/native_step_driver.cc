@@ -6,11 +6,10 @@
 // friction (RunFullBlock, the forces only), tangent: the same run with its tangents along
 // three directions (damping, friction, impact speed: a fit iteration's value and jacfwd),
 // each one block of 8 chains of 20 bodies and a wall, 4000 steps, two recorded contacts.
-#include <cstdio>
-#include <cstring>
 #include <vector>
 
 #include "chain_kernel.cc"
+#include "step_driver_main.h"
 
 namespace {
 
@@ -84,17 +83,6 @@ void Full() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  const char* run = argc > 1 ? argv[1] : "";
-  if (std::strcmp(run, "conservative") == 0) {
-    Conservative();
-  } else if (std::strcmp(run, "forward") == 0) {
-    Full<false>();
-  } else if (std::strcmp(run, "tangent") == 0) {
-    Full<true>();
-  } else {
-    std::fprintf(stderr, "usage: %s conservative|forward|tangent\n", argv[0]);
-    return 2;
-  }
-  std::printf("%.17g\n", checksum);
-  return 0;
+  return RunNamed(argc, argv, {{"conservative", Conservative}, {"forward", Full<false>}, {"tangent", Full<true>}},
+                  checksum);
 }

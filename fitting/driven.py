@@ -187,11 +187,14 @@ class DrivenModel:
         return r, jac
 
 
-def _settings(experiment):
+def lockin_settings(experiment) -> dict:
+    """The read-out keywords of `hertzchain.driven.lockin_grid` for `experiment`: its sensor
+    bead and quantity, the drive frequency alone, and its model's ramp, hold, window and
+    steps per period."""
     m = experiment.model
     return {"bead": experiment.sensor_bead, "quantity": experiment.quantity, "harmonics": (1.0,),
-                "ramp_periods": m["ramp_periods"], "hold_periods": m["hold_periods"],
-                "window_periods": m["window_periods"], "steps_per_period": m["steps_per_period"]}
+            "ramp_periods": m["ramp_periods"], "hold_periods": m["hold_periods"],
+            "window_periods": m["window_periods"], "steps_per_period": m["steps_per_period"]}
 
 
 def _scale_index(experiment):
@@ -201,7 +204,7 @@ def _scale_index(experiment):
 def _grid(experiment, x, frequencies, drives):
     chain = chain_at(experiment, x)
     scale = x[_scale_index(experiment)]
-    return lockin_grid(chain, frequencies, drives * scale, **_settings(experiment)).rms[0]
+    return lockin_grid(chain, frequencies, drives * scale, **lockin_settings(experiment)).rms[0]
 
 
 @eqx.filter_jit
@@ -225,7 +228,7 @@ class _Constants:
 
 
 def _grid_jvp(experiment, x, frequencies, drives, directions):
-    settings = tuple(sorted(_settings(experiment).items()))
+    settings = tuple(sorted(lockin_settings(experiment).items()))
     return _grid_jvp_compiled(settings, experiment.n_beads, jnp.asarray(experiment.bead_mass_kg),
                               jnp.asarray(experiment.contact_kappa_n_m1p5), _scale_index(experiment),
                               jnp.asarray(x), frequencies, drives, directions)

@@ -57,7 +57,7 @@ from hertzchain.driven import DrivenChain, lockin_grid
 from hertzchain.driven.thresholds import onset_tangents, period_doubling_onsets
 from hertzchain.progress import Progress
 
-from .driven import NOMINAL_SCALE, chain_at, fit_driven, lag1_autocorrelation
+from .driven import NOMINAL_SCALE, chain_at, fit_driven, lag1_autocorrelation, lockin_settings
 from .driven_experiment import DrivenExperiment, DrivenExperimentError
 from .fit import least_squares
 from .uncertainty import covariance_from_jacobian
@@ -245,7 +245,8 @@ class JointModel:
         rows = np.nonzero(m.fit_mask)[0] if rows is None else rows
         chain = self.run_chain(run, x)
         drives = sweep.drive_amplitudes_m * self.run_scale(run, x)
-        return np.asarray(lockin_grid(chain, sweep.frequencies_hz[rows], drives, **_settings(self.experiment)).rms[0])
+        return np.asarray(lockin_grid(chain, sweep.frequencies_hz[rows], drives,
+                                      **lockin_settings(self.experiment)).rms[0])
 
     def _bending(self, run: RunModel, m, x, columns):
         sweep = m.data.sweep
@@ -262,9 +263,10 @@ class JointModel:
             directions[k, run.chain_columns.index(c) if c != run.scale_column else -1] = 1.0
         factors = np.append(np.asarray(x)[run.chain_columns], 0.0)
         drives = sweep.drive_amplitudes_m * self.run_scale(run, x)
-        value, tangents = _bending_jvp(self.start_chain, run.paths, tuple(sorted(_settings(self.experiment).items())),
-                                       jnp.asarray(factors), jnp.asarray(sweep.frequencies_hz[rows]),
-                                       jnp.asarray(drives), jnp.asarray(directions))
+        settings = tuple(sorted(lockin_settings(self.experiment).items()))
+        value, tangents = _bending_jvp(self.start_chain, run.paths, settings, jnp.asarray(factors),
+                                       jnp.asarray(sweep.frequencies_hz[rows]), jnp.asarray(drives),
+                                       jnp.asarray(directions))
         r = ((np.asarray(value) - measured) / peaks).ravel() * scale
         for k, c in enumerate(local):
             jac[:, list(columns).index(c)] = (np.asarray(tangents[k]) / peaks).ravel() * scale
@@ -320,13 +322,6 @@ class JointModel:
         if run.scale_column in columns:  # log(a*/s): -1 per unit of log s
             jac[:, list(columns).index(run.scale_column)] = np.where(in_scale, -1.0, 0.0) / self.sigma
         return residual, jac
-
-
-def _settings(experiment):
-    m = experiment.model
-    return {"bead": experiment.sensor_bead, "quantity": experiment.quantity, "harmonics": (1.0,),
-            "ramp_periods": m["ramp_periods"], "hold_periods": m["hold_periods"],
-            "window_periods": m["window_periods"], "steps_per_period": m["steps_per_period"]}
 
 
 def _steps(experiment) -> int:

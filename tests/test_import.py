@@ -35,6 +35,18 @@ PRE_TRIGGER = 200
 INTERVAL_S = 1e-6
 
 
+# The embedded sensor of bead 6, as its [[channel]] describes it.
+SENSOR = {"sensor_beta": 0.11, "sensor_f0_hz": 85000}
+
+
+def _channel_table(source, **keys) -> str:
+    """The `[[channel]]` table of scope channel `source`: what it measures (`CHANNELS`), its
+    sensitivity (`SENSITIVITY`) and the further `keys` (strings quoted, numbers as written)."""
+    rows = {"source": source, "measures": CHANNELS[source], "sensitivity_v_per_n": SENSITIVITY[source], **keys}
+    return "\n[[channel]]\n" + "".join(f'{k} = "{v}"\n' if isinstance(v, str) else f"{k} = {v}\n"
+                                        for k, v in rows.items())
+
+
 def brass_chain(velocity, **extra):
     return hc.ChainSetup(12, bead_radius_m=0.01, bead_density_kg_m3=BRASS.density_kg_m3,
                          bead_youngs_pa=BRASS.youngs_pa, bead_poisson=BRASS.poisson,
@@ -99,21 +111,7 @@ def lab(tmp_path_factory):
         [scope]
         format = "tek-csv"
         time_zero = "trigger"
-
-        [[channel]]
-        source = "CH1"
-        measures = "wall"
-        sensitivity_v_per_n = 0.1124
-        coupling = "ac"
-
-        [[channel]]
-        source = "CH2"
-        measures = "sensor_6"
-        sensitivity_v_per_n = 0.01124
-        coupling = "ac"
-        sensor_beta = 0.11
-        sensor_f0_hz = 85000
-        """) + "".join(
+        """) + _channel_table("CH1", coupling="ac") + _channel_table("CH2", coupling="ac", **SENSOR) + "".join(
         f'\n[[shot]]\nfiles = ["{a}", "{b}"]\nstriker_velocity_m_s = {v}\n' for (a, b), v in shots))
     return folder, experiment
 
@@ -268,9 +266,7 @@ def test_records_without_pre_trigger_need_the_notebook_values(tmp_path, lab):
 
 def test_time_zero_from_a_trigger_channel_crossing(tmp_path, lab):
     folder, _ = lab
-    sensor = ('[[channel]]\nsource = "CH2"\nmeasures = "sensor_6"\nsensitivity_v_per_n = 0.01124\n'
-              'sensor_beta = 0.11\nsensor_f0_hz = 85000')
-    path = _experiment(tmp_path, lab, channel_extra=sensor, scope='format = "tek-csv"\ntime_zero = "channel:CH1>0.5V"')
+    path = _experiment(tmp_path, lab, channel_extra=_channel_table("CH2", **SENSOR), scope='format = "tek-csv"\ntime_zero = "channel:CH1>0.5V"')
     # the wall channel as the trigger puts time zero at the wall's pulse, long after the
     # impact: the arrivals say so, and the warning names the delay to give
     with pytest.warns(TimeZeroWarning, match=r"time zero looks wrong: the arrivals put the impact at -\d+") as seen:

@@ -167,24 +167,34 @@ def _written_names(text: str) -> set[str]:
             if re.search(rf"(?<![\w.]){name}(?![\w])", text)}
 
 
+def _run_in_both_spellings(tmp_path, capsys, base, public, previous, product):
+    """Run the command `base` once with the options `public` (into tmp_path/new) and once with
+    `previous` (into tmp_path/old), both writing `<product>.json` and `<product>.csv`; assert
+    that both CSVs are the same. Returns the two JSONs, the public run's CSV and console, and
+    the first clause of each warning the previous names gave."""
+    assert main([*base, *public, "--out", str(tmp_path / "new")]) == 0
+    new_out = capsys.readouterr().out
+    with pytest.warns(ParameterNameWarning) as caught:
+        assert main([*base, *previous, "--out", str(tmp_path / "old")]) == 0
+    capsys.readouterr()
+    new, old = (json.loads((tmp_path / run / f"{product}.json").read_text()) for run in ("new", "old"))
+    table = (tmp_path / "new" / f"{product}.csv").read_text()
+    assert table == (tmp_path / "old" / f"{product}.csv").read_text()
+    return new, old, table, new_out, [str(w.message).split(";")[0] for w in caught]
+
+
 def test_sensitivity_reads_either_spelling_gives_the_same_numbers_and_writes_the_public_names(tmp_path, capsys):
     """`hertzchain sensitivity` over a swept grid: the previous names in --params and --sweep
     give the numbers of the public ones, each warns once naming its option, and the JSON,
     the CSV and the console speak only the public names."""
     base = ["sensitivity", "--n-beads", "5", "--eta", "1us", "--mu-star", "0.03", "--observables",
             "wall_peak,contact_2_peak", "--t-end", "0.4ms", "--sample-interval", "2us", "--sweep-velocities", "0.1,0.3"]
-    assert main([*base, "--params", "eta_s,wall_youngs_pa,mu_star", "--sweep", "eta_s=0.5us,1us",
-                 "--out", str(tmp_path / "new")]) == 0
-    new_out = capsys.readouterr().out
-    with pytest.warns(ParameterNameWarning) as caught:
-        assert main([*base, "--params", "eta,wall_youngs,mu_star", "--sweep", "eta=0.5us,1us",
-                     "--out", str(tmp_path / "old")]) == 0
-    capsys.readouterr()
-    assert [str(w.message).split(";")[0] for w in caught] == [
+    new, old, table, new_out, warned = _run_in_both_spellings(
+        tmp_path, capsys, base, ["--params", "eta_s,wall_youngs_pa,mu_star", "--sweep", "eta_s=0.5us,1us"],
+        ["--params", "eta,wall_youngs,mu_star", "--sweep", "eta=0.5us,1us"], "sensitivity")
+    assert warned == [
         "--params: 'eta' is now called 'eta_s'", "--params: 'wall_youngs' is now called 'wall_youngs_pa'",
         "--sweep: 'eta' is now called 'eta_s'"]
-    new = json.loads((tmp_path / "new" / "sensitivity.json").read_text())
-    old = json.loads((tmp_path / "old" / "sensitivity.json").read_text())
     assert new == old
     assert new["grid"]["axes"] == ["striker_velocity_m_s", "eta_s"]
     assert list(new["params"]) == ["eta_s", "wall_youngs_pa", "mu_star"] and new["params"]["eta_s"]["unit"] == "s"
@@ -192,8 +202,6 @@ def test_sensitivity_reads_either_spelling_gives_the_same_numbers_and_writes_the
     # the peak force grows with the impact velocity as V^(6/5) (dissipation lowers it a little)
     ratio = np.asarray(new["observables"]["wall_peak"]["value"])[1] / np.asarray(new["observables"]["wall_peak"]["value"])[0]
     assert np.all((ratio > 3 ** 1.1) & (ratio < 3 ** 1.2))
-    table = (tmp_path / "new" / "sensitivity.csv").read_text()
-    assert table == (tmp_path / "old" / "sensitivity.csv").read_text()
     assert table.splitlines()[0].startswith("striker_velocity_m_s,eta_s,observable,")
     assert {row.split(",")[5] for row in table.splitlines()[1:]} == {"eta_s", "wall_youngs_pa", "mu_star"}
     assert "sweep over striker_velocity_m_s (2) x eta_s (2)" in new_out
@@ -259,25 +267,17 @@ def test_design_reads_either_spelling_gives_the_same_numbers_and_writes_the_publ
     and the console speak only the public names."""
     base = ["design", "--n-beads", "6", "--eta", "1.7us", "--mu", "0.12", "--mu-star", "0.03", "--velocities",
             "0.1,0.3", "--contacts", "2", "--t-end", "0.4ms"]
-    assert main([*base, "--params", "eta_s,mu,C", "--nuisances", "striker_velocity_m_s",
-                 "--out", str(tmp_path / "new")]) == 0
-    new_out = capsys.readouterr().out
-    with pytest.warns(ParameterNameWarning) as caught:
-        assert main([*base, "--params", "eta,mu,C", "--nuisances", "striker_velocity",
-                     "--out", str(tmp_path / "old")]) == 0
-    capsys.readouterr()
-    assert [str(w.message).split(";")[0] for w in caught] == [
+    new, old, table, new_out, warned = _run_in_both_spellings(
+        tmp_path, capsys, base, ["--params", "eta_s,mu,C", "--nuisances", "striker_velocity_m_s"],
+        ["--params", "eta,mu,C", "--nuisances", "striker_velocity"], "design")
+    assert warned == [
         "--params: 'eta' is now called 'eta_s'", "--nuisances: 'striker_velocity' is now called 'striker_velocity_m_s'"]
-    new = json.loads((tmp_path / "new" / "design.json").read_text())
-    old = json.loads((tmp_path / "old" / "design.json").read_text())
     assert {k: v for k, v in new.items() if k != "plan"} == {k: v for k, v in old.items() if k != "plan"}
     assert list(new["params"]) == ["eta_s", "mu", "C"] and new["correlation"]["names"] == ["eta_s", "mu", "C"]
     assert new["nuisances"]["free"] == ["striker_velocity_m_s"]
     assert new["values"] == {"eta_s": pytest.approx(1.7e-6), "mu": 0.12, "mu_star": 0.03}
     eta = new["params"]["eta_s"]
     assert eta["unit"] == "s" and eta["value"] == pytest.approx(1.7e-6) and 0 < eta["relative_stderr"] < 0.1
-    table = (tmp_path / "new" / "design.csv").read_text()
-    assert table == (tmp_path / "old" / "design.csv").read_text()
     assert [row.split(",")[0] for row in table.splitlines()] == ["param", "eta_s", "mu", "C"]
     assert "Fisher information of eta_s, mu, C (free nuisances: striker_velocity_m_s)" in new_out
     for text in (table, json.dumps({k: v for k, v in new.items() if k != "plan"}), new_out):

@@ -31,7 +31,6 @@ Whole or nothing: the folder is written only when every part has run.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import math
 from pathlib import Path
@@ -41,8 +40,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from run_record import started, write_stamped  # this folder's helper
-from two_bead_prediction import TONGUE_AMPLITUDES_M, single_bead_constants
+from run_record import write_stamped  # this folder's helper
+from two_bead_prediction import TONGUE_AMPLITUDES_M, single_bead_constants, two_bead_fit_start
 
 from fitting.driven_candidates import BoundedJointModel, fitted_levels
 from fitting.driven_experiment import Measurement, load_driven_experiment
@@ -382,15 +381,7 @@ def plot(path: Path, experiment, shown: dict) -> None:
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data-dir", required=True)
-    parser.add_argument("--out", default=str(HERE / "results" / "two_bead_end_compliance"))
-    parser.add_argument("--level-stride", type=int, default=6)
-    parser.add_argument("--row-stride", type=int, default=3)
-    parser.add_argument("--max-steps", type=int, default=20)
-    args = parser.parse_args(argv)
-    start = started()
-    experiment = load_driven_experiment(HERE / "two_bead_bending.toml", args.data_dir)
+    args, start, experiment = two_bead_fit_start(argv, __doc__.splitlines()[0], "two_bead_end_compliance", 6, 20)
     single = load_driven_experiment(HERE / "single_bead_bending.toml", args.data_dir)
     two_hz = [
         m["lowest_drive_peak_hz"] for m in bending(experiment, experiment.sweep.rms_velocity_m_s)

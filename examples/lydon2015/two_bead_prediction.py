@@ -57,16 +57,23 @@ def two_bead_chain(constants: dict, precompression_n: float) -> DrivenChain:
                                                          constants["support_friction.slip_displacement_m"]))
 
 
-def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def two_bead_fit_start(argv, description: str, out: str, level_stride: int, max_steps: int):
+    """(arguments, `started()`, the two-bead bending experiment) of a script here that fits the
+    two-bead bending sweep: `--data-dir` (required), `--out` (default `results/<out>`), the
+    `--level-stride` and `--max-steps` given, `--row-stride` 3 (every third frequency)."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--data-dir", required=True)
-    parser.add_argument("--out", default=str(HERE / "results" / "two_bead_micro_slip"))
-    parser.add_argument("--level-stride", type=int, default=7)
+    parser.add_argument("--out", default=str(HERE / "results" / out))
+    parser.add_argument("--level-stride", type=int, default=level_stride)
     parser.add_argument("--row-stride", type=int, default=3)
-    parser.add_argument("--max-steps", type=int, default=15)
+    parser.add_argument("--max-steps", type=int, default=max_steps)
     args = parser.parse_args(argv)
     start = started()
-    experiment = load_driven_experiment(HERE / "two_bead_bending.toml", args.data_dir)
+    return args, start, load_driven_experiment(HERE / "two_bead_bending.toml", args.data_dir)
+
+
+def main(argv=None) -> None:
+    args, start, experiment = two_bead_fit_start(argv, __doc__.splitlines()[0], "two_bead_micro_slip", 7, 15)
     run = "2013-07-05 11:24"
     rows = experiment.fit_mask & (np.arange(experiment.fit_mask.size) % args.row_stride == 0)
     full = Measurement("bending", run, Bending(run, experiment.sweep), experiment.drive_m_per_v,

@@ -22,7 +22,6 @@ each kind) and build folders left by killed builds.
 from __future__ import annotations
 
 import argparse
-import os
 import time
 
 from .. import native
@@ -47,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         deleted, freed = native.prune_cache()
         print(f"hertzchain kernel: pruned {deleted} superseded files ({freed / 2**20:.1f} MiB) "
               f"from {native.cache_dir()}")
-    if os.environ.get("HERTZCHAIN_NATIVE", "1") == "0":
+    if native.registry.switched_off():
         print(f"hertzchain kernel: the fused C++ kernel cannot be used ({native.SWITCHED_OFF}); "
               "every command runs the JAX kernel instead.")
         return 0

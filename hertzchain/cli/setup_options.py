@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 from pathlib import Path
 
 from .. import laws
 from ..chain import DEPRECATED_LAW_KEYWORDS, PLASTIC_LAWS, ChainSetup
 from ..io.importer import load_chain
-from ..io.tracefile import REDUNDANT_TOLERANCE
+from ..io.tracefile import REDUNDANT_TOLERANCE, sphere_mass_kg
 from ..materials import BEAD_STEEL, Material, material
 from ..sweep import default_contacts
 from ..units import format_si, parse_field, parse_quantity
@@ -164,10 +163,6 @@ def _material_values(body: str, found: Material, option: str, density_given: boo
     return values
 
 
-def _sphere_mass_kg(radius_m: float, density_kg_m3: float) -> float:
-    return 4.0 / 3.0 * math.pi * density_kg_m3 * radius_m**3
-
-
 def _file_values(path: str) -> dict:
     """The setup file's chain as ChainSetup keywords (a bead mass becomes a density)."""
     if not Path(path).is_file():
@@ -175,7 +170,7 @@ def _file_values(path: str) -> dict:
     values = {k: v for k, v in load_chain(path).items() if not k.startswith("x_")}
     if "bead_mass_kg" in values:
         mass = values.pop("bead_mass_kg")
-        density = mass / _sphere_mass_kg(values.get("bead_radius_m", 0.013), 1.0)
+        density = mass / sphere_mass_kg(values.get("bead_radius_m", 0.013), 1.0)
         given = values.setdefault("bead_density_kg_m3", density)
         if abs(given - density) > REDUNDANT_TOLERANCE * density:
             raise ValueError(f"{path} [chain]: bead_mass_kg = {mass:.6g} implies a density of "
@@ -190,7 +185,7 @@ def _striker_size(values: dict, sources: dict) -> None:
         return
     mass, radius = values["striker_mass_kg"], values["striker_radius_m"]
     density = values.get("striker_density_kg_m3", values.get("bead_density_kg_m3", BEAD_STEEL.density_kg_m3))
-    implied = _sphere_mass_kg(radius, density)
+    implied = sphere_mass_kg(radius, density)
     if abs(mass - implied) > REDUNDANT_TOLERANCE * implied:
         where = sources.get("striker_density_kg_m3", sources.get("bead_density_kg_m3", "the default"))
         raise ValueError(

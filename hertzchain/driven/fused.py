@@ -21,7 +21,6 @@ built on first use (its own, so that sweeps of impacts never wait for it) into t
 from __future__ import annotations
 
 import functools
-import os
 
 import jax
 import jax.numpy as jnp
@@ -42,13 +41,7 @@ QUANTITIES = ("velocity", "displacement")
 def _load() -> str | None:
     """Build (if needed), load and register the kernel: None on success, else why not (said
     once on stderr, with what runs instead, by `native._load_library`)."""
-    if os.environ.get("HERTZCHAIN_NATIVE", "1") == "0":
-        return native.SWITCHED_OFF
-    try:
-        _library()
-    except (OSError, RuntimeError) as error:
-        return str(error)
-    return None
+    return native.registry.load_failure(_library)
 
 
 @functools.cache
@@ -117,8 +110,8 @@ def _call(config):
     B)), with its JVP and batching rules: returns the sums (2, H, B)."""
     steps, ramp_steps, _, _, harmonics, row, displacement, viscous = config
     tables = _tables(config)
-    attrs = dict(steps=np.int64(steps), ramp_steps=np.int64(ramp_steps), row=np.int64(row),
-                 displacement=np.int64(displacement), viscous=np.int64(viscous))
+    attrs = {"steps": np.int64(steps), "ramp_steps": np.int64(ramp_steps), "row": np.int64(row),
+             "displacement": np.int64(displacement), "viscous": np.int64(viscous)}
     n_arrays = 8
 
     def batch_of(arrays):

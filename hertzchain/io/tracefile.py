@@ -222,16 +222,16 @@ class TraceFile:
         A missing `striker_velocity_m_s` must be given in `overrides` (e.g. an estimate).
         """
         h = self.header
-        values = dict(
-            bead_radius_m=h["bead_radius_m"],
-            bead_density_kg_m3=bead_density_kg_m3(h),
-            bead_youngs_pa=h["bead_youngs_pa"],
-            bead_poisson=h["bead_poisson"],
-            wall_youngs_pa=h["wall_youngs_pa"],
-            wall_poisson=h["wall_poisson"],
-            end=h.get("end", "wall"),
-            sensor_beads=self.sensor_beads,
-        )
+        values = {
+            "bead_radius_m": h["bead_radius_m"],
+            "bead_density_kg_m3": bead_density_kg_m3(h),
+            "bead_youngs_pa": h["bead_youngs_pa"],
+            "bead_poisson": h["bead_poisson"],
+            "wall_youngs_pa": h["wall_youngs_pa"],
+            "wall_poisson": h["wall_poisson"],
+            "end": h.get("end", "wall"),
+            "sensor_beads": self.sensor_beads,
+        }
         for key in (
             "striker_mass_kg", "striker_radius_m", "striker_density_kg_m3", "striker_youngs_pa",
             "striker_poisson", "striker_velocity_m_s", "precompression_n", "sensor_beta",
@@ -259,7 +259,8 @@ def _ac_channel_names(header: dict) -> tuple[str, ...]:
     return tuple(c.strip() for c in str(header.get("ac_channels", "")).split(",") if c.strip())
 
 
-def _sphere_mass_kg(radius_m: float, density_kg_m3: float) -> float:
+def sphere_mass_kg(radius_m: float, density_kg_m3: float) -> float:
+    """Mass of a solid sphere of radius `radius_m` (m) and density `density_kg_m3` (kg/m^3), kg."""
     return 4.0 / 3.0 * math.pi * density_kg_m3 * radius_m**3
 
 
@@ -267,7 +268,7 @@ def bead_density_kg_m3(header: dict) -> float:
     """The beads' density, kg/m^3: `bead_density_kg_m3`, else from `bead_mass_kg` and the radius."""
     if "bead_density_kg_m3" in header:
         return float(header["bead_density_kg_m3"])
-    return float(header["bead_mass_kg"]) / _sphere_mass_kg(float(header["bead_radius_m"]), 1.0)
+    return float(header["bead_mass_kg"]) / sphere_mass_kg(float(header["bead_radius_m"]), 1.0)
 
 
 def _check_redundant(header: dict, where: str) -> None:
@@ -286,13 +287,13 @@ def _check_redundant(header: dict, where: str) -> None:
         _fail(where, "missing header key '# bead_density_kg_m3 = ...' (or '# bead_mass_kg = ...').")
     if "bead_density_kg_m3" in header and "bead_mass_kg" in header:
         agree("bead_mass_kg", float(header["bead_mass_kg"]),
-              _sphere_mass_kg(radius, float(header["bead_density_kg_m3"])),
+              sphere_mass_kg(radius, float(header["bead_density_kg_m3"])),
               f"bead_radius_m = {radius:.6g} and bead_density_kg_m3 = {header['bead_density_kg_m3']:.6g}")
     if "striker_mass_kg" in header and "striker_radius_m" in header:
         density = float(header.get("striker_density_kg_m3", bead_density_kg_m3(header)))
         source = ("striker_density_kg_m3" if "striker_density_kg_m3" in header else "the beads' density")
         agree("striker_mass_kg", float(header["striker_mass_kg"]),
-              _sphere_mass_kg(float(header["striker_radius_m"]), density),
+              sphere_mass_kg(float(header["striker_radius_m"]), density),
               f"striker_radius_m = {header['striker_radius_m']:.6g} and {source} ({density:.6g} kg/m^3)")
 
 

@@ -71,14 +71,11 @@ def _keep_freed_buffers() -> bool:
 def _load() -> str | None:
     """Build (if needed), load and register the kernel (and tune malloc for its results,
     `_keep_freed_buffers`): None on success, else why not (announced once by `_load_library`)."""
-    if os.environ.get("HERTZCHAIN_NATIVE", "1") == "0":
-        return registry.SWITCHED_OFF
-    _keep_freed_buffers()
-    try:
+    def load():
+        _keep_freed_buffers()
         _load_main()
-    except (OSError, RuntimeError) as error:
-        return str(error)
-    return None
+
+    return registry.load_failure(load)
 
 
 @functools.cache

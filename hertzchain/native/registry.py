@@ -13,6 +13,26 @@ from . import build
 # `unavailable_reason()` where `HERTZCHAIN_NATIVE=0` switched the kernel off
 SWITCHED_OFF = "switched off (HERTZCHAIN_NATIVE=0)"
 
+
+
+def switched_off() -> bool:
+    """Whether `HERTZCHAIN_NATIVE=0` switched the kernels off (every run takes the JAX kernel)."""
+    return os.environ.get("HERTZCHAIN_NATIVE", "1") == "0"
+
+
+def load_failure(load) -> str | None:
+    """Call `load` (build if needed, load and register a kernel's library): None on success,
+    else why not: `SWITCHED_OFF` where the kernels are switched off (`load` is then not
+    called), or the text of the `OSError` or `RuntimeError` it raised."""
+    if switched_off():
+        return SWITCHED_OFF
+    try:
+        load()
+    except (OSError, RuntimeError) as error:
+        return str(error)
+    return None
+
+
 # The libraries this process failed to build or load: path -> why (tried once a process).
 _FAILED: dict[Path, str] = {}
 

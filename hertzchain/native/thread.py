@@ -47,7 +47,7 @@ def _nvcc() -> str | None:
 def thread_unavailable_reason(backend: str) -> str | None:
     """Why the one-thread-per-chain kernel cannot be built for `backend` ("cuda" or
     "emulated"), or None when it can."""
-    if os.environ.get("HERTZCHAIN_NATIVE", "1") == "0":
+    if registry.switched_off():
         return registry.SWITCHED_OFF
     if backend == "cuda":
         return None if _nvcc() else "no CUDA compiler (nvcc) found (set CUDA_HOME, or install the CUDA toolkit)"

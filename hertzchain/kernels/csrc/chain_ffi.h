@@ -38,12 +38,18 @@ auto FullArgs(Binding&& binding) {
       .template Arg<F64Buffer>();  // dashpot
 }
 
+// Every kernel's first attributes: the step (s) and the steps per recorded sample
+template <class Binding>
+auto StepAttrs(Binding&& binding) {
+  return std::forward<Binding>(binding)
+      .template Attr<double>("dt")
+      .template Attr<int64_t>("steps_per_sample");
+}
+
 // The conservative kernel's attributes
 template <class Binding>
 auto ForwardAttrs(Binding&& binding) {
-  return std::forward<Binding>(binding)
-      .template Attr<double>("dt")
-      .template Attr<int64_t>("steps_per_sample")
+  return StepAttrs(std::forward<Binding>(binding))
       .template Attr<int64_t>("preload")
       .template Attr<int64_t>("springs")
       .template Attr<int64_t>("books");
@@ -53,9 +59,7 @@ auto ForwardAttrs(Binding&& binding) {
 // dashpot's terms in, with viscous only)
 template <class Binding>
 auto FullAttrs(Binding&& binding) {
-  return std::forward<Binding>(binding)
-      .template Attr<double>("dt")
-      .template Attr<int64_t>("steps_per_sample")
+  return StepAttrs(std::forward<Binding>(binding))
       .template Attr<int64_t>("viscous")
       .template Attr<int64_t>("friction")
       .template Attr<int64_t>("extras")

@@ -31,10 +31,16 @@ constexpr int64_t kQuarterLanes = 4;
 // 8-lane block was 4x slower). The loop and its bodies (`HC_LANES`) are always inlined: the
 // tangent sweep's body, with its contact law on dual numbers, is larger than GCC 12 inlines
 // on its own, and a loop that calls it per lane stays scalar (3.5x the instructions).
+// `kRolled`: never unrolled (`#pragma GCC unroll 1`), where unrolling it let GCC vectorise an
+// outer loop instead (the driven kernel's kick, `driven_kernel.cc`).
 #define HC_LANES __attribute__((always_inline))
-template <int64_t kLanes, class Body>
+template <int64_t kLanes, bool kRolled = false, class Body>
 HC_LANES inline void ForLanes(const Body& body) {
-  if constexpr (kLanes == 64) {
+  if constexpr (kRolled) {
+#pragma GCC ivdep
+#pragma GCC unroll 1
+    for (int64_t j = 0; j < kLanes; ++j) body(j);
+  } else if constexpr (kLanes == 64) {
 #pragma GCC ivdep
 #pragma GCC unroll 8
     for (int64_t j = 0; j < kLanes; ++j) body(j);

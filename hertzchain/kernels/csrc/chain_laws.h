@@ -165,6 +165,20 @@ HC_HD HC_INLINE Dual<N, M> Chain(double v, double slope, const Dual<N, M>& x) {
     if (Has(M, k)) r.d[k] = slope * x.d[k];
   return r;
 }
+// r = f(a, b) with partial derivatives by_a, by_b: dr = by_a da + by_b db, in each direction
+// only the terms of the arguments that carry it
+template <int N, unsigned A, unsigned B>
+HC_HD HC_INLINE Dual<N, A | B> Chain(double v, double by_a, const Dual<N, A>& a, double by_b, const Dual<N, B>& b) {
+  Dual<N, A | B> r;
+  r.v = v;
+  HC_UNROLL
+  for (int k = 0; k < N; ++k) {
+    if (Has(A, k) && Has(B, k)) r.d[k] = by_a * a.d[k] + by_b * b.d[k];
+    else if (Has(A, k)) r.d[k] = by_a * a.d[k];
+    else if (Has(B, k)) r.d[k] = by_b * b.d[k];
+  }
+  return r;
+}
 template <int N, unsigned A, unsigned B>
 HC_HD HC_INLINE Dual<N, A | B> operator+(const Dual<N, A>& a, const Dual<N, B>& b) {
   Dual<N, A | B> r;
@@ -268,16 +282,8 @@ HC_HD HC_INLINE Dual<N, M> Pow(const Dual<N, M>& x, double y) {
 // x^y (x > 0): y x^(y - 1) dx + log(x) x^y dy
 template <int N, unsigned A, unsigned B>
 HC_HD HC_INLINE Dual<N, A | B> Pow(const Dual<N, A>& x, const Dual<N, B>& y) {
-  Dual<N, A | B> r;
-  r.v = std::pow(x.v, y.v);
-  const double by_x = y.v * std::pow(x.v, y.v - 1.0), by_y = std::log(x.v) * r.v;
-  HC_UNROLL
-  for (int k = 0; k < N; ++k) {
-    if (Has(A, k) && Has(B, k)) r.d[k] = by_x * x.d[k] + by_y * y.d[k];
-    else if (Has(A, k)) r.d[k] = by_x * x.d[k];
-    else if (Has(B, k)) r.d[k] = by_y * y.d[k];
-  }
-  return r;
+  const double v = std::pow(x.v, y.v);
+  return Chain(v, y.v * std::pow(x.v, y.v - 1.0), x, std::log(x.v) * v, y);
 }
 template <int N, unsigned M>
 HC_HD HC_INLINE Dual<N, M> Pow(double x, const Dual<N, M>& y) {
@@ -313,16 +319,8 @@ HC_HD HC_INLINE Dual<N, M> MaxZero(const Dual<N, M>& s) {
 HC_HD HC_INLINE double Max(double a, double b) { return b > a ? b : a; }
 template <int N, unsigned A, unsigned B>
 HC_HD HC_INLINE Dual<N, A | B> Max(const Dual<N, A>& a, const Dual<N, B>& b) {
-  Dual<N, A | B> r;
-  r.v = b.v > a.v ? b.v : a.v;
   const double wa = b.v > a.v ? 0.0 : b.v == a.v ? 0.5 : 1.0, wb = b.v > a.v ? 1.0 : b.v == a.v ? 0.5 : 0.0;
-  HC_UNROLL
-  for (int k = 0; k < N; ++k) {
-    if (Has(A, k) && Has(B, k)) r.d[k] = wa * a.d[k] + wb * b.d[k];
-    else if (Has(A, k)) r.d[k] = wa * a.d[k];
-    else if (Has(B, k)) r.d[k] = wb * b.d[k];
-  }
-  return r;
+  return Chain(b.v > a.v ? b.v : a.v, wa, a, wb, b);
 }
 
 // ---------------------------------------------------------------------------------------

@@ -47,6 +47,7 @@ namespace {
 
 using hertzchain::AsParam;
 using hertzchain::Block;
+using hertzchain::ForLanes;
 using hertzchain::Load;
 using hertzchain::LoadTangent;
 using hertzchain::Param;
@@ -340,14 +341,7 @@ struct DrivenBlock {
         const T num = At<T>(half, j) + At<T>(h_row, j) * At<T>(f_in, j);
         Put(Over(num, At<T>(den_in, j), At<T>(inv_in, j)), out, j);
       };
-      if constexpr (std::is_same_v<T, double>) {
-#pragma GCC ivdep
-#pragma GCC unroll 1
-        for (int64_t j = 0; j < L; ++j) lane(j);
-      } else {
-#pragma GCC ivdep
-        for (int64_t j = 0; j < L; ++j) lane(j);
-      }
+      ForLanes<L, std::is_same_v<T, double>>(lane);
     }
   }
 
