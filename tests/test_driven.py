@@ -247,8 +247,6 @@ def test_bad_input_names_the_field():
         lockin_grid(chain, [4000.0], [1e-9], quantity="force")
     with pytest.raises(ValueError, match="contact"):
         lockin_grid(chain, [4000.0], [1e-9], contact=1)
-    with pytest.raises(TypeError, match="lockin_grid: unknown keyword 'beads'; the read-out keywords"):
-        lockin_grid(chain, [4000.0], [1e-9], beads=1)
 
 
 def test_smooth_step_is_smooth():

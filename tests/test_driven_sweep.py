@@ -39,8 +39,6 @@ def test_sweep_resumes_and_matches_one_batch(tmp_path):
     assert (tmp_path / "lockin.png").stat().st_size > 0
     with pytest.raises(ValueError, match="differs in: drive_amplitudes_m"):
         run_lockin_sweep(chain, frequencies, amplitudes * 2, tmp_path, chunk_size=4, progress=False, **OPTIONS)
-    with pytest.raises(TypeError, match="run_lockin_sweep: unknown keyword 'unroll'; the read-out keywords"):
-        run_lockin_sweep(chain, frequencies, amplitudes, tmp_path, progress=False, unroll=4, **OPTIONS)
 
 
 _SHARDED = f"""

@@ -20,7 +20,6 @@ from .floquet import Floquet as Floquet
 from .floquet import floquet_multipliers as floquet_multipliers
 from .floquet import period_doubling_threshold as period_doubling_threshold
 from .grid import LockinGrid as LockinGrid
-from .grid import LockinReadout as LockinReadout
 from .grid import lockin_grid as lockin_grid
 from .grid import settle_periods as settle_periods
 from .grid_sweep import LockinSweepResult as LockinSweepResult
@@ -46,7 +45,6 @@ __all__ = [
     "HarmonicSchedule",
     "LockIn",
     "LockinGrid",
-    "LockinReadout",
     "LockinSweepResult",
     "RayleighStroke",
     "ScheduleLockin",

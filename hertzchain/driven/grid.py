@@ -35,8 +35,6 @@ threshold itself.
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -75,12 +73,30 @@ class LockinGrid(AbstractReading):
     kernel: str | None = eqx.field(static=True, default=None)
 
 
-class LockinReadout(NamedTuple):
-    """What a lock-in grid runs and reads, with its defaults: the keywords of `lockin_grid`
-    and `run_lockin_sweep` besides the chain and the grid.
+def lockin_grid(
+    chain: DrivenChain,
+    frequencies_hz,
+    drive_amplitudes_m,
+    *,
+    bead: int = 1,
+    quantity: str = "velocity",
+    harmonics: tuple[float, ...] = (1.0, 0.5),
+    ramp_periods: int = 25,
+    hold_periods: int = 35,
+    window_periods: int = 4,
+    steps_per_period: int = 64,
+    contact: int | None = None,
+    unroll: int = DEFAULT_UNROLL,
+    kernel: str = "auto",
+) -> LockinGrid:
+    """Lock-in response of `chain` over the grid `frequencies_hz` (F,) × `drive_amplitudes_m`
+    (A,) (the driver's displacement amplitude, m, ≥ 0), all F × A runs as one batch.
 
-    **Fields:**
+    **Arguments:**
 
+    - `chain`: the `DrivenChain` (may be traced: `jax.jacfwd(lambda c: lockin_grid(c, ...).rms)`).
+    - `frequencies_hz`: (F,) drive frequencies, Hz (> 0).
+    - `drive_amplitudes_m`: (A,) drive displacement amplitudes, m.
     - `bead`: which bead the vibrometer reads, 1..n (1 = next to the driver).
     - `quantity`: "velocity" (m/s) or "displacement" (m, from the static equilibrium) of
       `bead`, or "force" (N) of `contact`.
@@ -92,48 +108,6 @@ class LockinReadout(NamedTuple):
       1/(f N)); checked against the chain's highest linear mode (ω dt ≤ 1).
     - `contact`: with `quantity="force"`, the contact whose total force the lock-in reads
       (0 = driver face .. n = wall; N), as a force sensor there would.
-    """
-
-    bead: int = 1
-    quantity: str = "velocity"
-    harmonics: tuple[float, ...] = (1.0, 0.5)
-    ramp_periods: int = 25
-    hold_periods: int = 35
-    window_periods: int = 4
-    steps_per_period: int = 64
-    contact: int | None = None
-
-    @classmethod
-    def of(cls, where: str, keywords: dict) -> LockinReadout:
-        """The read-out `keywords` (field -> value) give, the others at their defaults; a
-        TypeError naming `where` and the fields for a keyword that is none of them."""
-        unknown = sorted(set(keywords) - set(cls._fields))
-        if unknown:
-            raise TypeError(f"{where}: unknown keyword {', '.join(map(repr, unknown))}; the read-out keywords "
-                            f"(LockinReadout) are {', '.join(cls._fields)}.")
-        return cls(**keywords)
-
-
-def lockin_grid(
-    chain: DrivenChain,
-    frequencies_hz,
-    drive_amplitudes_m,
-    *,
-    unroll: int = DEFAULT_UNROLL,
-    kernel: str = "auto",
-    **readout,
-) -> LockinGrid:
-    """Lock-in response of `chain` over the grid `frequencies_hz` (F,) × `drive_amplitudes_m`
-    (A,) (the driver's displacement amplitude, m, ≥ 0), all F × A runs as one batch.
-
-    **Arguments:**
-
-    - `chain`: the `DrivenChain` (may be traced: `jax.jacfwd(lambda c: lockin_grid(c, ...).rms)`).
-    - `frequencies_hz`: (F,) drive frequencies, Hz (> 0).
-    - `drive_amplitudes_m`: (A,) drive displacement amplitudes, m.
-    - `readout`: the fields of `LockinReadout` by keyword (`bead=1`, `quantity="velocity"`,
-      `harmonics=(1.0, 0.5)`, `ramp_periods=25`, `hold_periods=35`, `window_periods=4`,
-      `steps_per_period=64`, `contact=None` where not given).
     - `unroll`: steps per scan iteration of the JAX kernel (speed only).
     - `kernel`: "auto" (default) runs the fused host kernel (`hertzchain.driven.fused`:
       the same numbers to round-off, forward-mode derivatives in the same call) where it
@@ -143,8 +117,6 @@ def lockin_grid(
 
     **Returns:** `LockinGrid` with `.rms` and `.phase_rad` of shape (n_harmonics, F, A).
     """
-    bead, quantity, harmonics, ramp_periods, hold_periods, window_periods, steps_per_period, contact = \
-        LockinReadout.of("lockin_grid", readout)
     harmonics = tuple(float(h) for h in harmonics)
     if kernel not in ("auto", "jax"):
         raise ValueError(f'kernel: expected "auto" or "jax", got {kernel!r}.')

@@ -34,7 +34,7 @@ from ..progress import Progress
 from ..sweep import _read_parquet, _write_parquet, _write_table_csv
 from . import fused
 from .chain import DrivenChain
-from .grid import LockinGrid, LockinReadout, check_grid_arguments, lockin_runs
+from .grid import LockinGrid, check_grid_arguments, lockin_runs
 from .kernel import DEFAULT_UNROLL
 
 LOCKIN_SWEEP_FORMAT = "hertzchain-lockin-sweep/1"
@@ -58,21 +58,36 @@ def harmonic_column(h: float) -> str:
     return f"{h:g}f"
 
 
-def run_lockin_sweep(chain: DrivenChain, frequencies_hz, drive_amplitudes_m, folder, *, chunk_size: int | None = None,
-                     devices=None, max_chunks: int | None = None, plots: bool = True, progress: bool = True,
-                     **readout) -> LockinSweepResult:
+def run_lockin_sweep(
+    chain: DrivenChain,
+    frequencies_hz,
+    drive_amplitudes_m,
+    folder,
+    *,
+    bead: int = 1,
+    quantity: str = "velocity",
+    harmonics: tuple[float, ...] = (1.0, 0.5),
+    ramp_periods: int = 25,
+    hold_periods: int = 35,
+    window_periods: int = 4,
+    steps_per_period: int = 64,
+    contact: int | None = None,
+    chunk_size: int | None = None,
+    devices=None,
+    max_chunks: int | None = None,
+    plots: bool = True,
+    progress: bool = True,
+) -> LockinSweepResult:
     """Run (or resume) the lock-in grid `frequencies_hz` × `drive_amplitudes_m` into `folder`.
 
-    **Arguments:** the chain, the grid and the read-out (`readout`: the fields of
-    `LockinReadout` by keyword) as for `lockin_grid` (concrete); `chunk_size`: runs per chunk (default: all runs, at most 4096, a multiple of the device
+    **Arguments:** the chain, the grid and the read-out as for `lockin_grid` (concrete);
+    `chunk_size`: runs per chunk (default: all runs, at most 4096, a multiple of the device
     count); `devices`: split each chunk over these (default: all local devices);
     `max_chunks`: stop after computing this many (the rest on a later call); `plots`,
     `progress`: write `lockin.png`; report progress and ETA on stderr.
 
     **Returns:** `LockinSweepResult`.
     """
-    bead, quantity, harmonics, ramp_periods, hold_periods, window_periods, steps_per_period, contact = \
-        LockinReadout.of("run_lockin_sweep", readout)
     harmonics = tuple(float(h) for h in harmonics)
     check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
                          hold_periods, window_periods, steps_per_period, contact)
