@@ -292,7 +292,7 @@ def item_fit() -> dict:
     row = {"n_traces": len(files), "truth": {"eta_s": 2e-6, "mu": 0.19}}
     for label in ("cold", "warm"):
         start = time.perf_counter()
-        fitted = fitting.fit(files, ("eta", "mu", "C"), progress=False, throw=False)
+        fitted = fitting.fit(files, ("eta_s", "mu", "C"), progress=False, throw=False)
         row[f"{label}_s"] = time.perf_counter() - start
         row[f"{label}_steps"] = int(fitted.n_steps)
         row[f"{label}_converged"] = bool(fitted.converged)

@@ -379,7 +379,7 @@ def worker_fit() -> dict:
     )
     result = {"available": True, "n_traces": len(files), "t_end_s": t_end, "truth": truth}
     start = time.perf_counter()
-    fitted = fitting.fit(files, ("eta", "mu", "C"), progress=False, throw=False)
+    fitted = fitting.fit(files, ("eta_s", "mu", "C"), progress=False, throw=False)
     result["fit_s"] = time.perf_counter() - start
     result["fit_values"] = {k: float(v) for k, v in dict(fitted.values).items()}
     result["fit_stderr"] = {k: float(v) for k, v in dict(fitted.stderr).items()}
@@ -517,7 +517,7 @@ def worker_fit_iteration() -> dict:
     from hertzchain.batched import solve_batched
 
     files = fit_bench_traces()
-    problem = make_problem(files, ("eta", "mu", "C"))
+    problem = make_problem(files, ("eta_s", "mu", "C"))
     x = jnp.asarray(initial_values(problem))
     first, median, low, high, (r, jac) = _time(lambda: residuals_and_jacobian(problem, x), 7)
     group = problem.groups[0]
