@@ -56,7 +56,7 @@ def posterior_gradient_ms(calls: int) -> float:
     files, _, _ = benchmark_files(10)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FitWarning)
-        fit = fitting.fit(files, ("eta", "mu", "C"), priors=["sensor_gain=+-2%"], covariance="noise",
+        fit = fitting.fit(files, ("eta_s", "mu", "C"), priors=["sensor_gain=+-2%"], covariance="noise",
                           progress=False, throw=False)
     problem = fit.problem
     constants = tuple(jnp.asarray(a) for a in transform_arrays(problem.instances))

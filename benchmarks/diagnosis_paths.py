@@ -47,7 +47,7 @@ def _problems(files, friction: bool):
     """(solve, batched kernel, C++ twin) problems and the point x: compliance and dashpot on for
     the first two; the twin's sensors rigid (coupling 0, where it is exact)."""
     forward = fx.effects_forward_model(N_BEADS, plastic=False)
-    seed = make_problem(files, ("eta", "C", "striker_velocity"), forward=forward)
+    seed = make_problem(files, ("eta_s", "C", "striker_velocity_m_s"), forward=forward)
     extra = tuple(ParameterInstance(get_spec(fx.PREFIX + name), label=name) for name in EXTRAS)
 
     def problem(model):

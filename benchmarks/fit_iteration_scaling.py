@@ -45,7 +45,7 @@ def main(argv=None) -> int:
               "kernel": native.unavailable_reason() or "host C++ kernel", "fit_iteration_ms": {}}
     for n in counts:
         files = fit_bench_traces(n)
-        problem = make_problem(files, ("eta", "mu", "C"))
+        problem = make_problem(files, ("eta_s", "mu", "C"))
         x = jnp.asarray(initial_values(problem))
         first, median, low, _, _ = _time(lambda: residuals_and_jacobian(problem, x), 7)
         result["fit_iteration_ms"][str(n)] = {"median_ms": 1e3 * median, "min_ms": 1e3 * low}

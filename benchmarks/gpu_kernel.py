@@ -136,13 +136,13 @@ def item_hertzchain(batch: int, damped: bool, repeats: int, kernel: str, referen
     import numpy as np
 
     from hertzchain import native
-    from hertzchain.batched import batch_size, kernel_flags, solve_batched
+    from hertzchain.batched import batch_size, kernel_flags, kernel_rows, solve_batched
     from hertzchain.integrate import Recording
 
     setup, grid = _case(batch, damped)
     chains = batch_size(setup)
     recording = Recording((N_BEADS // 2 - 1, N_BEADS // 2))
-    fused = native.kernel_for(kernel_flags(setup)._replace(ledger=False), None) if kernel == "auto" else None
+    fused = native.kernel_for(kernel_flags(setup)._replace(ledger=False), None, kernel_rows(setup)) if kernel == "auto" else None
 
     def run():
         out = solve_batched(setup, grid, recording, books=False, kernel=kernel)
@@ -170,11 +170,11 @@ def item_kernel_alone(batch: int, damped: bool, repeats: int) -> dict:
     import jax
 
     from hertzchain import native
-    from hertzchain.batched import _initial, _Layout, _start, kernel_flags, kernel_params, share_uniform
+    from hertzchain.batched import _initial, _Layout, _start, kernel_flags, kernel_params, kernel_rows, share_uniform
 
     setup, grid = _case(batch, damped)
     flags = kernel_flags(setup)._replace(ledger=False)
-    fused = native.kernel_for(flags, None)
+    fused = native.kernel_for(flags, None, kernel_rows(setup))
     if fused is None:
         return {"error": "no fused kernel for this device"}
     start = time.perf_counter()
@@ -292,7 +292,7 @@ def item_fit() -> dict:
     row = {"n_traces": len(files), "truth": {"eta_s": 2e-6, "mu": 0.19}}
     for label in ("cold", "warm"):
         start = time.perf_counter()
-        fitted = fitting.fit(files, ("eta", "mu", "C"), progress=False, throw=False)
+        fitted = fitting.fit(files, ("eta_s", "mu", "C"), progress=False, throw=False)
         row[f"{label}_s"] = time.perf_counter() - start
         row[f"{label}_steps"] = int(fitted.n_steps)
         row[f"{label}_converged"] = bool(fitted.converged)

@@ -33,9 +33,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from fit_bench import benchmark_files, machine_info  # noqa: E402
 
-PARAMS = ("eta", "mu", "C")
+PARAMS = ("eta_s", "mu", "C")
 GAIN_PRIOR = "sensor_gain=+-2%"
-YOUNGS_PRIOR = "bead_youngs=203GPa+-4GPa"
+YOUNGS_PRIOR = "bead_youngs_pa=203GPa+-4GPa"
 
 
 def benchmark_posterior(n_traces: int = 10, *, chains: int = 4, warmup: int = 100, draws: int = 200,
@@ -45,11 +45,12 @@ def benchmark_posterior(n_traces: int = 10, *, chains: int = 4, warmup: int = 10
 
     import fitting
     from fitting.fit import FitWarning
+    from fitting.parameters import resolve_name
     from fitting.posterior import PosteriorWarning, sample_posterior
 
     load_before = os.getloadavg()[0]
     files, truth, data_s = benchmark_files(n_traces)
-    truth = dict(zip(PARAMS, truth.tolist()))
+    truth = {resolve_name(p): value for p, value in zip(PARAMS, truth.tolist())}  # by label, as the results
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FitWarning)
         began = time.perf_counter()

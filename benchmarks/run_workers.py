@@ -150,10 +150,10 @@ def worker_throughput(impl: str, n_beads: int, batch: int, steps: int, devices: 
         forces = np.stack([np.asarray(result[k]) for k in result], axis=1)  # (B, 3, n)
         forces = np.transpose(forces, (2, 1, 0))  # (n, 3, B)
         from hertzchain import native
-        from hertzchain.batched import kernel_flags
+        from hertzchain.batched import kernel_flags, kernel_rows
 
         flags = kernel_flags(setup)._replace(ledger=books)
-        ran = native.kernel_for(flags, use) if kernel == "auto" else None
+        ran = native.kernel_for(flags, use, kernel_rows(setup)) if kernel == "auto" else None
         native_kernel = ran or "none (JAX kernel)"
     elif impl == "plain-jax":
         import jax
@@ -379,7 +379,7 @@ def worker_fit() -> dict:
     )
     result = {"available": True, "n_traces": len(files), "t_end_s": t_end, "truth": truth}
     start = time.perf_counter()
-    fitted = fitting.fit(files, ("eta", "mu", "C"), progress=False, throw=False)
+    fitted = fitting.fit(files, ("eta_s", "mu", "C"), progress=False, throw=False)
     result["fit_s"] = time.perf_counter() - start
     result["fit_values"] = {k: float(v) for k, v in dict(fitted.values).items()}
     result["fit_stderr"] = {k: float(v) for k, v in dict(fitted.stderr).items()}
@@ -412,7 +412,7 @@ def worker_pairs(damped: bool, pairs: int, repeats: int) -> dict:
 
     import baselines
     from hertzchain import native
-    from hertzchain.batched import kernel_flags, solve_batched
+    from hertzchain.batched import kernel_flags, kernel_rows, solve_batched
     from hertzchain.integrate import Recording
 
     if not baselines.HAVE_NUMBA:
@@ -458,7 +458,7 @@ def worker_pairs(damped: bool, pairs: int, repeats: int) -> dict:
         "available": True,
         "case": f"N={n}, B={b}, {STANDARD_STEPS} steps of 1 us, 3 forces every step"
         + (f", eta = {eta * 1e6:g} us, mu = {mu}" if damped else ", dissipationless"),
-        "native_kernel": native.kernel_for(kernel_flags(setup)._replace(ledger=False), use) or "none (JAX kernel)",
+        "native_kernel": native.kernel_for(kernel_flags(setup)._replace(ledger=False), use, kernel_rows(setup)) or "none (JAX kernel)",
         "host_devices": len(devices),
         "numba_threads": numba_threads(),
         "kernel_march": os.environ.get(native.ARCH_VARIABLE, "native"),
@@ -517,7 +517,7 @@ def worker_fit_iteration() -> dict:
     from hertzchain.batched import solve_batched
 
     files = fit_bench_traces()
-    problem = make_problem(files, ("eta", "mu", "C"))
+    problem = make_problem(files, ("eta_s", "mu", "C"))
     x = jnp.asarray(initial_values(problem))
     first, median, low, high, (r, jac) = _time(lambda: residuals_and_jacobian(problem, x), 7)
     group = problem.groups[0]

@@ -37,7 +37,7 @@ def sweep_benchmark(n_setups: int, chunk_size: int) -> dict:
     velocities = np.geomspace(0.05, 1.0, n_v)
     walls = np.geomspace(3e9, 4e11, n_w)
     setup = hc.ChainSetup(eta_s=1.7e-6, mu=0.12, mu_star=0.03)
-    params = ("eta", "mu", "wall_youngs", "striker_velocity")
+    params = ("eta_s", "mu", "wall_youngs_pa", "striker_velocity_m_s")
     observables = ("wall_peak", "contact_10_peak", "force_ratio_10", "contact_10_arrival")
     kwargs = dict(t_end_s=2.0e-3, sample_interval_s=1e-6, chunk_size=chunk_size, progress=False)
     # compile on one chunk of the same shape (the same grid step as the full sweep)
@@ -48,11 +48,11 @@ def sweep_benchmark(n_setups: int, chunk_size: int) -> dict:
     warm_velocities = velocities[: max(1, -(-chunk_size // 2))]
     warm_velocities = np.unique(np.concatenate([warm_velocities, velocities[-1:]]))
     S.sensitivity_sweep(setup, params, observables,
-                        {"striker_velocity": warm_velocities, "wall_youngs": warm_walls}, **kwargs)
+                        {"striker_velocity_m_s": warm_velocities, "wall_youngs_pa": warm_walls}, **kwargs)
     warm = time.perf_counter() - start
     start = time.perf_counter()
     result = S.sensitivity_sweep(setup, params, observables,
-                                 {"striker_velocity": velocities, "wall_youngs": walls}, **kwargs)
+                                 {"striker_velocity_m_s": velocities, "wall_youngs_pa": walls}, **kwargs)
     elapsed = time.perf_counter() - start
     n = int(np.prod(result.grid_shape))
     valid = {o: int(result.valid[o].sum()) for o in observables}
@@ -76,13 +76,13 @@ def design_benchmark(small: bool) -> dict:
     from fitting import design as fd
 
     setup = hc.ChainSetup(eta_s=1.7e-6, mu=0.12, mu_star=0.03)
-    values = {"eta": 1.7e-6, "mu": 0.12, "mu_star": 0.03}
+    values = {"eta_s": 1.7e-6, "mu": 0.12, "mu_star": 0.03}
     velocities = [0.1, 0.4] if small else [0.03, 0.06, 0.1, 0.2, 0.4, 0.8]
     channels = ["contact_6", "wall"] if small else [
         "contact_2", "contact_6", "contact_10", "contact_14", "contact_18", "contact_20", "wall"]
     start = time.perf_counter()
     opt = fd.optimize_plan(
-        setup, ("eta", "mu", "C"), candidate_velocities_m_s=velocities, candidate_channels=channels,
+        setup, ("eta_s", "mu", "C"), candidate_velocities_m_s=velocities, candidate_channels=channels,
         size=2 if small else 4, values=values, noise_std_n=0.5, sample_interval_s=1e-6,
         t_end_s=1.6e-3 if small else 2.5e-3, baseline_units=[(0.3, "contact_6"), (0.3, "wall")],
         progress=False,

@@ -51,7 +51,7 @@ def in_process(repeats: int) -> dict:
 
     import hertzchain as hc
     from hertzchain import native
-    from hertzchain.batched import kernel_flags, solve_batched
+    from hertzchain.batched import kernel_flags, kernel_rows, solve_batched
 
     setup, grid, _, rows = _case(21, 1024, 2500, DAMPED_ETA_S, DAMPED_MU)
     recording = hc.Recording(rows)
@@ -77,7 +77,7 @@ def in_process(repeats: int) -> dict:
                    for name in ("dissipated_j", "kinetic_j", "potential_j", "energy_error_j")}
     return {
         "case": "N = 21, B = 1024, 2500 steps of 1 us, eta = 2 us, mu = 0.19, books on",
-        "kernel": str(native.kernel_for(kernel_flags(setup), None)),
+        "kernel": str(native.kernel_for(kernel_flags(setup), None, kernel_rows(setup))),
         "repeats": repeats,
         "run_s": medians,
         "runs_s": times,

@@ -2,7 +2,7 @@
 
 The public API:
 
-- `fit(experiments, params=("eta", "mu", "C"), ...) -> FitResult`: Levenberg-Marquardt
+- `fit(experiments, params=("eta_s", "mu", "C"), ...) -> FitResult`: Levenberg-Marquardt
   (optimistix) on whitened residuals, multistart, standard errors, correlations,
   identifiability warnings and profile likelihoods.
 - `load_experiments(paths)`, `make_experiment(trace)`, `Experiment`: the data model.

@@ -1,6 +1,6 @@
 """Least-squares fits of chain parameters to trace files with optimistix.
 
-`fit(experiments, params=("eta", "mu", "C"))` minimises the sum of squared whitened
+`fit(experiments, params=("eta_s", "mu", "C"))` minimises the sum of squared whitened
 residuals (`fitting.model`) with Levenberg-Marquardt (`optimistix.LevenbergMarquardt`,
 Jacobian by forward-mode differentiation of the solver), in the bounded transformed
 coordinates of `fitting.parameters`. Several starts run as one `vmap`ped batch; the best
@@ -37,12 +37,15 @@ from .least_squares import LeastSquares, least_squares  # noqa: F401  (importabl
 from .model import ForwardModel, Problem
 from .optimum import OPTIMUM_TOLERANCE
 from .parameters import (
+    LabelledValues,
     bare_speed_constant,
     build_instances,
+    checked_keys,
     get_spec,
     parse_parameter_list,
     public_label,
     resolve_label,
+    resolve_name,
     to_unbounded,
     transform_arrays,
 )
@@ -68,26 +71,27 @@ class FitWarning(UserWarning):
 
 
 # --- building a problem ------------------------------------------------------------------------
-def make_problem(experiments, params=("eta", "mu", "C"), *, fixed=None,
+def make_problem(experiments, params=("eta_s", "mu", "C"), *, fixed=None,
                  forward: ForwardModel | None = None, priors=()) -> Problem:
     """Build the least-squares `Problem` for `params` on `experiments`.
 
     **Arguments:**
 
     - `experiments`: `Experiment`s (see `fitting.data`), `TraceFile`s or paths.
-    - `params`: names from the registry (`fitting.parameters.REGISTRY`); experiment-scoped
-      ones get one value per file, `gain` one per channel.
+    - `params`: names from the registry (`fitting.parameters.REGISTRY`, public names; a
+      previous name warns); experiment-scoped ones get one value per file, `gain` one per
+      channel.
     - `fixed`: name -> value (SI) of global setup parameters held fixed at a value other than
-      the header's (e.g. `{"mu": 0.19}`).
+      the header's (e.g. `{"mu": 0.19}`; a previous name warns).
     - `forward`: a `ForwardModel` (custom solver / model switches, time-step choice).
-    - `priors`: `fitting.priors` texts or `Prior`s (`"bead_youngs=203GPa+-4GPa"`); a
+    - `priors`: `fitting.priors` texts or `Prior`s (`"bead_youngs_pa=203GPa+-4GPa"`); a
       parameter with a prior is fitted; a normal prior adds a residual row.
     """
     experiments = as_experiments(experiments)
-    priors = parse_priors(priors)
-    names = parse_parameter_list(tuple(parse_parameter_list(params)) + prior_names(priors))
+    priors = parse_priors(priors, source="priors")
+    names = checked_keys(parse_parameter_list(params, where="params") + prior_names(priors))
     forward = forward or ForwardModel()
-    fixed = dict(fixed or {})
+    fixed = {resolve_name(name, where="fixed"): value for name, value in dict(fixed or {}).items()}
     base = []
     for experiment in experiments:
         trace = experiment.trace
@@ -96,20 +100,21 @@ def make_problem(experiments, params=("eta", "mu", "C"), *, fixed=None,
             if "striker_velocity" not in names:
                 raise FitInputError(
                     f"{experiment.label}: the file has no striker_velocity_m_s; add it to the header "
-                    "or fit it (params ... ,striker_velocity)."
+                    "or fit it (params ... ,striker_velocity_m_s)."
                 )
             overrides["striker_velocity_m_s"] = start_values.estimate_striker_velocity(trace)
         setup = trace.setup(**overrides)
         for name, value in fixed.items():
             spec = get_spec(name)
+            shown = public_label(name)
             if spec.kind != "setup" or spec.scope != "global":
-                raise ValueError(f"fixed: {name} is not a global setup parameter.")
+                raise ValueError(f"fixed: {shown} is not a global setup parameter.")
             if name in names:
-                raise ValueError(f"{name} is both fitted and fixed; choose one.")
+                raise ValueError(f"{shown} is both fitted and fixed; choose one.")
             if not spec.in_bounds(float(value)):
-                raise ValueError(f"fixed {name} = {float(value):g} {spec.unit}".rstrip() + " is outside its range "
-                                 f"({spec.lower:g} to {spec.upper:g} {spec.unit}".rstrip() + f"); give {name} a value "
-                                 "in that range, in SI units or with a unit (e.g. 2us, 5GPa).")
+                raise ValueError(f"fixed {shown} = {float(value):g} {spec.unit}".rstrip() + " is outside its range "
+                                 f"({spec.lower:g} to {spec.upper:g} {spec.unit}".rstrip() + f"); give {shown} a "
+                                 "value in that range, in SI units or with a unit (e.g. 2us, 5GPa).")
             setup = spec.apply(setup, float(value))
         if fixed:
             setup.__check_init__()  # the setup's own checks of its values, which the updates above skip
@@ -130,24 +135,29 @@ def make_problem(experiments, params=("eta", "mu", "C"), *, fixed=None,
     return Problem(experiments, instances, base, forward, rows)
 
 
-def _start_key(key: str) -> str:
-    """A `start` key written with a public or a previous parameter name, as the problem labels
-    it (`eta_s` -> `eta`, `striker_velocity_m_s[run1]` -> `striker_velocity[run1]`); a key that
-    names no parameter is kept, for the check that names it."""
+def _problem_label(label: str, where: str) -> str:
+    """A label written in argument `where` with a public or a previous parameter name (which
+    warns), as the problem labels it (`eta_s` -> `eta`, `striker_velocity_m_s[run1]` ->
+    `striker_velocity[run1]`); a label that names no parameter is kept, for the check that
+    names it."""
     try:
-        return resolve_label(key)
+        return resolve_label(label, where=where)
     except ValueError:
-        return key
+        return label
 
 
 def initial_values(problem: Problem, start=None) -> np.ndarray:
     """Start values (SI) of the problem's parameters.
 
     From `start` (a dict keyed by parameter name, which sets every instance of it, or by
-    instance label) where given; else eta, mu, C from the data (`fitting.start`); else the
-    header's value (`spec.read`) or the spec's default.
+    instance label, a previous name warning; or a fit's `values`) where given; else eta, mu,
+    C from the data (`fitting.start`); else the header's value (`spec.read`) or the spec's
+    default.
     """
-    start = {_start_key(key): value for key, value in dict(start or {}).items()}
+    if isinstance(start, LabelledValues):  # a fit's values: labelled by the library, in registry spelling
+        start = dict(start)
+    else:
+        start = {_problem_label(key, "start"): value for key, value in dict(start or {}).items()}
     for key in start:
         if key not in problem.labels and key not in {inst.name for inst in problem.instances}:
             raise ValueError(
@@ -195,7 +205,7 @@ class _IterationReport:
             self.progress.note(f"iteration {step}, best chi^2 = {float(np.min(finite)):.6g}", throttle=True)
 
 
-def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multistart: int = 1,
+def fit(experiments, params=("eta_s", "mu", "C"), *, start=None, fixed=None, multistart: int = 1,
         seed: int = 0, max_steps: int = 100, tolerance: float = OPTIMUM_TOLERANCE,
         covariance: str = "auto", profile=(), profile_points: int = 13,
         forward: ForwardModel | None = None, progress: bool = True, throw: bool = True,
@@ -205,8 +215,10 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
     **Arguments:**
 
     - `experiments`: trace file paths, `TraceFile`s or `Experiment`s (`fitting.data`).
-    - `params`: parameter names (see `fitting.parameters.REGISTRY`): e.g. `("eta", "mu", "C")`,
-      plus nuisances `striker_velocity`, `time_offset` (per file), `gain` (per channel).
+    - `params`: parameter names (see `fitting.parameters.REGISTRY`): e.g. `("eta_s", "mu",
+      "C")`, plus nuisances `striker_velocity_m_s`, `time_offset_s` (per file), `gain` (per
+      channel). Here and in `start`, `fixed`, `profile` and `priors`, a previous name
+      (`eta`) warns once (`fitting.parameters.ParameterNameWarning`).
     - `start`: name or label -> start value (SI); default: estimated from the data.
     - `fixed`: name -> value (SI) of global setup parameters held fixed.
     - `multistart`: number of starts run as one batch (the first is the data-derived one).
@@ -223,7 +235,7 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
     - `forward`: a `ForwardModel` (custom simulator, model switches, time step).
     - `progress`: report iterations on stderr.
     - `throw`: raise `FitError` when no start converged (else return with `converged=False`).
-    - `priors`: tolerances of parameters (`fitting.priors`, e.g. `"bead_youngs=203GPa+-4GPa"`);
+    - `priors`: tolerances of parameters (`fitting.priors`, e.g. `"bead_youngs_pa=203GPa+-4GPa"`);
       each frees its parameter, and a normal one makes the optimum the maximum a posteriori
       point and the covariance the Laplace approximation with the prior included.
 
@@ -235,9 +247,11 @@ def fit(experiments, params=("eta", "mu", "C"), *, start=None, fixed=None, multi
     problem = make_problem(experiments, params, fixed=fixed, forward=forward, priors=priors)
     if covariance not in COVARIANCES:
         raise ValueError(f"covariance must be one of {', '.join(COVARIANCES)}; got {covariance!r}.")
+    profile = tuple(_problem_label(label, "profile") for label in profile)
     for label in profile:
         if label not in problem.labels:
-            raise ValueError(f"profile: {label!r} is not fitted; fitted: {', '.join(problem.labels)}.")
+            raise ValueError(f"profile: {public_label(label)!r} is not fitted; fitted: "
+                             f"{', '.join(map(public_label, problem.labels))}.")
     x0 = initial_values(problem, start)
     constants = tuple(jnp.asarray(a) for a in transform_arrays(problem.instances))
     z0 = to_unbounded(problem.instances, x0)

@@ -44,8 +44,12 @@ ones keep theirs (`mu`, `mu_star`, `wall_poisson`, `gain`, `sensor_gain`), and s
 the paper's symbol of the speed constant in $v = C F_m^{1/6}$, whose unit (m/s N^-1/6) no
 suffix spells readably (every output states it in its unit column). The registry keys
 (`ParameterSpec.name`: `eta`, `wall_youngs`, ...) are the internal names; `resolve_name`
-maps either spelling to the key (the short one, the previous public name, with a one-line
-`ParameterNameWarning`), `public_label` maps a key or an instance label to what a user sees.
+maps either spelling to the key (the short one, the previous public name, warns once, one
+line: `ParameterNameWarning`), `public_label` maps a key or an instance label to what a user
+sees. Every function that takes parameter names from its caller (`fitting.fit`,
+`make_problem`, `fitting.design`, `fitting.priors`, `diagnose`, ...) resolves them so; code
+holding keys looks them up (`REGISTRY`, `get_spec`, `checked_keys`) and hands public names
+to those functions, so only a user's spelling warns.
 
 Add parameters with `register_parameter`.
 """
@@ -227,10 +231,10 @@ def public_names() -> tuple[str, ...]:
 
 def resolve_name(name: str, *, where: str | None = None) -> str:
     """The registry key of the parameter a user named `name`, written either way: its public
-    name (`wall_youngs_pa`) or its previous, short one (`wall_youngs`). `where` is the option
-    or file it was written in (`--fixed`): given, a previous name warns once, one line
-    (`ParameterNameWarning`), with the name to write. An unknown name raises a ValueError
-    listing the public names."""
+    name (`wall_youngs_pa`) or its previous, short one (`wall_youngs`), which warns once, one
+    line (`ParameterNameWarning`), with the name to write and `where` (the argument, option or
+    file it was written in: `fixed`, `--fixed`) where given. An unknown name raises a
+    ValueError listing the public names."""
     return resolve_key(
         name, _KEY_OF_PUBLIC, lambda key: REGISTRY[key].public_name if key in REGISTRY else None, where,
         lambda: ValueError(f"Unknown parameter {name!r}{f' in {where}' if where else ''}. "
@@ -350,14 +354,16 @@ EXCLUSIVE = ((("C", "mu_star"), "the same stiffness scale"), (("gain", "sensor_g
 
 
 def get_spec(name: str) -> ParameterSpec:
-    """The registered parameter `name` (registry key or public name); an unknown name raises a
-    ValueError listing all."""
-    return REGISTRY[resolve_name(name)]
+    """The registered parameter `name`, a name the code holds: a registry key or a public name
+    (not resolved as a user's spelling, so nothing warns); an unknown name raises a ValueError
+    listing all."""
+    return REGISTRY[name] if name in REGISTRY else REGISTRY[resolve_name(name)]
 
 
 def parse_parameter_list(text_or_names, *, where: str | None = None) -> tuple[str, ...]:
-    """Parse `"eta_s,mu,C"` (or a sequence of names, either spelling) into checked,
-    de-duplicated registry keys; `where` as in `resolve_name`."""
+    """Parse `"eta_s,mu,C"` (or a sequence of names, either spelling: a previous name warns,
+    `resolve_name`) into registry keys checked by `checked_keys`; `where` as in
+    `resolve_name`."""
     if isinstance(text_or_names, str):
         names = [part.strip() for part in text_or_names.split(",") if part.strip()]
     else:
@@ -365,11 +371,13 @@ def parse_parameter_list(text_or_names, *, where: str | None = None) -> tuple[st
     if not names:
         raise ValueError(f"No parameters to fit{f' in {where}' if where else ''}: give at least one, "
                          "e.g. eta_s,mu,C.")
-    seen = []
-    for written in names:
-        name = resolve_name(written, where=where)
-        if name not in seen:
-            seen.append(name)
+    return checked_keys(resolve_name(written, where=where) for written in names)
+
+
+def checked_keys(keys) -> tuple[str, ...]:
+    """Registry keys, de-duplicated in order and checked: at most one of each group of
+    `EXCLUSIVE`."""
+    seen = tuple(dict.fromkeys(keys))
     for group, quantity in EXCLUSIVE:
         chosen = [name for name in group if name in seen]
         if len(chosen) > 1:

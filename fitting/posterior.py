@@ -330,8 +330,8 @@ def sample_posterior(experiments, params=("eta_s", "mu", "C"), *, priors=(), cha
     **Arguments:**
 
     - `experiments`, `params`, `fixed`, `start`, `multistart`, `forward`: as for `fitting.fit`.
-    - `priors`: tolerances (`fitting.priors`), e.g. `["bead_youngs=203GPa+-4GPa",
-      "sensor_gain=+-2%", "bead_radius=+-62.5um"]`; parameters without one are flat
+    - `priors`: tolerances (`fitting.priors`), e.g. `["bead_youngs_pa=203GPa+-4GPa",
+      "sensor_gain=+-2%", "bead_radius_m=+-62.5um"]`; parameters without one are flat
       within their bounds.
     - `chains`, `warmup`, `draws`: chains (one vectorised batch per device), warmup iterations
       (step size and diagonal metric adaptation) and kept draws per chain.

@@ -102,7 +102,8 @@ def _with_unit_of(text: str, other: str) -> str:
 
 def parse_prior(text: str, *, source: str | None = None) -> Prior:
     """Read `name=203GPa+-4GPa`, `name=+-2%`, `name=1+-0.02` or `name=0..10us`; `source`: the
-    option or file it was written in (`--prior`), named where a previous name warns."""
+    argument, option or file it was written in (`priors`, `--prior`), named in the warning a
+    previous name gives."""
     if "=" not in text:
         raise PriorError(
             f"prior {text!r}: expected name=VALUE+-SD, name=+-SD%, or name=LOW..HIGH "

@@ -7,9 +7,12 @@ each parameter by its public name (`Parameter.public_name`), the unit-suffixed s
 the `ChainSetup` field it sets (`eta_s`, `wall_youngs_pa`, `bead_yield_stress_pa`), or of
 the quantity where no field holds it (`striker_mass_kg`, `yield_force_n`, `bead_masses_kg`);
 dimensionless ones keep theirs (`mu`, `mu_star`, `wall_poisson`, `bead_poisson`,
-`sensor_beta`). `resolve_name` maps either spelling to the key (the short one, the previous
-public name, with a one-line `ParameterNameWarning` where a user wrote it), `public_name`
-maps a key or a per-bead label (`bead_masses[3]`) to what a user sees. `get` and `set` are
+`sensor_beta`). `resolve_name` maps either spelling to the key; the short one, the previous
+public name, warns once, one line (`ParameterNameWarning`), naming the name to write. Every
+function that takes parameter names from its caller resolves them so; code holding keys
+looks them up in `PARAMETERS` (`key_values`, `with_keys`) and hands public names to those
+functions, so only a user's spelling warns. `public_name` maps a key or a per-bead label
+(`bead_masses[3]`) to what a user sees. `get` and `set` are
 pure and differentiable, so a value can be traced through `jax.grad`, `jax.jacfwd` and
 `jax.vmap`. `hertzchain.sensitivity` takes derivatives
 against these names. What a name does to a setup is defined here and nowhere else: a
@@ -159,18 +162,19 @@ def resolve_key(name: str, key_of_public: Mapping[str, str], public_of: Callable
                 where: str | None, unknown: Callable[[], Exception]) -> str:
     """The key of the parameter a user named `name` in a registry of parameters (this one, or
     `fitting.parameters`' of fitted ones), written either way: `key_of_public` maps public names
-    to keys, `public_of(key)` is a key's public name (None: no such key). `where` (the option or
-    file `name` was written in): given, a previous name warns once, one line
-    (`ParameterNameWarning`), naming the name to write. A name of neither spelling raises
-    `unknown()`."""
+    to keys, `public_of(key)` is a key's public name (None: no such key). A previous name warns
+    once, one line (`ParameterNameWarning`), naming the name to write and, where given, `where`
+    (the argument, option or file `name` was written in). A name of neither spelling raises
+    `unknown()`. Code that holds a key indexes its registry instead: a key is a previous name
+    too."""
     if name in key_of_public:
         return key_of_public[name]
     public = public_of(name)
     if public is None:
         raise unknown()
-    if where is not None and public != name:
-        warnings.warn(f"{where}: {name!r} is now called {public!r}; write {public} (the old name is "
-                      "accepted until the next release).", ParameterNameWarning, stacklevel=3)
+    if public != name:
+        warnings.warn(f"{f'{where}: ' if where else ''}{name!r} is now called {public!r}; write {public} "
+                      "(the old name is accepted until the next release).", ParameterNameWarning, stacklevel=3)
     return name
 
 
@@ -190,9 +194,10 @@ def public_names(*, per_bead: bool = True) -> tuple[str, ...]:
 
 def resolve_name(name: str, *, where: str | None = None) -> str:
     """The registry key of the parameter a user named `name`, written either way: its public
-    name (`wall_youngs_pa`) or its previous, short one (`wall_youngs`). `where` is the option
-    or file it was written in (`--params`): given, a previous name warns once, one line
-    (`ParameterNameWarning`). An unknown name raises a ValueError listing the public names."""
+    name (`wall_youngs_pa`) or its previous, short one (`wall_youngs`), which warns once, one
+    line (`ParameterNameWarning`), naming `where` (the argument, option or file it was written
+    in: `params`, `--params`) where given. An unknown name raises a ValueError listing the
+    public names."""
     return resolve_key(
         name, _KEY_OF_PUBLIC, lambda key: PARAMETERS[key].public_name if key in PARAMETERS else None, where,
         lambda: ValueError(f"unknown parameter {name!r}{f' in {where}' if where else ''}; valid parameters: "
@@ -205,15 +210,35 @@ def public_name(label: str) -> str:
     return relabel(label, lambda name: PARAMETERS[name].public_name if name in PARAMETERS else name)
 
 
+def _held(name: str) -> Parameter:
+    """The parameter of a name the code holds (a registry key or a public name), unresolved."""
+    return PARAMETERS[_KEY_OF_PUBLIC.get(name, name)]
+
+
+def key_values(setup: ChainSetup, keys: Sequence[str]) -> dict[str, jax.Array]:
+    """The current values of the parameters `keys` (names the code holds: registry keys or
+    public names, not resolved, so nothing warns) in `setup` (scalars, or (N,) for per-bead
+    ones), SI, keyed as given."""
+    return {key: jnp.asarray(_held(key).get(setup)) for key in keys}
+
+
+def with_keys(setup: ChainSetup, values: Mapping[str, jax.Array]) -> ChainSetup:
+    """`setup` with the parameters `values`' keys name (as in `key_values`) set to `values`
+    (SI; pure and differentiable)."""
+    for key, value in values.items():
+        setup = _held(key).set(setup, value)
+    return setup
+
+
 def parameter_values(setup: ChainSetup, params: Sequence[str]) -> dict[str, jax.Array]:
-    """The current values of `params` (either spelling, `resolve_name`) in `setup` (scalars,
-    or (N,) for per-bead ones), SI, keyed as given."""
-    return {name: jnp.asarray(PARAMETERS[resolve_name(name)].get(setup)) for name in params}
+    """The current values of `params` (either spelling, `resolve_name`: a previous name warns)
+    in `setup` (scalars, or (N,) for per-bead ones), SI, keyed as given."""
+    keys = [resolve_name(name, where="params") for name in params]
+    values = key_values(setup, keys)
+    return {name: values[key] for name, key in zip(params, keys)}
 
 
 def with_parameters(setup: ChainSetup, values: Mapping[str, jax.Array]) -> ChainSetup:
-    """`setup` with the named parameters (either spelling) set to `values` (pure and
-    differentiable)."""
-    for name, value in values.items():
-        setup = PARAMETERS[resolve_name(name)].set(setup, value)
-    return setup
+    """`setup` with the named parameters (either spelling, `resolve_name`: a previous name
+    warns) set to `values` (SI; pure and differentiable)."""
+    return with_keys(setup, {resolve_name(name, where="values"): value for name, value in values.items()})

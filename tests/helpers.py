@@ -144,7 +144,7 @@ def synthetic_fit_problem():
 
     files = synthetic_traces(paper_setups([0.2, 0.5], n_beads=12), contacts=(4,), t_end_s=0.6e-3,
                              sample_interval_s=2e-6, noise_std_n=0.3, seed=3)
-    problem = make_problem(files, ("eta", "mu", "C"))
+    problem = make_problem(files, ("eta_s", "mu", "C"))
     return problem, initial_values(problem)
 
 

@@ -130,7 +130,7 @@ def test_sensitivity_sweeps_and_boxes_take_unit_suffixes():
 
     args = argparse.Namespace(sweep_velocities="10cm/s,0.3", sweep_wall_youngs="3GPa", sweep=["eta_s=0,1us"],
                               box=["eta_s=0:2us", "wall_youngs_pa=3GPa:203GPa"])
-    assert _sweep_axes(args) == {"striker_velocity": [0.1, 0.3], "wall_youngs": [3e9], "eta": [0.0, 1e-6]}
-    assert _box(args) == {"eta": (0.0, 2e-6), "wall_youngs": (3e9, 203e9)}
+    assert _sweep_axes(args) == {"striker_velocity_m_s": [0.1, 0.3], "wall_youngs_pa": [3e9], "eta_s": [0.0, 1e-6]}
+    assert _box(args) == {"eta_s": (0.0, 2e-6), "wall_youngs_pa": (3e9, 203e9)}
     with pytest.raises(ValueError, match="--box eta_s: unit 'GPa'"):
         _box(argparse.Namespace(box=["eta_s=0:2GPa"]))

@@ -37,7 +37,7 @@ def _problem(files, solve=False, **law):
     forward = fx.effects_forward_model(7, **law)
     if solve:
         forward = dataclasses.replace(forward, kernel=None)
-    seed = make_problem(files, ("eta", "C", "striker_velocity"), forward=forward)
+    seed = make_problem(files, ("eta_s", "C", "striker_velocity_m_s"), forward=forward)
     extra = [ParameterInstance(get_spec(fx.PREFIX + name), label=name) for name in EXTRAS]
     problem = Problem(seed.experiments, tuple(seed.instances) + tuple(extra), seed.base_setups, forward)
     return problem, np.concatenate([initial_values(seed), np.zeros(len(extra))])

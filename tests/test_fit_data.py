@@ -86,7 +86,7 @@ def test_sub_dither_channels_make_the_fit_expect_correlated_residuals():
         trace, header={**trace.header, "x_import_wall_analogue_noise_steps": "0.25",
                        "x_import_contact_3_analogue_noise_steps": "1.1"})
     problem = fitting.make_problem([make_experiment(quiet, label="a"), make_experiment(coarse, label="b")],
-                                   ("eta", "mu", "C"))
+                                   ("eta_s", "mu", "C"))
     series, reason = fit_module._correlated_series(problem)
     setup = quiet.setup()
     striker, bead = float(setup.striker_mass_kg), float(setup.bead_mass_kg[0])
@@ -94,4 +94,4 @@ def test_sub_dither_channels_make_the_fit_expect_correlated_residuals():
     assert {lags for _, lags in series} == {round(duration / float(quiet.time_s[1] - quiet.time_s[0]))}
     assert len(series) == 4 and sum(len(rows) for rows, _ in series) == problem.n_fitted
     assert reason is not None and "b:wall (0.25 step)" in reason and "contact_3" not in reason
-    assert fit_module._correlated_series(fitting.make_problem([make_experiment(quiet)], ("eta",)))[1] is None
+    assert fit_module._correlated_series(fitting.make_problem([make_experiment(quiet)], ("eta_s",)))[1] is None

@@ -26,7 +26,7 @@ def _warnings_for(files, params):
 
 def test_stiffness_velocity_gain_degeneracy_is_named(one_file):
     # F(t; lambda kappa, V0) = lambda^-2 F(t; kappa, lambda^2 V0) exactly without dissipation
-    cov, messages = _warnings_for(one_file, ("C", "striker_velocity", "gain"))
+    cov, messages = _warnings_for(one_file, ("C", "striker_velocity_m_s", "gain"))
     text = "\n".join(messages)
     assert "C is not identifiable with striker_velocity[trace0]" in text
     # the Jacobian itself shows it: a singular value at round-off level, naming C
@@ -36,7 +36,7 @@ def test_stiffness_velocity_gain_degeneracy_is_named(one_file):
 
 
 def test_holding_one_gain_restores_identifiability(one_file):
-    problem = fitting.make_problem(one_file, ("C", "striker_velocity", "gain"))
+    problem = fitting.make_problem(one_file, ("C", "striker_velocity_m_s", "gain"))
     # drop the wall's gain: the stiffness scale is then determined
     instances = [inst for inst in problem.instances if inst.label != "gain[trace0:wall]"]
     reduced = fitting.Problem(problem.experiments, instances, problem.base_setups, problem.forward)
@@ -55,20 +55,20 @@ def test_friction_from_a_high_amplitude_trace_alone_is_flagged(one_file):
     setups = paper_setups([0.4], eta_s=2e-6, mu=0.0)
     files = synthetic_traces(setups, contacts=(5,), t_end_s=0.5e-3, noise_std_n=2.0, seed=2)
     experiments = [fitting.make_experiment(files[0], channels=("contact_5",))]
-    cov, messages = _warnings_for(experiments, ("eta", "mu"))
+    cov, messages = _warnings_for(experiments, ("eta_s", "mu"))
     assert cov.stderr[1] > 0.5 * 0.05  # far larger than the start value of mu
     assert any("mu is practically not identifiable" in m for m in messages)
 
 
 def test_unknown_parameter_and_bad_start_are_refused(one_file):
     with pytest.raises(ValueError, match="Fittable parameters: eta_s, mu, C"):
-        fitting.fit(one_file, ("eta", "viscosity"))
+        fitting.fit(one_file, ("eta_s", "viscosity"))
     with pytest.raises(ValueError, match="outside its bounds"):
         fitting.fit(one_file, ("mu",), start={"mu": -0.1}, progress=False)
     with pytest.raises(ValueError, match="not a fitted parameter"):
-        fitting.fit(one_file, ("eta",), start={"mu": 0.1}, progress=False)
+        fitting.fit(one_file, ("eta_s",), start={"mu": 0.1}, progress=False)
 
 
 def test_a_fit_that_cannot_converge_says_so(one_file):
     with pytest.raises(fitting.FitError, match="no start reached an optimum within 1 steps"):
-        fitting.fit(one_file, ("eta",), start={"eta": 5e-5}, max_steps=1, progress=False)
+        fitting.fit(one_file, ("eta_s",), start={"eta_s": 5e-5}, max_steps=1, progress=False)

@@ -19,7 +19,7 @@ def small_problem():
     setups = paper_setups([0.2], eta_s=TRUTH["eta"], mu=TRUTH["mu"], mu_star=TRUTH["mu_star"])
     files = synthetic_traces(setups, contacts=(5,), t_end_s=1.4e-3, noise_std_n=0.2,
                              time_offset_s=2e-6, gains=[{"contact_5": 1.05}], seed=3)
-    params = ("eta", "mu", "C", "striker_velocity", "time_offset", "gain")
+    params = ("eta_s", "mu", "C", "striker_velocity_m_s", "time_offset_s", "gain")
     problem = fitting.make_problem(files, params)
     c_true = float(bare_speed_constant(setups[0])) * (1 + TRUTH["mu_star"]) ** (1 / 3)
     x_true = np.array([TRUTH["eta"], TRUTH["mu"], c_true, 0.2, 2e-6, 1.05, 1.0])
@@ -127,7 +127,7 @@ def test_batched_kernel_and_solve_give_the_same_model_and_jacobian(law):
 
     setups = paper_setups([0.2, 0.5], eta_s=TRUTH["eta"], mu=TRUTH["mu"], mu_star=TRUTH["mu_star"], **FIT_LAWS[law])
     files = synthetic_traces(setups, contacts=(5,), t_end_s=1.4e-3, noise_std_n=0.2, seed=4)
-    params = ("eta", "mu", "C", "striker_velocity", "time_offset")
+    params = ("eta_s", "mu", "C", "striker_velocity_m_s", "time_offset_s")
     fast = fitting.make_problem(files, params)
     general = fitting.make_problem(files, params, forward=ForwardModel(simulate=lambda s, g, r, e: solve(s, g, r)))
     assert fast.fast_path_flags(fast.groups[0]) is not None
@@ -153,7 +153,7 @@ def test_many_parameter_sets_in_one_simulation_equal_each_set_alone():
 
     setups = paper_setups([0.1, 0.2, 0.3, 0.4], eta_s=2e-6, mu=0.1, n_beads=8)
     files = synthetic_traces(setups, contacts=(3,), t_end_s=0.6e-3, noise_std_n=0.2, seed=1)
-    problem = fitting.make_problem(files, ("eta", "mu", "C", "gain"))
+    problem = fitting.make_problem(files, ("eta_s", "mu", "C", "gain"))
     x0 = np.asarray(initial_values(problem, None))
     xs = jnp.asarray(x0 * (1 + 0.01 * np.random.default_rng(0).standard_normal((8, x0.size))))
     many = np.asarray(problem.residuals_many(xs))

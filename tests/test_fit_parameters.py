@@ -35,7 +35,7 @@ def test_required_parameters_are_registered():
 
 def test_unknown_name_lists_the_valid_ones():
     with pytest.raises(ValueError, match="Unknown parameter 'etaa'.*eta_s, mu, C"):
-        parse_parameter_list("eta,etaa")
+        parse_parameter_list("eta_s,etaa")
 
 
 def test_c_and_mu_star_are_exclusive():
@@ -123,7 +123,7 @@ def test_material_nuisances_are_applied_before_the_speed_constant():
     from fitting.synthetic import paper_setups, synthetic_traces
 
     trace = synthetic_traces(paper_setups([0.3]), contacts=(6,), t_end_s=1.5e-3)[0]
-    problem = make_problem([trace], ("C", "bead_youngs"))
+    problem = make_problem([trace], ("C", "bead_youngs_pa"))
     c = float(bare_speed_constant(problem.base_setups[0])) * 1.02
     youngs = 203e9
     before = problem.setup_at(np.array([c, youngs]), 0)
@@ -146,7 +146,7 @@ def test_bead_radius_scales_every_bead_and_its_mass():
     from fitting.synthetic import paper_setups, synthetic_traces
 
     trace = synthetic_traces(paper_setups([0.3]), contacts=(6,), t_end_s=1.5e-3)[0]
-    problem = make_problem([trace], ("bead_radius",))
+    problem = make_problem([trace], ("bead_radius_m",))
     setup = problem.setup_at(np.array([0.013 * 1.01]), 0)
     assert np.allclose(np.asarray(setup.bead_radius_m), 0.013 * 1.01, rtol=1e-12)
     assert float(setup.bead_mass_kg[0]) == pytest.approx(

@@ -16,7 +16,7 @@ from fitting.synthetic import paper_setups, synthetic_traces
 
 VELOCITIES = (0.08, 0.2, 0.4)
 TRUTH = {"eta": 2e-6, "mu": 0.19, "mu_star": 0.02}
-FAR_START = {"eta": 6e-6, "mu": 0.19 / 3}
+FAR_START = {"eta_s": 6e-6, "mu": 0.19 / 3}
 
 
 def _data(velocities=VELOCITIES, t_end_s=1.5e-3):
@@ -33,7 +33,7 @@ def _data(velocities=VELOCITIES, t_end_s=1.5e-3):
 @pytest.fixture(scope="module")
 def recovery():
     clean, noisy, truth = _data()
-    problem = fitting.make_problem(noisy, ("eta", "mu", "C"))
+    problem = fitting.make_problem(noisy, ("eta_s", "mu", "C"))
     clean_vector = np.concatenate([f.channels[c] for f in clean for c in f.channels])
     sigma = problem.sigma_vector()
     rng = np.random.default_rng(7)
@@ -68,7 +68,7 @@ def test_estimates_are_within_their_reported_errors(recovery):
 def test_two_sigma_coverage_over_many_seeds():
     """The 2-sigma interval covers the truth about 95 % of the time (120 seeds, one batch)."""
     clean, noisy, truth = _data()
-    problem = fitting.make_problem(noisy, ("eta", "mu", "C"))
+    problem = fitting.make_problem(noisy, ("eta_s", "mu", "C"))
     clean_vector = np.concatenate([f.channels[c] for f in clean for c in f.channels])
     rng = np.random.default_rng(2024)
     datasets = clean_vector + problem.sigma_vector() * rng.standard_normal((120, clean_vector.size))

@@ -19,7 +19,7 @@ def test_unknown_soft_wall_modulus_from_wall_and_incident_traces():
     """A 5 GPa wall (the paper's Fig. 3b) recovered from a start 10 times too stiff."""
     setups = paper_setups([0.2, 0.4], wall_youngs_pa=5e9, wall_poisson=0.3)
     files = _noisy(setups, (11,), 2.5e-3, seed=4)
-    result = fitting.fit(files, ("wall_youngs", "eta", "mu"), start={"wall_youngs": 5e10},
+    result = fitting.fit(files, ("wall_youngs_pa", "eta_s", "mu"), start={"wall_youngs_pa": 5e10},
                          progress=False)
     assert result.converged
     value, error = result.values["wall_youngs"], result.stderr["wall_youngs"]

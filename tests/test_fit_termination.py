@@ -16,7 +16,7 @@ import fitting
 from fitting.synthetic import paper_setups, synthetic_traces
 
 fit_module = importlib.import_module("fitting.fit")
-PARAMS = ("eta", "mu", "C")
+PARAMS = ("eta_s", "mu", "C")
 
 
 @pytest.fixture(scope="module")

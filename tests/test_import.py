@@ -163,8 +163,8 @@ def test_fit_from_scope_files_recovers_the_truth_at_the_information_limit(lab, t
     assert fit["covariance_scale"] == "correlated" and "below 0.5 of a converter step" in fit["covariance_reason"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", fitting.FitWarning)
-        bound = design(fitting.load_experiments([experiment]), ("eta", "mu", "C"),
-                               values={"eta": TRUTH["eta"], "mu": TRUTH["mu"], "C": c_true})
+        bound = design(fitting.load_experiments([experiment]), ("eta_s", "mu", "C"),
+                               values={"eta_s": TRUTH["eta"], "mu": TRUTH["mu"], "C": c_true})
     for name in ("eta", "mu", "C"):
         stated = fit["params"][written[name]]["stderr_stated_noise"]
         assert stated == pytest.approx(bound.stderr[name], rel=0.3), name
@@ -325,14 +325,14 @@ def test_experiment_priors_are_read_and_must_agree(tmp_path, lab):
     from hertzchain.io.importer import experiment_priors
 
     path = _experiment(tmp_path, lab)
-    path.write_text(path.read_text() + '\n[prior]\nbead_youngs = "110GPa+-2GPa"\nsensor_gain = "+-2%"\n')
-    assert load_experiment(path).priors == ("bead_youngs=110GPa+-2GPa", "sensor_gain=+-2%")
+    path.write_text(path.read_text() + '\n[prior]\nbead_youngs_pa = "110GPa+-2GPa"\nsensor_gain = "+-2%"\n')
+    assert load_experiment(path).priors == ("bead_youngs_pa=110GPa+-2GPa", "sensor_gain=+-2%")
     parsed = {p.key: p for p in parse_priors(experiment_priors([path, "shot.csv"]))}
     assert parsed["bead_youngs"].sd == pytest.approx(2e9)
     other = tmp_path / "other" / "experiment.toml"
     other.parent.mkdir()
     other.write_text(path.read_text().replace('"110GPa+-2GPa"', '"110GPa+-5GPa"'))
-    with pytest.raises(ExperimentFileError, match=r"'bead_youngs=110GPa\+-5GPa' differs from 'bead_youngs=110GPa\+-2GPa'"):
+    with pytest.raises(ExperimentFileError, match=r"'bead_youngs_pa=110GPa\+-5GPa' differs from 'bead_youngs_pa=110GPa\+-2GPa'"):
         experiment_priors([path, other])
     path.write_text(path.read_text().replace('sensor_gain = "+-2%"', "sensor_gain = 0.02"))
     with pytest.raises(ExperimentFileError, match=r"\[prior\]: each entry is name = \"TEXT\""):

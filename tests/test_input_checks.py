@@ -205,13 +205,13 @@ def test_fixed_values_outside_their_range_are_refused(trace, tmp_path, capsys):
 
 def test_a_prior_width_takes_the_unit_of_its_value():
     """`203GPa+-4` is 4 GPa (not 4 Pa); a bare width with no value beside it must carry a unit."""
-    assert parse_prior("bead_youngs=203GPa+-4").sd == pytest.approx(4e9)
-    assert parse_prior("bead_youngs=203e9+-4e9").sd == pytest.approx(4e9)
-    prior = parse_prior("eta=0..10us")
+    assert parse_prior("bead_youngs_pa=203GPa+-4").sd == pytest.approx(4e9)
+    assert parse_prior("bead_youngs_pa=203e9+-4e9").sd == pytest.approx(4e9)
+    prior = parse_prior("eta_s=0..10us")
     assert (prior.low, prior.high) == (0.0, pytest.approx(1e-5))
-    assert parse_prior("bead_radius=+-62.5um").sd == pytest.approx(62.5e-6)
+    assert parse_prior("bead_radius_m=+-62.5um").sd == pytest.approx(62.5e-6)
     with pytest.raises(PriorError, match=r"the width '4' has no unit; .*\(e.g. \+-4GPa\) or relative"):
-        parse_prior("bead_youngs=+-4")
+        parse_prior("bead_youngs_pa=+-4")
 
 
 # --- every file-system and parse error as one line, exit status 2 ----------------------------------

@@ -120,13 +120,13 @@ def test_fit_model_honours_ac_coupling(preloaded):
     long as the file says which; read as DC, AC data miss by the preload everywhere."""
     for coupling in ("ac", "dc"):
         trace = _record(preloaded, coupling)
-        problem = fitting.make_problem([trace], ("eta",))
+        problem = fitting.make_problem([trace], ("eta_s",))
         x = np.array([1e-6])
         r2 = float(np.mean(np.asarray(jax.jit(problem.residuals)(x)) ** 2))
         assert r2 == pytest.approx(1.0, abs=0.15), coupling
     wrong = _record(preloaded, "ac")
     header = {k: v for k, v in wrong.header.items() if k != "ac_channels"}
-    misread = fitting.make_problem([TraceFile(header, wrong.time_s, wrong.channels)], ("eta",))
+    misread = fitting.make_problem([TraceFile(header, wrong.time_s, wrong.channels)], ("eta_s",))
     r = np.asarray(misread.residuals(np.array([1e-6])))
     assert np.mean(r[:40]) == pytest.approx(PRELOAD_N / 0.02, rel=0.1)  # the offset it predicts
 
@@ -135,7 +135,7 @@ def test_eta_fitted_to_ac_coupled_preloaded_data_without_an_offset(preloaded):
     trace = _record(preloaded, "ac", seed=4)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", fitting.FitWarning)
-        result = fitting.fit([trace], ("eta",), start={"eta": 0.5e-6}, progress=False)
+        result = fitting.fit([trace], ("eta_s",), start={"eta_s": 0.5e-6}, progress=False)
     assert result.reduced_chi2 == pytest.approx(1.0, abs=0.15)
     assert abs(result.values["eta"] - 1e-6) < 4 * result.stderr["eta"]
     assert result.stderr["eta"] < 0.1e-6
@@ -154,7 +154,7 @@ def test_clipped_samples_are_left_out_of_the_fit_with_a_warning(preloaded):
     with pytest.warns(fitting.data.DataWarning, match=rf"channel wall has {clipped.sum()} samples at the "
                                                       "digitiser's range limit"):
         experiment = fitting.make_experiment(trace, label="clip")
-    problem = fitting.make_problem([experiment], ("eta",))
+    problem = fitting.make_problem([experiment], ("eta_s",))
     assert problem.n_fitted == problem.n_residuals - clipped.sum()
     r = np.asarray(problem.residuals(np.array([1e-6])))
     wall = problem.residual_slices()[0]["wall"]
@@ -178,6 +178,6 @@ def test_simulate_and_design_plans_read_a_preload_as_the_coupling_says(tmp_path)
         setup = hc.ChainSetup(6, precompression_n=PRELOAD_N)
         (plan,) = plan_experiments(setup, [0.2], channels=("wall",), t_end_s=0.3e-3, coupling=coupling)
         assert plan.data("wall")[0] == pytest.approx(rest, abs=1e-6)
-        problem = fitting.make_problem([plan], ("eta",))
+        problem = fitting.make_problem([plan], ("eta_s",))
         # the noise-free plan is the model itself, whichever the coupling
         assert float(np.max(np.abs(np.asarray(problem.residuals(np.array([0.0])))))) < 1e-3

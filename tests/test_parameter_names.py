@@ -10,6 +10,7 @@ import pytest
 from fitting.parameters import (
     REGISTRY,
     ParameterNameWarning,
+    get_spec,
     parse_parameter_list,
     public_label,
     public_names,
@@ -44,19 +45,26 @@ def test_each_setup_parameter_is_named_as_the_setup_field_it_sets():
     assert not set(OLD_NAMES) & set(public_names())
 
 
-def test_both_spellings_resolve_and_only_the_old_one_warns_where_a_user_wrote_it():
+def test_both_spellings_resolve_and_only_the_old_one_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert resolve_name("wall_youngs_pa", where="--params") == "wall_youngs"
-        assert resolve_name("wall_youngs") == "wall_youngs"  # internal use: silent
         assert resolve_label("striker_velocity_m_s[run1]", where="--fixed") == "striker_velocity[run1]"
+        # code holding a key looks it up, without resolving it as a user's spelling
+        assert get_spec("wall_youngs") is get_spec("wall_youngs_pa") is REGISTRY["wall_youngs"]
+    with pytest.warns(ParameterNameWarning) as caught:
+        assert resolve_name("wall_youngs") == "wall_youngs"  # a library call: no option to name
+    assert [str(w.message) for w in caught] == [
+        ("'wall_youngs' is now called 'wall_youngs_pa'; write wall_youngs_pa (the old name is accepted until the "
+         "next release).")]
     with pytest.warns(ParameterNameWarning) as caught:
         assert parse_parameter_list("eta,mu,C", where="--params") == ("eta", "mu", "C")
     assert len(caught) == 1
     message = str(caught[0].message)
     assert message == ("--params: 'eta' is now called 'eta_s'; write eta_s (the old name is accepted until the "
                        "next release).")
-    assert parse_parameter_list("eta_s,eta,mu") == ("eta", "mu")
+    with pytest.warns(ParameterNameWarning, match="'eta' is now called 'eta_s'"):
+        assert parse_parameter_list("eta_s,eta,mu") == ("eta", "mu")
     assert public_label("striker_velocity[run1]") == "striker_velocity_m_s[run1]"
     assert public_label("gain[run1:wall]") == "gain[run1:wall]" and public_label("C") == "C"
     with pytest.raises(ValueError, match=r"Unknown parameter 'eta_us' in --params\. Fittable parameters: "
@@ -69,7 +77,7 @@ def test_a_prior_in_either_spelling_is_the_same_prior_and_twice_is_refused():
     with pytest.warns(ParameterNameWarning, match="'bead_youngs' is now called 'bead_youngs_pa'"):
         old, = parse_priors(["bead_youngs=203GPa+-4GPa"], source="--prior")
     assert (new.key, new.centre, new.sd) == (old.key, old.centre, old.sd) == ("bead_youngs", 203e9, 4e9)
-    with pytest.raises(PriorError, match="two priors for eta_s"):
+    with pytest.raises(PriorError, match="two priors for eta_s"), pytest.warns(ParameterNameWarning):
         parse_priors(["eta=0..10us", "eta_s=0..5us"])
 
 
@@ -210,9 +218,9 @@ def test_sensitivity_reads_either_spelling_gives_the_same_numbers_and_writes_the
 
 
 def test_sensitivity_boxes_and_library_calls_read_either_spelling():
-    """--box warns once per previous name and yields the same box; the library reads both
-    spellings silently and names its result's parameters publicly; an unknown name lists the
-    public ones."""
+    """--box warns once per previous name and yields the same box, by public names; the
+    library reads both spellings, a previous one with one warning naming the argument; an
+    unknown name lists the public ones."""
     import argparse
 
     from hertzchain import sensitivity as S
@@ -222,7 +230,7 @@ def test_sensitivity_boxes_and_library_calls_read_either_spelling():
     new = _box(argparse.Namespace(box=["eta_s=0:2us", "wall_youngs_pa=3GPa:203GPa"]))
     with pytest.warns(ParameterNameWarning) as caught:
         old = _box(argparse.Namespace(box=["eta=0:2us", "wall_youngs=3GPa:203GPa"]))
-    assert old == new == {"eta": (0.0, 2e-6), "wall_youngs": (3e9, 203e9)}
+    assert old == new == {"eta_s": (0.0, 2e-6), "wall_youngs_pa": (3e9, 203e9)}
     assert [str(w.message).split(";")[0] for w in caught] == [
         "--box: 'eta' is now called 'eta_s'", "--box: 'wall_youngs' is now called 'wall_youngs_pa'"]
     with pytest.raises(ValueError, match="--box: eta_s is given twice"), pytest.warns(ParameterNameWarning):
@@ -230,13 +238,21 @@ def test_sensitivity_boxes_and_library_calls_read_either_spelling():
     setup = ChainSetup(4, eta_s=1e-6)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
+        assert check_axes(setup, {"eta_s": [1e-6], "wall_youngs_pa": [5e9]}).keys() == {"eta", "wall_youngs"}
+        values = S.parameter_values(setup, ("eta_s", "wall_youngs_pa"))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         assert check_axes(setup, {"eta": [1e-6], "wall_youngs_pa": [5e9]}).keys() == {"eta", "wall_youngs"}
-        values = S.parameter_values(setup, ("eta_s", "wall_youngs"))
-    assert float(values["eta_s"]) == 1e-6 and float(values["wall_youngs"]) == float(setup.wall_youngs_pa)
-    with pytest.raises(ValueError, match=r"params: unknown parameter 'eta_us'; valid parameters: eta_s, mu, mu_star, "
+        old = S.parameter_values(setup, ("eta_s", "wall_youngs"))
+    assert _first_parts(caught) == [
+        "sweep: 'eta' is now called 'eta_s'", "params: 'wall_youngs' is now called 'wall_youngs_pa'"]
+    assert float(values["eta_s"]) == float(old["eta_s"]) == 1e-6
+    assert float(old["wall_youngs"]) == float(values["wall_youngs_pa"]) == float(setup.wall_youngs_pa)
+    with pytest.raises(ValueError, match=r"unknown parameter 'eta_us' in params; valid parameters: eta_s, mu, mu_star, "
                                          r"striker_velocity_m_s, striker_mass_kg"):
         S.sensitivity(setup, ("eta_us",), ("wall_peak",), t_end_s=1e-4)
-    with pytest.raises(ValueError, match="a parameter is listed twice: \\('eta_s', 'eta_s'\\)"):
+    with pytest.raises(ValueError, match="a parameter is listed twice: \\('eta_s', 'eta_s'\\)"), \
+            pytest.warns(ParameterNameWarning):
         S.sensitivity(setup, ("eta", "eta_s"), ("wall_peak",), t_end_s=1e-4)
 
 
@@ -285,22 +301,23 @@ def test_design_reads_either_spelling_gives_the_same_numbers_and_writes_the_publ
 
 
 def test_diagnose_reads_free_parameters_and_nuisances_in_either_spelling():
-    """`hertzchain diagnose --free/--nuisances`: both spellings give the same registry keys;
-    a previous name warns once, naming the option; the default nuisances are public names."""
+    """`hertzchain diagnose --free/--nuisances`: both spellings give the same public names,
+    which the library takes; a previous name warns once, naming the option; the default
+    nuisances are public names."""
     import argparse
 
     from hertzchain.cli.diagnose import _parameters, add_arguments
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert _parameters("eta_s,C", "--free") == ["eta", "C"]
+        assert _parameters("eta_s,C", "--free") == ["eta_s", "C"]
         parser = argparse.ArgumentParser()
         add_arguments(parser)
         default = parser.get_default("nuisances")
         assert default == "striker_velocity_m_s,time_offset_s"
-        assert _parameters(default, "--nuisances") == ["striker_velocity", "time_offset"]
+        assert _parameters(default, "--nuisances") == ["striker_velocity_m_s", "time_offset_s"]
     with pytest.warns(ParameterNameWarning) as caught:
-        assert _parameters("eta,C", "--free") == ["eta", "C"]
+        assert _parameters("eta,C", "--free") == ["eta_s", "C"]
     assert [str(w.message) for w in caught] == [
         "--free: 'eta' is now called 'eta_s'; write eta_s (the old name is accepted until the next release)."]
     with pytest.raises(ValueError, match="Unknown parameter 'etaa' in --free"):
@@ -338,8 +355,112 @@ def test_library_start_values_read_either_spelling_and_an_unknown_key_is_named_p
     paths, _ = soft_wall_traces
     problem = make_problem(paths, ("eta_s", "wall_youngs_pa", "C"))
     new = initial_values(problem, {"eta_s": 1.3e-6, "wall_youngs_pa": 25e9})
-    old = initial_values(problem, {"eta": 1.3e-6, "wall_youngs": 25e9})
+    with pytest.warns(ParameterNameWarning) as caught:
+        old = initial_values(problem, {"eta": 1.3e-6, "wall_youngs": 25e9})
+    assert _first_parts(caught) == ["start: 'eta' is now called 'eta_s'",
+                                    "start: 'wall_youngs' is now called 'wall_youngs_pa'"]
     np.testing.assert_array_equal(new, old)
     assert not np.array_equal(new, initial_values(problem, {"eta_s": 2.6e-6, "wall_youngs_pa": 25e9}))
     with pytest.raises(ValueError, match=r"start: 'mu' is not a fitted parameter; fitted: eta_s, wall_youngs_pa, C\."):
         initial_values(problem, {"mu": 0.1})
+
+
+def _first_parts(caught) -> list[str]:
+    """The warnings' messages up to the name to write ("params: 'eta' is now called 'eta_s'")."""
+    return [str(w.message).split(";")[0] for w in caught]
+
+
+def test_fitting_library_calls_warn_once_per_previous_name_naming_the_argument(soft_wall_traces):
+    """`make_problem` (which `fit` and `sample_posterior` build on), `initial_values` and
+    `fit(profile=...)`: each previous name warns exactly once, naming the argument it was
+    written in, and gives the problem of the public names, which warn nothing."""
+    from fitting.fit import fit, initial_values, make_problem
+
+    paths, _ = soft_wall_traces
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        old = make_problem(paths, ("eta", "wall_youngs_pa", "striker_velocity_m_s"), fixed={"precompression": 0.5},
+                           priors=["bead_youngs=203GPa+-4GPa"])
+        old_start = initial_values(old, {"wall_youngs": 25e9, "striker_velocity[shot0]": 0.21})
+    assert _first_parts(caught) == [
+        "priors: 'bead_youngs' is now called 'bead_youngs_pa'", "params: 'eta' is now called 'eta_s'",
+        "fixed: 'precompression' is now called 'precompression_n'", "start: 'wall_youngs' is now called 'wall_youngs_pa'",
+        "start: 'striker_velocity' is now called 'striker_velocity_m_s'"]
+    assert all(w.category is ParameterNameWarning for w in caught)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        new = make_problem(paths, ("eta_s", "wall_youngs_pa", "striker_velocity_m_s"), fixed={"precompression_n": 0.5},
+                           priors=["bead_youngs_pa=203GPa+-4GPa"])
+        new_start = initial_values(new, {"wall_youngs_pa": 25e9, "striker_velocity_m_s[shot0]": 0.21})
+    assert new.labels == old.labels == ("eta", "wall_youngs", "striker_velocity[shot0]", "striker_velocity[shot1]",
+                                        "bead_youngs")
+    assert [float(s.precompression_n) for s in new.base_setups] == [float(s.precompression_n) for s in old.base_setups] \
+        == [0.5, 0.5]
+    np.testing.assert_array_equal(new_start, old_start)
+    assert new_start[1] == 25e9 and new_start[2] == 0.21
+    with pytest.raises(ValueError, match=r"profile: 'wall_youngs_pa' is not fitted; fitted: eta_s\."), \
+            pytest.warns(ParameterNameWarning) as caught:
+        fit(paths, ("eta_s",), profile=("wall_youngs",), progress=False)
+    assert _first_parts(caught) == ["profile: 'wall_youngs' is now called 'wall_youngs_pa'"]
+
+
+def test_design_and_diagnose_library_calls_warn_once_per_previous_name(soft_wall_traces):
+    """`fitting.design.design` (params, values, nuisances) and `fitting.diagnosis.diagnose`
+    (free, nuisances): each previous name warns exactly once, naming its argument; the
+    design of the public names warns nothing and gives the same numbers."""
+    from fitting.design import design
+    from fitting.diagnosis import DiagnosisError, diagnose
+
+    paths, _ = soft_wall_traces
+    values = {"eta_s": 1e-6, "wall_youngs_pa": WALL_PA}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        new = design(paths, ("eta_s", "wall_youngs_pa"), values=values, nuisances=("striker_velocity_m_s",))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        old = design(paths, ("eta", "wall_youngs_pa"), values={"eta": 1e-6, "wall_youngs": WALL_PA},
+                     nuisances=("striker_velocity",))
+    assert _first_parts(caught) == [
+        "params: 'eta' is now called 'eta_s'", "nuisances: 'striker_velocity' is now called 'striker_velocity_m_s'",
+        "values: 'eta' is now called 'eta_s'", "values: 'wall_youngs' is now called 'wall_youngs_pa'"]
+    assert new.to_json()["params"] == old.to_json()["params"]
+    assert 0 < new.relative_stderr["eta_s"] < 1
+    with pytest.raises(DiagnosisError, match="nuisances: eta_s is a global parameter"), \
+            warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        diagnose(paths, free=("wall_youngs",), nuisances=("eta",), progress=False)
+    assert _first_parts(caught) == ["nuisances: 'eta' is now called 'eta_s'",
+                                    "free: 'wall_youngs' is now called 'wall_youngs_pa'"]
+
+
+def test_sensitivity_library_calls_warn_once_per_previous_name_naming_the_argument():
+    """`sensitivity`, `sensitivity_sweep` and `global_sensitivity`: a previous name in
+    `params`, `sweep` or `box` warns exactly once, naming the argument, and gives the numbers
+    of the public name, which warns nothing."""
+    from hertzchain import sensitivity as S
+
+    setup = ChainSetup(4, eta_s=1e-6)
+    run = {"t_end_s": 0.4e-3, "sample_interval_s": 2e-6}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        local = S.sensitivity(setup, ("eta_s", "wall_youngs_pa"), ("wall_peak",), **run)
+        swept = S.sensitivity_sweep(setup, ("eta_s",), ("wall_peak",), {"striker_velocity_m_s": [0.1, 0.2]},
+                                    progress=False, **run)
+        box = S.global_sensitivity(setup, ("wall_peak",), {"eta_s": (0.5e-6, 1e-6)}, n_samples=2,
+                                   progress=False, **run)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        local_old = S.sensitivity(setup, ("eta", "wall_youngs_pa"), ("wall_peak",), **run)
+        swept_old = S.sensitivity_sweep(setup, ("eta_s",), ("wall_peak",), {"striker_velocity": [0.1, 0.2]},
+                                        progress=False, **run)
+        box_old = S.global_sensitivity(setup, ("wall_peak",), {"eta": (0.5e-6, 1e-6)}, n_samples=2,
+                                       progress=False, **run)
+    assert _first_parts(caught) == ["params: 'eta' is now called 'eta_s'",
+                                    "sweep: 'striker_velocity' is now called 'striker_velocity_m_s'",
+                                    "box: 'eta' is now called 'eta_s'"]
+    assert local.params == local_old.params == ("eta_s", "wall_youngs_pa")
+    assert local.to_json() == local_old.to_json() and swept.to_json() == swept_old.to_json()
+    assert box.to_json() == box_old.to_json() and box.ranking == {"wall_peak": ["eta_s"]}
+    with pytest.warns(ParameterNameWarning, match="values: 'eta' is now called 'eta_s'"):
+        changed = S.with_parameters(setup, {"eta": 2e-6})
+    assert float(changed.eta_s) == 2e-6

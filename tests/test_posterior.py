@@ -61,7 +61,7 @@ def brass_traces():
 def noise_only(brass_traces):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PosteriorWarning)
-        return sample_posterior(brass_traces, ("eta", "C"), chains=2, warmup=80, draws=150, seed=3,
+        return sample_posterior(brass_traces, ("eta_s", "C"), chains=2, warmup=80, draws=150, seed=3,
                                 progress=False)
 
 
@@ -69,7 +69,7 @@ def noise_only(brass_traces):
 def test_noise_only_posterior_is_the_optimum_with_cramer_rao_widths(noise_only, brass_traces):
     result = noise_only
     assert result.fit.converged and result.fit.reduced_chi2 < 1.2
-    bound = design(brass_traces, ("eta", "C"), values={"eta": result.fit.values["eta"],
+    bound = design(brass_traces, ("eta_s", "C"), values={"eta_s": result.fit.values["eta"],
                                                          "C": result.fit.values["C"]})
     for label in ("eta", "C"):
         row = result.summary[label]
@@ -84,13 +84,13 @@ def test_noise_only_posterior_is_the_optimum_with_cramer_rao_widths(noise_only, 
 
 @pytest.mark.slow
 def test_tolerance_priors_widen_as_linear_propagation_predicts(brass_traces):
-    priors = ["sensor_gain=+-2%", "bead_radius=+-0.5%"]
+    priors = ["sensor_gain=+-2%", "bead_radius_m=+-0.5%"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PosteriorWarning)
-        result = sample_posterior(brass_traces, ("eta", "C"), priors=priors, chains=2, warmup=80,
+        result = sample_posterior(brass_traces, ("eta_s", "C"), priors=priors, chains=2, warmup=80,
                                   draws=250, seed=4, progress=False)
     # linear propagation: J of the data residuals alone, prior precision added by hand
-    plain = fitting.make_problem(brass_traces, ("eta", "C", "sensor_gain", "bead_radius"))
+    plain = fitting.make_problem(brass_traces, ("eta_s", "C", "sensor_gain", "bead_radius_m"))
     assert plain.labels == result.labels
     _, jac = residuals_and_jacobian(plain, result.fit.x)
     prior_sd = {"bead_radius": 0.005 * 5e-3, "sensor_gain[contact_3]": 0.02, "sensor_gain[wall]": 0.02}
@@ -354,7 +354,7 @@ def test_low_amplitude_shot_alone_breaks_the_laplace_approximation(tmp_path):
     trace = acquire_trace(setup, np.asarray(sim.time_s), forces, setting, seed=1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PosteriorWarning)
-        result = sample_posterior([trace], ("eta", "mu"), chains=2, warmup=150, draws=300, seed=1,
+        result = sample_posterior([trace], ("eta_s", "mu"), chains=2, warmup=150, draws=300, seed=1,
                                   progress=False)
     mu = result.laplace["mu"]
     assert mu["fails"]
@@ -367,14 +367,14 @@ def test_low_amplitude_shot_alone_breaks_the_laplace_approximation(tmp_path):
     assert "the covariance (Laplace) approximation fails for mu" in summary
 
 
-_CALIBRATION_PRIORS = ("eta=1.5us+-0.3us", "C=+-1%")
+_CALIBRATION_PRIORS = ("eta_s=1.5us+-0.3us", "C=+-1%")
 
 
 def _calibration_posterior(trace, seed):
     """One data set's posterior (in a worker process): thinned draws and 90 % intervals."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PosteriorWarning)
-        result = sample_posterior([trace], ("eta", "C"), priors=_CALIBRATION_PRIORS, chains=2, warmup=150,
+        result = sample_posterior([trace], ("eta_s", "C"), priors=_CALIBRATION_PRIORS, chains=2, warmup=150,
                                   draws=200, seed=seed, progress=False)
     thinned = result.draws[:, ::4, :].reshape(-1, 2)  # 100 draws, nearly independent
     intervals = [(result.summary[label]["q05"], result.summary[label]["q95"]) for label in result.labels]
@@ -400,7 +400,7 @@ def test_posterior_intervals_are_calibrated_over_data_drawn_from_the_prior():
     setting = Acquisition(sample_interval_s=1e-6, record_length=250, pre_trigger_samples=10,
                           noise_std_n=NOISE_N, coupling="dc")
     base = acquire_trace(setup, np.asarray(sim.time_s), forces, setting, seed=0)
-    problem = fitting.make_problem([base], ("eta", "C"), priors=_CALIBRATION_PRIORS)
+    problem = fitting.make_problem([base], ("eta_s", "C"), priors=_CALIBRATION_PRIORS)
     centre = np.array([row.centre for row in problem.priors])
     sd = np.array([row.sd for row in problem.priors])
     n_sets, rng = 60, np.random.default_rng(2024)

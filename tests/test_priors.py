@@ -14,23 +14,23 @@ def traces():
 
 
 def test_parse_forms():
-    p = parse_prior("bead_youngs=203GPa+-4GPa")
+    p = parse_prior("bead_youngs_pa=203GPa+-4GPa")
     assert (p.kind, p.centre, p.sd) == ("normal", 203e9, 4e9)
     p = parse_prior("sensor_gain=+-2%")
     assert (p.centre, p.relative_sd) == (None, pytest.approx(0.02))
-    p = parse_prior("bead_radius = 13mm +- 62.5um")
+    p = parse_prior("bead_radius_m = 13mm +- 62.5um")
     assert (p.centre, p.sd) == (pytest.approx(0.013), pytest.approx(62.5e-6))
-    p = parse_prior("eta=0..10us")
+    p = parse_prior("eta_s=0..10us")
     assert (p.kind, p.low, p.high) == ("uniform", 0.0, pytest.approx(1e-5))
-    assert parse_prior("striker_velocity[run1]=0.3+-0.003").name == "striker_velocity"
+    assert parse_prior("striker_velocity_m_s[run1]=0.3+-0.003").name == "striker_velocity"
 
 
 @pytest.mark.parametrize("text, match", [
-    ("bead_youngs", "expected name=VALUE"),
-    ("bead_youngs=203GPa", "no width"),
-    ("bead_youngs=203GPa+-4mm", "unit"),
+    ("bead_youngs_pa", "expected name=VALUE"),
+    ("bead_youngs_pa=203GPa", "no width"),
+    ("bead_youngs_pa=203GPa+-4mm", "unit"),
     ("sensor_gain=1+--2%", "positive"),
-    ("eta=5us..1us", "LOW < HIGH"),
+    ("eta_s=5us..1us", "LOW < HIGH"),
     ("youngs=1+-0.1", "Unknown parameter 'youngs'"),
 ])
 def test_bad_priors_name_the_field(text, match):
@@ -44,8 +44,8 @@ def test_twice_the_same_key_is_refused():
 
 
 def test_priors_free_their_parameters_and_add_rows(traces):
-    problem = make_problem(traces, ("eta",), priors=["striker_velocity=+-1%",
-                                                     "striker_velocity[trace1]=0.31+-0.002",
+    problem = make_problem(traces, ("eta_s",), priors=["striker_velocity_m_s=+-1%",
+                                                     "striker_velocity_m_s[trace1]=0.31+-0.002",
                                                      "sensor_gain=1+-0.02"])
     assert problem.labels == ("eta", "striker_velocity[trace0]", "striker_velocity[trace1]",
                               "sensor_gain[contact_6]", "sensor_gain[wall]")
@@ -61,10 +61,10 @@ def test_priors_free_their_parameters_and_add_rows(traces):
 
 
 def test_uniform_narrows_the_bounds_and_unknown_labels_fail(traces):
-    problem = make_problem(traces, ("eta", "mu"), priors=["eta=0..10us"])
+    problem = make_problem(traces, ("eta_s", "mu"), priors=["eta_s=0..10us"])
     assert problem.instances[0].spec.upper == pytest.approx(1e-5)
     assert problem.priors == ()
     with pytest.raises(PriorError, match="must start at 0"):
-        make_problem(traces, ("eta",), priors=["eta=1us..10us"])
+        make_problem(traces, ("eta_s",), priors=["eta_s=1us..10us"])
     with pytest.raises(PriorError, match="no fitted parameter.*gain\\[nowhere\\]|no fitted parameter"):
-        make_problem(traces, ("eta",), priors=["gain[nowhere]=1+-0.1"])
+        make_problem(traces, ("eta_s",), priors=["gain[nowhere]=1+-0.1"])

@@ -212,7 +212,7 @@ def test_global_sensitivity_ranks_the_impact_velocity_first():
 @pytest.mark.parametrize(
     ("params", "observables", "setup_kwargs", "match"),
     [
-        (("etaa",), ("wall_peak",), {}, "unknown parameter 'etaa'; valid parameters: eta_s, mu"),
+        (("etaa",), ("wall_peak",), {}, "unknown parameter 'etaa' in params; valid parameters: eta_s, mu"),
         (("eta_s",), ("wall_max",), {}, "unknown observable 'wall_max'; valid forms"),
         (("eta_s",), ("contact_12_peak",), {}, "contact 12 is not in the chain"),
         (("eta_s",), ("sensor_2_peak",), {}, "bead 2 has no embedded sensor"),

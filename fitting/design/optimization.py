@@ -14,7 +14,7 @@ from hertzchain.progress import Progress
 
 from ..data import Experiment
 from ..model import ForwardModel
-from ..parameters import public_label
+from ..parameters import public_keys, public_label
 from .plan import (
     CRITERIA,
     NUISANCES,
@@ -227,7 +227,8 @@ def optimize_plan(
     if baseline_units:
         reference = subset_result([units.index(u) for u in baseline_units])
     elif baseline is not None:
-        reference = design(baseline, params, values=values, nuisances=nuisances, forward=forward)
+        reference = design(baseline, tuple(map(public_label, params)), values=public_keys(plan.values),
+                           nuisances=tuple(map(public_label, nuisances)), forward=forward)
     return PlanOptimization(
         criterion=criterion,
         size=size,

@@ -19,7 +19,14 @@ from hertzchain.io.tracefile import TraceFile, setup_header
 from ..data import Experiment, as_experiments, make_experiment
 from ..fit import make_problem
 from ..model import ForwardModel, Problem, residuals_and_jacobian
-from ..parameters import LabelledValues, get_spec, parse_parameter_list, public_label, resolve_name
+from ..parameters import (
+    LabelledValues,
+    get_spec,
+    parse_parameter_list,
+    public_keys,
+    public_label,
+    resolve_name,
+)
 from ..synthetic import simulate_clean
 
 # Verlet steps per contact time of the noise-free data of a planned experiment: the design
@@ -187,8 +194,9 @@ def _plan_summary(experiments: Sequence[Experiment]) -> list[dict]:
 
 
 def _check_names(params, nuisances) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """The registry keys of `params` and `nuisances` (either spelling), checked."""
-    params = parse_parameter_list(params)
+    """The registry keys of `params` and `nuisances` (either spelling: a previous name warns),
+    checked."""
+    params = parse_parameter_list(params, where="params")
     shown = ", ".join(map(public_label, NUISANCES))
     for name in params:
         if name in NUISANCES:
@@ -201,7 +209,7 @@ def _check_names(params, nuisances) -> tuple[tuple[str, ...], tuple[str, ...]]:
     keys = []
     for name in nuisances:
         try:
-            key = resolve_name(name)
+            key = resolve_name(name, where="nuisances")
         except ValueError:
             key = None
         if key not in NUISANCES:
@@ -222,10 +230,11 @@ def _setup_with_values(setup: ChainSetup, values: Mapping[str, float], skip=()) 
 
 
 class _Plan:
-    """The Problem of a plan and its parameter vector at the given values."""
+    """The Problem of a plan and its parameter vector at the given values (`params`,
+    `nuisances`: registry keys; `values`: as the user wrote them, a previous name warns)."""
 
     def __init__(self, experiments, params, nuisances, values, forward):
-        values = {resolve_name(name): value for name, value in (values or {}).items()}
+        values = {resolve_name(name, where="values"): value for name, value in (values or {}).items()}
         if "C" in params and "mu_star" in values:
             # C is set through the stiffness scale: apply mu* to read C, do not fix it
             fixed = {k: v for k, v in values.items() if k not in params and k != "mu_star"}
@@ -233,8 +242,8 @@ class _Plan:
             fixed = {k: v for k, v in values.items() if k not in params}
         if "mu_star" in params and "C" in values:
             raise ValueError("values: give mu_star, not C, when mu_star is the designed parameter.")
-        self.problem: Problem = make_problem(experiments, params + nuisances, fixed=fixed,
-                                             forward=forward)
+        self.problem: Problem = make_problem(experiments, tuple(map(public_label, params + nuisances)),
+                                             fixed=public_keys(fixed), forward=forward)
         truth = [_setup_with_values(s, values) for s in self.problem.base_setups]
         x = []
         for inst in self.problem.instances:
@@ -254,6 +263,7 @@ class _Plan:
                 )
         self.params = params
         self.nuisances = nuisances
+        self.values = values
         self.interest = [i for i, inst in enumerate(self.problem.instances) if inst.name in params]
 
     def jacobian(self) -> np.ndarray:

@@ -71,7 +71,7 @@ def fit_scatter(plan, params=("eta_s", "mu", "C"), *, values=None, nuisances=(),
     predicted = _result_from_jacobian(plan_, plan_.jacobian(), experiments)
     problem = plan_.problem
     x = plan_.x
-    truth = dict(zip(problem.labels, map(float, x)))
+    truth = dict(zip(map(public_label, problem.labels), map(float, x)))
     clean = np.asarray(problem.model_vector(x))
     sigma = problem.sigma_vector()
     sigma = np.where(np.isfinite(sigma), sigma, 0.0)  # samples left out of the fit stay clean

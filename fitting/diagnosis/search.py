@@ -11,7 +11,7 @@ from .. import effects as fx
 from ..data import Experiment
 from ..fit import initial_values, make_problem
 from ..model import Problem
-from ..parameters import ParameterInstance, get_spec
+from ..parameters import ParameterInstance, get_spec, public_label
 from .candidates import _Candidates
 from .evaluator import _Evaluator
 from .heldout import _HeldOut
@@ -39,7 +39,7 @@ class _Search(_Refits, _Candidates, _Screening, _HeldOut):
                                                               1e-3)) for e in experiments])))
         forward = fx.effects_forward_model(self.n_beads, steps_per_contact, reference_force_n=reference_force_n)
         base_params = tuple(nuisances) + tuple(free)
-        seed = make_problem(experiments, base_params, forward=forward)
+        seed = make_problem(experiments, tuple(map(public_label, base_params)), forward=forward)
         self.base_start = initial_values(seed)
         covered = {fx.COVERED_BY[name] for name in free if name in fx.COVERED_BY}
         has_contacts = any(k for e in experiments for k in (c.startswith("contact_") for c in e.channels))

@@ -208,7 +208,7 @@ class _Workflow(_Verdict, _Report):
                 self.x, self.chi2, self.status = x_wo, chi2_wo, _status(result)
 
 
-def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, candidates=None,
+def diagnose(experiments, *, model: str = "base", free=(), nuisances=None, candidates=None,
              max_effects: int = 3, min_share: float = MIN_SHARE, steps_per_contact: int = STEPS_PER_CONTACT,
              max_refits: int = 3, progress: bool = True) -> Diagnosis:
     """Find, name and add the effects a chain model is missing (see the module docstring).
@@ -220,8 +220,9 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
       `"base+EFFECT+..."` to start with effects already in the model.
     - `free`: further parameters of the registry fitted throughout (e.g. `("C",)`); the
       candidate they stand for is then left out.
-    - `nuisances`: per-file / per-channel nuisances always fitted (default striker velocity
-      and trigger offset; add `"gain"` for uncalibrated channels).
+    - `nuisances`: per-file / per-channel nuisances always fitted (default None: striker
+      velocity and trigger offset, `NUISANCES`; add `"gain"` for uncalibrated channels). Here
+      and in `free`, a previous name (`striker_velocity`) warns once.
     - `candidates`: identifiers to consider (default: all of `fitting.effects`).
     - `max_effects`: most effects to add.
     - `min_share`: share of the remaining excess misfit a named effect must remove.
@@ -238,8 +239,8 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=NUISANCES, 
     """
     began = time.perf_counter()
     experiments = as_experiments(experiments)
-    nuisances = tuple(resolve_name(name) for name in nuisances)
-    free = tuple(parse_parameter_list(free)) if free else ()
+    nuisances = NUISANCES if nuisances is None else tuple(resolve_name(name, where="nuisances") for name in nuisances)
+    free = tuple(parse_parameter_list(free, where="free")) if free else ()
     for name in nuisances:
         if get_spec(name).scope == "global":
             raise DiagnosisError(f"nuisances: {public_label(name)} is a global parameter; give it in `free`.")

@@ -90,14 +90,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _values(chain) -> dict:
+    """The values (SI) the design is made at, by public name."""
     setup = chain.setup
-    values = {"eta": float(setup.eta_s), "mu": float(setup.mu), "mu_star": float(setup.mu_star)}
+    values = {"eta_s": float(setup.eta_s), "mu": float(setup.mu), "mu_star": float(setup.mu_star)}
     if "wall_youngs_pa" in chain.sources:
-        values["wall_youngs"] = float(setup.wall_youngs_pa)
+        values["wall_youngs_pa"] = float(setup.wall_youngs_pa)
     if "wall_poisson" in chain.sources:
         values["wall_poisson"] = float(setup.wall_poisson)
     if float(setup.precompression_n) > 0:
-        values["precompression"] = float(setup.precompression_n)
+        values["precompression_n"] = float(setup.precompression_n)
     return values
 
 
@@ -118,8 +119,9 @@ def _csv(result, recommended=None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    params = parse_parameter_list(args.params, where="--params")
-    nuisances = tuple(dict.fromkeys(resolve_name(n, where="--nuisances") for n in _names(args.nuisances)))
+    # public names, as the library takes them (a previous name has warned here, naming the option)
+    params = tuple(map(public_label, parse_parameter_list(args.params, where="--params")))
+    nuisances = tuple(dict.fromkeys(public_label(resolve_name(n, where="--nuisances")) for n in _names(args.nuisances)))
     chain = chain_from_args(args)
     setup = chain.setup
     values = _values(chain)

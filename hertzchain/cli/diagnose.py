@@ -39,11 +39,12 @@ def _names(text: str) -> list[str]:
 
 
 def _parameters(text: str, option: str) -> list[str]:
-    """The registry keys of the parameters listed in `option` (either spelling; a previous
-    name warns once, as in `hertzchain fit`: `fitting.parameters.resolve_name`)."""
-    from fitting.parameters import resolve_name
+    """The public names of the parameters listed in `option` (either spelling; a previous
+    name warns once, naming `option`, as in `hertzchain fit`: `fitting.parameters.resolve_name`),
+    as the library takes them."""
+    from fitting.parameters import public_label, resolve_name
 
-    return [resolve_name(name, where=option) for name in _names(text)]
+    return [public_label(resolve_name(name, where=option)) for name in _names(text)]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

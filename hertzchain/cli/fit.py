@@ -38,7 +38,15 @@ from fitting.effects import PREFIX as EFFECT_PREFIX
 from fitting.fit import FitWarning, fit
 from fitting.forward_model import time_step_s
 from fitting.model import STEPS_PER_CONTACT, ForwardModel
-from fitting.parameters import build_instances, get_spec, parse_parameter_list, public_label, public_names, resolve_label
+from fitting.parameters import (
+    build_instances,
+    checked_keys,
+    get_spec,
+    parse_parameter_list,
+    public_label,
+    public_names,
+    resolve_label,
+)
 from fitting.posterior import PosteriorWarning, sample_posterior
 from fitting.posterior_report import write_posterior_report
 from fitting.priors import parse_priors, prior_names
@@ -53,8 +61,9 @@ from ..units import parse_quantity
 
 
 def _assignments(text: str | None, option: str) -> dict:
-    """Parse 'eta_s=2us,mu=0.19' into {registry label: SI value} (units by the parameter's
-    unit; either spelling of a name, `fitting.parameters.resolve_label`)."""
+    """Parse 'eta_s=2us,mu=0.19' into {public label: SI value}, as the library takes it
+    (units by the parameter's unit; either spelling of a name, `fitting.parameters.resolve_label`:
+    a previous name warns, naming `option`)."""
     values = {}
     if not text:
         return values
@@ -67,7 +76,7 @@ def _assignments(text: str | None, option: str) -> dict:
         name = resolve_label(written, where=option)
         spec = get_spec(name.split("[", 1)[0])
         unit = spec.unit if spec.unit in ("s", "Pa", "N", "m/s") else ""
-        values[name] = parse_quantity(value, unit, name=f"{option} {written}")
+        values[public_label(name)] = parse_quantity(value, unit, name=f"{option} {written}")
     return values
 
 
@@ -195,20 +204,22 @@ def run(args: argparse.Namespace) -> int:
 
 def _fit(args, out: Path, began: float, forward: ForwardModel, noise: float | None) -> int:
     """The fit of trace files, written into `out` (the temporary of `--out`)."""
-    params = parse_parameter_list(args.params, where="--params")
+    keys = parse_parameter_list(args.params, where="--params")
+    params = tuple(map(public_label, keys))  # as the library takes them: a previous name has warned here
     channels = tuple(c.strip() for c in args.channels.split(",") if c.strip()) if args.channels else None
     experiments = load_experiments(args.files, channels=channels, noise_std_n=noise)
     read = time.perf_counter()
-    profile = tuple(resolve_label(p.strip(), where="--profile") for p in args.profile.split(",") if p.strip())
+    profile = tuple(public_label(resolve_label(p.strip(), where="--profile"))
+                    for p in args.profile.split(",") if p.strip())
     priors = parse_priors(parse_priors(experiment_priors(args.files), source="an experiment file's [prior]")
                           + parse_priors(args.prior, source="--prior"))  # once more: one prior per parameter
     if args.posterior and args.covariance == "residual":
         raise ValueError("--posterior samples the likelihood of the stated noise; use --covariance auto or noise.")
     if not args.yes:
-        free = build_instances(parse_parameter_list(params + prior_names(priors)), experiments)
+        free = build_instances(checked_keys(keys + prior_names(priors)), experiments)
         check_fit_size(experiments, len(free),
                        multistart=args.multistart, steps_per_contact=args.steps_per_contact)
-    print(f"fitting {', '.join(map(public_label, params))} to {len(experiments)} file(s) ...", flush=True)
+    print(f"fitting {', '.join(params)} to {len(experiments)} file(s) ...", flush=True)
     with warnings.catch_warnings():  # the summary below and fit.json carry every warning
         warnings.simplefilter("ignore", FitWarning)
         result = fit(

@@ -67,25 +67,26 @@ def _values(text: str, unit: str, option: str) -> list[float]:
 
 
 def _sweep_axes(args) -> dict[str, list[float]]:
-    """Swept parameter (registry key) -> values (SI)."""
+    """Swept parameter (public name, as the library takes it) -> values (SI)."""
     axes = {}
     if args.sweep_velocities:
-        axes["striker_velocity"] = _values(args.sweep_velocities, "m/s", "--sweep-velocities")
+        axes["striker_velocity_m_s"] = _values(args.sweep_velocities, "m/s", "--sweep-velocities")
     if args.sweep_wall_youngs:
-        axes["wall_youngs"] = _values(args.sweep_wall_youngs, "Pa", "--sweep-wall-youngs")
+        axes["wall_youngs_pa"] = _values(args.sweep_wall_youngs, "Pa", "--sweep-wall-youngs")
     for item in args.sweep:
         written, _, values = item.partition("=")
         if not values:
             raise ValueError(f"--sweep {item!r}: expected PARAM=V1,V2,... (SI values).")
-        name = resolve_name(written.strip(), where="--sweep")
-        if name in axes:
-            raise ValueError(f"--sweep: {public_name(name)} is swept twice.")
-        axes[name] = _values(values, S.PARAMETERS[name].unit, f"--sweep {written.strip()}")
+        key = resolve_name(written.strip(), where="--sweep")
+        if public_name(key) in axes:
+            raise ValueError(f"--sweep: {public_name(key)} is swept twice.")
+        axes[public_name(key)] = _values(values, S.PARAMETERS[key].unit, f"--sweep {written.strip()}")
     return axes
 
 
 def _box(args) -> dict[str, tuple[float, float]]:
-    """Parameter (registry key) -> (low, high) of the global study's box (SI)."""
+    """Parameter (public name, as the library takes it) -> (low, high) of the global study's
+    box (SI)."""
     box = {}
     for item in args.box:
         written, _, bounds = item.partition("=")
@@ -93,11 +94,11 @@ def _box(args) -> dict[str, tuple[float, float]]:
         if not colon:
             raise ValueError(f"--box {item!r}: expected PARAM=LOW:HIGH (SI, or with units: "
                              "wall_youngs_pa=3GPa:203GPa).")
-        name = resolve_name(written.strip(), where="--box")
-        if name in box:
-            raise ValueError(f"--box: {public_name(name)} is given twice.")
-        unit, option = S.PARAMETERS[name].unit, f"--box {written.strip()}"
-        box[name] = (parse_quantity(low, unit, name=option), parse_quantity(high, unit, name=option))
+        key = resolve_name(written.strip(), where="--box")
+        if public_name(key) in box:
+            raise ValueError(f"--box: {public_name(key)} is given twice.")
+        unit, option = S.PARAMETERS[key].unit, f"--box {written.strip()}"
+        box[public_name(key)] = (parse_quantity(low, unit, name=option), parse_quantity(high, unit, name=option))
     return box
 
 
@@ -137,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
     setup = setup_from_args(args)
     options = _run_options(args)
     out = Path(args.out)
-    params = tuple(resolve_name(name, where="--params") for name in args.params)
+    params = tuple(public_name(resolve_name(name, where="--params")) for name in args.params)
     axes, box = _sweep_axes(args), _box(args)
     if axes and box:
         raise ValueError("give either sweep options or --box (a global study), not both.")

@@ -12,8 +12,9 @@ names; SI units): `eta_s`, `mu`, `mu_star`, `striker_velocity_m_s`, `striker_mas
 `bead_poisson`, `sensor_beta`, `sensor_f0_hz`, `precompression_n` (at a positive preload:
 at zero the static overlap F^(2/3) makes the derivative singular), `bead_yield_stress_pa`
 and `yield_force_n` for elastic-plastic contacts (`plasticity=True`), and `bead_masses_kg`
-(one per bead: N parameters). The registry keys (`eta`, `wall_youngs`) are read too; every
-result names a parameter by its public name.
+(one per bead: N parameters). The previous short names (`eta`, `wall_youngs`) are read too,
+each with one `ParameterNameWarning` naming the argument it was given in and the name to
+write; every result names a parameter by its public name.
 
 **Observables** (`observable_names`), with `CH` one of `contact_K`, `wall`, `sensor_K`:
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..chain import ChainSetup
 from ..io.atomic import json_ready
-from ..parameters import parameter_values, public_name
+from ..parameters import key_values, public_name
 from .jacobian import n_values, resolve_mode
 from .local import prepare
 from .result import SensitivityResult, build_result
@@ -67,7 +67,7 @@ def global_sensitivity(
 ) -> GlobalSensitivity:
     """Mean squared elasticities of `observables` over a Latin-hypercube sample of `box`.
 
-    **Arguments:** `box`: parameter (public name, or registry key) -> (low, high) in SI
+    **Arguments:** `box`: parameter (public name; a previous one warns) -> (low, high) in SI
     (uniform sampling); `params`: the
     parameters to rank (default: those of the box); `n_samples` points, drawn with `seed`;
     run options as `sensitivity`.
@@ -84,20 +84,20 @@ def global_sensitivity(
             raise ValueError(f"box: {name} needs (low, high) with low <= high, got {bounds}.")
     if n_samples < 2:
         raise ValueError(f"n_samples must be at least 2, got {n_samples}.")
-    params = tuple(box) if params is None else tuple(params)
     names = list(box)
     unit = qmc.LatinHypercube(d=len(names), seed=seed).random(n_samples)
     low = np.array([float(box[n][0]) for n in names])
     high = np.array([float(box[n][1]) for n in names])
     points = low + unit * (high - low)
-    params, parsed = prepare(setup, params, observables)
-    names = list(check_axes(setup, {n: points[:, i] for i, n in enumerate(names)}))
+    names = list(check_axes(setup, {n: points[:, i] for i, n in enumerate(names)}, where="box"))
+    params, parsed = prepare(setup, tuple(map(public_name, names)) if params is None else tuple(params),
+                             observables)
     if any(o.is_trace for o in parsed):
         raise ValueError("global sensitivity: whole-trace observables (trace_*) are not supported.")
     batch = {n: jnp.asarray(points[:, i]) for i, n in enumerate(names)}
     grid = grid_for_batch(setup, batch, t_end_s=t_end_s, sample_interval_s=sample_interval_s,
                           dt_s=dt_s)
-    mode = resolve_mode("auto", n_values(parameter_values(setup, params)), len(parsed))
+    mode = resolve_mode("auto", n_values(key_values(setup, params)), len(parsed))
     out, valid, jac, pvals = jacobians_at_points(
         setup, params, parsed, batch, grid, mode, chunk_size=chunk_size,
         label="global sensitivity (samples)", progress=progress,

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..chain import ChainSetup
 from ..integrate import solve
-from ..parameters import with_parameters
+from ..parameters import with_keys
 from ..timegrid import TimeGrid
 from .observables import Observable, evaluate_observables, recording_for
 
@@ -47,12 +47,15 @@ def observable_function(
 ):
     """The function `values -> (observables, valid)` for a fixed time grid (differentiable).
 
-    `values` is a dict param name -> value; the rest of `setup` is held fixed.
+    `values` is a dict parameter -> value, keyed by registry key or public name (as
+    `hertzchain.parameters.key_values` or `parameter_values` gives them; not resolved here,
+    so a user's names are resolved before: `local.check_params`); the rest of `setup` is held
+    fixed.
     """
     recording = recording_for(observables)
 
     def fn(values, base=setup):
-        changed = with_parameters(base, values)
+        changed = with_keys(base, values)
         traces = solve(changed, grid, recording)
         return evaluate_observables(changed, traces, observables, grid.sample_interval_s)
 

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..chain import ChainSetup
-from ..parameters import PARAMETERS, parameter_values, public_name, public_names, resolve_name
+from ..parameters import PARAMETERS, key_values, public_name, public_names, resolve_name
 from ..timegrid import DEFAULT_STEPS_PER_CONTACT, TimeGrid, choose_time_grid
 from .jacobian import jacobian_at, n_values, resolve_mode
 from .observables import OBSERVABLE_FORMS, Observable, invalid_reason, parse_observable
@@ -16,15 +16,16 @@ from .result import SensitivityResult, build_result
 
 
 def check_params(setup: ChainSetup, params: Sequence[str]) -> tuple[str, ...]:
-    """The registry keys of `params` (either spelling, `hertzchain.parameters.resolve_name`),
-    checked: known, distinct, finite in `setup`, and acting in it (a sensor, a wall,
-    elastic-plastic contacts, a positive preload where needed)."""
+    """The registry keys of `params` (either spelling, `hertzchain.parameters.resolve_name`:
+    a previous name warns), checked as `check_keys` does."""
     if not tuple(params):
         raise ValueError(f"params: give at least one parameter; valid: {', '.join(public_names())}.")
-    try:
-        params = tuple(resolve_name(name) for name in params)
-    except ValueError as unknown:
-        raise ValueError(f"params: {unknown}") from None
+    return check_keys(setup, tuple(resolve_name(name, where="params") for name in params))
+
+
+def check_keys(setup: ChainSetup, params: tuple[str, ...]) -> tuple[str, ...]:
+    """`params` (registry keys), checked: distinct, finite in `setup`, and acting in it (a
+    sensor, a wall, elastic-plastic contacts, a positive preload where needed)."""
     if len(set(params)) != len(params):
         raise ValueError(f"params: a parameter is listed twice: {tuple(map(public_name, params))}.")
     for name in params:
@@ -87,7 +88,7 @@ def sensitivity(
 
     - `setup`: the chain (a single, unbatched `ChainSetup`).
     - `params`: parameters of `PARAMETERS`, by public name (e.g. `("eta_s", "mu",
-      "wall_youngs_pa")`; the registry keys `eta`, `wall_youngs` are read too).
+      "wall_youngs_pa")`; a previous name, `eta`, is read with a `ParameterNameWarning`).
     - `observables`: names (see `hertzchain.sensitivity`, e.g. `("wall_peak", "contact_6_peak")`).
     - `t_end_s`, `sample_interval_s`, `dt_s`, `steps_per_contact`: the run, as in `simulate`
       (or give a ready `grid`).
@@ -103,7 +104,7 @@ def sensitivity(
     if grid is None:
         grid = choose_time_grid(setup, t_end_s=t_end_s, sample_interval_s=sample_interval_s,
                                 dt_s=dt_s, steps_per_contact=steps_per_contact)
-    values0 = parameter_values(setup, params)
+    values0 = key_values(setup, params)
     n_out = sum(grid.n_samples if o.is_trace else 1 for o in parsed)
     mode = resolve_mode(mode, n_values(values0), n_out)
     out, valid, jac = jacobian_at(values0, setup, params, parsed, grid, mode)

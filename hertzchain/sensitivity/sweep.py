@@ -13,49 +13,51 @@ import numpy as np
 from ..chain import ChainSetup
 from ..parameters import (
     PARAMETERS,
-    parameter_values,
+    key_values,
     public_name,
     public_names,
     resolve_name,
-    with_parameters,
+    with_keys,
 )
 from ..progress import Progress
 from ..timegrid import DEFAULT_STEPS_PER_CONTACT, TimeGrid, choose_time_grid
 from .jacobian import jacobian_fn, n_values, observable_function, resolve_mode
-from .local import check_params, prepare
+from .local import check_keys, prepare
 from .observables import Observable, invalid_reason
 from .result import SensitivityResult, build_result
 
 
-def check_axes(setup: ChainSetup, axes: Mapping[str, Sequence[float]]) -> dict[str, np.ndarray]:
-    """Swept parameter (either spelling) -> finite values (SI), keyed by registry key and
-    checked as `check_params` does."""
+def check_axes(setup: ChainSetup, axes: Mapping[str, Sequence[float]], *,
+               where: str = "sweep") -> dict[str, np.ndarray]:
+    """Swept parameter (either spelling: a previous name warns) -> finite values (SI), keyed
+    by registry key and checked as `check_keys` does; `where`: the argument `axes` was given
+    as, named in the messages."""
     if not axes:
-        raise ValueError("sweep: give at least one parameter to sweep, e.g. "
+        raise ValueError(f"{where}: give at least one parameter to sweep, e.g. "
                          "{'striker_velocity_m_s': [0.1, 0.3], 'wall_youngs_pa': [5e9, 2.03e11]}.")
     out = {}
     for name, values in axes.items():
         try:
-            key = resolve_name(name)
+            key = resolve_name(name, where=where)
         except ValueError:
             key = None
         if key is None or PARAMETERS[key].per_bead:
             raise ValueError(
-                f"sweep: cannot sweep {name!r}; sweepable parameters: {', '.join(public_names(per_bead=False))}."
+                f"{where}: cannot sweep {name!r}; sweepable parameters: {', '.join(public_names(per_bead=False))}."
             )
         array = np.asarray(values, dtype=float).ravel()
         if array.size == 0 or not np.all(np.isfinite(array)):
-            raise ValueError(f"sweep: {public_name(key)} needs finite values, got {list(values)}.")
+            raise ValueError(f"{where}: {public_name(key)} needs finite values, got {list(values)}.")
         if key in out:
-            raise ValueError(f"sweep: {public_name(key)} is swept twice.")
+            raise ValueError(f"{where}: {public_name(key)} is swept twice.")
         out[key] = array
-    check_params(setup, tuple(out))
+    check_keys(setup, tuple(out))
     return out
 
 
 def grid_for_batch(setup: ChainSetup, points: dict[str, jax.Array], **run) -> TimeGrid:
-    """One time grid fine enough for `setup` at every point (name -> (n,) values)."""
-    batched = jax.vmap(lambda v: with_parameters(setup, v))(points)
+    """One time grid fine enough for `setup` at every point (registry key -> (n,) values)."""
+    batched = jax.vmap(lambda v: with_keys(setup, v))(points)
     return choose_time_grid(batched, **run)
 
 
@@ -67,8 +69,8 @@ def _jacobian_batch(batch, setup, params, observables, grid, mode):
     jac_fn = jacobian_fn(fn, mode)
 
     def one(point):
-        base = with_parameters(setup, point)
-        values = parameter_values(base, params)
+        base = with_keys(setup, point)
+        values = key_values(base, params)
         return jac_fn(values, base) + (values,)
 
     return jax.vmap(one)(batch)
@@ -159,7 +161,7 @@ def sensitivity_sweep(
     points = {name: jnp.asarray(m.ravel()) for name, m in zip(axes, mesh)}
     grid = grid_for_batch(setup, points, t_end_s=t_end_s, sample_interval_s=sample_interval_s,
                           dt_s=dt_s, steps_per_contact=steps_per_contact)
-    mode = resolve_mode(mode, n_values(parameter_values(setup, params)), len(parsed))
+    mode = resolve_mode(mode, n_values(key_values(setup, params)), len(parsed))
     out, valid, jac, pvals = jacobians_at_points(
         setup, params, parsed, points, grid, mode, chunk_size=chunk_size,
         label="sensitivity sweep (setups)", progress=progress,
