@@ -21,7 +21,7 @@ import numpy as np
 
 from . import laws, setup_constants, setup_laws
 from .caller import user_stacklevel
-from .materials import BEAD_STEEL
+from .materials import BEAD_STEEL, sphere_mass_kg, sphere_volume_m3
 from .setup_laws import LAW_ATTRIBUTES  # noqa: F401  (importable from here too)
 from .validation import as_float64, check_setup, check_values
 
@@ -62,7 +62,7 @@ def _bead_sizes(n_beads: int, radius_m, density_kg_m3, mass_kg) -> tuple[jax.Arr
         return radius, _per_bead(density_kg_m3, "bead_density_kg_m3", n_beads)
     mass = _per_bead(mass_kg, "bead_mass_kg", n_beads)
     check_values("bead_mass_kg", mass)
-    return radius, mass / (4.0 / 3.0 * jnp.pi * radius**3)
+    return radius, mass / sphere_volume_m3(radius)
 
 
 def _striker_size(radius_m, mass_kg, density_kg_m3, bead_radius_m, bead_density_kg_m3) -> tuple[jax.Array, jax.Array]:
@@ -267,11 +267,11 @@ class ChainSetup(eqx.Module):
 
     @property
     def bead_mass_kg(self) -> jax.Array:
-        return 4.0 / 3.0 * jnp.pi * self.bead_density_kg_m3 * self.bead_radius_m**3
+        return sphere_mass_kg(self.bead_radius_m, self.bead_density_kg_m3)
 
     @property
     def striker_mass_kg(self) -> jax.Array:
-        return 4.0 / 3.0 * jnp.pi * self.striker_density_kg_m3 * self.striker_radius_m**3
+        return sphere_mass_kg(self.striker_radius_m, self.striker_density_kg_m3)
 
     # The laws under the attribute names of the former keywords (`hertzchain.setup_laws`).
     law_attributes = property(setup_laws.law_attributes)

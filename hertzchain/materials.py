@@ -136,3 +136,14 @@ def material(name: str) -> Material:
             return value
     aliases = ", ".join(f"{alias} = {key}" for alias, key in ALIASES.items())
     raise ValueError(f"Unknown material {name!r}; known materials: {', '.join(MATERIALS)} (also {aliases}).")
+
+
+def sphere_volume_m3(radius_m):
+    """Volume of a sphere of radius `radius_m` (m; a float or an array), m^3."""
+    return 4.0 / 3.0 * math.pi * radius_m**3
+
+
+def sphere_mass_kg(radius_m, density_kg_m3):
+    """Mass of a solid sphere of radius `radius_m` (m) and density `density_kg_m3` (kg/m^3),
+    kg (floats or arrays)."""
+    return 4.0 / 3.0 * math.pi * density_kg_m3 * radius_m**3

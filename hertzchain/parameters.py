@@ -43,6 +43,7 @@ import jax
 import jax.numpy as jnp
 
 from .chain import ChainSetup
+from .materials import sphere_volume_m3
 
 
 class Parameter(NamedTuple):
@@ -84,19 +85,15 @@ def _bead_scalar_set(name: str):
     return set_value
 
 
-def _sphere_volume(radius_m):
-    return 4.0 / 3.0 * jnp.pi * radius_m**3
-
-
 def _set_bead_masses(setup, mass_kg):
     return eqx.tree_at(
-        lambda s: s.bead_density_kg_m3, setup, mass_kg / _sphere_volume(setup.bead_radius_m)
+        lambda s: s.bead_density_kg_m3, setup, mass_kg / sphere_volume_m3(setup.bead_radius_m)
     )
 
 
 def _set_striker_mass(setup, mass_kg):
     return eqx.tree_at(
-        lambda s: s.striker_density_kg_m3, setup, mass_kg / _sphere_volume(setup.striker_radius_m)
+        lambda s: s.striker_density_kg_m3, setup, mass_kg / sphere_volume_m3(setup.striker_radius_m)
     )
 
 

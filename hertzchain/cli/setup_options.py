@@ -16,8 +16,8 @@ from pathlib import Path
 from .. import laws
 from ..chain import DEPRECATED_LAW_KEYWORDS, PLASTIC_LAWS, ChainSetup
 from ..io.importer import load_chain
-from ..io.tracefile import REDUNDANT_TOLERANCE, sphere_mass_kg
-from ..materials import BEAD_STEEL, Material, material
+from ..io.tracefile import REDUNDANT_TOLERANCE
+from ..materials import BEAD_STEEL, Material, material, sphere_mass_kg
 from ..sweep import default_contacts
 from ..units import format_si, parse_field, parse_quantity
 from ..validation import check_plausible

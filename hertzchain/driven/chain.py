@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import contact, laws
+from ..materials import sphere_mass_kg
 from ..precision import require_float64
 from ..validation import check_positive_parameters, is_concrete
 from .drive import DRIVE_STROKES, ActuatorMode, RayleighStroke
@@ -269,7 +270,7 @@ def _material_constants(n_beads, radius_m, bead_youngs_pa, bead_poisson, driver_
         raise ValueError(f"n_beads: expected a positive whole number of beads, got {n_beads}.")
     radius = jnp.asarray(radius_m, dtype=jnp.float64)
     if bead_mass_kg is None:
-        bead_mass_kg = 4.0 / 3.0 * np.pi * radius**3 * bead_density_kg_m3
+        bead_mass_kg = sphere_mass_kg(radius, bead_density_kg_m3)
     driver = contact.kappa_sphere_flat(radius, bead_youngs_pa, bead_poisson, driver_youngs_pa, driver_poisson)
     wall = contact.kappa_sphere_flat(radius, bead_youngs_pa, bead_poisson, wall_youngs_pa, wall_poisson)
     between = contact.kappa_sphere_sphere(radius, bead_youngs_pa, bead_poisson, radius, bead_youngs_pa,

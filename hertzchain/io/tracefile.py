@@ -53,6 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from ..chain import ChainSetup
+from ..materials import sphere_mass_kg
 from ..validation import RULES, check_plausible
 from .atomic import write_text
 
@@ -257,11 +258,6 @@ def _fail(where: str, message: str):
 
 def _ac_channel_names(header: dict) -> tuple[str, ...]:
     return tuple(c.strip() for c in str(header.get("ac_channels", "")).split(",") if c.strip())
-
-
-def sphere_mass_kg(radius_m: float, density_kg_m3: float) -> float:
-    """Mass of a solid sphere of radius `radius_m` (m) and density `density_kg_m3` (kg/m^3), kg."""
-    return 4.0 / 3.0 * math.pi * density_kg_m3 * radius_m**3
 
 
 def bead_density_kg_m3(header: dict) -> float:
