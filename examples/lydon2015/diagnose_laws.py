@@ -81,8 +81,9 @@ def main(argv=None) -> None:
     parser.add_argument("--plot-only", action="store_true", help="redraw NAME.png from the stored NAME.json")
     parser.add_argument("--only", nargs="*", help="candidate names (default: every one of CANDIDATES; the base "
                         "is always fitted; SLOW_CANDIDATES only when named)")
-    parser.add_argument("--with-tongue", action="store_true", help="fit FREE_PRELOAD_CANDIDATES (or --only of them) "
-                        "on the bending and the tongue together (fit_candidate_jointly), predict the loop")
+    parser.add_argument("--with-tongue", action="store_true", help="fit FREE_PRELOAD_CANDIDATES (or --only of them "
+                        "and of SLOW_CANDIDATES; free_preload always) on the bending and the tongue together "
+                        "(fit_candidate_jointly), predict the loop")
     args = parser.parse_args(argv)
     out = Path(args.out)
     if args.plot_only:
@@ -91,8 +92,8 @@ def main(argv=None) -> None:
     load = os.getloadavg()[0]
     experiment = load_driven_experiment(HERE / "single_bead_joint.toml", args.data_dir)
     if args.with_tongue:
-        chosen = [c for c in FREE_PRELOAD_CANDIDATES if not args.only or c.name in args.only
-                  or c is FREE_PRELOAD_CANDIDATES[0]]
+        chosen = [c for c in FREE_PRELOAD_CANDIDATES + SLOW_CANDIDATES if (c in FREE_PRELOAD_CANDIDATES and not args.only)
+                  or c.name in (args.only or ()) or c is FREE_PRELOAD_CANDIDATES[0]]
     else:
         chosen = [c for c in CANDIDATES + SLOW_CANDIDATES if (c in CANDIDATES and not args.only)
                   or c.name in (args.only or ()) or c.name == CANDIDATES[0].name]
