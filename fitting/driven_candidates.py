@@ -313,7 +313,8 @@ def _tongue_fundamental_measurement(tongue_m, sensor_m_s_per_v: float):
 
 
 def fit_candidate_jointly(experiment, candidate: DrivenCandidate, *, held_out_levels: int = 0, level_stride: int = 1,
-                          max_steps: int = 20, progress: bool = False) -> dict:
+                          max_steps: int = 20, progress: bool = False,
+                          start_precompression_n: float = FREE_PRELOAD_START_N) -> dict:
     """Fit `candidate` on the bending run and the tongue run together, then predict the loop.
 
     The tongue run enters by its thresholds (Floquet, support sliders as state,
@@ -321,7 +322,7 @@ def fit_candidate_jointly(experiment, candidate: DrivenCandidate, *, held_out_le
     its fundamental below every onset (`hertzchain.driven.measurements.tongue_fundamental`),
     which measures that run's true drive: each run has its own drive scale (calibration prior);
     everything else is shared, a freed `precompression_n` too (started at
-    `FREE_PRELOAD_START_N`): the same apparatus an hour apart, stated at the same 4.5 N. (Free
+    `start_precompression_n`, N, default `FREE_PRELOAD_START_N`): the same apparatus an hour apart, stated at the same 4.5 N. (Free
     per run, the fit escapes to a tongue run of resonance ~2.2 kHz and drive scale ~4, where the
     fundamental's drive scale and resonance trade off and the model has no tongue at all.) The loop (the next day, the tongue's
     calibration) is predicted at the tongue run's constants and drive scale. **Returns:** `fit_candidate`'s dict with
@@ -334,7 +335,7 @@ def fit_candidate_jointly(experiment, candidate: DrivenCandidate, *, held_out_le
         raise ValueError(f"{experiment.path}: fitting on the tongue needs a [[measurement]] of kind \"tongue\".")
     start = candidate.add(base_chain(experiment))
     if "precompression_n" in candidate.free:
-        start = eqx.tree_at(lambda c: c.precompression_n, start, jnp.asarray(FREE_PRELOAD_START_N))
+        start = eqx.tree_at(lambda c: c.precompression_n, start, jnp.asarray(float(start_precompression_n)))
     measured_bend = bending(experiment.for_bending(bending_m), bending_m.data.sweep.rms_velocity_m_s)[0]
     chain = _tuned(start, measured_bend["lowest_drive_peak_hz"])
     fundamental = _tongue_fundamental_measurement(tongue_m, bending_m.data.sweep.sensor_m_s_per_v)
