@@ -32,8 +32,9 @@ predicts the loop; the verdict names no candidate for a measurement it was fitte
 
 `CANDIDATES` run by default; `SLOW_CANDIDATES` (micro-slip at the supports alone and in pairs
 with a free static force, a velocity-squared loss, a Rayleigh piezo or an actuator mode; their
-sliders have no Floquet multipliers, so their thresholds come from the lab's upward sweeps
-stepped in time, `emulate_loop`) only when named; `FREE_PRELOAD_CANDIDATES` for the joint fit.
+sliders are state of the period map, `hertzchain.driven.floquet`, and their thresholds come from
+the same continuation as every other candidate's) only when named; `FREE_PRELOAD_CANDIDATES` for
+the joint fit.
 """
 
 from __future__ import annotations
@@ -50,7 +51,6 @@ from hertzchain import laws
 from hertzchain.driven import ActuatorMode, DrivenChain, RayleighStroke
 from hertzchain.driven.linear import normal_modes
 from hertzchain.driven.measurements import tongue_fundamental
-from hertzchain.driven.thresholds import emulate_loop
 from hertzchain.progress import Progress
 
 from .driven import NOMINAL_SCALE, lag1_autocorrelation
@@ -169,9 +169,6 @@ SLOW_CANDIDATES = (
                     MICRO_SLIP + ("drive_stroke.mode_hz", "drive_stroke.damping_ratio"),
                     {"drive_stroke.mode_hz": (0.5, 3.0)}),  # 4.5-27 kHz: above the bending sweep's 4.7 kHz
 )
-# A chain with sliders has no Floquet multipliers (its sliders are state): its thresholds are
-# found by stepping the lab's sweeps in time (`emulate_loop`), the tongue at these frequencies.
-TIME_STEPPED_TONGUE_HZ = (6900.0, 7050.0, 7200.0, 7350.0, 7500.0, 7800.0)
 
 
 def base_chain(experiment, damping_rate_per_s: float = 1500.0) -> DrivenChain:
@@ -316,18 +313,19 @@ def _tongue_fundamental_measurement(tongue_m, sensor_m_s_per_v: float):
 
 
 def fit_candidate_jointly(experiment, candidate: DrivenCandidate, *, held_out_levels: int = 0, level_stride: int = 1,
-                          max_steps: int = 20, progress: bool = False) -> dict:
+                          max_steps: int = 20, progress: bool = False,
+                          start_precompression_n: float = FREE_PRELOAD_START_N) -> dict:
     """Fit `candidate` on the bending run and the tongue run together, then predict the loop.
 
-    The tongue run enters by its thresholds (Floquet, `fitting.driven_joint.JointModel`) and by
+    The tongue run enters by its thresholds (Floquet, support sliders as state,
+    `fitting.driven_joint.JointModel`) and by
     its fundamental below every onset (`hertzchain.driven.measurements.tongue_fundamental`),
     which measures that run's true drive: each run has its own drive scale (calibration prior);
     everything else is shared, a freed `precompression_n` too (started at
-    `FREE_PRELOAD_START_N`): the same apparatus an hour apart, stated at the same 4.5 N. (Free
+    `start_precompression_n`, N, default `FREE_PRELOAD_START_N`): the same apparatus an hour apart, stated at the same 4.5 N. (Free
     per run, the fit escapes to a tongue run of resonance ~2.2 kHz and drive scale ~4, where the
     fundamental's drive scale and resonance trade off and the model has no tongue at all.) The loop (the next day, the tongue's
-    calibration) is predicted at the tongue run's constants and drive scale. A chain with support
-    sliders has no Floquet multipliers and is refused. **Returns:** `fit_candidate`'s dict with
+    calibration) is predicted at the tongue run's constants and drive scale. **Returns:** `fit_candidate`'s dict with
     `fitted_on` (["bending", "tongue"]), `tongue_run` (its constants) and `tongue_fundamental`
     (its median misfit)."""
     began = time.perf_counter()
@@ -336,11 +334,8 @@ def fit_candidate_jointly(experiment, candidate: DrivenCandidate, *, held_out_le
     if tongue_m is None:
         raise ValueError(f"{experiment.path}: fitting on the tongue needs a [[measurement]] of kind \"tongue\".")
     start = candidate.add(base_chain(experiment))
-    if start.support_friction is not None:
-        raise ValueError(f"{candidate.name}: a chain with support sliders has no Floquet thresholds to fit; "
-                         "use fit_candidate (bending alone, the tongue stepped in time).")
     if "precompression_n" in candidate.free:
-        start = eqx.tree_at(lambda c: c.precompression_n, start, jnp.asarray(FREE_PRELOAD_START_N))
+        start = eqx.tree_at(lambda c: c.precompression_n, start, jnp.asarray(float(start_precompression_n)))
     measured_bend = bending(experiment.for_bending(bending_m), bending_m.data.sweep.rms_velocity_m_s)[0]
     chain = _tuned(start, measured_bend["lowest_drive_peak_hz"])
     fundamental = _tongue_fundamental_measurement(tongue_m, bending_m.data.sweep.sensor_m_s_per_v)
@@ -402,32 +397,19 @@ def _constants(chain, shared, drive_scale) -> dict:
     return values
 
 
-def _stepped_onsets(experiment, chain, run, tongue_hz=TIME_STEPPED_TONGUE_HZ) -> np.ndarray:
-    """The onsets going up at each of `run`'s threshold entries (NaN: none) by time stepping the
-    lab's sweeps (`emulate_loop`): the loop's own amplitudes, the tongue's upward amplitudes at
-    `TIME_STEPPED_TONGUE_HZ` (its other frequencies NaN, said in the result)."""
-    onsets = []
-    steps = int(experiment.model["steps_per_period"])
-    for m in run.measurements:
-        if m.kind == "tongue":
-            for f in m.data.frequencies_hz:
-                onset = np.nan
-                if f in tongue_hz:
-                    onset = emulate_loop(chain, f, m.data.drive_amplitudes_m, bead=experiment.sensor_bead,
-                                         steps_per_period=steps).onset_up_m
-                onsets.append(np.nan if onset is None else onset)
-        elif m.kind == "loop":
-            onset = emulate_loop(chain, m.data.frequency_hz, m.data.drive_amplitudes_m, bead=experiment.sensor_bead,
-                                 steps_per_period=steps).onset_up_m
-            onsets.append(np.nan if onset is None else onset)
-    return np.array(onsets, dtype=float)
+def floquet_onsets(predict: JointModel, run) -> tuple[np.ndarray, str]:
+    """(the true-amplitude thresholds of `predict`'s `run` at each of its threshold entries, NaN
+    where none was found; how): the Floquet continuation, support sliders included."""
+    _, found = predict.onsets(run, np.zeros(0))
+    return np.where(found.found, found.amplitude_m, np.nan), "Floquet threshold (continuation)"
 
 
 def predict_thresholds(experiment, chain, progress, drive_scale: float = 1.0, kinds=("tongue", "loop"),
-                       tongue_hz=TIME_STEPPED_TONGUE_HZ) -> dict:
+                       onsets=floquet_onsets) -> dict:
     """The tongue tip and the loop's onset going up of `chain` (the measurements of `kinds`) at
-    each run's calibration times `drive_scale` (Floquet thresholds; by time stepping for a chain
-    with support sliders, the tongue at `tongue_hz` only), in nominal amplitude."""
+    each run's calibration times `drive_scale`, in nominal amplitude. `onsets(predict, run) ->
+    (amplitudes, how)` finds each run's thresholds (default `floquet_onsets`; `predict` the
+    `JointModel` of `chain` on those measurements)."""
     others = [m for m in experiment.measurements if m.kind in kinds]
     rest = dataclasses.replace(experiment, measurements=tuple(others))
     predict = JointModel(rest, chain, [], {m.run: 1.0 for m in others}, 1.0)
@@ -437,13 +419,7 @@ def predict_thresholds(experiment, chain, progress, drive_scale: float = 1.0, ki
         if report is not None:
             report.note(f"run {run.run}")
         rows = _threshold_data(run)
-        if chain.support_friction is None:
-            _, found = predict.onsets(run, np.zeros(0))
-            model, how = np.where(found.found, found.amplitude_m, np.nan), "Floquet threshold (continuation)"
-        else:
-            model = _stepped_onsets(experiment, chain, run, tongue_hz)
-            how = (f"the lab's upward sweeps stepped in time (emulate_loop; tongue at {tuple(tongue_hz)} Hz "
-                   "only): the sliders have no Floquet multipliers")
+        model, how = onsets(predict, run)
         model = model / drive_scale
         for kind in ("tongue", "loop"):
             picked = [i for i, row in enumerate(rows) if row[4] == kind]

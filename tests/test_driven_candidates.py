@@ -132,3 +132,37 @@ def test_tongue_fundamental_is_a_sweep_of_the_levels_below_every_onset():
     np.testing.assert_allclose(sweep.rms_velocity_m_s, volts[:3].T * 0.02125)  # (F, A), m/s
     with pytest.raises(ValueError, match="at or above its lowest onset"):
         tongue_fundamental(tongue, sensor_m_s_per_v=0.02125, levels=4)
+
+
+def test_micro_slip_candidate_predicts_the_floquet_continuations_thresholds():
+    """A micro-slip chain's predicted tongue and loop onsets (`predict_thresholds`) are the
+    Floquet continuation's (`period_doubling_onsets`, the sliders as state) over the same
+    search range; `test_driven_thresholds.test_micro_slip_onset_and_its_derivative` checks that
+    continuation against a scan of the multipliers."""
+    from fitting.driven_candidates import predict_thresholds
+    from fitting.driven_joint import SEARCH_ABOVE, SEARCH_BELOW
+    from hertzchain import laws
+    from hertzchain.driven import DrivenChain
+    from hertzchain.driven.measurements import Loop, Tongue
+    from hertzchain.driven.thresholds import period_doubling_onsets
+
+    kappa = 3.8016e10  # the bending fit's single bead, F0 0.138 N, with micro-slip supports
+    chain = DrivenChain([0.028], [kappa, kappa], 0.137979, 1751.8,
+                        support_friction=laws.IwanSupport(1e6, 10e-9, elements=8))
+    drives = np.linspace(5e-9, 30e-9, 11)
+    tongue = Tongue("t", np.array([7900.0]), drives, np.ones((11, 1)), np.zeros((11, 1)), np.array([14e-9]), 2.5e-9,
+                    7.5e-7, "s")
+    loop = Loop("t", 7600.0, np.r_[drives, drives[-2::-1]], np.ones(21), np.zeros(21), 10, 20e-9, np.nan, np.nan,
+                2.5e-9, 7.5e-7, "s")
+    measurements = (Measurement("tongue", "t", tongue, 7.5e-7, 0.41, None, ("t",)),
+                    Measurement("loop", "t", loop, 7.5e-7, 0.41, None, ("l",)))
+    experiment = DrivenExperiment(Path("s.toml"), "s", np.array([0.028]), np.array([kappa, kappa]), 0.138, 7.5e-7,
+                                  0.41, 1, "velocity", None, None, MODEL, measurements, {})
+    predicted = predict_thresholds(experiment, chain, False, drive_scale=0.8)
+    found = period_doubling_onsets(chain, [7900.0, 7600.0], lowest_amplitude_m=SEARCH_BELOW * 14e-9,
+                                   highest_amplitude_m=SEARCH_ABOVE * 30e-9, steps_per_period=48)
+    assert found.reasons == ("crossed", "crossed")
+    assert predicted["tongue"]["model_tip_m"] == pytest.approx(found.amplitude_m[0] / 0.8, rel=1e-12)
+    assert predicted["tongue"]["model_tip_m"] * 0.8 == pytest.approx(14.37e-9, rel=2e-3)  # measured 1.4371e-8 m
+    assert predicted["loop"]["model_onset_up_m"] == pytest.approx(found.amplitude_m[1] / 0.8, rel=1e-12)
+    assert predicted["tongue"]["how"] == predicted["loop"]["how"] == "Floquet threshold (continuation)"

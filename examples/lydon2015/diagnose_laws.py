@@ -17,6 +17,7 @@ tongue together (its fundamental below onset and its thresholds) and predicts th
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 from pathlib import Path
@@ -26,6 +27,7 @@ import numpy as np
 from fitting.driven_candidates import (
     CANDIDATES,
     FREE_PRELOAD_CANDIDATES,
+    FREE_PRELOAD_START_N,
     SLOW_CANDIDATES,
     diagnose_laws,
     fit_candidate,
@@ -81,9 +83,15 @@ def main(argv=None) -> None:
     parser.add_argument("--plot-only", action="store_true", help="redraw NAME.png from the stored NAME.json")
     parser.add_argument("--only", nargs="*", help="candidate names (default: every one of CANDIDATES; the base "
                         "is always fitted; SLOW_CANDIDATES only when named)")
-    parser.add_argument("--with-tongue", action="store_true", help="fit FREE_PRELOAD_CANDIDATES (or --only of them) "
-                        "on the bending and the tongue together (fit_candidate_jointly), predict the loop")
+    parser.add_argument("--with-tongue", action="store_true", help="fit FREE_PRELOAD_CANDIDATES (or --only of them "
+                        "and of SLOW_CANDIDATES; free_preload always) on the bending and the tongue together "
+                        "(fit_candidate_jointly), predict the loop")
+    parser.add_argument("--start-precompression", type=float, default=FREE_PRELOAD_START_N,
+                        help="N: with --with-tongue, where a freed static force starts (default "
+                        f"{FREE_PRELOAD_START_N})")
     args = parser.parse_args(argv)
+    if args.start_precompression <= 0:
+        parser.error(f"--start-precompression must be > 0 N, got {args.start_precompression}.")
     out = Path(args.out)
     if args.plot_only:
         plot(json.loads((out / f"{args.name}.json").read_text()), out / f"{args.name}.png")
@@ -91,16 +99,18 @@ def main(argv=None) -> None:
     load = os.getloadavg()[0]
     experiment = load_driven_experiment(HERE / "single_bead_joint.toml", args.data_dir)
     if args.with_tongue:
-        chosen = [c for c in FREE_PRELOAD_CANDIDATES if not args.only or c.name in args.only
-                  or c is FREE_PRELOAD_CANDIDATES[0]]
+        chosen = [c for c in FREE_PRELOAD_CANDIDATES + SLOW_CANDIDATES if (c in FREE_PRELOAD_CANDIDATES and not args.only)
+                  or c.name in (args.only or ()) or c is FREE_PRELOAD_CANDIDATES[0]]
     else:
         chosen = [c for c in CANDIDATES + SLOW_CANDIDATES if (c in CANDIDATES and not args.only)
                   or c.name in (args.only or ()) or c.name == CANDIDATES[0].name]
     result = diagnose_laws(experiment, chosen, level_stride=args.level_stride, max_steps=args.max_steps,
-                           fit=fit_candidate_jointly if args.with_tongue else fit_candidate)
+                           fit=functools.partial(fit_candidate_jointly, start_precompression_n=args.start_precompression)
+                           if args.with_tongue else fit_candidate)
     result["load_average_at_start"] = load
     result["arguments"] = {"max_steps": args.max_steps, "level_stride": args.level_stride, "only": args.only,
-                           "name": args.name, "with_tongue": args.with_tongue}
+                           "name": args.name, "with_tongue": args.with_tongue,
+                           "start_precompression_n": args.start_precompression}
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / f"{args.name}.json", json_ready(result))
     plot(result, out / f"{args.name}.png")

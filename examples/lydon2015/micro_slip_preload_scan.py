@@ -12,7 +12,8 @@ static force of `--preloads` (N; the rest of the stated 4.5 N carried by the fix
 parallel), with the bending fit's supports, damping and drive scale and the Hertz constant
 rescaled so that the linear resonance stays the fitted one, this measures the bending (every
 7th drive level, every frequency) and predicts the tongue and the loop by stepping the lab's
-sweeps (`fitting.driven_candidates.predict_thresholds`, at the calibration). With
+upward sweeps in time (`stepped_onsets`, `hertzchain.driven.thresholds.emulate_loop`, at the
+calibration; `micro_slip_floquet_tongue.py` gives the same chains' Floquet thresholds). With
 `--tongue-run-preloads` it also predicts the tongue and the loop for a tongue run of the same
 apparatus (the Hertz constant of the first of `--preloads`, the bending run's) at its own
 static force: the lab set the precompression anew for each run. Writes `NAME.json`.
@@ -32,7 +33,6 @@ import numpy as np
 from run_record import started, write_stamped  # this folder's helper
 
 from fitting.driven_candidates import (
-    TIME_STEPPED_TONGUE_HZ,
     BoundedJointModel,
     bending_summary,
     fitted_levels,
@@ -44,9 +44,37 @@ from fitting.driven_joint import DRIVE_SCALE, JointParameter
 from hertzchain import laws
 from hertzchain.driven import DrivenChain
 from hertzchain.driven.linear import normal_modes
+from hertzchain.driven.thresholds import emulate_loop
 
 HERE = Path(__file__).resolve().parent
 SOURCE = "micro_slip_free_preload.json"
+# The tongue's frequencies stepped in time by default (of the measured ones).
+TONGUE_HZ = (6900.0, 7050.0, 7200.0, 7350.0, 7500.0, 7800.0)
+
+
+def stepped_onsets(tongue_hz):
+    """`predict_thresholds`' `onsets`: each threshold entry's onset going up (NaN: none) by
+    stepping the lab's upward sweeps in time (`emulate_loop`): the loop's own amplitudes, the
+    tongue's upward amplitudes at `tongue_hz` only (its other frequencies NaN)."""
+
+    def onsets(predict, run):
+        experiment, chain = predict.experiment, predict.start_chain
+        steps, found = int(experiment.model["steps_per_period"]), []
+        for m in run.measurements:
+            if m.kind == "tongue":
+                sweeps = [(f, m.data.drive_amplitudes_m) for f in m.data.frequencies_hz]
+            else:
+                sweeps = [(m.data.frequency_hz, m.data.drive_amplitudes_m)]
+            for f, amplitudes in sweeps:
+                onset = None
+                if m.kind == "loop" or f in tongue_hz:
+                    onset = emulate_loop(chain, f, amplitudes, bead=experiment.sensor_bead,
+                                         steps_per_period=steps).onset_up_m
+                found.append(np.nan if onset is None else onset)
+        how = f"the lab's upward sweeps stepped in time (emulate_loop; tongue at {tuple(tongue_hz)} Hz only)"
+        return np.array(found, dtype=float), how
+
+    return onsets
 
 
 def chain_at(constants: dict, precompression_n: float) -> DrivenChain:
@@ -81,7 +109,7 @@ def main(argv=None) -> None:
     parser.add_argument("--tongue-run-preloads", type=float, nargs="*", default=[],
                         help="N: predict the tongue and the loop with the Hertz constant of the chain at the first of "
                         "--preloads (the bending run's) and the tongue run's own static force, each of these")
-    parser.add_argument("--tongue-hz", type=float, nargs="+", default=list(TIME_STEPPED_TONGUE_HZ),
+    parser.add_argument("--tongue-hz", type=float, nargs="+", default=list(TONGUE_HZ),
                         help="the tongue's frequencies stepped in time (of the measured ones)")
     parser.add_argument("--measured-drive-scale", action="store_true",
                         help="predict the tongue run at the drive scale its own fundamental measures at the chain's "
@@ -108,7 +136,7 @@ def main(argv=None) -> None:
                "resonance_hz": float(normal_modes(chain)[0][0]),
                "bending": bending_summary(experiment, model, model.runs[0], shown, np.zeros(1), 0,
                                           int(shown.data.sweep.drive_amplitudes_m.size))}
-        row.update(predict_thresholds(experiment, chain, False))
+        row.update(predict_thresholds(experiment, chain, False, onsets=stepped_onsets(tuple(args.tongue_hz))))
         row["scores"] = {k: v for k, (v, _) in scores(row).items()}
         rows.append(row)
         print(f"{force:g} N: bending {row['bending']['misfit_median']:.4f}, tip {row['tongue']['model_tip_m']}, "
@@ -121,7 +149,7 @@ def main(argv=None) -> None:
         scale = measured_drive_scale(out_dir, f0) if args.measured_drive_scale else 1.0
         row = {"tongue_run_precompression_n": force, "bending_run_precompression_n": args.preloads[0],
                "static_overlap_m": float(chain.static_overlap_m()[0]), "resonance_hz": f0, "drive_scale": scale}
-        row.update(predict_thresholds(experiment, chain, False, scale, tongue_hz=tuple(args.tongue_hz)))
+        row.update(predict_thresholds(experiment, chain, False, scale, onsets=stepped_onsets(tuple(args.tongue_hz))))
         tongue_rows.append(row)
         print(f"tongue run at {force:g} N: f0 {row['resonance_hz']:.0f} Hz, tip {row['tongue']['model_tip_m']} "
               f"at {row['tongue']['model_tip_hz']}, loop {row['loop']['model_onset_up_m']}", flush=True)
