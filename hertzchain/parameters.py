@@ -42,6 +42,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .caller import user_stacklevel
 from .chain import ChainSetup
 from .materials import sphere_volume_m3
 
@@ -171,7 +172,8 @@ def resolve_key(name: str, key_of_public: Mapping[str, str], public_of: Callable
         raise unknown()
     if public != name:
         warnings.warn(f"{f'{where}: ' if where else ''}{name!r} is now called {public!r}; write {public} "
-                      "(the old name is accepted until the next release).", ParameterNameWarning, stacklevel=3)
+                      "(the old name is accepted until the next release).", ParameterNameWarning,
+                      stacklevel=user_stacklevel())
     return name
 
 

@@ -458,6 +458,8 @@ def test_sensitivity_library_calls_warn_once_per_previous_name_naming_the_argume
     assert _first_parts(caught) == ["params: 'eta' is now called 'eta_s'",
                                     "sweep: 'striker_velocity' is now called 'striker_velocity_m_s'",
                                     "box: 'eta' is now called 'eta_s'"]
+    # each attributed to the call that wrote the old name, in this file
+    assert {w.filename for w in caught} == {__file__}
     assert local.params == local_old.params == ("eta_s", "wall_youngs_pa")
     assert local.to_json() == local_old.to_json() and swept.to_json() == swept_old.to_json()
     assert box.to_json() == box_old.to_json() and box.ranking == {"wall_peak": ["eta_s"]}
