@@ -8,7 +8,7 @@
 # files are described in an `experiment.toml`, imported, fitted and diagnosed exactly as
 # real recordings would be.
 #
-# Set `HERTZCHAIN_EXAMPLE_SMALL=1` for a small data set (a 10-bead chain, two shots);
+# Set `HERTZCHAIN_EXAMPLE_SMALL=1` for a small data set (a 10-bead chain, three shots);
 # outputs go to `HERTZCHAIN_EXAMPLE_OUT` (default `out/examples`).
 
 # %%

@@ -45,7 +45,7 @@ def _fmt(value, digits=4) -> str:
 def physical_reading(name: str, value: float, stderr, setup) -> str:
     """A fitted effect strength as the quantity it stands for, in human units with its σ
     (`wall_softening` -> the wall's modulus in GPa, `yield_softening` -> the yield stress in
-    MPa, `eta_s` -> η in µs); "" for a strength without such a reading. `setup`: the
+    MPa, `eta_s` -> η in µs, `mu` -> the track's friction coefficient); "" for a strength without such a reading. `setup`: the
     diagnosed files' nominal chain (the first file's)."""
     stderr = None if stderr is None or not math.isfinite(stderr) else float(stderr)
 
@@ -64,23 +64,32 @@ def physical_reading(name: str, value: float, stderr, setup) -> str:
     if short == "sensor_rate" and value > 0:
         f0 = 1e5 / math.sqrt(value)
         return "sensor resonance f0 " + format_measured(f0, error(0.5 * f0 / value), "Hz")
-    if short in ("eta_s", "preload_n", "dashpot_n_s_m"):
-        quantity = {"eta_s": "η", "preload_n": "preload", "dashpot_n_s_m": "dashpot"}[short]
-        unit = {"eta_s": "s", "preload_n": "N", "dashpot_n_s_m": "N s/m"}[short]
+    if short in ("eta_s", "preload_n", "dashpot_n_s_m", "mu", "mu_star"):
+        quantity = {"eta_s": "η", "preload_n": "preload", "dashpot_n_s_m": "dashpot", "mu": "track friction μ",
+                    "mu_star": "contact-stiffness scale μ*"}[short]
+        unit = {"eta_s": "s", "preload_n": "N", "dashpot_n_s_m": "N s/m", "mu": "", "mu_star": ""}[short]
         return f"{quantity} " + format_measured(value, stderr, unit)
     return ""
 
 
 def readings(diagnosis: Diagnosis) -> list[str]:
     """One line per named effect's strength that stands for a quantity (`physical_reading`):
-    `"wall_compliance: wall Young's modulus 20.3 ± 1.2 GPa"`."""
+    `"wall_compliance: wall Young's modulus 20.3 ± 1.2 GPa"`, at the final fit (every named
+    effect in the model), with its error there; a strength the final fit does not hold is
+    read at the step that added it."""
     setup = diagnosis.problem.base_setups[0]
+    final_values = diagnosis.final.get("values", {})
+    final_stderr = diagnosis.final.get("stderr", {})
     lines = []
     for step in diagnosis.steps:
         if step.effect not in diagnosis.missing_effects:
             continue
         for name, value in step.values.items():
-            reading = physical_reading(name, value, step.stderr.get(name), setup)
+            if name in final_values:
+                value, stderr = final_values[name], final_stderr.get(name)
+            else:
+                stderr = step.stderr.get(name)
+            reading = physical_reading(name, value, stderr, setup)
             if reading:
                 lines.append(f"{step.effect}: {reading}")
     return lines

@@ -42,7 +42,8 @@ def test_effect_strengths_read_as_the_quantities_they_stand_for():
     # yield_softening s: sigma_Y = sigma_Y0 / s; its error sigma_Y0 sigma_s / s^2
     assert physical_reading("yield_softening", 4.0, 0.2, setup) == "yield stress 500 ± 25 MPa"
     assert physical_reading("eta_s", 1.02e-6, 4.4e-8, setup) == "η 1.020 ± 0.044 µs"
-    assert physical_reading("mu", 0.1, 0.01, setup) == ""
+    assert physical_reading("mu", 0.1, 0.01, setup) == "track friction μ 0.100 ± 0.010"
+    assert physical_reading("sensor_beta", 0.1, 0.01, setup) == ""  # no quantity of its own
 
 
 def test_the_fit_summary_prints_significant_digits_and_no_nan():
@@ -70,9 +71,24 @@ def test_the_diagnosis_reads_a_named_soft_wall_in_gpa():
     setup = ChainSetup(5, wall_youngs_pa=203e9)
     step = types.SimpleNamespace(effect="wall_compliance", values={"wall_softening": math.log(203 / 20.3)},
                                  stderr={"wall_softening": 0.0123})
-    diagnosis = types.SimpleNamespace(steps=[step], missing_effects=["wall_compliance"],
+    diagnosis = types.SimpleNamespace(steps=[step], missing_effects=["wall_compliance"], final={},
                                       problem=types.SimpleNamespace(base_setups=[setup]))
     assert readings(diagnosis) == ["wall_compliance: wall Young's modulus 20.30 ± 0.25 GPa"]
+
+
+def test_the_diagnosis_reads_each_named_strength_at_the_final_fit():
+    """A strength refitted after later effects joined the model is read at the final fit
+    (where every named effect is in), not at the step that named it."""
+    from fitting.diagnosis_report import readings
+
+    steps = [types.SimpleNamespace(effect="viscous_damping", values={"dx_eta_s": 2.0426e-6},
+                                   stderr={"dx_eta_s": 5.0e-9}),
+             types.SimpleNamespace(effect="track_friction", values={"dx_mu": 0.19}, stderr={"dx_mu": 0.002})]
+    final = {"values": {"dx_eta_s": 2.0023e-6, "dx_mu": 0.18982}, "stderr": {"dx_eta_s": 2.2e-9, "dx_mu": 8.0e-4}}
+    diagnosis = types.SimpleNamespace(steps=steps, missing_effects=["viscous_damping", "track_friction"],
+                                      final=final, problem=types.SimpleNamespace(base_setups=[ChainSetup(5)]))
+    assert readings(diagnosis) == ["viscous_damping: η 2.0023 ± 0.0022 µs",
+                                   "track_friction: track friction μ 0.18982 ± 0.00080"]
 
 
 def test_table_columns_state_their_units():
