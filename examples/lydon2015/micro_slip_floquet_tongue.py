@@ -66,7 +66,7 @@ def plot(rows: list, measured: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hertzchain.io.atomic import atomic_path
+    from hertzchain.io.atomic import finish_figure
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     f_meas = sorted(measured)
@@ -84,10 +84,7 @@ def plot(rows: list, measured: dict, path: Path) -> None:
     ax.set_ylabel("onset of f/2, nominal drive (nm)")
     ax.set_ylim(0, 150)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    with atomic_path(path) as partial:
-        fig.savefig(partial, format="png", dpi=120)
-    plt.close(fig)
+    finish_figure(fig, path, dpi=120)
 
 
 def main(argv=None) -> None:

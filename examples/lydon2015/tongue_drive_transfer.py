@@ -106,7 +106,7 @@ def plot(rows: list, measured: dict, transfer: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hertzchain.io.atomic import atomic_path
+    from hertzchain.io.atomic import finish_figure
 
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 6), sharex=True, height_ratios=(1, 2))
     freqs = sorted(transfer)
@@ -125,10 +125,7 @@ def plot(rows: list, measured: dict, transfer: dict, path: Path) -> None:
     bottom.set_xlabel("drive frequency (Hz)")
     bottom.set_ylabel("onset of f/2, nominal drive (nm)")
     bottom.legend(fontsize=7)
-    fig.tight_layout()
-    with atomic_path(path) as partial:
-        fig.savefig(partial, format="png", dpi=120)
-    plt.close(fig)
+    finish_figure(fig, path, dpi=120)
 
 
 def main(argv=None) -> None:
