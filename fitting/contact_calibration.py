@@ -66,6 +66,7 @@ import numpy as np
 from hertzchain import contact
 from hertzchain.covariance import gauss_newton_covariance
 from hertzchain.materials import Material
+from hertzchain.units import counted
 
 from .contact_report import median_secant_ratio, summary_table, write_outputs  # noqa: F401
 from .driven import lag1_autocorrelation
@@ -649,7 +650,7 @@ def calibrate(curves, geometry: ContactGeometry, *, offset: str = "first-sample"
         material = curves[members[0]].material
         kappa = _kappa(material, geometry)
         if progress:
-            progress(f"fitting {name} on {len(members)} curve(s)")
+            progress(f"fitting {name} on {counted(len(members), 'curve')}")
         values, errors, converged, singles, singles_converged, shifts, drifts = _fit_material(
             [pieces[i] for i in members], material, kappa, geometry, options)
         files = [curves[i].name for i in members]

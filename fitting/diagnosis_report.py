@@ -24,7 +24,7 @@ import numpy as np
 
 from hertzchain.io.atomic import save_figure, write_csv, write_json, write_text
 from hertzchain.native import kernel_record
-from hertzchain.units import display_unit, format_measured
+from hertzchain.units import counted, display_unit, format_measured
 
 from .diagnosis import Diagnosis
 from .effects import PREFIX, fitted_wall_youngs_pa, nominal_yield_stress_pa
@@ -178,7 +178,7 @@ def markdown(diagnosis: Diagnosis) -> str:
         w(f"\nDropped by the backward check (redundant once the others were in): "
           f"{', '.join(d.dropped_in_backward_check)}\n")
     w("\n![gap](gap.png)\n")
-    w(f"\nRun time {d.elapsed_s:.1f} s, {d.evaluations} model evaluations.\n")
+    w(f"\nRun time {d.elapsed_s:.1f} s, {counted(d.evaluations, 'model evaluation')}.\n")
     return out.getvalue()
 
 

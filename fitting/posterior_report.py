@@ -35,7 +35,7 @@ from hertzchain.io.atomic import (  # noqa: E402
     write_json,
     write_text,
 )
-from hertzchain.units import format_measured  # noqa: E402
+from hertzchain.units import counted, format_measured  # noqa: E402
 
 from .parameters import public_label
 from .posterior import PosteriorResult, posterior_predictive  # noqa: E402
@@ -65,8 +65,8 @@ def _markdown(result: PosteriorResult) -> str:
     lines = [
         "# Posterior",
         "",
-        f"{result.settings['chains']} chains x {result.settings['draws']} draws after "
-        f"{result.settings['warmup']} warmup; {result.divergences} divergences; "
+        f"{counted(result.settings['chains'], 'chain')} x {counted(result.settings['draws'], 'draw')} after "
+        f"{result.settings['warmup']} warmup; {counted(result.divergences, 'divergence')}; "
         f"{result.elapsed_s['total']:.1f} s in all, "
         f"{result.seconds_per_effective_sample:.3g} s per effective sample.",
         "",

@@ -16,15 +16,21 @@ class Progress:
     Open-ended work (`total` None: an optimiser's iterations, a diagnosis's stages): call
     `note(text)`, a line `label: text, elapsed` each time (`throttle=True`: at most every
     `min_interval_s` seconds). Writes to `stream` (default stderr).
+
+    `since`: the `time.perf_counter()` reading the elapsed times count from, so that a stage's
+    lines give the time since its command started (a stage's reporter: `since=outer.start`);
+    default: when this reporter is made. The ETA is from this work's own rate.
     """
 
-    def __init__(self, total: int | None, label: str, *, stream=None, min_interval_s: float = 1.0):
+    def __init__(self, total: int | None, label: str, *, stream=None, min_interval_s: float = 1.0,
+                 since: float | None = None):
         self.total = None if total is None else max(int(total), 1)
         self.label = label
         self.done = 0
         self.stream = sys.stderr if stream is None else stream
         self.min_interval_s = min_interval_s
-        self.start = time.perf_counter()
+        self.began = time.perf_counter()  # this work's own start (its rate, the ETA)
+        self.start = self.began if since is None else float(since)  # what elapsed times count from
         self._last = -float("inf")
         self._open_line = False  # a terminal line rewritten in place and not ended yet
 
@@ -40,11 +46,11 @@ class Progress:
         if self.done < self.total and now - self._last < self.min_interval_s:
             return
         self._last = now
-        elapsed = now - self.start
-        eta = elapsed / self.done * (self.total - self.done) if self.done else float("nan")
+        own = now - self.began
+        eta = own / self.done * (self.total - self.done) if self.done else float("nan")
         line = (
             f"{self.label}: {self.done}/{self.total} ({100 * self.done / self.total:.0f} %), "
-            f"{elapsed:.1f} s elapsed, ETA {eta:.1f} s"
+            f"{now - self.start:.1f} s elapsed, ETA {eta:.1f} s"
         )
         terminal = self._terminal()
         self._open_line = terminal and self.done < self.total

@@ -131,3 +131,10 @@ def format_si(value: float, unit: str) -> str:
         if abs(value) >= factor:
             return f"{value / factor:.4g} {prefix}{unit}"
     return f"{value:g} {unit}"
+
+
+def counted(count: int, noun: str, plural: str | None = None) -> str:
+    """A count with its noun in the number the count asks for: `counted(1, "chunk")` ->
+    `"1 chunk"`, `counted(3, "chunk")` -> `"3 chunks"`; `plural` for a noun whose plural
+    is not the noun with an `s` (`counted(2, "library", "libraries")`)."""
+    return f"{count} {noun if count == 1 else plural or noun + 's'}"

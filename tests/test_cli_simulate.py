@@ -25,7 +25,10 @@ def test_simulate_writes_traces_summary_and_plot(tmp_path, capsys):
     assert summary["energy_balance"]["max_relative_error"] < 1e-4
     assert summary["energy_balance"]["dissipated_viscous_j"] > 0
     assert (out / "simulation.png").stat().st_size > 10_000
-    assert "peak wall" in capsys.readouterr().out
+    first = capsys.readouterr()
+    assert "peak wall" in first.out and "replaced" not in first.err
+    assert main(["simulate", "--n-beads", "12", "--t-end", "0.5ms", "--out", str(out)]) == 0  # a rerun says so
+    assert capsys.readouterr().err.splitlines()[-1] == f"hertzchain simulate: replaced the results of an earlier run in {out}"
 
 
 def test_simulate_contact_law_options(tmp_path):

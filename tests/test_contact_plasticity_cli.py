@@ -41,6 +41,9 @@ def test_cli_recovers_the_yield_stress_of_a_csv_curve_and_writes_every_output(tm
                "--yield-stress", "500MPa", "--rate-constant", "0.02", "--geometry", "sphere-flat",
                "--radius", "2mm", "--out", str(out)])
     assert rc == 0
+    captured = capsys.readouterr()
+    assert f"wrote contact.json, contact.png, residuals.png and 1 CSV file to {out}\n" in captured.out
+    assert "fitting given on 1 curve\n" in captured.err
     report = json.loads((out / "contact.json").read_text())
     fitted = report["materials"]["given"]["fitted"]["yield_stress_pa"]
     entry = report["materials"]["given"]

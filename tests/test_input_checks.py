@@ -286,15 +286,17 @@ def test_contact_radius_without_unit_is_refused_before_anything_is_written(tmp_p
 
 
 # --- output folders are written as a whole ---------------------------------------------------------
-def test_output_folder_is_replaced_whole(tmp_path):
+def test_output_folder_is_replaced_whole(tmp_path, capsys):
     out = tmp_path / "out"
     with output_folder(out, "test", "fit.json") as folder:
         (folder / "residuals_shot1.csv").write_text("first run")
         (folder / "plot.png").write_text("first run")
     assert sorted(p.name for p in out.iterdir()) == [FOLDER_MARKER, "plot.png", "residuals_shot1.csv"]
+    assert capsys.readouterr().err == ""  # a new folder: nothing replaced
     with output_folder(out, "test", "fit.json") as folder:
         assert sorted(p.name for p in folder.iterdir()) == [FOLDER_MARKER]
         (folder / "plot.png").write_text("second run")
+    assert capsys.readouterr().err == f"hertzchain test: replaced the results of an earlier run in {out}\n"
     assert sorted(p.name for p in out.iterdir()) == [FOLDER_MARKER, "plot.png"]  # no stale residuals
     assert (out / "plot.png").read_text() == "second run"
     with pytest.raises(RuntimeError), output_folder(out, "test", "fit.json") as folder:  # a failed run changes nothing

@@ -112,7 +112,7 @@ def test_a_truncated_library_is_rebuilt_by_the_kernel_command(tmp_path, size_byt
     said = (f"{_built_library().name} is empty; building it again" if size_bytes == 0
             else "holds 800000 bytes where its build wrote")
     done = _run_on(*_truncated_cache(tmp_path, size_bytes), "kernel", said=said)
-    assert "[1/1] chain (" in done.stdout and "ready, 1 libraries" in done.stdout
+    assert "[1/1] chain (" in done.stdout and "ready, 1 library (" in done.stdout
 
 
 @pytest.mark.slow

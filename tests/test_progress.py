@@ -44,3 +44,20 @@ def test_a_note_ends_a_terminal_line_rewritten_in_place():
     text = stream.getvalue()
     assert text.startswith("\rdiagnose: 3/10 (30 %)")
     assert "\ndiagnose: refit eta, " in text and text.endswith(" s elapsed\n")
+
+
+def test_a_stage_counts_elapsed_time_from_its_command_and_its_eta_from_its_own_rate():
+    """A stage's reporter made with `since=outer.start` gives the time since the command
+    started (not since the stage did), so its lines follow the command's on one clock."""
+    stream = io.StringIO()
+    outer = Progress(None, "diagnose", stream=stream)
+    outer.start -= 40.0  # the command started 40 s ago
+    outer.note("stage 2")
+    stage = Progress(4, "diagnose: refitting candidates", stream=stream, min_interval_s=0.0, since=outer.start)
+    stage.advance()
+    note, line = stream.getvalue().splitlines()
+    assert note.startswith("diagnose: stage 2, 40.")
+    counted, elapsed, eta = line.split(", ")
+    assert counted == "diagnose: refitting candidates: 1/4 (25 %)"
+    assert 40.0 <= float(elapsed.removesuffix(" s elapsed")) < 45.0
+    assert float(eta.removeprefix("ETA ").removesuffix(" s")) < 1.0  # 3 more at the stage's own (fast) rate

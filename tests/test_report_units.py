@@ -8,7 +8,7 @@ import pytest
 from fitting.diagnosis_report import physical_reading
 from fitting.report import summary_text
 from hertzchain.chain import ChainSetup
-from hertzchain.units import display_unit, format_measured
+from hertzchain.units import counted, display_unit, format_measured
 
 
 @pytest.mark.parametrize("value, sigma, unit, text", [
@@ -21,6 +21,12 @@ from hertzchain.units import display_unit, format_measured
 ])
 def test_value_given_to_the_digits_of_its_error(value, sigma, unit, text):
     assert format_measured(value, sigma, unit) == text
+
+
+def test_a_count_reads_right_for_one_and_for_many():
+    assert [counted(n, "chunk") for n in (0, 1, 2)] == ["0 chunks", "1 chunk", "2 chunks"]
+    assert counted(1, "CSV file") == "1 CSV file" and counted(3, "CSV file") == "3 CSV files"
+    assert counted(1, "library", "libraries") == "1 library" and counted(4, "library", "libraries") == "4 libraries"
 
 
 def test_an_undetermined_error_says_so_and_why():

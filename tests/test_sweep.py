@@ -155,7 +155,9 @@ def test_cli_resume(tmp_path, capsys):
     assert cli_main(args + ["--max-chunks", "1"]) == 0
     assert "1/2 chunks done" in capsys.readouterr().out
     assert cli_main(args) == 0
-    assert "2 of 4 runs exceed the yield force of contact 0" in capsys.readouterr().err  # 1.2 m/s, 2 GPa steel
+    captured = capsys.readouterr()
+    assert "(4 runs, 1 chunk computed now)" in captured.out  # the second run computes the other chunk
+    assert "2 of 4 runs exceed the yield force of contact 0" in captured.err  # 1.2 m/s, 2 GPa steel
     table = read_sweep(tmp_path)
     np.testing.assert_array_equal(table["eta_s"], [0.0, 2e-6, 0.0, 2e-6])
     np.testing.assert_array_equal(table["peak_over_yield"] > 1, [False, False, True, True])

@@ -106,7 +106,8 @@ class _Workflow(_Verdict, _Report):
         dof = self.dof_of(self.accepted)
         excess = self.chi2 - dof
         refitted: dict = {}
-        bar = Progress(len(worth), "diagnose: refitting candidates") if self.progress and worth else None
+        bar = Progress(len(worth), "diagnose: refitting candidates",
+                       since=search.report.start if search.report else None) if self.progress and worth else None
         for name in sorted(worth, key=lambda c: (len(search.effect_columns[c]), -scores[c])):
             cols = search.effect_columns[name]
             k = len(cols)

@@ -35,6 +35,7 @@ from .. import pulses, sensor, theory  # noqa: E402
 from ..io.atomic import file_stem, finish_figure, json_ready, output_folder, write_json, write_text  # noqa: E402
 from ..io.importer import expand_sources  # noqa: E402
 from ..io.tracefile import TraceFile, read_trace  # noqa: E402
+from ..units import counted
 
 # Shots whose measured striker velocities differ by less than this fraction are repeats
 # of one setting when no nominal velocity is given (a drop height is set to about 1 %).
@@ -393,7 +394,7 @@ def _analyze(args: argparse.Namespace, out: Path) -> None:
             summary["file"],
             out / f"{file_stem(Path(summary['file']).stem)}_pulses.png",
         )
-        print(f"{summary['file']}: {len(rows)} pulses" + _file_line(summary))
+        print(f"{summary['file']}: {counted(len(rows), 'pulse')}" + _file_line(summary))
     result = {"definitions": DEFINITIONS, "files": summaries}
     with_speed = [s for s in summaries if "speed_m_s" in s]
     if with_speed:
@@ -403,7 +404,7 @@ def _analyze(args: argparse.Namespace, out: Path) -> None:
         result["velocity_law"] = law._asdict()
         print(
             f"velocity law: C = {law.velocity_constant:.2f} ± {law.velocity_constant_stderr:.2g} "
-            f"(m/s)/N^(1/6) from {law.n_points} file(s)"
+            f"(m/s)/N^(1/6) from {counted(law.n_points, 'file')}"
         )
     points = [p for s in summaries for p in s["restitution"]]
     law_dict = None
@@ -469,7 +470,7 @@ def _repeat_line(row) -> str:
             parts.append(f"{label} {row[f'{name}_mean']:.4g} {unit} (measured in one shot only)")
         else:
             parts.append(f"{label} {row[f'{name}_mean']:.4g} ± {row[f'{name}_sd']:.2g} {unit}")
-    return f"{row['n_shots']} shots at {row['velocity_m_s']:.4g} m/s: {', '.join(parts)} (shot-to-shot sd)"
+    return f"{counted(row['n_shots'], 'shot')} at {row['velocity_m_s']:.4g} m/s: {', '.join(parts)} (shot-to-shot sd)"
 
 
 def repeat_scatter(summaries) -> list[dict]:

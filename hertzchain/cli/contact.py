@@ -41,7 +41,7 @@ import sys
 
 from ..io.atomic import output_folder
 from ..materials import Material, material
-from ..units import parse_quantity
+from ..units import counted, parse_quantity
 
 from fitting.compilation_cache import enable_compilation_cache
 from .errors import EXIT_NOT_CONVERGED, exit_codes_epilog
@@ -165,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
               + (f", approach drift {entry['approach_drift_m_s']:+.3f}"
                  + (f" +- {entry['approach_drift_stderr_m_s']:.3f}" if entry['approach_drift_stderr_m_s'] is not None
                     else "") + " m/s" if args.approach_drift else ""))
-    print(f"wrote contact.json, contact.png, residuals.png and {len(curves)} CSV files to {args.out}")
+    print(f"wrote contact.json, contact.png, residuals.png and {counted(len(curves), 'CSV file')} to {args.out}")
     unconverged = [f"{name}: {', '.join(entry['unconverged_fits'])}" for name, entry in data["materials"].items()
                    if not entry["converged"]]
     if unconverged:

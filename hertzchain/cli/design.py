@@ -42,7 +42,7 @@ from fitting.parameters import (
 )
 
 from ..io.atomic import save_figure, write_json, write_text
-from ..units import parse_quantity
+from ..units import counted, parse_quantity
 from ..validation import yield_notice
 from .setup_options import add_setup_arguments, chain_from_args
 
@@ -146,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
             channels.append("wall")
         if not channels:
             raise ValueError("the plan records no channel: give --contacts, --sensors or keep the wall.")
-        print(f"simulating the plan: {len(velocities)} shot(s), channels {', '.join(channels)} ...",
+        print(f"simulating the plan: {counted(len(velocities), 'shot')}, channels {', '.join(channels)} ...",
               flush=True)
         notice = yield_notice(setup, velocities, what="the plan's shots")
         if notice:
@@ -170,8 +170,8 @@ def run(args: argparse.Namespace) -> int:
             candidates = ["wall"] + [f"contact_{k}" for k in range(1, setup.n_beads, 3)]
         velocities = [parse_quantity(v, "m/s", name="--candidate-velocities")
                       for v in _names(args.candidate_velocities)]
-        print(f"optimising a plan of {args.optimize} recordings from {len(velocities)} velocities x "
-              f"{len(candidates)} channels ({args.criterion}-optimal) ...", flush=True)
+        print(f"optimising a plan of {counted(args.optimize, 'recording')} from {counted(len(velocities), 'velocity', 'velocities')} x "
+              f"{counted(len(candidates), 'channel')} ({args.criterion}-optimal) ...", flush=True)
         if args.files:
             first = plan[0]
             base = first.trace.setup()
@@ -188,7 +188,7 @@ def run(args: argparse.Namespace) -> int:
         recommended = optimization.recommended
         given = sum(len(e.channels) for e in plan)
         if args.optimize < given:
-            print(f"  note: the recommended plan has {args.optimize} recordings, the given plan "
+            print(f"  note: the recommended plan has {counted(args.optimize, 'recording')}, the given plan "
                   f"{given}; compare plans of the same size (--optimize {given}).")
         data["optimization"] = optimization.to_json()
         chosen = ", ".join(f"{c} at {v:g} m/s" for v, c in optimization.chosen)

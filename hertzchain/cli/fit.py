@@ -57,7 +57,7 @@ from ..io.atomic import output_folder, write_json
 from ..timegrid import choose_time_grid
 from ..validation import RunSize, check_run_size, estimate_run_size
 from ..io.importer import experiment_priors
-from ..units import parse_quantity
+from ..units import counted, parse_quantity
 
 
 def _assignments(text: str | None, option: str) -> dict:
@@ -219,7 +219,7 @@ def _fit(args, out: Path, began: float, forward: ForwardModel, noise: float | No
         free = build_instances(checked_keys(keys + prior_names(priors)), experiments)
         check_fit_size(experiments, len(free),
                        multistart=args.multistart, steps_per_contact=args.steps_per_contact)
-    print(f"fitting {', '.join(params)} to {len(experiments)} file(s) ...", flush=True)
+    print(f"fitting {', '.join(params)} to {counted(len(experiments), 'file')} ...", flush=True)
     with warnings.catch_warnings():  # the summary below and fit.json carry every warning
         warnings.simplefilter("ignore", FitWarning)
         result = fit(
@@ -237,13 +237,13 @@ def _fit(args, out: Path, began: float, forward: ForwardModel, noise: float | No
     write_json(out / "timings.json", timings)
     written.append(out / "timings.json")
     print(summary_text(result))
-    print(f"wrote {len(written)} files to {args.out} (fit.json, params.csv, plots)")
+    print(f"wrote {counted(len(written), 'file')} to {args.out} (fit.json, params.csv, plots)")
     if not result.converged:
         print(f"hertzchain fit: error: {result.message}", file=sys.stderr)
         return 3
     if not args.posterior:
         return 0
-    print(f"sampling the posterior: {args.chains} chains x ({args.warmup} warmup + {args.draws} draws) ...",
+    print(f"sampling the posterior: {counted(args.chains, 'chain')} x ({args.warmup} warmup + {counted(args.draws, 'draw')}) ...",
           flush=True)
     with warnings.catch_warnings():  # posterior.json and the summary carry every warning
         warnings.simplefilter("ignore", PosteriorWarning)
@@ -254,7 +254,7 @@ def _fit(args, out: Path, began: float, forward: ForwardModel, noise: float | No
         )
     written = write_posterior_report(posterior, out, plots=not args.no_plots)
     print((out / "posterior_summary.md").read_text())
-    print(f"wrote {len(written)} files to {args.out} (posterior.json, posterior.nc, draws.csv, plots)")
+    print(f"wrote {counted(len(written), 'file')} to {args.out} (posterior.json, posterior.nc, draws.csv, plots)")
     failed = posterior.failed_diagnostics()
     if failed:
         print("hertzchain fit: WARNING: the posterior's diagnostics fail: " + "; ".join(failed)

@@ -27,6 +27,7 @@ import numpy as np  # noqa: E402
 from ..io.atomic import file_stem, finish_figure, output_folder, write_json  # noqa: E402
 from ..io.importer import import_experiment  # noqa: E402
 from ..io.tracefile import write_trace  # noqa: E402
+from ..units import counted
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     with output_folder(args.out, "import", "import.json") as out:
         traces = import_experiment(args.experiment)
         listing = _write(traces, out, args)
-    print(f"wrote {len(listing)} trace files and import.json to {args.out}")
+    print(f"wrote {counted(len(listing), 'trace file')} and import.json to {args.out}")
     return 0
 
 
@@ -82,7 +83,7 @@ def _write(traces, out: Path, args) -> list:
                 "clipped_samples": clipped,
             }
             if clipped:
-                print(f"warning: shot {label}, channel {name}: {clipped} samples at the scope's range "
+                print(f"warning: shot {label}, channel {name}: {counted(clipped, 'sample')} at the scope's range "
                       "limit (clipped); fits leave them out.", file=sys.stderr)
             note = trace.header.get(f"x_import_{name}_noise_note")
             if note:
@@ -96,7 +97,7 @@ def _write(traces, out: Path, args) -> list:
             "time_zero_s": float(trace.header["x_import_time_zero_s"]),
             "time_zero_check": trace.header["x_import_time_zero_check"],
         })
-        print(f"{label}: {len(trace.time_s)} samples ({listing[-1]['pre_trigger_samples']} before the "
+        print(f"{label}: {counted(len(trace.time_s), 'sample')} ({listing[-1]['pre_trigger_samples']} before the "
               f"impact), channels {', '.join(trace.channels)} -> {Path(args.out) / path.name}")
     write_json(out / "import.json", {"experiment": str(args.experiment), "shots": listing})
     return listing

@@ -25,6 +25,7 @@ import argparse
 import time
 
 from .. import native
+from ..units import counted
 
 # The exit status where a library asked for could not be built or loaded.
 BUILD_FAILED = 4
@@ -44,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     began = time.perf_counter()
     if args.prune:
         deleted, freed = native.prune_cache()
-        print(f"hertzchain kernel: pruned {deleted} superseded files ({freed / 2**20:.1f} MiB) "
+        print(f"hertzchain kernel: pruned {counted(deleted, 'superseded file')} ({freed / 2**20:.1f} MiB) "
               f"from {native.cache_dir()}")
     if native.registry.switched_off():
         print(f"hertzchain kernel: the fused C++ kernel cannot be used ({native.SWITCHED_OFF}); "
@@ -58,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
               "built, and every command runs the JAX kernel instead, several times slower.")
         return BUILD_FAILED
     if not args.quiet:
-        print(f"hertzchain kernel: checking {len(names)} libraries in {native.cache_dir()} and building "
+        print(f"hertzchain kernel: checking {counted(len(names), 'library', 'libraries')} in {native.cache_dir()} and building "
               f"those not there ({native.BUILD_TIME_NOTE} each, several at once)", flush=True)
     failed = []
     for done, (name, path, seconds, why) in enumerate(native.build_libraries(names, args.jobs), start=1):
@@ -74,5 +75,5 @@ def run(args: argparse.Namespace) -> int:
               flush=True)
         return BUILD_FAILED
     if not args.quiet:
-        print(f"hertzchain kernel: ready, {len(names)} libraries ({time.perf_counter() - began:.0f} s)")
+        print(f"hertzchain kernel: ready, {counted(len(names), 'library', 'libraries')} ({time.perf_counter() - began:.0f} s)")
     return 0

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import plotting
-from ..io.atomic import save_figure, write_json
+from ..io.atomic import save_figure, say_replaced, write_json
 from ..native import kernel_record
 from ..integrate import simulate
 from ..io.summary import run_summary
@@ -58,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
         print(line, flush=True)
     traces = simulate(setup, record_all=True, progress=True, **options)
     out = Path(args.out)
+    earlier = any((out / name).is_file() for name in ("traces.csv", "summary.json", "simulation.png"))
     rest = float(setup.precompression_n) if args.coupling == "ac" else 0.0
     forces = {name: np.asarray(traces.forces_n[name]) - rest for name in traces.channel_names}
     if args.coupling == "ac":
@@ -72,6 +73,8 @@ def run(args: argparse.Namespace) -> int:
     write_json(out / "summary.json", {**summary, "kernel": kernel_record()})
     save_figure(plotting.plot_run(traces), out / "simulation.png", dpi=120)
     print(f"wrote {out / 'traces.csv'}, {out / 'summary.json'}, {out / 'simulation.png'}")
+    if earlier:
+        say_replaced(out, "simulate")
     for name, peak in summary["peak_force_n"].items():
         print(f"  peak {name}: {peak:.4g} N")
     balance = summary["energy_balance"]["max_relative_error"]

@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from ..sweep import SweepSpec, nonfinite_runs, parse_grid, run_sweep, table_yield_notice
-from ..units import parse_quantity
+from ..units import counted, parse_quantity
 from ..validation import check_plausible
 from .setup_options import add_run_arguments, add_setup_arguments, chain_from_args
 
@@ -97,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
         dt_s=None if args.dt is None else parse_quantity(args.dt, "s", name="--dt"),
         contacts=tuple(args.contacts or ()),
     )
-    print(f"sweep of {spec.n_runs} runs over {', '.join(grid)} into {args.out}", flush=True)
+    print(f"sweep of {counted(spec.n_runs, 'run')} over {', '.join(grid)} into {args.out}", flush=True)
     for line in chain.describe(swept=grid):
         print(line, flush=True)
     result = run_sweep(
@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
         check_size=not args.yes,
     )
     if args.distributed and jax_process_index() != 0:
-        print(f"process {jax_process_index()}: computed {result.computed} chunks; process 0 writes the table.",
+        print(f"process {jax_process_index()}: computed {counted(result.computed, 'chunk')}; process 0 writes the table.",
               flush=True)
         return 0
     if not result.complete:
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
         )
         return 0
     print(f"wrote {result.folder / 'sweep.csv'} and {result.folder / 'sweep.parquet'} "
-          f"({len(result.table['run'])} runs, {result.computed} chunks computed now)")
+          f"({counted(len(result.table['run']), 'run')}, {counted(result.computed, 'chunk')} computed now)")
     notice = table_yield_notice(result.table, setup)
     if notice:
         print(f"hertzchain sweep: warning: {notice}", file=sys.stderr)

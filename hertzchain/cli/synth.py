@@ -27,7 +27,7 @@ from ..integrate import simulate  # noqa: E402
 from ..io.atomic import finish_figure, write_json  # noqa: E402
 from ..io.tracefile import validate_header, write_trace  # noqa: E402
 from ..progress import Progress  # noqa: E402
-from ..units import parse_quantity  # noqa: E402
+from ..units import counted, parse_quantity  # noqa: E402
 from ..validation import check_batch_size  # noqa: E402
 from .setup_options import add_run_arguments, add_setup_arguments, run_options, setup_from_args  # noqa: E402
 
@@ -190,5 +190,5 @@ def run(args: argparse.Namespace) -> int:
         )
         progress.advance(1)
     write_json(out / "synth.json", {"files": listing})
-    print(f"wrote {len(listing)} trace files, their plots and synth.json to {out}")
+    print(f"wrote {counted(len(listing), 'trace file')}, their plots and synth.json to {out}")
     return 0

@@ -14,6 +14,7 @@ import math
 import os
 import re
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
@@ -83,6 +84,12 @@ def _remove_orphans(target: Path) -> None:
             shutil.rmtree(sibling, ignore_errors=True)
 
 
+def say_replaced(folder: str | os.PathLike, command: str) -> None:
+    """One line on stderr saying that `command` replaced the results of an earlier run in
+    `folder` (not an error: users rerun into the same folder)."""
+    print(f"hertzchain {command}: replaced the results of an earlier run in {folder}", file=sys.stderr, flush=True)
+
+
 @contextlib.contextmanager
 def output_folder(path: str | os.PathLike, command: str, result_file: str):
     """Yield a new, empty temporary folder beside `path` to write a command's outputs into; on
@@ -92,7 +99,8 @@ def output_folder(path: str | os.PathLike, command: str, result_file: str):
     or an earlier output folder of hertzchain (it holds `FOLDER_MARKER`, written here, or the
     command's `result_file`), so that a folder holding the user's own files is never replaced.
     On an error the temporary is removed and `path` stays as it was; temporaries of killed runs
-    are removed on the next run into the same `path`.
+    are removed on the next run into the same `path`. Replacing an earlier output says so in one
+    line on stderr (`say_replaced`).
 
     **Arguments:**
 
@@ -129,6 +137,8 @@ def output_folder(path: str | os.PathLike, command: str, result_file: str):
         os.replace(temporary, target)
         if previous is not None:
             shutil.rmtree(previous, ignore_errors=True)
+            if earlier:
+                say_replaced(target, command)
     except BaseException:
         shutil.rmtree(temporary, ignore_errors=True)
         raise
