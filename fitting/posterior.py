@@ -52,6 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from hertzchain.io.atomic import json_ready
+from hertzchain.units import counted
 
 from .fit import FitResult, FitWarning, fit
 from .model import ForwardModel, Problem
@@ -473,7 +474,7 @@ def _run_chains(starts, key, *, potential, warmup, draws, target_accept, max_tre
     else:
         state = jax.jit(init)(starts[0], key)
         iterate = jax.jit(step)
-    report = Progress(warmup + draws, f"NUTS, {chains} chain(s), {warmup} warmup + {draws} draws") \
+    report = Progress(warmup + draws, f"NUTS, {counted(chains, 'chain')}, {warmup} warmup + {draws} draws") \
         if progress else None
     fields = ("z", "num_steps", "diverging", "accept_prob", "potential_energy")
     warmup_steps, records = [], []

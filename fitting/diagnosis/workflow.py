@@ -7,6 +7,7 @@ import math
 import time
 
 from hertzchain.progress import Progress
+from hertzchain.units import counted
 
 from .. import effects as fx
 from ..data import as_experiments
@@ -115,7 +116,7 @@ class _Workflow(_Verdict, _Report):
             if simpler:
                 refitted[name] = CandidateResult(
                     effect=name, n_parameters=k, score_chi2=scores[name],
-                    reason=f"not refitted: {simpler[0].effect} ({simpler[0].n_parameters} parameter(s)) "
+                    reason=f"not refitted: {simpler[0].effect} ({counted(simpler[0].n_parameters, 'parameter')}) "
                     "already explains the misfit to the noise level")
             else:
                 fitted = search.refit(starts[name], self.accepted + [name], name)
