@@ -184,6 +184,18 @@ def newton_step(z, image, monodromy, n_beads: int):
     return z - jnp.linalg.solve(system, residual[..., None])[..., 0].T
 
 
+def polished_orbit(advance, z, newton_steps: int, n_beads: int):
+    """The period-1 orbit `newton_steps` Newton steps (`newton_step`) polish from z (N, B)
+    under the period map `advance`. **Returns:** (the orbit (N, B), its monodromy (B, N, N),
+    the relative residual $|P(z) - z|/|z|$ (B,))."""
+    for _ in range(newton_steps):
+        image, monodromy = linearise(advance, z)
+        z = newton_step(z, image, monodromy, n_beads)
+    image, monodromy = linearise(advance, z)
+    residual = jnp.linalg.norm(image - z, axis=0) / jnp.maximum(jnp.linalg.norm(z, axis=0), 1e-300)
+    return z, monodromy, residual
+
+
 @eqx.filter_jit
 def _monodromy(chain, frequency_hz, amplitude_m, steps_per_period, ramp_periods, hold_periods, newton_steps, unroll):
     schedule = HarmonicSchedule(frequency_hz[None], amplitude_m[None], steps_per_period, ramp_periods,
@@ -191,11 +203,7 @@ def _monodromy(chain, frequency_hz, amplitude_m, steps_per_period, ramp_periods,
     _, _, state = _levels(chain, schedule, steps_per_period, lambda s, u, u_dot: u, unroll)
     z = orbit_state(state)
     advance = period_map(chain, frequency_hz, amplitude_m, steps_per_period, unroll, state.contact_history_m)
-    for _ in range(newton_steps):
-        image, monodromy = linearise(advance, z)
-        z = newton_step(z, image, monodromy, chain.n_beads)
-    image, monodromy = linearise(advance, z)
-    residual = jnp.linalg.norm(image - z, axis=0) / jnp.maximum(jnp.linalg.norm(z, axis=0), 1e-300)
+    z, monodromy, residual = polished_orbit(advance, z, newton_steps, chain.n_beads)
     return monodromy, z, residual
 
 

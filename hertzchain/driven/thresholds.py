@@ -37,7 +37,7 @@ import numpy as np
 
 from . import kernel, measurements
 from .chain import DrivenChain
-from .floquet import linearise, newton_step, orbit_state, period_map
+from .floquet import orbit_state, period_map, polished_orbit
 from .schedule import HarmonicSchedule, _levels, check_readout, lockin_schedule
 
 # A polished orbit whose period map misses it by more than this (relative) is lost: the
@@ -81,12 +81,7 @@ def doubling_margin(chain: DrivenChain, frequency_hz, amplitude_m, guess, steps_
     where a slider starts or stops slipping (the map is piecewise smooth, `floquet`).
     **Returns:** (g (B,), orbit (N, B), relative orbit residual $|P(z) - z|/|z|$ (B,))."""
     advance = period_map(chain, frequency_hz, amplitude_m, steps_per_period, unroll)
-    z = guess
-    for _ in range(newton_steps):
-        image, monodromy = linearise(advance, z)
-        z = newton_step(z, image, monodromy, chain.n_beads)
-    image, monodromy = linearise(advance, z)
-    residual = jnp.linalg.norm(image - z, axis=0) / jnp.maximum(jnp.linalg.norm(z, axis=0), 1e-300)
+    z, monodromy, residual = polished_orbit(advance, guess, newton_steps, chain.n_beads)
     return jnp.linalg.det(jnp.eye(z.shape[0]) + monodromy), z, residual
 
 
