@@ -83,9 +83,9 @@ def run_case(hidden, seed, *, n_beads=None, noise_fraction=None, contacts=None, 
         "runtime_s": time.perf_counter() - began,
         "cpu_s": cpu,  # the process's CPU time (every thread's): what a load on the machine leaves as it was
         "loadavg": list(os.getloadavg()),
-    } | ({"strengths": {step.effect: {"true": true_strength(setup, step.effect) if step.effect in hidden else None,
-                                      "fitted": recovered(setup, step.effect, step.values)}
-                        for step in result.steps}} if setup else {})
+    } | ({"strengths": {name: {"true": true_strength(setup, name) if name in hidden else None,
+                               "fitted": recovered(setup, name, result.final["values"])}
+                        for name in result.missing_effects}} if setup else {})
 
 
 def table(rows, columns) -> str:

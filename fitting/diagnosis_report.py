@@ -108,7 +108,7 @@ def _unit(label: str) -> str:
 def _stages(diagnosis: Diagnosis):
     stages = [("base", diagnosis.base_fit["location"])]
     for step in diagnosis.steps:
-        stages.append((f"+{step.effect}", step.location_after))
+        stages.append((f"+{step.effect}" + (f"-{step.replaces}" if step.replaces else ""), step.location_after))
     return stages
 
 
@@ -154,7 +154,7 @@ def markdown(diagnosis: Diagnosis) -> str:
     w("\nchi^2 per sample by channel and time window:\n\n")
     w("\n".join(_gap_table(d)) + "\n\n")
     for k, s in enumerate(d.steps, 1):
-        w(f"## Step {k}: {s.effect}\n\n")
+        w(f"## Step {k}: {s.effect}" + (f" (in place of {s.replaces})" if s.replaces else "") + "\n\n")
         w("Fitted strengths (0 = effect off) and what they stand for:\n\n"
           "| parameter | value ± σ | unit | reading |\n|---|---|---|---|\n")
         for name, value in s.values.items():
@@ -177,6 +177,10 @@ def markdown(diagnosis: Diagnosis) -> str:
     if d.dropped_in_backward_check:
         w(f"\nDropped by the backward check (redundant once the others were in): "
           f"{', '.join(d.dropped_in_backward_check)}\n")
+    for swap in d.exchanged:
+        w(f"\nExchanged (the misfit was above the noise): {swap['in']} in place of {swap['out']}, chi^2 "
+          f"{swap['chi2_before']:.6g} -> {swap['chi2_after']:.6g}, BIC gain {swap['bic_gain']:.4g}"
+          + ("" if swap["converged"] else f" (its refit did not converge within {swap['steps']} steps)") + "\n")
     w("\n![gap](gap.png)\n")
     w(f"\nRun time {d.elapsed_s:.1f} s, {counted(d.evaluations, 'model evaluation')}.\n")
     return out.getvalue()

@@ -29,7 +29,7 @@ class _Report:
         `settings`: the arguments of `diagnose` it records (free, nuisances, max_effects,
         steps_per_contact)."""
         search = self.search
-        named = [s.effect for s in self.steps if s.effect not in self.dropped]
+        named = self.named_effects
         final_location = self.locate()
         alarm, text, where = self.conclusion(named, final_location)
         unconverged = self.unconverged_fits(named)
@@ -67,4 +67,5 @@ class _Report:
             evaluations=search.evaluate.calls,
             evaluation_seconds=search.evaluate.seconds,
             residual_evaluations=search.evaluate.residual_calls,
+            exchanged=self.exchanged,
         )

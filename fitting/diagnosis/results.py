@@ -64,10 +64,12 @@ class Step:
     x_before: np.ndarray
     x_after: np.ndarray
     status: dict = dataclasses.field(default_factory=dict)
+    replaces: str | None = None  # the effect this one was exchanged for (`fitting.diagnosis.exchange`)
 
     def to_json(self) -> dict:
         return json_ready({
             "effect": self.effect,
+            "replaces": self.replaces,
             **self.status,
             "gap_before": self.gap_before,
             "gap_after": self.gap_after,
@@ -95,6 +97,9 @@ class Diagnosis:
     - `last_candidates`: the candidates of the round that named nothing.
     - `not_separable`: candidates whose sensitivity lies in the span of the free parameters.
     - `indistinguishable`: candidate pairs with |cos| > 0.95 of their projected sensitivities.
+    - `dropped_in_backward_check`: named effects the backward check took out.
+    - `exchanged`: the exchanges taken (`fitting.diagnosis.exchange`): the effect put `out`,
+      the one put `in`, chi^2 before and after, BIC and held-out gains, the refit's status.
     - `misspecification`: True when the final excess misfit is above the noise band.
     - `conclusion`: one paragraph in words.
     - `unconverged`: the fits the result rests on (named effects' refits, the fits adding
@@ -126,6 +131,7 @@ class Diagnosis:
     evaluations: int
     evaluation_seconds: float = 0.0
     residual_evaluations: int = 0
+    exchanged: list = dataclasses.field(default_factory=list)
 
     @property
     def converged(self) -> bool:
@@ -144,6 +150,7 @@ class Diagnosis:
             "not_separable": self.not_separable,
             "indistinguishable": self.indistinguishable,
             "dropped_in_backward_check": self.dropped_in_backward_check,
+            "exchanged": self.exchanged,
             "misspecification_alarm": self.misspecification,
             "conclusion": self.conclusion,
             "settings": self.settings,

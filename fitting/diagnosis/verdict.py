@@ -133,6 +133,9 @@ class _Verdict:
                 text += search.interpret(name, x, self.accepted, chi2)
         else:
             text = "No missing effect detected: no candidate passes the tests."
+        for swap in self.exchanged:
+            text += (f" {swap['in']} was put in place of {swap['out']} by the exchange check (chi^2 "
+                     f"{swap['chi2_before']:.6g} -> {swap['chi2_after']:.6g}, BIC gain {swap['bic_gain']:.4g}).")
         if "rotational_friction" in named:
             text += (" rotational_friction is a uniform scale of the contact stiffness, kappa* = (1+mu*) kappa: "
                      "in this form it cannot be told apart from an error in the beads' Young's modulus.")

@@ -15,6 +15,7 @@ from ..locate import locate
 from ..model import STEPS_PER_CONTACT
 from ..parameters import get_spec, parse_parameter_list, public_label, resolve_name
 from .evaluator import _status
+from .exchange import _Exchange
 from .protocol import MIN_SHARE, NUISANCES, DiagnosisError, parse_model
 from .report import _Report
 from .results import CandidateResult, Diagnosis, Step
@@ -22,10 +23,11 @@ from .search import _Search
 from .verdict import _Verdict
 
 
-class _Workflow(_Verdict, _Report):
+class _Workflow(_Verdict, _Exchange, _Report):
     """The steps of one diagnosis (`diagnose`), in the order they run: `base_fit`, then per
     round `locate`, `screen`, `refit`, `heldout_check` (with the other tests a candidate must
-    pass) and `name`; then `backward_check` and `report`. Holds the current model
+    pass) and `name`; then `backward_check`, `exchange_check` (after an exchange, the rounds
+    resume) and `report`. Holds the current model
     (`accepted`, its fit `x`, `chi2`) and what the rounds found."""
 
     def __init__(self, search: _Search, model: str, *, min_share: float, max_refits: int, progress: bool):
@@ -42,8 +44,15 @@ class _Workflow(_Verdict, _Report):
         self.not_separable: set = set()
         self.pairs_seen: list = []
         self.dropped: list = []
+        self.exchanged: list = []  # the exchanges taken (`_Exchange`), in order
         self._heldout_cache: dict = {}
         self.location: dict | None = None  # the residual breakdown of the current fit
+
+    @property
+    def named_effects(self) -> list[str]:
+        """The effects the steps named that are in the model now (not dropped by the backward
+        check, not put out by an exchange), in the order named."""
+        return [s.effect for s in self.steps if s.effect in self.accepted]
 
     # --- 1. base fit --------------------------------------------------------------------------------
     def base_fit(self):
@@ -189,7 +198,7 @@ class _Workflow(_Verdict, _Report):
     # --- 6. backward check --------------------------------------------------------------------------
     def backward_check(self):
         """Refit without each named effect in turn; drop any that no longer passes (a) and (b)."""
-        named = [s.effect for s in self.steps]
+        named = self.named_effects
         if len(named) < 2:
             return
         search = self.search
@@ -237,7 +246,9 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=None, candi
     **Returns:** `Diagnosis`.
 
     The steps (`_Workflow`): base fit; then, until nothing passes or `max_effects` are named,
-    locate, screen, refit, held-out check and name; backward check; report.
+    locate, screen, refit, held-out check and name; backward check; where the misfit is still
+    above the noise, the exchange check (`fitting.diagnosis.exchange`), after which the rounds
+    resume; report.
     """
     began = time.perf_counter()
     experiments = as_experiments(experiments)
@@ -255,9 +266,12 @@ def diagnose(experiments, *, model: str = "base", free=(), nuisances=None, candi
     run = _Workflow(search, model, min_share=min_share, max_refits=max_refits, progress=progress)
     search.log(f"{len(experiments)} files, {search.n} residuals; compiling the model ...")
     run.base_fit()
-    while len(run.steps) < max_effects and run.round():
-        pass
-    run.backward_check()
+    while True:
+        while len(run.named_effects) < max_effects and run.round():
+            pass
+        run.backward_check()
+        if not run.exchange_check():
+            break
     settings = {"free": [public_label(n) for n in free], "nuisances": [public_label(n) for n in nuisances],
                 "max_effects": max_effects,
                 "steps_per_contact": steps_per_contact}
