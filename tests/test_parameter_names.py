@@ -441,20 +441,22 @@ def test_sensitivity_library_calls_warn_once_per_previous_name_naming_the_argume
 
     setup = ChainSetup(4, eta_s=1e-6)
     run = {"t_end_s": 0.4e-3, "sample_interval_s": 2e-6}
+
+    def three_calls(eta: str, striker_velocity: str):
+        """`sensitivity`, `sensitivity_sweep` and `global_sensitivity` naming eta and the
+        striker's velocity `eta` and `striker_velocity`."""
+        return (S.sensitivity(setup, (eta, "wall_youngs_pa"), ("wall_peak",), **run),
+                S.sensitivity_sweep(setup, ("eta_s",), ("wall_peak",), {striker_velocity: [0.1, 0.2]},
+                                    progress=False, **run),
+                S.global_sensitivity(setup, ("wall_peak",), {eta: (0.5e-6, 1e-6)}, n_samples=2,
+                                     progress=False, **run))
+
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        local = S.sensitivity(setup, ("eta_s", "wall_youngs_pa"), ("wall_peak",), **run)
-        swept = S.sensitivity_sweep(setup, ("eta_s",), ("wall_peak",), {"striker_velocity_m_s": [0.1, 0.2]},
-                                    progress=False, **run)
-        box = S.global_sensitivity(setup, ("wall_peak",), {"eta_s": (0.5e-6, 1e-6)}, n_samples=2,
-                                   progress=False, **run)
+        local, swept, box = three_calls("eta_s", "striker_velocity_m_s")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        local_old = S.sensitivity(setup, ("eta", "wall_youngs_pa"), ("wall_peak",), **run)
-        swept_old = S.sensitivity_sweep(setup, ("eta_s",), ("wall_peak",), {"striker_velocity": [0.1, 0.2]},
-                                        progress=False, **run)
-        box_old = S.global_sensitivity(setup, ("wall_peak",), {"eta": (0.5e-6, 1e-6)}, n_samples=2,
-                                       progress=False, **run)
+        local_old, swept_old, box_old = three_calls("eta", "striker_velocity")
     assert _first_parts(caught) == ["params: 'eta' is now called 'eta_s'",
                                     "sweep: 'striker_velocity' is now called 'striker_velocity_m_s'",
                                     "box: 'eta' is now called 'eta_s'"]

@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from micro_slip_preload_scan import chain_at  # this folder's scripts
 from run_record import started, write_stamped
-from tongue_drive_transfer import transfer_at
+from tongue_drive_transfer import finish_onset_figure, transfer_at
 
 from fitting.driven_experiment import load_driven_experiment
 from hertzchain.driven.floquet import floquet_multipliers
@@ -66,8 +66,6 @@ def plot(rows: list, measured: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hertzchain.io.atomic import finish_figure
-
     fig, ax = plt.subplots(figsize=(7, 4.5))
     f_meas = sorted(measured)
     ax.plot(f_meas, [measured[f] * 1e9 for f in f_meas], "ks", label="measured onset (f/2)")
@@ -80,11 +78,8 @@ def plot(rows: list, measured: dict, path: Path) -> None:
         stepped = [c for c in row["stepped"] if c["onset_m"] is not None]
         ax.plot([c["frequency_hz"] for c in stepped], [c["onset_m"] * 1e9 for c in stepped], "o", color=color,
                 mfc="none", label=f"stepped in time, measured drive, {label}")
-    ax.set_xlabel("drive frequency (Hz)")
-    ax.set_ylabel("onset of f/2, nominal drive (nm)")
     ax.set_ylim(0, 150)
-    ax.legend(fontsize=7)
-    finish_figure(fig, path, dpi=120)
+    finish_onset_figure(fig, ax, path)
 
 
 def main(argv=None) -> None:

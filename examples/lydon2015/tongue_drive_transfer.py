@@ -106,8 +106,6 @@ def plot(rows: list, measured: dict, transfer: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hertzchain.io.atomic import finish_figure
-
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 6), sharex=True, height_ratios=(1, 2))
     freqs = sorted(transfer)
     top.plot(freqs, [transfer[f] for f in freqs], ".-", color="0.3")
@@ -122,9 +120,17 @@ def plot(rows: list, measured: dict, transfer: dict, path: Path) -> None:
                     label=f"model, measured drive, {label}")
         bottom.plot([c["frequency_hz"] for c in cells], [c["smooth_onset_m"] * 1e9 for c in cells], "o:",
                     alpha=0.4, label=f"model, smooth drive, {label}")
-    bottom.set_xlabel("drive frequency (Hz)")
-    bottom.set_ylabel("onset of f/2, nominal drive (nm)")
-    bottom.legend(fontsize=7)
+    finish_onset_figure(fig, bottom, path)
+
+
+def finish_onset_figure(fig, ax, path: Path) -> None:
+    """Label `ax` as onsets of f/2 (nm of nominal drive) against the drive frequency (Hz),
+    add its legend and write `fig` to `path`."""
+    from hertzchain.io.atomic import finish_figure
+
+    ax.set_xlabel("drive frequency (Hz)")
+    ax.set_ylabel("onset of f/2, nominal drive (nm)")
+    ax.legend(fontsize=7)
     finish_figure(fig, path, dpi=120)
 
 
