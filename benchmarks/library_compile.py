@@ -42,6 +42,7 @@ def libraries() -> dict:
     from hertzchain.native import build
 
     table = {"main": ((), build.SOURCE), "dashpot": ((f"-D{build.DASHPOT_DEFINE}",), build.SOURCE),
+             "velocity_squared": (build.VELOCITY_SQUARED_DEFINES, build.SOURCE),
              "sensors": ((f"-D{build.SENSOR_DEFINE}",), build.SOURCE)}
     for law, define in build.LAW_DEFINES.items():
         table[law] = ((f"-D{define}",), build.SOURCE)

@@ -139,8 +139,9 @@ def contact_law(setup: ChainSetup) -> str:
 def kernel_flags(setup: ChainSetup, *, switched_on=()) -> KernelFlags:
     """The kernel a concrete (possibly batched) setup needs: damping (Kuwabara-Kono or a
     dashpot), friction and preload where any chain has them, or where named in `switched_on`
-    ("viscous", "dashpot", "friction", "preload": e.g. parameters a fit frees from 0), and the
-    setup's contact law."""
+    ("viscous", "dashpot", "friction", "preload": e.g. parameters a fit frees from 0), the
+    setup's contact law, and whether its `laws.VelocitySquared` takes the native kernels' rate
+    slot (the one further dissipation law of a chain without a dashpot)."""
     on = set(switched_on)
     unknown = on - {"viscous", "dashpot", "friction", "preload"}
     if unknown:
@@ -148,14 +149,17 @@ def kernel_flags(setup: ChainSetup, *, switched_on=()) -> KernelFlags:
                          "preload.")
     friction = np.asarray(setup.mu) * np.asarray(setup.gravity_m_s2)
     dashpot = "dashpot" in on or bool(np.any(np.asarray(setup.dashpot_n_s_m) != 0.0))
-    others = len(setup.dissipation) > 2  # laws beyond Kuwabara-Kono's and the dashpot: rates needed
+    others = setup.dissipation[2:]  # laws beyond Kuwabara-Kono's and the dashpot: rates needed
     return KernelFlags(
-        viscous=dashpot or others or "viscous" in on or bool(np.any(np.asarray(setup.eta_s) != 0.0)),
+        viscous=dashpot or bool(others) or "viscous" in on or bool(np.any(np.asarray(setup.eta_s) != 0.0)),
         springs=bool(setup.sensor_beads),
         preload="preload" in on or bool(np.any(np.asarray(setup.precompression_n) != 0.0)),
         friction="friction" in on or bool(np.any(friction != 0.0)),
         law=contact_law(setup),
         dashpot=dashpot,
+        # the native kernels' rate slot holds one law: velocity-squared dissipation where the
+        # dashpot leaves it free
+        velocity_squared=not dashpot and len(others) == 1 and isinstance(others[0], laws.VelocitySquared),
     )
 
 
@@ -312,7 +316,7 @@ def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ..
         traces, state = native.run_full_books(
             p, state, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
             channels=channels, viscous=flags.viscous, friction=flags.friction, preload=flags.preload,
-            springs=flags.springs, dashpot=flags.dashpot, law=flags.law,
+            springs=flags.springs, dashpot=flags.dashpot, law=flags.law, velocity_squared=flags.velocity_squared,
         )
         return traces, state, layout
     if which.physics == "full":
@@ -325,7 +329,7 @@ def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ..
             p, x, v, a, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
             channels=channels, viscous=flags.viscous, friction=flags.friction, preload=flags.preload,
             springs=flags.springs, dashpot=flags.dashpot, law=flags.law, backend=which.backend,
-            sensors=flags.sensors, sensor_state=sensor_state,
+            sensors=flags.sensors, sensor_state=sensor_state, velocity_squared=flags.velocity_squared,
         )
         return traces, None, layout
     state, _, _ = _initial(p, flags, layout, grid.dt_s)
@@ -510,7 +514,7 @@ def solve_batched(
     if devices is not None:
         padded = len(devices) * math.ceil(padded / len(devices))
     params = share_uniform(kernel_params(setup, pad_to=padded))
-    native_ok = kernel == "auto" and _native_laws(setup)
+    native_ok = kernel == "auto" and _native_laws(setup, flags)
     fused = native.kernel_for(flags, devices, params["inv_mass"].shape[-2]) if native_ok else None
     if fused is not None and fused.physics == "full":
         flags = flags._replace(full_step=True)
@@ -561,17 +565,23 @@ def record_batched(
     params = _params(setup, None)
     if flags.sensors or compliant_sensors is not None:
         params = _with_compliant_sensors(params, setup, flags, compliant_sensors)
-    native_ok = kernel == "auto" and not flags.ledger and _native_laws(setup)
+    native_ok = kernel == "auto" and not flags.ledger and _native_laws(setup, flags)
     fused = native.kernel_for(flags, None, params["inv_mass"].shape[-2]) if native_ok else None
     if fused is not None:  # the full kernel carries the tangents, whatever the physics
         fused = fused._replace(physics="full")
     return _assemble(params, batch, flags, grid, rows, names, user, int(block_steps), None, fused)
 
 
-def _native_laws(setup: ChainSetup) -> bool:
-    """Whether the native kernels have every law of the setup (`laws.registry`); where not,
-    the JAX kernel runs (`BatchedTraces.kernel` says so)."""
-    return laws.registry.runs_natively(setup.contact_law, setup.dissipation)
+def _native_laws(setup: ChainSetup, flags: KernelFlags) -> bool:
+    """Whether the native kernels have every law of the setup (`laws.registry`) and `flags`
+    puts its dissipation beyond Kuwabara-Kono's and the dashpot into their rate slot (which
+    holds one law: a chain with a dashpot and velocity-squared dissipation, or with two
+    further laws, is not native); where not, the JAX kernel runs (`BatchedTraces.kernel`
+    says so)."""
+    others = setup.dissipation[2:]
+    carried = not others or (flags.velocity_squared and len(others) == 1
+                             and isinstance(others[0], laws.VelocitySquared))
+    return carried and laws.registry.runs_natively(setup.contact_law, setup.dissipation)
 
 
 def _with_compliant_sensors(params: dict, setup: ChainSetup, flags: KernelFlags, sensors) -> dict:

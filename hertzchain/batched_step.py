@@ -39,6 +39,10 @@ class KernelFlags(NamedTuple):
     law: str = "hertz"
     # A linear dashpot on every contact's overlap rate (with `viscous`, which computes the rates).
     dashpot: bool = False
+    # The setup's `laws.VelocitySquared` in the native kernels' rate slot, in the dashpot's
+    # place (`kernel_flags`; with `viscous`, not with `dashpot`). The JAX kernel runs it from
+    # the setup's laws whatever this says.
+    velocity_squared: bool = False
     # The full step's state whatever the physics: set where the full C++ kernel runs a
     # conservative chain (laws other than Hertz's, `native.kernel_for`), whose books come in
     # and out in that layout. The JAX kernel keeps the conservative one for those chains: in

@@ -162,6 +162,19 @@ def assert_forces_equal_the_jax_kernels(setup, grid, *, books: bool):
     return ours, reference
 
 
+def assert_jacfwd_equals_the_jax_kernels(forces, q):
+    """`jax.jacfwd` of `forces(q, kernel)` (recorded forces at parameters q) on the default
+    kernel against the JAX kernel: every column within 1e-10 of its largest value (friction's
+    derivative crosses stick-slip kinks), none of them zero. Returns the default kernel's."""
+    jac = np.asarray(jax.jit(jax.jacfwd(lambda q: forces(q, "auto")))(q))
+    reference = np.asarray(jax.jit(jax.jacfwd(lambda q: forces(q, "jax")))(q))
+    for i in range(q.size):
+        scale = np.max(np.abs(reference[..., i]))
+        assert scale > 0.0
+        np.testing.assert_allclose(jac[..., i], reference[..., i], rtol=0, atol=1e-10 * scale)
+    return jac
+
+
 def assert_transform_is_one_call_equal_to_the_jax_kernel(transform: str, targets) -> None:
     """`record_batched` under `TRANSFORMS[transform]` on the fused kernel: the custom call
     `targets(transform)` names appears once in the compiled program (no loop around it), and

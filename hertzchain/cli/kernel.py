@@ -6,8 +6,8 @@ after installing: it builds every library a first fit or diagnosis needs
 (`native.FIRST_USE_LIBRARIES`: the main one, the dashpot's, the compliant sensors', the
 Jackson-Green and power-law contacts', Jackson-Green with compliant sensors, the driven
 chains'), several at once over the CPU's cores, with a line as each is ready
-(`[3/7] dashpot (61 s)`); `--all` builds every library (the Thornton law's and the other
-laws' compliant sensors too). A cached library that does not match its build record
+(`[3/7] dashpot (61 s)`); `--all` builds every library (the Thornton law's, velocity-squared
+dissipation's and the other laws' compliant sensors too). A cached library that does not match its build record
 (truncated, emptied, changed) is said to be so and built again.
 
 Exit status: 0 when every library asked for is built and loads, and when the kernels are

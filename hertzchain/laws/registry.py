@@ -26,7 +26,7 @@ NATIVE_NAMES: dict[type, str | None] = {
     JacksonGreen: "jackson_green",
     Viscoelastic: "viscous",
     Dashpot: "dashpot",
-    VelocitySquared: None,
+    VelocitySquared: "velocity_squared",
     SeriesCompliance: None,
     RoughContact: None,
 }

@@ -9,8 +9,9 @@ physics it runs, so that the conservative case pays nothing for the rest:
 
 - the conservative one (`run`): Hertz contacts, sensor springs, preload, walls and free
   ends, with or without the books (running maxima, energies);
-- the full one (`run_full`): the same plus Kuwabara-Kono damping and a linear dashpot (the
-  total force clipped at 0) and track friction, the recorded forces only, and forward-mode tangents carried
+- the full one (`run_full`): the same plus Kuwabara-Kono damping and one law in the rate
+  slot, a linear dashpot or velocity-squared dissipation (`laws.VelocitySquared`, in a
+  library of its own on Hertz contacts; the total force clipped at 0), and track friction, the recorded forces only, and forward-mode tangents carried
   through the same loop (`jax.custom_jvp`: `jax.jvp`, `jax.jacfwd`, `jax.linearize`; the
   forces and all the directions of a Jacobian in one run); `run_full_books`, the same
   forward run with the books (largest forces, viscous work, friction losses, final state:
@@ -82,6 +83,8 @@ from .build import (  # noqa: F401
     SOURCE,
     SOURCE_PARTS,
     UNMASKED_FLAGS,
+    VELOCITY_SQUARED_DEFINE,
+    VELOCITY_SQUARED_DEFINES,
     _build,
     prune_cache,
 )
@@ -100,12 +103,16 @@ from .host import (  # noqa: F401
     SENSOR_TANGENT_TARGET,
     TANGENT_TARGET,
     TARGET,
+    VELOCITY_SQUARED_BOOKS_TARGET,
+    VELOCITY_SQUARED_FULL_TARGET,
+    VELOCITY_SQUARED_TANGENT_TARGET,
     FusedKernel,
     _load,
     _load_dashpot,
     _load_law,
     _load_library,
     _load_sensors,
+    _load_velocity_squared,
     available,
     build_libraries,
     cache_dir,
@@ -131,7 +138,9 @@ __all__ = [
     "FFI_ARGS", "FIRST_USE_LIBRARIES", "FLAGS", "FULL_TARGET", "JAX_INSTEAD", "KEPT_FREE_BYTES", "LAWS",
     "LAW_DEFINES", "MALLOC_VARIABLE", "NVCC_FLAGS", "REUSED_BUFFER_BYTES", "SENSOR_DEFINE", "SENSOR_FULL_TARGET",
     "SENSOR_TANGENT_TARGET", "SOURCE", "SOURCE_PARTS", "SWITCHED_OFF", "TANGENT_TARGET", "TARGET",
-    "THREAD_FLAGS_VARIABLE", "THREAD_SOURCE", "UNMASKED_FLAGS", "FusedKernel", "available", "build_libraries",
+    "THREAD_FLAGS_VARIABLE", "THREAD_SOURCE", "UNMASKED_FLAGS", "VELOCITY_SQUARED_BOOKS_TARGET",
+    "VELOCITY_SQUARED_DEFINE", "VELOCITY_SQUARED_DEFINES", "VELOCITY_SQUARED_FULL_TARGET",
+    "VELOCITY_SQUARED_TANGENT_TARGET", "FusedKernel", "available", "build_libraries",
     "cache_dir", "kernel_for", "kernel_record", "library_path", "library_table", "note_use", "prune_cache",
     "run", "run_full", "run_full_books", "thread_unavailable_reason", "unavailable_reason",
 ]

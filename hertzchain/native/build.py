@@ -43,6 +43,12 @@ FFI_ARGS = CSRC / "chain_ffi.h"  # their handlers' argument lists
 # library every run needs does not wait for them (36 s -> 50 s when built into it, 2 cores).
 DASHPOT_DEFINE = "HC_DASHPOT_LIBRARY"
 
+# The rate slot's other law: velocity-squared dissipation (`laws.VelocitySquared`) in the
+# dashpot's place on Hertz contacts (`chain_laws.h`'s `RateSlotCoefficient`), likewise in a
+# library of its own built on first use: the dashpot library's code with this define.
+VELOCITY_SQUARED_DEFINE = "HC_VELOCITY_SQUARED_LIBRARY"
+VELOCITY_SQUARED_DEFINES = (f"-D{DASHPOT_DEFINE}", f"-D{VELOCITY_SQUARED_DEFINE}")
+
 # The full kernel with every contact on another law than Hertz's (`batched.KernelFlags.law`):
 # the power law (`contact.power_law_force`), Thornton's and Jackson-Green's elastic-plastic
 # laws (`contact.thornton_contact`, `contact.jackson_green_contact`), likewise each in a
@@ -124,7 +130,7 @@ _STALE_SCRATCH_S = 3600.0
 def _current_host_libraries() -> set[Path]:
     """The host libraries this installation builds on this machine with these flags: the
     main one, those built on first use (`load_on_demand_libraries`) and the driven chains'."""
-    defines = [(), (f"-D{DASHPOT_DEFINE}",), (f"-D{SENSOR_DEFINE}",)] + [
+    defines = [(), (f"-D{DASHPOT_DEFINE}",), VELOCITY_SQUARED_DEFINES, (f"-D{SENSOR_DEFINE}",)] + [
         (f"-D{define}",) + extra for define in LAW_DEFINES.values() for extra in ((), (f"-D{SENSOR_DEFINE}",))]
     return {_library_path(d) for d in defines} | {_library_path((), DRIVEN_SOURCE)}
 

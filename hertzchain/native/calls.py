@@ -12,7 +12,7 @@ import jax
 import numpy as np
 from jax.interpreters import partial_eval
 
-from .. import contact
+from .. import contact, laws
 from . import build, host, registry, thread
 
 
@@ -38,7 +38,9 @@ class _Ffi(NamedTuple):
 
     def call(self, kind: str, shapes, args, index, attrs, beads=()) -> tuple:
         """`kind`: "forward", "full", "tangent", "books", the last three with a dashpot
-        ("_dashpot": its own host library; the thread kernels compile it into the same one) or
+        ("_dashpot": its own host library; the thread kernels compile it into the same one),
+        with velocity-squared dissipation in its place ("_velocity_squared": its own host
+        library) or
         on another law ("_<law>", a `LAW_DEFINES` key: its own host library), the first two
         also with compliant sensors ("_sensors", in `beads`: their own host library)."""
         if self.backend == "host":  # the library built on first use that holds the handler
@@ -47,6 +49,8 @@ class _Ffi(NamedTuple):
                 path = host._load_sensors(law)
             elif kind.endswith("_dashpot"):
                 path = host._load_dashpot()
+            elif kind.endswith("_velocity_squared"):
+                path = host._load_velocity_squared()
             elif law != "hertz":
                 path = host._load_law(law)
             else:
@@ -162,7 +166,7 @@ def _fold_directions(size: int, batched, tangents):
 def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples: int,
              channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
              dashpot: bool = False, law: str = "hertz", backend: str = "host",
-             sensors: tuple[int, ...] = (), sensor_state=None):
+             sensors: tuple[int, ...] = (), sensor_state=None, velocity_squared: bool = False):
     """The full step (`batched._step` with velocities and accelerations apart: damping,
     friction) from displacements `x`, velocities `v` and accelerations `a` (bodies + 1, B)
     at the impact, through `n_samples` samples of `steps_per_sample` steps of `dt_s`
@@ -175,7 +179,10 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     without tangents): a vmapped batch of fits, `jacfwd` of `vmap` and `vmap` of `jacfwd`
     are one kernel run each. Reverse mode is not available (use the JAX kernel,
     `kernel="jax"`). `dashpot`: a linear dashpot on every contact (`p["dashpot"]`, N s/m;
-    needs `viscous`), its terms compiled into this call's kernel only. `law`: the contacts'
+    needs `viscous`), its terms compiled into this call's kernel only. `velocity_squared`:
+    instead of the dashpot, the setup's `laws.VelocitySquared` (`p["dissipation"]`, its
+    coefficient N s^2/m^2; needs `viscous`; Hertz contacts on the host, no compliant
+    sensors), in a library of its own. `law`: the contacts'
     elastic law (`batched.KernelFlags.law`: "hertz", or "power_law" on `contact.power_law_force`,
     "thornton" or "jackson_green" on the elastic-plastic laws of `forces.elastic_parts`, from
     the arrays `batched` stores for them; host only, each in a library of its own;
@@ -193,34 +200,40 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     if sensors and (sensor_state is None or sensor_state.shape[0] != 3 * len(sensors)):
         raise ValueError("run_full: sensor_state must hold the sensors' forces, rates and drives, "
                          "(3 n_sensors, B).")
+    _check_velocity_squared(velocity_squared, dashpot, law, backend, sensors, "run_full")
     state0 = jax.numpy.concatenate([x, v, a] + ([sensor_state] if sensors else []))
-    args = _full_args(p, state0, preload, springs, dashpot, law, backend, sensors)
+    args = _full_args(p, state0, preload, springs, dashpot, law, backend, sensors, velocity_squared)
     config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
-              bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), law, backend, sensors)
+              bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), law, backend, sensors,
+              bool(velocity_squared))
     return _full_call(config)(*args)
 
 
 def run_full_books(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
                    channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
-                   dashpot: bool = False, law: str = "hertz"):
+                   dashpot: bool = False, law: str = "hertz", velocity_squared: bool = False):
     """`run_full` with the books, on the host: advances the packed state `state0` (rows, B)
     of `batched._Layout` for the full step with the books (x, v, a; for elastic-plastic
     contacts every contact's largest overlap so far; every contact's largest total force; with damping, the viscous force on every body; the energy dissipated by
     damping and friction so far) and returns (the (B, n_samples) force traces, one per
     channel, N; the final packed state). The books' sums over the bodies follow
     `batched._step`'s order; the run is not differentiable (sweeps; fits call `run_full`).
-    `dashpot`, `law` as for `run_full`."""
+    `dashpot`, `law`, `velocity_squared` as for `run_full`."""
     _require("host")
-    if dashpot and not viscous:
-        raise ValueError("run_full_books: a dashpot needs viscous=True (the kernel's rates come with the damping).")
+    if (dashpot or velocity_squared) and not viscous:
+        raise ValueError("run_full_books: a dashpot or velocity-squared dissipation needs viscous=True (the "
+                         "kernel's rates come with the damping).")
     _check_law(law, "host", "run_full_books")
-    args = _full_args(p, state0, preload, springs, dashpot, law, "host") + (p["mass"],)
+    _check_velocity_squared(velocity_squared, dashpot, law, "host", (), "run_full_books")
+    args = _full_args(p, state0, preload, springs, dashpot, law, "host", (), velocity_squared) + (p["mass"],)
     attrs = {"dt": np.float64(dt_s), "steps_per_sample": np.int64(steps_per_sample), "viscous": np.int64(viscous),
-             "friction": np.int64(friction), "extras": np.int64(preload or springs), "dashpot": np.int64(dashpot)}
+             "friction": np.int64(friction), "extras": np.int64(preload or springs),
+             "dashpot": np.int64(dashpot or velocity_squared)}
     call = _Ffi("host", p["inv_mass"].shape[-2], n_samples)
     shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + call.trace_shapes(state0, len(channels))
     index = np.asarray(channels, dtype=np.int64)
-    kind = f"books_{law}" if law != "hertz" else "books_dashpot" if dashpot else "books"
+    kind = (f"books_{law}" if law != "hertz" else "books_velocity_squared" if velocity_squared
+            else "books_dashpot" if dashpot else "books")
     state, *traces = call.call(kind, shapes, args, index, attrs)
     return tuple(traces), state
 
@@ -232,11 +245,30 @@ def _check_law(law: str, backend: str, caller: str) -> None:
         raise ValueError(f"{caller}: the {law} law runs on the host kernel (backend 'host').")
 
 
+def _check_velocity_squared(velocity_squared: bool, dashpot: bool, law: str, backend: str, sensors, caller: str):
+    if velocity_squared and (dashpot or law != "hertz" or backend != "host" or sensors):
+        raise ValueError(f"{caller}: velocity-squared dissipation runs in the dashpot's place, on Hertz contacts, on "
+                         "the host kernel, without compliant sensors (dashpot=False, law='hertz', backend='host', "
+                         "sensors=()); the JAX kernel runs the other combinations.")
+
+
+def _velocity_squared_coefficient(p: dict):
+    """The coefficient (N s^2/m^2) of the one `laws.VelocitySquared` among the kernel arrays'
+    other dissipation laws (`p["dissipation"]`, `batched._chain_params`)."""
+    found = [law for law in p.get("dissipation", ()) if isinstance(law, laws.VelocitySquared)]
+    if len(found) != 1:
+        raise ValueError(f"velocity_squared: the kernel arrays hold {len(found)} VelocitySquared laws; the "
+                         "rate slot carries exactly one.")
+    return found[0].c_n_s2_m2
+
+
 def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool, law: str, backend: str,
-               sensors: tuple[int, ...] = ()) -> tuple:
+               sensors: tuple[int, ...] = (), velocity_squared: bool = False) -> tuple:
     """The full kernels' arrays: the state, then the eight parameter arrays (zeros for the
-    physics a run does not have) and, for the host kernels, the law's (`_law_array`) and the
-    compliant sensors' (`_sensor_array`)."""
+    physics a run does not have; the rate slot's coefficient the dashpot's or, with
+    `velocity_squared`, the velocity-squared law's) and, for the host kernels, the law's
+    (`_law_array`) and the compliant sensors' (`_sensor_array`)."""
+    slot = _velocity_squared_coefficient(p) if velocity_squared else p["dashpot"] if dashpot else None
     width = lambda leaf: leaf.shape[-1]
     zeros = lambda leaf: jax.numpy.zeros_like(leaf)
     return (
@@ -248,8 +280,9 @@ def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool, law
         p["external"] if preload else zeros(p["external"]),
         jax.numpy.reshape(p["eta"], (1, width(p["eta"]))),
         jax.numpy.reshape(p["friction"], (1, width(p["friction"]))),
-        # the linear dashpot (N s/m, `contact.contact_force`), zeros without one
-        jax.numpy.reshape(p["dashpot"], (1, width(p["dashpot"]))) if dashpot else jax.numpy.zeros((1, 1)),
+        # the rate slot's coefficient (the linear dashpot's, N s/m, or velocity-squared
+        # dissipation's, N s^2/m^2), zeros without one
+        jax.numpy.reshape(slot, (1, width(slot))) if slot is not None else jax.numpy.zeros((1, 1)),
     ) + ((_law_array(p, law), _sensor_array(p, sensors)) if backend == "host" else ())
 
 
@@ -289,13 +322,16 @@ def _law_array(p: dict, law: str):
 @functools.cache
 def _full_call(config):
     """The full kernel for one configuration as a function of its arrays, with its JVP."""
-    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, dashpot, law, backend, sensors = config
-    if dashpot and not viscous:
-        raise ValueError("run_full: a dashpot needs viscous=True (the kernel's rates come with the damping).")
-    # dashpot: the kernel with the dashpot's terms compiled in (`DASHPOT_DEFINE`)
+    (dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, dashpot, law, backend, sensors,
+     velocity_squared) = config
+    if (dashpot or velocity_squared) and not viscous:
+        raise ValueError("run_full: a dashpot or velocity-squared dissipation needs viscous=True (the kernel's "
+                         "rates come with the damping).")
+    # dashpot: the kernel with the rate slot's terms compiled in (`DASHPOT_DEFINE`; with
+    # velocity_squared, `VELOCITY_SQUARED_DEFINES`)
     attrs = {"dt": np.float64(dt_s), "steps_per_sample": np.int64(steps_per_sample),
              "viscous": np.int64(viscous), "friction": np.int64(friction), "extras": np.int64(extras),
-             "dashpot": np.int64(dashpot)}
+             "dashpot": np.int64(dashpot or velocity_squared)}
     index = np.asarray(channels, dtype=np.int64)
     # the state, the eight parameter arrays (host: and the law's and the sensors')
     n_args = 11 if backend == "host" else 9
@@ -303,6 +339,8 @@ def _full_call(config):
     # compliant sensors (with or without a dashpot): the sensors' library
     if law != "hertz":
         kinds = (f"full_{law}", f"tangent_{law}")
+    elif velocity_squared:
+        kinds = ("full_velocity_squared", "tangent_velocity_squared")
     elif dashpot and not sensors:
         kinds = ("full_dashpot", "tangent_dashpot")
     else:

@@ -19,8 +19,9 @@ import jax
 from . import build, registry, thread
 
 # The FFI targets the host libraries' handlers are registered as (`_load_library`): the main
-# library's, the dashpot's and the compliant sensors' (`build.DASHPOT_DEFINE`,
-# `build.SENSOR_DEFINE`); each other law's are named by `_law_target`.
+# library's, the dashpot's, velocity-squared dissipation's and the compliant sensors'
+# (`build.DASHPOT_DEFINE`, `build.VELOCITY_SQUARED_DEFINES`, `build.SENSOR_DEFINE`); each
+# other contact law's are named by `_law_target`.
 TARGET = "hertzchain_chain_forward"
 FULL_TARGET = "hertzchain_chain_full_forward"
 TANGENT_TARGET = "hertzchain_chain_full_tangent"
@@ -28,6 +29,9 @@ BOOKS_TARGET = "hertzchain_chain_full_books"
 DASHPOT_FULL_TARGET = "hertzchain_chain_full_forward_dashpot"
 DASHPOT_TANGENT_TARGET = "hertzchain_chain_full_tangent_dashpot"
 DASHPOT_BOOKS_TARGET = "hertzchain_chain_full_books_dashpot"
+VELOCITY_SQUARED_FULL_TARGET = "hertzchain_chain_full_forward_velocity_squared"
+VELOCITY_SQUARED_TANGENT_TARGET = "hertzchain_chain_full_tangent_velocity_squared"
+VELOCITY_SQUARED_BOOKS_TARGET = "hertzchain_chain_full_books_velocity_squared"
 SENSOR_FULL_TARGET = "hertzchain_chain_full_forward_sensors"
 SENSOR_TANGENT_TARGET = "hertzchain_chain_full_tangent_sensors"
 
@@ -122,6 +126,16 @@ def _load_dashpot() -> Path:
 
 
 @functools.cache
+def _load_velocity_squared() -> Path:
+    """Build (if needed), load and register the full kernels with velocity-squared dissipation
+    in the rate slot (`VELOCITY_SQUARED_DEFINES`)."""
+    return _load_library(build.VELOCITY_SQUARED_DEFINES, "the fused chain kernel's velocity-squared runs",
+                         ((VELOCITY_SQUARED_FULL_TARGET, "HertzChainFullForward"),
+                          (VELOCITY_SQUARED_TANGENT_TARGET, "HertzChainFullTangent"),
+                          (VELOCITY_SQUARED_BOOKS_TARGET, "HertzChainFullBooks")))
+
+
+@functools.cache
 def _load_sensors(law: str = "hertz") -> Path:
     """Build (if needed), load and register the compliant sensors' full kernels (`SENSOR_DEFINE`)
     on `law`'s contacts."""
@@ -138,10 +152,12 @@ def _load_sensors(law: str = "hertz") -> Path:
 def library_table() -> dict[str, tuple[tuple[str, ...], Path]]:
     """Every host library, by name: its `-D` macros and source. "chain" is the main library
     every run needs; the others are built on their first use: the dashpot's (Hertz contacts
-    with a dashpot), the compliant sensors', each other contact law's (`LAW_DEFINES`, with or
+    with a dashpot), velocity-squared dissipation's (Hertz contacts with
+    `laws.VelocitySquared` in the dashpot's place), the compliant sensors', each other contact law's (`LAW_DEFINES`, with or
     without a dashpot) and its compliant sensors', and the driven chains' lock-in kernel
     ("driven", `hertzchain.driven.fused`)."""
     table = {"chain": ((), build.SOURCE), "dashpot": ((f"-D{build.DASHPOT_DEFINE}",), build.SOURCE),
+             "velocity_squared": (build.VELOCITY_SQUARED_DEFINES, build.SOURCE),
              "compliant sensors": ((f"-D{build.SENSOR_DEFINE}",), build.SOURCE)}
     table |= {law: ((f"-D{define}",), build.SOURCE) for law, define in build.LAW_DEFINES.items()}
     table |= {f"{law} compliant sensors": ((f"-D{define}", f"-D{build.SENSOR_DEFINE}"), build.SOURCE)
@@ -161,6 +177,8 @@ def _load_named(name: str) -> Path:
         return _load_main()
     if name == "dashpot":
         return _load_dashpot()
+    if name == "velocity_squared":
+        return _load_velocity_squared()
     if name == "driven":
         from ..driven import fused  # (the driven chains' kernel registers its own targets)
 
@@ -266,6 +284,8 @@ def _host_library_loads(flags) -> bool:
             _load_sensors(flags.law)
         elif flags.law != "hertz":
             _load_law(flags.law)
+        elif flags.velocity_squared:
+            _load_velocity_squared()
         elif flags.dashpot:
             _load_dashpot()
     except (OSError, RuntimeError):
@@ -281,11 +301,17 @@ def _platforms(devices) -> set[str]:
 def kernel_for(flags, devices, rows: int | None = None) -> FusedKernel | None:
     """Which fused kernel runs a compiled kernel's physics (`batched.KernelFlags`) on these
     devices, or None (the JAX kernel: laws other than Hertz's on a GPU, compliant sensors on
-    a GPU or with the books, the books of damping or friction on a GPU, devices
+    a GPU or with the books, velocity-squared dissipation on a GPU, with compliant sensors
+    or on another law than Hertz's, the books of damping or friction on a GPU, devices
     of another kind, no compiler, a library that cannot be built or loaded). `rows`: the
     kernel arrays' rows (bodies + 1); where given, the GPU's thread kernel for that chain
     length is built and loaded here, and one that cannot be (said once on stderr) gives None."""
     platforms = _platforms(devices)
+    if flags.velocity_squared:  # its library has Hertz contacts, on the host, no compliant sensors
+        if (flags.sensors or flags.law != "hertz" or platforms != {"cpu"} or not available()
+                or not _host_library_loads(flags)):
+            return None
+        return FusedKernel("full", "host")
     if flags.sensors:  # compliant sensors: the host's sensor libraries, no books
         if flags.ledger or platforms != {"cpu"} or not available() or not _host_library_loads(flags):
             return None
@@ -308,7 +334,9 @@ def kernel_for(flags, devices, rows: int | None = None) -> FusedKernel | None:
 # Each kind of host run (`calls._Ffi.call`): its FFI target.
 _HOST_TARGETS = {"forward": TARGET, "full": FULL_TARGET, "tangent": TANGENT_TARGET, "books": BOOKS_TARGET,
                  "full_dashpot": DASHPOT_FULL_TARGET, "tangent_dashpot": DASHPOT_TANGENT_TARGET,
-                 "books_dashpot": DASHPOT_BOOKS_TARGET, "full_sensors": SENSOR_FULL_TARGET,
+                 "books_dashpot": DASHPOT_BOOKS_TARGET, "full_velocity_squared": VELOCITY_SQUARED_FULL_TARGET,
+                 "tangent_velocity_squared": VELOCITY_SQUARED_TANGENT_TARGET,
+                 "books_velocity_squared": VELOCITY_SQUARED_BOOKS_TARGET, "full_sensors": SENSOR_FULL_TARGET,
                  "tangent_sensors": SENSOR_TANGENT_TARGET} | {
                      f"{kind}_{law}": _law_target(kind, law) for law in build.LAW_DEFINES for kind in ("full", "tangent", "books")} | {
                      f"{kind}_{law}_sensors": _law_target(kind, law) + "_sensors" for law in build.LAW_DEFINES

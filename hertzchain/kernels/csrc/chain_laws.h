@@ -396,8 +396,23 @@ HC_HD HC_INLINE D ContactDashpot(const K& kappa, const D& dashpot) {
   return Value(kappa) > 0.0 ? dashpot : Like(dashpot, 0.0);
 }
 
+// The coefficient of the rate slot's law per unit overlap rate, its force being that times
+// the rate (`laws.registry`: the slot's law is chosen by the library): a linear dashpot's
+// gamma (N s/m), or in HC_VELOCITY_SQUARED_LIBRARY velocity-squared dissipation's c |rate|
+// (`laws.VelocitySquared`, c in N s^2/m^2).
+template <class D, class V>
+HC_HD HC_INLINE auto RateSlotCoefficient(const D& coefficient, const V& rate) {
+#if defined(HC_VELOCITY_SQUARED_LIBRARY)
+  return coefficient * Abs(rate);
+#else
+  (void)rate;
+  return coefficient;
+#endif
+}
+
 // contact.contact_force (the total, clipped at 0 in contact: Kuwabara-Kono damping with
-// kv = 1.5 eta kappa, and with kDashpot a linear dashpot `dash` = `ContactDashpot`) about a
+// kv = 1.5 eta kappa, and with kDashpot the rate slot's law of coefficient `dash` =
+// `ContactDashpot`, `RateSlotCoefficient`) about a
 // given elastic force (`elastic`, N) at overlap dl (m; root sqrt(dl_+) `rt`) and rate (m/s),
 // plus the spring (kExtras), N. Branch-free (selects only): sqrt(0) = 0 is the root out of
 // contact, as `contact` has it, where elastic = viscous = 0; a dashpot would push there, so
@@ -409,7 +424,7 @@ template <bool kViscous, bool kDashpot, class E, class R, class O, class V, clas
 HC_HD HC_INLINE auto ClippedTotal(const E& elastic, const R& rt, const O& dl, const V& rate, const Kv& kv,
                                   const D& dash) {
   if constexpr (kViscous && kDashpot) {
-    const auto s = elastic + (kv * rt + dash) * rate;
+    const auto s = elastic + (kv * rt + RateSlotCoefficient(dash, rate)) * rate;
     return Select(Value(dl) > 0.0, MaxZero(s), 0.0);
   } else if constexpr (kViscous) {
     return MaxZero(elastic + (kv * rt) * rate);
