@@ -1,4 +1,6 @@
 import os
+import sys
+import time
 
 import jax
 import pytest
@@ -11,6 +13,26 @@ jax.config.update("jax_enable_x64", True)
 # commands called in-process here would switch that on for the rest of the session and write
 # hundreds of the suite's programs there. tests/test_compilation_cache.py tests the switch.
 os.environ.setdefault("HERTZCHAIN_NO_COMPILE_CACHE", "1")
+
+
+def pytest_configure(config):
+    """Before a parallel run's workers start, build every kernel library not yet in the cache,
+    several at once (`hertzchain kernel --all`): on a cold cache the workers would otherwise
+    each wait for the libraries their tests need, one compiler running while the other core
+    idles. Targeted runs (`-n 0`) build only what their tests use. Where a compiler is, a
+    library that cannot be built ends the run here, naming it: every library is checked,
+    those no default test runs included."""
+    from hertzchain import native
+
+    if (hasattr(config, "workerinput") or config.getoption("numprocesses", None) in (None, 0)
+            or os.environ.get("HERTZCHAIN_NATIVE", "1") == "0" or native.build._cxx() is None):
+        return
+    began = time.perf_counter()
+    failed = [(name, why) for name, _, _, why in native.build_libraries(tuple(native.library_table())) if why]
+    if failed:
+        pytest.exit("kernel libraries that could not be built: "
+                    + "; ".join(f"{name}: {why.splitlines()[0]}" for name, why in failed), returncode=1)
+    print(f"kernel libraries ready in {time.perf_counter() - began:.0f} s", file=sys.stderr)
 
 
 @pytest.fixture(autouse=True, scope="module")
