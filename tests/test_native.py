@@ -2,7 +2,6 @@
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 
@@ -10,6 +9,7 @@ import jax
 import numpy as np
 import pytest
 from helpers import (
+    NEEDS_A_COMPILER,
     TRANSFORMS,
     assert_fit_iteration_equals_the_jax_kernels,
     assert_forces_equal_the_jax_kernels,
@@ -24,11 +24,7 @@ from hertzchain import native
 from hertzchain.batched import kernel_flags, solve_batched
 from hertzchain.integrate import Recording, solve_stacked
 
-# Skipped only where the kernel cannot be built at all (no C++ compiler, or switched off on
-# purpose); where a compiler is, a kernel that cannot be built or loaded fails every test.
-pytestmark = pytest.mark.skipif(
-    (shutil.which("c++") or native.build._cxx()) is None or os.environ.get("HERTZCHAIN_NATIVE", "1") == "0",
-    reason="no C++ compiler (or HERTZCHAIN_NATIVE=0): the fused kernel cannot be built here")
+pytestmark = NEEDS_A_COMPILER
 
 
 @pytest.fixture(autouse=True)

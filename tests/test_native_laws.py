@@ -10,14 +10,12 @@ In the slow suite: each test takes tens of seconds, mostly XLA compiling the ref
 JAX kernel's `jacfwd`; Thornton's full run: 29 s of CPU), beyond the libraries' builds.
 """
 
-import os
-import shutil
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import NEEDS_A_COMPILER
 
 import hertzchain as hc
 from hertzchain import laws, native
@@ -25,9 +23,7 @@ from hertzchain.batched import kernel_flags, record_batched
 from hertzchain.compliant_sensor import CompliantSensors
 from hertzchain.integrate import Recording
 
-pytestmark = pytest.mark.skipif(
-    (shutil.which("c++") or native.build._cxx()) is None or os.environ.get("HERTZCHAIN_NATIVE", "1") == "0",
-    reason="no C++ compiler (or HERTZCHAIN_NATIVE=0): the fused kernel cannot be built here")
+pytestmark = NEEDS_A_COMPILER
 
 # Yield stress (Pa) low enough that the faster strikers yield the first contacts.
 YIELD_PA = 1.2e9

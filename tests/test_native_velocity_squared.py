@@ -2,9 +2,7 @@
 slot: its forces, books and forward-mode derivatives against the JAX kernel and the general
 solver, and the chains the slot cannot carry left to the JAX kernel."""
 
-import os
 import re
-import shutil
 
 import equinox as eqx
 import jax
@@ -12,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from helpers import (
+    NEEDS_A_COMPILER,
     assert_forces_equal_the_jax_kernels,
     assert_jacfwd_equals_the_jax_kernels,
     ten_bead_batch,
@@ -22,9 +21,7 @@ from hertzchain import laws, native
 from hertzchain.batched import kernel_flags, record_batched, solve_batched
 from hertzchain.integrate import Recording, solve_stacked
 
-pytestmark = pytest.mark.skipif(
-    (shutil.which("c++") or native.build._cxx()) is None or os.environ.get("HERTZCHAIN_NATIVE", "1") == "0",
-    reason="no C++ compiler (or HERTZCHAIN_NATIVE=0): the fused kernel cannot be built here")
+pytestmark = NEEDS_A_COMPILER
 
 # c = 3000 N s^2/m^2 at the 0.3-1 m/s impacts of `ten_bead_batch`: c v^2 is 270-3000 N against
 # contact forces of ~1e3 N, a loss of the order the driven candidates use
