@@ -159,7 +159,7 @@ def kernel_flags(setup: ChainSetup, *, switched_on=()) -> KernelFlags:
         dashpot=dashpot,
         # the native kernels' rate slot holds one law: velocity-squared dissipation where the
         # dashpot leaves it free
-        velocity_squared=not dashpot and len(others) == 1 and isinstance(others[0], laws.VelocitySquared),
+        velocity_squared=not dashpot and _fills_the_rate_slot(others),
     )
 
 
@@ -572,6 +572,12 @@ def record_batched(
     return _assemble(params, batch, flags, grid, rows, names, user, int(block_steps), None, fused)
 
 
+def _fills_the_rate_slot(others) -> bool:
+    """Whether a setup's dissipation laws beyond Kuwabara-Kono's and the dashpot (`others`)
+    are one `laws.VelocitySquared`, which the native kernels' rate slot can carry."""
+    return len(others) == 1 and isinstance(others[0], laws.VelocitySquared)
+
+
 def _native_laws(setup: ChainSetup, flags: KernelFlags) -> bool:
     """Whether the native kernels have every law of the setup (`laws.registry`) and `flags`
     puts its dissipation beyond Kuwabara-Kono's and the dashpot into their rate slot (which
@@ -579,8 +585,7 @@ def _native_laws(setup: ChainSetup, flags: KernelFlags) -> bool:
     further laws, is not native); where not, the JAX kernel runs (`BatchedTraces.kernel`
     says so)."""
     others = setup.dissipation[2:]
-    carried = not others or (flags.velocity_squared and len(others) == 1
-                             and isinstance(others[0], laws.VelocitySquared))
+    carried = not others or (flags.velocity_squared and _fills_the_rate_slot(others))
     return carried and laws.registry.runs_natively(setup.contact_law, setup.dissipation)
 
 
