@@ -31,6 +31,7 @@ def test_simulate_writes_traces_summary_and_plot(tmp_path, capsys):
     assert capsys.readouterr().err.splitlines()[-1] == f"hertzchain simulate: replaced the results of an earlier run in {out}"
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; each law against the reference solver stays in the default suite (tests/test_batched.py)
 def test_simulate_contact_law_options(tmp_path):
     """--plasticity, --contact-exponent and --dashpot reach the chain: a fast striker on
     beads of low yield stress (the elastic model warns) dissipates plastically and loads the

@@ -34,6 +34,7 @@ def _write_curve(path, sigma_pa, rate_constant, radius_m=2e-3, youngs_pa=200e9, 
     return force
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; the command on the measured curves stays in the default suite
 def test_cli_recovers_the_yield_stress_of_a_csv_curve_and_writes_every_output(tmp_path, capsys):
     force = _write_curve(tmp_path / "sphere.csv", 700e6, 0.02)
     out = tmp_path / "out"

@@ -55,6 +55,7 @@ def _run(tmp_path, *flags):
     return json.loads((out / "contact.json").read_text())
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; the residuals' gradients against finite differences stay in the default suite
 def test_damping_time_and_yield_stress_are_recovered(tmp_path):
     _write(tmp_path / "curve.csv", 700e6, eta_s=2e-6)
     report = _run(tmp_path, "--damping")

@@ -28,6 +28,7 @@ def small_plan(small_setup):
     return fd.plan_experiments(small_setup, [0.3], channels=("contact_2", "wall"), **RUN)
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; a statistical check over many fits
 def test_predicted_stderr_matches_the_scatter_of_fits():
     """Small variant (20 seeds): eta and C with friction fixed; the slow test does 60 seeds
     of eta, mu, C within 20 %."""

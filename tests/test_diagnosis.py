@@ -64,6 +64,7 @@ def test_effect_strengths_reach_the_setup():
     assert not np.isfinite(float(fx.apply_effects(setup, _extras(6)).bead_yield_stress_pa))
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; the effects-off model against solve stays in the default suite
 def test_hertz_contact_model_equals_the_plastic_one_until_contacts_yield():
     setup = ChainSetup(6, striker_velocity_m_s=0.5)
     extras = _extras(6, eta_s=1e-6, wall_softening=0.5, bead_radius_dev_2=0.01)
@@ -238,6 +239,7 @@ def viscous_short():
     return diagnose(files, progress=False, max_effects=2)
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; a hidden effect named on the Verlet path (the diffrax path's soft wall stays in the default suite, tests/test_diagnosis_second_path.py)
 def test_names_hidden_viscous_damping_on_a_short_chain(viscous_short):
     result = viscous_short
     assert result.missing_effects == ["viscous_damping"]
@@ -253,6 +255,7 @@ def test_names_hidden_viscous_damping_on_a_short_chain(viscous_short):
     assert after["peak"]["chi2_per_sample"] < 0.5 * before["peak"]["chi2_per_sample"]
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; the report of the viscous diagnosis above (its fixture); the report's verdict rules stay in the default suite
 def test_report_files(viscous_short, tmp_path):
     compiled = []  # the overlays' predictions: the diagnosis's compiled models, not the full one
 

@@ -134,6 +134,7 @@ def test_tongue_fundamental_is_a_sweep_of_the_levels_below_every_onset():
         tongue_fundamental(tongue, sensor_m_s_per_v=0.02125, levels=4)
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; the Floquet thresholds stay in the default suite (tests/test_driven_floquet.py)
 def test_micro_slip_candidate_predicts_the_floquet_continuations_thresholds():
     """A micro-slip chain's predicted tongue and loop onsets (`predict_thresholds`) are the
     Floquet continuation's (`period_doubling_onsets`, the sliders as state) over the same

@@ -145,6 +145,7 @@ def test_monodromy_with_slipping_sliders_matches_finite_differences():
     assert k == 2 + slipping.size and np.sort(np.abs(floquet.multipliers[0, :k]))[:slipping.size].max() < 1e-6
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; the multipliers against finite differences and the independent model's tongue tip stay in the default suite
 def test_micro_slip_doubling_threshold_matches_stepped_lockin_onset():
     # the Floquet threshold (a real multiplier of the dynamics crossing -1) against the lab's
     # reading of runs stepped in time: f/2 above 0.1 x the fundamental at the end of a level

@@ -38,6 +38,7 @@ def test_01_simulate_paper_chain(small):
     assert namespace["energy_error"] < 1e-4
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; the first example stays in the default suite; sweeps are tested in tests/test_sweep.py
 def test_02_sweep_velocity_wall(small):
     namespace = _run("02_sweep_velocity_wall.py")
     assert (small / "02_force_ratio.png").stat().st_size > 20_000

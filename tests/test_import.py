@@ -304,6 +304,7 @@ def test_time_zero_syntax_with_a_delay(tmp_path, lab):
         _time_zero("channel:CH3>2.5V+fortyus", "x")
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; analyze and design on trace files stay in the default suite
 def test_analyze_and_design_take_the_experiment_file(lab, tmp_path):
     import json
 

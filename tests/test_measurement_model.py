@@ -131,6 +131,7 @@ def test_fit_model_honours_ac_coupling(preloaded):
     assert np.mean(r[:40]) == pytest.approx(PRELOAD_N / 0.02, rel=0.1)  # the offset it predicts
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; AC coupling in the fit model stays in the default suite
 def test_eta_fitted_to_ac_coupled_preloaded_data_without_an_offset(preloaded):
     trace = _record(preloaded, "ac", seed=4)
     with warnings.catch_warnings():

@@ -116,6 +116,7 @@ print(json.dumps(result))
 """
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; vmap and jacfwd as one kernel run stay in the default suite
 def test_split_over_devices_gives_the_one_device_numbers():
     """The kernels inside `shard_map` over two host devices (one thread each), conservative
     and damped with friction and the books: the same traces, maxima and energies as on one

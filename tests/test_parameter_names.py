@@ -100,6 +100,7 @@ def _fit(paths, out, params, fixed, start):
                  "--quiet", "--no-plots"])
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; the spellings' resolution and warnings stay in the default suite
 def test_old_and_new_spellings_give_the_same_fit_and_the_report_speaks_the_new(soft_wall_traces, tmp_path, capsys):
     paths, _ = soft_wall_traces
     assert _fit(paths, tmp_path / "new", "wall_youngs_pa,mu", "eta_s=1us", "wall_youngs_pa=60GPa") == 0
@@ -191,6 +192,7 @@ def _run_in_both_spellings(tmp_path, capsys, base, public, previous, product):
     return new, old, table, new_out, [str(w.message).split(";")[0] for w in caught]
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; the sensitivity boxes' spellings stay in the default suite
 def test_sensitivity_reads_either_spelling_gives_the_same_numbers_and_writes_the_public_names(tmp_path, capsys):
     """`hertzchain sensitivity` over a swept grid: the previous names in --params and --sweep
     give the numbers of the public ones, each warns once naming its option, and the JSON,
@@ -277,6 +279,7 @@ def test_each_sensitivity_parameter_is_named_as_the_quantity_it_sets():
     assert np.allclose(masses.bead_mass_kg, 2.0 * setup.bead_mass_kg) and public_name("bead_masses[3]") == "bead_masses_kg[3]"
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; the design and diagnose calls' spellings stay in the default suite
 def test_design_reads_either_spelling_gives_the_same_numbers_and_writes_the_public_names(tmp_path, capsys):
     """`hertzchain design`: --params and --nuisances by their previous names give the
     numbers of the public ones, each previous name warns once, and design.json, design.csv
@@ -433,6 +436,7 @@ def test_design_and_diagnose_library_calls_warn_once_per_previous_name(soft_wall
                                     "free: 'wall_youngs' is now called 'wall_youngs_pa'"]
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; the fitting calls' warnings stay in the default suite
 def test_sensitivity_library_calls_warn_once_per_previous_name_naming_the_argument():
     """`sensitivity`, `sensitivity_sweep` and `global_sensitivity`: a previous name in
     `params`, `sweep` or `box` warns exactly once, naming the argument, and gives the numbers

@@ -52,6 +52,7 @@ def test_fit_cos6_recovers_an_exact_pulse():
     assert float(fit2.center_s) == pytest.approx(500e-6, rel=1e-7)
 
 
+@pytest.mark.slow  # default-suite time on 2 cores; a statistical check over many fits; the fit's derivative stays in the default suite
 def test_fit_cos6_errors_cover_the_truth():
     """200 noisy pulses fitted in one vmapped call: about 95 % of the estimates lie within
     two standard errors of the truth, and the errors match the scatter."""
