@@ -68,7 +68,6 @@ def test_stops_soon_after_chi2_is_final_at_the_tight_fits_values(kinked_files, d
         assert moved < 0.01, (name, moved)
 
 
-@pytest.mark.slow  # default-suite time on 2 cores; the optimiser started at its optimum stays in the default suite (least squares, below)
 def test_a_fit_at_its_optimum_says_so_at_once(kinked_files, default_fit):
     result, _ = default_fit
     again = fitting.fit(kinked_files, PARAMS, start=result.values, progress=False, throw=False)
