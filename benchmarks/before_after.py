@@ -2,6 +2,7 @@
 
     python benchmarks/before_after.py --before DIR --after DIR --repeats 5 --out DIR
                                       [--sweep 21,1024,2500] [--traces 10] [--label TEXT]
+                                      [--only conservative,damped_frictional,fit_iteration,fit]
 
 The measurements of `benchmarks/run.py --quick` that both trees have, each run by the tree's
 own worker (`TREE/benchmarks/run.py --worker`) in a process of its own with `PYTHONPATH=TREE`:
@@ -196,9 +197,14 @@ def write_data(tree: Path, folder: Path, n_traces: int, cache: Path) -> list[Pat
     return files
 
 
+# The groups of measurements `--only` chooses from, each run by one worker or command.
+PARTS = ("conservative", "damped_frictional", "fit_iteration", "fit")
+
+
 def measure(trees: dict, repeats: int, out: Path, *, sweep: tuple[int, int, int], n_traces: int,
-            log=print) -> dict:
-    """Every measurement `repeats` times, the trees alternately; the JSON-ready result."""
+            parts: tuple[str, ...] = PARTS, log=print) -> dict:
+    """The measurements of `parts` (`PARTS`) `repeats` times each, the trees alternately; the
+    JSON-ready result."""
     cores = os.cpu_count() or 1
     work = out / "work"
     if work.exists():
@@ -208,7 +214,7 @@ def measure(trees: dict, repeats: int, out: Path, *, sweep: tuple[int, int, int]
     for name in TREES:
         log(f"{name}: preparing the kernel libraries")
         prepared[name] = prepare_kernels(trees[name], kernels[name])
-    files = write_data(trees["after"], work / "data", n_traces, kernels["after"])
+    files = write_data(trees["after"], work / "data", n_traces, kernels["after"]) if "fit" in parts else []
     values = {name: {key: [] for key, *_ in MEASUREMENTS} for name in TREES}
     records = {name: [] for name in TREES}
     failures = []
@@ -225,17 +231,17 @@ def measure(trees: dict, repeats: int, out: Path, *, sweep: tuple[int, int, int]
 
     for repeat in range(repeats):
         for part, damped in (("conservative", False), ("damped_frictional", True)):
-            for name in TREES:
+            for name in TREES if part in parts else ():
                 log(f"repeat {repeat + 1}/{repeats}: {part}, {name}")
                 n_beads, batch, steps = sweep
                 result = run_worker(trees[name], kernels[name], "throughput", cores, impl="hertzchain",
                                     n_beads=n_beads, batch=batch, steps=steps, devices=cores, damped=damped)
                 keep(name, repeat, part, result, _sweep_values)
-        for name in TREES:
+        for name in TREES if "fit_iteration" in parts else ():
             log(f"repeat {repeat + 1}/{repeats}: fit_iteration, {name}")
             keep(name, repeat, "fit_iteration", run_worker(trees[name], kernels[name], "fit_iteration", 1),
                  _iteration_values)
-        for name in TREES:
+        for name in TREES if "fit" in parts else ():
             cache = work / "fit_cache" / f"{name}{repeat}"
             _copy_libraries(kernels[name], cache)
             for part in ("fit_cold", "fit_warm"):
@@ -248,7 +254,8 @@ def measure(trees: dict, repeats: int, out: Path, *, sweep: tuple[int, int, int]
     return {"trees": {name: _commit(trees[name]) for name in TREES}, "kernel_libraries": prepared,
             "data": {"files": len(files), "written_by": "after", "synth_options": list(SYNTH_OPTIONS),
                      "velocities_m_s": f"{n_traces} log-spaced over {SYNTH_VELOCITIES_M_S}"},
-            "settings": {"repeats": repeats, "sweep_n_beads_batch_steps": list(sweep), "host_devices": cores},
+            "settings": {"repeats": repeats, "sweep_n_beads_batch_steps": list(sweep), "host_devices": cores,
+                         "parts": list(parts)},
             "values": values, "summary": summary, "runs": records, "failures": failures}
 
 
@@ -315,7 +322,13 @@ def main(argv=None) -> int:
     parser.add_argument("--traces", type=int, default=10, help="trace files of the fit [10]")
     parser.add_argument("--label", default="", help="what the machine was doing (e.g. 'quiet', 'loaded')")
     parser.add_argument("--keep-work", action="store_true", help="keep OUT/work (kernels, data, fit outputs)")
+    parser.add_argument("--only", default=",".join(PARTS),
+                        help=f"comma-separated measurements to run, of {', '.join(PARTS)} [all]")
     args = parser.parse_args(argv)
+    parts = tuple(part.strip() for part in args.only.split(",") if part.strip())
+    unknown = [part for part in parts if part not in PARTS]
+    if unknown or not parts:
+        parser.error(f"--only {args.only!r}: choose from {', '.join(PARTS)}")
     trees = {"before": Path(args.before).resolve(), "after": Path(args.after).resolve()}
     for name, tree in trees.items():
         if not (tree / "hertzchain" / "__init__.py").exists() or not (tree / "benchmarks" / "run.py").exists():
@@ -334,7 +347,8 @@ def main(argv=None) -> int:
     out = Path(args.out)
     began = time.perf_counter()
     load_before = " ".join(f"{x:.2f}" for x in os.getloadavg())
-    result = measure(trees, args.repeats, out, sweep=sweep, n_traces=args.traces, log=lambda text: print(text, file=sys.stderr, flush=True))
+    result = measure(trees, args.repeats, out, sweep=sweep, n_traces=args.traces, parts=parts,
+                     log=lambda text: print(text, file=sys.stderr, flush=True))
     result = {"label": args.label,
               "machine": {"cpus": os.cpu_count(), "load_average_before": load_before,
                           "load_average_after": " ".join(f"{x:.2f}" for x in os.getloadavg())},

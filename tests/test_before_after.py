@@ -28,3 +28,11 @@ def test_times_faster_is_smaller():
     slower = before_after.summarise(before, [2.5, 2.6], larger_is_faster=False)
     assert slower["after"]["median"] == pytest.approx(2.55, rel=1e-15)
     assert not slower["within_before_range"] and not slower["faster"] and not slower["same_or_faster"]
+
+
+def test_only_names_the_measurements_it_knows(capsys):
+    tree = str(Path(__file__).resolve().parent.parent)
+    with pytest.raises(SystemExit) as stopped:
+        before_after.main(["--before", tree, "--after", tree, "--out", "unused", "--only", "conservative,fitt"])
+    assert stopped.value.code == 2
+    assert "choose from conservative, damped_frictional, fit_iteration, fit" in capsys.readouterr().err
