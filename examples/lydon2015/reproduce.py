@@ -42,6 +42,8 @@ JOBS = {
 SCRIPTS = {
     "lydon2014_band_edge": ("lydon2014_band_edge.py",
                             lambda data, out: ["--data-dir", str(data / "lydon-2014"), "--out", str(out)]),
+    "lydon2014_static_exponent": ("lydon2014_static_exponent.py",
+                                  lambda data, out: ["--data-dir", str(data / "lydon-2014"), "--out", str(out)]),
     "two_bead_end_compliance": ("two_bead_end_compliance.py",
                                 lambda data, out: ["--data-dir", str(data / "lydon-2015"), "--out", str(out)]),
     "tongue_drive_transfer": ("tongue_drive_transfer.py",
