@@ -191,7 +191,7 @@ def test_two_process_distributed_sweep_matches_one_process(tmp_path):
     outputs = [proc.communicate(timeout=300) for proc in procs]
     for proc, (out, err) in zip(procs, outputs):
         assert proc.returncode == 0, err[-2000:]
-    assert "process 1: computed 1 chunks" in outputs[1][0]
+    assert "process 1: computed 1 chunk;" in outputs[1][0]
     assert "wrote" in outputs[0][0]
     assert (tmp_path / "two" / "sweep.csv").read_bytes() == (tmp_path / "one" / "sweep.csv").read_bytes()
 
