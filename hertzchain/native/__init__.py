@@ -2,7 +2,7 @@
 
 XLA compiles the JAX kernel of `batched` into a few loops per step, each a pass over the
 whole batch's state; `chain_kernel.cc` advances a block of 64 chains (8 for the rest of
-the batch, then one at a time) through all the steps of the run while their state stays in
+the batch, then one at a time; tangent runs in blocks of 8) through all the steps of the run while their state stays in
 the cache, computing every contact's force once per step (the loop structure of a
 hand-written kernel). Two kernels, each specialised at compile time (C++ templates) for the
 physics it runs, so that the conservative case pays nothing for the rest:

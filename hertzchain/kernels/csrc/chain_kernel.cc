@@ -351,14 +351,20 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   // blocks of 64, then of 8 (the last one may be partial), the last 2-4 chains in a block
   // of 4 (a vector costs about what one chain alone does), a last single chain alone; runs
   // with the books (sweeps: large batches) in blocks of 64 and 8 only, so that they add two
-  // block widths to the library's build, not four; the laws other than Hertz's and the
-  // compliant sensors in blocks of one width (`kOneWidth`)
+  // block widths to the library's build, not four; tangent runs in blocks of 8, 4 and 1, not
+  // 64: the Jacobian of 128 or 1024 chains in 5 directions took the same time in blocks of 8
+  // (medians 1.08 and 1.05 of the 64-wide blocks', 0.97 in a rerun of 1024 chains: within the
+  // spread of repeats), and the 64-wide tangent instantiations were 12 of the 42 s of compiling
+  // the main library's tangent part, 10 of 29 s for the dashpot's
+  // (benchmarks/results/tangent_block_width/); the laws other than Hertz's and the compliant
+  // sensors in blocks of one width (`kOneWidth`)
   std::vector<Block> blocks;
   int64_t lo = 0;
   if constexpr (kOneWidth)
     for (; lo < batch; lo += kOneWidthLanes) blocks.push_back({lo, kOneWidthLanes});
-  for (; lo + kWideLanes <= batch; lo += kWideLanes) blocks.push_back({lo, kWideLanes});
   constexpr bool kB = kPass == Pass::kBooks;
+  if constexpr (kPass != Pass::kTangent)
+    for (; lo + kWideLanes <= batch; lo += kWideLanes) blocks.push_back({lo, kWideLanes});
   int64_t narrow = 0;
   for (; batch - lo > (kB ? 0 : kQuarterLanes); lo += kNarrowLanes, ++narrow)
     blocks.push_back({lo, kNarrowLanes});
@@ -396,7 +402,8 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
       if constexpr (kOneWidth) {
         advance(std::integral_constant<int64_t, kOneWidthLanes>{}, block.lo);
       } else {
-        if (block.lanes == kWideLanes) return advance(std::integral_constant<int64_t, kWideLanes>{}, block.lo);
+        if constexpr (kPass != Pass::kTangent)
+          if (block.lanes == kWideLanes) return advance(std::integral_constant<int64_t, kWideLanes>{}, block.lo);
         if (block.lanes == kNarrowLanes) return advance(std::integral_constant<int64_t, kNarrowLanes>{}, block.lo);
         if constexpr (!kB) {
           if (block.lanes == kQuarterLanes) return advance(std::integral_constant<int64_t, kQuarterLanes>{}, block.lo);
