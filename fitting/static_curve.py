@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from fitting.driven import lag1_autocorrelation
 from fitting.least_squares import least_squares
 from hertzchain.covariance import gauss_newton_covariance
 from hertzchain.laws import ContactConstants, PowerLaw
@@ -122,8 +123,9 @@ def fit_static_exponent(displacement_m, force_n, *, reference_overlap_m: float =
     residual, jacobian = residual * scale, jacobian * scale
     dof = max(residual.size - 2, 1)
     scatter = float(np.sqrt(np.sum(residual**2) / dof))
-    rho = float(np.corrcoef(residual[:-1], residual[1:])[0, 1]) if residual.size > 3 else 0.0
-    factor = float(np.sqrt((1 + max(rho, 0.0)) / (1 - max(rho, 0.0)))) if rho < 1 else float("inf")
+    rho = lag1_autocorrelation(residual)
+    clipped = min(max(rho, 0.0), 0.999)  # as the driven fits clip it
+    factor = float(np.sqrt((1 + clipped) / (1 - clipped)))
     stderr = np.asarray(gauss_newton_covariance(jacobian, residual_std=scatter).stderr) * factor
     exponent, kappa = float(result.x[0]), float(np.exp(result.x[1]))
     return StaticExponentFit(
