@@ -5,6 +5,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 import library_compile
+import pytest
+from helpers import NEEDS_A_COMPILER
 
 from hertzchain import native
 from hertzchain.native import build
@@ -16,3 +18,17 @@ def test_its_table_is_the_set_the_kernel_command_builds():
     names = {build._library_path(defines, source).name for defines, source in table.values()}
     assert names == {path.name for path in build._current_host_libraries()}
     assert table["thornton_sensors"][0] == (f"-D{build.LAW_DEFINES['thornton']}", f"-D{build.SENSOR_DEFINE}")
+
+
+@NEEDS_A_COMPILER
+def test_front_end_check_passes_a_library_and_names_a_compile_error(tmp_path):
+    """`native.check_libraries` (the default suite's check of the libraries only slow tests
+    run) passes a real library and refuses a source with an error, naming it, writing nothing."""
+    assert list(native.check_libraries(["thornton compliant sensors"])) == [("thornton compliant sensors", None)]
+    broken = tmp_path / "broken_kernel.cc"
+    broken.write_text("int f() { return undeclared_name; }\n")
+    with pytest.raises(RuntimeError, match=r"compiling broken_kernel.cc failed: .*undeclared_name"):
+        build.check_source((), broken)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["broken_kernel.cc"]
+    with pytest.raises(ValueError, match="unknown kernel libraries"):
+        list(native.check_libraries(["thornton_sensors"]))

@@ -116,6 +116,7 @@ from .host import (  # noqa: F401
     available,
     build_libraries,
     cache_dir,
+    check_libraries,
     kernel_for,
     library_path,
     library_table,
@@ -141,6 +142,6 @@ __all__ = [
     "THREAD_FLAGS_VARIABLE", "THREAD_SOURCE", "UNMASKED_FLAGS", "VELOCITY_SQUARED_BOOKS_TARGET",
     "VELOCITY_SQUARED_DEFINE", "VELOCITY_SQUARED_DEFINES", "VELOCITY_SQUARED_FULL_TARGET",
     "VELOCITY_SQUARED_TANGENT_TARGET", "FusedKernel", "available", "build_libraries",
-    "cache_dir", "kernel_for", "kernel_record", "library_path", "library_table", "note_use", "prune_cache",
+    "cache_dir", "check_libraries", "kernel_for", "kernel_record", "library_path", "library_table", "note_use", "prune_cache",
     "run", "run_full", "run_full_books", "thread_unavailable_reason", "unavailable_reason",
 ]

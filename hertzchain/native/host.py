@@ -229,6 +229,25 @@ def build_libraries(names, jobs: int | None = None):
             yield name, path, time.perf_counter() - began, why
 
 
+def check_libraries(names):
+    """Compile the libraries `names` (`library_table` keys) through the compiler's front end
+    only (`build.check_source`: what a build would refuse, refused in a tenth of its time;
+    nothing is written or loaded). **Yields** (name, why) in the order of `names`: `why` is
+    None where it compiles, else the whole message of its failure."""
+    table = library_table()
+    unknown = [name for name in names if name not in table]
+    if unknown:
+        raise ValueError(f"unknown kernel libraries {unknown}; known: {', '.join(table)}")
+    for name in names:
+        defines, source = table[name]
+        try:
+            build.check_source(defines, source)
+        except (OSError, RuntimeError) as error:
+            yield name, str(error) or type(error).__name__
+        else:
+            yield name, None
+
+
 def _law_target(kind: str, law: str) -> str:
     """The FFI target of a full run (`kind`: "full", "tangent" or "books") on `law`'s library."""
     return f"hertzchain_chain_full_{'forward' if kind == 'full' else kind}_{law}"
