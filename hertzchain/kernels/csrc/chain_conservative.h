@@ -1,5 +1,5 @@
-// The conservative velocity-Verlet step of `batched._step` on a host kernel's block of chains
-// (`chain_kernel.cc`'s HertzChainForward): Hertz contacts, linear sensor springs, static
+// The conservative velocity-Verlet step of `batched._step` (`chain_verlet.h`) on a host
+// kernel's block of chains (`chain_kernel.cc`'s HertzChainForward): Hertz contacts, linear sensor springs, static
 // overlaps and external forces of a preload, a wall or a free end, with or without the books
 // (largest overlaps). Layouts: `chain_kernel.cc`.
 #pragma once
@@ -12,33 +12,27 @@
 #include "chain_blocks.h"
 #include "chain_lanes.h"
 #include "chain_laws.h"
+#include "chain_verlet.h"
 
 namespace hertzchain {
 
 // (static: every library its own copy, as a kernel's code differs with its library's defines)
 
-// One contact of the conservative sweep over a block's lanes: the drift of body i + 1, the
-// force of contact i (stored in `record` when given), the full kick of body i. kUniformK /
-// kUniformM: kappa / the inverse mass of the row is one value for every lane.
+// One contact of the conservative step (`ConservativeContact`) over a block's lanes, the
+// force of contact i stored in `record` when given. kUniformK / kUniformM: kappa / the
+// inverse mass of the row is one value for every lane.
 template <int64_t kLanes, bool kPreload, bool kSprings, bool kBooks, bool kUniformK, bool kUniformM, bool kRecord>
-static inline void ConservativeContact(double dt, double h, double* __restrict xi, double* __restrict xn,
-                                       const double* __restrict un, double* __restrict ui,
-                                       const double* __restrict k, const double* __restrict o,
-                                       const double* __restrict sp, const double* __restrict m,
-                                       const double* __restrict e, double* __restrict top,
-                                       double* __restrict force_before, double* __restrict record) {
+static inline void ContactOverLanes(double dt, double h, double* __restrict xi, double* __restrict xn,
+                                    const double* __restrict un, double* __restrict ui, const double* __restrict k,
+                                    const double* __restrict o, const double* __restrict sp,
+                                    const double* __restrict m, const double* __restrict e, double* __restrict top,
+                                    double* __restrict force_before, double* __restrict record) {
   const double k0 = k[0], m0 = m[0];
   ForLanes<kLanes>([&](int64_t j) HC_LANES {
-    xn[j] = xn[j] + dt * un[j];
-    double overlap = kPreload ? (xi[j] - xn[j]) + o[j] : xi[j] - xn[j];
-    double force = hertzchain::ElasticForce<kSprings>(overlap, kUniformK ? k0 : k[j], sp[j]);
-    if (kBooks) top[j] = std::max(top[j], overlap);
+    const double force = ConservativeContact<kPreload, kSprings, kBooks>(
+        dt, h, xi[j], xn[j], un[j], ui[j], kUniformK ? k0 : k[j], kPreload ? o[j] : 0.0, kSprings ? sp[j] : 0.0,
+        kUniformM ? m0 : m[j], kPreload ? e[j] : 0.0, top[j], force_before[j]);
     if (kRecord) record[j] = force;
-    double body = force_before[j] - force;
-    if (kPreload) body = body + e[j];
-    double a = body * (kUniformM ? m0 : m[j]);
-    double v = ui[j] + h * a;
-    ui[j] = v + h * a;
     force_before[j] = force;
   });
 }
@@ -87,8 +81,8 @@ static void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_sample
       for (int64_t i = 0; i < contacts; ++i) {
         double* dst = last && channel_of[i] >= 0 ? record.slot(0, channel_of[i]) : nullptr;
         auto sweep = [&](auto uk, auto um, auto rec) {
-          ConservativeContact<kLanes, kPreload, kSprings, kBooks, decltype(uk)::value, decltype(um)::value,
-                              decltype(rec)::value>(
+          ContactOverLanes<kLanes, kPreload, kSprings, kBooks, decltype(uk)::value, decltype(um)::value,
+                           decltype(rec)::value>(
               dt, h, &x[i * kLanes], &x[(i + 1) * kLanes], &u[(i + 1) * kLanes], &u[i * kLanes], &kap[i * kLanes],
               &ov0[i * kLanes], &spr[i * kLanes], &inv[i * kLanes], &ext[i * kLanes], &mx[i * kLanes],
               force_before, dst);
@@ -112,11 +106,9 @@ static void RunBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_sample
       const double* mw = &inv[contacts * kLanes];
       const double* ew = &ext[contacts * kLanes];
       for (int64_t j = 0; j < kLanes; ++j) {
-        double body = force_before[j];
-        if (kPreload) body = body + ew[j];
-        double a = body * mw[j];
-        double v = uw[j] + h * a;
-        uw[j] = v + h * a;
+        double u = uw[j];
+        ConservativeWall<kPreload>(h, u, mw[j], kPreload ? ew[j] : 0.0, force_before[j]);
+        uw[j] = u;
       }
     }
     // a contact recorded by two channels: the second a copy of the first

@@ -36,6 +36,7 @@
 
 #include "chain_ffi.h"
 #include "chain_laws.h"
+#include "chain_verlet.h"
 
 namespace ffi = xla::ffi;
 
@@ -136,28 +137,20 @@ HC_HD void ForwardChain(const ForwardArgs& A, int64_t b) {
   for (int64_t n = 0; n < A.n_samples; ++n) {
     for (int64_t s = 0; s < A.steps_per_sample; ++s) {
       // the striker's drift, then body by body the next body's drift, the force of the
-      // contact between them and this body's full kick (v = u + h a, u = v + h a)
+      // contact between them and this body's full kick (`chain_verlet.h`)
       x[0] = x[0] + dt * u[0];
       double force_before = 0.0;
 #pragma unroll
       for (int i = 0; i < kContacts; ++i) {
-        x[i + 1] = x[i + 1] + dt * u[i + 1];
-        double overlap = kPreload ? (x[i] - x[i + 1]) + A.overlap0.at(i, b) : x[i] - x[i + 1];
-        double force = hertzchain::ElasticForce<kSprings>(overlap, kappa[i], kSprings ? A.spring.at(i, b) : 0.0);
-        if (kBooks) mx[i] = overlap > mx[i] ? overlap : mx[i];
-        double body = force_before - force;
-        if (kPreload) body = body + A.external.at(i, b);
-        double a = body * inv_mass[i];
-        double v = u[i] + h * a;
-        u[i] = v + h * a;
-        force_before = force;
+        double unused_top = 0.0;
+        force_before = hertzchain::ConservativeContact<kPreload, kSprings, kBooks>(
+            dt, h, x[i], x[i + 1], u[i + 1], u[i], kappa[i], kPreload ? A.overlap0.at(i, b) : 0.0,
+            kSprings ? A.spring.at(i, b) : 0.0, inv_mass[i], kPreload ? A.external.at(i, b) : 0.0,
+            kBooks ? mx[i] : unused_top, force_before);
       }
       // the wall's row (inverse mass 0: at rest)
-      double body = force_before;
-      if (kPreload) body = body + A.external.at(kContacts, b);
-      double a = body * inv_mass[kContacts];
-      double v = u[kContacts] + h * a;
-      u[kContacts] = v + h * a;
+      hertzchain::ConservativeWall<kPreload>(h, u[kContacts], inv_mass[kContacts],
+                                             kPreload ? A.external.at(kContacts, b) : 0.0, force_before);
     }
     for (int c = 0; c < A.channels.count; ++c) {
       A.out.trace[c][n * B + b] = AtContact<0, kContacts>(A.channels.contact[c], [&](auto contact) {
