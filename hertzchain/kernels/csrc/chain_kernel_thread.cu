@@ -225,30 +225,32 @@ HC_HD void FullChain(const FullArgs& A, int64_t b, int64_t d) {
     const T sp = kExtras ? in(A.spring, A.t_spring, i, kContacts) : Like(eta, 0.0);
     return TotalForce<kViscous, kExtras, kDashpot>(dl, rate, k, c1 * k, ContactDashpot(k, dashpot), sp);
   };
+  // the friction kick (`chain_verlet.h`'s phases take it)
+  auto friction = [&](const T& w) -> T {
+    if constexpr (kFriction) {
+      return Kick(w, loss);
+    } else {
+      return w;
+    }
+  };
   // the second half kick of body i by the force `body` on it, and friction
   auto kick = [&](int i, const T& body, const T& w) {
     const T acc = body * in(A.inv_mass, A.t_inv_mass, i, kRows);
-    T vn = w + h * acc;
-    if (kFriction) vn = Kick(vn, loss);
+    v[i] = SecondHalfKick(w, acc, h, friction);
     a[i] = acc;
-    v[i] = vn;
   };
 
   for (int64_t n = 0; n < A.n_samples; ++n) {
     for (int64_t s = 0; s < A.steps_per_sample; ++s) {
       // body 0: half kick, friction, drift, predicted velocity
-      T w = v[0] + h * a[0];
-      if (kFriction) w = Kick(w, loss);
-      x[0] = x[0] + dt * w;
-      T w_prev = w, p_prev = w + h * a[0], f_prev = Like(eta, 0.0);
+      T p_prev;
+      T w_prev = HalfKickAndDrift(v[0], a[0], h, dt, friction, x[0], p_prev), f_prev = Like(eta, 0.0);
 #pragma unroll
       for (int i = 0; i < kContacts; ++i) {
         const int nx = i + 1;
         // body i + 1: half kick, friction, drift, predicted velocity
-        T wn = v[nx] + h * a[nx];
-        if (kFriction) wn = Kick(wn, loss);
-        x[nx] = x[nx] + dt * wn;
-        const T pred = wn + h * a[nx];
+        T pred;
+        const T wn = HalfKickAndDrift(v[nx], a[nx], h, dt, friction, x[nx], pred);
         // contact i
         T dl = x[i] - x[nx];
         if (kExtras) dl = dl + in(A.overlap0, A.t_overlap0, i, kContacts);

@@ -13,11 +13,26 @@
 #include "chain_full_block.h"
 #include "chain_lanes.h"
 #include "chain_laws.h"
+#include "chain_verlet.h"
 
 namespace hertzchain {
 
 // ---------------------------------------------------------------------------------------
 // The laws as the step applies them.
+
+// The friction kick's linearisation for the tangent passes, which run `chain_verlet.h`'s
+// phases on tangents: t -> by_w t + by_loss t_loss, with the partials by the velocity and the
+// loss that `FrictionKick` left and the loss's tangent t_loss; the identity without friction.
+template <bool kFriction>
+HC_LANES inline auto LinearisedKick(double by_w, double by_loss, double t_loss) {
+  return [=](double t) HC_LANES {
+    if constexpr (kFriction) {
+      return by_w * t + by_loss * t_loss;
+    } else {
+      return t;
+    }
+  };
+}
 
 // contact.track_friction_kick with its partial derivatives by the velocity and the loss (the
 // law run on dual numbers)
@@ -256,26 +271,29 @@ template <class C>
 HC_LANES inline void FullBlock<C>::FirstBody(StepSize t, Lanes& __restrict l) {
   const double h = t.h, dt = t.dt;
   for (int64_t j = 0; j < kLanes; ++j) {
-    double w = v[j] + h * a[j];
-    if constexpr (kBooks) {
-      l.raw_prev[j] = w;
-      l.work1[j] = l.work2[j] = l.lost1[j] = l.lost2[j] = l.d_prev[j] = 0.0;
-    }
-    w = FrictionKick(w, l.loss[j], &l.kick1_w[j], &l.kick1_loss[j]);
-    x[j] = x[j] + dt * w;
+    if constexpr (kBooks) l.work1[j] = l.work2[j] = l.lost1[j] = l.lost2[j] = l.d_prev[j] = 0.0;
+    auto kick = [&](double raw) HC_LANES {
+      if constexpr (kBooks) l.raw_prev[j] = raw;
+      return FrictionKick(raw, l.loss[j], &l.kick1_w[j], &l.kick1_loss[j]);
+    };
+    double position = x[j], predicted;
+    const double w = HalfKickAndDrift(v[j], a[j], h, dt, kick, position, predicted);
+    x[j] = position;
     l.w_prev[j] = w;
-    l.p_prev[j] = w + h * a[j];
+    l.p_prev[j] = predicted;
     l.f_prev[j] = 0.0;
   }
   if (kTangent)
     for (int64_t d = 0; d < D; ++d)
       ForLanes<kLanes>([&](int64_t j) HC_LANES {
-        const int64_t q = d * kLanes + j;
-        double tw = tv[d * rows_x * kLanes + j] + h * ta[d * rows_x * kLanes + j];
-        if (kFriction) tw = l.kick1_w[j] * tw + l.kick1_loss[j] * tloss[q];
-        tx[d * rows_x * kLanes + j] = tx[d * rows_x * kLanes + j] + dt * tw;
+        const int64_t q = d * kLanes + j, row = d * rows_x * kLanes + j;
+        double position = tx[row], predicted;
+        const double tw = HalfKickAndDrift(tv[row], ta[row], h, dt,
+                                           LinearisedKick<kFriction>(l.kick1_w[j], l.kick1_loss[j], tloss[q]),
+                                           position, predicted);
+        tx[row] = position;
         tw_prev[q] = tw;
-        tp_prev[q] = tw + h * ta[d * rows_x * kLanes + j];
+        tp_prev[q] = predicted;
         tf_prev[q] = 0.0;
       });
 }
@@ -290,9 +308,10 @@ HC_LANES inline void FullBlock<C>::GrowPeaks(int64_t i, StepSize t, Lanes& __res
   const int64_t ri = i * kLanes, rn = (i + 1) * kLanes;
   bool grown = false;
   ForLanes<kLanes>([&](int64_t j) HC_LANES {
-    double w = v[rn + j] + h * a[rn + j];
-    if (kFriction) w = KickOf(w, l.loss[j]);
-    double dl = x[ri + j] - (x[rn + j] + dt * w);
+    double drifted = x[rn + j], predicted;
+    HalfKickAndDrift(v[rn + j], a[rn + j], h, dt, [&](double w) HC_LANES { return kFriction ? KickOf(w, l.loss[j]) : w; },
+                     drifted, predicted);
+    double dl = x[ri + j] - drifted;
     if constexpr (kExtras) dl = dl + ov0[ri + j];
     if constexpr (kSensors) dl = dl + cut[ri + j];
     const double old = pk[ri + j];
@@ -325,11 +344,14 @@ HC_LANES inline void FullBlock<C>::Sweep(int64_t i, StepSize t, Lanes& __restric
     const double kj = kUK ? k0 : kap[ri + j], kvj = kUK ? kv0 : kvis[ri + j];
     const double dj = kDashpot ? (kUK ? d0 : dsh[ri + j]) : 0.0;
     // body i + 1: half kick, friction, drift, predicted velocity
-    double w = v[rn + j] + h * a[rn + j];
-    double w_raw = w;
-    w = FrictionKick(w, l.loss[j], &l.kick1_w[j], &l.kick1_loss[j]);
-    x[rn + j] = x[rn + j] + dt * w;
-    double pred = w + h * a[rn + j];
+    double w_raw;
+    auto first_kick = [&](double raw) HC_LANES {
+      w_raw = raw;
+      return FrictionKick(raw, l.loss[j], &l.kick1_w[j], &l.kick1_loss[j]);
+    };
+    double position = x[rn + j], pred;
+    const double w = HalfKickAndDrift(v[rn + j], a[rn + j], h, dt, first_kick, position, pred);
+    x[rn + j] = position;
     // contact i
     double dl = x[ri + j] - x[rn + j];
     if constexpr (kExtras) dl = dl + ov0[ri + j];
@@ -349,9 +371,11 @@ HC_LANES inline void FullBlock<C>::Sweep(int64_t i, StepSize t, Lanes& __restric
     double b = l.f_prev[j] - f;
     if constexpr (kExtras) b = b + ext[ri + j];
     double acc = b * (kUM ? m0 : inv[ri + j]);
-    double vn = l.w_prev[j] + h * acc;
-    double vn_raw = vn;
-    vn = FrictionKick(vn, l.loss[j], &l.kick2_w[j], &l.kick2_loss[j]);
+    double vn_raw;
+    const double vn = SecondHalfKick(l.w_prev[j], acc, h, [&](double raw) HC_LANES {
+      vn_raw = raw;
+      return FrictionKick(raw, l.loss[j], &l.kick2_w[j], &l.kick2_loss[j]);
+    });
     if constexpr (kBooks) {  // body i's energy terms, contact i's largest force
       if (kViscous) {
         // total - elastic of contact i (springs in both, as `batched` adds them)
@@ -399,10 +423,11 @@ HC_LANES inline void FullBlock<C>::TangentSweep(int64_t i, StepSize t, Lanes& __
     const int64_t tc = (d * contacts + i) * kLanes;
     ForLanes<kLanes>([&](int64_t j) HC_LANES {
       const int64_t q = d * kLanes + j;
-      double tw = tv[tn + j] + h * ta[tn + j];
-      if (kFriction) tw = l.kick1_w[j] * tw + l.kick1_loss[j] * tloss[q];
-      tx[tn + j] = tx[tn + j] + dt * tw;
-      double tpred = tw + h * ta[tn + j];
+      double position = tx[tn + j], tpred;
+      const double tw = HalfKickAndDrift(tv[tn + j], ta[tn + j], h, dt,
+                                         LinearisedKick<kFriction>(l.kick1_w[j], l.kick1_loss[j], tloss[q]),
+                                         position, tpred);
+      tx[tn + j] = position;
       double tdl = tx[ti + j] - tx[tn + j];
       if constexpr (kExtras && !kFixed) tdl = tdl + tov0[tc + j];
       double trate = tp_prev[q] - tpred;
@@ -420,8 +445,8 @@ HC_LANES inline void FullBlock<C>::TangentSweep(int64_t i, StepSize t, Lanes& __
       if constexpr (kExtras && !kFixed) tb = tb + text[ti + j];
       double tacc = tb * inv[ri + j];
       if constexpr (!kFixed) tacc = tacc + l.body[j] * tinv[ti + j];
-      double tvn = tw_prev[q] + h * tacc;
-      if (kFriction) tvn = l.kick2_w[j] * tvn + l.kick2_loss[j] * tloss[q];
+      const double tvn =
+          SecondHalfKick(tw_prev[q], tacc, h, LinearisedKick<kFriction>(l.kick2_w[j], l.kick2_loss[j], tloss[q]));
       ta[ti + j] = tacc;
       tv[ti + j] = tvn;
       tf_prev[q] = tf;
@@ -446,9 +471,11 @@ HC_LANES inline void FullBlock<C>::Wall(StepSize t, Lanes& __restrict l) {
     double b = l.f_prev[j];
     if constexpr (kExtras) b = b + ext[rw + j];
     double acc = b * inv[rw + j];
-    double vn = l.w_prev[j] + h * acc;
-    const double vn_raw = vn;
-    vn = FrictionKick(vn, l.loss[j], &l.kick2_w[j], &l.kick2_loss[j]);
+    double vn_raw;
+    const double vn = SecondHalfKick(l.w_prev[j], acc, h, [&](double raw) HC_LANES {
+      vn_raw = raw;
+      return FrictionKick(raw, l.loss[j], &l.kick2_w[j], &l.kick2_loss[j]);
+    });
     if constexpr (kBooks) {  // the wall's terms, then the step's dissipation
       if (kViscous) {
         l.work1[j] = l.work1[j] + vis[rw + j] * h * 0.5 * (v[rw + j] + l.raw_prev[j]);
@@ -469,8 +496,8 @@ HC_LANES inline void FullBlock<C>::Wall(StepSize t, Lanes& __restrict l) {
         double tb = tf_prev[q];
         if constexpr (kExtras) tb = tb + text[tw_row + j];
         double tacc = tb * inv[rw + j] + l.body[j] * tinv[tw_row + j];
-        double tvn = tw_prev[q] + h * tacc;
-        if (kFriction) tvn = l.kick2_w[j] * tvn + l.kick2_loss[j] * tloss[q];
+        const double tvn =
+            SecondHalfKick(tw_prev[q], tacc, h, LinearisedKick<kFriction>(l.kick2_w[j], l.kick2_loss[j], tloss[q]));
         ta[tw_row + j] = tacc;
         tv[tw_row + j] = tvn;
       });

@@ -1,11 +1,19 @@
-// The conservative velocity-Verlet step of `batched._step` on one chain's bodies and
-// contacts, written once for every native kernel that runs it: a lane of the host's blocks of
-// chains (`chain_conservative.h`) and a thread of the one-thread-per-chain kernels
-// (`chain_kernel_thread.cu`, on the host or a GPU). The step keeps u = v + (dt/2) a: the
-// striker's drift, then contact by contact the drift of the next body, the contact's force
-// and the full kick of the body behind it, then the wall's kick. The arithmetic is the JAX
-// kernel's, operation for operation and in its order (no contraction into fused
-// multiply-adds), so that every kernel agrees with it to round-off.
+// The velocity-Verlet step of `batched._step` on one chain's bodies and contacts, written once
+// for every native kernel that runs it: a lane of the host's blocks of chains
+// (`chain_conservative.h`, `chain_step.h`) and a thread of the one-thread-per-chain kernels
+// (`chain_kernel_thread.cu`, on the host or a GPU). The arithmetic is the JAX kernel's,
+// operation for operation and in its order (no contraction into fused multiply-adds), so
+// that every kernel agrees with it to round-off.
+//
+// The conservative step keeps u = v + (dt/2) a: the striker's drift, then contact by contact
+// the drift of the next body, the contact's force and the full kick of the body behind it,
+// then the wall's kick. The full step (damping, friction) keeps v and a apart: a body's first
+// half kick, friction kick and drift (`HalfKickAndDrift`), the contact's force at the
+// predicted velocities (`chain_laws.h`), the second half kick and friction kick of the body
+// behind it (`SecondHalfKick`). Its phases are templates over the number type and the
+// friction kick: run on doubles with `Kick` for the values, on dual numbers for the thread
+// kernel's tangents, and on tangents with the friction kick's linearisation for the host's
+// tangent passes (the phases are linear in the state but for that kick).
 #pragma once
 
 #include "chain_laws.h"
@@ -49,6 +57,25 @@ HC_HD HC_INLINE void ConservativeWall(double h, double& u, double inv_mass, doub
   double body = force_before;
   if (kPreload) body = body + external;
   FullKick(u, h, body * inv_mass);
+}
+
+// A body's first half kick and drift in the full step: w = kick(v + h a) (`kick`: the friction
+// kick, or the identity), x = x + dt w; returns w, and `predicted` = w + h a, the velocity the
+// contacts' rates are taken at. T: a double (m, m/s, m/s^2), a dual number, or a tangent.
+template <class T, class KickFn>
+HC_HD HC_INLINE T HalfKickAndDrift(const T& v, const T& a, double h, double dt, const KickFn& kick, T& x,
+                                   T& predicted) {
+  const T w = kick(v + h * a);
+  x = x + dt * w;
+  predicted = w + h * a;
+  return w;
+}
+
+// A body's second half kick in the full step: kick(w + h a), w its half-kicked velocity and a
+// its new acceleration.
+template <class T, class KickFn>
+HC_HD HC_INLINE T SecondHalfKick(const T& w, const T& a, double h, const KickFn& kick) {
+  return kick(w + h * a);
 }
 
 }  // namespace hertzchain
