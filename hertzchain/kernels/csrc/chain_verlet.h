@@ -1,7 +1,9 @@
 // The velocity-Verlet step of `batched._step` on one chain's bodies and contacts, written once
 // for every native kernel that runs it: a lane of the host's blocks of chains
-// (`chain_conservative.h`, `chain_step.h`) and a thread of the one-thread-per-chain kernels
-// (`chain_kernel_thread.cu`, on the host or a GPU). The arithmetic is the JAX kernel's,
+// (`chain_conservative.h`, `chain_step.h`), a thread of the one-thread-per-chain kernels
+// (`chain_kernel_thread.cu`, on the host or a GPU) and a lane of the driven chains' blocks
+// (`driven_kernel.cc`: its drag in the acceleration of the first half kick and implicit in
+// the second, as that kick's function). The arithmetic is the JAX kernel's,
 // operation for operation and in its order (no contraction into fused multiply-adds), so
 // that every kernel agrees with it to round-off.
 //
@@ -61,9 +63,10 @@ HC_HD HC_INLINE void ConservativeWall(double h, double& u, double inv_mass, doub
 
 // A body's first half kick and drift in the full step: w = kick(v + h a) (`kick`: the friction
 // kick, or the identity), x = x + dt w; returns w, and `predicted` = w + h a, the velocity the
-// contacts' rates are taken at. T: a double (m, m/s, m/s^2), a dual number, or a tangent.
-template <class T, class KickFn>
-HC_HD HC_INLINE T HalfKickAndDrift(const T& v, const T& a, double h, double dt, const KickFn& kick, T& x,
+// contacts' rates are taken at. T: a double (m, m/s, m/s^2), a dual number, or a tangent; H,
+// the step's: a double, or a dual number where the step has a tangent (the driven kernel's).
+template <class T, class H, class KickFn>
+HC_HD HC_INLINE T HalfKickAndDrift(const T& v, const T& a, const H& h, const H& dt, const KickFn& kick, T& x,
                                    T& predicted) {
   const T w = kick(v + h * a);
   x = x + dt * w;
@@ -73,8 +76,8 @@ HC_HD HC_INLINE T HalfKickAndDrift(const T& v, const T& a, double h, double dt, 
 
 // A body's second half kick in the full step: kick(w + h a), w its half-kicked velocity and a
 // its new acceleration.
-template <class T, class KickFn>
-HC_HD HC_INLINE T SecondHalfKick(const T& w, const T& a, double h, const KickFn& kick) {
+template <class T, class H, class KickFn>
+HC_HD HC_INLINE T SecondHalfKick(const T& w, const T& a, const H& h, const KickFn& kick) {
   return kick(w + h * a);
 }
 

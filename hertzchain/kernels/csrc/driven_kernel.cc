@@ -40,6 +40,7 @@
 #include "chain_blocks.h"
 #include "chain_lanes.h"
 #include "chain_laws.h"
+#include "chain_verlet.h"
 
 namespace ffi = xla::ffi;
 
@@ -93,6 +94,14 @@ struct Slopes {
 // the tangents (the same operations on them: JAX's jvp rules).
 using Dual1 = hertzchain::Dual<1, 1u>;
 
+// a kick without friction (`chain_verlet.h`'s phases take the kick as a function)
+struct Identity {
+  template <class T>
+  HC_INLINE T operator()(const T& w) const {
+    return w;
+  }
+};
+
 // num / den for a den constant through the run, inv its reciprocal: the quotient for the
 // values (as JAX divides), the product with the reciprocal for dual numbers (the same
 // derivative: no division per direction and step, a fifth of the tangent run's time)
@@ -109,18 +118,6 @@ template <class T>
 HC_INLINE RunConstants<T> Constants(const T& dt, const T& eta, double ramp) {
   const T ramp_time = ramp * dt;
   return {0.5 * dt, 1.5 * eta, ramp_time, 1.0 / ramp_time};
-}
-
-// the kick and drift of one bead: kick = h (f - gamma v), v_half = v + kick, x' = x + dt
-// v_half (x in place), and the predicted velocity v_half + kick (into references: a
-// returned struct of them leaves the lane loops scalar)
-template <class T>
-HC_INLINE void KickAndDrift(T& x, const T& v, const T& f, const T& g, const T& h, const T& dt, T& half,
-                            T& predicted) {
-  const T kick = h * (f - g * v);
-  half = v + kick;
-  x = x + dt * half;
-  predicted = half + kick;
 }
 
 // the driver (`drive.harmonic_segment` from 0 to a: from + change S, change = a; without a
@@ -242,9 +239,12 @@ struct DrivenBlock {
       const OutRow x_out = Out(x, tx, i, n, d), half = Out(vh, tvh, i, n, d), pred = Out(vp, tvp, i, n, d);
 #pragma GCC ivdep
       for (int64_t j = 0; j < L; ++j) {
-        T position = At<T>(x_in, j), half_v, predicted;
-        KickAndDrift(position, At<T>(v_in, j), At<T>(f_in, j), At<T>(g_in, j), At<T>(h_row, j), At<T>(dt_row, j),
-                     half_v, predicted);
+        // (`chain_verlet.h`: the drag in the first half kick's acceleration f - gamma v)
+        const T velocity = At<T>(v_in, j);
+        T position = At<T>(x_in, j), predicted;
+        const T half_v = hertzchain::HalfKickAndDrift(velocity, At<T>(f_in, j) - At<T>(g_in, j) * velocity,
+                                                      At<T>(h_row, j), At<T>(dt_row, j), Identity{}, position,
+                                                      predicted);
         Put(position, x_out, j);
         Put(half_v, half, j);
         Put(predicted, pred, j);
@@ -338,8 +338,9 @@ struct DrivenBlock {
       const Row den_in = In(den, tden, i, n, d), inv_in = In(inv_den, tinv_den, i, n, d);
       const OutRow out = Out(v, tv, i, n, d);
       auto lane = [&](int64_t j) HC_LANES {
-        const T num = At<T>(half, j) + At<T>(h_row, j) * At<T>(f_in, j);
-        Put(Over(num, At<T>(den_in, j), At<T>(inv_in, j)), out, j);
+        // (`chain_verlet.h`, the drag implicit: the kick divides by 1 + h gamma)
+        const auto implicit_drag = [&](const T& num) HC_LANES { return Over(num, At<T>(den_in, j), At<T>(inv_in, j)); };
+        Put(hertzchain::SecondHalfKick(At<T>(half, j), At<T>(f_in, j), At<T>(h_row, j), implicit_drag), out, j);
       };
       ForLanes<L, std::is_same_v<T, double>>(lane);
     }
