@@ -9,6 +9,8 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <type_traits>
+#include <utility>
 
 #include "chain_full_block.h"
 #include "chain_lanes.h"
@@ -204,6 +206,47 @@ inline double FullBlock<C>::PlasticInput(int k, int64_t d, int64_t i, int64_t j)
 }
 
 // ---------------------------------------------------------------------------------------
+// The compliant sensors' laws (`compliant_sensor`), over the number type: doubles for the
+// values, a dual number along one direction (`hertzchain::Along`) for each direction's
+// tangents.
+
+// A value and its tangent along one direction as a dual number.
+HC_LANES inline hertzchain::Dual<1, 1u> WithTangent(double value, double tangent) {
+  return hertzchain::Along(value, tangent);
+}
+
+// A sensor's first half kick and drift (`compliant_sensor.drift`): from its drive, force and
+// rate (N, N/s) and its 1/omega0^2 (s^2; `quasi`: the step does not resolve its resonance,
+// and the force follows the drive), its new force, half-step rate and predicted rate.
+template <class T>
+struct SensorDrifted {
+  T force, half, predicted;
+};
+template <class T>
+HC_LANES inline SensorDrifted<T> SensorDriftOf(const T& drive, const T& force, const T& rate, const T& inv_w2,
+                                               bool quasi, double h, double dt) {
+  const T gap = drive - force;
+  const T accel = quasi ? hertzchain::Like(gap, 0.0) : gap / inv_w2;
+  const T half = rate + h * accel;
+  return {quasi ? drive : force + dt * half, half, half + h * accel};
+}
+
+// A sensor's second half kick (`compliant_sensor.kick`) from its new drive beta F_back +
+// (1 - beta) F_front: the drive and the new rate (0 where `quasi`).
+template <class T>
+struct SensorKicked {
+  T drive, rate;
+};
+template <class T>
+HC_LANES inline SensorKicked<T> SensorKickOf(const T& beta, const T& back, const T& front, const T& force,
+                                             const T& half, const T& inv_w2, bool quasi, double h) {
+  const T drive = beta * back + (1.0 - beta) * front;
+  const T gap = drive - force;
+  const T accel = quasi ? hertzchain::Like(gap, 0.0) : gap / inv_w2;
+  return {drive, quasi ? hertzchain::Like(gap, 0.0) : half + h * accel};
+}
+
+// ---------------------------------------------------------------------------------------
 // The phases of a step.
 
 // The sensors' first half kick and drift (`compliant_sensor.drift`), then the cuts of every
@@ -216,28 +259,24 @@ HC_LANES inline void FullBlock<C>::SensorDrift(StepSize t, Lanes& __restrict l) 
     for (int64_t k = 0; k < ns; ++k)
       for (int64_t j = 0; j < kLanes; ++j) {
         const int64_t c = k * kLanes + j;
-        const double inv_w2 = sp[inv_row(k) * kLanes + j];
+        const double inv_w2 = sp[inv_row(k) * kLanes + j], first = sp[first_row * kLanes + j];
         const bool quasi = inv_w2 < t.dt2;  // the step does not resolve the resonance
-        const double gap = sd[c] - sf[c];
-        const double accel = quasi ? 0.0 : gap / inv_w2;
-        const double half = sr[c] + h * accel;
-        const double force = quasi ? sd[c] : sf[c] + dt * half;
-        if constexpr (kTangent)  // (JAX's rules: d(a/b) = da/b + (-db a) b^-2)
+        if constexpr (kTangent)  // (before the values move on: the same law on dual numbers)
           for (int64_t d = 0; d < D; ++d) {
             const int64_t q = (d * ns + k) * kLanes + j;
-            const double tinv_w2 = tsens(d, inv_row(k))[j];
-            const double taccel =
-                quasi ? 0.0 : (tsd[q] - tsf[q]) / inv_w2 + ((-tinv_w2) * gap) * (1.0 / (inv_w2 * inv_w2));
-            const double thalf = tsr[q] + h * taccel;
-            tsf[q] = quasi ? tsd[q] : tsf[q] + dt * thalf;
-            ts_half[q] = thalf;
-            ts_pred[q] = thalf + h * taccel;
-            ts_amt[q] = tsf[q] - tsens(d, first_row)[j];
+            const auto drifted = SensorDriftOf(WithTangent(sd[c], tsd[q]), WithTangent(sf[c], tsf[q]),
+                                               WithTangent(sr[c], tsr[q]),
+                                               WithTangent(inv_w2, tsens(d, inv_row(k))[j]), quasi, h, dt);
+            tsf[q] = drifted.force.d[0];
+            ts_half[q] = drifted.half.d[0];
+            ts_pred[q] = drifted.predicted.d[0];
+            ts_amt[q] = (drifted.force - WithTangent(first, tsens(d, first_row)[j])).d[0];
           }
-        sf[c] = force;
-        s_half[c] = half;
-        s_pred[c] = half + h * accel;
-        s_amt[c] = force - sp[first_row * kLanes + j];
+        const SensorDrifted<double> drifted = SensorDriftOf(sd[c], sf[c], sr[c], inv_w2, quasi, h, dt);
+        sf[c] = drifted.force;
+        s_half[c] = drifted.half;
+        s_pred[c] = drifted.predicted;
+        s_amt[c] = drifted.force - first;
         s_quasi[c] = quasi ? 1.0 : 0.0;
       }
     for (int64_t k = 0; k < ns; ++k)
@@ -253,14 +292,19 @@ HC_LANES inline void FullBlock<C>::SensorDrift(StepSize t, Lanes& __restrict l) 
         for (int64_t j = 0; j < kLanes; ++j) {
           const int64_t e = k * kLanes + j, i = row * kLanes + j;
           const double comp = sp[crow * kLanes + j];
-          cut[i] = cut[i] - comp * s_amt[e];
-          cut_rate[i] = cut_rate[i] - comp * s_pred[e];
-          for (int64_t d = 0; d < D; ++d) {  // (JAX's rule for c a: dc a + c da)
+          // the contact shortened by the sensor's compliance times its force (or rate)
+          const auto shortened = [](const auto& cut_by, const auto& compliance, const auto& amount) HC_LANES {
+            return cut_by - compliance * amount;
+          };
+          for (int64_t d = 0; d < D; ++d) {  // (the same on dual numbers)
             const int64_t td = (d * contacts + row) * kLanes + j, te = (d * ns + k) * kLanes + j;
-            const double tcomp = tsens(d, crow)[j];
-            tcut[td] = tcut[td] - (tcomp * s_amt[e] + comp * ts_amt[te]);
-            tcut_rate[td] = tcut_rate[td] - (tcomp * s_pred[e] + comp * ts_pred[te]);
+            const auto tcomp = WithTangent(comp, tsens(d, crow)[j]);
+            tcut[td] = shortened(WithTangent(cut[i], tcut[td]), tcomp, WithTangent(s_amt[e], ts_amt[te])).d[0];
+            tcut_rate[td] =
+                shortened(WithTangent(cut_rate[i], tcut_rate[td]), tcomp, WithTangent(s_pred[e], ts_pred[te])).d[0];
           }
+          cut[i] = shortened(cut[i], comp, s_amt[e]);
+          cut_rate[i] = shortened(cut_rate[i], comp, s_pred[e]);
         }
       }
   }
@@ -513,22 +557,19 @@ HC_LANES inline void FullBlock<C>::SensorKick(StepSize t, Lanes& __restrict l) {
         const int64_t c = k * kLanes + j;
         const double beta = sp[beta_row(k) * kLanes + j], inv_w2 = sp[inv_row(k) * kLanes + j];
         const bool quasi = s_quasi[c] != 0.0;
-        const double drive = beta * s_fb[c] + (1.0 - beta) * s_ff[c];
-        const double gap = drive - sf[c];
-        const double accel = quasi ? 0.0 : gap / inv_w2;
-        if constexpr (kTangent)
+        if constexpr (kTangent)  // (before the values move on: the same law on dual numbers)
           for (int64_t d = 0; d < D; ++d) {
             const int64_t q = (d * ns + k) * kLanes + j;
-            const double tbeta = tsens(d, beta_row(k))[j], tinv_w2 = tsens(d, inv_row(k))[j];
-            const double tdrive =
-                (tbeta * s_fb[c] + beta * ts_fb[q]) + ((-tbeta) * s_ff[c] + (1.0 - beta) * ts_ff[q]);
-            const double taccel =
-                quasi ? 0.0 : (tdrive - tsf[q]) / inv_w2 + ((-tinv_w2) * gap) * (1.0 / (inv_w2 * inv_w2));
-            tsr[q] = quasi ? 0.0 : ts_half[q] + h * taccel;
-            tsd[q] = tdrive;
+            const auto kicked = SensorKickOf(
+                WithTangent(beta, tsens(d, beta_row(k))[j]), WithTangent(s_fb[c], ts_fb[q]),
+                WithTangent(s_ff[c], ts_ff[q]), WithTangent(sf[c], tsf[q]), WithTangent(s_half[c], ts_half[q]),
+                WithTangent(inv_w2, tsens(d, inv_row(k))[j]), quasi, h);
+            tsr[q] = kicked.rate.d[0];
+            tsd[q] = kicked.drive.d[0];
           }
-        sr[c] = quasi ? 0.0 : s_half[c] + h * accel;
-        sd[c] = drive;
+        const SensorKicked<double> kicked = SensorKickOf(beta, s_fb[c], s_ff[c], sf[c], s_half[c], inv_w2, quasi, h);
+        sr[c] = kicked.rate;
+        sd[c] = kicked.drive;
       }
   }
 }
@@ -540,20 +581,36 @@ HC_LANES inline void FullBlock<C>::Record(Lanes& __restrict l) {
     // kSensors: the sensors' forces and rates at the sample shorten contact i
     const int64_t sb = kSensors ? back_of[i] : -1, sf_ = kSensors ? front_of[i] : -1;
     for (int64_t j = 0; j < kLanes; ++j) {
-      double dl = x[ri + j] - x[rn + j];
-      if constexpr (kExtras) dl = dl + ov0[ri + j];
-      double rate = v[ri + j] - v[rn + j];
-      if constexpr (kSensors) {
-        const double first = sp[first_row * kLanes + j];
-        if (sb >= 0) {
-          dl = dl - sp[back_row(sb) * kLanes + j] * (sf[sb * kLanes + j] - first);
-          rate = rate - sp[back_row(sb) * kLanes + j] * sr[sb * kLanes + j];
+      // contact i's overlap and rate over a number type: doubles for the values (d = -1), dual
+      // numbers along direction d for its tangents (`WithTangent`; `tangent` read only then)
+      auto overlap_and_rate = [&](auto on_duals, int64_t d) HC_LANES {
+        constexpr bool kDual = decltype(on_duals)::value;
+        auto number = [&](double value, const auto& tangent) HC_LANES {
+          if constexpr (kDual) {
+            return WithTangent(value, tangent());
+          } else {
+            return value;
+          }
+        };
+        const int64_t ti = (d * rows_x + i) * kLanes + j, tn = (d * rows_x + i + 1) * kLanes + j;
+        const int64_t tc = (d * contacts + i) * kLanes + j;
+        auto dl = number(x[ri + j], [&] { return tx[ti]; }) - number(x[rn + j], [&] { return tx[tn]; });
+        if constexpr (kExtras) dl = dl + number(ov0[ri + j], [&] { return tov0[tc]; });
+        auto rate = number(v[ri + j], [&] { return tv[ti]; }) - number(v[rn + j], [&] { return tv[tn]; });
+        if constexpr (kSensors) {
+          const auto first = number(sp[first_row * kLanes + j], [&] { return tsens(d, first_row)[j]; });
+          auto shorten = [&](int64_t k, int64_t row) {  // by sensor k's compliance in `row`
+            const auto comp = number(sp[row * kLanes + j], [&] { return tsens(d, row)[j]; });
+            const int64_t e = k * kLanes + j, te = (d * ns + k) * kLanes + j;
+            dl = dl - comp * (number(sf[e], [&] { return tsf[te]; }) - first);
+            rate = rate - comp * number(sr[e], [&] { return tsr[te]; });
+          };
+          if (sb >= 0) shorten(sb, back_row(sb));
+          if (sf_ >= 0) shorten(sf_, front_row(sf_));
         }
-        if (sf_ >= 0) {
-          dl = dl - sp[front_row(sf_) * kLanes + j] * (sf[sf_ * kLanes + j] - first);
-          rate = rate - sp[front_row(sf_) * kLanes + j] * sr[sf_ * kLanes + j];
-        }
-      }
+        return std::make_pair(dl, rate);
+      };
+      const auto [dl, rate] = overlap_and_rate(std::false_type{}, -1);
       if constexpr (!kTangent) {
         const double dj = kDashpot ? dsh[ri + j] : 0.0;
         record.slot(0, c)[j] = LawForce(dl, rate, kap[ri + j], kvis[ri + j], dj, spr[ri + j], LawIn(ri + j, j, 0),
@@ -563,27 +620,12 @@ HC_LANES inline void FullBlock<C>::Record(Lanes& __restrict l) {
       double here[kForceInputs];  // the force's partials (`ContactSlopes`)
       record.slot(0, c)[j] = ContactSlopes<true>(dl, rate, kap[ri + j], l.c1[j], dash[j], spr[ri + j], ri + j, j, here, 1);
       for (int64_t d = 0; d < D; ++d) {
-        const int64_t q = d * kLanes + j;
-        const int64_t ti = (d * rows_x + i) * kLanes, tn = (d * rows_x + i + 1) * kLanes;
-        const int64_t tc = (d * contacts + i) * kLanes;
-        double tdl = tx[ti + j] - tx[tn + j];
-        if constexpr (kExtras) tdl = tdl + tov0[tc + j];
-        double trate = tv[ti + j] - tv[tn + j];
-        if constexpr (kSensors) {
-          const double first = sp[first_row * kLanes + j], tfirst = tsens(d, first_row)[j];
-          auto shorten = [&](int64_t k, int64_t row) {  // sensor k's compliance in `row`
-            const double comp = sp[row * kLanes + j], tcomp = tsens(d, row)[j];
-            const int64_t e = k * kLanes + j, te = (d * ns + k) * kLanes + j;
-            tdl = tdl - (tcomp * (sf[e] - first) + comp * (tsf[te] - tfirst));
-            trate = trate - (tcomp * sr[e] + comp * tsr[te]);
-          };
-          if (sb >= 0) shorten(sb, back_row(sb));
-          if (sf_ >= 0) shorten(sf_, front_row(sf_));
-        }
+        const int64_t q = d * kLanes + j, tc = (d * contacts + i) * kLanes;
+        const auto [tdl, trate] = overlap_and_rate(std::true_type{}, d);
         double tlaw0, tlaw1;
         LawTangents(i, j, d, &tlaw0, &tlaw1);
-        record.slot(d + 1, c)[j] = ForceTangent<true>(here, 1, tdl, trate, tkap[tc + j], t15eta[q], tdash[q],
-                                                      tspr[tc + j], tlaw0, tlaw1);
+        record.slot(d + 1, c)[j] = ForceTangent<true>(here, 1, tdl.d[0], trate.d[0], tkap[tc + j], t15eta[q],
+                                                      tdash[q], tspr[tc + j], tlaw0, tlaw1);
       }
     }
   }
