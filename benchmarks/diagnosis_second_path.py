@@ -162,7 +162,7 @@ def elastic_check() -> float:
     setup = hc.ChainSetup(spec["n_beads"], striker_velocity_m_s=max(spec["velocities_m_s"]), **spec["fields"])
     _, forces = thornton_chain([setup], spec["record_s"], spec["contacts"])
     reference = simulate_reference(setup, t_end_s=spec["record_s"], sample_interval_s=0.25e-6,
-                                   contacts=spec["contacts"], rtol=1e-9)
+                                   contacts=spec["contacts"], rtol=1e-9, on_yield="ignore")  # (elastic on purpose)
     worst = 0.0
     for name, values in forces.items():
         other = np.asarray(reference.forces_n[name])

@@ -146,7 +146,8 @@ def hertzchain(*args, cwd) -> dict:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     done = subprocess.run([sys.executable, "-m", "hertzchain", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, check=False)
-    warned = [line.strip() for line in done.stderr.splitlines() if "Warning: " in line]
+    # (a command prints each warning as one line "hertzchain COMMAND: warning: TEXT")
+    warned = [line.strip() for line in done.stderr.splitlines() if ": warning: " in line]
     return {"command": "hertzchain " + " ".join(args), "exit_status": done.returncode,
             "wall_s": time.perf_counter() - start, "warnings": warned,
             "output_tail": (done.stdout + done.stderr)[-1500:]}

@@ -71,13 +71,17 @@ def simulate_reference(
     friction_smoothing_m_s: float = 1e-6,
     record_all: bool = False,
     max_steps: int = 2_000_000,
+    on_yield: str = "warn",
 ):
     """Simulate `setup` with diffrax (Dopri8, PID step control); same outputs as `simulate`.
 
-    **Arguments:** as `simulate`, plus `rtol` and `atol` (tolerances on the state made
+    **Arguments:** as `simulate` (`on_yield`: `"warn"`, `"raise"` or `"ignore"` when a force
+    exceeds the yield force), plus `rtol` and `atol` (tolerances on the state made
     dimensionless by the striker's speed, its kinetic energy and momentum and its first
     collision's overlap), and `friction_smoothing_m_s` (see module docstring).
     """
+    if on_yield not in ("warn", "raise", "ignore"):
+        raise ValueError(f"on_yield must be 'warn', 'raise' or 'ignore', got {on_yield!r}.")
     if setup.plasticity:
         raise ValueError(
             "The reference solver integrates an ODE and cannot follow the history of plastic "
@@ -88,7 +92,7 @@ def simulate_reference(
     n_samples = round(t_end_s / sample_interval_s)
     grid = TimeGrid(dt_s=sample_interval_s, steps_per_sample=1, n_samples=n_samples)
     traces = _reference_jit(setup, grid, recording, rtol, atol, friction_smoothing_m_s, max_steps)
-    check_yield(traces, "warn")
+    check_yield(traces, on_yield)
     return traces
 
 

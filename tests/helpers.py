@@ -6,6 +6,8 @@ imports them from here, never from another test file)."""
 import math
 import os
 import shutil
+import subprocess
+import sys
 
 import jax
 import numpy as np
@@ -23,6 +25,22 @@ from hertzchain.integrate import Recording
 NEEDS_A_COMPILER = pytest.mark.skipif(
     (shutil.which("c++") or native.build._cxx()) is None or os.environ.get("HERTZCHAIN_NATIVE", "1") == "0",
     reason="no C++ compiler (or HERTZCHAIN_NATIVE=0): the fused kernel cannot be built here")
+
+
+def rerun_at_the_default_xla_level(test_file: str, test_name: str) -> bool:
+    """Where the suite lowered XLA's optimisation level (tests/conftest.py), run the test
+    `test_name` of `test_file` again in a process of its own at the default level and fail
+    with its output unless it passes there: True where it ran there (the caller then returns),
+    False where this process is already at the default level (the caller runs its checks)."""
+    if "xla_backend_optimization_level=0" not in os.environ.get("XLA_FLAGS", "") or os.environ.get(
+            "HERTZCHAIN_TEST_XLA_DEFAULT_LEVEL") == "1":
+        return False
+    flags = " ".join(f for f in os.environ["XLA_FLAGS"].split() if "xla_backend_optimization_level" not in f)
+    env = dict(os.environ, XLA_FLAGS=flags, HERTZCHAIN_TEST_XLA_DEFAULT_LEVEL="1")
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-n", "0", "-m", "",
+                           f"{test_file}::{test_name}"], env=env, capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, f"{test_name} at XLA's default optimisation level:\n{proc.stdout[-4000:]}"
+    return True
 
 
 def jackson_green_force(overlap, peak, kappa, radius, sigma, nu, hardness=2.84):

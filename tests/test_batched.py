@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import rerun_at_the_default_xla_level
 
 import hertzchain as hc
 from hertzchain.batched import solve_batched, stack_setups
@@ -226,7 +227,11 @@ def test_fast_path_uses_the_force_laws_of_solve(case):
 def test_kernel_without_books_records_the_same_forces():
     """`ledger=False` (what fits run) drops the maxima and the energy books, not the physics:
     the recorded forces of the JAX kernel are bit-identical, the books NaN (the C++ kernel
-    fits run instead is held to this one in tests/test_native.py)."""
+    fits run instead is held to this one in tests/test_native.py). Bit-identical at XLA's
+    default optimisation level, which users run (at the suite's level 0 the two programs round
+    differently by ~5e-12)."""
+    if rerun_at_the_default_xla_level(__file__, "test_kernel_without_books_records_the_same_forces"):
+        return
     from hertzchain.batched import kernel_flags, record_batched
 
     setup, grid = _batch(**CASES["friction_viscous_preload"])

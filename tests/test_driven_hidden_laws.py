@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import driven_bead_lockin, iwan_support
+from helpers import driven_bead_lockin, iwan_support, rerun_at_the_default_xla_level
 
 from fitting.driven_candidates import CANDIDATES, SLOW_CANDIDATES
 from fitting.driven_diagnosis import diagnose_experiment
@@ -159,7 +159,12 @@ def test_joint_fit_recovers_hidden_micro_slip_from_the_bending_and_the_tongue():
     the 4 nm step's quantisation (2 %), outweigh the bending (weighted down for its correlated
     residuals), and the stepped onsets lie up to a step above the Floquet thresholds (62 nm
     against 58.0 nm at 5900 Hz), which the fit meets by giving up the bending's loss growth
-    (bending misfit 4.3 %, peak per nm top/lowest 0.87 against 0.77)."""
+    (bending misfit 4.3 %, peak per nm top/lowest 0.87 against 0.77). At XLA's default
+    optimisation level, which these numbers were measured at (at the suite's level 0 the fit
+    ends elsewhere on the loose slip displacement, its predicted loop onset 57.2 nm)."""
+    if rerun_at_the_default_xla_level(__file__,
+                                      "test_joint_fit_recovers_hidden_micro_slip_from_the_bending_and_the_tongue"):
+        return
     from fitting.driven_candidates import fit_candidate_jointly
     from fitting.driven_experiment import Measurement
     from hertzchain import laws

@@ -1,6 +1,8 @@
 """The velocity-Verlet solver against conservation laws, an independent solver, the exact
 scaling symmetry of the Hertz chain, finite differences and the paper's qualitative facts."""
 
+import warnings
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -239,3 +241,19 @@ def test_yield_warning_names_the_contact():
         hc.simulate(hc.ChainSetup(5, striker_velocity_m_s=1.2), t_end_s=0.3e-3)
     with pytest.raises(ValueError, match="yield force"):
         hc.simulate(hc.ChainSetup(5, striker_velocity_m_s=1.2), t_end_s=0.3e-3, on_yield="raise")
+
+
+def test_the_reference_solver_takes_the_yield_check_its_warning_advises():
+    """`simulate_reference` warns past the yield force as `simulate` does, and takes the
+    `on_yield` its warning names: 'ignore' silences it, 'raise' raises, another value is
+    refused before the solve."""
+    setup = hc.ChainSetup(3, striker_velocity_m_s=1.2)
+    with pytest.warns(hc.YieldWarning, match=r"contact 0 reached .* or set on_yield='ignore'"):
+        simulate_reference(setup, t_end_s=0.1e-3, sample_interval_s=1e-6, rtol=1e-6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        simulate_reference(setup, t_end_s=0.1e-3, sample_interval_s=1e-6, rtol=1e-6, on_yield="ignore")
+    with pytest.raises(ValueError, match="yield force"):
+        simulate_reference(setup, t_end_s=0.1e-3, sample_interval_s=1e-6, rtol=1e-6, on_yield="raise")
+    with pytest.raises(ValueError, match="on_yield must be 'warn', 'raise' or 'ignore'"):
+        simulate_reference(setup, on_yield="quiet")

@@ -6,6 +6,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import rerun_at_the_default_xla_level
 
 import hertzchain as hc
 from hertzchain import sensitivity as S
@@ -100,6 +101,10 @@ def test_derivatives_match_finite_differences(smooth_setup, smooth_grid):
 
 @pytest.mark.slow
 def test_every_parameter_matches_finite_differences(smooth_setup, smooth_grid):
+    """At XLA's default optimisation level (at the suite's level 0 the central difference of a
+    sensor's peak by a bead's mass, a difference of rounded peaks, came out of the wrong sign)."""
+    if rerun_at_the_default_xla_level(__file__, "test_every_parameter_matches_finite_differences"):
+        return
     observables = SCALAR_OBS + ("trace_wall",)
     result = S.sensitivity(smooth_setup, PARAMS_ALL, observables, grid=smooth_grid)
     fd = _central_differences(smooth_setup, PARAMS_ALL, observables, smooth_grid, 1e-6)

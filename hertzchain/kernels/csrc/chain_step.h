@@ -4,7 +4,9 @@
 // (elastic-plastic laws), the sweep (drift of the next body, the contact's force, the kick of
 // this body, the books) and its tangent pass, the wall's kick, the sensors' kick, and at a
 // sample's end the recorded channels. The laws are `chain_laws.h`'s, on doubles for the
-// values and on dual numbers for the partial derivatives the tangent passes read.
+// values and on dual numbers for the partial derivatives the tangent passes read; the drift
+// and kicks are `chain_verlet.h`'s, run on the tangents with the friction kick's
+// linearisation; the compliant sensors' laws run on dual numbers along each direction.
 #pragma once
 
 #include <algorithm>
