@@ -12,7 +12,7 @@ import pytest
 from helpers import rerun_at_the_default_xla_level
 
 import hertzchain as hc
-from hertzchain.batched import solve_batched, stack_setups
+from hertzchain.batched import solve_batched
 from hertzchain.integrate import Recording, solve_stacked
 
 N = 10
