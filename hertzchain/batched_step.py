@@ -11,7 +11,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from . import compliant_sensor, contact, laws
+from . import compliant_sensor, contact, laws, verlet
 from .chain import (
     PLASTIC_LAWS,
 )
@@ -226,7 +226,7 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
         return _contact_forces(p, flags, x, v, peak=new.get("peak"), sensor=sensor)
 
     if not flags.full_state:
-        x = s["x"] + dt * s["u"]
+        x = verlet.drift(s["x"], s["u"], dt)
         force = contact_forces(x, None)[0]
         # Displacements and contact forces materialised together (one loop), so that the
         # next loop reads each contact's force instead of evaluating it again for each of
@@ -234,26 +234,26 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
         both = barrier(jnp.concatenate([x, force]))
         x, force = both[: layout.bodies + 1], both[layout.bodies + 1 :]
         a = _body_force(force, p["external"] if flags.preload else None) * p["inv_mass"]
-        v = s["u"] + h * a
-        new |= {"x": x, "u": v + h * a}
+        v = verlet.half_kick(s["u"], a, h)
+        new |= {"x": x, "u": verlet.half_kick(v, a, h)}
         if flags.ledger:
             new["max"] = jnp.maximum(s["max"], _overlaps(p, flags, x))
         return barrier(layout.pack(flags, new))
-    v_half = s["v"] + h * s["a"]
+    v_half = verlet.half_kick(s["v"], s["a"], h)
     work = lost = 0.0
     if flags.viscous and flags.ledger:
         work = jnp.sum(s["viscous"] * h * 0.5 * (s["v"] + v_half), axis=0)
     if flags.friction:
         v_half, lost = _friction_kick(p, flags, v_half, h)
-    x = s["x"] + dt * v_half
+    x = verlet.drift(s["x"], v_half, dt)
     if flags.viscous:
-        total, elastic = contact_forces(x, v_half + h * s["a"])
+        total, elastic = contact_forces(x, verlet.half_kick(v_half, s["a"], h))
         both = barrier(jnp.concatenate([total, elastic]))
         total, elastic = both[: layout.bodies], both[layout.bodies :]
     else:
         total = barrier(contact_forces(x, None)[0])
     a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
-    v = v_half + h * a
+    v = verlet.half_kick(v_half, a, h)
     new |= {"x": x, "a": a, "v": v}
     if flags.sensors:  # the second half kick, from the new drive
         drive = compliant_sensor.drive(p["sensor_beta"], *compliant_sensor.contacts_of(flags.sensors, total))

@@ -41,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import compliant_sensor as cs
-from . import contact
+from . import contact, verlet
 from .chain import (
     ChainModel,
     ChainSetup,
@@ -146,20 +146,20 @@ def verlet_step(model: ChainModel, dt_s: float, state: ChainState) -> ChainState
     h = 0.5 * dt_s
     m = model.mass_kg
     v0 = state.velocity_m_s
-    v_half = v0 + h * state.accel_m_s2
+    v_half = verlet.half_kick(v0, state.accel_m_s2, h)
     viscous_work = jnp.sum(m * state.viscous_accel_m_s2 * h * 0.5 * (v0 + v_half))
     v_half, friction_1, impulse_1 = _friction_kick(model, v_half, h)
-    displacement = state.displacement_m + dt_s * v_half
+    displacement = verlet.drift(state.displacement_m, v_half, dt_s)
     sensor = _sensor_drift(model, dt_s, state)
     contact_overlap, wall_overlap = overlaps(model, displacement, sensor.force_n)
     max_overlap = jnp.maximum(
         state.max_overlap_m, jnp.concatenate([contact_overlap, wall_overlap[None]])
     )
-    forces = chain_forces(model, displacement, v_half + h * state.accel_m_s2, max_overlap, sensor.force_n,
-                          sensor.predicted_rate_n_s)
+    forces = chain_forces(model, displacement, verlet.half_kick(v_half, state.accel_m_s2, h), max_overlap,
+                          sensor.force_n, sensor.predicted_rate_n_s)
     accel = forces.body_force_n / m
     viscous_accel = forces.body_viscous_force_n / m
-    v_end = v_half + h * accel
+    v_end = verlet.half_kick(v_half, accel, h)
     viscous_work += jnp.sum(m * viscous_accel * h * 0.5 * (v_half + v_end))
     v_end, friction_2, impulse_2 = _friction_kick(model, v_end, h)
     all_forces = jnp.concatenate([forces.contact_total_n, forces.wall_total_n[None]])

@@ -32,7 +32,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .. import laws
+from .. import laws, verlet
 from .chain import DrivenChain
 
 # Steps of a `lax.scan` unrolled into one loop iteration (speed only).
@@ -146,16 +146,16 @@ def step(p: KernelParams, state: State, dt_s, drive_m, drive_m_s) -> State:
     end of the step, (B,), m and m/s."""
     h = 0.5 * dt_s
     x, v, f, history, slider = state
-    kick = h * (f - p.damping_rate_per_s * v)
-    v_half = v + kick
-    x = x + dt_s * v_half
+    drag_accel = f - p.damping_rate_per_s * v  # (the drag in the first half kick, implicit in the second)
+    v_half = verlet.half_kick(v, drag_accel, h)
+    x = verlet.drift(x, v_half, dt_s)
     if history is not None:
         history = p.contact_law.update_state(history, contact_overlaps(p, x, drive_m))
     if slider is not None:
         slider = p.support_friction.update_state(slider, x)
-    force = contact_forces(p, x, v_half + kick, drive_m, drive_m_s, history)
+    force = contact_forces(p, x, verlet.half_kick(v_half, drag_accel, h), drive_m, drive_m_s, history)
     f = contact_accel(p, force, x, slider)
-    v = (v_half + h * f) / (1.0 + h * p.damping_rate_per_s)
+    v = verlet.half_kick(v_half, f, h) / (1.0 + h * p.damping_rate_per_s)
     return State(x, v, f, history, slider)
 
 
