@@ -189,6 +189,15 @@ def _load_named(name: str) -> Path:
     return _load_law(law)
 
 
+def _known_libraries(names) -> dict[str, tuple[tuple[str, ...], Path]]:
+    """`library_table()`, once every name in `names` is checked to be one of its keys."""
+    table = library_table()
+    unknown = [name for name in names if name not in table]
+    if unknown:
+        raise ValueError(f"unknown kernel libraries {unknown}; known: {', '.join(table)}")
+    return table
+
+
 def build_libraries(names, jobs: int | None = None):
     """Build the libraries `names` (`library_table` keys) where they are not in the cache
     and verified, several at once (one compiler process each, the main library's parts two),
@@ -201,10 +210,7 @@ def build_libraries(names, jobs: int | None = None):
     `why` is None where it was built (or already there) and loaded, else the whole message of
     its failure; seconds from the start of its build (or check) to its end.
     """
-    table = library_table()
-    unknown = [name for name in names if name not in table]
-    if unknown:
-        raise ValueError(f"unknown kernel libraries {unknown}; known: {', '.join(table)}")
+    table = _known_libraries(names)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     began = time.perf_counter()
 
@@ -234,10 +240,7 @@ def check_libraries(names):
     only (`build.check_source`: what a build would refuse, refused in a tenth of its time;
     nothing is written or loaded). **Yields** (name, why) in the order of `names`: `why` is
     None where it compiles, else the whole message of its failure."""
-    table = library_table()
-    unknown = [name for name in names if name not in table]
-    if unknown:
-        raise ValueError(f"unknown kernel libraries {unknown}; known: {', '.join(table)}")
+    table = _known_libraries(names)
     for name in names:
         defines, source = table[name]
         try:
