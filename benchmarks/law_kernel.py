@@ -80,7 +80,7 @@ def main() -> None:
 
     start = time.perf_counter()
     reason = native.unavailable_reason()
-    native._load_law(args.law)  # both libraries built once, outside every timing
+    native._load_named(args.law)  # both libraries built once, outside every timing
     build_s = time.perf_counter() - start
     fields, constant, value, sweep_speeds, fit_speeds = LAWS[args.law]
 

@@ -2,11 +2,11 @@
 instances each holds.
 
     python benchmarks/library_compile.py --out benchmarks/results/library_compile/latest.json
-                                         [--only main,dashpot] [--label TEXT]
+                                         [--only chain,dashpot] [--label TEXT]
 
-Every library that `hertzchain kernel --all` builds on this machine (`native.build`'s
-`_current_host_libraries`: the main library, the dashpot's, the compliant sensors', each other
-contact law's with and without sensors, the driven chains') is compiled by `native.build._build`
+Every library that `hertzchain kernel --all` builds on this machine (`native.library_table`:
+the main library "chain", the rate-slot laws', the compliant sensors', each other contact law's
+with and without sensors, the driven chains') is compiled by `native.build._build`
 into an empty temporary folder, one after another in this process. Measured per library: the
 wall time, and the CPU seconds of the compiler processes (user + system of the children,
 `resource.RUSAGE_CHILDREN`; the main library's two parts run at once, so its wall time is about
@@ -38,22 +38,10 @@ _INSTANCE = re.compile(r"^[0-9a-f]+ ([0-9a-f]+) [tTwW] (?:void )?(?:\(anonymous 
 
 
 def libraries() -> dict:
-    """The host libraries of this machine by name: (`-D` defines, source)."""
-    from hertzchain.native import build
+    """The host libraries of this machine by name (`hertzchain kernel --all`'s): (`-D` defines, source)."""
+    from hertzchain import native
 
-    table = {"main": ((), build.SOURCE), "dashpot": ((f"-D{build.DASHPOT_DEFINE}",), build.SOURCE),
-             "velocity_squared": (build.VELOCITY_SQUARED_DEFINES, build.SOURCE),
-             "sensors": ((f"-D{build.SENSOR_DEFINE}",), build.SOURCE)}
-    for law, define in build.LAW_DEFINES.items():
-        table[law] = ((f"-D{define}",), build.SOURCE)
-        table[f"{law}_sensors"] = ((f"-D{define}", f"-D{build.SENSOR_DEFINE}"), build.SOURCE)
-    table["driven"] = ((), build.DRIVEN_SOURCE)
-    expected = {path.name for path in build._current_host_libraries()}
-    names = {build._library_path(defines, source).name for defines, source in table.values()}
-    if names != expected:
-        raise RuntimeError(f"the libraries here ({sorted(names)}) are not those `hertzchain kernel --all` builds "
-                           f"({sorted(expected)}): update libraries()")
-    return table
+    return native.library_table()
 
 
 def instances(path: Path) -> list[dict]:

@@ -129,10 +129,10 @@ def build_times(before: Path | None) -> dict:
     env = dict(os.environ)
     prefix = "import sys, time, tempfile, pathlib; from hertzchain import native; t = time.perf_counter(); "
     scripts = {"main_library_build_s": prefix + "native._build(pathlib.Path(tempfile.mkdtemp()) / 'k.so')",
-               "dashpot_library_build_s": prefix + "native._load_dashpot()",
-               "sensor_library_build_s": prefix + "native._load_sensors()",
-               "jackson_green_library_build_s": prefix + "native._load_law('jackson_green')",
-               "power_law_library_build_s": prefix + "native._load_law('power_law')"}
+               "dashpot_library_build_s": prefix + "native._load_named('dashpot')",
+               "sensor_library_build_s": prefix + "native._load_named('compliant sensors')",
+               "jackson_green_library_build_s": prefix + "native._load_named('jackson_green')",
+               "power_law_library_build_s": prefix + "native._load_named('power_law')"}
     times = {name: {} for name in scripts}
     for label, source in (("this_checkout", HERE.parent), ("before", before)):
         if source is None:

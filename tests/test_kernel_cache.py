@@ -135,7 +135,7 @@ def test_a_library_built_on_first_use_that_fails_is_announced_once_and_its_runs_
     monkeypatch.setenv("HERTZCHAIN_CACHE", str(tmp_path))
     monkeypatch.setattr(native.build, "_build", _failing_build)
     monkeypatch.setattr(native.registry, "_FAILED", {})
-    monkeypatch.setattr(native.host, "_load_dashpot", native.host._load_dashpot.__wrapped__)
+    monkeypatch.setattr(native.host, "_load_host_library", native.host._load_host_library.__wrapped__)
     flags = KernelFlags(viscous=True, springs=False, preload=False, dashpot=True)
     for _ in range(3):
         assert native.kernel_for(flags, None) is None
@@ -170,7 +170,7 @@ def test_libraries_are_built_at_once(tmp_path, monkeypatch):
 
     def build(path, defines=(), source=native.SOURCE):
         time.sleep(0.5)
-        if defines == (f"-D{native.DASHPOT_DEFINE}",):
+        if defines == native.HOST_LIBRARIES["dashpot"].defines:
             raise RuntimeError("compiling chain_kernel.cc failed:\nwhole message")
         path.write_bytes(b"library")
 

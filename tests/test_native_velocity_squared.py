@@ -47,7 +47,7 @@ def test_forces_and_books_equal_the_jax_kernel_and_the_general_solver(extra):
     flags = kernel_flags(setup)
     assert flags.velocity_squared and flags.viscous and not flags.dashpot
     assert native.kernel_for(flags, None) == native.FusedKernel("full", "host")
-    assert _native_target(setup, grid, flags._replace(ledger=False)) == [native.VELOCITY_SQUARED_FULL_TARGET]
+    assert _native_target(setup, grid, flags._replace(ledger=False)) == [native.HOST_LIBRARIES["velocity_squared"].target("full")]
     ours, reference = assert_forces_equal_the_jax_kernels(setup, grid, books=True)
     assert ours.kernel == "native full (host)" and reference.kernel == "jax"
     energy = np.asarray(reference.initial_energy_j)

@@ -1,7 +1,7 @@
 """The one table from law types to the native kernels.
 
 Each contact law maps to its `batched.KernelFlags.law` name (the native library it selects,
-`native.LAW_DEFINES`); each dissipation law to the `KernelFlags` field that compiles it in.
+`native.HOST_LIBRARIES`); each dissipation law to the `KernelFlags` field that compiles it in.
 None: no native kernel has the law, and the JAX kernels run it (`BatchedTraces.kernel`
 says which kernel ran).
 """

@@ -59,9 +59,11 @@ process's results, for result files. Without a compiler
 (or with `HERTZCHAIN_NATIVE=0`), `available()` is False, says why in `unavailable_reason()`,
 and `solve_batched` runs the JAX kernel.
 
-The package, one concept a module: `build` (sources, compiler and flags, the library cache,
-build records and their verification, pruning), `registry` (what this process loaded,
-could not load, and ran), `host` (the host libraries, their targets, `kernel_for`),
+The package, one concept a module: `libraries` (the table of host libraries: the physics
+each runs, its macros and FFI targets, and which runs which physics), `build` (the compiler
+and its flags, the library cache, build records and their verification, pruning),
+`registry` (what this process loaded, could not load, and ran), `host` (loading the host
+libraries, `kernel_for`),
 `thread` (the one-thread-per-chain kernels) and `calls` (the kernels as JAX functions).
 """
 
@@ -71,48 +73,29 @@ could not load, and ran), `host` (the host libraries, their targets, `kernel_for
 from .build import (  # noqa: F401
     ARCH_VARIABLE,
     BUILD_TIME_NOTE,
-    CONTACT_LAWS,
-    CSRC,
-    DASHPOT_DEFINE,
-    DRIVEN_SOURCE,
     FFI_ARGS,
     FLAGS,
-    LAW_DEFINES,
     LAWS,
-    SENSOR_DEFINE,
-    SOURCE,
     SOURCE_PARTS,
     UNMASKED_FLAGS,
-    VELOCITY_SQUARED_DEFINE,
-    VELOCITY_SQUARED_DEFINES,
     _build,
     prune_cache,
 )
 from .calls import _fold_chains, _fold_directions, _unfold_chains, run, run_full, run_full_books  # noqa: F401
 from .host import (  # noqa: F401
     BOOKS_TARGET,
-    DASHPOT_BOOKS_TARGET,
-    DASHPOT_FULL_TARGET,
-    DASHPOT_TANGENT_TARGET,
     FIRST_USE_LIBRARIES,
     FULL_TARGET,
     KEPT_FREE_BYTES,
     MALLOC_VARIABLE,
     REUSED_BUFFER_BYTES,
-    SENSOR_FULL_TARGET,
-    SENSOR_TANGENT_TARGET,
     TANGENT_TARGET,
     TARGET,
-    VELOCITY_SQUARED_BOOKS_TARGET,
-    VELOCITY_SQUARED_FULL_TARGET,
-    VELOCITY_SQUARED_TANGENT_TARGET,
     FusedKernel,
     _load,
-    _load_dashpot,
-    _load_law,
+    _load_host_library,
     _load_library,
-    _load_sensors,
-    _load_velocity_squared,
+    _load_named,
     available,
     build_libraries,
     cache_dir,
@@ -121,6 +104,19 @@ from .host import (  # noqa: F401
     library_path,
     library_table,
     unavailable_reason,
+)
+from .libraries import (
+    CONTACT_LAW_DEFINES,
+    CONTACT_LAWS,
+    CSRC,
+    DRIVEN_SOURCE,
+    HOST_LIBRARIES,
+    RATE_LAW_DEFINES,
+    SENSOR_DEFINE,
+    SOURCE,
+    SYMBOLS,
+    HostLibrary,
+    host_library_for,
 )
 from .registry import JAX_INSTEAD, SWITCHED_OFF, kernel_record, note_use
 from .thread import (  # noqa: F401
@@ -134,14 +130,12 @@ from .thread import (  # noqa: F401
 )
 
 __all__ = [
-    "ARCH_VARIABLE", "BOOKS_TARGET", "BUILD_TIME_NOTE", "CONTACT_LAWS", "CSRC", "DASHPOT_BOOKS_TARGET",
-    "DASHPOT_DEFINE", "DASHPOT_FULL_TARGET", "DASHPOT_TANGENT_TARGET", "DRIVEN_SOURCE", "EMULATION_FLAGS",
-    "FFI_ARGS", "FIRST_USE_LIBRARIES", "FLAGS", "FULL_TARGET", "JAX_INSTEAD", "KEPT_FREE_BYTES", "LAWS",
-    "LAW_DEFINES", "MALLOC_VARIABLE", "NVCC_FLAGS", "REUSED_BUFFER_BYTES", "SENSOR_DEFINE", "SENSOR_FULL_TARGET",
-    "SENSOR_TANGENT_TARGET", "SOURCE", "SOURCE_PARTS", "SWITCHED_OFF", "TANGENT_TARGET", "TARGET",
-    "THREAD_FLAGS_VARIABLE", "THREAD_SOURCE", "UNMASKED_FLAGS", "VELOCITY_SQUARED_BOOKS_TARGET",
-    "VELOCITY_SQUARED_DEFINE", "VELOCITY_SQUARED_DEFINES", "VELOCITY_SQUARED_FULL_TARGET",
-    "VELOCITY_SQUARED_TANGENT_TARGET", "FusedKernel", "available", "build_libraries",
-    "cache_dir", "check_libraries", "kernel_for", "kernel_record", "library_path", "library_table", "note_use", "prune_cache",
-    "run", "run_full", "run_full_books", "thread_unavailable_reason", "unavailable_reason",
+    "ARCH_VARIABLE", "BOOKS_TARGET", "BUILD_TIME_NOTE", "CONTACT_LAWS", "CONTACT_LAW_DEFINES", "CSRC",
+    "DRIVEN_SOURCE", "EMULATION_FLAGS", "FFI_ARGS", "FIRST_USE_LIBRARIES", "FLAGS", "FULL_TARGET",
+    "HOST_LIBRARIES", "JAX_INSTEAD", "KEPT_FREE_BYTES", "LAWS", "MALLOC_VARIABLE", "NVCC_FLAGS",
+    "RATE_LAW_DEFINES", "REUSED_BUFFER_BYTES", "SENSOR_DEFINE", "SOURCE", "SOURCE_PARTS", "SWITCHED_OFF",
+    "SYMBOLS", "TANGENT_TARGET", "TARGET", "THREAD_FLAGS_VARIABLE", "THREAD_SOURCE", "UNMASKED_FLAGS",
+    "FusedKernel", "HostLibrary", "available", "build_libraries", "cache_dir", "check_libraries",
+    "host_library_for", "kernel_for", "kernel_record", "library_path", "library_table", "note_use",
+    "prune_cache", "run", "run_full", "run_full_books", "thread_unavailable_reason", "unavailable_reason",
 ]

@@ -1,4 +1,4 @@
-"""Building the host and thread kernels' libraries: the sources, the compiler and its
+"""Building the host and thread kernels' libraries (which ones: `libraries`): the compiler and its
 flags, the library cache (its names, which digest everything a build reads, and its
 pruning), the build records (`<library>.json`: size and SHA-256) that a cached library
 must match before it is loaded, and the build itself (written whole or not at all, one
@@ -22,48 +22,15 @@ from pathlib import Path
 
 import jax
 
+from .libraries import CONTACT_LAW_DEFINES, CSRC, DRIVEN_SOURCE, HOST_LIBRARIES, SOURCE
+
 try:
     import fcntl
 except ImportError:  # not a POSIX system: builds are not serialised between processes
     fcntl = None
 
-
-CSRC = Path(__file__).parent.parent / "kernels" / "csrc"  # the kernels' C++ and CUDA sources
-SOURCE = CSRC / "chain_kernel.cc"
-
-# The driven chains' lock-in kernel (`hertzchain.driven.fused`), built by `_load_library` too.
-DRIVEN_SOURCE = CSRC / "driven_kernel.cc"
 LAWS = CSRC / "chain_laws.h"  # the laws both kernels include
 FFI_ARGS = CSRC / "chain_ffi.h"  # their handlers' argument lists
-
-# The full kernel with a linear dashpot: its terms compiled in for its runs alone (they cost
-# every damped run ~17 % as a runtime term,
-# `benchmarks/results/dashpot_kernel/history/dashpot_in_cpp_kernel_not_kept.md`),
-# in a library of their own (`-D` DASHPOT_DEFINE) built on first use, so that the main
-# library every run needs does not wait for them (36 s -> 50 s when built into it, 2 cores).
-DASHPOT_DEFINE = "HC_DASHPOT_LIBRARY"
-
-# The rate slot's other law: velocity-squared dissipation (`laws.VelocitySquared`) in the
-# dashpot's place on Hertz contacts (`chain_laws.h`'s `RateSlotCoefficient`), likewise in a
-# library of its own built on first use: the dashpot library's code with this define.
-VELOCITY_SQUARED_DEFINE = "HC_VELOCITY_SQUARED_LIBRARY"
-VELOCITY_SQUARED_DEFINES = (f"-D{DASHPOT_DEFINE}", f"-D{VELOCITY_SQUARED_DEFINE}")
-
-# The full kernel with every contact on another law than Hertz's (`batched.KernelFlags.law`):
-# the power law (`contact.power_law_force`), Thornton's and Jackson-Green's elastic-plastic
-# laws (`contact.thornton_contact`, `contact.jackson_green_contact`), likewise each in a
-# library of its own (`-D` its define), built on first use; its targets are
-# "hertzchain_chain_full_{forward,tangent,books}_<law>", with or without a dashpot.
-# The full kernel with compliant sensor beads (`hertzchain.compliant_sensor`; with or without
-# a dashpot, forward and tangent runs, no books): likewise in a library of its own, built on
-# first use (the diagnosis's sensor refits), on Hertz contacts and, with a law's define
-# (`LAW_DEFINES`), on that law ("hertzchain_chain_full_{forward,tangent}_<law>_sensors").
-SENSOR_DEFINE = "HC_SENSOR_LIBRARY"
-LAW_DEFINES = {"power_law": "HC_POWER_LIBRARY", "thornton": "HC_THORNTON_LIBRARY",
-               "jackson_green": "HC_JACKSON_GREEN_LIBRARY"}
-
-
-CONTACT_LAWS = ("hertz",) + tuple(LAW_DEFINES)
 
 # IEEE arithmetic as the JAX kernel rounds it: no contraction into fused multiply-adds
 # other than the source's own `std::fma`, no fast math; -fno-math-errno lets the square
@@ -128,11 +95,9 @@ _STALE_SCRATCH_S = 3600.0
 
 
 def _current_host_libraries() -> set[Path]:
-    """The host libraries this installation builds on this machine with these flags: the
-    main one, those built on first use (`load_on_demand_libraries`) and the driven chains'."""
-    defines = [(), (f"-D{DASHPOT_DEFINE}",), VELOCITY_SQUARED_DEFINES, (f"-D{SENSOR_DEFINE}",)] + [
-        (f"-D{define}",) + extra for define in LAW_DEFINES.values() for extra in ((), (f"-D{SENSOR_DEFINE}",))]
-    return {_library_path(d) for d in defines} | {_library_path((), DRIVEN_SOURCE)}
+    """The host libraries this installation builds on this machine with these flags: those of
+    `chain_kernel.cc` (`libraries.HOST_LIBRARIES`) and the driven chains'."""
+    return {_library_path(library.defines) for library in HOST_LIBRARIES.values()} | {_library_path((), DRIVEN_SOURCE)}
 
 
 def prune_cache(now: float | None = None) -> tuple[int, int]:
@@ -322,7 +287,7 @@ def _libraries(defines: tuple[str, ...]) -> tuple[str, ...]:
     library, on x86-64 Linux, glibc's vector maths (libmvec: its vectorised `pow` and `log`,
     declared in `chain_kernel.cc`)."""
     vector_maths = platform.machine() == "x86_64" and platform.libc_ver()[0] == "glibc"
-    return ("-lmvec",) if vector_maths and f"-D{LAW_DEFINES['power_law']}" in defines else ()
+    return ("-lmvec",) if vector_maths and f"-D{CONTACT_LAW_DEFINES['power_law']}" in defines else ()
 
 
 def _build(path: Path, defines: tuple[str, ...] = (), source: Path = SOURCE) -> None:

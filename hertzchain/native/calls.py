@@ -13,7 +13,8 @@ import numpy as np
 from jax.interpreters import partial_eval
 
 from .. import contact, laws
-from . import build, host, registry, thread
+from . import host, registry, thread
+from .libraries import CONTACT_LAWS, HOST_LIBRARIES, HostLibrary, host_library_for
 
 
 def _require(backend: str) -> None:
@@ -36,30 +37,18 @@ class _Ffi(NamedTuple):
         shape = (batch, self.n_samples) if self.backend == "host" else (self.n_samples, batch)
         return tuple(jax.ShapeDtypeStruct(leading + shape, state0.dtype) for _ in range(count))
 
-    def call(self, kind: str, shapes, args, index, attrs, beads=()) -> tuple:
-        """`kind`: "forward", "full", "tangent", "books", the last three with a dashpot
-        ("_dashpot": its own host library; the thread kernels compile it into the same one),
-        with velocity-squared dissipation in its place ("_velocity_squared": its own host
-        library) or
-        on another law ("_<law>", a `LAW_DEFINES` key: its own host library), the first two
-        also with compliant sensors ("_sensors", in `beads`: their own host library)."""
-        if self.backend == "host":  # the library built on first use that holds the handler
-            law = next((law for law in build.LAW_DEFINES if f"_{law}" in kind), "hertz")
-            if kind.endswith("_sensors"):
-                path = host._load_sensors(law)
-            elif kind.endswith("_dashpot"):
-                path = host._load_dashpot()
-            elif kind.endswith("_velocity_squared"):
-                path = host._load_velocity_squared()
-            elif law != "hertz":
-                path = host._load_law(law)
-            else:
-                path = host._load_main()
+    def call(self, kind: str, library: HostLibrary, shapes, args, index, attrs, beads=()) -> tuple:
+        """The run of `kind` ("forward", "full", "tangent", "books": `libraries.SYMBOLS`) in
+        `library` (`libraries.HOST_LIBRARIES`: on the host, the library built on first use
+        that holds it; the thread kernels compile the main library's and the dashpot's runs
+        into one), the full runs with compliant sensors in `beads`."""
+        if self.backend == "host":
+            path = host._load_host_library(library)
             registry.note_use(path)
             # the host's full kernels take the sensors' beads after the channels (empty without)
             extra = () if kind == "forward" else (np.asarray(beads, dtype=np.int64),)
-            return tuple(jax.ffi.ffi_call(host._HOST_TARGETS[kind], shapes)(*args, index, *extra, **attrs))
-        target = thread._thread_target(self.backend, int(self.rows), kind.removesuffix("_dashpot"))
+            return tuple(jax.ffi.ffi_call(library.target(kind), shapes)(*args, index, *extra, **attrs))
+        target = thread._thread_target(self.backend, int(self.rows), kind)
         registry.note_use(thread._thread_library(self.backend, int(self.rows)), self.backend)
         return tuple(jax.ffi.ffi_call(target, shapes)(*args, channels=index, **attrs))
 
@@ -106,7 +95,7 @@ def _conservative_call(config):
         state0 = args[0]
         ffi = _Ffi(backend, args[1].shape[-2], n_samples)
         shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + ffi.trace_shapes(state0, len(channels))
-        state, *traces = ffi.call("forward", shapes, args, index, attrs)
+        state, *traces = ffi.call("forward", HOST_LIBRARIES["chain"], shapes, args, index, attrs)
         return (state,) + ffi.traces(traces)
 
     @call.def_vmap
@@ -193,14 +182,13 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     "sensor_back", "sensor_front", (n_sensors, 1 or B) each, and "first_force"), and
     `sensor_state` their forces (N), rates (N/s) and drives (N) at the impact, (3 n_sensors, B)."""
     _require(backend)
-    _check_law(law, backend, "run_full")
     sensors = tuple(int(k) for k in sensors)
     if sensors and backend != "host":
         raise ValueError("run_full: compliant sensors run on the host kernel (backend 'host').")
     if sensors and (sensor_state is None or sensor_state.shape[0] != 3 * len(sensors)):
         raise ValueError("run_full: sensor_state must hold the sensors' forces, rates and drives, "
                          "(3 n_sensors, B).")
-    _check_velocity_squared(velocity_squared, dashpot, law, backend, sensors, "run_full")
+    _library(law, dashpot, velocity_squared, sensors, backend, "run_full")
     state0 = jax.numpy.concatenate([x, v, a] + ([sensor_state] if sensors else []))
     args = _full_args(p, state0, preload, springs, dashpot, law, backend, sensors, velocity_squared)
     config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
@@ -223,8 +211,7 @@ def run_full_books(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_sam
     if (dashpot or velocity_squared) and not viscous:
         raise ValueError("run_full_books: a dashpot or velocity-squared dissipation needs viscous=True (the "
                          "kernel's rates come with the damping).")
-    _check_law(law, "host", "run_full_books")
-    _check_velocity_squared(velocity_squared, dashpot, law, "host", (), "run_full_books")
+    library = _library(law, dashpot, velocity_squared, (), "host", "run_full_books")
     args = _full_args(p, state0, preload, springs, dashpot, law, "host", (), velocity_squared) + (p["mass"],)
     attrs = {"dt": np.float64(dt_s), "steps_per_sample": np.int64(steps_per_sample), "viscous": np.int64(viscous),
              "friction": np.int64(friction), "extras": np.int64(preload or springs),
@@ -232,24 +219,30 @@ def run_full_books(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_sam
     call = _Ffi("host", p["inv_mass"].shape[-2], n_samples)
     shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + call.trace_shapes(state0, len(channels))
     index = np.asarray(channels, dtype=np.int64)
-    kind = (f"books_{law}" if law != "hertz" else "books_velocity_squared" if velocity_squared
-            else "books_dashpot" if dashpot else "books")
-    state, *traces = call.call(kind, shapes, args, index, attrs)
+    state, *traces = call.call("books", library, shapes, args, index, attrs)
     return tuple(traces), state
 
 
-def _check_law(law: str, backend: str, caller: str) -> None:
-    if law not in build.CONTACT_LAWS:
-        raise ValueError(f"{caller}: law must be one of {build.CONTACT_LAWS}, got {law!r}.")
-    if law != "hertz" and backend != "host":
-        raise ValueError(f"{caller}: the {law} law runs on the host kernel (backend 'host').")
-
-
-def _check_velocity_squared(velocity_squared: bool, dashpot: bool, law: str, backend: str, sensors, caller: str):
-    if velocity_squared and (dashpot or law != "hertz" or backend != "host" or sensors):
-        raise ValueError(f"{caller}: velocity-squared dissipation runs in the dashpot's place, on Hertz contacts, on "
-                         "the host kernel, without compliant sensors (dashpot=False, law='hertz', backend='host', "
-                         "sensors=()); the JAX kernel runs the other combinations.")
+def _library(law: str, dashpot: bool, velocity_squared: bool, sensors, backend: str, caller: str) -> HostLibrary:
+    """The host library of a full run on `law`'s contacts with the rate slot's law (a
+    `dashpot`, `velocity_squared` dissipation, or neither) and compliant `sensors`, once
+    `backend` is checked to run it (the thread kernels: Hertz contacts, with or without a
+    dashpot, no sensors); else a ValueError from `caller` naming the fix."""
+    if law not in CONTACT_LAWS:
+        raise ValueError(f"{caller}: law must be one of {CONTACT_LAWS}, got {law!r}.")
+    if dashpot and velocity_squared:
+        raise ValueError(f"{caller}: the rate slot carries one law: a dashpot or velocity-squared dissipation "
+                         "(dashpot=False or velocity_squared=False); the JAX kernel runs both together.")
+    rate = "velocity_squared" if velocity_squared else "dashpot" if dashpot else None
+    library = host_library_for(law, rate, bool(sensors))
+    if library is None:
+        raise ValueError(f"{caller}: no native library runs {law} contacts with {rate} in the rate slot"
+                         f"{' and compliant sensors' if sensors else ''} (velocity_squared needs law='hertz' and "
+                         "sensors=()); the JAX kernel runs that combination.")
+    if backend != "host" and library.name not in ("chain", "dashpot"):
+        raise ValueError(f"{caller}: {law} contacts{f' with {rate}' if rate else ''}"
+                         f"{' and compliant sensors' if sensors else ''} run on the host kernel (backend 'host').")
+    return library
 
 
 def _velocity_squared_coefficient(p: dict):
@@ -327,26 +320,13 @@ def _full_call(config):
     if (dashpot or velocity_squared) and not viscous:
         raise ValueError("run_full: a dashpot or velocity-squared dissipation needs viscous=True (the kernel's "
                          "rates come with the damping).")
-    # dashpot: the kernel with the rate slot's terms compiled in (`DASHPOT_DEFINE`; with
-    # velocity_squared, `VELOCITY_SQUARED_DEFINES`)
     attrs = {"dt": np.float64(dt_s), "steps_per_sample": np.int64(steps_per_sample),
              "viscous": np.int64(viscous), "friction": np.int64(friction), "extras": np.int64(extras),
              "dashpot": np.int64(dashpot or velocity_squared)}
     index = np.asarray(channels, dtype=np.int64)
     # the state, the eight parameter arrays (host: and the law's and the sensors')
     n_args = 11 if backend == "host" else 9
-    # a dashpot on Hertz contacts: the dashpot library; on another law: that law's library;
-    # compliant sensors (with or without a dashpot): the sensors' library
-    if law != "hertz":
-        kinds = (f"full_{law}", f"tangent_{law}")
-    elif velocity_squared:
-        kinds = ("full_velocity_squared", "tangent_velocity_squared")
-    elif dashpot and not sensors:
-        kinds = ("full_dashpot", "tangent_dashpot")
-    else:
-        kinds = ("full", "tangent")
-    if sensors:
-        kinds = tuple(f"{kind}_sensors" for kind in kinds)
+    library = _library(law, dashpot, velocity_squared, sensors, backend, "run_full")
 
     def ffi(args):
         return _Ffi(backend, args[1].shape[-2], n_samples)
@@ -355,7 +335,7 @@ def _full_call(config):
     def traces(*args):
         call = ffi(args)
         shapes = call.trace_shapes(args[0], len(channels))
-        return call.traces(call.call(kinds[0], shapes, args, index, attrs, sensors))
+        return call.traces(call.call("full", library, shapes, args, index, attrs, sensors))
 
     @traces.def_vmap
     def _(size, batched, *args):
@@ -371,7 +351,7 @@ def _full_call(config):
         call = ffi(primals)
         n = len(channels)
         out_shapes = call.trace_shapes(primals[0], n) + call.trace_shapes(primals[0], n, (directions,))
-        out = call.call(kinds[1], out_shapes, primals + tangents, index, attrs, sensors)
+        out = call.call("tangent", library, out_shapes, primals + tangents, index, attrs, sensors)
         return call.traces(out[:n]) + call.traces(out[n:])
 
     @traces_and_tangents.def_vmap

@@ -17,23 +17,12 @@ from typing import NamedTuple
 import jax
 
 from . import build, registry, thread
+from .libraries import HOST_LIBRARIES, HostLibrary, host_library_for
 
-# The FFI targets the host libraries' handlers are registered as (`_load_library`): the main
-# library's, the dashpot's, velocity-squared dissipation's and the compliant sensors'
-# (`build.DASHPOT_DEFINE`, `build.VELOCITY_SQUARED_DEFINES`, `build.SENSOR_DEFINE`); each
-# other contact law's are named by `_law_target`.
-TARGET = "hertzchain_chain_forward"
-FULL_TARGET = "hertzchain_chain_full_forward"
-TANGENT_TARGET = "hertzchain_chain_full_tangent"
-BOOKS_TARGET = "hertzchain_chain_full_books"
-DASHPOT_FULL_TARGET = "hertzchain_chain_full_forward_dashpot"
-DASHPOT_TANGENT_TARGET = "hertzchain_chain_full_tangent_dashpot"
-DASHPOT_BOOKS_TARGET = "hertzchain_chain_full_books_dashpot"
-VELOCITY_SQUARED_FULL_TARGET = "hertzchain_chain_full_forward_velocity_squared"
-VELOCITY_SQUARED_TANGENT_TARGET = "hertzchain_chain_full_tangent_velocity_squared"
-VELOCITY_SQUARED_BOOKS_TARGET = "hertzchain_chain_full_books_velocity_squared"
-SENSOR_FULL_TARGET = "hertzchain_chain_full_forward_sensors"
-SENSOR_TANGENT_TARGET = "hertzchain_chain_full_tangent_sensors"
+# The FFI targets of the main library's runs (`libraries.HostLibrary.target` names every
+# library's): the conservative step, and the full step's forces, tangents and books.
+TARGET, FULL_TARGET, TANGENT_TARGET, BOOKS_TARGET = (
+    HOST_LIBRARIES["chain"].target(kind) for kind in ("forward", "full", "tangent", "books"))
 
 
 # glibc's malloc options (mallopt): the size from which a request is served by its own
@@ -85,9 +74,8 @@ def _load() -> str | None:
 @functools.cache
 def _load_main() -> Path:
     """Build (if needed), load and register the main library (`_load_library`): its path."""
-    return _load_library((), "the fused C++ kernel",
-                         ((TARGET, "HertzChainForward"), (FULL_TARGET, "HertzChainFullForward"),
-                          (TANGENT_TARGET, "HertzChainFullTangent"), (BOOKS_TARGET, "HertzChainFullBooks")),
+    main = HOST_LIBRARIES["chain"]
+    return _load_library(main.defines, main.what, main.targets,
                          instead="the JAX kernel runs instead, several times slower. "
                                  "hertzchain.native.unavailable_reason() gives the whole message; "
                                  "HERTZCHAIN_NATIVE=0 chooses the JAX kernel without this notice")
@@ -118,50 +106,19 @@ def _load_library(defines: tuple[str, ...], what: str, targets, source: Path = b
 
 
 @functools.cache
-def _load_dashpot() -> Path:
-    """Build (if needed), load and register the dashpot's full kernels (`DASHPOT_DEFINE`)."""
-    return _load_library((f"-D{build.DASHPOT_DEFINE}",), "the fused chain kernel's dashpot runs",
-                         ((DASHPOT_FULL_TARGET, "HertzChainFullForward"), (DASHPOT_TANGENT_TARGET, "HertzChainFullTangent"),
-                          (DASHPOT_BOOKS_TARGET, "HertzChainFullBooks")))
-
-
-@functools.cache
-def _load_velocity_squared() -> Path:
-    """Build (if needed), load and register the full kernels with velocity-squared dissipation
-    in the rate slot (`VELOCITY_SQUARED_DEFINES`)."""
-    return _load_library(build.VELOCITY_SQUARED_DEFINES, "the fused chain kernel's velocity-squared runs",
-                         ((VELOCITY_SQUARED_FULL_TARGET, "HertzChainFullForward"),
-                          (VELOCITY_SQUARED_TANGENT_TARGET, "HertzChainFullTangent"),
-                          (VELOCITY_SQUARED_BOOKS_TARGET, "HertzChainFullBooks")))
-
-
-@functools.cache
-def _load_sensors(law: str = "hertz") -> Path:
-    """Build (if needed), load and register the compliant sensors' full kernels (`SENSOR_DEFINE`)
-    on `law`'s contacts."""
-    if law == "hertz":
-        return _load_library((f"-D{build.SENSOR_DEFINE}",), "the fused chain kernel's compliant sensors",
-                             ((SENSOR_FULL_TARGET, "HertzChainFullForward"),
-                              (SENSOR_TANGENT_TARGET, "HertzChainFullTangent")))
-    return _load_library((f"-D{build.LAW_DEFINES[law]}", f"-D{build.SENSOR_DEFINE}"),
-                         f"the fused chain kernel's compliant sensors on {law}",
-                         ((_law_target("full", law) + "_sensors", "HertzChainFullForward"),
-                          (_law_target("tangent", law) + "_sensors", "HertzChainFullTangent")))
+def _load_host_library(library: HostLibrary) -> Path:
+    """Build (if needed), load and register `library` (a `libraries.HOST_LIBRARIES` entry;
+    all but the main library are built on their first use): its path."""
+    if library.name == "chain":
+        return _load_main()
+    return _load_library(library.defines, library.what, library.targets)
 
 
 def library_table() -> dict[str, tuple[tuple[str, ...], Path]]:
-    """Every host library, by name: its `-D` macros and source. "chain" is the main library
-    every run needs; the others are built on their first use: the dashpot's (Hertz contacts
-    with a dashpot), velocity-squared dissipation's (Hertz contacts with
-    `laws.VelocitySquared` in the dashpot's place), the compliant sensors', each other contact law's (`LAW_DEFINES`, with or
-    without a dashpot) and its compliant sensors', and the driven chains' lock-in kernel
-    ("driven", `hertzchain.driven.fused`)."""
-    table = {"chain": ((), build.SOURCE), "dashpot": ((f"-D{build.DASHPOT_DEFINE}",), build.SOURCE),
-             "velocity_squared": (build.VELOCITY_SQUARED_DEFINES, build.SOURCE),
-             "compliant sensors": ((f"-D{build.SENSOR_DEFINE}",), build.SOURCE)}
-    table |= {law: ((f"-D{define}",), build.SOURCE) for law, define in build.LAW_DEFINES.items()}
-    table |= {f"{law} compliant sensors": ((f"-D{define}", f"-D{build.SENSOR_DEFINE}"), build.SOURCE)
-              for law, define in build.LAW_DEFINES.items()}
+    """Every host library, by name: its `-D` macros and source. Those of `chain_kernel.cc`
+    (`libraries.HOST_LIBRARIES`: "chain", the main library every run needs, and those built on
+    their first use), then the driven chains' lock-in kernel ("driven", `hertzchain.driven.fused`)."""
+    table = {name: (library.defines, build.SOURCE) for name, library in HOST_LIBRARIES.items()}
     table["driven"] = ((), build.DRIVEN_SOURCE)
     return table
 
@@ -173,20 +130,11 @@ FIRST_USE_LIBRARIES = ("chain", "dashpot", "compliant sensors", "jackson_green",
 
 def _load_named(name: str) -> Path:
     """Load the library `name` (`library_table`), building it where needed: its path."""
-    if name == "chain":
-        return _load_main()
-    if name == "dashpot":
-        return _load_dashpot()
-    if name == "velocity_squared":
-        return _load_velocity_squared()
     if name == "driven":
         from ..driven import fused  # (the driven chains' kernel registers its own targets)
 
         return fused._library()
-    law, _, sensors = name.partition(" ")
-    if sensors:
-        return _load_sensors("hertz" if law == "compliant" else law)
-    return _load_law(law)
+    return _load_host_library(HOST_LIBRARIES[name])
 
 
 def _known_libraries(names) -> dict[str, tuple[tuple[str, ...], Path]]:
@@ -251,21 +199,6 @@ def check_libraries(names):
             yield name, None
 
 
-def _law_target(kind: str, law: str) -> str:
-    """The FFI target of a full run (`kind`: "full", "tangent" or "books") on `law`'s library."""
-    return f"hertzchain_chain_full_{'forward' if kind == 'full' else kind}_{law}"
-
-
-@functools.cache
-def _load_law(law: str) -> Path:
-    """Build (if needed), load and register the full kernels of a law other than Hertz's
-    (`LAW_DEFINES`)."""
-    return _load_library((f"-D{build.LAW_DEFINES[law]}",), f"the fused chain kernel's {law} runs",
-                         tuple((_law_target(kind, law), symbol) for kind, symbol in (
-                             ("full", "HertzChainFullForward"), ("tangent", "HertzChainFullTangent"),
-                             ("books", "HertzChainFullBooks"))))
-
-
 def available() -> bool:
     """Whether the kernel is built and registered (it builds it on the first call)."""
     return _load() is None
@@ -297,19 +230,19 @@ class FusedKernel(NamedTuple):
     backend: str
 
 
-def _host_library_loads(flags) -> bool:
-    """Whether the host library that runs `flags`' physics (`batched.KernelFlags`) beyond the
-    main library's (compliant sensors, another law, a dashpot) loads; where it cannot be
-    built, that was said once on stderr and those runs take the JAX kernel."""
+def host_library_of(flags) -> HostLibrary | None:
+    """The host library that runs `flags`' physics (`batched.KernelFlags`: its contact law,
+    its rate-slot law, compliant sensors or not), or None where none does
+    (`libraries.host_library_for`)."""
+    rate = "velocity_squared" if flags.velocity_squared else "dashpot" if flags.dashpot else None
+    return host_library_for(flags.law, rate, bool(flags.sensors))
+
+
+def _host_library_loads(library: HostLibrary) -> bool:
+    """Whether `library` loads; where it cannot be built, that was said once on stderr and
+    its runs take the JAX kernel."""
     try:
-        if flags.sensors:
-            _load_sensors(flags.law)
-        elif flags.law != "hertz":
-            _load_law(flags.law)
-        elif flags.velocity_squared:
-            _load_velocity_squared()
-        elif flags.dashpot:
-            _load_dashpot()
+        _load_host_library(library)
     except (OSError, RuntimeError):
         return False
     return True
@@ -329,37 +262,18 @@ def kernel_for(flags, devices, rows: int | None = None) -> FusedKernel | None:
     kernel arrays' rows (bodies + 1); where given, the GPU's thread kernel for that chain
     length is built and loaded here, and one that cannot be (said once on stderr) gives None."""
     platforms = _platforms(devices)
-    if flags.velocity_squared:  # its library has Hertz contacts, on the host, no compliant sensors
-        if (flags.sensors or flags.law != "hertz" or platforms != {"cpu"} or not available()
-                or not _host_library_loads(flags)):
-            return None
-        return FusedKernel("full", "host")
-    if flags.sensors:  # compliant sensors: the host's sensor libraries, no books
-        if flags.ledger or platforms != {"cpu"} or not available() or not _host_library_loads(flags):
-            return None
-        return FusedKernel("full", "host")
-    if flags.law != "hertz":  # the full kernel's library of the law (`LAW_DEFINES`), on the host
-        if platforms != {"cpu"} or not available() or not _host_library_loads(flags):
-            return None
-        return FusedKernel("full", "host")
-    physics = "full" if flags.full_state else "conservative"
-    if platforms == {"cpu"} and available() and _host_library_loads(flags):
+    library = host_library_of(flags)
+    if library is None or (flags.ledger and "books" not in library.kinds):
+        return None
+    # (a conservative chain on another law runs the full kernel: its library's only runs)
+    physics = "full" if flags.full_state or library.law != "hertz" else "conservative"
+    if platforms == {"cpu"} and available() and _host_library_loads(library):
         return FusedKernel(physics, "host")
-    if flags.full_state and flags.ledger:  # the thread kernels keep no books of the full step
+    # the thread kernels: Hertz contacts with or without a dashpot (compiled into one
+    # library), no compliant sensors, no books of the full step
+    if library.name not in ("chain", "dashpot") or (flags.full_state and flags.ledger):
         return None
     if platforms == {"gpu"} and thread.thread_unavailable_reason("cuda") is None and (
             rows is None or thread._thread_library_loads("cuda", int(rows))):
         return FusedKernel(physics, "cuda")
     return None
-
-
-# Each kind of host run (`calls._Ffi.call`): its FFI target.
-_HOST_TARGETS = {"forward": TARGET, "full": FULL_TARGET, "tangent": TANGENT_TARGET, "books": BOOKS_TARGET,
-                 "full_dashpot": DASHPOT_FULL_TARGET, "tangent_dashpot": DASHPOT_TANGENT_TARGET,
-                 "books_dashpot": DASHPOT_BOOKS_TARGET, "full_velocity_squared": VELOCITY_SQUARED_FULL_TARGET,
-                 "tangent_velocity_squared": VELOCITY_SQUARED_TANGENT_TARGET,
-                 "books_velocity_squared": VELOCITY_SQUARED_BOOKS_TARGET, "full_sensors": SENSOR_FULL_TARGET,
-                 "tangent_sensors": SENSOR_TANGENT_TARGET} | {
-                     f"{kind}_{law}": _law_target(kind, law) for law in build.LAW_DEFINES for kind in ("full", "tangent", "books")} | {
-                     f"{kind}_{law}_sensors": _law_target(kind, law) + "_sensors" for law in build.LAW_DEFINES
-                     for kind in ("full", "tangent")}
