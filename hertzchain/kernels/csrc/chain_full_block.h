@@ -28,8 +28,7 @@
 namespace hertzchain {
 
 // The contacts' elastic law of a full run (`batched.KernelFlags.law`): each library runs one
-// (the main and dashpot libraries Hertz's, HC_POWER_LIBRARY the power law, HC_THORNTON_LIBRARY
-// and HC_JACKSON_GREEN_LIBRARY the elastic-plastic laws).
+// (the libraries without a law macro Hertz's; chain_kernel.cc's HC_LIBRARY_LAW the others').
 enum class Law { kHertz, kPower, kThornton, kJacksonGreen };
 
 // Whether a law is elastic-plastic: its contacts carry their largest overlap so far.

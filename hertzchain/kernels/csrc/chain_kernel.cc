@@ -85,9 +85,16 @@ namespace ffi = xla::ffi;
 #define HC_PART_TANGENT 0
 #endif
 
-// A library of a contact law other than Hertz's (the full kernel's runs only).
-#if defined(HC_POWER_LIBRARY) || defined(HC_THORNTON_LIBRARY) || defined(HC_JACKSON_GREEN_LIBRARY)
-#define HC_LAW_LIBRARY 1
+// A library of a contact law other than Hertz's (the full kernel's runs only): the law
+// (`Law`, chain_full_block.h) that its macro selects (`native.libraries.CONTACT_LAW_DEFINES`):
+// the power law (`contact.power_law_force`), Thornton's and Jackson-Green's elastic-plastic
+// laws (`contact.thornton_contact`, `contact.jackson_green_contact`).
+#if defined(HC_POWER_LIBRARY)
+#define HC_LIBRARY_LAW kPower
+#elif defined(HC_THORNTON_LIBRARY)
+#define HC_LIBRARY_LAW kThornton
+#elif defined(HC_JACKSON_GREEN_LIBRARY)
+#define HC_LIBRARY_LAW kJacksonGreen
 #endif
 
 namespace {
@@ -182,7 +189,7 @@ void RunFullBlock(int64_t bodies, int64_t lo, int64_t batch, int64_t n_samples,
   if constexpr (kBooks) block.StoreBooks();
 }
 
-#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_LAW_LIBRARY) && !defined(HC_SENSOR_LIBRARY) && \
+#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_LIBRARY_LAW) && !defined(HC_SENSOR_LIBRARY) && \
     HC_PART_FORWARD  // (the main library only)
 ffi::Error Forward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buffer<ffi::F64> inv_mass,
                    ffi::Buffer<ffi::F64> kappa, ffi::Buffer<ffi::F64> overlap0,
@@ -248,15 +255,9 @@ ffi::Error Forward(ffi::ThreadPool pool, ffi::Buffer<ffi::F64> state0, ffi::Buff
 // tangents (kTangent, `tangents` given), or with the books (kBooks, `books` given).
 enum class Pass { kForward, kTangent, kBooks };
 
-// The law of this library's runs: the power-law library's `contact.power_law_force`, the
-// elastic-plastic libraries' `contact.thornton_contact` and `contact.jackson_green_contact`,
-// the others Hertz's.
-#if defined(HC_POWER_LIBRARY)
-constexpr Law kLibraryLaw = Law::kPower;
-#elif defined(HC_THORNTON_LIBRARY)
-constexpr Law kLibraryLaw = Law::kThornton;
-#elif defined(HC_JACKSON_GREEN_LIBRARY)
-constexpr Law kLibraryLaw = Law::kJacksonGreen;
+// The law of this library's runs: its law macro's (HC_LIBRARY_LAW, above), else Hertz's.
+#if defined(HC_LIBRARY_LAW)
+constexpr Law kLibraryLaw = Law::HC_LIBRARY_LAW;
 #else
 constexpr Law kLibraryLaw = Law::kHertz;
 #endif
@@ -430,7 +431,7 @@ ffi::Error RunFull(ffi::ThreadPool& pool, ffi::Buffer<ffi::F64> state0, ffi::Buf
   // on first use by `native`), so that the library every run needs does not wait for them;
   // a law's library runs its law with and without a dashpot, and so do the compliant
   // sensors' libraries (HC_SENSOR_LIBRARY, on Hertz's law or on a law's define).
-#if defined(HC_LAW_LIBRARY) || defined(HC_SENSOR_LIBRARY)
+#if defined(HC_LIBRARY_LAW) || defined(HC_SENSOR_LIBRARY)
   if (dashpot_on && !viscous)
     return ffi::Error::InvalidArgument("a dashpot runs with damping only (the kernels compute rates with it)");
   if (dashpot_on) {
@@ -542,7 +543,7 @@ auto HostFullArgs(Binding&& binding) {
       .template Arg<ffi::Buffer<ffi::F64>>();  // sensors
 }
 
-#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_LAW_LIBRARY) && !defined(HC_SENSOR_LIBRARY) && HC_PART_FORWARD
+#if !defined(HC_DASHPOT_LIBRARY) && !defined(HC_LIBRARY_LAW) && !defined(HC_SENSOR_LIBRARY) && HC_PART_FORWARD
 XLA_FFI_DEFINE_HANDLER_SYMBOL(HertzChainForward, Forward,
                               hertzchain::ForwardAttrs(hertzchain::ChainArgs(ffi::Ffi::Bind().Ctx<ffi::ThreadPool>())
                                                            .Arg<ffi::Buffer<ffi::S64>>())  // channels
