@@ -112,13 +112,13 @@ class PreviousName(Exception):
 def _name_check(command: str, args) -> None:
     """A fit, diagnosis, design or sensitivity study: each parameter name resolved as the
     command resolves it (a previous name's warning raised as an error)."""
-    from fitting.driven_experiment import is_driven_experiment
+    from fitting.driven.experiment import is_driven_experiment
     from fitting.parameters import ParameterNameWarning, resolve_label
     from hertzchain.parameters import resolve_name
 
     files = getattr(args, "files", ())
     if getattr(args, "data_dir", None) is not None or any(Path(f).is_file() and is_driven_experiment(f) for f in files):
-        return  # a driven experiment names its own parameters (fitting.driven_experiment)
+        return  # a driven experiment names its own parameters (fitting.driven.experiment)
     resolve = resolve_name if command == "sensitivity" else resolve_label
     with warnings.catch_warnings():
         warnings.simplefilter("error", ParameterNameWarning)

@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 import hertzchain  # noqa: F401  (float64)
-from fitting import driven
-from fitting.driven_experiment import load_driven_experiment
+from fitting.driven import lockin_fit as driven
+from fitting.driven.experiment import load_driven_experiment
 from hertzchain.driven import fused
 from hertzchain.io.atomic import write_json
 

@@ -69,7 +69,7 @@ from hertzchain.materials import Material
 from hertzchain.units import counted
 
 from .contact_report import median_secant_ratio, summary_table, write_outputs  # noqa: F401
-from .driven import lag1_autocorrelation
+from .driven.lockin_fit import lag1_autocorrelation
 from .fit import least_squares
 from .uncertainty import covariance_from_jacobian
 

@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fitting.driven import lag1_autocorrelation
+from fitting.driven.lockin_fit import lag1_autocorrelation
 from fitting.least_squares import least_squares
 from hertzchain.covariance import gauss_newton_covariance
 from hertzchain.laws import ContactConstants, PowerLaw

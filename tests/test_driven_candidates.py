@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fitting.driven_candidates import CANDIDATES, diagnose_laws, verdict
-from fitting.driven_experiment import DrivenExperiment, Measurement
+from fitting.driven.candidates import CANDIDATES, diagnose_laws, verdict
+from fitting.driven.experiment import DrivenExperiment, Measurement
 from hertzchain.driven.measurements import Bending
 from hertzchain.driven.sweeper_files import LockinSweep
 
@@ -140,8 +140,8 @@ def test_micro_slip_candidate_predicts_the_floquet_continuations_thresholds():
     Floquet continuation's (`period_doubling_onsets`, the sliders as state) over the same
     search range; `test_driven_thresholds.test_micro_slip_onset_and_its_derivative` checks that
     continuation against a scan of the multipliers."""
-    from fitting.driven_candidates import predict_thresholds
-    from fitting.driven_joint import SEARCH_ABOVE, SEARCH_BELOW
+    from fitting.driven.candidates import predict_thresholds
+    from fitting.driven.joint import SEARCH_ABOVE, SEARCH_BELOW
     from hertzchain import laws
     from hertzchain.driven import DrivenChain
     from hertzchain.driven.measurements import Loop, Tongue

@@ -2,8 +2,8 @@
 of one bead between a driven face and a wall (`tests/helpers.driven_bead_lockin`), its contacts
 a power law of another exponent than Hertz's, Hertz in series with a spring, or Hertz with
 micro-slip friction at the bead's supports (an Iwan element). Fitted on the lower drive levels
-at the stated precompression, the protocol (`fitting.driven_diagnosis.diagnose_experiment`,
-which runs `fitting.driven_candidates.diagnose_laws`) must name the hidden law by what it
+at the stated precompression, the protocol (`fitting.driven.diagnosis.diagnose_experiment`,
+which runs `fitting.driven.candidates.diagnose_laws`) must name the hidden law by what it
 predicts for the top level, and recover its constant.
 
 The setups: a 28 g bead at a stated 0.5 N whose contacts rest at 136 nm, driven by 3 to 18 nm
@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from helpers import driven_bead_lockin, iwan_support, rerun_at_the_default_xla_level
 
-from fitting.driven_candidates import CANDIDATES, SLOW_CANDIDATES
-from fitting.driven_diagnosis import diagnose_experiment
-from fitting.driven_experiment import DrivenExperiment
+from fitting.driven.candidates import CANDIDATES, SLOW_CANDIDATES
+from fitting.driven.diagnosis import diagnose_experiment
+from fitting.driven.experiment import DrivenExperiment
 from hertzchain.driven.sweeper_files import LockinSweep
 
 MASS, F0, OVERLAP, GAMMA = 0.028, 0.5, 1.36e-7, 2500.0
@@ -165,8 +165,8 @@ def test_joint_fit_recovers_hidden_micro_slip_from_the_bending_and_the_tongue():
     if rerun_at_the_default_xla_level(__file__,
                                       "test_joint_fit_recovers_hidden_micro_slip_from_the_bending_and_the_tongue"):
         return
-    from fitting.driven_candidates import fit_candidate_jointly
-    from fitting.driven_experiment import Measurement
+    from fitting.driven.candidates import fit_candidate_jointly
+    from fitting.driven.experiment import Measurement
     from hertzchain import laws
     from hertzchain.driven import DrivenChain
     from hertzchain.driven.measurements import Bending, Loop, Tongue

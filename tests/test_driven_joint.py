@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fitting.driven_experiment import DrivenExperiment, DrivenExperimentError, Measurement
-from fitting.driven_joint import JointModel, fit_joint, joint_parameters
+from fitting.driven.experiment import DrivenExperiment, DrivenExperimentError, Measurement
+from fitting.driven.joint import JointModel, fit_joint, joint_parameters
 from hertzchain.driven import DrivenChain, lockin_grid
 from hertzchain.driven.measurements import Bending, Loop, Tongue
 from hertzchain.driven.sweeper_files import LockinSweep

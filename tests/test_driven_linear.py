@@ -8,7 +8,12 @@ from scipy.integrate import solve_ivp
 
 from hertzchain.contact import hertz_force
 from hertzchain.driven import DrivenChain
-from hertzchain.driven.linear import band_structure, frequency_response, monatomic_band_edge_hz, normal_modes
+from hertzchain.driven.linear import (
+    band_structure,
+    frequency_response,
+    monatomic_band_edge_hz,
+    normal_modes,
+)
 
 MASS = 0.028  # kg, the 19.05 mm stainless beads of Lydon et al.
 KAPPA = 9.7576e9  # N/m^1.5, their sphere-sphere Hertz constant

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from helpers import DRIVEN_EXPERIMENT_HEAD
 
-from fitting.driven_experiment import DrivenExperimentError, load_driven_experiment
+from fitting.driven.experiment import DrivenExperimentError, load_driven_experiment
 from hertzchain.driven.measurements import read_loop, read_scope, read_tongue, spectral_amplitude
 from hertzchain.driven.sweeper_files import SweeperFileError
 

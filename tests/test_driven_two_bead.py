@@ -7,7 +7,7 @@ import jax
 import numpy as np
 import pytest
 
-from fitting.driven_joint import _leaf, scaled_chain
+from fitting.driven.joint import _leaf, scaled_chain
 from hertzchain import laws
 from hertzchain.driven import DrivenChain
 from hertzchain.driven.linear import normal_modes, symmetric_pair_stiffness_n_m

@@ -12,7 +12,7 @@ import pytest
 
 import hertzchain as hc
 from fitting.data import FitInputError, load_experiments
-from fitting.driven_experiment import DrivenExperimentError, is_driven_experiment, load_driven_experiment
+from fitting.driven.experiment import DrivenExperimentError, is_driven_experiment, load_driven_experiment
 from fitting.priors import PriorError, parse_prior
 from hertzchain.io.atomic import FOLDER_MARKER, file_stem, output_folder
 from hertzchain.cli import main

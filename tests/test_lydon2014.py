@@ -1,4 +1,4 @@
-"""The band-edge criterion of fitting.driven_band, on the linearised chain's own response and
+"""The band-edge criterion of fitting.driven.band, on the linearised chain's own response and
 on Lydon et al. 2014's `Band.mat` (where present)."""
 
 from pathlib import Path
@@ -6,10 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fitting.driven.band import band_edge_hz, lydon2014_band_edges, power_law
 from hertzchain.driven import DrivenChain
 from hertzchain.driven.linear import frequency_response, monatomic_band_edge_hz, normal_modes
-
-from fitting.driven_band import band_edge_hz, lydon2014_band_edges, power_law
 
 LYDON_2014 = Path(__file__).resolve().parents[2] / "shared/data/real/lydon-2014"
 MASS, KAPPA = 0.028, 9.7576e9

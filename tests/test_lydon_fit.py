@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from fitting.driven import DrivenLayout, fit_driven, lag1_autocorrelation
-from fitting.driven_experiment import (
+from fitting.driven.experiment import (
     DrivenExperiment,
     DrivenExperimentError,
     load_driven_experiment,
 )
+from fitting.driven.lockin_fit import DrivenLayout, fit_driven, lag1_autocorrelation
 from hertzchain.driven.sweeper_files import LockinSweep
 
 RAMP, HOLD, WINDOW = 12, 28, 4
@@ -223,12 +223,12 @@ def _candidate(name, *, held_out, median, converged=True, tongue_tip=None):
 
 
 def test_driven_diagnosis_conclusion_says_what_each_candidate_explains_in_numbers():
-    """The conclusion of the candidate protocol (`fitting.driven_diagnosis.finished`) on hand-made
+    """The conclusion of the candidate protocol (`fitting.driven.diagnosis.finished`) on hand-made
     entries: the named candidate and why, every candidate's measurements with their numbers
     and targets, measurements the experiment does not hold left out (a bending-only file has
     no tongue), and an unconverged fit and a failed one named, `converged` False."""
-    from fitting.driven_candidates import verdict
-    from fitting.driven_diagnosis import finished
+    from fitting.driven.candidates import verdict
+    from fitting.driven.diagnosis import finished
 
     entries = [_candidate("hertz_viscous", held_out=0.10, median=0.05),
                _candidate("fits_better", held_out=0.095, median=0.01),

@@ -1,6 +1,6 @@
 """mkdocs hook: the reference page of experiment-file keys, `reference/experiment-files.md`,
 made at build time from the key lists the readers check against (`hertzchain.io.importer`,
-`hertzchain.io.tracefile`, `fitting.driven_experiment`), so that a key added to a reader without
+`hertzchain.io.tracefile`, `fitting.driven.experiment`), so that a key added to a reader without
 a line here fails the build instead of going undocumented."""
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ def _table(keys, meanings, where: str, header_keys=None) -> str:
 
 
 def page() -> str:
-    from fitting import driven_experiment as driven
+    from fitting.driven import experiment as driven
     from hertzchain.io import importer, tracefile
 
     return "\n\n".join([

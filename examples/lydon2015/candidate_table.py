@@ -6,7 +6,7 @@
 Reads each `diagnose_laws.py` result in the folder (`RESULTS`, in this order; a file not there
 is skipped and said) and writes `table.json`: one row per candidate (the first time its name
 appears), with where it is stored (`file#candidates.i`), what it was fitted on, its
-precompression and drive scales, and per target of `fitting.driven_candidates.TARGETS` the
+precompression and drive scales, and per target of `fitting.driven.candidates.TARGETS` the
 value and whether it is met (`scores`); a target it was fitted on is marked so. The
 micro-slip scans of the contacts' static force (`SCANS`) add one row per static force.
 """
@@ -17,7 +17,7 @@ import argparse
 import json
 from pathlib import Path
 
-from fitting.driven_candidates import MEASURED_BY, TARGETS, scores
+from fitting.driven.candidates import MEASURED_BY, TARGETS, scores
 from hertzchain.io.atomic import json_ready, write_json
 
 HERE = Path(__file__).resolve().parent

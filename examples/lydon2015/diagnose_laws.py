@@ -1,4 +1,4 @@
-"""The driven candidates (`fitting.driven_candidates`) on the single bead, in one command:
+"""The driven candidates (`fitting.driven.candidates`) on the single bead, in one command:
 
     python examples/lydon2015/diagnose_laws.py --data-dir ../shared/data/real/lydon-2015
         [--out examples/lydon2015/results/single_bead_diagnosis_laws] [--max-steps 20]
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fitting.driven_candidates import (
+from fitting.driven.candidates import (
     CANDIDATES,
     FREE_PRELOAD_CANDIDATES,
     FREE_PRELOAD_START_N,
@@ -34,7 +34,7 @@ from fitting.driven_candidates import (
     fit_candidate_jointly,
     scores,
 )
-from fitting.driven_experiment import load_driven_experiment
+from fitting.driven.experiment import load_driven_experiment
 from hertzchain.io.atomic import json_ready, save_figure, write_json
 
 HERE = Path(__file__).resolve().parent

@@ -29,7 +29,7 @@ import numpy as np
 from run_record import started, write_stamped  # this folder's helper
 from scipy.optimize import least_squares
 
-from fitting.driven_experiment import load_driven_experiment
+from fitting.driven.experiment import load_driven_experiment
 from hertzchain.driven import DrivenChain
 from hertzchain.driven.linear import frequency_response
 

@@ -20,11 +20,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hertzchain.io.atomic import save_figure, write_csv, write_json  # noqa: E402
+from fitting.driven.band import PAPER_EDGE_HZ, lydon2014_band_edges, power_law  # noqa: E402
 from hertzchain.driven import DrivenChain  # noqa: E402
 from hertzchain.driven.linear import monatomic_band_edge_hz, normal_modes  # noqa: E402
-
-from fitting.driven_band import PAPER_EDGE_HZ, lydon2014_band_edges, power_law  # noqa: E402
+from hertzchain.io.atomic import save_figure, write_csv, write_json  # noqa: E402
 
 BEAD_MASS_KG = 0.028  # 19.05 mm stainless beads (the authors' scripts)
 KAPPA_N_M1P5 = 9.7576e9  # their sphere-sphere Hertz constant (316 steel, R = 9.525 mm)

@@ -22,9 +22,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.io  # noqa: E402
 
-from hertzchain.io.atomic import save_figure, write_csv, write_json  # noqa: E402
-
 from fitting.static_curve import chain_force_n, fit_static_exponent  # noqa: E402
+from hertzchain.io.atomic import save_figure, write_csv, write_json  # noqa: E402
 
 # The authors' calibrations (`plotmode_fine.m`, the data's README): static force (V - V_ref)
 # x 4.09 N/V, actuator displacement (V - V_ref) x 1.2564e-6 m/V from its strain gauge, V_ref

@@ -37,7 +37,7 @@ from micro_slip_preload_scan import chain_at  # this folder's scripts
 from run_record import started, write_stamped
 from tongue_drive_transfer import finish_onset_figure, transfer_at
 
-from fitting.driven_experiment import load_driven_experiment
+from fitting.driven.experiment import load_driven_experiment
 from hertzchain.driven.floquet import floquet_multipliers
 from hertzchain.driven.linear import normal_modes
 from hertzchain.driven.thresholds import period_doubling_onsets

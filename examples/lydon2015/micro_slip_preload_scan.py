@@ -32,15 +32,15 @@ import jax.numpy as jnp
 import numpy as np
 from run_record import started, write_stamped  # this folder's helper
 
-from fitting.driven_candidates import (
+from fitting.driven.candidates import (
     BoundedJointModel,
     bending_summary,
     fitted_levels,
     predict_thresholds,
     scores,
 )
-from fitting.driven_experiment import load_driven_experiment
-from fitting.driven_joint import DRIVE_SCALE, JointParameter
+from fitting.driven.experiment import load_driven_experiment
+from fitting.driven.joint import DRIVE_SCALE, JointParameter
 from hertzchain import laws
 from hertzchain.driven import DrivenChain
 from hertzchain.driven.linear import normal_modes

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 from run_record import started, write_stamped  # this folder's helper
 
-from fitting.driven_experiment import load_driven_experiment
+from fitting.driven.experiment import load_driven_experiment
 
 HERE = Path(__file__).resolve().parent
 SOURCE = "micro_slip_tongue_run_preload.json"

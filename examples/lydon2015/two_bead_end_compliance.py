@@ -43,10 +43,10 @@ import numpy as np
 from run_record import write_stamped  # this folder's helper
 from two_bead_prediction import TONGUE_AMPLITUDES_M, single_bead_constants, two_bead_fit_start
 
-from fitting.driven_candidates import BoundedJointModel, fitted_levels
-from fitting.driven_experiment import Measurement, load_driven_experiment
-from fitting.driven_joint import DRIVE_SCALE, JointParameter, _leaf
-from fitting.driven_report import bending
+from fitting.driven.candidates import BoundedJointModel, fitted_levels
+from fitting.driven.experiment import Measurement, load_driven_experiment
+from fitting.driven.joint import DRIVE_SCALE, JointParameter, _leaf
+from fitting.driven.report import bending
 from fitting.fit import least_squares
 from fitting.uncertainty import covariance_from_jacobian
 from hertzchain import laws

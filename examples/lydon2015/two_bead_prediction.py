@@ -27,10 +27,10 @@ from pathlib import Path
 import numpy as np
 from run_record import started, write_stamped  # this folder's helper
 
-from fitting.driven_candidates import BoundedJointModel, fitted_levels
-from fitting.driven_experiment import Measurement, load_driven_experiment
-from fitting.driven_joint import DRIVE_SCALE, JointParameter
-from fitting.driven_report import bending
+from fitting.driven.candidates import BoundedJointModel, fitted_levels
+from fitting.driven.experiment import Measurement, load_driven_experiment
+from fitting.driven.joint import DRIVE_SCALE, JointParameter
+from fitting.driven.report import bending
 from fitting.fit import least_squares
 from hertzchain import laws
 from hertzchain.driven import DrivenChain

@@ -39,13 +39,21 @@ import dataclasses
 import math
 import sys
 
+from fitting.compilation_cache import enable_compilation_cache
+from fitting.contact_calibration import (
+    GEOMETRIES,
+    MAX_TIME_SHIFT_S,
+    OFFSETS,
+    ContactGeometry,
+    calibrate,
+    read_curve,
+    write_outputs,
+)
+
 from ..io.atomic import output_folder
 from ..materials import Material, material
 from ..units import counted, parse_quantity
-
-from fitting.compilation_cache import enable_compilation_cache
 from .errors import EXIT_NOT_CONVERGED, exit_codes_epilog
-from fitting.contact_calibration import GEOMETRIES, MAX_TIME_SHIFT_S, OFFSETS, ContactGeometry, calibrate, read_curve, write_outputs
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -3,7 +3,7 @@ chain model is missing (see `fitting.diagnosis`).
 
 A driven experiment file (`kind = "driven"`: a bending `[sweep]`, or `[[measurement]]` tables of
 bending, tongue, loop and scope runs; `docs/how-to/driven-measurements.md`) runs the candidate-law
-protocol instead (`fitting.driven_diagnosis`): each candidate law fitted on the bending run, named
+protocol instead (`fitting.driven.diagnosis`): each candidate law fitted on the bending run, named
 only where it predicts a measurement it was not fitted on (the held-out top drive levels, the
 tongue's tip, the loop's onset) better than the base. `--candidates` names driven candidates
 there; `--held-out-levels`, `--level-stride` and `--max-steps` are its cost knobs.
@@ -21,8 +21,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from fitting.driven_candidates import CANDIDATES, SLOW_CANDIDATES
-from fitting.driven_diagnosis import (
+from fitting.driven.candidates import CANDIDATES, SLOW_CANDIDATES
+from fitting.driven.diagnosis import (
     DEFAULT_HELD_OUT_LEVELS,
     DEFAULT_LEVEL_STRIDE,
     DEFAULT_MAX_STEPS,

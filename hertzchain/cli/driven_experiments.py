@@ -13,7 +13,7 @@ import math
 import sys
 from pathlib import Path
 
-from fitting.driven_experiment import is_driven_experiment, load_driven_experiment
+from fitting.driven.experiment import is_driven_experiment, load_driven_experiment
 
 from ..units import format_measured
 from .errors import EXIT_NOT_CONVERGED
@@ -73,8 +73,8 @@ def _one_experiment(args):
 def run_fit(args, out) -> int:
     """The driven branch of `hertzchain fit`, written into the folder `out` (exit 0 converged, 3 not
     converged)."""
-    from fitting.driven import PARAMETERS, fit_driven
-    from fitting.driven_report import report_data, write_driven_report
+    from fitting.driven.lockin_fit import PARAMETERS, fit_driven
+    from fitting.driven.report import report_data, write_driven_report
 
     _refuse(args, _TRACE_FIT_OPTIONS, "fit")
     experiment = _one_experiment(args)
@@ -114,8 +114,8 @@ def run_fit(args, out) -> int:
 def run_joint_fit(args, out, experiment) -> int:
     """`hertzchain fit` on a file of `[[measurement]]` tables: every measurement fitted together,
     the constants its `[fit]` table names shared or per run (exit 0 converged, 3 not)."""
-    from fitting.driven_joint import fit_joint
-    from fitting.driven_joint_report import report_data, write_joint_report
+    from fitting.driven.joint import fit_joint
+    from fitting.driven.joint_report import report_data, write_joint_report
 
     if args.params != _defaults("fit", ("params",))["params"]:
         raise ValueError("--params: a file of [[measurement]] tables names what it fits in its [fit] table "
@@ -166,10 +166,10 @@ def _measurement_line(m: dict) -> str:
 
 def run_diagnose(args, out) -> int:
     """The driven branch of `hertzchain diagnose`: the candidate-law protocol
-    (`fitting.driven_diagnosis.diagnose_experiment`) on one experiment file, bending-only or of
+    (`fitting.driven.diagnosis.diagnose_experiment`) on one experiment file, bending-only or of
     `[[measurement]]` tables, written into the folder `out` (exit 0 converged, 3 a candidate's
     fit did not converge)."""
-    from fitting.driven_diagnosis import (
+    from fitting.driven.diagnosis import (
         candidates_named,
         diagnose_experiment,
         write_driven_diagnosis,

@@ -54,10 +54,10 @@ from fitting.report import summary_text, write_report
 from fitting.uncertainty import COVARIANCES
 
 from ..io.atomic import output_folder, write_json
-from ..timegrid import choose_time_grid
-from ..validation import RunSize, check_run_size, estimate_run_size
 from ..io.importer import experiment_priors
+from ..timegrid import choose_time_grid
 from ..units import counted, parse_quantity
+from ..validation import RunSize, check_run_size, estimate_run_size
 
 
 def _assignments(text: str | None, option: str) -> dict:

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 
 from .. import plotting
-from ..io.atomic import save_figure, say_replaced, write_json
-from ..native import kernel_record
 from ..integrate import simulate
+from ..io.atomic import save_figure, say_replaced, write_json
 from ..io.summary import run_summary
 from ..io.tracefile import TraceFile, setup_header, validate_header, write_trace
+from ..native import kernel_record
 from ..validation import check_simulation_size
 from .setup_options import add_run_arguments, add_setup_arguments, chain_from_args, run_options
 

@@ -11,7 +11,7 @@ import numpy as np
 from hertzchain.io.atomic import json_ready, save_figure, write_csv, write_json
 from hertzchain.peaks import frequency_response_peaks
 
-from .driven import UNITS, DrivenFit, DrivenLayout, chain_at, nominal_modes_hz
+from .lockin_fit import UNITS, DrivenFit, DrivenLayout, chain_at, nominal_modes_hz
 
 
 def mode_windows(experiment, n_modes: int) -> list[np.ndarray]:

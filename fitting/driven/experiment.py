@@ -76,7 +76,7 @@ days need not) and its files::
     scope_file = "...ScopeShots_middle....txt.txt"
     levels_file = "...SingleBeadSingleRun Signal Amplitude_0....txt"   # the sweep's steps
 
-    [fit]                                  # the joint fit (`fitting.driven_joint`)
+    [fit]                                  # the joint fit (`fitting.driven.joint`)
     shared = ["contact_kappa_n_m1p5", "damping_rate_per_s"]
     per_run = ["precompression_n", "drive_scale"]
 
@@ -95,10 +95,14 @@ import numpy as np
 
 from hertzchain.contact import kappa_sphere_flat, kappa_sphere_sphere
 from hertzchain.driven import measurements as kinds
-from hertzchain.driven.sweeper_files import (LockinSweep, SweeperFileError, SweeperTable, lockin_sweep,
-                                             read_sweeper_table)
-from hertzchain.io.importer import ExperimentFileError
-from hertzchain.io.importer import quantity_of_key
+from hertzchain.driven.sweeper_files import (
+    LockinSweep,
+    SweeperFileError,
+    SweeperTable,
+    lockin_sweep,
+    read_sweeper_table,
+)
+from hertzchain.io.importer import ExperimentFileError, quantity_of_key
 
 KIND = "driven"
 TOP_KEYS = ("kind", "label", "chain", "drive", "sensor", "sweep", "model", "measurement", "fit")

@@ -1,11 +1,11 @@
 """The diagnosis of a driven experiment: the candidate-law protocol run on an experiment file,
 its result as a folder and in plain words.
 
-`diagnose_experiment` runs `fitting.driven_candidates.diagnose_laws`, the one protocol: every
+`diagnose_experiment` runs `fitting.driven.candidates.diagnose_laws`, the one protocol: every
 candidate law fitted on the file's bending run, judged by what it predicts for the
 measurements it was not fitted on (the bending run's `held_out_levels` highest drive levels,
 a tongue's tip, a loop's onset going up), named only when it beats the base there
-(`fitting.driven_candidates.verdict`). A bending-only file (a `[sweep]` table) is read as an
+(`fitting.driven.candidates.verdict`). A bending-only file (a `[sweep]` table) is read as an
 experiment of one bending measurement, so that its held-out levels are the only measurement
 the candidates predict; a file of `[[measurement]]` tables is taken as it is.
 
@@ -36,8 +36,8 @@ from hertzchain.driven.measurements import Bending
 from hertzchain.io.atomic import json_ready, save_figure, write_json, write_text
 from hertzchain.native import kernel_record
 
-from .driven_candidates import CANDIDATES, SLOW_CANDIDATES, TARGETS, diagnose_laws, scores
-from .driven_experiment import DrivenExperiment, Measurement
+from .candidates import CANDIDATES, SLOW_CANDIDATES, TARGETS, diagnose_laws, scores
+from .experiment import DrivenExperiment, Measurement
 
 # Each candidate's bending fit leaves out the top this many drive levels and predicts them ...
 DEFAULT_HELD_OUT_LEVELS = 4

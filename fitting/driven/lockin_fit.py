@@ -44,9 +44,9 @@ from hertzchain.native import kernel_record
 from hertzchain.peaks import frequency_response_peaks
 from hertzchain.progress import Progress
 
-from .driven_experiment import DrivenExperiment
-from .least_squares import least_squares
-from .uncertainty import covariance_from_jacobian
+from ..least_squares import least_squares
+from ..uncertainty import covariance_from_jacobian
+from .experiment import DrivenExperiment
 
 # Residuals (fractions of a curve's peak) are divided by this before the optimiser sees them,
 # so that its tolerance (0.1 in chi^2) means about a third of a standard error: on measured

@@ -1,6 +1,6 @@
 """Joint fits of every measurement of a driven experiment, across runs.
 
-An experiment file of `[[measurement]]` tables (`fitting.driven_experiment`) describes runs of
+An experiment file of `[[measurement]]` tables (`fitting.driven.experiment`) describes runs of
 one apparatus: the bead, its contacts and its damping are the same in every run; what the lab
 sets anew each time (the precompression, the drive's calibration) need not be. The fit has
 **shared** parameters, one value for every run, and **per-run** ones, one value per run, named
@@ -57,10 +57,10 @@ from hertzchain.driven import DrivenChain, lockin_grid
 from hertzchain.driven.thresholds import onset_tangents, period_doubling_onsets
 from hertzchain.progress import Progress
 
-from .driven import NOMINAL_SCALE, chain_at, fit_driven, lag1_autocorrelation, lockin_settings
-from .driven_experiment import DrivenExperiment, DrivenExperimentError
-from .fit import least_squares
-from .uncertainty import covariance_from_jacobian
+from ..fit import least_squares
+from ..uncertainty import covariance_from_jacobian
+from .experiment import DrivenExperiment, DrivenExperimentError
+from .lockin_fit import NOMINAL_SCALE, chain_at, fit_driven, lag1_autocorrelation, lockin_settings
 
 DEFAULT_SHARED = ("contact_kappa_n_m1p5", "damping_rate_per_s")
 DEFAULT_PER_RUN = ("precompression_n", "drive_scale")

@@ -1,4 +1,4 @@
-"""What a joint driven fit found (`fitting.driven_joint`), as `fit.json`: the status, which
+"""What a joint driven fit found (`fitting.driven.joint`), as `fit.json`: the status, which
 constants are shared and which per run with their values and standard errors, each run's chain,
 and for every measurement the data beside the model (bending misfit and shift, the tongue's
 onsets and tip, the loop's onset, the scope records' onset as a check)."""
@@ -15,8 +15,8 @@ from hertzchain.driven.measurements import loop_thresholds
 from hertzchain.driven.thresholds import emulate_loop
 from hertzchain.io.atomic import json_ready, write_json
 
-from .driven_joint import DRIVE_SCALE, JointFit, _leaf, _threshold_data, chain_fields
-from .driven_report import bending
+from .joint import DRIVE_SCALE, JointFit, _leaf, _threshold_data, chain_fields
+from .report import bending
 
 # A constant whose log factor's standard error is above this is reported as not determined.
 DETERMINED_LOG_STDERR = 0.5

@@ -3,7 +3,7 @@ predicts for the measurements it was not fitted on.
 
 A **candidate** is the base chain (Hertz contacts, viscous drag on the bead) with one law
 added or replaced (`DrivenCandidate`: a name, the law it adds, the paths of the chain's fields
-it frees, in `fitting.driven_joint`'s addressing). Every candidate is held to the apparatus as
+it frees, in `fitting.driven.joint`'s addressing). Every candidate is held to the apparatus as
 the lab describes it:
 
 - the **precompression is fixed** at the file's stated value (Lydon: 4.5 N) in every run,
@@ -11,7 +11,7 @@ the lab describes it:
   force is carried by a load path in parallel with the bead (the fixture), which a
   prescribed face motion does not feel;
 - each run's **drive scale** keeps its calibration prior ($\\log s \\sim N(0, \\log(1+u)^2)$,
-  `fitting.driven_joint`); a run that is only predicted is predicted at its calibration
+  `fitting.driven.joint`); a run that is only predicted is predicted at its calibration
   (s = 1), and the report gives the scale that would have matched it.
 
 Protocol (`diagnose_laws`): each candidate is fitted (`fitting.fit.least_squares`) on the
@@ -53,10 +53,10 @@ from hertzchain.driven.linear import normal_modes
 from hertzchain.driven.measurements import tongue_fundamental
 from hertzchain.progress import Progress
 
-from .driven import NOMINAL_SCALE, lag1_autocorrelation
-from .driven_joint import DRIVE_SCALE, JointModel, JointParameter, _leaf, _threshold_data
-from .driven_report import bending
-from .fit import least_squares
+from ..fit import least_squares
+from .joint import DRIVE_SCALE, JointModel, JointParameter, _leaf, _threshold_data
+from .lockin_fit import NOMINAL_SCALE, lag1_autocorrelation
+from .report import bending
 
 # The issue's targets on the single bead: bending misfit (median over drive levels, fraction of
 # each curve's peak), resonance shift (points), peak velocity per nm top/lowest, and the
@@ -318,7 +318,7 @@ def fit_candidate_jointly(experiment, candidate: DrivenCandidate, *, held_out_le
     """Fit `candidate` on the bending run and the tongue run together, then predict the loop.
 
     The tongue run enters by its thresholds (Floquet, support sliders as state,
-    `fitting.driven_joint.JointModel`) and by
+    `fitting.driven.joint.JointModel`) and by
     its fundamental below every onset (`hertzchain.driven.measurements.tongue_fundamental`),
     which measures that run's true drive: each run has its own drive scale (calibration prior);
     everything else is shared, a freed `precompression_n` too (started at
