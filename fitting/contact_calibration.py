@@ -69,9 +69,8 @@ from hertzchain.materials import Material
 from hertzchain.units import counted
 
 from .contact_report import median_secant_ratio, summary_table, write_outputs  # noqa: F401
-from .driven.lockin_fit import lag1_autocorrelation
 from .fit import least_squares
-from .uncertainty import covariance_from_jacobian
+from .uncertainty import ar1_correlation, ar1_inflation, covariance_from_jacobian
 
 GEOMETRIES = ("sphere-sphere", "sphere-flat")
 OFFSETS = ("first-sample", "none")
@@ -498,9 +497,8 @@ def _fit_material(pieces, material, kappa, geometry, options):
     weighted = jac.copy()
     for k in range(n):
         rows = slice(sizes[k], sizes[k + 1])
-        rho = min(max(lag1_autocorrelation(r[rows]), 0.0), 0.999)
         variance = float(r[rows] @ r[rows]) / max(sizes[k + 1] - sizes[k] - 1, 1)
-        weighted[rows] /= math.sqrt(variance * (1 + rho) / (1 - rho)) if variance > 0 else 1.0
+        weighted[rows] /= math.sqrt(variance * ar1_inflation(ar1_correlation(r[rows]))) if variance > 0 else 1.0
     used = np.abs(weighted).max(axis=0) > 0
     marginal = np.full(len(free), np.nan)
     marginal[used] = gauss_newton_covariance(weighted[:, used]).stderr ** 2

@@ -13,14 +13,15 @@ autocorrelation rho, as the driven fits do).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fitting.driven.lockin_fit import lag1_autocorrelation
 from fitting.least_squares import least_squares
+from fitting.uncertainty import ar1_inflation, lag1_autocorrelation
 from hertzchain.covariance import gauss_newton_covariance
 from hertzchain.laws import ContactConstants, PowerLaw
 
@@ -124,8 +125,7 @@ def fit_static_exponent(displacement_m, force_n, *, reference_overlap_m: float =
     dof = max(residual.size - 2, 1)
     scatter = float(np.sqrt(np.sum(residual**2) / dof))
     rho = lag1_autocorrelation(residual)
-    clipped = min(max(rho, 0.0), 0.999)  # as the driven fits clip it
-    factor = float(np.sqrt((1 + clipped) / (1 - clipped)))
+    factor = math.sqrt(ar1_inflation(rho))
     stderr = np.asarray(gauss_newton_covariance(jacobian, residual_std=scatter).stderr) * factor
     exponent, kappa = float(result.x[0]), float(np.exp(result.x[1]))
     return StaticExponentFit(

@@ -60,6 +60,32 @@ RELATIVE_ERROR_LIMIT = 0.5
 # added on each side, in its standard deviations sqrt(2/dof).
 MODEL_ERROR_ALLOWANCE = 0.25
 NOISE_BAND_SIGMA = 3.0
+# Residuals correlated along a series (a curve over frequency or time) are taken as an AR(1)
+# noise of lag-1 correlation rho in [0, AR1_LIMIT]: anticorrelated residuals are credited with
+# no more information than white ones, and the inflation stays finite.
+AR1_LIMIT = 0.999
+
+
+def lag1_autocorrelation(residuals) -> float:
+    """Pooled lag-1 autocorrelation of `residuals` along their first axis (each column one
+    series, e.g. a lock-in curve over frequency)."""
+    r = np.asarray(residuals)
+    r = r - r.mean(axis=0)
+    return float(np.sum(r[1:] * r[:-1]) / np.sum(r * r))
+
+
+def ar1_correlation(residuals) -> float:
+    """The lag-1 correlation of `residuals` (`lag1_autocorrelation`) as an AR(1) noise's,
+    clipped to [0, AR1_LIMIT]."""
+    return min(max(lag1_autocorrelation(residuals), 0.0), AR1_LIMIT)
+
+
+def ar1_inflation(rho: float) -> float:
+    """$(1 + \\rho)/(1 - \\rho)$, $\\rho$ clipped to [0, AR1_LIMIT]: the factor by which an AR(1)
+    noise of lag-1 correlation $\\rho$ inflates the variance of a white-noise estimate (its
+    $n$ points count as $n (1 - \\rho)/(1 + \\rho)$ independent ones)."""
+    rho = min(max(float(rho), 0.0), AR1_LIMIT)
+    return (1.0 + rho) / (1.0 - rho)
 
 
 def noise_band(dof: int) -> tuple[float, float]:

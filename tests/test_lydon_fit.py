@@ -15,7 +15,8 @@ from fitting.driven.experiment import (
     DrivenExperimentError,
     load_driven_experiment,
 )
-from fitting.driven.lockin_fit import DrivenLayout, fit_driven, lag1_autocorrelation
+from fitting.driven.lockin_fit import DrivenLayout, fit_driven
+from fitting.uncertainty import ar1_correlation, ar1_inflation, lag1_autocorrelation
 from hertzchain.driven.sweeper_files import LockinSweep
 
 RAMP, HOLD, WINDOW = 12, 28, 4
@@ -117,6 +118,14 @@ def test_lag1_autocorrelation_of_an_ar1_series():
     for t in range(1, e.shape[0]):
         r[t] = 0.9 * r[t - 1] + e[t]
     assert lag1_autocorrelation(r) == pytest.approx(0.9, abs=0.01)
+    # AR(1) of rho 0.9: its 20000 points per column count as 20000 (1 - 0.9)/(1 + 0.9); the
+    # variance of a mean over a column is 19 times a white series' (the closed form)
+    assert ar1_inflation(ar1_correlation(r)) == pytest.approx(19.0, rel=0.15)
+    means = [np.mean(r[k:k + 400, j]) for k in range(0, 20000, 400) for j in range(3)]
+    assert np.var(means) * 400 == pytest.approx(ar1_inflation(0.9) * np.var(e) / (1 - 0.81), rel=0.5)
+    # anticorrelated residuals are taken as white; rho = 1 stays finite
+    assert ar1_correlation(np.array([1.0, -1.0, 1.0, -1.0, 1.0])) == 0.0
+    assert ar1_inflation(-0.5) == 1.0 and ar1_inflation(1.0) == pytest.approx(1999.0)
 
 
 def _write(tmp_path, text):

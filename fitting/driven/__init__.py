@@ -24,7 +24,6 @@ from .lockin_fit import (
     check_layout,
     finish_fit,
     fit_driven,
-    lag1_autocorrelation,
     linear_start,
     lockin_settings,
     nominal_modes_hz,
@@ -34,5 +33,5 @@ from .lockin_fit import (
 __all__ = [
     "COARSE_LEVEL_STRIDE", "COARSE_ROW_STRIDE", "NOMINAL_SCALE", "PARAMETERS", "UNITS", "DrivenFit",
     "DrivenLayout", "DrivenModel", "chain_at", "check_layout", "finish_fit", "fit_driven",
-    "lag1_autocorrelation", "linear_start", "lockin_settings", "nominal_modes_hz", "scan_precompression",
+    "linear_start", "lockin_settings", "nominal_modes_hz", "scan_precompression",
 ]

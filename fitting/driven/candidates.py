@@ -54,8 +54,9 @@ from hertzchain.driven.measurements import tongue_fundamental
 from hertzchain.progress import Progress
 
 from ..fit import least_squares
+from ..uncertainty import ar1_correlation, ar1_inflation
 from .joint import DRIVE_SCALE, JointModel, JointParameter, _leaf, _threshold_data
-from .lockin_fit import NOMINAL_SCALE, lag1_autocorrelation
+from .lockin_fit import NOMINAL_SCALE
 from .report import bending
 
 # The targets on the single bead: bending misfit (median over drive levels, fraction of
@@ -231,13 +232,13 @@ def _bounded_model(experiment, chain, parameters, scales, candidate, progress, w
     measured = bend.data.sweep.rms_velocity_m_s[bend.fit_mask]
     x0 = np.zeros(len(parameters))
     resid = (unit.bending_curves(run, bend, x0) - measured) / bend.data.sweep.rms_velocity_m_s.max(axis=0)
-    rho = min(max(lag1_autocorrelation(resid), 0.0), 0.999)
+    weight = 1.0 / math.sqrt(ar1_inflation(ar1_correlation(resid)))
     low, high = np.full(len(parameters), -math.log(FACTOR_LIMIT)), np.full(len(parameters), math.log(FACTOR_LIMIT))
     limits = {"contact_kappa_n_m1p5": KAPPA_LIMITS, **candidate.factor_limits}
     for k, p in enumerate(parameters):
         if p.name in limits:
             low[k], high[k] = (math.log(v) for v in limits[p.name])
-    return BoundedJointModel(experiment, chain, parameters, scales, math.sqrt((1 - rho) / (1 + rho)), progress,
+    return BoundedJointModel(experiment, chain, parameters, scales, weight, progress,
                              bounds=(low, high), weights=weights)
 
 

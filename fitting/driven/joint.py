@@ -58,9 +58,9 @@ from hertzchain.driven.thresholds import onset_tangents, period_doubling_onsets
 from hertzchain.progress import Progress
 
 from ..fit import least_squares
-from ..uncertainty import covariance_from_jacobian
+from ..uncertainty import ar1_correlation, ar1_inflation, covariance_from_jacobian
 from .experiment import DrivenExperiment, DrivenExperimentError
-from .lockin_fit import NOMINAL_SCALE, chain_at, fit_driven, lag1_autocorrelation, lockin_settings
+from .lockin_fit import NOMINAL_SCALE, chain_at, fit_driven, lockin_settings
 
 DEFAULT_SHARED = ("contact_kappa_n_m1p5", "damping_rate_per_s")
 DEFAULT_PER_RUN = ("precompression_n", "drive_scale")
@@ -459,8 +459,8 @@ def fit_joint(experiment: DrivenExperiment, *, max_steps: int = 100, progress: b
             if m.kind == "bending":
                 measured = m.data.sweep.rms_velocity_m_s[m.fit_mask]
                 resid = (unit.bending_curves(run, m, x) - measured) / m.data.sweep.rms_velocity_m_s.max(axis=0)
-                rho = max(rho, min(max(lag1_autocorrelation(resid), 0.0), 0.999))
-    model = JointModel(experiment, chain, parameters, scales, math.sqrt((1 - rho) / (1 + rho)), progress)
+                rho = max(rho, ar1_correlation(resid))
+    model = JointModel(experiment, chain, parameters, scales, 1.0 / math.sqrt(ar1_inflation(rho)), progress)
     x = scan_threshold_runs(model, x, progress=progress)
     if model.report is not None:
         model.report.note(f"fitting {', '.join(labels)} jointly ...")

@@ -45,7 +45,7 @@ from hertzchain.peaks import frequency_response_peaks
 from hertzchain.progress import Progress
 
 from ..least_squares import least_squares
-from ..uncertainty import covariance_from_jacobian
+from ..uncertainty import ar1_correlation, ar1_inflation, covariance_from_jacobian
 from .experiment import DrivenExperiment
 
 # Residuals (fractions of a curve's peak) are divided by this before the optimiser sees them,
@@ -269,13 +269,6 @@ def linear_start(experiment: DrivenExperiment) -> np.ndarray:
 
 
 # --- results -----------------------------------------------------------------------------------
-def lag1_autocorrelation(residuals) -> float:
-    """Pooled lag-1 autocorrelation of residuals (frequencies, levels) along frequency."""
-    r = np.asarray(residuals)
-    r = r - r.mean(axis=0)
-    return float(np.sum(r[1:] * r[:-1]) / np.sum(r * r))
-
-
 @dataclasses.dataclass
 class DrivenFit:
     """A fitted driven experiment, with the status keys of every fit (`fitting.fit_result.FitResult`'s).
@@ -345,9 +338,9 @@ def fit_driven(experiment: DrivenExperiment, *, free=("linear_resonance_hz", "pr
     # again from there while s^2 still fell by more than half (3 passes at most).
     def variance_and_tolerance(x):
         residuals = model.residuals(x)
-        rho = min(max(lag1_autocorrelation(residuals.reshape(model.measured.shape)), 0.0), 0.999)
+        inflation = ar1_inflation(ar1_correlation(residuals.reshape(model.measured.shape)))
         variance = float(residuals @ residuals) / max(residuals.size - len(columns), 1)
-        return variance, 0.1 * variance * (1 + rho) / (1 - rho)
+        return variance, 0.1 * variance * inflation
 
     every_point = np.ones(model.measured.size)  # the weights: every point counts
     # a given start can be the optimum already (a refit from a saved result): it is tested on
@@ -403,8 +396,8 @@ def finish_fit(model: DrivenModel, x, columns, converged, steps, max_steps, bega
     chi2 = float(r @ r)
     n, p = r.size, len(columns)
     resid = r.reshape(model.measured.shape) * NOMINAL_SCALE
-    rho = min(max(lag1_autocorrelation(resid), 0.0), 0.999)
-    inflation = (1 + rho) / (1 - rho)
+    rho = ar1_correlation(resid)
+    inflation = ar1_inflation(rho)
     labels = DrivenLayout.for_beads(experiment.n_beads).labels
     dof = n - p
     cov = covariance_from_jacobian(jac, [labels[c] for c in columns], chi2=chi2 * inflation, dof=dof,
@@ -420,5 +413,5 @@ def finish_fit(model: DrivenModel, x, columns, converged, steps, max_steps, bega
         f"no optimum reached within {max_steps} steps per stage (chi^2 = {chi2:.6g} after {int(steps)} steps, "
         "and a step still lowers it by more than the test's tolerance); raise --max-steps or fit fewer parameters.")
     return DrivenFit(experiment, labels, x, stderr, list(columns), bool(converged), message, int(steps), chi2, dof,
-                     chi2 / dof if dof > 0 else math.nan, rho, n * (1 - rho) / (1 + rho), cov.correlation, curves,
+                     chi2 / dof if dof > 0 else math.nan, rho, n / inflation, cov.correlation, curves,
                      misfit, kernel_record(), time.perf_counter() - began)
