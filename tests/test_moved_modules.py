@@ -56,3 +56,18 @@ def test_the_packages_import_no_old_path_themselves():
     run = subprocess.run([sys.executable, "-W", "error::DeprecationWarning", "-c", code], capture_output=True,
                          text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]
+
+
+def test_the_driven_sweep_fit_keeps_its_former_names_with_a_warning():
+    """`fitting.driven` was the sweep fit's module: its names are forwarded to
+    `fitting.driven.lockin_fit` (the same objects), each with a warning naming the new path."""
+    import fitting.driven
+    from fitting.driven import lockin_fit
+
+    with pytest.warns(DeprecationWarning, match=r"`fitting.driven.fit_driven` moved to `fitting.driven.lockin_fit"):
+        assert fitting.driven.fit_driven is lockin_fit.fit_driven
+    with pytest.warns(DeprecationWarning):
+        from fitting.driven import NOMINAL_SCALE
+    assert NOMINAL_SCALE == lockin_fit.NOMINAL_SCALE
+    with pytest.raises(AttributeError, match="has no attribute 'no_such_name'"):
+        fitting.driven.no_such_name  # noqa: B018
