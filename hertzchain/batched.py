@@ -140,8 +140,8 @@ def kernel_flags(setup: ChainSetup, *, switched_on=()) -> KernelFlags:
     """The kernel a concrete (possibly batched) setup needs: damping (Kuwabara-Kono or a
     dashpot), friction and preload where any chain has them, or where named in `switched_on`
     ("viscous", "dashpot", "friction", "preload": e.g. parameters a fit frees from 0), the
-    setup's contact law, and whether its `laws.VelocitySquared` takes the native kernels' rate
-    slot (the one further dissipation law of a chain without a dashpot)."""
+    setup's contact law, and the law of the contacts' rate slot: the dashpot, else a
+    `laws.VelocitySquared` that is the setup's one further dissipation law."""
     on = set(switched_on)
     unknown = on - {"viscous", "dashpot", "friction", "preload"}
     if unknown:
@@ -156,10 +156,9 @@ def kernel_flags(setup: ChainSetup, *, switched_on=()) -> KernelFlags:
         preload="preload" in on or bool(np.any(np.asarray(setup.precompression_n) != 0.0)),
         friction="friction" in on or bool(np.any(friction != 0.0)),
         law=contact_law(setup),
-        dashpot=dashpot,
         # the native kernels' rate slot holds one law: velocity-squared dissipation where the
         # dashpot leaves it free
-        velocity_squared=not dashpot and _fills_the_rate_slot(others),
+        rate_law="dashpot" if dashpot else "velocity_squared" if _fills_the_rate_slot(others) else None,
     )
 
 
@@ -316,7 +315,7 @@ def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ..
         traces, state = native.run_full_books(
             p, state, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
             channels=channels, viscous=flags.viscous, friction=flags.friction, preload=flags.preload,
-            springs=flags.springs, dashpot=flags.dashpot, law=flags.law, velocity_squared=flags.velocity_squared,
+            springs=flags.springs, rate_law=flags.rate_law, law=flags.law,
         )
         return traces, state, layout
     if which.physics == "full":
@@ -328,8 +327,8 @@ def _native_kernel(p, *, flags: KernelFlags, grid: TimeGrid, rows: tuple[int, ..
         traces = native.run_full(
             p, x, v, a, dt_s=grid.dt_s, steps_per_sample=grid.steps_per_sample, n_samples=grid.n_samples,
             channels=channels, viscous=flags.viscous, friction=flags.friction, preload=flags.preload,
-            springs=flags.springs, dashpot=flags.dashpot, law=flags.law, backend=which.backend,
-            sensors=flags.sensors, sensor_state=sensor_state, velocity_squared=flags.velocity_squared,
+            springs=flags.springs, rate_law=flags.rate_law, law=flags.law, backend=which.backend,
+            sensors=flags.sensors, sensor_state=sensor_state,
         )
         return traces, None, layout
     state, _, _ = _initial(p, flags, layout, grid.dt_s)
@@ -585,7 +584,7 @@ def _native_laws(setup: ChainSetup, flags: KernelFlags) -> bool:
     further laws, is not native); where not, the JAX kernel runs (`BatchedTraces.kernel`
     says so)."""
     others = setup.dissipation[2:]
-    carried = not others or (flags.velocity_squared and _fills_the_rate_slot(others))
+    carried = not others or (flags.rate_law == "velocity_squared" and _fills_the_rate_slot(others))
     return carried and laws.registry.runs_natively(setup.contact_law, setup.dissipation)
 
 

@@ -37,12 +37,12 @@ class KernelFlags(NamedTuple):
     # The contacts' elastic law (`contact_law`: "hertz", "power_law" or a `PLASTIC_LAWS` name);
     # plastic laws carry each contact's largest overlap so far in the state.
     law: str = "hertz"
-    # A linear dashpot on every contact's overlap rate (with `viscous`, which computes the rates).
-    dashpot: bool = False
-    # The setup's `laws.VelocitySquared` in the native kernels' rate slot, in the dashpot's
-    # place (`kernel_flags`; with `viscous`, not with `dashpot`). The JAX kernel runs it from
-    # the setup's laws whatever this says.
-    velocity_squared: bool = False
+    # The law of the contacts' rate slot beside Kuwabara-Kono damping (with `viscous`, which
+    # computes the rates), by its `laws.registry` name: "dashpot" (a linear dashpot on every
+    # contact, `setup.dashpot_n_s_m`), "velocity_squared" (the setup's one further law, a
+    # `laws.VelocitySquared`, which the native kernels carry there; the JAX kernel runs it from
+    # the setup's laws whatever this says), or None.
+    rate_law: str | None = None
     # The full step's state whatever the physics: set where the full C++ kernel runs a
     # conservative chain (laws other than Hertz's, `native.kernel_for`), whose books come in
     # and out in that layout. The JAX kernel keeps the conservative one for those chains: in
@@ -78,10 +78,10 @@ def _law(p, flags: KernelFlags, rows=lambda a: a):
 
 def _dissipation(p, flags: KernelFlags) -> tuple:
     """The dissipation laws the kernel compiles in: Kuwabara-Kono's (with `flags.viscous`),
-    the dashpot (with `flags.dashpot`) and every other law of the setup."""
+    the dashpot (`flags.rate_law` "dashpot") and every other law of the setup."""
     if not flags.viscous:
         return ()
-    return ((laws.Viscoelastic(p["eta"]),) + ((laws.Dashpot(p["dashpot"]),) if flags.dashpot else ())
+    return ((laws.Viscoelastic(p["eta"]),) + ((laws.Dashpot(p["dashpot"]),) if flags.rate_law == "dashpot" else ())
             + tuple(p.get("dissipation", ())))
 
 

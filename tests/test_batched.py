@@ -268,18 +268,18 @@ LAWS = {
     "hertz": dict(viscous=False, springs=False, preload=True, friction=False),
     "hertz_and_sensor_spring": dict(viscous=False, springs=True, preload=True, friction=False),
     "kuwabara_kono_clipped": dict(viscous=True, springs=False, preload=True, friction=False),
-    "dashpot_and_kuwabara_kono": dict(viscous=True, springs=False, preload=True, friction=False, dashpot=True),
+    "dashpot_and_kuwabara_kono": dict(viscous=True, springs=False, preload=True, friction=False, rate_law="dashpot"),
     "track_friction": dict(viscous=False, springs=False, preload=True, friction=True),
-    "all_together": dict(viscous=True, springs=True, preload=True, friction=True, dashpot=True),
+    "all_together": dict(viscous=True, springs=True, preload=True, friction=True, rate_law="dashpot"),
     "power_law": dict(viscous=False, springs=False, preload=True, friction=False, law="power_law"),
     "power_law_damped_and_friction": dict(viscous=True, springs=True, preload=True, friction=True, law="power_law"),
     "thornton": dict(viscous=False, springs=False, preload=True, friction=False, law="thornton"),
     "jackson_green_damped_and_friction": dict(viscous=True, springs=True, preload=True, friction=True,
                                               law="jackson_green"),
     "power_law_dashpot": dict(viscous=True, springs=False, preload=True, friction=False, law="power_law",
-                              dashpot=True),
+                              rate_law="dashpot"),
     "thornton_dashpot_and_friction": dict(viscous=True, springs=False, preload=True, friction=True, law="thornton",
-                                          dashpot=True),
+                                          rate_law="dashpot"),
 }
 
 
@@ -322,7 +322,7 @@ def test_every_kernel_applies_the_laws_of_contact(law, kernel):
         # contact 0: closing from touch, closing from a gap it never closes, preloaded and opening
         "overlap0": np.array([[0.0, -0.3e-6, 2.5e-6], [2e-7] * batch]),
         "eta": np.full(batch, 2e-6 if flags.viscous else 0.0),
-        "dashpot": np.full(batch, 40.0 if flags.dashpot else 0.0),  # N s/m: a tenth of the elastic force
+        "dashpot": np.full(batch, 40.0 if flags.rate_law == "dashpot" else 0.0),  # N s/m: a tenth of the elastic force
         "friction": np.full(batch, 0.19 * 9.81 * 5e3 if flags.friction else 0.0),  # strong: stops the slow one
         "external": np.zeros((3, batch)), "first_force": np.zeros(batch), "last_force": np.zeros(batch),
         "v0": v0,

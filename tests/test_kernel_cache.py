@@ -136,14 +136,14 @@ def test_a_library_built_on_first_use_that_fails_is_announced_once_and_its_runs_
     monkeypatch.setattr(native.build, "_build", _failing_build)
     monkeypatch.setattr(native.registry, "_FAILED", {})
     monkeypatch.setattr(native.host, "_load_host_library", native.host._load_host_library.__wrapped__)
-    flags = KernelFlags(viscous=True, springs=False, preload=False, dashpot=True)
+    flags = KernelFlags(viscous=True, springs=False, preload=False, rate_law="dashpot")
     for _ in range(3):
         assert native.kernel_for(flags, None) is None
     err = capsys.readouterr().err
     assert err.count("the fused chain kernel's dashpot runs cannot be used (compiling chain_kernel.cc failed:)") == 1
     assert "those runs take the JAX kernel instead" in err and "second line" not in err
     assert err.count("compiling the fused chain kernel's dashpot runs") == 1  # one try a process
-    assert native.kernel_for(flags._replace(dashpot=False), None) == native.FusedKernel("full", "host")
+    assert native.kernel_for(flags._replace(rate_law=None), None) == native.FusedKernel("full", "host")
 
 
 def test_the_driven_kernel_that_cannot_be_built_is_announced_once(tmp_path, monkeypatch, capsys):

@@ -113,9 +113,9 @@ def test_registry_names_every_law_as_the_native_kernels_know_it():
     assert contact_names == set(native.CONTACT_LAWS)
     for name in native.CONTACT_LAWS:
         assert laws.registry.native_name(laws.registry.contact_law_named(name)()) == name
-    dissipation_names = {laws.Viscoelastic().native_name, laws.Dashpot().native_name,
-                         laws.VelocitySquared().native_name}
-    assert dissipation_names <= set(KernelFlags._fields)
+    # Kuwabara-Kono damping is the kernels' `viscous`; the rate slot's laws are `rate_law`'s values
+    assert laws.Viscoelastic().native_name in KernelFlags._fields
+    assert {laws.Dashpot().native_name, laws.VelocitySquared().native_name} == set(native.RATE_LAW_DEFINES)
     with pytest.raises(ValueError, match="no contact law is named 'hertzian'"):
         laws.registry.contact_law_named("hertzian")
 

@@ -215,9 +215,9 @@ def test_a_dashpot_without_the_damped_kernel_is_refused():
     p = {name: jnp.zeros((2, 1)) for name in ("inv_mass", "kappa", "overlap0", "spring", "external")}
     p.update(eta=jnp.zeros(1), friction=jnp.zeros(1), dashpot=jnp.ones(1))
     x = jnp.zeros((2, 1))
-    with pytest.raises(ValueError, match="a dashpot or velocity-squared dissipation needs viscous=True"):
+    with pytest.raises(ValueError, match=r"a rate-slot law \(dashpot\) needs viscous=True"):
         native.run_full(p, x, x, x, dt_s=1e-7, steps_per_sample=1, n_samples=1, channels=(0,), viscous=False,
-                        friction=False, preload=False, springs=False, dashpot=True)
+                        friction=False, preload=False, springs=False, rate_law="dashpot")
 
 
 def assert_books_equal_the_jax_kernels(ours, reference):

@@ -33,7 +33,7 @@ def test_each_combination_of_law_rate_and_sensors_has_its_one_library(law, rate,
     matches = [lib for lib in native.HOST_LIBRARIES.values()
                if lib.law == law and lib.sensors == sensors and rate in lib.rates]
     assert len(matches) == (library is not None)
-    flags = KernelFlags(springs=False, preload=False, viscous=rate is not None, dashpot=rate == "dashpot", velocity_squared=rate == "velocity_squared",
+    flags = KernelFlags(springs=False, preload=False, viscous=rate is not None, rate_law=rate,
                         law=law, sensors=(3,) if sensors else ())
     assert native.host.host_library_of(flags) == library
 
@@ -70,8 +70,8 @@ def test_a_law_or_rate_it_does_not_know_is_refused_by_name():
 def test_kernel_for_refuses_the_combinations_no_library_runs():
     """Velocity-squared dissipation with compliant sensors or on another law, and the books of
     compliant sensors, run on the JAX kernel (`kernel_for` is None) without building anything."""
-    for flags in (KernelFlags(springs=False, preload=False, viscous=True, velocity_squared=True, sensors=(2,), ledger=False),
-                  KernelFlags(springs=False, preload=False, viscous=True, velocity_squared=True, law="thornton"),
+    for flags in (KernelFlags(springs=False, preload=False, viscous=True, rate_law="velocity_squared", sensors=(2,), ledger=False),
+                  KernelFlags(springs=False, preload=False, viscous=True, rate_law="velocity_squared", law="thornton"),
                   KernelFlags(springs=False, preload=False, viscous=True, sensors=(2,), ledger=True)):
         assert native.kernel_for(flags, None) is None
     assert libraries.host_library_for("hertz", "dashpot", True).name == "compliant sensors"

@@ -45,7 +45,7 @@ def test_forces_and_books_equal_the_jax_kernel_and_the_general_solver(extra):
     is real: the chains dissipate."""
     setup, grid = _chain(**extra)
     flags = kernel_flags(setup)
-    assert flags.velocity_squared and flags.viscous and not flags.dashpot
+    assert flags.rate_law == "velocity_squared" and flags.viscous
     assert native.kernel_for(flags, None) == native.FusedKernel("full", "host")
     assert _native_target(setup, grid, flags._replace(ledger=False)) == [native.HOST_LIBRARIES["velocity_squared"].target("full")]
     ours, reference = assert_forces_equal_the_jax_kernels(setup, grid, books=True)
@@ -67,7 +67,7 @@ def test_derivatives_in_the_coefficient_equal_jacfwd_through_the_jax_kernel():
     base, grid = _chain(speeds=(0.3, 1.0))
     grid = hc.choose_time_grid(base, t_end_s=0.4e-3, sample_interval_s=2e-6)
     flags = kernel_flags(base, switched_on=("viscous", "friction"))._replace(ledger=False)
-    assert flags.velocity_squared
+    assert flags.rate_law == "velocity_squared"
     ones = jnp.ones(base.eta_s.shape)
 
     def forces(q, kernel):
@@ -92,7 +92,7 @@ def test_chains_the_rate_slot_cannot_carry_run_on_the_jax_kernel(extra, why):
     law: the JAX kernel runs it, says so, and agrees with the general solver."""
     setup, grid = _chain(**extra)
     flags = kernel_flags(setup)
-    assert flags.velocity_squared == ("dashpot_n_s_m" not in extra), why
+    assert (flags.rate_law == "velocity_squared") == ("dashpot_n_s_m" not in extra), why
     out = solve_batched(setup, grid, Recording((2,)), books=False)
     assert out.kernel == "jax", why
     reference = solve_stacked(setup, grid, Recording((2,)))
@@ -102,12 +102,15 @@ def test_chains_the_rate_slot_cannot_carry_run_on_the_jax_kernel(extra, why):
         np.testing.assert_allclose(out.forces_n[name], reference.forces_n[name], rtol=0, atol=1e-9 * scale)
 
 
-def test_the_rate_slot_refuses_a_second_law():
-    """`native.run_full` asked for velocity-squared dissipation and a dashpot at once: refused,
-    naming the fix."""
+def test_the_rate_slot_takes_one_law_by_its_name():
+    """`native.run_full`'s rate slot holds one law, named: an unknown name is refused naming
+    the known ones, and velocity-squared dissipation on another contact law naming the fix."""
     p = {name: jnp.zeros((2, 1)) for name in ("inv_mass", "kappa", "overlap0", "spring", "external")}
     p.update(eta=jnp.zeros(1), friction=jnp.zeros(1), dashpot=jnp.ones(1), dissipation=(laws.VelocitySquared(1.0),))
     x = jnp.zeros((2, 1))
-    with pytest.raises(ValueError, match="dashpot=False"):
-        native.run_full(p, x, x, x, dt_s=1e-7, steps_per_sample=1, n_samples=1, channels=(0,), viscous=True,
-                        friction=False, preload=False, springs=False, dashpot=True, velocity_squared=True)
+    common = dict(dt_s=1e-7, steps_per_sample=1, n_samples=1, channels=(0,), viscous=True, friction=False,
+                  preload=False, springs=False)
+    with pytest.raises(ValueError, match=r"rate_law must be None or one of \('dashpot', 'velocity_squared'\)"):
+        native.run_full(p, x, x, x, rate_law="dashpot_and_velocity_squared", **common)
+    with pytest.raises(ValueError, match="rate_law='velocity_squared' needs law='hertz'"):
+        native.run_full(p, x, x, x, rate_law="velocity_squared", law="thornton", **common)

@@ -1,7 +1,9 @@
 """The one table from law types to the native kernels.
 
 Each contact law maps to its `batched.KernelFlags.law` name (the native library it selects,
-`native.HOST_LIBRARIES`); each dissipation law to the `KernelFlags` field that compiles it in.
+`native.HOST_LIBRARIES`); each dissipation law to the kernels' name for it: Kuwabara-Kono
+damping's is the `KernelFlags` field that compiles it in ("viscous"), the rate slot's laws'
+are `KernelFlags.rate_law`'s values (`native.RATE_LAW_DEFINES`).
 None: no native kernel has the law, and the JAX kernels run it (`BatchedTraces.kernel`
 says which kernel ran).
 """

@@ -14,7 +14,7 @@ from jax.interpreters import partial_eval
 
 from .. import contact, laws
 from . import host, registry, thread
-from .libraries import CONTACT_LAWS, HOST_LIBRARIES, HostLibrary, host_library_for
+from .libraries import CONTACT_LAWS, HOST_LIBRARIES, RATE_LAW_DEFINES, HostLibrary, host_library_for
 
 
 def _require(backend: str) -> None:
@@ -154,8 +154,8 @@ def _fold_directions(size: int, batched, tangents):
 
 def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples: int,
              channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
-             dashpot: bool = False, law: str = "hertz", backend: str = "host",
-             sensors: tuple[int, ...] = (), sensor_state=None, velocity_squared: bool = False):
+             rate_law: str | None = None, law: str = "hertz", backend: str = "host",
+             sensors: tuple[int, ...] = (), sensor_state=None):
     """The full step (`batched._step` with velocities and accelerations apart: damping,
     friction) from displacements `x`, velocities `v` and accelerations `a` (bodies + 1, B)
     at the impact, through `n_samples` samples of `steps_per_sample` steps of `dt_s`
@@ -167,11 +167,12 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     `jax.vmap` the mapped chains join the kernel's batch (one run for all of them, with or
     without tangents): a vmapped batch of fits, `jacfwd` of `vmap` and `vmap` of `jacfwd`
     are one kernel run each. Reverse mode is not available (use the JAX kernel,
-    `kernel="jax"`). `dashpot`: a linear dashpot on every contact (`p["dashpot"]`, N s/m;
-    needs `viscous`), its terms compiled into this call's kernel only. `velocity_squared`:
-    instead of the dashpot, the setup's `laws.VelocitySquared` (`p["dissipation"]`, its
-    coefficient N s^2/m^2; needs `viscous`; Hertz contacts on the host, no compliant
-    sensors), in a library of its own. `law`: the contacts'
+    `kernel="jax"`). `rate_law`: the law of the contacts' rate slot beside Kuwabara-Kono
+    damping (needs `viscous`; `batched.KernelFlags.rate_law`): "dashpot", a linear dashpot on
+    every contact (`p["dashpot"]`, N s/m), its terms compiled into this call's kernel only;
+    "velocity_squared", the setup's `laws.VelocitySquared` (`p["dissipation"]`, its
+    coefficient N s^2/m^2; Hertz contacts on the host, no compliant sensors), in a library
+    of its own; or None. `law`: the contacts'
     elastic law (`batched.KernelFlags.law`: "hertz", or "power_law" on `contact.power_law_force`,
     "thornton" or "jackson_green" on the elastic-plastic laws of `forces.elastic_parts`, from
     the arrays `batched` stores for them; host only, each in a library of its own;
@@ -188,34 +189,31 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     if sensors and (sensor_state is None or sensor_state.shape[0] != 3 * len(sensors)):
         raise ValueError("run_full: sensor_state must hold the sensors' forces, rates and drives, "
                          "(3 n_sensors, B).")
-    _library(law, dashpot, velocity_squared, sensors, backend, "run_full")
+    _library(law, rate_law, sensors, backend, "run_full")
     state0 = jax.numpy.concatenate([x, v, a] + ([sensor_state] if sensors else []))
-    args = _full_args(p, state0, preload, springs, dashpot, law, backend, sensors, velocity_squared)
+    args = _full_args(p, state0, preload, springs, rate_law, law, backend, sensors)
     config = (float(dt_s), int(steps_per_sample), int(n_samples), tuple(int(c) for c in channels),
-              bool(viscous), bool(friction), bool(preload or springs), bool(dashpot), law, backend, sensors,
-              bool(velocity_squared))
+              bool(viscous), bool(friction), bool(preload or springs), rate_law, law, backend, sensors)
     return _full_call(config)(*args)
 
 
 def run_full_books(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_samples: int,
                    channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
-                   dashpot: bool = False, law: str = "hertz", velocity_squared: bool = False):
+                   rate_law: str | None = None, law: str = "hertz"):
     """`run_full` with the books, on the host: advances the packed state `state0` (rows, B)
     of `batched._Layout` for the full step with the books (x, v, a; for elastic-plastic
     contacts every contact's largest overlap so far; every contact's largest total force; with damping, the viscous force on every body; the energy dissipated by
     damping and friction so far) and returns (the (B, n_samples) force traces, one per
     channel, N; the final packed state). The books' sums over the bodies follow
     `batched._step`'s order; the run is not differentiable (sweeps; fits call `run_full`).
-    `dashpot`, `law`, `velocity_squared` as for `run_full`."""
+    `rate_law`, `law` as for `run_full`."""
     _require("host")
-    if (dashpot or velocity_squared) and not viscous:
-        raise ValueError("run_full_books: a dashpot or velocity-squared dissipation needs viscous=True (the "
-                         "kernel's rates come with the damping).")
-    library = _library(law, dashpot, velocity_squared, (), "host", "run_full_books")
-    args = _full_args(p, state0, preload, springs, dashpot, law, "host", (), velocity_squared) + (p["mass"],)
+    _check_rates(rate_law, viscous, "run_full_books")
+    library = _library(law, rate_law, (), "host", "run_full_books")
+    args = _full_args(p, state0, preload, springs, rate_law, law, "host", ()) + (p["mass"],)
     attrs = {"dt": np.float64(dt_s), "steps_per_sample": np.int64(steps_per_sample), "viscous": np.int64(viscous),
              "friction": np.int64(friction), "extras": np.int64(preload or springs),
-             "dashpot": np.int64(dashpot or velocity_squared)}
+             "dashpot": np.int64(rate_law is not None)}
     call = _Ffi("host", p["inv_mass"].shape[-2], n_samples)
     shapes = (jax.ShapeDtypeStruct(state0.shape, state0.dtype),) + call.trace_shapes(state0, len(channels))
     index = np.asarray(channels, dtype=np.int64)
@@ -223,22 +221,28 @@ def run_full_books(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_sam
     return tuple(traces), state
 
 
-def _library(law: str, dashpot: bool, velocity_squared: bool, sensors, backend: str, caller: str) -> HostLibrary:
-    """The host library of a full run on `law`'s contacts with the rate slot's law (a
-    `dashpot`, `velocity_squared` dissipation, or neither) and compliant `sensors`, once
-    `backend` is checked to run it (the thread kernels: Hertz contacts, with or without a
-    dashpot, no sensors); else a ValueError from `caller` naming the fix."""
+def _check_rates(rate_law: str | None, viscous: bool, caller: str) -> None:
+    """A ValueError from `caller` where the rate slot holds a law (`rate_law`) but the run
+    computes no rates (`viscous` False)."""
+    if rate_law is not None and not viscous:
+        raise ValueError(f"{caller}: a rate-slot law ({rate_law}) needs viscous=True (the kernel's rates come "
+                         "with the damping).")
+
+
+def _library(law: str, rate: str | None, sensors, backend: str, caller: str) -> HostLibrary:
+    """The host library of a full run on `law`'s contacts with the rate slot's law `rate`
+    (`run_full`'s `rate_law`) and compliant `sensors`, once `backend` is checked to run it
+    (the thread kernels: Hertz contacts, with or without a dashpot, no sensors); else a
+    ValueError from `caller` naming the fix."""
     if law not in CONTACT_LAWS:
         raise ValueError(f"{caller}: law must be one of {CONTACT_LAWS}, got {law!r}.")
-    if dashpot and velocity_squared:
-        raise ValueError(f"{caller}: the rate slot carries one law: a dashpot or velocity-squared dissipation "
-                         "(dashpot=False or velocity_squared=False); the JAX kernel runs both together.")
-    rate = "velocity_squared" if velocity_squared else "dashpot" if dashpot else None
+    if rate is not None and rate not in RATE_LAW_DEFINES:
+        raise ValueError(f"{caller}: rate_law must be None or one of {tuple(RATE_LAW_DEFINES)}, got {rate!r}.")
     library = host_library_for(law, rate, bool(sensors))
     if library is None:
         raise ValueError(f"{caller}: no native library runs {law} contacts with {rate} in the rate slot"
-                         f"{' and compliant sensors' if sensors else ''} (velocity_squared needs law='hertz' and "
-                         "sensors=()); the JAX kernel runs that combination.")
+                         f"{' and compliant sensors' if sensors else ''} (rate_law='velocity_squared' needs "
+                         "law='hertz' and sensors=()); the JAX kernel runs that combination.")
     if backend != "host" and library.name not in ("chain", "dashpot"):
         raise ValueError(f"{caller}: {law} contacts{f' with {rate}' if rate else ''}"
                          f"{' and compliant sensors' if sensors else ''} run on the host kernel (backend 'host').")
@@ -255,13 +259,14 @@ def _velocity_squared_coefficient(p: dict):
     return found[0].c_n_s2_m2
 
 
-def _full_args(p: dict, state0, preload: bool, springs: bool, dashpot: bool, law: str, backend: str,
-               sensors: tuple[int, ...] = (), velocity_squared: bool = False) -> tuple:
+def _full_args(p: dict, state0, preload: bool, springs: bool, rate_law: str | None, law: str, backend: str,
+               sensors: tuple[int, ...] = ()) -> tuple:
     """The full kernels' arrays: the state, then the eight parameter arrays (zeros for the
-    physics a run does not have; the rate slot's coefficient the dashpot's or, with
-    `velocity_squared`, the velocity-squared law's) and, for the host kernels, the law's
+    physics a run does not have; the rate slot's coefficient `rate_law`'s: the dashpot's or
+    the velocity-squared law's) and, for the host kernels, the law's
     (`_law_array`) and the compliant sensors' (`_sensor_array`)."""
-    slot = _velocity_squared_coefficient(p) if velocity_squared else p["dashpot"] if dashpot else None
+    slot = (p["dashpot"] if rate_law == "dashpot" else _velocity_squared_coefficient(p) if rate_law == "velocity_squared"
+            else None)
     width = lambda leaf: leaf.shape[-1]
     zeros = lambda leaf: jax.numpy.zeros_like(leaf)
     return (
@@ -315,18 +320,15 @@ def _law_array(p: dict, law: str):
 @functools.cache
 def _full_call(config):
     """The full kernel for one configuration as a function of its arrays, with its JVP."""
-    (dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, dashpot, law, backend, sensors,
-     velocity_squared) = config
-    if (dashpot or velocity_squared) and not viscous:
-        raise ValueError("run_full: a dashpot or velocity-squared dissipation needs viscous=True (the kernel's "
-                         "rates come with the damping).")
+    dt_s, steps_per_sample, n_samples, channels, viscous, friction, extras, rate_law, law, backend, sensors = config
+    _check_rates(rate_law, viscous, "run_full")
     attrs = {"dt": np.float64(dt_s), "steps_per_sample": np.int64(steps_per_sample),
              "viscous": np.int64(viscous), "friction": np.int64(friction), "extras": np.int64(extras),
-             "dashpot": np.int64(dashpot or velocity_squared)}
+             "dashpot": np.int64(rate_law is not None)}
     index = np.asarray(channels, dtype=np.int64)
     # the state, the eight parameter arrays (host: and the law's and the sensors')
     n_args = 11 if backend == "host" else 9
-    library = _library(law, dashpot, velocity_squared, sensors, backend, "run_full")
+    library = _library(law, rate_law, sensors, backend, "run_full")
 
     def ffi(args):
         return _Ffi(backend, args[1].shape[-2], n_samples)

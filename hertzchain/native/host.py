@@ -234,8 +234,7 @@ def host_library_of(flags) -> HostLibrary | None:
     """The host library that runs `flags`' physics (`batched.KernelFlags`: its contact law,
     its rate-slot law, compliant sensors or not), or None where none does
     (`libraries.host_library_for`)."""
-    rate = "velocity_squared" if flags.velocity_squared else "dashpot" if flags.dashpot else None
-    return host_library_for(flags.law, rate, bool(flags.sensors))
+    return host_library_for(flags.law, flags.rate_law, bool(flags.sensors))
 
 
 def _host_library_loads(library: HostLibrary) -> bool:
