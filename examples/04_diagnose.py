@@ -18,11 +18,10 @@
 import os
 from pathlib import Path
 
-from hertzchain.io.tracefile import write_trace
-
 from fitting.diagnosis import diagnose
-from fitting.diagnosis_report import write_diagnosis_report
+from fitting.diagnosis.report import write_diagnosis_report
 from fitting.hidden import hidden_effect_traces
+from hertzchain.io.tracefile import write_trace
 
 SMALL = os.environ.get("HERTZCHAIN_EXAMPLE_SMALL") == "1"
 OUT = Path(os.environ.get("HERTZCHAIN_EXAMPLE_OUT", "out/examples"))

@@ -18,14 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
+import fitting
 import hertzchain as hc
+from fitting.diagnosis import diagnose
+from fitting.diagnosis.report import write_diagnosis_report
+from fitting.report import write_report
 from hertzchain.acquisition import Acquisition, acquire
 from hertzchain.io.importer import import_experiment
-
-import fitting
-from fitting.diagnosis import diagnose
-from fitting.diagnosis_report import write_diagnosis_report
-from fitting.report import write_report
 
 SMALL = os.environ.get("HERTZCHAIN_EXAMPLE_SMALL") == "1"
 OUT = Path(os.environ.get("HERTZCHAIN_EXAMPLE_OUT", "out/examples")) / "06_scope_files"

@@ -22,6 +22,8 @@ MOVED = {
     **{f"fitting.cli.{name}": f"hertzchain.cli.{name}"
        for name in ("contact", "design", "diagnose", "fit")},
     "fitting.driven_cli": "hertzchain.cli.driven_experiments",
+    "fitting.diagnosis_report": "fitting.diagnosis.report",
+    "fitting.locate": "fitting.diagnosis.locate",
     **{f"fitting.driven_{name}": f"fitting.driven.{name}"
        for name in ("band", "candidates", "diagnosis", "experiment", "joint", "joint_report", "report")},
 }

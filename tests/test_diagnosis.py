@@ -16,9 +16,9 @@ import pytest
 import hertzchain  # noqa: F401
 from fitting import effects as fx
 from fitting.diagnosis import DiagnosisError, Step, diagnose, parse_model
-from fitting.diagnosis_report import write_diagnosis_report
+from fitting.diagnosis.locate import cell, window_masks
+from fitting.diagnosis.report import write_diagnosis_report
 from fitting.hidden import NOMINAL, hidden_effect_traces, truth_fields
-from fitting.locate import cell, window_masks
 from hertzchain.chain import ChainSetup
 from hertzchain.integrate import Recording, solve
 from hertzchain.timegrid import choose_time_grid
@@ -431,11 +431,11 @@ def test_command_line_writes_the_report(tmp_path, monkeypatch, capsys):
 
 
 def test_local_band_sees_a_pulse_window_excess_that_a_low_global_chi2_hides():
-    """`LOCAL_BAND_SIGMA` on the cells of `fitting.locate`: white noise in 15 channel x window
+    """`LOCAL_BAND_SIGMA` on the cells of `fitting.diagnosis.locate`: white noise in 15 channel x window
     cells (400 records) never reaches it, while residuals 0.67 sigma overall (a noise estimate
     1.5 x too large: chi^2/dof = 0.45) with a 3-sigma excess over a 100-sample pulse window do."""
     from fitting.diagnosis import LOCAL_BAND_SIGMA, NOISE_BAND_SIGMA
-    from fitting.locate import cell
+    from fitting.diagnosis.locate import cell
 
     rng = np.random.default_rng(4)
     sizes = [100, 300, 100, 300, 2000] * 3  # before, edges, peak, tail of three channels
@@ -551,10 +551,10 @@ def test_noise_band_holds_chi2_whitened_by_noise_levels_estimated_from_pre_trigg
     assert np.mean(chi2 - dof > band) < 0.01  # 0.5 %: 1 / s_c skews the tail beyond a normal's 0.13 %
     assert np.mean(chi2 - dof > NOISE_BAND_SIGMA * math.sqrt(2 * dof)) > 0.25
     assert 1.21 * dof - dof > band  # residuals 10 % too large: still an alarm
-    # one channel x window cell of 3000 such samples (`fitting.locate.cell`): its excess leaves
+    # one channel x window cell of 3000 such samples (`fitting.diagnosis.locate.cell`): its excess leaves
     # LOCAL_BAND_SIGMA in several % of the draws in white-noise units, rarely with the estimate's
     from fitting.diagnosis import LOCAL_BAND_SIGMA
-    from fitting.locate import estimate_variance
+    from fitting.diagnosis.locate import estimate_variance
 
     window = rng.chisquare(3000, 4000) / (rng.chisquare(m - 1, 4000) / (m - 1))
     assert np.mean((window - 3000) / math.sqrt(2 * 3000) > LOCAL_BAND_SIGMA) > 0.05

@@ -5,7 +5,7 @@ import types
 
 import pytest
 
-from fitting.diagnosis_report import physical_reading
+from fitting.diagnosis.report import physical_reading
 from fitting.report import summary_text
 from hertzchain.chain import ChainSetup
 from hertzchain.units import counted, display_unit, format_measured
@@ -72,7 +72,7 @@ def test_the_fit_summary_prints_significant_digits_and_no_nan():
 
 
 def test_the_diagnosis_reads_a_named_soft_wall_in_gpa():
-    from fitting.diagnosis_report import readings
+    from fitting.diagnosis.report import readings
 
     setup = ChainSetup(5, wall_youngs_pa=203e9)
     step = types.SimpleNamespace(effect="wall_compliance", values={"wall_softening": math.log(203 / 20.3)},
@@ -85,7 +85,7 @@ def test_the_diagnosis_reads_a_named_soft_wall_in_gpa():
 def test_the_diagnosis_reads_each_named_strength_at_the_final_fit():
     """A strength refitted after later effects joined the model is read at the final fit
     (where every named effect is in), not at the step that named it."""
-    from fitting.diagnosis_report import readings
+    from fitting.diagnosis.report import readings
 
     steps = [types.SimpleNamespace(effect="viscous_damping", values={"dx_eta_s": 2.0426e-6},
                                    stderr={"dx_eta_s": 5.0e-9}),

@@ -7,7 +7,7 @@ and repeat until nothing significant is left.
    ideal force sensors) is fitted with its nuisances free: per file the striker velocity
    and the trigger offset (optionally a gain per channel), plus any physical parameter the
    user frees. A disagreement is then not just a badly chosen nuisance.
-2. **Locate** (`fitting.locate`): the whitened residual by channel x time window, by file
+2. **Locate** (`fitting.diagnosis.locate`): the whitened residual by channel x time window, by file
    (amplitude) and by frequency band.
 3. **Screen and refit.** Every candidate of the library (`fitting.effects`) is ranked by
    its score (the $\\chi^2$ a Gauss-Newton step on its strength alone would remove, from

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import effects as fx
-from ..locate import estimate_variance, noise_estimate_samples
+from .locate import estimate_variance, noise_estimate_samples
 
 NUISANCES = ("striker_velocity", "time_offset")
 MIN_SHARE = 0.2
@@ -30,7 +30,7 @@ PRELOAD_START_FRACTIONS = (0.003, 0.01, 0.03, 0.1, 0.3)
 YIELD_START_FRACTIONS = (1.0, 0.8, 0.65, 0.5, 0.35)
 # Number of noise standard deviations of the chi^2 excess regarded as "at the noise level".
 NOISE_BAND_SIGMA = 3.0
-# The same for the largest excess of one channel x time-window cell (`fitting.locate`, files
+# The same for the largest excess of one channel x time-window cell (`fitting.diagnosis.locate`, files
 # pooled): a global chi^2/dof at or below 1 (a noise estimate too large, or long quiet records)
 # can hide a pulse window tens of sigma above the noise. The band's 3 plus the look-elsewhere
 # allowance for the largest of K cells, sqrt(2 ln K) = 2.3-2.8 for the K = 15-50 cells of

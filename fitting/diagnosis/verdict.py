@@ -6,8 +6,8 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from ..locate import describe
 from .evaluator import _status
+from .locate import describe
 from .protocol import FEW_STRENGTHS, LOCAL_BAND_SIGMA, NOISE_BAND_SIGMA, PRACTICAL_GAP
 from .results import CandidateResult, Step
 

@@ -11,13 +11,13 @@ from hertzchain.units import counted
 
 from .. import effects as fx
 from ..data import as_experiments
-from ..locate import locate
 from ..model import STEPS_PER_CONTACT
 from ..parameters import get_spec, parse_parameter_list, public_label, resolve_name
+from .assembly import _Report
 from .evaluator import _status
 from .exchange import _Exchange
+from .locate import locate
 from .protocol import MIN_SHARE, NUISANCES, DiagnosisError, parse_model
-from .report import _Report
 from .results import CandidateResult, Diagnosis, Step
 from .search import _Search
 from .verdict import _Verdict
@@ -69,7 +69,7 @@ class _Workflow(_Verdict, _Exchange, _Report):
 
     # --- 2. locate ----------------------------------------------------------------------------------
     def locate(self, x=None) -> dict:
-        """Where the fit `x` (default the current one) misses: `fitting.locate`."""
+        """Where the fit `x` (default the current one) misses: `fitting.diagnosis.locate`."""
         x = self.x if x is None else x
         evaluate = self.search.evaluate
         return locate(self.search.problem, x, evaluate.residuals(x), evaluate.predictions(x))

@@ -114,7 +114,7 @@ def _diagnose(args, out: Path) -> int:
     """The diagnosis of trace files, written into `out` (the temporary of `--out`)."""
     from fitting.data import load_experiments
     from fitting.diagnosis import diagnose
-    from fitting.diagnosis_report import readings, write_diagnosis_report
+    from fitting.diagnosis.report import readings, write_diagnosis_report
 
     experiments = load_experiments(args.files, channels=_names(args.channels) or None)
     diagnosis = diagnose(
