@@ -158,7 +158,7 @@ def kernel_flags(setup: ChainSetup, *, switched_on=()) -> KernelFlags:
         law=contact_law(setup),
         # the native kernels' rate slot holds one law: velocity-squared dissipation where the
         # dashpot leaves it free
-        rate_law="dashpot" if dashpot else "velocity_squared" if _fills_the_rate_slot(others) else None,
+        rate_law="dashpot" if dashpot else _rate_slot_law(others),
     )
 
 
@@ -571,10 +571,12 @@ def record_batched(
     return _assemble(params, batch, flags, grid, rows, names, user, int(block_steps), None, fused)
 
 
-def _fills_the_rate_slot(others) -> bool:
-    """Whether a setup's dissipation laws beyond Kuwabara-Kono's and the dashpot (`others`)
-    are one `laws.VelocitySquared`, which the native kernels' rate slot can carry."""
-    return len(others) == 1 and isinstance(others[0], laws.VelocitySquared)
+def _rate_slot_law(others) -> str | None:
+    """The native name of a setup's one dissipation law beyond Kuwabara-Kono's and the
+    dashpot (`others`) where the native kernels' rate slot carries it (a
+    `native.RATE_LAW_DEFINES` key: `laws.VelocitySquared`), else None."""
+    name = laws.registry.native_name(others[0]) if len(others) == 1 else None
+    return name if name in native.RATE_LAW_DEFINES else None
 
 
 def _native_laws(setup: ChainSetup, flags: KernelFlags) -> bool:
@@ -584,7 +586,7 @@ def _native_laws(setup: ChainSetup, flags: KernelFlags) -> bool:
     further laws, is not native); where not, the JAX kernel runs (`BatchedTraces.kernel`
     says so)."""
     others = setup.dissipation[2:]
-    carried = not others or (flags.rate_law == "velocity_squared" and _fills_the_rate_slot(others))
+    carried = not others or (flags.rate_law is not None and flags.rate_law == _rate_slot_law(others))
     return carried and laws.registry.runs_natively(setup.contact_law, setup.dissipation)
 
 

@@ -116,6 +116,14 @@ def test_registry_names_every_law_as_the_native_kernels_know_it():
     # Kuwabara-Kono damping is the kernels' `viscous`; the rate slot's laws are `rate_law`'s values
     assert laws.Viscoelastic().native_name in KernelFlags._fields
     assert {laws.Dashpot().native_name, laws.VelocitySquared().native_name} == set(native.RATE_LAW_DEFINES)
+    # the rate slot's laws give the kernels their coefficient, the others none
+    for law in (laws.Viscoelastic(2e-6), laws.Dashpot(30.0), laws.VelocitySquared(5.0)):
+        coefficient = law.rate_slot_coefficient()
+        assert (coefficient is not None) == (law.native_name in native.RATE_LAW_DEFINES)
+        if coefficient is not None:  # its force is the coefficient times the rate (velocity squared: |rate| too)
+            rate = -0.3
+            per_rate = coefficient * (abs(rate) if law.native_name == "velocity_squared" else 1.0)
+            assert float(law.force(1e-6, rate, 1e10)) == pytest.approx(float(per_rate) * rate, rel=1e-15)
     with pytest.raises(ValueError, match="no contact law is named 'hertzian'"):
         laws.registry.contact_law_named("hertzian")
 

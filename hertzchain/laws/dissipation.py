@@ -35,11 +35,17 @@ class AbstractDissipation(eqx.Module):
 
     @property
     def native_name(self) -> str | None:
-        """The native kernels' name of this law (a `batched.KernelFlags` field), or None
-        where only the JAX kernels run it (`hertzchain.laws.registry`)."""
+        """The native kernels' name of this law (`hertzchain.laws.registry`), or None where
+        only the JAX kernels run it."""
         from .registry import native_name
 
         return native_name(self)
+
+    def rate_slot_coefficient(self):
+        """For a law of the native kernels' rate slot (its force a coefficient times the
+        overlap rate, `chain_laws.h`'s `RateSlotCoefficient`; its native name a
+        `native.RATE_LAW_DEFINES` key): the coefficient the kernels take. None: not such a law."""
+        return None
 
 
 class Viscoelastic(AbstractDissipation):
@@ -85,6 +91,9 @@ class Dashpot(AbstractDissipation):
 
     def is_active(self):
         return self.gamma_n_s_m != 0.0
+
+    def rate_slot_coefficient(self):
+        return self.gamma_n_s_m
 
 
 def total_force(elastic_n, overlap_m, overlap_rate_m_s, kappa_n_m1p5, dissipation=()):
@@ -138,3 +147,6 @@ class VelocitySquared(AbstractDissipation):
 
     def is_active(self):
         return self.c_n_s2_m2 != 0.0
+
+    def rate_slot_coefficient(self):
+        return self.c_n_s2_m2

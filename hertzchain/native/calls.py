@@ -249,14 +249,18 @@ def _library(law: str, rate: str | None, sensors, backend: str, caller: str) -> 
     return library
 
 
-def _velocity_squared_coefficient(p: dict):
-    """The coefficient (N s^2/m^2) of the one `laws.VelocitySquared` among the kernel arrays'
-    other dissipation laws (`p["dissipation"]`, `batched._chain_params`)."""
-    found = [law for law in p.get("dissipation", ()) if isinstance(law, laws.VelocitySquared)]
+def _rate_slot_coefficient(p: dict, rate_law: str | None):
+    """The coefficient the rate slot's law `rate_law` takes: the dashpot's (`p["dashpot"]`,
+    N s/m), or that of the one law of that native name among the kernel arrays' other
+    dissipation laws (`p["dissipation"]`, `batched._chain_params`; its
+    `rate_slot_coefficient`); None without one."""
+    if rate_law is None or rate_law == "dashpot":
+        return None if rate_law is None else p["dashpot"]
+    found = [law for law in p.get("dissipation", ()) if laws.registry.native_name(law) == rate_law]
     if len(found) != 1:
-        raise ValueError(f"velocity_squared: the kernel arrays hold {len(found)} VelocitySquared laws; the "
-                         "rate slot carries exactly one.")
-    return found[0].c_n_s2_m2
+        raise ValueError(f"rate_law={rate_law!r}: the kernel arrays hold {len(found)} such laws; the rate slot "
+                         "carries exactly one.")
+    return found[0].rate_slot_coefficient()
 
 
 def _full_args(p: dict, state0, preload: bool, springs: bool, rate_law: str | None, law: str, backend: str,
@@ -265,8 +269,7 @@ def _full_args(p: dict, state0, preload: bool, springs: bool, rate_law: str | No
     physics a run does not have; the rate slot's coefficient `rate_law`'s: the dashpot's or
     the velocity-squared law's) and, for the host kernels, the law's
     (`_law_array`) and the compliant sensors' (`_sensor_array`)."""
-    slot = (p["dashpot"] if rate_law == "dashpot" else _velocity_squared_coefficient(p) if rate_law == "velocity_squared"
-            else None)
+    slot = _rate_slot_coefficient(p, rate_law)
     width = lambda leaf: leaf.shape[-1]
     zeros = lambda leaf: jax.numpy.zeros_like(leaf)
     return (
