@@ -54,6 +54,7 @@ from ..io.atomic import output_folder
 from ..materials import Material, material
 from ..units import counted, parse_quantity
 from .errors import EXIT_NOT_CONVERGED, exit_codes_epilog
+from .shared_options import add_compile_cache_option
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -86,9 +87,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fit a linear drift (m/s) of each curve's approach record [off]")
     parser.add_argument("--max-shift", default=f"{MAX_TIME_SHIFT_S * 1e6:g}us",
                         help=f"bound of --time-shift (s, or 13us) [{MAX_TIME_SHIFT_S * 1e6:g}us]")
-    parser.add_argument("--no-compile-cache", action="store_true",
-                        help="do not keep compiled programs between runs (default: kept in "
-                        "~/.cache/hertzchain/jax; also off with HERTZCHAIN_NO_COMPILE_CACHE=1)")
+    add_compile_cache_option(parser)
     parser.add_argument("--out", default="out/contact", help="output folder [out/contact]")
 
 

@@ -32,6 +32,7 @@ from fitting.model import STEPS_PER_CONTACT, ForwardModel
 
 from ..io.atomic import output_folder
 from .errors import EXIT_NOT_CONVERGED, exit_codes_epilog
+from .shared_options import add_compile_cache_option, add_driven_data_dir_option
 
 
 def _names(text: str) -> list[str]:
@@ -72,8 +73,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"Verlet steps per shortest contact time of the model (default {STEPS_PER_CONTACT}, "
                         "as for fit: see fitting.model)")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    parser.add_argument("--data-dir", help="driven experiments (kind = \"driven\"): the folder their sweep files "
-                        "are relative to")
+    add_driven_data_dir_option(parser)
     parser.add_argument("--held-out-levels", type=int, default=DEFAULT_HELD_OUT_LEVELS,
                         help="driven files: the bending run's top drive levels each candidate is not fitted on "
                         f"and predicts (default {DEFAULT_HELD_OUT_LEVELS}; at least 1)")
@@ -83,9 +83,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "with the default candidates within 10 minutes on 2 cores; 1 fits every level)")
     parser.add_argument("--max-steps", type=int, default=DEFAULT_MAX_STEPS,
                         help=f"driven files: optimiser iterations per candidate (default {DEFAULT_MAX_STEPS})")
-    parser.add_argument("--no-compile-cache", action="store_true",
-                        help="do not keep compiled code between runs (default: kept in $HERTZCHAIN_CACHE/jax, "
-                        "~/.cache/hertzchain/jax; also off with HERTZCHAIN_NO_COMPILE_CACHE=1)")
+    add_compile_cache_option(parser)
 
 
 def run(args) -> int:

@@ -58,6 +58,7 @@ from ..io.importer import experiment_priors
 from ..timegrid import choose_time_grid
 from ..units import counted, parse_quantity
 from ..validation import RunSize, check_run_size, estimate_run_size
+from .shared_options import add_compile_cache_option, add_driven_data_dir_option
 
 
 def _assignments(text: str | None, option: str) -> dict:
@@ -128,15 +129,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--per-trace-plots", action="store_true",
                         help="also an overlay and a residual figure per file (about 1.5 s each) besides the "
                         "summary figure fit_summary.png")
-    parser.add_argument("--no-compile-cache", action="store_true",
-                        help="do not keep compiled code between runs (default: kept in $HERTZCHAIN_CACHE/jax, "
-                        "~/.cache/hertzchain/jax; also off with HERTZCHAIN_NO_COMPILE_CACHE=1)")
+    add_compile_cache_option(parser)
     parser.add_argument("--yes", action="store_true",
                         help="fit even when one iteration (the model and its derivatives for every file and "
                         "start) needs more memory than is available or more than 1e10 bead-steps")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
-    parser.add_argument("--data-dir", help="driven experiments (kind = \"driven\"): the folder their sweep files "
-                        "are relative to")
+    add_driven_data_dir_option(parser)
 
 
 def _noise_std_n(text: str | None) -> float | None:
