@@ -1,7 +1,7 @@
-"""The host's fused C++ kernels (`chain_kernel.cc` and its variants, the driven chains'
-`driven_kernel.cc`): their FFI targets, loading and registering each library (built on
-first use), the libraries `hertzchain kernel` builds, and `kernel_for`, which fused kernel
-(if any) runs a compiled kernel's physics."""
+"""The host's fused C++ kernels (`chain_kernel.cc` and its variants, `libraries.HOST_LIBRARIES`;
+the driven chains' `driven_kernel.cc`): loading and registering each library (built on first
+use), the libraries `hertzchain kernel` builds, and `kernel_for`, which fused kernel (if any)
+runs a compiled kernel's physics."""
 
 from __future__ import annotations
 
