@@ -70,7 +70,13 @@ class KernelFlags(NamedTuple):
 def _law(p, flags: KernelFlags, rows=lambda a: a):
     """The contact law (`flags.law`'s class, `laws.registry`) and its `laws.ContactConstants`
     (of the contacts `rows` picks) from the kernel arrays `_chain_params` stored."""
-    kind = laws.registry.contact_law_named(flags.law)
+    return law_from_arrays(p, flags.law, rows)
+
+
+def law_from_arrays(p, name: str, rows=lambda a: a):
+    """The contact law of native name `name` (`laws.registry`) and its `laws.ContactConstants`
+    (of the contacts `rows` picks) from the kernel arrays `_chain_params` stored."""
+    kind = laws.registry.contact_law_named(name)
     law = kind(**{field.name: p[field.name] for field in dataclasses.fields(kind)})
     constants = {name: rows(p[name]) if name in _PER_CONTACT else p[name] for name in _CONSTANTS if name in p}
     return law, laws.ContactConstants(rows(p["kappa"]), **constants)

@@ -1,6 +1,7 @@
 """The table of host libraries (`native.libraries`): which library runs which physics, their
 macros and FFI targets, against the combinations written out here."""
 
+import numpy as np
 import pytest
 
 from hertzchain import native
@@ -75,3 +76,24 @@ def test_kernel_for_refuses_the_combinations_no_library_runs():
                   KernelFlags(springs=False, preload=False, viscous=True, sensors=(2,), ledger=True)):
         assert native.kernel_for(flags, None) is None
     assert libraries.host_library_for("hertz", "dashpot", True).name == "compliant sensors"
+
+
+def test_each_contact_laws_parameters_fill_the_rows_the_kernel_reads():
+    """`native.run_full`'s law array from each law's `native_rows`: the rows `chain_kernel.cc`'s
+    `LawRows` reads (Hertz 2 of zeros, the power law 2, Thornton one per contact, Jackson-Green
+    three per contact and 2), in its order."""
+    import jax.numpy as jnp
+
+    from hertzchain.native.calls import _law_array
+
+    contacts = 4
+    per_contact = lambda value: jnp.full((contacts, 1), value)  # noqa: E731
+    p = {"kappa": per_contact(1e10), "exponent": jnp.full((1,), 1.6), "reference_overlap_m": jnp.full((1,), 2e-6),
+         "yield_force_n": per_contact(50.0), "reduced_radius_m": per_contact(5e-3), "poisson": per_contact(0.3),
+         "yield_stress_pa": jnp.full((1,), 1e9)}
+    rows = {law: np.asarray(_law_array(p, law))[:, 0] for law in ("hertz",) + OTHER_LAWS}
+    np.testing.assert_array_equal(rows["hertz"], [0.0, 0.0])
+    np.testing.assert_array_equal(rows["power_law"], [1.6, 2e-6])
+    np.testing.assert_array_equal(rows["thornton"], [50.0] * contacts)
+    np.testing.assert_array_equal(rows["jackson_green"], [50.0] * contacts + [5e-3] * contacts + [0.3] * contacts
+                                  + [1e9, 2.84])

@@ -92,6 +92,12 @@ class AbstractContactLaw(eqx.Module):
         check compares the forces with."""
         return constants.yield_force_n
 
+
+    def native_rows(self, constants: ContactConstants) -> tuple:
+        """Its parameters as the native kernels read them: the rows of their law array in
+        order (`chain_kernel.cc`'s `LawRows`), each a value per contact or one for all
+        (`native.run_full` lays them out). Hertz's law has none."""
+        return ()
     @property
     def native_name(self) -> str | None:
         """The native kernels' name of this law (`batched.KernelFlags.law`), or None where

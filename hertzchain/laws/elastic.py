@@ -48,3 +48,7 @@ class PowerLaw(AbstractContactLaw):
 
     def overlap_at_force(self, force_n, constants: ContactConstants):
         return contact.overlap_at_force(force_n, constants.kappa_n_m1p5, self.exponent, self.reference_overlap_m)
+
+    def native_rows(self, constants: ContactConstants) -> tuple:
+        """The exponent and the reference overlap (m)."""
+        return (self.exponent, self.reference_overlap_m)

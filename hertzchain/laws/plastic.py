@@ -37,6 +37,10 @@ class Thornton(AbstractContactLaw):
         """Hertz's overlap (a chain's static preload is taken below the yield force)."""
         return contact.overlap_at_force(force_n, constants.kappa_n_m1p5)
 
+    def native_rows(self, constants: ContactConstants) -> tuple:
+        """Every contact's yield force (N)."""
+        return (constants.yield_force_n,)
+
 
 class JacksonGreen(AbstractContactLaw):
     """Jackson & Green's elastic-plastic contact of spheres (`contact.jackson_green_contact`,
@@ -63,6 +67,13 @@ class JacksonGreen(AbstractContactLaw):
     def overlap_at_force(self, force_n, constants: ContactConstants):
         """Hertz's overlap (a chain's static preload is taken below the yield force)."""
         return contact.overlap_at_force(force_n, constants.kappa_n_m1p5)
+
+    def native_rows(self, constants: ContactConstants) -> tuple:
+        """Every contact's yield force (N; where it yields at all), reduced radius (m) and
+        Poisson ratio, then the yield stress (Pa) and the hardness ratio
+        (`contact.JG_HARDNESS_RATIO`, the one `contact.jackson_green_contact` applies)."""
+        return (constants.yield_force_n, constants.reduced_radius_m, constants.poisson, constants.yield_stress_pa,
+                jnp.full((1,), contact.JG_HARDNESS_RATIO))
 
     def yield_force_n(self, constants: ContactConstants):
         """Where the law leaves Hertz, $\\kappa(1.9\\,\\delta_c)^{3/2}$ (`contact.jackson_green_yield_force`), N."""

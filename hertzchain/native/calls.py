@@ -12,7 +12,8 @@ import jax
 import numpy as np
 from jax.interpreters import partial_eval
 
-from .. import contact, laws
+from .. import laws
+from ..batched_step import law_from_arrays
 from . import host, registry, thread
 from .libraries import CONTACT_LAWS, HOST_LIBRARIES, RATE_LAW_DEFINES, HostLibrary, host_library_for
 
@@ -301,20 +302,14 @@ def _sensor_array(p: dict, sensors: tuple[int, ...]):
 
 
 def _law_array(p: dict, law: str):
-    """The law's parameters as the host kernels' (rows, 1 or B) array (`chain_kernel.cc`'s
-    `LawRows`): Hertz's, two rows of zeros; the power law's exponent and reference overlap
-    (m); Thornton's, every contact's yield force (N); Jackson-Green's, every contact's yield
-    force, reduced radius (m) and Poisson ratio, then the yield stress (Pa) and the hardness
-    ratio (`contact.JG_HARDNESS_RATIO`, the one `forces.elastic_parts` applies)."""
-    if law == "hertz":
+    """The parameters of the contact law named `law` as the host kernels' (rows, 1 or B)
+    array (`chain_kernel.cc`'s `LawRows`): the law's `native_rows` from the kernel arrays
+    (`batched_step.law_from_arrays`), each a row or a row per contact; two rows of zeros for
+    a law without parameters (Hertz's)."""
+    contact_law, constants = law_from_arrays(p, law)
+    rows = contact_law.native_rows(constants)
+    if not rows:
         return jax.numpy.zeros((2, 1))
-    if law == "power_law":
-        rows = [p["exponent"], p["reference_overlap_m"]]
-    elif law == "thornton":
-        rows = [p["yield_force_n"]]
-    else:
-        hardness = jax.numpy.full((1,), contact.JG_HARDNESS_RATIO)
-        rows = [p["yield_force_n"], p["reduced_radius_m"], p["poisson"], p["yield_stress_pa"], hardness]
     rows = [jax.numpy.reshape(row, (-1, row.shape[-1]) if row.ndim > 1 else (1, -1)) for row in rows]
     width = max(row.shape[-1] for row in rows)
     return jax.numpy.concatenate([jax.numpy.broadcast_to(row, (row.shape[0], width)) for row in rows])
