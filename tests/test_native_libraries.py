@@ -59,6 +59,8 @@ def test_the_libraries_macros_and_targets():
     with pytest.raises(ValueError, match="holds no 'books' runs"):
         table["compliant sensors"].target("books")
     assert (native.TARGET, native.FULL_TARGET) == ("hertzchain_chain_forward", "hertzchain_chain_full_forward")
+    # the thread kernels run Hertz contacts, with or without a dashpot, and no sensors
+    assert [name for name, lib in table.items() if lib.runs_on_threads] == ["chain", "dashpot"]
 
 
 def test_a_law_or_rate_it_does_not_know_is_refused_by_name():

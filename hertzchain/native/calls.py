@@ -244,7 +244,7 @@ def _library(law: str, rate: str | None, sensors, backend: str, caller: str) -> 
         raise ValueError(f"{caller}: no native library runs {law} contacts with {rate} in the rate slot"
                          f"{' and compliant sensors' if sensors else ''} (rate_law='velocity_squared' needs "
                          "law='hertz' and sensors=()); the JAX kernel runs that combination.")
-    if backend != "host" and library.name not in ("chain", "dashpot"):
+    if backend != "host" and not library.runs_on_threads:
         raise ValueError(f"{caller}: {law} contacts{f' with {rate}' if rate else ''}"
                          f"{' and compliant sensors' if sensors else ''} run on the host kernel (backend 'host').")
     return library

@@ -268,9 +268,8 @@ def kernel_for(flags, devices, rows: int | None = None) -> FusedKernel | None:
     physics = "full" if flags.full_state or library.law != "hertz" else "conservative"
     if platforms == {"cpu"} and available() and _host_library_loads(library):
         return FusedKernel(physics, "host")
-    # the thread kernels: Hertz contacts with or without a dashpot (compiled into one
-    # library), no compliant sensors, no books of the full step
-    if library.name not in ("chain", "dashpot") or (flags.full_state and flags.ledger):
+    # the thread kernels: their libraries' chains, no books of the full step
+    if not library.runs_on_threads or (flags.full_state and flags.ledger):
         return None
     if platforms == {"gpu"} and thread.thread_unavailable_reason("cuda") is None and (
             rows is None or thread._thread_library_loads("cuda", int(rows))):

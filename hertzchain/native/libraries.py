@@ -79,6 +79,13 @@ class HostLibrary(NamedTuple):
         return (None, "dashpot") if self.law != "hertz" or self.sensors else (None,)
 
     @property
+    def runs_on_threads(self) -> bool:
+        """Whether the GPU's thread kernels (`chain_kernel_thread.cu`) run its chains too:
+        Hertz contacts with or without a dashpot (one thread library holds both), no
+        compliant sensors."""
+        return self.law == "hertz" and not self.sensors and set(self.rates) <= {None, "dashpot"}
+
+    @property
     def what(self) -> str:
         """How messages name it."""
         if self.name == "chain":
