@@ -1,25 +1,16 @@
-"""The velocity-Verlet step of driven chains, many runs at once on the SIMD axis.
+"""The driven chains' kernel: `verlet.step` with the driver as a boundary, many runs at once.
 
 The state of B runs is laid out as (n, B) arrays, the runs on the fast axis, so that every
 operation of a step is one vector instruction over runs (as in `hertzchain.batched`). Runs
 may differ in their time step (each run's own `dt_s`, a (B,) array), in the driver's
 displacement and in nothing else: the chain's constants are shared, (n, 1) columns.
 
-One step of length $\\Delta t$ with $h = \\Delta t/2$, $f$ the acceleration
-$(F_{i-1} - F_i + S_i + F^{fr}_i)/m_i$ by the contact forces, the supports' static force and
-their friction, and
-$\\gamma$ the beads' viscous damping rate:
-
-    v_half = v + h (f - gamma v)
-    x'     = x + dt v_half
-    H'     = the contact law's history after the move (the largest overlap so far), and
-             the supports' friction sliders after it (`laws.IwanSupport`)
-    f'     = contact forces at x' and H', the driver at its new position u', the contact
-             damping at the predicted velocity v_half + h (f - gamma v) (as `integrate.verlet_step`)
-    v'     = (v_half + h f') / (1 + h gamma)
-
-The drag $-\\gamma v$ is treated by the trapezoidal rule (implicit, solved in closed form):
-the scheme stays symmetric, second order and stable for any damping. The contact forces are
+A step is `verlet.step` with $\\gamma$, the beads' viscous damping rate, as its drag: the
+acceleration after the drift is $(F_{i-1} - F_i + S_i + F^{fr}_i)/m_i$, by the contact
+forces at the new displacements (the driver at its new position, the contact damping at the
+predicted velocity), the supports' static force and their friction, after the contact law's
+history (the largest overlap so far) and the supports' friction sliders
+(`laws.IwanSupport`) have followed the move. The contact forces are
 the chain's laws (`DrivenChain.contact_law` and `.dissipation`, `hertzchain.laws`), their
 sum clipped at zero, each law's parameters as (n + 1, 1) columns over the contacts.
 """
@@ -141,22 +132,22 @@ def static_state(p: KernelParams, runs: jax.Array) -> State:
 
 
 def step(p: KernelParams, state: State, dt_s, drive_m, drive_m_s) -> State:
-    """One velocity-Verlet step of every run (see the module docstring). `dt_s`: (B,) or
-    scalar step, s; `drive_m`, `drive_m_s`: the driver's displacement and velocity at the
-    end of the step, (B,), m and m/s."""
-    h = 0.5 * dt_s
-    x, v, f, history, slider = state
-    drag_accel = f - p.damping_rate_per_s * v  # (the drag in the first half kick, implicit in the second)
-    v_half = verlet.half_kick(v, drag_accel, h)
-    x = verlet.drift(x, v_half, dt_s)
-    if history is not None:
-        history = p.contact_law.update_state(history, contact_overlaps(p, x, drive_m))
-    if slider is not None:
-        slider = p.support_friction.update_state(slider, x)
-    force = contact_forces(p, x, verlet.half_kick(v_half, drag_accel, h), drive_m, drive_m_s, history)
-    f = contact_accel(p, force, x, slider)
-    v = verlet.half_kick(v_half, f, h) / (1.0 + h * p.damping_rate_per_s)
-    return State(x, v, f, history, slider)
+    """One velocity-Verlet step of every run (`verlet.step`, with the beads' drag). `dt_s`:
+    (B,) or scalar step, s; `drive_m`, `drive_m_s`: the driver's displacement and velocity
+    at the end of the step, (B,), m and m/s."""
+
+    def accel_at(x, v):
+        history, slider = state.contact_history_m, state.support_slider_m
+        if history is not None:
+            history = p.contact_law.update_state(history, contact_overlaps(p, x, drive_m))
+        if slider is not None:
+            slider = p.support_friction.update_state(slider, x)
+        force = contact_forces(p, x, v, drive_m, drive_m_s, history)
+        return contact_accel(p, force, x, slider), (history, slider)
+
+    s = verlet.step(state.displacement_m, state.velocity_m_s, state.contact_accel_m_s2, dt_s, accel_at,
+                    drag_rate_per_s=p.damping_rate_per_s)
+    return State(s.displacement_m, s.velocity_m_s, s.accel_m_s2, *s.forces)
 
 
 DriveFn = Callable[[jax.Array], tuple[jax.Array, jax.Array]]
