@@ -134,39 +134,44 @@ def initial_state(model: ChainModel) -> ChainState:
 
 
 def _friction_kick(model: ChainModel, velocity, half_step_s):
-    """Coulomb friction over half a step as a clamped kick: (velocity, dissipated J, impulse N s)."""
+    """Coulomb friction over half a step as a clamped kick: (velocity, (dissipated J, impulse N s))."""
     clamped = contact.track_friction_kick(velocity, model.friction_decel_m_s2, half_step_s)
     dissipated = 0.5 * jnp.sum(model.mass_kg * (velocity**2 - clamped**2))
     impulse = jnp.sum(model.mass_kg * (clamped - velocity))
-    return clamped, dissipated, impulse
+    return clamped, (dissipated, impulse)
 
 
 def verlet_step(model: ChainModel, dt_s: float, state: ChainState) -> ChainState:
-    """Advance the chain by one velocity-Verlet step of `dt_s` seconds (pure function)."""
+    """Advance the chain by one velocity-Verlet step of `dt_s` seconds (pure function):
+    `verlet.step` with track friction as its kick limit (and again at the step's end), the
+    compliant sensors' phases around it, and the books."""
     h = 0.5 * dt_s
     m = model.mass_kg
-    v0 = state.velocity_m_s
-    v_half = verlet.half_kick(v0, state.accel_m_s2, h)
-    viscous_work = jnp.sum(m * state.viscous_accel_m_s2 * h * 0.5 * (v0 + v_half))
-    v_half, friction_1, impulse_1 = _friction_kick(model, v_half, h)
-    displacement = verlet.drift(state.displacement_m, v_half, dt_s)
     sensor = _sensor_drift(model, dt_s, state)
-    contact_overlap, wall_overlap = overlaps(model, displacement, sensor.force_n)
-    max_overlap = jnp.maximum(
-        state.max_overlap_m, jnp.concatenate([contact_overlap, wall_overlap[None]])
-    )
-    forces = chain_forces(model, displacement, verlet.half_kick(v_half, state.accel_m_s2, h), max_overlap,
-                          sensor.force_n, sensor.predicted_rate_n_s)
-    accel = forces.body_force_n / m
+
+    def accel_at(displacement, velocity):
+        contact_overlap, wall_overlap = overlaps(model, displacement, sensor.force_n)
+        max_overlap = jnp.maximum(
+            state.max_overlap_m, jnp.concatenate([contact_overlap, wall_overlap[None]])
+        )
+        forces = chain_forces(model, displacement, velocity, max_overlap, sensor.force_n,
+                              sensor.predicted_rate_n_s)
+        return forces.body_force_n / m, (forces, max_overlap)
+
+    stepped = verlet.step(state.displacement_m, state.velocity_m_s, state.accel_m_s2, dt_s, accel_at,
+                          limit=lambda w: _friction_kick(model, w, h))
+    forces, max_overlap = stepped.forces
+    friction_1, impulse_1 = stepped.limited
+    v0, v_half, v_end = state.velocity_m_s, stepped.half_kicked_m_s, stepped.velocity_m_s
     viscous_accel = forces.body_viscous_force_n / m
-    v_end = verlet.half_kick(v_half, accel, h)
-    viscous_work += jnp.sum(m * viscous_accel * h * 0.5 * (v_half + v_end))
-    v_end, friction_2, impulse_2 = _friction_kick(model, v_end, h)
+    viscous_work = jnp.sum(m * state.viscous_accel_m_s2 * h * 0.5 * (v0 + v_half))
+    viscous_work += jnp.sum(m * viscous_accel * h * 0.5 * (stepped.half_velocity_m_s + v_end))
+    v_end, (friction_2, impulse_2) = _friction_kick(model, v_end, h)
     all_forces = jnp.concatenate([forces.contact_total_n, forces.wall_total_n[None]])
     return ChainState(
-        displacement_m=displacement,
+        displacement_m=stepped.displacement_m,
         velocity_m_s=v_end,
-        accel_m_s2=accel,
+        accel_m_s2=stepped.accel_m_s2,
         viscous_accel_m_s2=viscous_accel,
         wall_force_n=forces.wall_total_n,
         dissipated_viscous_j=state.dissipated_viscous_j - viscous_work,
