@@ -214,7 +214,9 @@ class _Layout(NamedTuple):
 
 
 def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
-    """One velocity-Verlet step on the packed state (the order of `integrate.verlet_step`)."""
+    """One velocity-Verlet step on the packed state: with damping, friction or sensors
+    `verlet.step` (as `integrate.verlet_step`), else its conservative form on (x, u), u the
+    next half kick's velocity."""
     h = 0.5 * dt
     s = layout.unpack(flags, state)
     barrier = jax.lax.optimization_barrier
@@ -245,21 +247,22 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
         if flags.ledger:
             new["max"] = jnp.maximum(s["max"], _overlaps(p, flags, x))
         return barrier(layout.pack(flags, new))
-    v_half = verlet.half_kick(s["v"], s["a"], h)
-    work = lost = 0.0
+
+    def accel_at(x, v):
+        if flags.viscous:
+            total, elastic = contact_forces(x, v)
+            both = barrier(jnp.concatenate([total, elastic]))
+            total, elastic = both[: layout.bodies], both[layout.bodies :]
+        else:
+            total, elastic = barrier(contact_forces(x, None)[0]), None
+        return _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"], (total, elastic)
+
+    limit = (lambda w: _friction_kick(p, flags, w, h)) if flags.friction else None
+    stepped = verlet.step(s["x"], s["v"], s["a"], dt, accel_at, limit=limit)
+    x, v, a, (total, elastic) = stepped.displacement_m, stepped.velocity_m_s, stepped.accel_m_s2, stepped.forces
+    work, lost = 0.0, stepped.limited if flags.friction else 0.0
     if flags.viscous and flags.ledger:
-        work = jnp.sum(s["viscous"] * h * 0.5 * (s["v"] + v_half), axis=0)
-    if flags.friction:
-        v_half, lost = _friction_kick(p, flags, v_half, h)
-    x = verlet.drift(s["x"], v_half, dt)
-    if flags.viscous:
-        total, elastic = contact_forces(x, verlet.half_kick(v_half, s["a"], h))
-        both = barrier(jnp.concatenate([total, elastic]))
-        total, elastic = both[: layout.bodies], both[layout.bodies :]
-    else:
-        total = barrier(contact_forces(x, None)[0])
-    a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
-    v = verlet.half_kick(v_half, a, h)
+        work = jnp.sum(s["viscous"] * h * 0.5 * (s["v"] + stepped.half_kicked_m_s), axis=0)
     new |= {"x": x, "a": a, "v": v}
     if flags.sensors:  # the second half kick, from the new drive
         drive = compliant_sensor.drive(p["sensor_beta"], *compliant_sensor.contacts_of(flags.sensors, total))
@@ -267,7 +270,7 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
                 "sensor_rate": compliant_sensor.kick(p["sensor_inv"], dt, force, half_rate, drive, quasi_static)}
     if flags.viscous and flags.ledger:
         viscous = _body_force(total - elastic)
-        work = work + jnp.sum(viscous * h * 0.5 * (v_half + v), axis=0)
+        work = work + jnp.sum(viscous * h * 0.5 * (stepped.half_velocity_m_s + v), axis=0)
         # Chains without damping in a damped batch dissipate nothing, exactly (total - elastic
         # can be an ulp off zero when XLA contracts the force law into fused multiply-adds).
         work = jnp.where(laws.is_damped(_dissipation(p, flags)), work, 0.0)
