@@ -255,11 +255,13 @@ def _step(p, flags: KernelFlags, layout: _Layout, dt: float, state):
             total, elastic = both[: layout.bodies], both[layout.bodies :]
         else:
             total, elastic = barrier(contact_forces(x, None)[0]), None
-        return _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"], (total, elastic)
+        a = _body_force(total, p["external"] if flags.preload else None) * p["inv_mass"]
+        return a, (total, elastic)
 
     limit = (lambda w: _friction_kick(p, flags, w, h)) if flags.friction else None
     stepped = verlet.step(s["x"], s["v"], s["a"], dt, accel_at, limit=limit)
-    x, v, a, (total, elastic) = stepped.displacement_m, stepped.velocity_m_s, stepped.accel_m_s2, stepped.forces
+    x, v, a = stepped.displacement_m, stepped.velocity_m_s, stepped.accel_m_s2
+    total, elastic = stepped.forces
     work, lost = 0.0, stepped.limited if flags.friction else 0.0
     if flags.viscous and flags.ledger:
         work = jnp.sum(s["viscous"] * h * 0.5 * (s["v"] + stepped.half_kicked_m_s), axis=0)

@@ -158,8 +158,8 @@ def verlet_step(model: ChainModel, dt_s: float, state: ChainState) -> ChainState
                               sensor.predicted_rate_n_s)
         return forces.body_force_n / m, (forces, max_overlap)
 
-    stepped = verlet.step(state.displacement_m, state.velocity_m_s, state.accel_m_s2, dt_s, accel_at,
-                          limit=lambda w: _friction_kick(model, w, h))
+    stepped = verlet.step(state.displacement_m, state.velocity_m_s, state.accel_m_s2, dt_s,
+                          accel_at, limit=lambda w: _friction_kick(model, w, h))
     forces, max_overlap = stepped.forces
     friction_1, impulse_1 = stepped.limited
     v0, v_half, v_end = state.velocity_m_s, stepped.half_kicked_m_s, stepped.velocity_m_s

@@ -90,7 +90,9 @@ def step(
     **Returns:** `Stepped`.
     """
     h = 0.5 * step_s
-    kick_accel = accel_m_s2 if drag_rate_per_s is None else accel_m_s2 - drag_rate_per_s * velocity_m_s
+    kick_accel = accel_m_s2
+    if drag_rate_per_s is not None:
+        kick_accel = accel_m_s2 - drag_rate_per_s * velocity_m_s
     kicked = half_kick(velocity_m_s, kick_accel, h)
     moving, limited = (kicked, None) if limit is None else limit(kicked)
     displacement = drift(displacement_m, moving, step_s)

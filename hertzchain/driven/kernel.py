@@ -145,8 +145,8 @@ def step(p: KernelParams, state: State, dt_s, drive_m, drive_m_s) -> State:
         force = contact_forces(p, x, v, drive_m, drive_m_s, history)
         return contact_accel(p, force, x, slider), (history, slider)
 
-    s = verlet.step(state.displacement_m, state.velocity_m_s, state.contact_accel_m_s2, dt_s, accel_at,
-                    drag_rate_per_s=p.damping_rate_per_s)
+    s = verlet.step(state.displacement_m, state.velocity_m_s, state.contact_accel_m_s2, dt_s,
+                    accel_at, drag_rate_per_s=p.damping_rate_per_s)
     return State(s.displacement_m, s.velocity_m_s, s.accel_m_s2, *s.forces)
 
 
