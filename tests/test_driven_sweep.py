@@ -67,3 +67,17 @@ def test_sharded_sweep_gives_the_same_numbers(tmp_path):
     direct = lockin_grid(chain, np.linspace(2500.0, 3100.0, 5), np.array([1e-9, 4e-9, 8e-9]), **OPTIONS)
     np.testing.assert_allclose(sharded, np.asarray(direct.complex_amplitude), rtol=1e-12,
                                atol=1e-12 * float(np.abs(direct.complex_amplitude).max()))
+
+
+def test_sweep_reads_out_with_the_grid_keywords_and_defaults(tmp_path):
+    # the read-out keywords and defaults are lockin_grid's (as the grid module's docstring
+    # states them); a misspelt one is refused by name, before anything runs
+    from hertzchain.driven.grid import readout_options
+
+    assert readout_options("test") == {"bead": 1, "quantity": "velocity", "harmonics": (1.0, 0.5),
+                                       "ramp_periods": 25, "hold_periods": 35, "window_periods": 4,
+                                       "steps_per_period": 64, "contact": None}
+    chain = lydon_bead(precompression_n=0.133, damping_rate_per_s=1280.0)
+    with pytest.raises(TypeError, match="run_lockin_sweep: unknown keyword.*windows_periods"):
+        run_lockin_sweep(chain, [3000.0], [1e-9], tmp_path, progress=False, windows_periods=4)
+    assert not (tmp_path / "manifest.json").exists()

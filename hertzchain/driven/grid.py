@@ -35,6 +35,8 @@ threshold itself.
 
 from __future__ import annotations
 
+import inspect
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -163,6 +165,24 @@ def lockin_runs(chain, frequency_hz, amplitude_m, *, bead, quantity, harmonics, 
     schedule = HarmonicSchedule(frequency_hz[None], amplitude_m[None], steps_per_period, ramp_periods, hold_periods, 0)
     return lockin_levels(chain, schedule, bead, quantity, harmonics, window_periods, unroll,
                          contact).complex_amplitude[:, 0]
+
+
+# The keywords of `lockin_grid` that say what a run is and what the lock-in reads (its
+# read-out protocol); `run_lockin_sweep` takes the same, with the same defaults.
+READOUT_KEYWORDS = ("bead", "quantity", "harmonics", "ramp_periods", "hold_periods", "window_periods",
+                    "steps_per_period", "contact")
+
+
+def readout_options(caller: str, **given) -> dict:
+    """The read-out protocol of `lockin_grid` (`READOUT_KEYWORDS`): the `given` keywords, and
+    `lockin_grid`'s defaults for the others. TypeError naming `caller` for a keyword that is
+    not one of them."""
+    unknown = sorted(set(given) - set(READOUT_KEYWORDS))
+    if unknown:
+        raise TypeError(f"{caller}: unknown keyword(s) {', '.join(unknown)}; the read-out keywords are "
+                        f"{', '.join(READOUT_KEYWORDS)} (as for lockin_grid).")
+    parameters = inspect.signature(lockin_grid).parameters
+    return {name: given.get(name, parameters[name].default) for name in READOUT_KEYWORDS}
 
 
 def settle_periods(chain: DrivenChain, frequency_hz: float, tolerance: float = 1e-4) -> int:

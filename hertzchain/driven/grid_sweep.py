@@ -34,7 +34,7 @@ from ..progress import Progress
 from ..sweep import _read_parquet, _write_parquet, _write_table_csv
 from . import fused
 from .chain import DrivenChain
-from .grid import LockinGrid, check_grid_arguments, lockin_runs
+from .grid import LockinGrid, check_grid_arguments, lockin_runs, readout_options
 from .kernel import DEFAULT_UNROLL
 
 LOCKIN_SWEEP_FORMAT = "hertzchain-lockin-sweep/1"
@@ -64,33 +64,31 @@ def run_lockin_sweep(
     drive_amplitudes_m,
     folder,
     *,
-    bead: int = 1,
-    quantity: str = "velocity",
-    harmonics: tuple[float, ...] = (1.0, 0.5),
-    ramp_periods: int = 25,
-    hold_periods: int = 35,
-    window_periods: int = 4,
-    steps_per_period: int = 64,
-    contact: int | None = None,
     chunk_size: int | None = None,
     devices=None,
     max_chunks: int | None = None,
     plots: bool = True,
     progress: bool = True,
+    **readout,
 ) -> LockinSweepResult:
     """Run (or resume) the lock-in grid `frequencies_hz` × `drive_amplitudes_m` into `folder`.
 
-    **Arguments:** the chain, the grid and the read-out as for `lockin_grid` (concrete);
-    `chunk_size`: runs per chunk (default: all runs, at most 4096, a multiple of the device
-    count); `devices`: split each chunk over these (default: all local devices);
-    `max_chunks`: stop after computing this many (the rest on a later call); `plots`,
-    `progress`: write `lockin.png`; report progress and ETA on stderr.
+    **Arguments:** the chain and the grid as for `lockin_grid` (concrete); `chunk_size`: runs
+    per chunk (default: all runs, at most 4096, a multiple of the device count); `devices`:
+    split each chunk over these (default: all local devices); `max_chunks`: stop after
+    computing this many (the rest on a later call); `plots`, `progress`: write `lockin.png`;
+    report progress and ETA on stderr; `**readout`: the read-out, `lockin_grid`'s keywords
+    `bead`, `quantity`, `harmonics`, `ramp_periods`, `hold_periods`, `window_periods`,
+    `steps_per_period` and `contact`, with its defaults (`grid.READOUT_KEYWORDS`; any other
+    keyword is refused).
 
     **Returns:** `LockinSweepResult`.
     """
-    harmonics = tuple(float(h) for h in harmonics)
-    check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, bead, quantity, harmonics, ramp_periods,
-                         hold_periods, window_periods, steps_per_period, contact)
+    o = readout_options("run_lockin_sweep", **readout)
+    harmonics = tuple(float(h) for h in o["harmonics"])
+    check_grid_arguments(chain, frequencies_hz, drive_amplitudes_m, o["bead"], o["quantity"], harmonics,
+                         o["ramp_periods"], o["hold_periods"], o["window_periods"], o["steps_per_period"],
+                         o["contact"])
     frequencies = np.asarray(frequencies_hz, dtype=float)
     amplitudes = np.asarray(drive_amplitudes_m, dtype=float)
     folder = Path(folder)
@@ -102,10 +100,9 @@ def run_lockin_sweep(
         raise ValueError(f"chunk_size must be a positive whole number of runs, got {chunk_size}.")
     chunk_size = len(devices) * math.ceil(int(chunk_size) / len(devices))
     n_chunks = math.ceil(n_runs / chunk_size)
-    options = {"bead": int(bead), "quantity": quantity, "harmonics": list(harmonics),
-               "ramp_periods": int(ramp_periods), "hold_periods": int(hold_periods),
-               "window_periods": int(window_periods), "steps_per_period": int(steps_per_period),
-               "contact": None if contact is None else int(contact)}
+    whole = ("bead", "ramp_periods", "hold_periods", "window_periods", "steps_per_period")
+    options = o | {name: int(o[name]) for name in whole} | {
+        "harmonics": list(harmonics), "contact": None if o["contact"] is None else int(o["contact"])}
     manifest = {
         "format": LOCKIN_SWEEP_FORMAT,
         "chain": chain.describe(),
@@ -132,7 +129,7 @@ def run_lockin_sweep(
         todo = todo[: max(0, int(max_chunks))]
     bar = Progress(sum(min((i + 1) * chunk_size, n_runs) - i * chunk_size for i in todo), "lock-in sweep (runs)") \
         if progress and todo else None
-    on_fused_kernel = (fused.runs(quantity) and chain.runs_on_fused_kernel
+    on_fused_kernel = (fused.runs(o["quantity"]) and chain.runs_on_fused_kernel
                        and all(d.platform == "cpu" for d in devices))
     evaluate = _chunk_function(tuple(devices) if len(devices) > 1 else None, on_fused_kernel)
     chain = chain.for_kernel()
@@ -197,11 +194,8 @@ def _chunk_function(devices, on_fused_kernel: bool):
     pairs (static)."""
 
     def local(chain, frequency, amplitude, settings):
-        o = dict(settings)
-        return lockin_runs(chain, frequency, amplitude, bead=o["bead"], quantity=o["quantity"],
-                           harmonics=o["harmonics"], ramp_periods=o["ramp_periods"], hold_periods=o["hold_periods"],
-                           window_periods=o["window_periods"], steps_per_period=o["steps_per_period"],
-                           unroll=DEFAULT_UNROLL, contact=o["contact"], on_fused_kernel=on_fused_kernel)
+        return lockin_runs(chain, frequency, amplitude, **dict(settings), unroll=DEFAULT_UNROLL,
+                           on_fused_kernel=on_fused_kernel)
 
     if devices is None:
         return eqx.filter_jit(local)
