@@ -12,6 +12,7 @@ import sys
 import jax
 import numpy as np
 import pytest
+from scipy.integrate import solve_ivp
 
 import hertzchain as hc
 from hertzchain import native
@@ -41,6 +42,26 @@ def rerun_at_the_default_xla_level(test_file: str, test_name: str) -> bool:
                            f"{test_file}::{test_name}"], env=env, capture_output=True, text=True, check=False)
     assert proc.returncode == 0, f"{test_name} at XLA's default optimisation level:\n{proc.stdout[-4000:]}"
     return True
+
+
+def binary_collision_loss_j(mass_kg, kappa_n_m1p5, damping_n, speed_m_s):
+    """Energy a head-on collision of two equal free beads (mass `mass_kg`) loses, J: the
+    relative motion $\\mu\\ddot\\delta = -\\max(\\kappa\\delta^{3/2} + F_d(\\delta,
+    \\dot\\delta), 0)$ ($\\mu$ = m/2, `damping_n(overlap, rate)` the dissipation law's force
+    in NumPy, N) integrated by SciPy from first touch at `speed_m_s` until the beads separate."""
+    reduced = mass_kg / 2.0
+
+    def rhs(_, y):
+        delta, rate = y
+        force = max(kappa_n_m1p5 * max(delta, 0.0) ** 1.5 + damping_n(delta, rate), 0.0) if delta > 0 else 0.0
+        return [rate, -force / reduced]
+
+    def separated(_, y):
+        return y[0]
+    separated.terminal, separated.direction = True, -1
+    solution = solve_ivp(rhs, (0.0, 1e-3), [1e-15, speed_m_s], events=separated, rtol=1e-12, atol=1e-18,
+                         max_step=1e-7)
+    return 0.5 * reduced * (speed_m_s**2 - solution.y_events[0][0][1] ** 2)
 
 
 def jackson_green_force(overlap, peak, kappa, radius, sigma, nu, hardness=2.84):

@@ -4,7 +4,7 @@ against the first-order closed form $\\Delta E = \\tfrac{10}{7}c\\,v^2\\delta_m$
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
+from helpers import binary_collision_loss_j
 
 import hertzchain as hc
 from hertzchain import laws
@@ -14,25 +14,6 @@ from hertzchain.timegrid import choose_time_grid
 
 C_N_S2_M2 = 20.0  # takes 0.7 % (0.1 m/s) and 1.6 % (0.3 m/s) of a collision's energy between 13 mm steel beads
 SPEEDS_M_S = (0.1, 0.3)
-
-
-def _collision_loss_j(mass_kg, kappa, c, speed):
-    """Energy a binary collision loses, J: $\\mu\\ddot\\delta = -\\max(\\kappa\\delta^{3/2}
-    + c|\\dot\\delta|\\dot\\delta, 0)$ integrated (SciPy, independent of hertzchain) until the
-    beads separate."""
-    reduced = mass_kg / 2.0
-
-    def rhs(_, y):
-        delta, rate = y
-        force = max(kappa * max(delta, 0.0) ** 1.5 + c * abs(rate) * rate, 0.0) if delta > 0 else 0.0
-        return [rate, -force / reduced]
-
-    def separated(_, y):
-        return y[0]
-    separated.terminal, separated.direction = True, -1
-    solution = solve_ivp(rhs, (0.0, 1e-3), [1e-15, speed], events=separated, rtol=1e-12, atol=1e-18,
-                         max_step=1e-7)
-    return 0.5 * reduced * (speed**2 - solution.y_events[0][0][1] ** 2)
 
 
 def test_velocity_squared_loss_in_a_binary_collision():
@@ -45,7 +26,7 @@ def test_velocity_squared_loss_in_a_binary_collision():
     run = solve_batched(batched, grid, Recording(contacts=(0,)))
     assert run.kernel == "native full (host)"  # the law in the native kernels' rate slot (`laws.registry`)
     for k, speed in enumerate(SPEEDS_M_S):
-        expected = _collision_loss_j(mass, kappa, C_N_S2_M2, speed)
+        expected = binary_collision_loss_j(mass, kappa, lambda d, rate: C_N_S2_M2 * abs(rate) * rate, speed)
         assert float(run.dissipated_j[k]) == pytest.approx(expected, rel=2e-3)
         # first order in c: c times the integral of |rate|^3 along the elastic collision
         largest = (5.0 * (mass / 2.0) * speed**2 / (4.0 * kappa)) ** 0.4
