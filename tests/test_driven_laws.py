@@ -64,6 +64,10 @@ CASES = {
     "velocity_squared": (
         dict(dissipation=(laws.VelocitySquared(3e4),)), hertz,
         lambda d, rate: 3e4 * np.abs(rate) * rate, 3.0),
+    # Hunt-Crossley's hysteretic damping 1.5 alpha kappa d^1.5 rate
+    "hunt_crossley": (
+        dict(dissipation=(laws.HuntCrossley(1.0),)), hertz,
+        lambda d, rate: 1.5 * 1.0 * KAPPA * np.maximum(d, 0.0) ** 1.5 * rate, 3.0),
     # a preload per contact (the supports hold the beads), Kuwabara-Kono damping
     "preload_per_contact": (
         dict(eta_s=2e-7), hertz,
@@ -72,7 +76,7 @@ CASES = {
 
 
 @pytest.mark.parametrize("case", [
-    pytest.param("power_law_dashpot", marks=pytest.mark.slow), "velocity_squared",
+    pytest.param("power_law_dashpot", marks=pytest.mark.slow), "velocity_squared", "hunt_crossley",
     pytest.param("preload_per_contact", marks=pytest.mark.slow)])
 def test_kernel_trajectory_matches_an_independent_integrator(case):
     options, elastic, damping, preload = CASES[case]

@@ -3,7 +3,7 @@
 A chain's contacts follow one contact law (`Hertz`, `PowerLaw`, `Thornton`,
 `JacksonGreen`, and a law in series with a layer: `SeriesCompliance`, `RoughContact`;
 subclasses of `AbstractContactLaw`) and any number of dissipation laws
-(`Viscoelastic`, `Dashpot`, ...: subclasses of `AbstractDissipation`), given to
+(`Viscoelastic`, `Dashpot`, `VelocitySquared`, `HuntCrossley`: subclasses of `AbstractDissipation`), given to
 `hertzchain.ChainSetup` as `contact_law=` and `dissipation=`; a driven chain's beads may
 also sit on supports with micro-slip friction (`IwanSupport`). Every kernel evaluates the
 same methods; `registry` is the one table from a law type to its native counterpart.
@@ -14,6 +14,7 @@ from .contact_law import AbstractContactLaw as AbstractContactLaw
 from .contact_law import ContactConstants as ContactConstants
 from .dissipation import AbstractDissipation as AbstractDissipation
 from .dissipation import Dashpot as Dashpot
+from .dissipation import HuntCrossley as HuntCrossley
 from .dissipation import VelocitySquared as VelocitySquared
 from .dissipation import Viscoelastic as Viscoelastic
 from .dissipation import is_damped as is_damped

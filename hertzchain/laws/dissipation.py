@@ -150,3 +150,37 @@ class VelocitySquared(AbstractDissipation):
 
     def rate_slot_coefficient(self):
         return self.c_n_s2_m2
+
+
+class HuntCrossley(AbstractDissipation):
+    """Hunt-Crossley hysteretic damping on Hertz's law, $F_d = \\tfrac32\\alpha\\,\\kappa
+    \\delta^{3/2}\\dot\\delta$ while in contact (Hunt & Crossley, J. Appl. Mech. 42, 440, 1975):
+    a damping force proportional to the elastic force, so it vanishes with $\\delta^{3/2}$ at
+    contact onset (no jump, unlike a dashpot's) and a preloaded contact's linear damping
+    coefficient is $\\tfrac32\\alpha F_0$: it scales with the load the contact carries, where
+    Kuwabara-Kono's $\\tfrac32\\eta\\kappa\\delta_0^{1/2}$ scales as $F_0^{1/3}$. A weak one
+    takes $\\Delta E = \\tfrac{8}{15}\\cdot\\tfrac32\\alpha\\kappa\\,v\\,\\delta_m^{5/2} =
+    \\alpha v\\cdot\\mu v^2$ from a binary Hertz collision at relative speed v (reduced mass
+    $\\mu$, largest overlap $\\delta_m$): a restitution $e = \\sqrt{1 - 2\\alpha v} \\approx 1 -
+    \\alpha v$, falling with the impact speed. The sum with the elastic force is clipped at 0
+    (`total_force`), so beads never pull.
+
+    **Arguments:**
+
+    - `alpha_s_m`: $\\alpha$, s/m (>= 0).
+    """
+
+    alpha_s_m: jax.Array
+
+    def __init__(self, alpha_s_m=0.0):
+        self.alpha_s_m = jnp.asarray(alpha_s_m, dtype=jnp.float64)
+
+    def __check_init__(self):
+        check_positive_parameters("HuntCrossley", (("alpha_s_m", self.alpha_s_m, "s/m"),), zero_ok=True)
+
+    def force(self, overlap_m, overlap_rate_m_s, kappa_n_m1p5):
+        positive, root = contact._positive_part_and_root(overlap_m)
+        return (1.5 * self.alpha_s_m * kappa_n_m1p5 * positive * root) * overlap_rate_m_s
+
+    def is_active(self):
+        return self.alpha_s_m != 0.0

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..validation import as_float64
 from .contact_law import AbstractContactLaw
-from .dissipation import AbstractDissipation, Dashpot, VelocitySquared, Viscoelastic
+from .dissipation import AbstractDissipation, Dashpot, HuntCrossley, VelocitySquared, Viscoelastic
 from .elastic import Hertz, PowerLaw
 from .plastic import JacksonGreen, Thornton
 from .rough import RoughContact
@@ -29,6 +29,7 @@ NATIVE_NAMES: dict[type, str | None] = {
     Viscoelastic: "viscous",
     Dashpot: "dashpot",
     VelocitySquared: "velocity_squared",
+    HuntCrossley: None,
     SeriesCompliance: None,
     RoughContact: None,
 }
