@@ -51,3 +51,21 @@ def test_lydon2014_near_sensor_edge():
     fit = power_law(edges.precompression_n, edges.edges_hz[6.0])
     assert fit["exponent"] == pytest.approx(0.159, abs=0.004)
     assert 6130 <= edges.defect_hz.min() and edges.defect_hz.max() <= 6190
+
+
+@pytest.mark.parametrize(("script", "needed"), [("lydon2014_band_edge", "Band.mat"),
+                                               ("lydon2014_static_exponent", "Modes_Fine.mat")])
+def test_examples_refuse_a_data_folder_without_their_file(script, needed, tmp_path, capsys):
+    """A --data-dir that lacks the file an example reads is refused by name (usage error, exit
+    2), before anything is written."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "lydon2015" / f"{script}.py"
+    spec = importlib.util.spec_from_file_location(script, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    with pytest.raises(SystemExit) as refused:
+        module.main(["--data-dir", str(tmp_path), "--out", str(tmp_path / "out")])
+    assert refused.value.code == 2
+    assert f"no {needed} there" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

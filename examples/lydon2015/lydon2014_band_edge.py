@@ -46,7 +46,10 @@ def main(argv=None) -> dict:
     parser.add_argument("--data-dir", required=True, type=Path, help="folder holding Band.mat")
     parser.add_argument("--out", type=Path, default=Path("examples/lydon2015/results/lydon2014_band_edge"))
     args = parser.parse_args(argv)
-    edges = lydon2014_band_edges(args.data_dir / "Band.mat")
+    path = args.data_dir / "Band.mat"
+    if not path.is_file():
+        parser.error(f"--data-dir {args.data_dir}: no Band.mat there (the lydon-2014 data folder holds it)")
+    edges = lydon2014_band_edges(path)
     force = edges.precompression_n
     model_edge = np.asarray(monatomic_band_edge_hz(BEAD_MASS_KG, KAPPA_N_M1P5, force))
     top_mode = np.array([
