@@ -222,7 +222,7 @@ def test_a_dashpot_without_the_damped_kernel_is_refused():
 
 def assert_books_equal_the_jax_kernels(ours, reference):
     """Largest forces to 1e-12 of themselves and every energy of the books within 1e-12 of
-    the impact energy (the sums over the bodies in `batched._step`'s order; XLA may fuse)."""
+    the impact energy (the sums over the bodies in `batched_step._step`'s order; XLA may fuse)."""
     np.testing.assert_allclose(ours.max_force_n, reference.max_force_n, rtol=1e-12)
     energy = np.asarray(reference.initial_energy_j)
     np.testing.assert_array_equal(ours.initial_energy_j, energy)

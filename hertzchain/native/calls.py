@@ -157,7 +157,7 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
              channels: tuple[int, ...], viscous: bool, friction: bool, preload: bool, springs: bool,
              rate_law: str | None = None, law: str = "hertz", backend: str = "host",
              sensors: tuple[int, ...] = (), sensor_state=None):
-    """The full step (`batched._step` with velocities and accelerations apart: damping,
+    """The full step (`batched_step._step` with velocities and accelerations apart: damping,
     friction) from displacements `x`, velocities `v` and accelerations `a` (bodies + 1, B)
     at the impact, through `n_samples` samples of `steps_per_sample` steps of `dt_s`
     seconds: one (B, n_samples) force trace per channel, N, recorded after every sample.
@@ -179,7 +179,7 @@ def run_full(p: dict, x, v, a, *, dt_s: float, steps_per_sample: int, n_samples:
     the arrays `batched` stores for them; host only, each in a library of its own;
     an elastic-plastic run starts from the largest overlaps so far at `x`). `backend` as for
     `run`. `sensors`: beads K with a compliant sensor (`hertzchain.compliant_sensor`, the
-    step of `batched._step`; on the host, in a library of its own for each law), whose
+    step of `batched_step._step`; on the host, in a library of its own for each law), whose
     parameters `p` holds as `batched` stores them ("sensor_beta", "sensor_inv",
     "sensor_back", "sensor_front", (n_sensors, 1 or B) each, and "first_force"), and
     `sensor_state` their forces (N), rates (N/s) and drives (N) at the impact, (3 n_sensors, B)."""
@@ -206,7 +206,7 @@ def run_full_books(p: dict, state0, *, dt_s: float, steps_per_sample: int, n_sam
     contacts every contact's largest overlap so far; every contact's largest total force; with damping, the viscous force on every body; the energy dissipated by
     damping and friction so far) and returns (the (B, n_samples) force traces, one per
     channel, N; the final packed state). The books' sums over the bodies follow
-    `batched._step`'s order; the run is not differentiable (sweeps; fits call `run_full`).
+    `batched_step._step`'s order; the run is not differentiable (sweeps; fits call `run_full`).
     `rate_law`, `law` as for `run_full`."""
     _require("host")
     _check_rates(rate_law, viscous, "run_full_books")

@@ -1,4 +1,4 @@
-// The conservative velocity-Verlet step of `batched._step` (`chain_verlet.h`) on a host
+// The conservative velocity-Verlet step of `batched_step._step` (`chain_verlet.h`) on a host
 // kernel's block of chains (`chain_kernel.cc`'s HertzChainForward): Hertz contacts, linear sensor springs, static
 // overlaps and external forces of a preload, a wall or a free end, with or without the books
 // (largest overlaps). Layouts: `chain_kernel.cc`.

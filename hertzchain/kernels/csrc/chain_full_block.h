@@ -1,4 +1,4 @@
-// The state of a block of chains through the full step of `batched._step` (velocities and accelerations kept apart): Kuwabara-Kono
+// The state of a block of chains through the full step of `batched_step._step` (velocities and accelerations kept apart): Kuwabara-Kono
 // damping at every contact (`contact.contact_force`: the total force clipped at 0) and
 // track friction (`contact.track_friction_kick`) before the drift and after the second half
 // kick, with sensor springs, static overlaps and external forces of a preload (zeros where
@@ -163,7 +163,7 @@ struct FullBlock {
   const int64_t valid;  // a last, partial block repeats its last chain
   // the chains' state and parameters
   std::vector<double> x, v, a, inv, kap, ov0, spr, ext, eta, fr, dash;
-  // kSensors: the compliant sensors (`compliant_sensor`, `batched._step`): their forces (N),
+  // kSensors: the compliant sensors (`compliant_sensor`, `batched_step._step`): their forces (N),
   // rates (N/s) and drives (Eq. 4, N) after x, v, a in state0 (n rows each), their
   // parameters `sp` (`SensorRows`); per step the half-step rates, the predicted rates, the
   // compressions counted from the preload's force (F_s - F_0) and whether the step resolves
@@ -229,7 +229,7 @@ struct FullBlock {
   struct Lanes {
     double damped[kLanes];  // 1 where the chain is damped: an undamped one's viscous work is 0, exactly
     // per step and lane: the viscous work of the two half steps, the kinetic energy the two
-    // friction kicks took (sums over the bodies, in `batched._step`'s order), the unkicked
+    // friction kicks took (sums over the bodies, in `batched_step._step`'s order), the unkicked
     // half-step velocity of body i and the viscous part of the force of contact i - 1
     double work1[kLanes], work2[kLanes], lost1[kLanes], lost2[kLanes], raw_prev[kLanes], d_prev[kLanes];
     // Per-lane values of the step kept for the tangent pass: what does not depend on the

@@ -1,7 +1,7 @@
 // Fused multi-step kernels for `hertzchain.batched`, a block of chains at a time through all
 // the steps of the run while the block's state sits in the cache, every contact's force
 // computed once per step and used for both bodies it pushes:
-//  - HertzChainForward: the conservative velocity-Verlet step of `batched._step` (Hertz
+//  - HertzChainForward: the conservative velocity-Verlet step of `batched_step._step` (Hertz
 //    contacts, linear sensor springs, static overlaps and external forces of a preload, a
 //    wall or a free end), with or without the books (largest overlaps);
 //  - HertzChainFullForward / HertzChainFullTangent / HertzChainFullBooks: the full step

@@ -344,7 +344,7 @@ HC_LANES inline void FullBlock<C>::FirstBody(StepSize t, Lanes& __restrict l) {
       });
 }
 
-// kPlastic: contact i's largest overlap so far, with this step's (`batched._step`), before
+// kPlastic: contact i's largest overlap so far, with this step's (`batched_step._step`), before
 // the sweep: the overlap from body i + 1's drift as the sweep computes it (the same
 // operations, so the same bits), then the unloading curve of the lanes whose overlap grew.
 // The sweep itself then has no branch and vectorises.

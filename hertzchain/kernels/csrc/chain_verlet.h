@@ -1,5 +1,5 @@
-// The velocity-Verlet step of `batched._step` on one chain's bodies and contacts, written once
-// for every native kernel that runs it: a lane of the host's blocks of chains
+// The velocity-Verlet step of `verlet.step` (as `batched_step._step` runs it) on one chain's
+// bodies and contacts, written once for every native kernel that runs it: a lane of the host's blocks of chains
 // (`chain_conservative.h`, `chain_step.h`), a thread of the one-thread-per-chain kernels
 // (`chain_kernel_thread.cu`, on the host or a GPU) and a lane of the driven chains' blocks
 // (`driven_kernel.cc`: its drag in the acceleration of the first half kick and implicit in
