@@ -80,3 +80,31 @@ def test_driven_bead_energy_books_close():
     assert not chain.runs_on_fused_kernel
     with pytest.raises(ValueError, match="one per bead"):
         DrivenChain([0.028], [1.38e10, 1.38e10], 4.5, gamma, support_friction=laws.IwanSupport([K, K], PHI))
+
+
+@pytest.mark.parametrize("power", [0.4, 0.7])
+def test_segalman_spread_follows_its_closed_forms(power):
+    # the elements spread so that a fraction (phi / phi_max)^p has slipped by a stretch phi:
+    # the loop energy 4 K p A^(2+p) / (phi^p (1+p)(2+p)) below full slip, the backbone
+    # K x (1 - (x/phi)^p / (1+p)) and the Coulomb force K phi p / (1+p) (the continuum's
+    # closed forms; 256 midpoint elements)
+    law = laws.IwanSupport(K, PHI, elements=256, slip_power=power)
+    for amplitude in (10e-9, 30e-9):
+        expected = 4 * K * power * amplitude ** (2 + power) / (PHI**power * (1 + power) * (2 + power))
+        assert loop_energy(law, amplitude) == pytest.approx(expected, rel=5e-3)
+    # the A^(2+p) law, not Mindlin's A^3: a factor 3^(2+p) from 10 to 30 nm
+    assert loop_energy(law, 30e-9) / loop_energy(law, 10e-9) == pytest.approx(3 ** (2 + power), rel=5e-3)
+    x = jnp.linspace(0.0, 2 * PHI, 201)
+    _, force = cycle_work(law, x)
+    coulomb = K * PHI * power / (1 + power)
+    backbone = np.where(x < PHI, K * x * (1 - (x / PHI) ** power / (1 + power)), coulomb)
+    np.testing.assert_allclose(-np.asarray(force), backbone, atol=5e-3 * coulomb)
+    assert float(law.coulomb_force_n) == pytest.approx(coulomb, rel=5e-3)
+
+
+def test_uniform_spread_is_the_default_and_the_power_is_checked():
+    # p = 1 (the default) puts the elements at the uniform midpoints (j - 1/2) phi_max / E
+    law = laws.IwanSupport(K, PHI, elements=16)
+    np.testing.assert_array_equal(np.asarray(law._slip_at(0.0)), (np.arange(16) + 0.5) / 16 * PHI)
+    with pytest.raises(ValueError, match="IwanSupport: slip_power"):
+        laws.IwanSupport(K, PHI, slip_power=0.0)
