@@ -100,6 +100,14 @@ def test_segalman_spread_follows_its_closed_forms(power):
     backbone = np.where(x < PHI, K * x * (1 - (x / PHI) ** power / (1 + power)), coulomb)
     np.testing.assert_allclose(-np.asarray(force), backbone, atol=5e-3 * coulomb)
     assert float(law.coulomb_force_n) == pytest.approx(coulomb, rel=5e-3)
+    # a small harmonic motion: the energy per cycle over pi A^2, per unit of in-phase
+    # stiffness lost, is 4 p / (pi (2 + p)) (the continuum's; 0.42 for the uniform spread)
+    samples, amplitude = 4000, 5e-9
+    phase = 2 * np.pi * np.arange(2 * samples + 1) / samples
+    work, force = cycle_work(law, jnp.asarray(amplitude * np.sin(phase)))
+    in_phase = -2 * np.mean(np.asarray(force)[samples:-1] * np.sin(phase[samples:-1])) / amplitude
+    lost = float(jnp.sum(work[samples:])) / (np.pi * amplitude**2) / (K - in_phase)
+    assert lost == pytest.approx(4 * power / (np.pi * (2 + power)), rel=2e-2)
 
 
 def test_uniform_spread_is_the_default_and_the_power_is_checked():
