@@ -22,7 +22,8 @@ from hertzchain.io.atomic import json_ready, write_json
 
 HERE = Path(__file__).resolve().parent
 RESULTS = ("diagnosis.json", "micro_slip.json", "micro_slip_free_preload.json", "micro_slip_velocity_squared.json",
-           "micro_slip_rayleigh_piezo.json", "micro_slip_actuator_mode.json", "with_tongue.json")
+           "micro_slip_rayleigh_piezo.json", "micro_slip_actuator_mode.json", "micro_slip_segalman.json",
+           "with_tongue.json")
 # The micro-slip scans of the contacts' static force (`micro_slip_preload_scan.py`).
 SCANS = ("micro_slip_preload_scan.json", "micro_slip_tongue_run_preload.json")
 

@@ -30,8 +30,9 @@ lower ones, the candidate predicts them (their median misfit a measurement not f
 thresholds and its fundamental below every onset, which measures that run's true drive) and
 predicts the loop; the verdict names no candidate for a measurement it was fitted on.
 
-`CANDIDATES` run by default; `SLOW_CANDIDATES` (micro-slip at the supports alone and in pairs
-with a free static force, a velocity-squared loss, a Rayleigh piezo or an actuator mode; their
+`CANDIDATES` run by default; `SLOW_CANDIDATES` (micro-slip at the supports alone, with
+Segalman's power-law spread of its slip, and in pairs with a free static force, a
+velocity-squared loss, a Rayleigh piezo or an actuator mode; their
 sliders are state of the period map, `hertzchain.driven.floquet`, and their thresholds come from
 the same continuation as every other candidate's) only when named; `FREE_PRELOAD_CANDIDATES` for
 the joint fit.
@@ -153,6 +154,14 @@ def _micro_slip(chain: DrivenChain, **changes) -> DrivenChain:
 SLOW_CANDIDATES = (
     DrivenCandidate("micro_slip_supports", "micro-slip friction at the bead's supports (Iwan element)",
                     lambda c: _replace(c, support_friction=laws.IwanSupport(2e6, 1e-7)), MICRO_SLIP),
+    # Micro-slip with Segalman's power-law spread of the supports' slip (a loss per cycle as
+    # A^(2+p) rather than A^3, and more softening for the energy taken where p < 1), started at
+    # the single-law fit's constants with the uniform spread (p = 1).
+    DrivenCandidate("micro_slip_segalman",
+                    "micro-slip supports with a power-law spread of their slip (Segalman; p free: loss per cycle "
+                    "as A^(2+p))",
+                    lambda c: _replace(c, support_friction=laws.IwanSupport(2.8e6, 2.25e-8, slip_power=1.0)),
+                    MICRO_SLIP + ("support_friction.slip_power",), {"support_friction.slip_power": (0.1, 2.0)}),
     # Pairs: micro-slip with a second law, the pair's constants freed together.
     DrivenCandidate("micro_slip_free_preload",
                     "micro-slip supports, the contacts' static force free: the rest of the stated 4.5 N carried "
