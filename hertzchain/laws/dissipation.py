@@ -20,6 +20,11 @@ from .. import contact
 from ..validation import check_positive_parameters
 
 
+def _float64(value) -> jax.Array:
+    """A law's coefficient as a float64 array (the field converter of every law here)."""
+    return jnp.asarray(value, dtype=jnp.float64)
+
+
 class AbstractDissipation(eqx.Module):
     """A rate-dependent normal force of a closed contact."""
 
@@ -58,10 +63,7 @@ class Viscoelastic(AbstractDissipation):
     - `eta_s`: viscoelastic time $\\eta$, s (>= 0).
     """
 
-    eta_s: jax.Array
-
-    def __init__(self, eta_s=0.0):
-        self.eta_s = jnp.asarray(eta_s, dtype=jnp.float64)
+    eta_s: jax.Array = eqx.field(converter=_float64, default=0.0)
 
     def force(self, overlap_m, overlap_rate_m_s, kappa_n_m1p5):
         _, root = contact._positive_part_and_root(overlap_m)
@@ -81,10 +83,7 @@ class Dashpot(AbstractDissipation):
     - `gamma_n_s_m`: $\\gamma$, N s/m (>= 0).
     """
 
-    gamma_n_s_m: jax.Array
-
-    def __init__(self, gamma_n_s_m=0.0):
-        self.gamma_n_s_m = jnp.asarray(gamma_n_s_m, dtype=jnp.float64)
+    gamma_n_s_m: jax.Array = eqx.field(converter=_float64, default=0.0)
 
     def force(self, overlap_m, overlap_rate_m_s, kappa_n_m1p5):
         return jnp.where(kappa_n_m1p5 > 0.0, self.gamma_n_s_m, 0.0) * overlap_rate_m_s
@@ -134,10 +133,7 @@ class VelocitySquared(AbstractDissipation):
     - `c_n_s2_m2`: c, N s^2/m^2 (>= 0).
     """
 
-    c_n_s2_m2: jax.Array
-
-    def __init__(self, c_n_s2_m2=0.0):
-        self.c_n_s2_m2 = jnp.asarray(c_n_s2_m2, dtype=jnp.float64)
+    c_n_s2_m2: jax.Array = eqx.field(converter=_float64, default=0.0)
 
     def __check_init__(self):
         check_positive_parameters("VelocitySquared", (("c_n_s2_m2", self.c_n_s2_m2, "N s^2/m^2"),), zero_ok=True)
@@ -170,10 +166,7 @@ class HuntCrossley(AbstractDissipation):
     - `alpha_s_m`: $\\alpha$, s/m (>= 0).
     """
 
-    alpha_s_m: jax.Array
-
-    def __init__(self, alpha_s_m=0.0):
-        self.alpha_s_m = jnp.asarray(alpha_s_m, dtype=jnp.float64)
+    alpha_s_m: jax.Array = eqx.field(converter=_float64, default=0.0)
 
     def __check_init__(self):
         check_positive_parameters("HuntCrossley", (("alpha_s_m", self.alpha_s_m, "s/m"),), zero_ok=True)
