@@ -172,8 +172,7 @@ class HuntCrossley(AbstractDissipation):
         check_positive_parameters("HuntCrossley", (("alpha_s_m", self.alpha_s_m, "s/m"),), zero_ok=True)
 
     def force(self, overlap_m, overlap_rate_m_s, kappa_n_m1p5):
-        positive, root = contact._positive_part_and_root(overlap_m)
-        return (1.5 * self.alpha_s_m * kappa_n_m1p5 * positive * root) * overlap_rate_m_s
+        return (1.5 * self.alpha_s_m * contact.hertz_force(overlap_m, kappa_n_m1p5)) * overlap_rate_m_s
 
     def is_active(self):
         return self.alpha_s_m != 0.0
